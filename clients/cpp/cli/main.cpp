@@ -1,0 +1,236 @@
+// animspace: the command line for animspaced (queries) and for offline work on model files.
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <google/protobuf/util/json_util.h>
+
+#include "clients/cpp/client.h"
+#include "core/container/model_container.h"
+#include "core/demo/demo_repository.h"
+#include "core/model/model_info.h"
+
+namespace {
+
+struct Globals {
+  std::string server = "127.0.0.1:50051";
+  int deadline_ms = 10000;
+  bool json = false;
+};
+
+std::string to_json(const google::protobuf::Message& message) {
+  std::string out;
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = true;
+  options.preserve_proto_field_names = true;
+  (void)google::protobuf::util::MessageToJsonString(message, &out, options);
+  return out;
+}
+
+animspace::Client connect(const Globals& g) {
+  animspace::ClientOptions options;
+  options.deadline = std::chrono::milliseconds(g.deadline_ms);
+  return animspace::Client(g.server, options);
+}
+
+std::string kind_label(animspace::v1::ModelKind kind) {
+  std::string name = animspace::v1::ModelKind_Name(kind);
+  const std::string prefix = "MODEL_KIND_";
+  return name.rfind(prefix, 0) == 0 ? name.substr(prefix.size()) : name;
+}
+
+void print_summary(const animspace::v1::ModelSummary& model) {
+  std::printf("%s (default version %llu)\n", model.name().c_str(),
+              static_cast<unsigned long long>(model.default_version()));
+  for (const auto& v : model.versions()) {
+    if (v.state() != animspace::v1::VERSION_STATE_AVAILABLE) {
+      std::printf("  version %llu  REFUSED: %s\n", static_cast<unsigned long long>(v.version()), v.error().c_str());
+      continue;
+    }
+    std::printf("  version %llu  %s  %u points × %u channels, %u faces, %u bones, %u frames", 
+                static_cast<unsigned long long>(v.version()), kind_label(v.kind()).c_str(), v.point_count(),
+                v.channel_count(), v.face_count(), v.bone_count(), v.frame_count());
+    if (v.key_point_count() > 0) std::printf(", %u key points, basis %u", v.key_point_count(), v.basis_size());
+    if (v.lod_level_count() > 0) std::printf(", %u LOD levels", v.lod_level_count());
+    std::printf("\n");
+    if (!v.description().empty()) std::printf("    %s\n", v.description().c_str());
+  }
+}
+
+int run_list(const Globals& g) {
+  auto client = connect(g);
+  auto models = client.list_models();
+  if (g.json) {
+    animspace::v1::ListModelsResponse response;
+    for (auto& m : models) *response.add_models() = m;
+    std::cout << to_json(response);
+    return 0;
+  }
+  if (models.empty()) std::printf("no models loaded\n");
+  for (const auto& m : models) print_summary(m);
+  return 0;
+}
+
+int run_describe(const Globals& g, const std::string& name, uint64_t version) {
+  auto client = connect(g);
+  auto model = client.describe_model(name, version);
+  if (g.json) {
+    std::cout << to_json(model);
+    return 0;
+  }
+  print_summary(model);
+  for (const auto& v : model.versions()) {
+    if (v.state() != animspace::v1::VERSION_STATE_AVAILABLE) continue;
+    std::printf("  version %llu metadata:\n", static_cast<unsigned long long>(v.version()));
+    std::map<std::string, std::string> sorted(v.metadata().begin(), v.metadata().end());
+    for (const auto& [key, value] : sorted) std::printf("    %s = %s\n", key.c_str(), value.c_str());
+    std::printf("  sections:");
+    for (const auto& s : v.sections()) std::printf(" %s", s.c_str());
+    std::printf("\n");
+  }
+  return 0;
+}
+
+int run_health(const Globals& g) {
+  auto client = connect(g);
+  const auto status = client.health();
+  const std::string name = grpc::health::v1::HealthCheckResponse::ServingStatus_Name(status);
+  if (g.json) {
+    std::printf("{\"status\": \"%s\"}\n", name.c_str());
+  } else {
+    std::printf("%s\n", name.c_str());
+  }
+  return status == grpc::health::v1::HealthCheckResponse::SERVING ? 0 : 1;
+}
+
+int run_server_info(const Globals& g) {
+  auto client = connect(g);
+  auto info = client.server_info();
+  if (g.json) {
+    std::cout << to_json(info);
+    return 0;
+  }
+  std::printf("animspaced %s (%s), renderer %s\n", info.server_version().c_str(), info.api().c_str(),
+              info.renderer().c_str());
+  std::printf("limits: message %llu bytes, batch %u poses, thumbnail %u px, %u concurrent calls\n",
+              static_cast<unsigned long long>(info.max_message_bytes()), info.max_batch_poses(),
+              info.max_thumbnail_px(), info.max_concurrent_calls());
+  std::printf("implemented:\n");
+  for (const auto& rpc : info.implemented_rpcs()) std::printf("  %s\n", rpc.c_str());
+  return 0;
+}
+
+int run_stats(const Globals& g, const std::string& model, bool reset) {
+  auto client = connect(g);
+  auto stats = client.stats(model, reset);
+  if (g.json) {
+    std::cout << to_json(stats);
+    return 0;
+  }
+  std::printf("%-24s %10s %10s %10s %10s %10s %8s %10s %10s\n", "model", "requests", "errors", "poses", "hits",
+              "blends", "hit%", "p50 ms", "p99 ms");
+  for (const auto& s : stats.models()) {
+    std::printf("%-24s %10llu %10llu %10llu %10llu %10llu %7.1f%% %10.3f %10.3f\n", s.model().c_str(),
+                static_cast<unsigned long long>(s.requests()), static_cast<unsigned long long>(s.errors()),
+                static_cast<unsigned long long>(s.poses()), static_cast<unsigned long long>(s.hits()),
+                static_cast<unsigned long long>(s.blends()), 100.0 * s.hit_rate(), 1e3 * s.latency_p50_s(),
+                1e3 * s.latency_p99_s());
+  }
+  return 0;
+}
+
+int run_inspect(const Globals& g, const std::string& path) {
+  auto container = animspace::container::read_file(path);
+  if (!container) {
+    std::fprintf(stderr, "animspace inspect: %s\n", container.error().message.c_str());
+    return 2;
+  }
+  auto info = animspace::model::describe(*container, path);
+  if (g.json) {
+    std::printf("{\"metadata\": {");
+    bool first = true;
+    for (const auto& [key, value] : container->metadata()) {
+      std::printf("%s\"%s\": \"%s\"", first ? "" : ", ", key.c_str(), value.c_str());
+      first = false;
+    }
+    std::printf("}, \"sections\": [");
+    first = true;
+    for (const auto& [name, section] : container->sections()) {
+      std::printf("%s{\"name\": \"%s\", \"rows\": %u, \"cols\": %u, \"bytes\": %zu}", first ? "" : ", ",
+                  name.c_str(), section.rows, section.cols, section.bytes.size());
+      first = false;
+    }
+    std::printf("]}\n");
+  } else {
+    std::printf("%s\n", path.c_str());
+    for (const auto& [key, value] : container->metadata()) std::printf("  %s = %s\n", key.c_str(), value.c_str());
+    for (const auto& [name, section] : container->sections()) {
+      std::printf("  section %-32s %8u × %-6u %10zu bytes\n", name.c_str(), section.rows, section.cols,
+                  section.bytes.size());
+    }
+  }
+  if (!info) {
+    std::fprintf(stderr, "animspace inspect: the daemon would refuse it: %s\n", info.error().message.c_str());
+    return 1;
+  }
+  return 0;
+}
+
+int run_demo_repository(const std::string& dir) {
+  if (auto status = animspace::demo::write_demo_repository(dir); !status.ok()) {
+    std::fprintf(stderr, "animspace demo-repository: %s\n", status.error().message.c_str());
+    return 2;
+  }
+  std::printf("wrote the demo model repository to %s\n", dir.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Globals g;
+  CLI::App app{"animspace — query animspaced, and work on model files offline"};
+  app.require_subcommand(1);
+  app.add_option("-s,--server", g.server, "animspaced address (gRPC target)")->capture_default_str();
+  app.add_option("--deadline-ms", g.deadline_ms, "Deadline for each call")->capture_default_str();
+  app.add_flag("--json", g.json, "Print JSON for scripts instead of tables");
+
+  auto* list = app.add_subcommand("list", "List the models the server serves, with their versions");
+  auto* health = app.add_subcommand("health", "grpc.health.v1 status of the server (exit 0 when SERVING)");
+  auto* info = app.add_subcommand("server-info", "Server version, limits and implemented RPCs");
+
+  std::string model;
+  uint64_t version = 0;
+  auto* describe = app.add_subcommand("describe", "Describe one model: versions, sizes, metadata, sections");
+  describe->add_option("model", model, "Model name")->required();
+  describe->add_option("--version", version, "One version (default: all)");
+
+  bool reset = false;
+  auto* stats = app.add_subcommand("stats", "Per-model soft-cache hit rates and latency");
+  stats->add_option("model", model, "Model name (default: every model)");
+  stats->add_flag("--reset", reset, "Zero the counters after reading");
+
+  std::string path;
+  auto* inspect = app.add_subcommand("inspect", "Offline: print a model file's metadata and sections and check it");
+  inspect->add_option("file", path, "model.anim file")->required()->check(CLI::ExistingFile);
+
+  auto* demo = app.add_subcommand("demo-repository", "Offline: write the bundled demo model repository");
+  demo->add_option("directory", path, "Repository directory to create")->required();
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*list) return run_list(g);
+    if (*health) return run_health(g);
+    if (*info) return run_server_info(g);
+    if (*describe) return run_describe(g, model, version);
+    if (*stats) return run_stats(g, model, reset);
+    if (*inspect) return run_inspect(g, path);
+    if (*demo) return run_demo_repository(path);
+  } catch (const animspace::RpcError& error) {
+    std::fprintf(stderr, "animspace: %s\n", error.what());
+    return 3;
+  }
+  return 0;
+}

@@ -1,0 +1,72 @@
+// animspace::Client — a thin C++ client for animspaced.
+//
+// Depends only on the generated animspace.v1 and grpc.health.v1 stubs. Every call has a
+// deadline; a failed call throws RpcError carrying the gRPC code and the server's message
+// (which names the offending field).
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "animspace/v1/models.grpc.pb.h"
+#include "animspace/v1/stats.grpc.pb.h"
+#include "grpc/health/v1/health.grpc.pb.h"
+
+namespace animspace {
+
+class RpcError : public std::runtime_error {
+ public:
+  RpcError(std::string rpc, const grpc::Status& status);
+  grpc::StatusCode code() const { return code_; }
+  // The server's message alone (what() adds the RPC and the code name).
+  const std::string& server_message() const { return server_message_; }
+
+ private:
+  grpc::StatusCode code_;
+  std::string server_message_;
+};
+
+struct ClientOptions {
+  // Deadline applied to every call.
+  std::chrono::milliseconds deadline{10000};
+  // Largest message received, bytes (poses and LOD chunks can be large).
+  int max_receive_message_bytes = 64 << 20;
+};
+
+class Client {
+ public:
+  // `target` is a gRPC target: "host:port", "dns:///name:port", "ipv4:a:p,b:p", …
+  explicit Client(const std::string& target, ClientOptions options = {});
+  // Uses an existing channel (TLS, interceptors, load balancing configured by the caller).
+  Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options = {});
+
+  // grpc.health.v1 status of `service` ("" = the whole server).
+  grpc::health::v1::HealthCheckResponse::ServingStatus health(const std::string& service = "");
+  std::vector<v1::ModelSummary> list_models();
+  v1::ModelSummary describe_model(const std::string& name, uint64_t version = 0);
+  v1::ModelSummary load_model(const std::string& name, uint64_t version = 0);
+  void unload_model(const std::string& name, uint64_t version = 0);
+  v1::GetServerInfoResponse server_info();
+  v1::GetStatsResponse stats(const std::string& model = "", bool reset = false);
+
+  const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
+
+ private:
+  void prepare(grpc::ClientContext* context) const;
+
+  ClientOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::ModelService::Stub> models_;
+  std::unique_ptr<v1::StatsService::Stub> stats_;
+  std::unique_ptr<grpc::health::v1::Health::Stub> health_;
+};
+
+// Name of a gRPC status code ("NOT_FOUND").
+const char* status_code_name(grpc::StatusCode code);
+
+}  // namespace animspace

@@ -1,0 +1,188 @@
+#include "core/common/atomic_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <new>
+#include <string>
+
+namespace animspace {
+namespace {
+
+std::string describe_errno(int error_number) { return std::strerror(error_number); }
+
+Error io_error(const std::filesystem::path& path, std::string_view what, int error_number) {
+  return make_error(ErrorCode::kIo, path.string() + ": " + std::string(what) + ": " +
+                                        describe_errno(error_number));
+}
+
+// Closes a descriptor on scope exit unless released first.
+class FileDescriptor {
+ public:
+  explicit FileDescriptor(int fd) : fd_(fd) {}
+  ~FileDescriptor() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  FileDescriptor(const FileDescriptor&) = delete;
+  FileDescriptor& operator=(const FileDescriptor&) = delete;
+  int get() const { return fd_; }
+  // Closes now and reports close()'s error: on NFS and some other file systems a failed write
+  // surfaces only here.
+  int close_checked() {
+    const int fd = fd_;
+    fd_ = -1;
+    return ::close(fd) == 0 ? 0 : errno;
+  }
+
+ private:
+  int fd_;
+};
+
+// A name no other writer uses: the pid separates processes, the counter separates threads and
+// calls of this process, the clock separates a pid reused after a crash. O_EXCL makes a
+// collision an error (retried) rather than a shared file.
+std::string temporary_name(const std::string& target_name, int attempt) {
+  static std::atomic<uint64_t> counter{0};
+  const auto ticks = static_cast<uint64_t>(
+      std::chrono::steady_clock::now().time_since_epoch().count());
+  uint64_t mixed = ticks ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ULL) ^
+                   static_cast<uint64_t>(attempt);
+  mixed ^= mixed >> 29;
+  char suffix[17];
+  static constexpr char kHex[] = "0123456789abcdef";
+  for (int i = 15; i >= 0; --i) {
+    suffix[i] = kHex[mixed & 0xF];
+    mixed >>= 4;
+  }
+  suffix[16] = '\0';
+  return "." + target_name + ".tmp." + std::to_string(::getpid()) + "." + suffix;
+}
+
+int write_all(int fd, std::string_view bytes) {
+  const char* data = bytes.data();
+  size_t remaining = bytes.size();
+  while (remaining > 0) {
+    const ssize_t written = ::write(fd, data, remaining);
+    if (written < 0) {
+      if (errno == EINTR) continue;
+      return errno;
+    }
+    data += written;
+    remaining -= static_cast<size_t>(written);
+  }
+  return 0;
+}
+
+int fsync_retrying(int fd) {
+  while (::fsync(fd) != 0) {
+    if (errno != EINTR) return errno;
+  }
+  return 0;
+}
+
+}  // namespace
+
+Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes) {
+  const std::string target_name = path.filename().string();
+  if (target_name.empty() || target_name == "." || target_name == "..") {
+    return make_error(ErrorCode::kIo, path.string() + ": not a file path");
+  }
+  std::filesystem::path directory = path.parent_path();
+  if (directory.empty()) directory = ".";
+
+  // Create the temporary file next to the target: rename() is atomic only within one file system.
+  std::filesystem::path temporary;
+  int fd = -1;
+  for (int attempt = 0; attempt < 16 && fd < 0; ++attempt) {
+    temporary = directory / temporary_name(target_name, attempt);
+    fd = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd < 0 && errno != EEXIST) return io_error(path, "cannot create temporary file", errno);
+  }
+  if (fd < 0) return io_error(path, "cannot create a uniquely named temporary file", EEXIST);
+  FileDescriptor file(fd);
+
+  // From here on every failure removes the temporary file; `path` has not been touched.
+  auto fail = [&](std::string_view what, int error_number) -> Status {
+    if (file.get() >= 0) file.close_checked();
+    ::unlink(temporary.c_str());
+    return io_error(path, what, error_number);
+  };
+
+  // Replacing a file keeps its permission bits (rename installs a new inode, which would
+  // otherwise get the umask default).
+  struct stat existing {};
+  if (::stat(path.c_str(), &existing) == 0 && S_ISREG(existing.st_mode)) {
+    if (::fchmod(file.get(), existing.st_mode & 07777) != 0) {
+      return fail("cannot copy permissions to temporary file", errno);
+    }
+  }
+  if (int error_number = write_all(file.get(), bytes); error_number != 0) {
+    return fail("cannot write temporary file", error_number);
+  }
+  // The data must be on disk before the rename makes it visible, or a crash could leave `path`
+  // naming an empty or partial file (the classic ext4 delayed-allocation zero-length file).
+  if (int error_number = fsync_retrying(file.get()); error_number != 0) {
+    return fail("cannot fsync temporary file", error_number);
+  }
+  if (int error_number = file.close_checked(); error_number != 0) {
+    return fail("cannot close temporary file", error_number);
+  }
+  if (::rename(temporary.c_str(), path.c_str()) != 0) {
+    return fail("cannot rename temporary file over it", errno);
+  }
+
+  // The rename is durable only once the directory entry is: fsync the directory. If this fails
+  // the new content is already in place (no undo is possible), but the caller must know that a
+  // crash could still bring back the old file.
+  const int directory_fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (directory_fd < 0) {
+    return io_error(path, "replaced, but cannot open its directory to fsync it", errno);
+  }
+  FileDescriptor directory_file(directory_fd);
+  if (int error_number = fsync_retrying(directory_file.get()); error_number != 0) {
+    return io_error(path, "replaced, but cannot fsync its directory", error_number);
+  }
+  return Status::Ok();
+}
+
+Result<std::string> read_whole_file(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const int error_number = errno;
+    if (error_number == ENOENT) {
+      return make_error(ErrorCode::kNotFound, path.string() + ": no such file");
+    }
+    return io_error(path, "cannot open", error_number);
+  }
+  FileDescriptor file(fd);
+
+  std::string bytes;
+  try {
+    struct stat info {};
+    if (::fstat(file.get(), &info) == 0 && S_ISREG(info.st_mode) && info.st_size > 0) {
+      bytes.reserve(static_cast<size_t>(info.st_size));
+    }
+    // Read until end of file rather than trusting st_size: the file may grow or shrink while
+    // being read, and pseudo-files report size 0.
+    char buffer[1 << 16];
+    while (true) {
+      const ssize_t count = ::read(file.get(), buffer, sizeof buffer);
+      if (count < 0) {
+        if (errno == EINTR) continue;
+        return io_error(path, "cannot read", errno);
+      }
+      if (count == 0) break;
+      bytes.append(buffer, static_cast<size_t>(count));
+    }
+  } catch (const std::bad_alloc&) {
+    return io_error(path, "cannot read", ENOMEM);
+  }
+  return bytes;
+}
+
+}  // namespace animspace

@@ -1,0 +1,23 @@
+// Durable whole-file writes.
+#pragma once
+
+#include <filesystem>
+#include <string_view>
+
+#include "core/common/result.h"
+
+namespace animspace {
+
+// Writes `bytes` to `path` so that a reader (or a crash) sees either the previous file or the
+// complete new one: write to a temporary file in the same directory
+// (".<name>.tmp.<pid>.<hex>", created with O_EXCL), fsync it, rename it over `path`, fsync the
+// directory. A replaced regular file keeps its permission bits. On failure before the rename
+// `path` is untouched and the temporary file removed; if only the final directory fsync fails,
+// the new content is already in place but may not survive a crash, and the error says so.
+// Errors: kIo naming the path, the step that failed and the operating system's reason.
+Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes);
+
+// Reads a whole file. Errors: kNotFound when it does not exist, kIo otherwise (with reason).
+Result<std::string> read_whole_file(const std::filesystem::path& path);
+
+}  // namespace animspace

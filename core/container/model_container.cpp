@@ -1,0 +1,741 @@
+// The model container's byte layout is specified in docs/FORMATS.md ("Model container (.anim)");
+// the constants below are that table, and the two must change together.
+//
+// parse() is written for hostile input (it will be fuzzed, and model repositories are copied
+// around by hand): every offset and size is checked against the buffer in 64-bit arithmetic that
+// cannot overflow before any byte is read, the section count is bounded before anything is
+// allocated, and every multi-byte load goes through memcpy (no alignment assumed).
+#include "core/container/model_container.h"
+
+#include <algorithm>
+#include <bit>
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <limits>
+#include <new>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+
+#include "core/common/atomic_file.h"
+#include "core/container/crc32.h"
+
+namespace animspace::container {
+
+// The format is little-endian and payloads are memcpy'd to and from Eigen storage as they are.
+// A big-endian port would byte-swap in load/store and in the matrix copies.
+static_assert(std::endian::native == std::endian::little,
+              "the model container code assumes a little-endian host");
+
+namespace {
+
+// --- Layout (docs/FORMATS.md) ------------------------------------------------------------------
+
+// Like PNG's signature: a high-bit byte catches 7-bit channels, CR LF catches CRLF→LF
+// conversion, the lone LF catches LF→CRLF conversion, and 0x1A stops `type` on DOS/Windows.
+constexpr std::string_view kMagic{"\x89" "ANM\r\n\x1a\n", 8};
+constexpr std::string_view kFooterMarker{"AEND", 4};
+
+constexpr uint64_t kHeaderSize = 64;
+constexpr uint64_t kEntrySize = 80;
+constexpr uint64_t kFooterSize = 8;
+constexpr uint64_t kAlignment = 8;
+constexpr size_t kNameFieldSize = kMaxSectionNameLength + 1;
+
+// Header field offsets. Bytes 0–15 and the header CRC at 60 keep their meaning in every format
+// version, so that any reader can tell corruption from a newer version.
+constexpr size_t kMagicAt = 0;
+constexpr size_t kVersionAt = 8;
+constexpr size_t kHeaderSizeAt = 12;
+constexpr size_t kFileSizeAt = 16;
+constexpr size_t kSectionCountAt = 24;
+constexpr size_t kEntrySizeAt = 28;
+constexpr size_t kReservedAt = 32;
+constexpr size_t kHeaderCrcAt = 60;
+
+// Section-table entry field offsets, relative to the entry.
+constexpr size_t kNameAt = 0;
+constexpr size_t kTypeAt = 48;
+constexpr size_t kRowsAt = 52;
+constexpr size_t kColsAt = 56;
+constexpr size_t kPayloadCrcAt = 60;
+constexpr size_t kOffsetAt = 64;
+constexpr size_t kSizeAt = 72;
+
+static_assert(kNameAt + kNameFieldSize == kTypeAt);
+static_assert(kSizeAt + 8 == kEntrySize);
+static_assert(kHeaderCrcAt + 4 == kHeaderSize);
+static_assert(kHeaderSize % kAlignment == 0 && kEntrySize % kAlignment == 0);
+static_assert(kMaxSections * kEntrySize < std::numeric_limits<uint32_t>::max());
+
+// Fuzzers cannot forge CRCs, so a fuzz build (libFuzzer and OSS-Fuzz define this macro) reports
+// mismatches as success and lets the structural checks behind them be exercised. Never defined
+// in a production build.
+#ifdef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
+constexpr bool kVerifyChecksums = false;
+#else
+constexpr bool kVerifyChecksums = true;
+#endif
+
+// --- Little-endian fields ----------------------------------------------------------------------
+
+uint32_t load_u32(std::string_view bytes, size_t at) {
+  assert(at <= bytes.size() && bytes.size() - at >= 4);
+  uint32_t value = 0;
+  std::memcpy(&value, bytes.data() + at, sizeof value);
+  return value;
+}
+
+uint64_t load_u64(std::string_view bytes, size_t at) {
+  assert(at <= bytes.size() && bytes.size() - at >= 8);
+  uint64_t value = 0;
+  std::memcpy(&value, bytes.data() + at, sizeof value);
+  return value;
+}
+
+void store_u32(std::string& out, size_t at, uint32_t value) {
+  assert(at + sizeof value <= out.size());
+  std::memcpy(out.data() + at, &value, sizeof value);
+}
+
+void store_u64(std::string& out, size_t at, uint64_t value) {
+  assert(at + sizeof value <= out.size());
+  std::memcpy(out.data() + at, &value, sizeof value);
+}
+
+uint64_t align_up(uint64_t n) { return (n + kAlignment - 1) / kAlignment * kAlignment; }
+
+std::string hex32(uint32_t value) {
+  char text[11];
+  std::snprintf(text, sizeof text, "0x%08x", static_cast<unsigned>(value));
+  return text;
+}
+
+std::string hex_bytes(std::string_view bytes) {
+  std::string text;
+  for (const char c : bytes) {
+    char byte[4];
+    std::snprintf(byte, sizeof byte, "%02x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+    if (!text.empty()) text += ' ';
+    text += byte;
+  }
+  return text;
+}
+
+// --- Section types -----------------------------------------------------------------------------
+
+constexpr uint32_t kLargestSectionType = static_cast<uint32_t>(SectionType::kFloat64Matrix);
+
+// Bytes per element for matrix types, 0 for the others.
+uint64_t element_size(SectionType type) {
+  switch (type) {
+    case SectionType::kFloat32Matrix: return 4;
+    case SectionType::kInt32Matrix: return 4;
+    case SectionType::kFloat64Matrix: return 8;
+    case SectionType::kBytes:
+    case SectionType::kText: return 0;
+  }
+  return 0;
+}
+
+// "an int32 matrix", for messages.
+std::string type_phrase(SectionType type) {
+  switch (type) {
+    case SectionType::kBytes: return "bytes";
+    case SectionType::kText: return "text";
+    case SectionType::kFloat32Matrix: return "a float32 matrix";
+    case SectionType::kInt32Matrix: return "an int32 matrix";
+    case SectionType::kFloat64Matrix: return "a float64 matrix";
+  }
+  return "an unknown type";
+}
+
+std::string shape_phrase(const Section& section) {
+  std::string phrase = type_phrase(section.type);
+  if (element_size(section.type) != 0) {
+    phrase += " (" + std::to_string(section.rows) + "x" + std::to_string(section.cols) + ")";
+  }
+  return phrase;
+}
+
+bool is_valid_section_name(std::string_view name) {
+  if (name.empty() || name.size() > kMaxSectionNameLength) return false;
+  return std::all_of(name.begin(), name.end(), [](char c) { return c >= 0x20 && c <= 0x7E; });
+}
+
+// What every set_* asserts before inserting `name`.
+[[maybe_unused]] bool can_add_section(const std::map<std::string, Section, std::less<>>& sections,
+                     const std::string& name) {
+  return is_valid_section_name(name) && name != kMetadataSectionName &&
+         (sections.contains(name) || sections.size() + 1 < kMaxSections);
+}
+
+template <typename Matrix>
+Section matrix_section(SectionType type, const Matrix& m) {
+  using Scalar = typename Matrix::Scalar;
+  static_assert(Matrix::IsRowMajor || Matrix::ColsAtCompileTime == 1, "sections are row-major");
+  assert(sizeof(Scalar) == element_size(type));
+  assert(static_cast<uint64_t>(m.rows()) <= std::numeric_limits<uint32_t>::max());
+  assert(static_cast<uint64_t>(m.cols()) <= std::numeric_limits<uint32_t>::max());
+  Section section;
+  section.type = type;
+  section.rows = static_cast<uint32_t>(m.rows());
+  section.cols = static_cast<uint32_t>(m.cols());
+  section.bytes.resize(static_cast<size_t>(m.size()) * sizeof(Scalar));
+  if (!section.bytes.empty()) std::memcpy(section.bytes.data(), m.data(), section.bytes.size());
+  return section;
+}
+
+// --- Typed reads -------------------------------------------------------------------------------
+
+Result<const Section*> find_section(const std::map<std::string, Section, std::less<>>& sections,
+                                    std::string_view name, SectionType wanted) {
+  const auto it = sections.find(name);
+  if (it == sections.end()) {
+    std::string present;
+    for (const auto& [other, unused] : sections) present += (present.empty() ? "" : ", ") + other;
+    return make_error(ErrorCode::kNotFound,
+                      "section '" + std::string(name) + "' not found (the container has: " +
+                          (present.empty() ? "no sections" : present) + ")");
+  }
+  if (it->second.type != wanted) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "section '" + std::string(name) + "': expected " + type_phrase(wanted) +
+                          ", got " + shape_phrase(it->second));
+  }
+  return &it->second;
+}
+
+template <typename Matrix>
+Result<Matrix> read_matrix(const std::map<std::string, Section, std::less<>>& sections,
+                           std::string_view name, SectionType wanted, int expected_cols) {
+  auto found = find_section(sections, name, wanted);
+  if (!found.ok()) return found.error();
+  const Section& section = **found;
+  if (expected_cols >= 0 && section.cols != static_cast<uint32_t>(expected_cols)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "section '" + std::string(name) + "': expected " + type_phrase(wanted) +
+                          " with " + std::to_string(expected_cols) + " columns, got " +
+                          shape_phrase(section));
+  }
+  // parse() and set_* guarantee rows·cols·element size == bytes.size().
+  assert(static_cast<uint64_t>(section.rows) * section.cols * sizeof(typename Matrix::Scalar) ==
+         section.bytes.size());
+  Matrix m(static_cast<Eigen::Index>(section.rows), static_cast<Eigen::Index>(section.cols));
+  if (!section.bytes.empty()) std::memcpy(m.data(), section.bytes.data(), section.bytes.size());
+  return m;
+}
+
+// --- Metadata as JSON --------------------------------------------------------------------------
+
+std::string metadata_to_json(const std::map<std::string, std::string>& metadata) {
+  nlohmann::json object = nlohmann::json::object();
+  for (const auto& [key, value] : metadata) object[key] = value;
+  // `replace` turns invalid UTF-8 into U+FFFD instead of throwing (see ModelContainer::metadata).
+  return object.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+// --- Parsing -----------------------------------------------------------------------------------
+
+struct ParsedEntry {
+  std::string_view name;
+  Section section;  // payload not yet copied
+  uint64_t offset = 0;
+  uint64_t size = 0;
+  uint32_t crc = 0;
+  size_t table_at = 0;  // byte offset of the entry, for messages
+};
+
+struct Parsed {
+  std::map<std::string, std::string> metadata;
+  std::vector<std::pair<std::string, Section>> sections;
+};
+
+class Parser {
+ public:
+  Parser(std::string_view bytes, std::string_view source) : bytes_(bytes), source_(source) {}
+
+  Result<Parsed> run() {
+    ANIMSPACE_RETURN_IF_ERROR(check_magic());
+    ANIMSPACE_RETURN_IF_ERROR(check_header());
+    ANIMSPACE_RETURN_IF_ERROR(check_footer());
+    std::vector<ParsedEntry> entries;
+    entries.reserve(section_count_);  // bounded by kMaxSections in check_header
+    for (uint32_t i = 0; i < section_count_; ++i) {
+      auto entry = read_entry(i);
+      if (!entry.ok()) return entry.error();
+      entries.push_back(std::move(entry).value());
+    }
+    ANIMSPACE_RETURN_IF_ERROR(check_names_unique(entries));
+    ANIMSPACE_RETURN_IF_ERROR(check_no_overlap(entries));
+    return collect(entries);
+  }
+
+ private:
+  Error data_loss(uint64_t at, const std::string& what) const {
+    return make_error(ErrorCode::kDataLoss,
+                      std::string(source_) + ": byte " + std::to_string(at) + ": " + what);
+  }
+
+  Status check_checksum(uint64_t at, std::string_view what, uint32_t stored,
+                        uint32_t computed) const {
+    if (kVerifyChecksums && stored != computed) {
+      return data_loss(at, std::string(what) + " checksum mismatch: stored " + hex32(stored) +
+                               ", computed " + hex32(computed));
+    }
+    return Status::Ok();
+  }
+
+  Status check_magic() const {
+    const std::string_view start = bytes_.substr(0, kMagic.size());
+    if (start == kMagic) return Status::Ok();
+    if (kMagic.starts_with(start)) {
+      return data_loss(bytes_.size(), "truncated: the file is " + std::to_string(bytes_.size()) +
+                                          " bytes, shorter than the " +
+                                          std::to_string(kMagic.size()) + "-byte magic");
+    }
+    std::string message = std::string(source_) +
+                          ": not an animspace model container (bad magic: got " +
+                          hex_bytes(start) + ", expected " + hex_bytes(kMagic) + ")";
+    if (start.substr(0, 4) == kMagic.substr(0, 4)) {
+      message += "; the name matches but the line-ending bytes do not, so the file was probably "
+                 "transferred in text mode";
+    }
+    return make_error(ErrorCode::kInvalidArgument, std::move(message));
+  }
+
+  Status check_header() {
+    if (bytes_.size() < kHeaderSize) {
+      return data_loss(bytes_.size(), "truncated: the file is " + std::to_string(bytes_.size()) +
+                                          " bytes, the header alone is " +
+                                          std::to_string(kHeaderSize));
+    }
+    // Checked before the version so that a corrupt version field reads as corruption.
+    ANIMSPACE_RETURN_IF_ERROR(check_checksum(kHeaderCrcAt, "header", load_u32(bytes_, kHeaderCrcAt),
+                                             crc32(bytes_.substr(0, kHeaderCrcAt))));
+
+    const uint32_t version = load_u32(bytes_, kVersionAt);
+    if (version > kFormatVersion) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        std::string(source_) + ": format version " + std::to_string(version) +
+                            " is newer than this build supports (" +
+                            std::to_string(kFormatVersion) + ")");
+    }
+    if (version == 0) return data_loss(kVersionAt, "format version 0 does not exist");
+
+    if (const uint32_t size = load_u32(bytes_, kHeaderSizeAt); size != kHeaderSize) {
+      return data_loss(kHeaderSizeAt, "header size is " + std::to_string(size) + ", expected " +
+                                          std::to_string(kHeaderSize));
+    }
+    if (const uint32_t size = load_u32(bytes_, kEntrySizeAt); size != kEntrySize) {
+      return data_loss(kEntrySizeAt, "section entry size is " + std::to_string(size) +
+                                         ", expected " + std::to_string(kEntrySize));
+    }
+    for (size_t at = kReservedAt; at < kHeaderCrcAt; ++at) {
+      if (bytes_[at] != '\0') return data_loss(at, "reserved header byte is not zero");
+    }
+
+    section_count_ = load_u32(bytes_, kSectionCountAt);
+    if (section_count_ > kMaxSections) {
+      return data_loss(kSectionCountAt, "section count " + std::to_string(section_count_) +
+                                            " exceeds the limit of " +
+                                            std::to_string(kMaxSections));
+    }
+
+    file_size_ = load_u64(bytes_, kFileSizeAt);
+    if (file_size_ > bytes_.size()) {
+      return data_loss(bytes_.size(), "truncated: the header says the file is " +
+                                          std::to_string(file_size_) + " bytes, got " +
+                                          std::to_string(bytes_.size()));
+    }
+    if (file_size_ < bytes_.size()) {
+      return data_loss(file_size_, std::to_string(bytes_.size() - file_size_) +
+                                       " unexpected bytes after the end of the file (the header "
+                                       "says the file is " +
+                                       std::to_string(file_size_) + " bytes)");
+    }
+    // No overflow: section_count_ <= kMaxSections.
+    table_end_ = kHeaderSize + kEntrySize * section_count_;
+    if (file_size_ < table_end_ + kFooterSize) {
+      return data_loss(kFileSizeAt, "file size " + std::to_string(file_size_) + " is too small for " +
+                                        std::to_string(section_count_) +
+                                        " sections (at least " +
+                                        std::to_string(table_end_ + kFooterSize) + " bytes)");
+    }
+    payload_end_ = file_size_ - kFooterSize;
+    return Status::Ok();
+  }
+
+  Status check_footer() const {
+    const std::string_view marker = bytes_.substr(payload_end_ + 4, kFooterMarker.size());
+    if (marker != kFooterMarker) {
+      return data_loss(payload_end_ + 4, "footer marker is " + hex_bytes(marker) + ", expected " +
+                                             hex_bytes(kFooterMarker));
+    }
+    return check_checksum(payload_end_, "file", load_u32(bytes_, payload_end_),
+                          crc32(bytes_.substr(0, payload_end_)));
+  }
+
+  Result<ParsedEntry> read_entry(uint32_t index) const {
+    ParsedEntry entry;
+    entry.table_at = kHeaderSize + kEntrySize * index;  // < table_end_ <= bytes_.size()
+    const std::string_view raw = bytes_.substr(entry.table_at, kEntrySize);
+    const std::string label = "section " + std::to_string(index);
+
+    // Name: 1..47 printable ASCII bytes, then NUL up to the end of the 48-byte field.
+    const std::string_view field = raw.substr(kNameAt, kNameFieldSize);
+    const size_t length = std::min(field.find('\0'), field.size());
+    if (length == 0) return data_loss(entry.table_at, label + " has an empty name");
+    if (length > kMaxSectionNameLength) {
+      return data_loss(entry.table_at + kMaxSectionNameLength, label + " name is not NUL-terminated");
+    }
+    for (size_t i = 0; i < kNameFieldSize; ++i) {
+      const char c = field[i];
+      const bool ok = i < length ? (c >= 0x20 && c <= 0x7E) : c == '\0';
+      if (!ok) {
+        return data_loss(entry.table_at + i,
+                         label + (i < length ? " name has a non-printable byte "
+                                             : " name padding has a non-zero byte ") +
+                             hex_bytes(field.substr(i, 1)));
+      }
+    }
+    entry.name = field.substr(0, length);
+    const std::string where = label + " '" + std::string(entry.name) + "'";
+
+    const uint32_t type = load_u32(raw, kTypeAt);
+    if (type > kLargestSectionType) {
+      return data_loss(entry.table_at + kTypeAt, where + " has unknown type " + std::to_string(type));
+    }
+    entry.section.type = static_cast<SectionType>(type);
+    entry.section.rows = load_u32(raw, kRowsAt);
+    entry.section.cols = load_u32(raw, kColsAt);
+    entry.crc = load_u32(raw, kPayloadCrcAt);
+    entry.offset = load_u64(raw, kOffsetAt);
+    entry.size = load_u64(raw, kSizeAt);
+
+    if (entry.name == kMetadataSectionName && entry.section.type != SectionType::kText) {
+      return data_loss(entry.table_at + kTypeAt,
+                       where + " is reserved for metadata and must be text, got " +
+                           type_phrase(entry.section.type));
+    }
+
+    // Shape: rows·cols·element size == size. rows·cols < 2^64 always; the multiplication by the
+    // element size is checked.
+    const uint64_t element = element_size(entry.section.type);
+    if (element == 0) {
+      if (entry.section.rows != 0 || entry.section.cols != 0) {
+        return data_loss(entry.table_at + kRowsAt,
+                         where + " is " + type_phrase(entry.section.type) +
+                             " but has a shape (" + std::to_string(entry.section.rows) + "x" +
+                             std::to_string(entry.section.cols) + ")");
+      }
+    } else {
+      const uint64_t count = uint64_t{entry.section.rows} * entry.section.cols;
+      const bool overflows = count > std::numeric_limits<uint64_t>::max() / element;
+      if (overflows || count * element != entry.size) {
+        return data_loss(entry.table_at + kSizeAt,
+                         where + " is " + shape_phrase(entry.section) + " and needs " +
+                             (overflows ? std::string("more than 2^64")
+                                        : std::to_string(count * element)) +
+                             " bytes, but its size is " + std::to_string(entry.size));
+      }
+    }
+
+    // Placement: aligned, after the table, before the footer. Written as subtractions from
+    // bounds already known to be ordered, so that nothing can wrap.
+    if (entry.offset % kAlignment != 0) {
+      return data_loss(entry.table_at + kOffsetAt, where + " offset " + std::to_string(entry.offset) +
+                                                       " is not a multiple of " +
+                                                       std::to_string(kAlignment));
+    }
+    if (entry.offset < table_end_ || entry.offset > payload_end_ ||
+        entry.size > payload_end_ - entry.offset) {
+      return data_loss(entry.table_at + kOffsetAt,
+                       where + " payload [" + std::to_string(entry.offset) + ", +" +
+                           std::to_string(entry.size) + ") lies outside the payload area [" +
+                           std::to_string(table_end_) + ", " + std::to_string(payload_end_) + ")");
+    }
+    return entry;
+  }
+
+  Status check_names_unique(const std::vector<ParsedEntry>& entries) const {
+    std::map<std::string_view, size_t> seen;
+    for (const ParsedEntry& entry : entries) {
+      const auto [it, inserted] = seen.emplace(entry.name, entry.table_at);
+      if (!inserted) {
+        return data_loss(entry.table_at, "section name '" + std::string(entry.name) +
+                                             "' appears twice (first at byte " +
+                                             std::to_string(it->second) + ")");
+      }
+    }
+    return Status::Ok();
+  }
+
+  Status check_no_overlap(const std::vector<ParsedEntry>& entries) const {
+    std::vector<const ParsedEntry*> by_offset;
+    by_offset.reserve(entries.size());
+    for (const ParsedEntry& entry : entries) by_offset.push_back(&entry);
+    std::sort(by_offset.begin(), by_offset.end(), [](const ParsedEntry* a, const ParsedEntry* b) {
+      return a->offset != b->offset ? a->offset < b->offset : a->size < b->size;
+    });
+    for (size_t i = 1; i < by_offset.size(); ++i) {
+      const ParsedEntry& previous = *by_offset[i - 1];
+      const ParsedEntry& current = *by_offset[i];
+      // previous.offset + previous.size <= payload_end_ was checked: no overflow.
+      if (current.offset < previous.offset + previous.size) {
+        return data_loss(current.table_at + kOffsetAt,
+                         "section '" + std::string(current.name) + "' payload at " +
+                             std::to_string(current.offset) + " overlaps section '" +
+                             std::string(previous.name) + "' [" +
+                             std::to_string(previous.offset) + ", +" +
+                             std::to_string(previous.size) + ")");
+      }
+    }
+    return Status::Ok();
+  }
+
+  Result<Parsed> collect(std::vector<ParsedEntry>& entries) const {
+    Parsed parsed;
+    parsed.sections.reserve(entries.size());
+    for (ParsedEntry& entry : entries) {
+      // offset + size <= payload_end_ <= bytes_.size(), checked in read_entry.
+      const std::string_view payload =
+          bytes_.substr(static_cast<size_t>(entry.offset), static_cast<size_t>(entry.size));
+      ANIMSPACE_RETURN_IF_ERROR(check_checksum(entry.table_at + kPayloadCrcAt,
+                                               "section '" + std::string(entry.name) + "'",
+                                               entry.crc, crc32(payload)));
+      if (entry.name == kMetadataSectionName) {
+        ANIMSPACE_RETURN_IF_ERROR(parse_metadata(payload, entry.offset, parsed.metadata));
+        continue;
+      }
+      entry.section.bytes.assign(payload);
+      parsed.sections.emplace_back(std::string(entry.name), std::move(entry.section));
+    }
+    return parsed;
+  }
+
+  // The metadata section is a JSON object whose values are all strings.
+  Status parse_metadata(std::string_view text, uint64_t at,
+                        std::map<std::string, std::string>& metadata) const {
+    // nlohmann 3.11 parses and destroys without recursion, so deep nesting cannot exhaust the
+    // stack; it can only fail the object-of-strings check below.
+    nlohmann::json document;
+    try {
+      document = nlohmann::json::parse(text);
+    } catch (const nlohmann::json::exception& e) {
+      return data_loss(at, "metadata is not valid JSON: " + std::string(e.what()));
+    }
+    if (!document.is_object()) {
+      return data_loss(at, std::string("metadata is a JSON ") + document.type_name() +
+                               ", expected an object");
+    }
+    for (const auto& [key, value] : document.items()) {
+      if (!value.is_string()) {
+        return data_loss(at, "metadata value for key '" + key + "' is a JSON " +
+                                 value.type_name() + ", expected a string");
+      }
+      metadata[key] = value.get<std::string>();
+    }
+    return Status::Ok();
+  }
+
+  std::string_view bytes_;
+  std::string_view source_;
+  uint32_t section_count_ = 0;
+  uint64_t file_size_ = 0;
+  uint64_t table_end_ = 0;    // first byte after the section table
+  uint64_t payload_end_ = 0;  // first byte of the footer
+};
+
+}  // namespace
+
+// --- ModelContainer ----------------------------------------------------------------------------
+
+std::string ModelContainer::metadata_value(const std::string& key,
+                                           const std::string& fallback) const {
+  const auto it = metadata_.find(key);
+  return it == metadata_.end() ? fallback : it->second;
+}
+
+void ModelContainer::set_bytes(const std::string& name, std::string bytes) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = Section{SectionType::kBytes, 0, 0, std::move(bytes)};
+}
+
+void ModelContainer::set_text(const std::string& name, std::string text) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = Section{SectionType::kText, 0, 0, std::move(text)};
+}
+
+void ModelContainer::set_matrix(const std::string& name, const FrameMatrix& m) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = matrix_section(SectionType::kFloat32Matrix, m);
+}
+
+void ModelContainer::set_matrix(const std::string& name, const Int32Matrix& m) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = matrix_section(SectionType::kInt32Matrix, m);
+}
+
+void ModelContainer::set_matrix(const std::string& name, const Float64Matrix& m) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = matrix_section(SectionType::kFloat64Matrix, m);
+}
+
+void ModelContainer::set_points(const std::string& name, const PointMatrix& m) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = matrix_section(SectionType::kFloat32Matrix, m);
+}
+
+void ModelContainer::set_faces(const std::string& name, const FaceMatrix& m) {
+  assert(can_add_section(sections_, name));
+  sections_[name] = matrix_section(SectionType::kInt32Matrix, m);
+}
+
+bool ModelContainer::has_section(std::string_view name) const {
+  return sections_.find(name) != sections_.end();
+}
+
+std::vector<std::string> ModelContainer::section_names() const {
+  std::vector<std::string> names;
+  names.reserve(sections_.size());
+  for (const auto& [name, unused] : sections_) names.push_back(name);
+  return names;
+}
+
+Result<std::string> ModelContainer::bytes(std::string_view name) const {
+  auto found = find_section(sections_, name, SectionType::kBytes);
+  if (!found.ok()) return found.error();
+  return (*found)->bytes;
+}
+
+Result<std::string> ModelContainer::text(std::string_view name) const {
+  auto found = find_section(sections_, name, SectionType::kText);
+  if (!found.ok()) return found.error();
+  return (*found)->bytes;
+}
+
+Result<FrameMatrix> ModelContainer::float_matrix(std::string_view name, int expected_cols) const {
+  return read_matrix<FrameMatrix>(sections_, name, SectionType::kFloat32Matrix, expected_cols);
+}
+
+Result<Int32Matrix> ModelContainer::int_matrix(std::string_view name, int expected_cols) const {
+  return read_matrix<Int32Matrix>(sections_, name, SectionType::kInt32Matrix, expected_cols);
+}
+
+Result<Float64Matrix> ModelContainer::double_matrix(std::string_view name,
+                                                    int expected_cols) const {
+  return read_matrix<Float64Matrix>(sections_, name, SectionType::kFloat64Matrix, expected_cols);
+}
+
+Result<PointMatrix> ModelContainer::points(std::string_view name) const {
+  return read_matrix<PointMatrix>(sections_, name, SectionType::kFloat32Matrix, 3);
+}
+
+Result<FaceMatrix> ModelContainer::faces(std::string_view name) const {
+  return read_matrix<FaceMatrix>(sections_, name, SectionType::kInt32Matrix, 3);
+}
+
+// --- Serialisation -----------------------------------------------------------------------------
+
+std::string serialize(const ModelContainer& container) {
+  struct Planned {
+    std::string_view name;
+    SectionType type;
+    uint32_t rows;
+    uint32_t cols;
+    std::string_view payload;
+    uint64_t offset;
+  };
+  const std::string metadata_json = metadata_to_json(container.metadata());
+
+  // Plan: metadata first, then the sections in name order, each payload 8-byte aligned.
+  std::vector<Planned> planned;
+  planned.reserve(container.sections().size() + 1);
+  planned.push_back({kMetadataSectionName, SectionType::kText, 0, 0, metadata_json, 0});
+  for (const auto& [name, section] : container.sections()) {
+    assert(is_valid_section_name(name) && name != kMetadataSectionName);
+    planned.push_back({name, section.type, section.rows, section.cols, section.bytes, 0});
+  }
+  assert(planned.size() <= kMaxSections);
+  uint64_t cursor = kHeaderSize + kEntrySize * planned.size();
+  for (Planned& p : planned) {
+    p.offset = cursor;
+    cursor = align_up(cursor + p.payload.size());
+  }
+  const uint64_t payload_end = cursor;
+  const uint64_t file_size = payload_end + kFooterSize;
+
+  // Zero-filled, so padding and reserved bytes need no code.
+  std::string out(static_cast<size_t>(file_size), '\0');
+
+  // Section table and payloads.
+  for (size_t i = 0; i < planned.size(); ++i) {
+    const Planned& p = planned[i];
+    const size_t entry_at = kHeaderSize + kEntrySize * i;
+    // min() keeps a release build (asserts off) from writing past the name field.
+    std::memcpy(out.data() + entry_at + kNameAt, p.name.data(),
+                std::min(p.name.size(), kMaxSectionNameLength));
+    store_u32(out, entry_at + kTypeAt, static_cast<uint32_t>(p.type));
+    store_u32(out, entry_at + kRowsAt, p.rows);
+    store_u32(out, entry_at + kColsAt, p.cols);
+    store_u32(out, entry_at + kPayloadCrcAt, crc32(p.payload));
+    store_u64(out, entry_at + kOffsetAt, p.offset);
+    store_u64(out, entry_at + kSizeAt, p.payload.size());
+    if (!p.payload.empty()) {
+      std::memcpy(out.data() + p.offset, p.payload.data(), p.payload.size());
+    }
+  }
+
+  // Header, then its checksum over bytes [0, 60).
+  std::memcpy(out.data() + kMagicAt, kMagic.data(), kMagic.size());
+  store_u32(out, kVersionAt, kFormatVersion);
+  store_u32(out, kHeaderSizeAt, static_cast<uint32_t>(kHeaderSize));
+  store_u64(out, kFileSizeAt, file_size);
+  store_u32(out, kSectionCountAt, static_cast<uint32_t>(planned.size()));
+  store_u32(out, kEntrySizeAt, static_cast<uint32_t>(kEntrySize));
+  store_u32(out, kHeaderCrcAt, crc32(std::string_view(out).substr(0, kHeaderCrcAt)));
+
+  // Footer: CRC of everything before it, then the end marker.
+  store_u32(out, payload_end, crc32(std::string_view(out).substr(0, payload_end)));
+  std::memcpy(out.data() + payload_end + 4, kFooterMarker.data(), kFooterMarker.size());
+  return out;
+}
+
+Result<ModelContainer> parse(std::string_view bytes, std::string_view source) {
+  try {
+    auto parsed = Parser(bytes, source).run();
+    if (!parsed.ok()) return parsed.error();
+    ModelContainer container;
+    container.metadata_ = std::move(parsed->metadata);
+    for (auto& [name, section] : parsed->sections) {
+      container.sections_.emplace(std::move(name), std::move(section));
+    }
+    return container;
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted,
+                      std::string(source) + ": out of memory while reading the model container");
+  } catch (const std::exception& e) {
+    return make_error(ErrorCode::kInternal,
+                      std::string(source) + ": unexpected error while reading the model "
+                                            "container: " + e.what());
+  }
+}
+
+Result<ModelContainer> read_file(const std::filesystem::path& path) {
+  auto bytes = read_whole_file(path);
+  if (!bytes.ok()) return bytes.error();
+  return parse(*bytes, path.string());
+}
+
+Status write_file(const std::filesystem::path& path, const ModelContainer& container) {
+  try {
+    return write_file_atomically(path, serialize(container));
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted,
+                      path.string() + ": out of memory while serialising the model container");
+  }
+}
+
+}  // namespace animspace::container

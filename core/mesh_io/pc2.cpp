@@ -1,0 +1,178 @@
+#include "core/mesh_io/pc2.h"
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <new>
+
+#include "core/common/atomic_file.h"
+
+namespace animspace::mesh_io {
+namespace {
+
+static_assert(std::endian::native == std::endian::little,
+              "PC2 is little endian and is read and written by copying memory");
+
+constexpr std::string_view kMagic{"POINTCACHE2\0", 12};
+constexpr size_t kHeaderBytes = 32;
+constexpr size_t kVersionOffset = 12;
+constexpr size_t kNumPointsOffset = 16;
+constexpr size_t kStartFrameOffset = 20;
+constexpr size_t kSampleRateOffset = 24;
+constexpr size_t kNumSamplesOffset = 28;
+
+template <typename T>
+T load(std::string_view bytes, size_t offset) {
+  T value;
+  std::memcpy(&value, bytes.data() + offset, sizeof(T));
+  return value;
+}
+
+template <typename T>
+void store(std::string& bytes, T value) {
+  bytes.append(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+Error at_byte(ErrorCode code, std::string_view source, size_t offset, const std::string& message) {
+  return make_error(code, std::string(source) + ": byte " + std::to_string(offset) + ": " + message);
+}
+
+// The first non-finite value of `samples`, or -1.
+Eigen::Index first_non_finite(const FrameMatrix& samples) {
+  const float* values = samples.data();
+  for (Eigen::Index i = 0; i < samples.size(); ++i) {
+    if (!std::isfinite(values[i])) return i;
+  }
+  return -1;
+}
+
+std::string describe_value(Eigen::Index flat_index, int num_points) {
+  static constexpr const char* kAxis[] = {"x", "y", "z"};
+  const Eigen::Index per_frame = 3 * Eigen::Index{num_points};
+  return "frame " + std::to_string(flat_index / per_frame) + ", point " +
+         std::to_string(flat_index % per_frame / 3) + ", " + kAxis[flat_index % 3];
+}
+
+Status check_cache(const PointCache& cache) {
+  if (cache.num_points <= 0) return make_error(ErrorCode::kInvalidArgument, "num_points must be > 0, got " + std::to_string(cache.num_points));
+  if (cache.samples.rows() == 0) return make_error(ErrorCode::kInvalidArgument, "a point cache needs at least one sample");
+  if (cache.samples.cols() != 3 * Eigen::Index{cache.num_points}) {
+    return make_error(ErrorCode::kInvalidArgument, "samples has " + std::to_string(cache.samples.cols()) +
+                                                       " columns, expected 3 × num_points = " +
+                                                       std::to_string(3 * Eigen::Index{cache.num_points}));
+  }
+  if (!std::isfinite(cache.start_frame)) return make_error(ErrorCode::kInvalidArgument, "start_frame is not finite");
+  if (!(std::isfinite(cache.sample_rate) && cache.sample_rate > 0)) {
+    return make_error(ErrorCode::kInvalidArgument, "sample_rate must be finite and > 0, got " + std::to_string(cache.sample_rate));
+  }
+  if (const Eigen::Index bad = first_non_finite(cache.samples); bad >= 0) {
+    return make_error(ErrorCode::kInvalidArgument, "non-finite value at " + describe_value(bad, cache.num_points));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+PointMatrix PointCache::frame(int index) const {
+  assert(index >= 0 && index < num_frames());
+  return Eigen::Map<const PointMatrix>(samples.row(index).data(), num_points, 3);
+}
+
+Result<PointCache> parse_pc2(std::string_view bytes, std::string_view source) {
+  if (bytes.size() < kHeaderBytes) {
+    return at_byte(ErrorCode::kDataLoss, source, bytes.size(),
+                   "truncated header: expected " + std::to_string(kHeaderBytes) + " bytes, got " +
+                       std::to_string(bytes.size()));
+  }
+  if (bytes.substr(0, kMagic.size()) != kMagic) {
+    return at_byte(ErrorCode::kInvalidArgument, source, 0, "expected the magic \"POINTCACHE2\\0\", not a PC2 file");
+  }
+  if (const auto version = load<int32_t>(bytes, kVersionOffset); version != 1) {
+    return at_byte(ErrorCode::kFailedPrecondition, source, kVersionOffset,
+                   "unsupported version " + std::to_string(version) + ", expected 1");
+  }
+  PointCache cache;
+  cache.num_points = load<int32_t>(bytes, kNumPointsOffset);
+  cache.start_frame = load<float>(bytes, kStartFrameOffset);
+  cache.sample_rate = load<float>(bytes, kSampleRateOffset);
+  const int32_t num_samples = load<int32_t>(bytes, kNumSamplesOffset);
+  if (cache.num_points <= 0) {
+    return at_byte(ErrorCode::kInvalidArgument, source, kNumPointsOffset,
+                   "expected numPoints > 0, got " + std::to_string(cache.num_points));
+  }
+  if (!std::isfinite(cache.start_frame)) {
+    return at_byte(ErrorCode::kInvalidArgument, source, kStartFrameOffset, "startFrame is not finite");
+  }
+  if (!(std::isfinite(cache.sample_rate) && cache.sample_rate > 0)) {
+    return at_byte(ErrorCode::kInvalidArgument, source, kSampleRateOffset,
+                   "expected a finite sampleRate > 0, got " + std::to_string(cache.sample_rate));
+  }
+  if (num_samples <= 0) {
+    return at_byte(ErrorCode::kInvalidArgument, source, kNumSamplesOffset,
+                   "expected numSamples > 0, got " + std::to_string(num_samples));
+  }
+
+  // The header's counts are untrusted: compare them with the real size before allocating. The
+  // payload size can exceed 64 bits (12 · (2^31)^2), hence the overflow check.
+  const uint64_t frame_bytes = 3 * sizeof(float) * static_cast<uint64_t>(cache.num_points);
+  uint64_t payload_bytes = 0;
+  const bool overflows = __builtin_mul_overflow(frame_bytes, static_cast<uint64_t>(num_samples), &payload_bytes) ||
+                         payload_bytes > UINT64_MAX - kHeaderBytes;
+  if (overflows || payload_bytes + kHeaderBytes != bytes.size()) {
+    const bool truncated = overflows || payload_bytes + kHeaderBytes > bytes.size();
+    return at_byte(ErrorCode::kDataLoss, source, bytes.size(),
+                   std::string(truncated ? "truncated" : "trailing bytes") + ": the header's " +
+                       std::to_string(num_samples) + " samples × " + std::to_string(cache.num_points) +
+                       " points need " + (overflows ? "more than 2^64" : std::to_string(payload_bytes + kHeaderBytes)) +
+                       " bytes, the data has " + std::to_string(bytes.size()));
+  }
+
+  try {
+    cache.samples.resize(num_samples, 3 * Eigen::Index{cache.num_points});
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted, std::string(source) + ": out of memory for " +
+                                                         std::to_string(payload_bytes) + " bytes of samples");
+  }
+  // The row-major samples matrix has the file's layout, so the payload is one copy.
+  std::memcpy(cache.samples.data(), bytes.data() + kHeaderBytes, payload_bytes);
+  if (const Eigen::Index bad = first_non_finite(cache.samples); bad >= 0) {
+    return at_byte(ErrorCode::kInvalidArgument, source, kHeaderBytes + sizeof(float) * static_cast<size_t>(bad),
+                   "non-finite value at " + describe_value(bad, cache.num_points));
+  }
+  return cache;
+}
+
+Result<PointCache> read_pc2(const std::filesystem::path& path) {
+  const auto bytes = read_whole_file(path);
+  if (!bytes.ok()) return bytes.error();
+  return parse_pc2(*bytes, path.string());
+}
+
+std::string serialize_pc2(const PointCache& cache) {
+  assert(cache.num_points > 0 && cache.samples.rows() > 0 &&
+         cache.samples.cols() == 3 * Eigen::Index{cache.num_points});
+  std::string bytes;
+  bytes.reserve(kHeaderBytes + sizeof(float) * static_cast<size_t>(cache.samples.size()));
+  bytes.append(kMagic);
+  store<int32_t>(bytes, 1);
+  store<int32_t>(bytes, cache.num_points);
+  store<float>(bytes, cache.start_frame);
+  store<float>(bytes, cache.sample_rate);
+  store<int32_t>(bytes, static_cast<int32_t>(cache.samples.rows()));
+  bytes.append(reinterpret_cast<const char*>(cache.samples.data()), sizeof(float) * static_cast<size_t>(cache.samples.size()));
+  return bytes;
+}
+
+Status write_pc2(const std::filesystem::path& path, const PointCache& cache) {
+  if (const Status valid = check_cache(cache); !valid.ok()) {
+    return make_error(valid.error().code, path.string() + ": " + valid.error().message);
+  }
+  try {
+    return write_file_atomically(path, serialize_pc2(cache));
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted, path.string() + ": out of memory while writing");
+  }
+}
+
+}  // namespace animspace::mesh_io

@@ -1,0 +1,122 @@
+#include "core/model/model_info.h"
+
+#include <array>
+#include <utility>
+
+namespace animspace::model {
+namespace {
+
+constexpr std::array<std::pair<ModelKind, const char*>, 4> kKindNames{{
+    {ModelKind::kMeshSequence, "mesh_sequence"},
+    {ModelKind::kPmsc, "pmsc"},
+    {ModelKind::kCrossPmsc, "cross_pmsc"},
+    {ModelKind::kAnimationSpace, "animation_space"},
+}};
+
+Error shape_error(const std::string& source, const char* section, const std::string& expected,
+                  long actual_rows, long actual_cols) {
+  return make_error(ErrorCode::kInvalidArgument,
+                    source + ": section '" + section + "' should be " + expected + ", got " +
+                        std::to_string(actual_rows) + "×" + std::to_string(actual_cols));
+}
+
+}  // namespace
+
+const char* kind_name(ModelKind kind) {
+  for (const auto& [k, name] : kKindNames) {
+    if (k == kind) return name;
+  }
+  return "unknown";
+}
+
+Result<ModelKind> parse_kind(const std::string& name) {
+  for (const auto& [kind, kind_string] : kKindNames) {
+    if (name == kind_string) return kind;
+  }
+  return make_error(ErrorCode::kInvalidArgument,
+                    "unknown model kind '" + name +
+                        "' (expected mesh_sequence, pmsc, cross_pmsc or animation_space)");
+}
+
+Result<ModelInfo> describe(const container::ModelContainer& model, const std::string& source) {
+  ModelInfo info;
+  const std::string kind = model.metadata_value("kind");
+  if (kind.empty()) {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata has no 'kind'");
+  }
+  auto parsed_kind = parse_kind(kind);
+  if (!parsed_kind) return make_error(ErrorCode::kInvalidArgument, source + ": " + parsed_kind.error().message);
+  info.kind = *parsed_kind;
+  info.description = model.metadata_value("description");
+
+  // The rest mesh fixes N; every other per-point section must agree with it.
+  auto rest = model.points(sections::kRestPoints);
+  if (!rest) return rest.error();
+  info.point_count = static_cast<int>(rest->rows());
+
+  if (model.has_section(sections::kFaces)) {
+    auto faces = model.faces(sections::kFaces);
+    if (!faces) return faces.error();
+    if (faces->size() > 0 && (faces->minCoeff() < 0 || faces->maxCoeff() >= info.point_count)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": section 'mesh.faces' indexes vertices outside [0, " +
+                            std::to_string(info.point_count) + ")");
+    }
+    info.face_count = static_cast<int>(faces->rows());
+  }
+
+  if (model.has_section(sections::kSkeletonParents)) {
+    auto parents = model.int_matrix(sections::kSkeletonParents, 1);
+    if (!parents) return parents.error();
+    info.bone_count = static_cast<int>(parents->rows());
+    for (int j = 0; j < info.bone_count; ++j) {
+      // Bones are stored parents-first so that G_j = G_parent · L_j composes in one pass.
+      const int parent = (*parents)(j, 0);
+      if (parent < -1 || parent >= j) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          source + ": section 'skeleton.parents' row " + std::to_string(j) +
+                              " has parent " + std::to_string(parent) +
+                              ", expected -1 or a bone index below " + std::to_string(j));
+      }
+    }
+    auto rest_transforms = model.double_matrix(sections::kSkeletonRest, 16);
+    if (!rest_transforms) return rest_transforms.error();
+    if (rest_transforms->rows() != info.bone_count) {
+      return shape_error(source, sections::kSkeletonRest, std::to_string(info.bone_count) + "×16",
+                         rest_transforms->rows(), rest_transforms->cols());
+    }
+  }
+
+  if (model.has_section(sections::kSkinningWeights)) {
+    auto weights = model.float_matrix(sections::kSkinningWeights);
+    if (!weights) return weights.error();
+    if (weights->rows() != info.point_count || weights->cols() != info.bone_count) {
+      return shape_error(source, sections::kSkinningWeights,
+                         std::to_string(info.point_count) + "×" + std::to_string(info.bone_count),
+                         weights->rows(), weights->cols());
+    }
+  }
+
+  if (model.has_section(sections::kSequenceFrames)) {
+    auto frames = model.float_matrix(sections::kSequenceFrames);
+    if (!frames) return frames.error();
+    if (frames->cols() != static_cast<long>(info.point_count) * info.channel_count) {
+      return shape_error(source, sections::kSequenceFrames,
+                         "F×" + std::to_string(info.point_count * info.channel_count),
+                         frames->rows(), frames->cols());
+    }
+    info.frame_count = static_cast<int>(frames->rows());
+    if (model.has_section(sections::kSequenceBoneTransforms)) {
+      auto bones = model.double_matrix(sections::kSequenceBoneTransforms);
+      if (!bones) return bones.error();
+      if (bones->rows() != info.frame_count || bones->cols() != 16L * info.bone_count) {
+        return shape_error(source, sections::kSequenceBoneTransforms,
+                           std::to_string(info.frame_count) + "×" + std::to_string(16 * info.bone_count),
+                           bones->rows(), bones->cols());
+      }
+    }
+  }
+  return info;
+}
+
+}  // namespace animspace::model

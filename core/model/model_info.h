@@ -1,0 +1,55 @@
+// What a model version is and what it can do, read from its container once at load time.
+//
+// The daemon answers DescribeModel from this, and refuses a container whose sections disagree
+// with each other (a frame matrix whose width is not 3·N, faces indexing past N, …) before it
+// ever serves it.
+#pragma once
+
+#include <string>
+
+#include "core/common/result.h"
+#include "core/container/model_container.h"
+
+namespace animspace::model {
+
+enum class ModelKind { kMeshSequence, kPmsc, kCrossPmsc, kAnimationSpace };
+
+// How a blend or miss obtains the full values (SPEC "Fail-through").
+enum class FailThrough { kNone, kServer, kClient, kImpossible };
+
+// Metadata value of "kind" for each ModelKind ("mesh_sequence", "pmsc", …).
+const char* kind_name(ModelKind kind);
+Result<ModelKind> parse_kind(const std::string& name);
+
+// Section names shared by the writers (demo, training, fitting) and the readers.
+namespace sections {
+inline constexpr const char* kRestPoints = "mesh.rest_points";            // N×3 float32
+inline constexpr const char* kFaces = "mesh.faces";                       // F×3 int32
+inline constexpr const char* kSkeletonParents = "skeleton.parents";       // B×1 int32, -1 = root
+inline constexpr const char* kSkeletonRest = "skeleton.rest_transforms";  // B×16 float64 (Ĝ_j)
+inline constexpr const char* kSkinningWeights = "skinning.weights";       // N×B float32
+inline constexpr const char* kSequenceFrames = "sequence.frames";         // F×(N·D) float32
+inline constexpr const char* kSequenceBoneTransforms = "sequence.bone_transforms";  // F×(B·16) f64
+}  // namespace sections
+
+struct ModelInfo {
+  ModelKind kind = ModelKind::kMeshSequence;
+  std::string description;
+  int point_count = 0;    // N
+  int channel_count = 3;  // D
+  int face_count = 0;
+  int bone_count = 0;
+  int frame_count = 0;
+  int key_point_count = 0;
+  int basis_size = 0;
+  int lod_level_count = 0;
+  float epsilon_min = 0;
+  float epsilon_max = 0;
+  FailThrough fail_through = FailThrough::kNone;
+};
+
+// Reads and cross-checks the sections every kind shares. Errors: kInvalidArgument (or the
+// container's own error) naming `source`, the section and expected vs actual shape.
+Result<ModelInfo> describe(const container::ModelContainer& model, const std::string& source);
+
+}  // namespace animspace::model

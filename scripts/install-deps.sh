@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Installs every Debian package that the build, the tests and the demo need.
+# Idempotent: packages already present are skipped, and apt is not touched at all
+# when nothing is missing. Debian's archive is the only source; nothing else is downloaded.
+set -euo pipefail
+
+packages=(
+  # toolchain
+  build-essential cmake ninja-build ccache pkg-config git
+  # RPC
+  libgrpc++-dev libgrpc-dev protobuf-compiler protobuf-compiler-grpc libprotobuf-dev grpc-proto
+  # core numerics and geometry
+  libeigen3-dev libopenmesh-dev libmeshoptimizer-dev libtinygltf-dev nlohmann-json3-dev libstb-dev
+  # server and command line
+  libspdlog-dev libfmt-dev libcli11-dev libcpp-httplib-dev
+  # headless rendering (Mesa's surfaceless EGL, llvmpipe) and PNG
+  libegl-dev libgles-dev libegl1 libgles2 libegl-mesa0 libgl1-mesa-dri libpng-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # Python client (always run with /usr/bin/python3)
+  python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-matplotlib
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed'; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+echo "install-deps: installing ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"

@@ -1,0 +1,20 @@
+#include "server/call_scope.h"
+
+#include <spdlog/spdlog.h>
+
+namespace animspace::server {
+
+grpc::Status CallScope::finish(grpc::Status status) {
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  const int code = static_cast<int>(status.error_code());
+  metrics_.record_call(rpc_, model_, code, seconds);
+  if (!status.ok()) {
+    spdlog::warn("rpc={} model={} status={} message=\"{}\" seconds={:.6f}", rpc_,
+                 model_.empty() ? "-" : model_, grpc_code_name(code), status.error_message(), seconds);
+  } else {
+    spdlog::debug("rpc={} model={} status=OK seconds={:.6f}", rpc_, model_.empty() ? "-" : model_, seconds);
+  }
+  return status;
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,60 @@
+#include "server/convert.h"
+
+namespace animspace::server {
+
+v1::ModelKind to_proto(model::ModelKind kind) {
+  switch (kind) {
+    case model::ModelKind::kMeshSequence: return v1::MODEL_KIND_MESH_SEQUENCE;
+    case model::ModelKind::kPmsc: return v1::MODEL_KIND_PMSC;
+    case model::ModelKind::kCrossPmsc: return v1::MODEL_KIND_CROSS_PMSC;
+    case model::ModelKind::kAnimationSpace: return v1::MODEL_KIND_ANIMATION_SPACE;
+  }
+  return v1::MODEL_KIND_UNSPECIFIED;
+}
+
+v1::FailThrough to_proto(model::FailThrough fail_through) {
+  switch (fail_through) {
+    case model::FailThrough::kNone: return v1::FAIL_THROUGH_UNSPECIFIED;
+    case model::FailThrough::kServer: return v1::FAIL_THROUGH_SERVER;
+    case model::FailThrough::kClient: return v1::FAIL_THROUGH_CLIENT;
+    case model::FailThrough::kImpossible: return v1::FAIL_THROUGH_IMPOSSIBLE;
+  }
+  return v1::FAIL_THROUGH_UNSPECIFIED;
+}
+
+void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
+  out->set_version(entry.version);
+  if (!entry.model) {
+    out->set_state(v1::VERSION_STATE_FAILED);
+    out->set_error(entry.error);
+    return;
+  }
+  const LoadedModel& m = *entry.model;
+  const model::ModelInfo& info = m.info;
+  out->set_state(v1::VERSION_STATE_AVAILABLE);
+  out->set_kind(to_proto(info.kind));
+  out->set_description(info.description);
+  out->set_point_count(static_cast<uint32_t>(info.point_count));
+  out->set_channel_count(static_cast<uint32_t>(info.channel_count));
+  out->set_face_count(static_cast<uint32_t>(info.face_count));
+  out->set_bone_count(static_cast<uint32_t>(info.bone_count));
+  out->set_key_point_count(static_cast<uint32_t>(info.key_point_count));
+  out->set_basis_size(static_cast<uint32_t>(info.basis_size));
+  out->set_frame_count(static_cast<uint32_t>(info.frame_count));
+  out->set_lod_level_count(static_cast<uint32_t>(info.lod_level_count));
+  out->set_epsilon_min(info.epsilon_min);
+  out->set_epsilon_max(info.epsilon_max);
+  out->set_fail_through(to_proto(info.fail_through));
+  out->set_file_size_bytes(m.file_size_bytes);
+  out->set_loaded_at_unix_s(m.loaded_at_unix_s);
+  for (const auto& [key, value] : m.container.metadata()) (*out->mutable_metadata())[key] = value;
+  for (const auto& name : m.container.section_names()) out->add_sections(name);
+}
+
+void to_proto(const ModelEntry& entry, v1::ModelSummary* out) {
+  out->set_name(entry.name);
+  out->set_default_version(entry.default_version());
+  for (const auto& [version, v] : entry.versions) to_proto(v, out->add_versions());
+}
+
+}  // namespace animspace::server

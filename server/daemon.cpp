@@ -1,0 +1,143 @@
+#include "server/daemon.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <httplib.h>
+#include <spdlog/spdlog.h>
+
+#include "core/common/atomic_file.h"
+#include "server/services/model_service.h"
+#include "server/services/pending_services.h"
+#include "server/services/stats_service.h"
+
+namespace animspace::server {
+namespace {
+
+// Splits "host:port" (or "[v6]:port"). Errors: kInvalidArgument naming the flag.
+Result<std::pair<std::string, int>> split_host_port(const std::string& address, const char* flag) {
+  const auto colon = address.rfind(':');
+  if (colon == std::string::npos || colon + 1 == address.size()) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      std::string(flag) + ": expected host:port, got '" + address + "'");
+  }
+  std::string host = address.substr(0, colon);
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  int port = -1;
+  try {
+    size_t used = 0;
+    port = std::stoi(address.substr(colon + 1), &used);
+    if (used != address.size() - colon - 1) port = -1;
+  } catch (const std::exception&) {
+    port = -1;
+  }
+  if (port < 0 || port > 65535) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      std::string(flag) + ": port must be 0..65535, got '" + address.substr(colon + 1) + "'");
+  }
+  return std::make_pair(host, port);
+}
+
+}  // namespace
+
+Daemon::Daemon(ServerOptions options)
+    : options_(std::move(options)), registry_(options_.repository), env_{registry_, metrics_, options_} {}
+
+Daemon::~Daemon() { shutdown(); }
+
+Status Daemon::start() {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(options_.repository, ec)) {
+    return make_error(ErrorCode::kNotFound,
+                      "--model-repository: '" + options_.repository.string() + "' is not a directory");
+  }
+
+  model_service_ = std::make_unique<ModelServiceImpl>(env_);
+  stats_service_ = std::make_unique<StatsServiceImpl>(env_);
+  pose_service_ = std::make_unique<PoseServiceImpl>(env_);
+  skinning_service_ = std::make_unique<SkinningServiceImpl>(env_);
+  lod_service_ = std::make_unique<LodServiceImpl>(env_);
+  render_service_ = std::make_unique<RenderServiceImpl>(env_);
+  training_service_ = std::make_unique<TrainingServiceImpl>(env_);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options_.listen_address, grpc::InsecureServerCredentials(), &port_);
+  builder.SetMaxReceiveMessageSize(static_cast<int>(options_.max_message_bytes));
+  builder.SetMaxSendMessageSize(static_cast<int>(options_.max_message_bytes));
+  grpc::ResourceQuota quota("animspaced");
+  quota.SetMaxThreads(std::max(2, options_.worker_threads));
+  builder.SetResourceQuota(quota);
+  builder.RegisterService(model_service_.get());
+  builder.RegisterService(stats_service_.get());
+  builder.RegisterService(pose_service_.get());
+  builder.RegisterService(skinning_service_.get());
+  builder.RegisterService(lod_service_.get());
+  builder.RegisterService(render_service_.get());
+  builder.RegisterService(training_service_.get());
+  server_ = builder.BuildAndStart();
+  if (!server_ || port_ == 0) {
+    server_.reset();
+    return make_error(ErrorCode::kInvalidArgument,
+                      "--listen: cannot bind '" + options_.listen_address + "' (in use or not a local address?)");
+  }
+  // Health is NOT_SERVING until the repository is loaded, so that load balancers and probes
+  // wait for a replica that can answer.
+  server_->GetHealthCheckService()->SetServingStatus(false);
+  spdlog::info("listening on {} (port {}), health NOT_SERVING while loading", options_.listen_address, port_);
+  if (!options_.port_file.empty()) {
+    ANIMSPACE_RETURN_IF_ERROR(write_file_atomically(options_.port_file, std::to_string(port_) + "\n"));
+  }
+  ANIMSPACE_RETURN_IF_ERROR(start_metrics_endpoint());
+
+  const int loaded = registry_.load_all();
+  metrics_.set_models_loaded(loaded);
+  spdlog::info("repository {}: {} model version(s) loaded", options_.repository.string(), loaded);
+  server_->GetHealthCheckService()->SetServingStatus(true);
+  spdlog::info("health SERVING");
+  return Status::Ok();
+}
+
+Status Daemon::start_metrics_endpoint() {
+  if (options_.metrics_address.empty()) return Status::Ok();
+  auto host_port = split_host_port(options_.metrics_address, "--metrics-listen");
+  if (!host_port) return host_port.error();
+  metrics_http_ = std::make_unique<httplib::Server>();
+  metrics_http_->Get("/metrics", [this](const httplib::Request&, httplib::Response& response) {
+    response.set_content(metrics_.prometheus_text(), "text/plain; version=0.0.4");
+  });
+  const auto& [host, port] = *host_port;
+  int bound = port;
+  if (port == 0) {
+    bound = metrics_http_->bind_to_any_port(host);
+  } else if (!metrics_http_->bind_to_port(host, port)) {
+    bound = -1;
+  }
+  if (bound <= 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "--metrics-listen: cannot bind '" + options_.metrics_address + "'");
+  }
+  metrics_thread_ = std::thread([this] { metrics_http_->listen_after_bind(); });
+  spdlog::info("metrics on http://{}:{}/metrics", host, bound);
+  return Status::Ok();
+}
+
+void Daemon::shutdown() {
+  if (stopped_) return;
+  stopped_ = true;
+  if (server_) {
+    server_->GetHealthCheckService()->SetServingStatus(false);
+    spdlog::info("shutting down: health NOT_SERVING, finishing in-flight calls (grace {} ms)",
+                 options_.shutdown_grace.count());
+    server_->Shutdown(std::chrono::system_clock::now() + options_.shutdown_grace);
+    server_->Wait();
+  }
+  if (metrics_http_) {
+    metrics_http_->stop();
+    if (metrics_thread_.joinable()) metrics_thread_.join();
+  }
+  spdlog::info("stopped");
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,72 @@
+// animspaced's lifecycle: bind, report NOT_SERVING, load the repository, report SERVING, serve,
+// and on shutdown report NOT_SERVING, stop accepting, let in-flight calls finish within the
+// grace period, exit.
+#pragma once
+
+#include <memory>
+#include <thread>
+
+#include "core/common/result.h"
+#include "server/metrics.h"
+#include "server/model_registry.h"
+#include "server/options.h"
+#include "server/service_environment.h"
+
+namespace grpc {
+class Server;
+}
+namespace httplib {
+class Server;
+}
+
+namespace animspace::server {
+
+class ModelServiceImpl;
+class StatsServiceImpl;
+class PoseServiceImpl;
+class SkinningServiceImpl;
+class LodServiceImpl;
+class RenderServiceImpl;
+class TrainingServiceImpl;
+
+class Daemon {
+ public:
+  explicit Daemon(ServerOptions options);
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  // Binds the gRPC (and metrics) addresses, then loads every model in the repository and turns
+  // health to SERVING. Errors: kInvalidArgument when an address cannot be bound, kNotFound when
+  // the repository does not exist.
+  Status start();
+
+  // The bound gRPC port (after start()).
+  int port() const { return port_; }
+
+  // Graceful stop: NOT_SERVING, stop accepting, in-flight calls get `options.shutdown_grace`
+  // to finish, then the rest are cancelled. Idempotent.
+  void shutdown();
+
+ private:
+  Status start_metrics_endpoint();
+
+  ServerOptions options_;
+  ModelRegistry registry_;
+  Metrics metrics_;
+  ServiceEnvironment env_;
+  std::unique_ptr<ModelServiceImpl> model_service_;
+  std::unique_ptr<StatsServiceImpl> stats_service_;
+  std::unique_ptr<PoseServiceImpl> pose_service_;
+  std::unique_ptr<SkinningServiceImpl> skinning_service_;
+  std::unique_ptr<LodServiceImpl> lod_service_;
+  std::unique_ptr<RenderServiceImpl> render_service_;
+  std::unique_ptr<TrainingServiceImpl> training_service_;
+  std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<httplib::Server> metrics_http_;
+  std::thread metrics_thread_;
+  int port_ = 0;
+  bool stopped_ = false;
+};
+
+}  // namespace animspace::server

@@ -1,0 +1,19 @@
+// The RPCs this build implements (GetServerInfo reports them, so that clients and load testers
+// can tell an UNIMPLEMENTED method from a failure before they call it). Each issue that lands an
+// RPC adds it here.
+#pragma once
+
+namespace animspace::server {
+
+inline constexpr const char* kImplementedRpcs[] = {
+    "animspace.v1.ModelService/ListModels",
+    "animspace.v1.ModelService/DescribeModel",
+    "animspace.v1.ModelService/LoadModel",
+    "animspace.v1.ModelService/UnloadModel",
+    "animspace.v1.ModelService/GetServerInfo",
+    "animspace.v1.StatsService/GetStats",
+    "grpc.health.v1.Health/Check",
+    "grpc.health.v1.Health/Watch",
+};
+
+}  // namespace animspace::server

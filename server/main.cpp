@@ -1,0 +1,104 @@
+// animspaced: serves trained character-animation models over gRPC.
+#include <csignal>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include "core/demo/demo_repository.h"
+#include "server/daemon.h"
+#include "server/version.h"
+
+namespace {
+
+// Generates the bundled demo repository in a fresh temporary directory: the embedded default
+// that lets `animspaced` serve something with nothing else present.
+std::filesystem::path make_demo_repository() {
+  const auto dir = std::filesystem::temp_directory_path() / ("animspaced-demo-" + std::to_string(::getpid()));
+  std::error_code ignored;
+  std::filesystem::remove_all(dir, ignored);
+  if (auto status = animspace::demo::write_demo_repository(dir); !status.ok()) {
+    spdlog::critical("cannot write the demo repository: {}", status.error().message);
+    std::exit(EXIT_FAILURE);
+  }
+  spdlog::info("no --model-repository given: serving the bundled demo repository generated in {}", dir.string());
+  return dir;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  animspace::server::ServerOptions options;
+  CLI::App app{"animspaced — serves trained character-animation models (PMSC soft cache, animation-space "
+               "skinning, LOD, thumbnails) over gRPC"};
+  app.set_version_flag("--version", animspace::server::kServerVersion);
+  app.add_option("--listen", options.listen_address, "gRPC address, host:port (port 0 picks a free one)")
+      ->capture_default_str();
+  app.add_option("--model-repository", options.repository,
+                 "Model repository <repo>/<model>/<version>/model.anim; default: generate and serve the "
+                 "bundled demo repository");
+  app.add_option("--worker-threads", options.worker_threads, "Upper bound on gRPC worker threads")
+      ->check(CLI::Range(1, 1024))
+      ->capture_default_str();
+  app.add_option("--max-message-bytes", options.max_message_bytes, "Largest request or response message")
+      ->check(CLI::Range(int64_t{1024}, int64_t{2000000000}))
+      ->capture_default_str();
+  app.add_option("--max-batch-poses", options.max_batch_poses, "Largest batch in one evaluation request")
+      ->check(CLI::Range(1u, 1000000u))
+      ->capture_default_str();
+  app.add_option("--max-thumbnail-px", options.max_thumbnail_px, "Largest thumbnail edge in pixels")
+      ->check(CLI::Range(16u, 4096u))
+      ->capture_default_str();
+  app.add_option("--max-concurrent-calls", options.max_concurrent_calls,
+                 "Calls served at once before RESOURCE_EXHAUSTED")
+      ->check(CLI::Range(1u, 100000u))
+      ->capture_default_str();
+  app.add_option("--metrics-listen", options.metrics_address,
+                 "host:port for Prometheus text metrics at /metrics (empty: off)");
+  app.add_option("--log-level", options.log_level, "trace, debug, info, warn, error, critical or off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
+      ->capture_default_str();
+  int64_t grace_ms = options.shutdown_grace.count();
+  app.add_option("--shutdown-grace-ms", grace_ms, "Time in-flight calls get to finish after SIGTERM/SIGINT")
+      ->check(CLI::Range(int64_t{0}, int64_t{600000}))
+      ->capture_default_str();
+  app.add_option("--port-file", options.port_file, "Write the bound gRPC port to this file once listening");
+  CLI11_PARSE(app, argc, argv);
+  options.shutdown_grace = std::chrono::milliseconds(grace_ms);
+
+  spdlog::set_level(spdlog::level::from_str(options.log_level));
+  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %^%l%$ animspaced[%P] %v");
+
+  // Block the stop signals in every thread (the gRPC threads inherit this mask) and take them
+  // synchronously here, so shutdown runs on an ordinary thread and not in a signal handler.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGTERM);
+  sigaddset(&stop_signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+  const bool demo = options.repository.empty();
+  if (demo) options.repository = make_demo_repository();
+
+  spdlog::info("animspaced {} starting (pid {})", animspace::server::kServerVersion, ::getpid());
+  int exit_code = EXIT_SUCCESS;
+  {
+    animspace::server::Daemon daemon(options);
+    if (auto status = daemon.start(); !status.ok()) {
+      spdlog::critical("{}", status.error().message);
+      exit_code = EXIT_FAILURE;
+    } else {
+      int signal_number = 0;
+      sigwait(&stop_signals, &signal_number);
+      spdlog::info("received {}", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
+      daemon.shutdown();
+    }
+  }
+  if (demo) {
+    std::error_code ignored;
+    std::filesystem::remove_all(options.repository, ignored);
+  }
+  return exit_code;
+}

@@ -1,0 +1,93 @@
+// Counters and histograms for operators: scraped as Prometheus text (GET /metrics) and read by
+// StatsService. One mutex guards everything: updates are a few additions per call, far below
+// the cost of the call itself.
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace animspace::server {
+
+// Fixed-bound histogram (Prometheus semantics: bucket i counts values ≤ bounds[i]; one more
+// bucket for +Inf).
+class Histogram {
+ public:
+  explicit Histogram(std::vector<double> upper_bounds);
+  void observe(double value);
+  // Linear interpolation inside the bucket that holds quantile q ∈ [0, 1] (as Prometheus's
+  // histogram_quantile does); 0 when empty.
+  double quantile(double q) const;
+
+  const std::vector<double>& upper_bounds() const { return bounds_; }
+  const std::vector<uint64_t>& counts() const { return counts_; }
+  uint64_t total_count() const { return total_; }
+  double sum() const { return sum_; }
+
+ private:
+  std::vector<double> bounds_;
+  std::vector<uint64_t> counts_;  // bounds_.size() + 1
+  uint64_t total_ = 0;
+  double sum_ = 0;
+};
+
+// Latency buckets: 50 µs … 10 s, roughly ×2.5 apart.
+std::vector<double> latency_bounds_seconds();
+// Key-point error buckets, model units: 1e-6 … 10, decades with 1-2.5-5 steps.
+std::vector<double> key_point_error_bounds();
+
+enum class CacheOutcome { kHit, kBlend, kMiss };
+
+struct ModelStatistics {
+  uint64_t requests = 0;
+  uint64_t errors = 0;
+  uint64_t poses = 0;
+  uint64_t hits = 0;
+  uint64_t blends = 0;
+  uint64_t misses = 0;
+  Histogram latency_seconds{latency_bounds_seconds()};
+  Histogram key_point_error{key_point_error_bounds()};
+};
+
+class Metrics {
+ public:
+  Metrics();
+
+  // One finished call. `model` is empty for calls that name none. `code` is the gRPC code.
+  void record_call(std::string_view rpc, std::string_view model, int code, double seconds);
+  // One pose through the soft cache.
+  void record_pose(std::string_view model, CacheOutcome outcome, double key_point_error);
+  void set_models_loaded(int count);
+
+  std::map<std::string, ModelStatistics> model_statistics() const;
+  void reset_model_statistics(std::string_view model);  // empty: all
+  std::chrono::system_clock::time_point statistics_since() const;
+
+  // The Prometheus text exposition format, version 0.0.4.
+  std::string prometheus_text() const;
+
+ private:
+  struct CallKey {
+    std::string rpc;
+    std::string model;
+    int code;
+    auto operator<=>(const CallKey&) const = default;
+  };
+
+  mutable std::mutex mutex_;
+  std::map<CallKey, uint64_t> calls_;
+  std::map<std::string, Histogram> rpc_latency_;
+  std::map<std::string, ModelStatistics> models_;
+  std::chrono::system_clock::time_point since_;
+  int models_loaded_ = 0;
+};
+
+// Name of a gRPC status code as Prometheus labels and logs show it ("NOT_FOUND").
+const char* grpc_code_name(int code);
+
+}  // namespace animspace::server

@@ -1,0 +1,254 @@
+#include "server/model_registry.h"
+
+#include <algorithm>
+#include <chrono>
+#include <charconv>
+#include <mutex>
+#include <system_error>
+
+#include <spdlog/spdlog.h>
+
+namespace animspace::server {
+namespace {
+
+constexpr size_t kMaxModelNameLength = 128;
+
+// Parses a version directory name: a positive decimal integer without sign or leading zeros.
+bool parse_version(const std::string& text, uint64_t* version) {
+  if (text.empty() || text[0] == '0') return false;
+  const char* end = text.data() + text.size();
+  auto [ptr, ec] = std::from_chars(text.data(), end, *version);
+  return ec == std::errc() && ptr == end;
+}
+
+int64_t unix_now_s() {
+  return std::chrono::duration_cast<std::chrono::seconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+uint64_t ModelEntry::default_version() const {
+  for (auto it = versions.rbegin(); it != versions.rend(); ++it) {
+    if (it->second.model) return it->first;
+  }
+  return 0;
+}
+
+Status validate_model_name(std::string_view name, std::string_view field) {
+  const std::string f(field);
+  if (name.empty()) return make_error(ErrorCode::kInvalidArgument, f + " is empty");
+  if (name.size() > kMaxModelNameLength) {
+    return make_error(ErrorCode::kInvalidArgument, f + " is " + std::to_string(name.size()) +
+                                                       " characters long, the limit is " +
+                                                       std::to_string(kMaxModelNameLength));
+  }
+  if (name[0] == '.') {
+    return make_error(ErrorCode::kInvalidArgument, f + " '" + std::string(name) + "' starts with '.'");
+  }
+  for (char c : name) {
+    const bool allowed = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                         c == '_' || c == '-' || c == '.';
+    if (!allowed) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        f + " may contain only letters, digits, '_', '-' and '.', got '" +
+                            std::string(name) + "'");
+    }
+  }
+  return Status::Ok();
+}
+
+ModelRegistry::ModelRegistry(std::filesystem::path repository) : repository_(std::move(repository)) {}
+
+VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t version,
+                                         const std::filesystem::path& dir) {
+  VersionEntry entry;
+  entry.version = version;
+  const auto path = dir / kModelFileName;
+  auto container = container::read_file(path);
+  if (!container) {
+    entry.error = container.error().message;
+    return entry;
+  }
+  auto info = model::describe(*container, path.string());
+  if (!info) {
+    entry.error = info.error().message;
+    return entry;
+  }
+  auto loaded = std::make_shared<LoadedModel>();
+  loaded->name = name;
+  loaded->version = version;
+  loaded->path = path;
+  std::error_code ec;
+  loaded->file_size_bytes = std::filesystem::file_size(path, ec);
+  loaded->loaded_at_unix_s = unix_now_s();
+  loaded->container = std::move(*container);
+  loaded->info = std::move(*info);
+  entry.model = std::move(loaded);
+  return entry;
+}
+
+Result<std::vector<uint64_t>> ModelRegistry::scan_versions(const std::string& name) const {
+  const auto dir = repository_ / name;
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) {
+    return make_error(ErrorCode::kNotFound,
+                      "model '" + name + "' has no directory in the repository (" + dir.string() + ")");
+  }
+  std::vector<uint64_t> versions;
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    uint64_t version = 0;
+    if (it->is_directory(ec) && parse_version(it->path().filename().string(), &version)) {
+      versions.push_back(version);
+    }
+  }
+  if (ec) return make_error(ErrorCode::kIo, "cannot list " + dir.string() + ": " + ec.message());
+  std::sort(versions.begin(), versions.end());
+  return versions;
+}
+
+int ModelRegistry::load_all() {
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(repository_, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (!it->is_directory(ec)) continue;
+    if (!validate_model_name(name).ok()) {
+      spdlog::warn("repository: skipping directory '{}': not a valid model name", name);
+      continue;
+    }
+    names.push_back(name);
+  }
+  if (ec) spdlog::error("repository: cannot list {}: {}", repository_.string(), ec.message());
+  int loaded = 0;
+  for (const auto& name : names) {
+    auto entry = load(name, 0);
+    if (!entry) continue;
+    for (const auto& [version, v] : entry->versions) loaded += v.model ? 1 : 0;
+  }
+  return loaded;
+}
+
+Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version) {
+  ANIMSPACE_RETURN_IF_ERROR(validate_model_name(name));
+  auto versions = scan_versions(name);
+  if (!versions) return versions.error();
+  if (version != 0 && std::find(versions->begin(), versions->end(), version) == versions->end()) {
+    return make_error(ErrorCode::kNotFound,
+                      "model '" + name + "' has no version " + std::to_string(version) + " in the repository");
+  }
+
+  // Read files without holding the lock: loading may take seconds, serving must not wait.
+  std::vector<VersionEntry> fresh;
+  {
+    std::shared_lock lock(mutex_);
+    const auto existing = models_.find(name);
+    for (uint64_t v : *versions) {
+      if (version != 0 && v != version) continue;
+      const bool already_loaded = existing != models_.end() && existing->second.versions.count(v) &&
+                                  existing->second.versions.at(v).model;
+      if (version == 0 && already_loaded) continue;
+      fresh.push_back({v, nullptr, ""});
+    }
+  }
+  for (auto& entry : fresh) {
+    entry = load_version(name, entry.version, repository_ / name / std::to_string(entry.version));
+    if (entry.model) {
+      spdlog::info("model {} version {} loaded: {} ({} points, {} faces, {} frames, {} bytes)", name,
+                   entry.version, model::kind_name(entry.model->info.kind), entry.model->info.point_count,
+                   entry.model->info.face_count, entry.model->info.frame_count,
+                   entry.model->file_size_bytes);
+    } else {
+      spdlog::error("model {} version {} refused: {}", name, entry.version, entry.error);
+    }
+  }
+
+  std::unique_lock lock(mutex_);
+  ModelEntry& model = models_[name];
+  model.name = name;
+  for (auto& entry : fresh) {
+    auto& slot = model.versions[entry.version];
+    // A refused reload of a version that is serving keeps the serving copy (nothing stored is
+    // lost); the refusal is still reported to the caller below.
+    if (!entry.model && slot.model) continue;
+    slot = entry;
+  }
+  if (version != 0) {
+    const auto& named = fresh.front();
+    if (!named.model) return make_error(ErrorCode::kFailedPrecondition, named.error);
+  }
+  return model;
+}
+
+Status ModelRegistry::unload(const std::string& name, uint64_t version) {
+  std::unique_lock lock(mutex_);
+  auto it = models_.find(name);
+  if (it == models_.end()) return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
+  if (version == 0) {
+    models_.erase(it);
+    spdlog::info("model {} unloaded (all versions)", name);
+    return Status::Ok();
+  }
+  if (it->second.versions.erase(version) == 0) {
+    return make_error(ErrorCode::kNotFound,
+                      "model '" + name + "' has no loaded version " + std::to_string(version));
+  }
+  if (it->second.versions.empty()) models_.erase(it);
+  spdlog::info("model {} version {} unloaded", name, version);
+  return Status::Ok();
+}
+
+Result<std::shared_ptr<const LoadedModel>> ModelRegistry::find(const std::string& name,
+                                                                uint64_t version) const {
+  std::shared_lock lock(mutex_);
+  auto it = models_.find(name);
+  if (it == models_.end()) {
+    return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
+  }
+  const ModelEntry& model = it->second;
+  const uint64_t wanted = version == 0 ? model.default_version() : version;
+  auto v = model.versions.find(wanted);
+  if (wanted == 0 || v == model.versions.end()) {
+    std::string available;
+    for (const auto& [n, entry] : model.versions) {
+      if (!entry.model) continue;
+      available += (available.empty() ? "" : ", ") + std::to_string(n);
+    }
+    return make_error(ErrorCode::kNotFound,
+                      "model '" + name + "' has no servable version " + std::to_string(version) +
+                          " (available: " + (available.empty() ? "none" : available) + ")");
+  }
+  if (!v->second.model) {
+    return make_error(ErrorCode::kFailedPrecondition, "model '" + name + "' version " +
+                                                          std::to_string(wanted) +
+                                                          " was refused: " + v->second.error);
+  }
+  return v->second.model;
+}
+
+Result<ModelEntry> ModelRegistry::describe(const std::string& name) const {
+  std::shared_lock lock(mutex_);
+  auto it = models_.find(name);
+  if (it == models_.end()) return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
+  return it->second;
+}
+
+std::vector<ModelEntry> ModelRegistry::list() const {
+  std::shared_lock lock(mutex_);
+  std::vector<ModelEntry> out;
+  out.reserve(models_.size());
+  for (const auto& [name, entry] : models_) out.push_back(entry);
+  return out;
+}
+
+int ModelRegistry::loaded_version_count() const {
+  std::shared_lock lock(mutex_);
+  int count = 0;
+  for (const auto& [name, entry] : models_) {
+    for (const auto& [v, version] : entry.versions) count += version.model ? 1 : 0;
+  }
+  return count;
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,94 @@
+// The in-memory model registry over a model repository directory.
+//
+// Layout: <repository>/<model>/<version>/model.anim, version a positive integer (as in
+// TensorFlow Serving and Triton). Every version found is loaded; a version that fails to load
+// is recorded with its reason and never served, and the versions already serving are untouched.
+// Readers take a shared_ptr snapshot of one version, so a call in flight keeps its model alive
+// while a reload or unload swaps the registry underneath it.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <shared_mutex>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/result.h"
+#include "core/container/model_container.h"
+#include "core/model/model_info.h"
+
+namespace animspace::server {
+
+inline constexpr const char* kModelFileName = "model.anim";
+
+// One loaded, immutable model version.
+struct LoadedModel {
+  std::string name;
+  uint64_t version = 0;
+  std::filesystem::path path;
+  uint64_t file_size_bytes = 0;
+  int64_t loaded_at_unix_s = 0;
+  container::ModelContainer container;
+  model::ModelInfo info;
+};
+
+struct VersionEntry {
+  uint64_t version = 0;
+  std::shared_ptr<const LoadedModel> model;  // null when the version was refused
+  std::string error;                         // why it was refused
+};
+
+struct ModelEntry {
+  std::string name;
+  std::map<uint64_t, VersionEntry> versions;
+  // Newest version that loaded, 0 when none did.
+  uint64_t default_version() const;
+};
+
+// Model names are directory names chosen by people; anything that could escape the repository
+// or hide a file ('..', '/', a leading '.') is refused. Errors: kInvalidArgument naming the
+// field and the rule.
+Status validate_model_name(std::string_view name, std::string_view field = "model.name");
+
+class ModelRegistry {
+ public:
+  explicit ModelRegistry(std::filesystem::path repository);
+
+  const std::filesystem::path& repository() const { return repository_; }
+
+  // Scans the repository and loads every model version in it. Returns the number of versions
+  // that loaded; refusals are recorded in the entries (and logged).
+  int load_all();
+
+  // Loads one model: every version in its directory (version 0) or exactly one. Versions
+  // already loaded are re-read only when named explicitly. Errors: kNotFound when the
+  // directory does not exist; the loader's error when the one named version is refused.
+  Result<ModelEntry> load(const std::string& name, uint64_t version);
+
+  // Stops serving a model (version 0) or one version. Errors: kNotFound.
+  Status unload(const std::string& name, uint64_t version);
+
+  // The version to serve: `version`, or the default when 0. Errors: kNotFound naming the model
+  // or the version (and which versions exist), kFailedPrecondition for a refused version.
+  Result<std::shared_ptr<const LoadedModel>> find(const std::string& name, uint64_t version) const;
+
+  Result<ModelEntry> describe(const std::string& name) const;
+  std::vector<ModelEntry> list() const;  // sorted by name
+  int loaded_version_count() const;
+
+ private:
+  // Reads and checks one version file; never throws.
+  static VersionEntry load_version(const std::string& name, uint64_t version,
+                                   const std::filesystem::path& dir);
+  // Version directories under <repository>/<name>, ascending. Errors: kNotFound.
+  Result<std::vector<uint64_t>> scan_versions(const std::string& name) const;
+
+  std::filesystem::path repository_;
+  mutable std::shared_mutex mutex_;
+  std::map<std::string, ModelEntry> models_;
+};
+
+}  // namespace animspace::server

@@ -1,0 +1,36 @@
+// Daemon configuration, filled from command-line flags (server/main.cpp).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+namespace animspace::server {
+
+struct ServerOptions {
+  // host:port for gRPC; port 0 picks a free port (reported in the "listening" log line).
+  std::string listen_address = "127.0.0.1:50051";
+  // Model repository, <repository>/<model>/<version>/model.anim.
+  std::filesystem::path repository;
+  // gRPC worker threads (sync server pool upper bound).
+  int worker_threads = 8;
+  // Largest request and response message, bytes.
+  int64_t max_message_bytes = 64LL << 20;
+  // Largest batch in one evaluation request, poses.
+  uint32_t max_batch_poses = 1024;
+  // Largest thumbnail edge, pixels.
+  uint32_t max_thumbnail_px = 4096;
+  // Calls served at once before RESOURCE_EXHAUSTED.
+  uint32_t max_concurrent_calls = 256;
+  // host:port for the Prometheus text endpoint (GET /metrics); empty disables it.
+  std::string metrics_address;
+  // spdlog level name: trace, debug, info, warn, error, critical, off.
+  std::string log_level = "info";
+  // How long in-flight calls may run after SIGTERM/SIGINT before they are cancelled.
+  std::chrono::milliseconds shutdown_grace{5000};
+  // File to write the bound gRPC port to once listening (for tests and supervisors); optional.
+  std::filesystem::path port_file;
+};
+
+}  // namespace animspace::server

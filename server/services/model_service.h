@@ -1,0 +1,28 @@
+// animspace.v1.ModelService: list, describe, load, unload, server info.
+#pragma once
+
+#include "animspace/v1/models.grpc.pb.h"
+#include "server/service_environment.h"
+
+namespace animspace::server {
+
+class ModelServiceImpl final : public v1::ModelService::Service {
+ public:
+  explicit ModelServiceImpl(ServiceEnvironment& env) : env_(env) {}
+
+  grpc::Status ListModels(grpc::ServerContext* context, const v1::ListModelsRequest* request,
+                          v1::ListModelsResponse* response) override;
+  grpc::Status DescribeModel(grpc::ServerContext* context, const v1::DescribeModelRequest* request,
+                             v1::DescribeModelResponse* response) override;
+  grpc::Status LoadModel(grpc::ServerContext* context, const v1::LoadModelRequest* request,
+                         v1::LoadModelResponse* response) override;
+  grpc::Status UnloadModel(grpc::ServerContext* context, const v1::UnloadModelRequest* request,
+                           v1::UnloadModelResponse* response) override;
+  grpc::Status GetServerInfo(grpc::ServerContext* context, const v1::GetServerInfoRequest* request,
+                             v1::GetServerInfoResponse* response) override;
+
+ private:
+  ServiceEnvironment& env_;
+};
+
+}  // namespace animspace::server

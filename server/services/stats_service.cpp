@@ -1,0 +1,56 @@
+#include "server/services/stats_service.h"
+
+#include "server/call_scope.h"
+#include "server/status_mapping.h"
+
+namespace animspace::server {
+namespace {
+
+void to_proto(const Histogram& h, v1::Histogram* out) {
+  for (double bound : h.upper_bounds()) out->add_upper_bounds(bound);
+  for (uint64_t count : h.counts()) out->add_counts(count);
+  out->set_total_count(h.total_count());
+  out->set_sum(h.sum());
+}
+
+void to_proto(const std::string& name, const ModelStatistics& s, v1::ModelStats* out) {
+  out->set_model(name);
+  out->set_requests(s.requests);
+  out->set_poses(s.poses);
+  out->set_hits(s.hits);
+  out->set_blends(s.blends);
+  out->set_misses(s.misses);
+  out->set_errors(s.errors);
+  out->set_hit_rate(s.poses == 0 ? 0.0 : static_cast<double>(s.hits) / static_cast<double>(s.poses));
+  to_proto(s.key_point_error, out->mutable_key_point_error());
+  to_proto(s.latency_seconds, out->mutable_latency_seconds());
+  out->set_latency_p50_s(s.latency_seconds.quantile(0.50));
+  out->set_latency_p90_s(s.latency_seconds.quantile(0.90));
+  out->set_latency_p99_s(s.latency_seconds.quantile(0.99));
+}
+
+}  // namespace
+
+grpc::Status StatsServiceImpl::GetStats(grpc::ServerContext*, const v1::GetStatsRequest* request,
+                                        v1::GetStatsResponse* response) {
+  CallScope scope(env_.metrics, "StatsService/GetStats");
+  const std::string& name = request->model();
+  // Statistics exist for every model that is loaded, including ones never called yet.
+  std::map<std::string, ModelStatistics> stats = env_.metrics.model_statistics();
+  for (const auto& entry : env_.registry.list()) stats.try_emplace(entry.name);
+  if (!name.empty()) {
+    scope.set_model(name);
+    if (auto valid = validate_model_name(name, "model"); !valid) return scope.finish(to_grpc_status(valid.error()));
+    auto it = stats.find(name);
+    if (it == stats.end()) return scope.finish(not_found("model: model '" + name + "' is not loaded"));
+    to_proto(it->first, it->second, response->add_models());
+  } else {
+    for (const auto& [model, s] : stats) to_proto(model, s, response->add_models());
+  }
+  response->set_since_unix_s(
+      std::chrono::duration_cast<std::chrono::seconds>(env_.metrics.statistics_since().time_since_epoch()).count());
+  if (request->reset()) env_.metrics.reset_model_statistics(name);
+  return scope.finish(grpc::Status::OK);
+}
+
+}  // namespace animspace::server

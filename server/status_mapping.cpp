@@ -1,0 +1,33 @@
+#include "server/status_mapping.h"
+
+namespace animspace::server {
+
+grpc::StatusCode to_grpc_code(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::kInvalidArgument: return grpc::StatusCode::INVALID_ARGUMENT;
+    case ErrorCode::kNotFound: return grpc::StatusCode::NOT_FOUND;
+    case ErrorCode::kDataLoss: return grpc::StatusCode::DATA_LOSS;
+    case ErrorCode::kFailedPrecondition: return grpc::StatusCode::FAILED_PRECONDITION;
+    case ErrorCode::kOutOfRange: return grpc::StatusCode::OUT_OF_RANGE;
+    case ErrorCode::kResourceExhausted: return grpc::StatusCode::RESOURCE_EXHAUSTED;
+    case ErrorCode::kUnimplemented: return grpc::StatusCode::UNIMPLEMENTED;
+    // An I/O failure on the server's own disk is not the caller's fault and may pass.
+    case ErrorCode::kIo: return grpc::StatusCode::UNAVAILABLE;
+    case ErrorCode::kInternal: return grpc::StatusCode::INTERNAL;
+  }
+  return grpc::StatusCode::UNKNOWN;
+}
+
+grpc::Status to_grpc_status(const Error& error) { return {to_grpc_code(error.code), error.message}; }
+
+grpc::Status invalid_argument(const std::string& message) {
+  return {grpc::StatusCode::INVALID_ARGUMENT, message};
+}
+
+grpc::Status not_found(const std::string& message) { return {grpc::StatusCode::NOT_FOUND, message}; }
+
+grpc::Status unimplemented(const std::string& rpc, const std::string& why) {
+  return {grpc::StatusCode::UNIMPLEMENTED, rpc + " is not implemented in this build: " + why};
+}
+
+}  // namespace animspace::server

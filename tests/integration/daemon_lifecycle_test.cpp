@@ -1,0 +1,317 @@
+// The real animspaced binary, started on an ephemeral port with a temporary repository and
+// driven only through the gRPC protocol, as a client would.
+#include <signal.h>
+
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include "animspace/v1/poses.grpc.pb.h"
+#include "clients/cpp/client.h"
+#include "core/container/model_container.h"
+#include "core/demo/demo_repository.h"
+#include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
+#include "tests/support/daemon_process.h"
+#include "tests/support/test_support.h"
+
+namespace animspace {
+namespace {
+
+using grpc::health::v1::HealthCheckResponse;
+using testing::DaemonProcess;
+using testing::TempDir;
+
+// A tetrahedron with two frames: every count below is known by hand.
+container::ModelContainer tetrahedron_model() {
+  container::ModelContainer model;
+  model.metadata()["kind"] = "mesh_sequence";
+  model.metadata()["description"] = "hand-made tetrahedron";
+  PointMatrix V(4, 3);
+  V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+  FaceMatrix F(4, 3);
+  F << 0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3;
+  FrameMatrix frames(2, 12);
+  frames.row(0) = Eigen::Map<const Eigen::RowVectorXf>(V.data(), 12);
+  frames.row(1) = frames.row(0) * 2.0f;
+  model.set_points("mesh.rest_points", V);
+  model.set_faces("mesh.faces", F);
+  model.set_matrix("sequence.frames", frames);
+  return model;
+}
+
+void write_model(const std::filesystem::path& repo, const std::string& name, int version,
+                 const container::ModelContainer& model) {
+  const auto dir = repo / name / std::to_string(version);
+  std::filesystem::create_directories(dir);
+  ASSERT_TRUE(container::write_file(dir / "model.anim", model).ok());
+}
+
+// Polls health until SERVING (it is NOT_SERVING while the repository loads).
+void wait_until_serving(Client& client) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (std::chrono::steady_clock::now() < deadline) {
+    try {
+      if (client.health() == HealthCheckResponse::SERVING) return;
+    } catch (const RpcError&) {
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  FAIL() << "server never reported SERVING";
+}
+
+class DaemonTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    repo_ = work_.path() / "repo";
+    ASSERT_TRUE(demo::write_demo_repository(repo_).ok());
+    write_model(repo_, "tetra", 3, tetrahedron_model());
+    // A model whose only version is garbage: listed as refused, never served.
+    std::filesystem::create_directories(repo_ / "broken" / "1");
+    testing::write_text_file(repo_ / "broken" / "1" / "model.anim", "this is not a model container");
+  }
+
+  std::unique_ptr<DaemonProcess> start(std::vector<std::string> extra = {}) {
+    std::vector<std::string> args{"--model-repository", repo_.string(), "--log-level", "debug"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return std::make_unique<DaemonProcess>(args, work_.path());
+  }
+
+  TempDir work_;
+  std::filesystem::path repo_;
+};
+
+TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
+  auto daemon = start();
+  Client client(daemon->address());
+  wait_until_serving(client);
+
+  const auto models = client.list_models();
+  ASSERT_EQ(models.size(), 3u);
+  EXPECT_EQ(models[0].name(), "arm");
+  EXPECT_EQ(models[1].name(), "broken");
+  EXPECT_EQ(models[2].name(), "tetra");
+
+  const auto& tetra = models[2];
+  EXPECT_EQ(tetra.default_version(), 3u);
+  ASSERT_EQ(tetra.versions_size(), 1);
+  const auto& v = tetra.versions(0);
+  EXPECT_EQ(v.state(), v1::VERSION_STATE_AVAILABLE);
+  EXPECT_EQ(v.kind(), v1::MODEL_KIND_MESH_SEQUENCE);
+  EXPECT_EQ(v.point_count(), 4u);
+  EXPECT_EQ(v.channel_count(), 3u);
+  EXPECT_EQ(v.face_count(), 4u);
+  EXPECT_EQ(v.frame_count(), 2u);
+  EXPECT_EQ(v.description(), "hand-made tetrahedron");
+  EXPECT_EQ(v.file_size_bytes(), std::filesystem::file_size(repo_ / "tetra/3/model.anim"));
+
+  // The refused model is visible with its reason, and has nothing to serve.
+  const auto& broken = models[1];
+  EXPECT_EQ(broken.default_version(), 0u);
+  ASSERT_EQ(broken.versions_size(), 1);
+  EXPECT_EQ(broken.versions(0).state(), v1::VERSION_STATE_FAILED);
+  EXPECT_NE(broken.versions(0).error().find("model.anim"), std::string::npos) << broken.versions(0).error();
+
+  // The demo arm matches its file, read independently of the server.
+  auto arm_file = container::read_file(demo::demo_model_path(repo_));
+  ASSERT_TRUE(arm_file.ok());
+  const auto arm = client.describe_model("arm");
+  ASSERT_EQ(arm.versions_size(), 1);
+  EXPECT_EQ(arm.versions(0).point_count(), arm_file->points("mesh.rest_points")->rows());
+  EXPECT_EQ(arm.versions(0).bone_count(), 2u);
+  EXPECT_EQ(arm.versions(0).frame_count(), static_cast<uint32_t>(demo::kDemoFrames));
+
+  daemon->send_signal(SIGTERM);
+  EXPECT_EQ(daemon->wait_for_exit(std::chrono::seconds(15)), 0) << daemon->log();
+  const std::string log = daemon->log();
+  EXPECT_NE(log.find("health SERVING"), std::string::npos) << log;
+  EXPECT_NE(log.find("received SIGTERM"), std::string::npos) << log;
+  EXPECT_NE(log.find("stopped"), std::string::npos) << log;
+}
+
+TEST_F(DaemonTest, SigintAlsoStopsCleanly) {
+  auto daemon = start();
+  Client client(daemon->address());
+  wait_until_serving(client);
+  daemon->send_signal(SIGINT);
+  EXPECT_EQ(daemon->wait_for_exit(std::chrono::seconds(15)), 0) << daemon->log();
+}
+
+TEST_F(DaemonTest, BadRequestsGetPreciseStatuses) {
+  auto daemon = start();
+  Client client(daemon->address());
+  wait_until_serving(client);
+
+  struct Case {
+    std::string name;
+    uint64_t version;
+    grpc::StatusCode code;
+    std::string message_part;
+  };
+  const std::vector<Case> cases = {
+      {"nosuchmodel", 0, grpc::StatusCode::NOT_FOUND, "nosuchmodel"},
+      {"../etc", 0, grpc::StatusCode::INVALID_ARGUMENT, "model.name"},
+      {"", 0, grpc::StatusCode::INVALID_ARGUMENT, "model.name is empty"},
+      {"a/b", 0, grpc::StatusCode::INVALID_ARGUMENT, "model.name"},
+      {"tetra", 9, grpc::StatusCode::NOT_FOUND, "version 9"},
+  };
+  for (const auto& c : cases) {
+    try {
+      client.describe_model(c.name, c.version);
+      ADD_FAILURE() << "describe '" << c.name << "' succeeded";
+    } catch (const RpcError& e) {
+      EXPECT_EQ(e.code(), c.code) << c.name << ": " << e.what();
+      EXPECT_NE(e.server_message().find(c.message_part), std::string::npos) << e.server_message();
+    }
+  }
+
+  // RPCs of issues that have not landed say so, with a message.
+  auto poses = v1::PoseService::NewStub(client.channel());
+  grpc::ClientContext context;
+  v1::EvaluateKeyPointsRequest request;
+  request.mutable_model()->set_name("tetra");
+  v1::EvaluateKeyPointsResponse response;
+  const auto status = poses->EvaluateKeyPoints(&context, request, &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNIMPLEMENTED);
+  EXPECT_NE(status.error_message().find("not implemented"), std::string::npos) << status.error_message();
+}
+
+TEST_F(DaemonTest, LoadAndUnloadAtRunTime) {
+  auto daemon = start();
+  Client client(daemon->address());
+  wait_until_serving(client);
+
+  client.unload_model("tetra");
+  try {
+    client.describe_model("tetra");
+    ADD_FAILURE() << "unloaded model still described";
+  } catch (const RpcError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::NOT_FOUND);
+  }
+
+  // A new version appears on disk; loading the model picks it up as the default.
+  write_model(repo_, "tetra", 4, tetrahedron_model());
+  const auto loaded = client.load_model("tetra");
+  EXPECT_EQ(loaded.default_version(), 4u);
+  EXPECT_EQ(loaded.versions_size(), 2);
+
+  // Loading a corrupt version is refused and the serving version is kept.
+  std::filesystem::create_directories(repo_ / "tetra" / "5");
+  std::string bytes = container::serialize(tetrahedron_model());
+  bytes.resize(bytes.size() / 2);  // truncated
+  testing::write_text_file(repo_ / "tetra" / "5" / "model.anim", bytes);
+  try {
+    client.load_model("tetra", 5);
+    ADD_FAILURE() << "truncated version loaded";
+  } catch (const RpcError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::FAILED_PRECONDITION) << e.what();
+  }
+  EXPECT_EQ(client.describe_model("tetra").default_version(), 4u);
+
+  try {
+    client.unload_model("nosuchmodel");
+    ADD_FAILURE() << "unloading an unknown model succeeded";
+  } catch (const RpcError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::NOT_FOUND);
+  }
+}
+
+TEST_F(DaemonTest, ReflectionListsTheApi) {
+  auto daemon = start();
+  Client client(daemon->address());
+  wait_until_serving(client);
+
+  auto stub = grpc::reflection::v1alpha::ServerReflection::NewStub(client.channel());
+  grpc::ClientContext context;
+  auto stream = stub->ServerReflectionInfo(&context);
+  grpc::reflection::v1alpha::ServerReflectionRequest request;
+  request.set_list_services("");
+  ASSERT_TRUE(stream->Write(request));
+  stream->WritesDone();
+  grpc::reflection::v1alpha::ServerReflectionResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  std::set<std::string> services;
+  for (const auto& s : response.list_services_response().service()) services.insert(s.name());
+  for (const char* expected : {"animspace.v1.ModelService", "animspace.v1.PoseService", "animspace.v1.SkinningService",
+                               "animspace.v1.LodService", "animspace.v1.RenderService",
+                               "animspace.v1.TrainingService", "animspace.v1.StatsService", "grpc.health.v1.Health"}) {
+    EXPECT_TRUE(services.count(expected)) << expected;
+  }
+  EXPECT_TRUE(stream->Finish().ok());
+}
+
+TEST_F(DaemonTest, PrometheusMetricsCountCalls) {
+  // A port free right now; the tiny race with other processes is acceptable in a test.
+  int metrics_port = 0;
+  {
+    httplib::Server probe;
+    metrics_port = probe.bind_to_any_port("127.0.0.1");
+  }
+  ASSERT_GT(metrics_port, 0);
+  auto daemon = start({"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
+  Client client(daemon->address());
+  wait_until_serving(client);
+  client.describe_model("tetra");
+  client.describe_model("tetra");
+  EXPECT_THROW(client.describe_model("nosuchmodel"), RpcError);
+
+  httplib::Client http("127.0.0.1", metrics_port);
+  auto result = http.Get("/metrics");
+  ASSERT_TRUE(result) << "no answer from the metrics endpoint";
+  EXPECT_EQ(result->status, 200);
+  const std::string& body = result->body;
+  EXPECT_NE(body.find("animspace_models_loaded 2\n"), std::string::npos) << body;
+  EXPECT_NE(body.find("animspace_requests_total{rpc=\"ModelService/DescribeModel\",model=\"tetra\",code=\"OK\"} 2\n"),
+            std::string::npos)
+      << body;
+  EXPECT_NE(body.find("rpc=\"ModelService/DescribeModel\",model=\"nosuchmodel\",code=\"NOT_FOUND\"} 1\n"),
+            std::string::npos)
+      << body;
+
+  const auto stats = client.stats("tetra");
+  ASSERT_EQ(stats.models_size(), 1);
+  EXPECT_EQ(stats.models(0).requests(), 2u);
+  EXPECT_EQ(stats.models(0).errors(), 0u);
+  EXPECT_EQ(stats.models(0).latency_seconds().total_count(), 2u);
+}
+
+TEST_F(DaemonTest, ServerInfoReportsLimitsFromFlags) {
+  auto daemon = start({"--max-batch-poses", "77", "--max-message-bytes", "1048576"});
+  Client client(daemon->address());
+  wait_until_serving(client);
+  const auto info = client.server_info();
+  EXPECT_EQ(info.api(), "animspace.v1");
+  EXPECT_EQ(info.max_batch_poses(), 77u);
+  EXPECT_EQ(info.max_message_bytes(), 1048576u);
+  bool lists_describe = false;
+  for (const auto& rpc : info.implemented_rpcs()) lists_describe |= rpc == "animspace.v1.ModelService/DescribeModel";
+  EXPECT_TRUE(lists_describe);
+}
+
+TEST(DaemonStartup, RefusesAMissingRepositoryWithAMessage) {
+  TempDir work;
+  try {
+    DaemonProcess daemon({"--model-repository", (work.path() / "absent").string()}, work.path(),
+                         std::chrono::seconds(10));
+    // It may write its port before checking the repository; then it must exit non-zero.
+    EXPECT_NE(daemon.wait_for_exit(std::chrono::seconds(10)), 0);
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("is not a directory"), std::string::npos) << e.what();
+  }
+}
+
+TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
+  TempDir work;
+  DaemonProcess daemon({}, work.path());
+  Client client(daemon.address());
+  wait_until_serving(client);
+  const auto models = client.list_models();
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_EQ(models[0].name(), "arm");
+  EXPECT_EQ(models[0].versions(0).state(), v1::VERSION_STATE_AVAILABLE);
+  daemon.send_signal(SIGTERM);
+  EXPECT_EQ(daemon.wait_for_exit(std::chrono::seconds(15)), 0) << daemon.log();
+}
+
+}  // namespace
+}  // namespace animspace

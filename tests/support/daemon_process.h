@@ -1,0 +1,44 @@
+// Runs the real animspaced binary as a child process for integration tests.
+#pragma once
+
+#include <sys/types.h>
+
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace animspace::testing {
+
+class DaemonProcess {
+ public:
+  // Starts `$ANIMSPACED --listen 127.0.0.1:0 --port-file … <extra_args>` with stdout/stderr
+  // going to `log_path`, and waits until it has written its port. Throws std::runtime_error
+  // (failing the test) when it does not come up within `timeout`.
+  DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,
+                std::chrono::milliseconds timeout = std::chrono::seconds(30));
+  // Kills the process if it is still running.
+  ~DaemonProcess();
+  DaemonProcess(const DaemonProcess&) = delete;
+  DaemonProcess& operator=(const DaemonProcess&) = delete;
+
+  int port() const { return port_; }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  pid_t pid() const { return pid_; }
+  const std::filesystem::path& log_path() const { return log_path_; }
+  std::string log() const;
+
+  void send_signal(int signal_number) const;
+  // Waits for the process to exit; returns its exit status (or 128 + signal), or -1 on timeout.
+  int wait_for_exit(std::chrono::milliseconds timeout);
+
+ private:
+  pid_t pid_ = -1;
+  int port_ = 0;
+  std::filesystem::path log_path_;
+};
+
+// Path of the animspaced binary under test ($ANIMSPACED, set by CTest).
+std::filesystem::path daemon_binary();
+
+}  // namespace animspace::testing
