@@ -4,7 +4,13 @@
 
 namespace animspace::server {
 
+CallScope::~CallScope() {
+  if (!finished_) metrics_.call_finished();
+}
+
 grpc::Status CallScope::finish(grpc::Status status) {
+  finished_ = true;
+  metrics_.call_finished();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   const int code = static_cast<int>(status.error_code());
   metrics_.record_call(rpc_, model_, code, seconds);

@@ -14,7 +14,8 @@ namespace animspace::server {
 
 class CallScope {
  public:
-  CallScope(Metrics& metrics, std::string_view rpc) : metrics_(metrics), rpc_(rpc) {}
+  CallScope(Metrics& metrics, std::string_view rpc) : metrics_(metrics), rpc_(rpc) { metrics_.call_started(); }
+  ~CallScope();
   CallScope(const CallScope&) = delete;
   CallScope& operator=(const CallScope&) = delete;
 
@@ -30,6 +31,7 @@ class CallScope {
   std::string rpc_;
   std::string model_;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  bool finished_ = false;
 };
 
 }  // namespace animspace::server

@@ -1,5 +1,6 @@
 #include "server/daemon.h"
 
+#include <grpc/grpc.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -69,6 +70,8 @@ Status Daemon::start() {
   grpc::ResourceQuota quota("animspaced");
   quota.SetMaxThreads(std::max(2, options_.worker_threads));
   builder.SetResourceQuota(quota);
+  // Sync-server pollers wake at this period; it bounds how long shutdown waits for idle pollers.
+  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
   builder.RegisterService(model_service_.get());
   builder.RegisterService(stats_service_.get());
   builder.RegisterService(pose_service_.get());
@@ -130,7 +133,19 @@ void Daemon::shutdown() {
     server_->GetHealthCheckService()->SetServingStatus(false);
     spdlog::info("shutting down: health NOT_SERVING, finishing in-flight calls (grace {} ms)",
                  options_.shutdown_grace.count());
-    server_->Shutdown(std::chrono::system_clock::now() + options_.shutdown_grace);
+    const auto deadline = std::chrono::system_clock::now() + options_.shutdown_grace;
+    std::thread stopper([this, deadline] { server_->Shutdown(deadline); });
+    // gRPC's shutdown also waits for every client connection to close, and an idle synchronous
+    // C++ client never reads the GOAWAY, so it would always take the whole grace period. Once
+    // our handlers have had nothing in flight for two consecutive polls, nothing is left to
+    // finish: drop the remaining connections (new calls are already refused).
+    int idle_polls = 0;
+    while (std::chrono::system_clock::now() < deadline && idle_polls < 2) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      idle_polls = metrics_.calls_in_flight() == 0 ? idle_polls + 1 : 0;
+    }
+    if (idle_polls >= 2) grpc_server_cancel_all_calls(server_->c_server());
+    stopper.join();
     server_->Wait();
   }
   if (metrics_http_) {

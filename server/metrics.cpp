@@ -134,7 +134,10 @@ std::string Metrics::prometheus_text() const {
   std::ostringstream out;
   out << "# HELP animspace_models_loaded Model versions loaded and serving.\n"
       << "# TYPE animspace_models_loaded gauge\n"
-      << "animspace_models_loaded " << models_loaded_ << '\n';
+      << "animspace_models_loaded " << models_loaded_ << '\n'
+      << "# HELP animspace_calls_in_flight RPC handlers running now.\n"
+      << "# TYPE animspace_calls_in_flight gauge\n"
+      << "animspace_calls_in_flight " << calls_in_flight() << '\n';
 
   out << "# HELP animspace_requests_total Finished RPCs by method, model and status code.\n"
       << "# TYPE animspace_requests_total counter\n";

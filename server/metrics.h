@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <map>
@@ -64,6 +65,11 @@ class Metrics {
   void record_pose(std::string_view model, CacheOutcome outcome, double key_point_error);
   void set_models_loaded(int count);
 
+  // Calls whose handler is running (CallScope brackets every handler).
+  void call_started() { in_flight_.fetch_add(1, std::memory_order_relaxed); }
+  void call_finished() { in_flight_.fetch_sub(1, std::memory_order_relaxed); }
+  int64_t calls_in_flight() const { return in_flight_.load(std::memory_order_relaxed); }
+
   std::map<std::string, ModelStatistics> model_statistics() const;
   void reset_model_statistics(std::string_view model);  // empty: all
   std::chrono::system_clock::time_point statistics_since() const;
@@ -85,6 +91,7 @@ class Metrics {
   std::map<std::string, ModelStatistics> models_;
   std::chrono::system_clock::time_point since_;
   int models_loaded_ = 0;
+  std::atomic<int64_t> in_flight_{0};
 };
 
 // Name of a gRPC status code as Prometheus labels and logs show it ("NOT_FOUND").

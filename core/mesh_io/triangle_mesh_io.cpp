@@ -167,17 +167,18 @@ Result<DeclaredCounts> declared_ply_counts(std::string_view bytes, std::string_v
   return in.error("expected 'end_header', got end of file");
 }
 
-// OFF header: `OFF` (or a variant such as COFF, NOFF), then `#vertices #faces #edges`.
+// OFF header: `OFF` (or a variant such as COFF, NOFF) alone on the first line, then
+// `#vertices #faces #edges`. Stricter than the format: OpenMesh's reader loops forever on a comment
+// before the keyword and reads nothing from counts on the keyword's line or after a comment.
 Result<DeclaredCounts> declared_off_counts(std::string_view bytes, std::string_view source) {
   TextReader in(bytes, source);
-  std::string_view keyword;
-  while (keyword.empty() || keyword.front() == '#') {  // skip blank and comment lines
-    if (!in.next_line()) return in.error("expected 'OFF', got end of file");
-    keyword = in.next_token();
-  }
-  if (!keyword.ends_with("OFF")) return in.error("'OFF'", keyword);
-  if (const std::string_view variant = in.next_token(); variant == "BINARY") {
-    return in.error("text OFF (binary OFF is not supported)", variant);
+  if (!in.next_line()) return in.error("expected 'OFF', got end of file");
+  const std::string_view keyword = in.next_token();
+  if (!keyword.ends_with("OFF")) return in.error("'OFF' on the first line", keyword);
+  if (const std::string_view rest = in.next_token(); rest == "BINARY") {
+    return in.error("text OFF (binary OFF is not supported)", rest);
+  } else if (!rest.empty()) {
+    return in.error("end of line after '" + std::string(keyword) + "' (the counts go on the next line)", rest);
   }
   DeclaredCounts counts;
   for (int* count : {&counts.vertices, &counts.faces}) {

@@ -5,7 +5,6 @@
 #include <thread>
 
 #include <gtest/gtest.h>
-#include <httplib.h>
 
 #include "animspace/v1/poses.grpc.pb.h"
 #include "clients/cpp/client.h"
@@ -14,6 +13,9 @@
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "tests/support/daemon_process.h"
 #include "tests/support/test_support.h"
+
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
+#include <httplib.h>
 
 namespace animspace {
 namespace {
@@ -242,12 +244,7 @@ TEST_F(DaemonTest, ReflectionListsTheApi) {
 
 TEST_F(DaemonTest, PrometheusMetricsCountCalls) {
   // A port free right now; the tiny race with other processes is acceptable in a test.
-  int metrics_port = 0;
-  {
-    httplib::Server probe;
-    metrics_port = probe.bind_to_any_port("127.0.0.1");
-  }
-  ASSERT_GT(metrics_port, 0);
+  const int metrics_port = testing::free_tcp_port();
   auto daemon = start({"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
   Client client(daemon->address());
   wait_until_serving(client);

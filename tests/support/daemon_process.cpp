@@ -14,9 +14,12 @@
 namespace animspace::testing {
 
 std::filesystem::path daemon_binary() {
-  const char* env = std::getenv("ANIMSPACED");
-  if (env == nullptr) throw std::runtime_error("ANIMSPACED is not set (run the tests through ctest)");
-  return env;
+  if (const char* env = std::getenv("ANIMSPACED")) return env;
+#ifdef ANIMSPACE_DAEMON_PATH
+  return ANIMSPACE_DAEMON_PATH;
+#else
+  throw std::runtime_error("ANIMSPACED is not set and no daemon path was compiled in");
+#endif
 }
 
 DaemonProcess::DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,

@@ -12,7 +12,7 @@ namespace animspace::testing {
 
 class DaemonProcess {
  public:
-  // Starts `$ANIMSPACED --listen 127.0.0.1:0 --port-file … <extra_args>` with stdout/stderr
+  // Starts `animspaced --listen 127.0.0.1:0 --port-file … <extra_args>` with stdout/stderr
   // going to `log_path`, and waits until it has written its port. Throws std::runtime_error
   // (failing the test) when it does not come up within `timeout`.
   DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,
@@ -38,7 +38,7 @@ class DaemonProcess {
   std::filesystem::path log_path_;
 };
 
-// Path of the animspaced binary under test ($ANIMSPACED, set by CTest).
+// Path of the animspaced binary under test: $ANIMSPACED, else the one the build compiled in.
 std::filesystem::path daemon_binary();
 
 }  // namespace animspace::testing

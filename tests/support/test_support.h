@@ -26,6 +26,9 @@ class TempDir {
 // call GTEST_SKIP() with a message in that case.
 std::optional<std::filesystem::path> shared_data_dir();
 
+// A TCP port on 127.0.0.1 that was free a moment ago (bound to port 0, read back, closed).
+int free_tcp_port();
+
 // Writes `text` to `path` (test fixtures only; not atomic).
 void write_text_file(const std::filesystem::path& path, const std::string& text);
 

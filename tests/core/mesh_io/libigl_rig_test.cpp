@@ -125,7 +125,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadText{"BadValue", "1 2\n1\n0x2\n", ":3: expected a number, got '0x2'"},
         BadText{"NanValue", "1 2\n1\nnan\n", ":3: expected a number, got 'nan'"},
         BadText{"HugeHeader", "100000 100000\n1\n", ":1: expected at most 16 values for a file of that size"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 // ---- TGF ----
 
@@ -202,7 +202,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadText{"OneColumnBone", "1 0 0 0\n2 1 0 0\n#\n1\n#\n", ":4: expected a joint index in 1..2, got end of line"},
         BadText{"SelfBone", "1 0 0 0\n2 1 0 0\n#\n2 2\n#\n", ":4: expected a child joint other than the parent"},
         BadText{"NoJoints", "#\n#\n", ": no joints"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 // ---- Tmat ----
 
@@ -263,7 +263,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadText{"SevenRows", "1 0 0\n0 1 0\n0 0 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n",
                 ": expected a positive multiple of 4 rows (4 per bone), got 7"},
         BadText{"Empty", "\n", ": expected a positive multiple of 4 rows (4 per bone), got 0"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 TEST(TmatFile, MissingFileIsNotFound) {
   TempDir dir;

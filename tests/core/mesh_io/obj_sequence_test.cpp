@@ -97,7 +97,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadSequence{"DifferentTriangle", frame_obj(1, "f 1 2 3\nf 1 3 2\n"),
                     "triangle 1 has vertices (0 2 1), expected (0 2 3)"},
         BadSequence{"ParseError", "v 0 0\n", ":1: expected a vertex coordinate"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 TEST(ObjSequence, EmptyListAndMissingFile) {
   const auto empty = read_obj_sequence({});

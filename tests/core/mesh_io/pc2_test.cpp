@@ -162,7 +162,7 @@ INSTANTIATE_TEST_SUITE_P(
                ErrorCode::kInvalidArgument, "bad.pc2: byte 60: non-finite value at frame 1, point 0, y"},
         BadPc2{"InfValue", pc2_bytes(1, 2, 0, 1, 1, {1, 2, 3, 4, 5, std::numeric_limits<float>::infinity()}),
                ErrorCode::kInvalidArgument, "byte 52: non-finite value at frame 0, point 1, z"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 TEST(Pc2File, WriteRefusesCachesThatWouldNotReadBack) {
   TempDir dir;

@@ -148,7 +148,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadObj{"NonNumericTexture", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/x 2 3\n", "got '1/x'"},
         BadObj{"NonNumericIndex", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 two 3\n", "bad.obj:4:"},
         BadObj{"NoVertices", "# nothing\n", "bad.obj: no vertices"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 TEST(MeshFile, UnknownExtensionNamesItAndTheSupportedOnes) {
   const auto mesh = read_triangle_mesh("model.stl");
@@ -213,9 +213,9 @@ TEST_P(MeshRoundTrip, KeepsNonManifoldFacesAndVertexNumbering) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Formats, MeshRoundTrip, ::testing::Values(".obj", ".ply", ".off", ".OBJ", ".Ply", ".OFF"),
-                         [](const auto& info) {
-                           std::string name = info.param + 1;
-                           return name + (std::isupper(static_cast<unsigned char>(info.param[1])) ? "Upper" : "");
+                         [](const auto& test) {
+                           std::string name = test.param + 1;
+                           return name + (std::isupper(static_cast<unsigned char>(test.param[1])) ? "Upper" : "");
                          });
 
 TEST(MeshFile, WriteRefusesMeshesThatWouldNotReadBack) {
@@ -226,7 +226,7 @@ TEST(MeshFile, WriteRefusesMeshesThatWouldNotReadBack) {
   negative.F(0, 0) = -1;
   TriangleMesh not_finite = tetrahedron();
   not_finite.V(3, 2) = std::numeric_limits<float>::quiet_NaN();
-  const TriangleMesh empty;
+  TriangleMesh empty;
   for (const TriangleMesh* mesh : {&out_of_range, &negative, &not_finite, &empty}) {
     const Status written = write_triangle_mesh(dir / "out.ply", *mesh);
     ASSERT_FALSE(written.ok());
@@ -238,7 +238,7 @@ TEST(MeshFile, WriteRefusesMeshesThatWouldNotReadBack) {
 
 TEST(OffRead, HandWrittenQuadIsFanTriangulated) {
   TempDir dir;
-  write_text_file(dir / "quad.off", "OFF\n# a unit square\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0.5\n4 0 1 2 3\n");
+  write_text_file(dir / "quad.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0.5\n4 0 1 2 3\n");
   const auto mesh = read_triangle_mesh(dir / "quad.off");
   ASSERT_TRUE(mesh.ok()) << mesh.error().message;
   PointMatrix V(4, 3);
@@ -284,8 +284,14 @@ TEST_P(PlyOffReadErrors, AreInvalidArgumentNamingTheFile) {
 INSTANTIATE_TEST_SUITE_P(
     Table, PlyOffReadErrors,
     ::testing::Values(
-        BadFile{"OffNotOff", "a.off", "garbage\n", ":1: expected 'OFF', got 'garbage'"},
+        BadFile{"OffNotOff", "a.off", "garbage\n", ":1: expected 'OFF' on the first line, got 'garbage'"},
         BadFile{"OffEmpty", "a.off", "", "expected 'OFF'"},
+        BadFile{"OffCommentFirst", "a.off", "# made by hand\nOFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n",
+                ":1: expected 'OFF' on the first line, got '#'"},
+        BadFile{"OffCountsOnKeywordLine", "a.off", "OFF 3 0 0\n0 0 0\n1 0 0\n0 1 0\n",
+                ":1: expected end of line after 'OFF' (the counts go on the next line), got '3'"},
+        BadFile{"OffCommentInHeader", "a.off", "OFF\n# counts\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n",
+                ":2: expected the vertex and face counts, got '#'"},
         BadFile{"OffHugeCounts", "a.off", "OFF\n1000000000 1 0\n0 0 0\n", ":2: expected element counts that fit"},
         BadFile{"OffNegativeCount", "a.off", "OFF\n-3 0 0\n0 0 0\n", "non-negative"},
         BadFile{"OffTruncatedVertex", "a.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n1 1\n", "truncated or malformed"},
@@ -310,7 +316,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadFile{"PlyNoVertices", "a.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
                                           "property float z\nend_header\n",
                 "no vertices"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test) { return std::string(test.param.name); });
 
 TEST(PlyRead, TruncatedBinaryIsRefused) {
   TempDir dir;
