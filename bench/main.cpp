@@ -1,137 +1,46 @@
 // animspace-bench: benchmark suites that print a table and write JSON, each figure next to a
 // baseline measured in the same run (these machines are shared and noisy: ratios hold,
-// absolute times drift). Suites grow with the algorithm issues.
-#include <algorithm>
-#include <chrono>
+// absolute times drift).
 #include <cstdio>
-#include <cstring>
-#include <filesystem>
 #include <fstream>
-#include <functional>
-#include <optional>
 #include <string>
-#include <vector>
 
 #include <CLI/CLI.hpp>
 
-#include "core/common/atomic_file.h"
-#include "core/container/model_container.h"
-#include "core/mesh_io/pc2.h"
-
-namespace {
-
-struct Row {
-  std::string name;
-  std::string baseline;
-  double seconds = 0;           // median over repetitions
-  double baseline_seconds = 0;  // median over repetitions
-  double bytes = 0;
-};
-
-// Median wall time of `repetitions` runs of `work`.
-double median_seconds(int repetitions, const std::function<void()>& work) {
-  std::vector<double> times;
-  for (int i = 0; i < repetitions; ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
-    work();
-    times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-  }
-  std::sort(times.begin(), times.end());
-  return times[times.size() / 2];
-}
-
-// A synthetic point cache of the horse-gallop's size, for machines without ../shared/data.
-animspace::mesh_io::PointCache synthetic_cache(int frames, int points) {
-  animspace::mesh_io::PointCache cache;
-  cache.num_points = points;
-  cache.samples.resize(frames, 3 * points);
-  for (int f = 0; f < frames; ++f) {
-    for (int i = 0; i < 3 * points; ++i) cache.samples(f, i) = static_cast<float>(f) * 1e-3f + static_cast<float>(i % 97);
-  }
-  return cache;
-}
-
-std::vector<Row> io_suite(const std::optional<std::filesystem::path>& data, int repetitions) {
-  std::vector<Row> rows;
-  std::string pc2_bytes;
-  std::string source = "synthetic 48×8431";
-  if (data && std::filesystem::exists(*data / "horse-gallop/frames.pc2")) {
-    auto bytes = animspace::read_whole_file(*data / "horse-gallop/frames.pc2");
-    if (bytes) {
-      pc2_bytes = std::move(*bytes);
-      source = "horse-gallop/frames.pc2";
-    }
-  }
-  if (pc2_bytes.empty()) pc2_bytes = animspace::mesh_io::serialize_pc2(synthetic_cache(48, 8431));
-
-  std::vector<char> sink(pc2_bytes.size());
-  const auto memcpy_baseline = [&] { std::memcpy(sink.data(), pc2_bytes.data(), pc2_bytes.size()); };
-
-  Row pc2{"parse_pc2 (" + source + ")", "memcpy of the same bytes"};
-  pc2.bytes = static_cast<double>(pc2_bytes.size());
-  pc2.seconds = median_seconds(repetitions, [&] {
-    auto parsed = animspace::mesh_io::parse_pc2(pc2_bytes, source);
-    if (!parsed) std::fprintf(stderr, "parse_pc2 failed: %s\n", parsed.error().message.c_str());
-  });
-  pc2.baseline_seconds = median_seconds(repetitions, memcpy_baseline);
-  rows.push_back(pc2);
-
-  // The same frames as a model container section: parse includes CRC-32 verification.
-  auto cache = animspace::mesh_io::parse_pc2(pc2_bytes, source);
-  animspace::container::ModelContainer container;
-  container.set_matrix("sequence.frames", cache->samples);
-  const std::string container_bytes = animspace::container::serialize(container);
-  std::vector<char> sink2(container_bytes.size());
-  Row anim{"container parse (checksummed)", "memcpy of the same bytes"};
-  anim.bytes = static_cast<double>(container_bytes.size());
-  anim.seconds = median_seconds(repetitions, [&] {
-    auto parsed = animspace::container::parse(container_bytes, "bench");
-    if (!parsed) std::fprintf(stderr, "container parse failed: %s\n", parsed.error().message.c_str());
-  });
-  anim.baseline_seconds = median_seconds(
-      repetitions, [&] { std::memcpy(sink2.data(), container_bytes.data(), container_bytes.size()); });
-  rows.push_back(anim);
-  return rows;
-}
-
-}  // namespace
+#include "bench/suites.h"
 
 int main(int argc, char** argv) {
   std::string suite = "io";
   std::string data_dir = "../shared/data";
   std::string json_path;
-  int repetitions = 21;
+  animspace::bench::SuiteOptions options;
   CLI::App app{"animspace-bench — benchmark suites with same-run baselines"};
-  app.add_option("suite", suite, "Suite to run")->check(CLI::IsMember({"io"}))->capture_default_str();
-  app.add_option("--data", data_dir, "Reference data folder (../shared/data); synthetic data when absent")
+  app.add_option("suite", suite, "io: file parsing; pmsc: PMSC training, accuracy and speed on real sequences")
+      ->check(CLI::IsMember({"io", "pmsc"}))
       ->capture_default_str();
+  app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
-  app.add_option("--repetitions", repetitions, "Runs per figure (median reported)")
+  app.add_option("--repetitions", options.repetitions, "Runs per timing (median reported)")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
+  app.add_option("--error-bound-diag", options.error_bound_diag, "pmsc: key selection bound (fraction of diagonal)")
+      ->capture_default_str();
+  app.add_option("--tolerance-diag", options.tolerance_diag, "pmsc: soft-cache tolerance (fraction of diagonal)")
+      ->capture_default_str();
+  app.add_option("--datasets", options.datasets, "pmsc: datasets under --data")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
-  std::optional<std::filesystem::path> data;
-  if (std::filesystem::is_directory(data_dir)) data = data_dir;
-  else std::printf("note: %s not found; using synthetic data\n", data_dir.c_str());
-
-  const std::vector<Row> rows = io_suite(data, repetitions);
-  std::printf("%-44s %12s %12s %10s %12s  %s\n", "benchmark", "median ms", "GB/s", "baseline", "× baseline",
-              "baseline is");
-  for (const auto& r : rows) {
-    std::printf("%-44s %12.3f %12.2f %10.3f %12.1f  %s\n", r.name.c_str(), 1e3 * r.seconds, r.bytes / r.seconds / 1e9,
-                1e3 * r.baseline_seconds, r.seconds / r.baseline_seconds, r.baseline.c_str());
+  if (std::filesystem::is_directory(data_dir)) {
+    options.data = data_dir;
+  } else {
+    std::printf("note: %s not found; suites that need it use synthetic data or are skipped\n", data_dir.c_str());
   }
+  nlohmann::json results = suite == "io" ? animspace::bench::run_io_suite(options)
+                                         : animspace::bench::run_pmsc_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);
-    json << "{\"suite\": \"" << suite << "\", \"repetitions\": " << repetitions << ", \"results\": [";
-    for (size_t i = 0; i < rows.size(); ++i) {
-      const auto& r = rows[i];
-      json << (i ? ", " : "") << "{\"name\": \"" << r.name << "\", \"seconds\": " << r.seconds
-           << ", \"baseline\": \"" << r.baseline << "\", \"baseline_seconds\": " << r.baseline_seconds
-           << ", \"bytes\": " << r.bytes << "}";
-    }
-    json << "]}\n";
+    json << nlohmann::json{{"suite", suite}, {"repetitions", options.repetitions}, {"results", results}}.dump(2)
+         << '\n';
   }
   return 0;
 }

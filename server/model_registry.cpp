@@ -8,6 +8,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/pmsc/pmsc_io.h"
+
 namespace animspace::server {
 namespace {
 
@@ -77,6 +79,14 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
     return entry;
   }
   auto loaded = std::make_shared<LoadedModel>();
+  if (info->kind == model::ModelKind::kPmsc || info->kind == model::ModelKind::kCrossPmsc) {
+    auto runtime = pmsc::load(*container, path.string());
+    if (!runtime) {
+      entry.error = runtime.error().message;
+      return entry;
+    }
+    loaded->pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
+  }
   loaded->name = name;
   loaded->version = version;
   loaded->path = path;

@@ -19,6 +19,7 @@
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/model/model_info.h"
+#include "core/pmsc/pmsc_model.h"
 
 namespace animspace::server {
 
@@ -33,6 +34,8 @@ struct LoadedModel {
   int64_t loaded_at_unix_s = 0;
   container::ModelContainer container;
   model::ModelInfo info;
+  // The prepared soft-cache runtime of a PMSC / cross-PMSC model (null for other kinds).
+  std::shared_ptr<const pmsc::PmscModel> pmsc;
 };
 
 struct VersionEntry {

@@ -202,12 +202,16 @@ Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view tex
 Result<TgfSkeleton> read_tgf(const std::filesystem::path& path) { return parse_file<TgfSkeleton>(path, parse_tgf); }
 
 Status write_tgf(const std::filesystem::path& path, const TgfSkeleton& skeleton) {
+  // Refuse what read_tgf would refuse.
+  if (skeleton.joints.rows() == 0) return make_error(ErrorCode::kInvalidArgument, path.string() + ": no joints to write");
   ANIMSPACE_RETURN_IF_ERROR(check_finite(skeleton.joints, path.string(), "joint coordinate"));
   for (Eigen::Index b = 0; b < skeleton.bones.rows(); ++b) {
-    if (skeleton.bones.row(b).minCoeff() < 0 || skeleton.bones.row(b).maxCoeff() >= skeleton.joints.rows()) {
-      return make_error(ErrorCode::kInvalidArgument, path.string() + ": bone " + std::to_string(b) +
-                                                         " refers to a joint outside 0.." +
-                                                         std::to_string(skeleton.joints.rows() - 1));
+    const auto bone = skeleton.bones.row(b);
+    if (bone.minCoeff() < 0 || bone.maxCoeff() >= skeleton.joints.rows() || bone(0) == bone(1)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        path.string() + ": bone " + std::to_string(b) + " (" + std::to_string(bone(0)) + ", " +
+                            std::to_string(bone(1)) + ") needs two different joints in 0.." +
+                            std::to_string(skeleton.joints.rows() - 1));
     }
   }
   std::string text;

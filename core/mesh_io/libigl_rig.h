@@ -34,7 +34,8 @@ struct TgfSkeleton {
 // Errors: kInvalidArgument for a malformed line, a joint index out of order, a bone joint outside
 // 1..#J or equal to its parent, or no joints; kNotFound / kIo from the read.
 Result<TgfSkeleton> read_tgf(const std::filesystem::path& path);
-// Errors: kInvalidArgument for non-finite joints or a bone joint outside [0, #J); kIo.
+// Errors: kInvalidArgument for no joints, a non-finite joint, or a bone whose joints are outside
+// [0, #J) or equal; kIo.
 Status write_tgf(const std::filesystem::path& path, const TgfSkeleton& skeleton);
 
 // Returns the rows by cols matrix. Errors: kInvalidArgument for a malformed header or value,

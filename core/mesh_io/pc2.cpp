@@ -1,6 +1,7 @@
 #include "core/mesh_io/pc2.h"
 
 #include <bit>
+#include <cassert>
 #include <cmath>
 #include <cstdint>
 #include <cstring>

@@ -104,8 +104,10 @@ Error TextReader::error(std::string_view expected, std::string_view got) const {
 
 Error TextReader::error(std::string_view message) const {
   std::string text(source_);
-  text += ':';
-  text += std::to_string(line_number_);
+  if (line_number_ > 0) {  // 0: the text has no line at all
+    text += ':';
+    text += std::to_string(line_number_);
+  }
   text += ": ";
   text += message;
   return make_error(ErrorCode::kInvalidArgument, std::move(text));

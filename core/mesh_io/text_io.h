@@ -43,7 +43,7 @@ class TextReader {
   // "source:line: expected <expected>, got <got>" ('got' quoted; an empty 'got' reads
   // "end of line").
   Error error(std::string_view expected, std::string_view got) const;
-  // "source:line: <message>".
+  // "source:line: <message>" ("source: <message>" before the first line).
   Error error(std::string_view message) const;
 
  private:

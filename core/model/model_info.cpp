@@ -1,6 +1,7 @@
 #include "core/model/model_info.h"
 
 #include <array>
+#include <cstdlib>
 #include <utility>
 
 namespace animspace::model {
@@ -48,6 +49,14 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
   if (!parsed_kind) return make_error(ErrorCode::kInvalidArgument, source + ": " + parsed_kind.error().message);
   info.kind = *parsed_kind;
   info.description = model.metadata_value("description");
+
+  if (info.kind == ModelKind::kPmsc || info.kind == ModelKind::kCrossPmsc) {
+    const std::string channels = model.metadata_value("pmsc.channels", "3");
+    info.channel_count = std::atoi(channels.c_str());
+    if (info.channel_count < 1) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": metadata 'pmsc.channels' must be ≥ 1, got '" + channels + "'");
+    }
+  }
 
   // The rest mesh fixes N; every other per-point section must agree with it.
   auto rest = model.points(sections::kRestPoints);
@@ -115,6 +124,26 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
                            bones->rows(), bones->cols());
       }
     }
+  }
+  if (info.kind == ModelKind::kPmsc || info.kind == ModelKind::kCrossPmsc) {
+    // Shapes only; pmsc::load validates everything and prepares the runtime.
+    auto mean = model.float_matrix("pmsc.mean");
+    if (!mean) return mean.error();
+    if (mean->cols() != static_cast<long>(info.point_count) * info.channel_count) {
+      return shape_error(source, "pmsc.mean", "1×" + std::to_string(info.point_count * info.channel_count),
+                         mean->rows(), mean->cols());
+    }
+    auto basis = model.float_matrix("pmsc.basis");
+    if (!basis) return basis.error();
+    auto keys = model.int_matrix("pmsc.key_points", 1);
+    if (!keys) return keys.error();
+    auto epsilon = model.double_matrix("pmsc.epsilon", 2);
+    if (!epsilon) return epsilon.error();
+    info.basis_size = static_cast<int>(basis->cols());
+    info.key_point_count = static_cast<int>(keys->rows());
+    info.epsilon_min = static_cast<float>((*epsilon)(0, 0));
+    info.epsilon_max = static_cast<float>((*epsilon)(0, 1));
+    info.fail_through = info.kind == ModelKind::kCrossPmsc ? FailThrough::kImpossible : FailThrough::kClient;
   }
   return info;
 }

@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 #include <google/protobuf/util/json_util.h>
 
+#include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
@@ -219,8 +220,12 @@ int main(int argc, char** argv) {
   auto* demo = app.add_subcommand("demo-repository", "Offline: write the bundled demo model repository");
   demo->add_option("directory", path, "Repository directory to create")->required();
 
+  animspace::cli::TrainPmscArgs train_pmsc_args;
+  auto* train_pmsc = animspace::cli::add_train_pmsc(app, train_pmsc_args);
+
   CLI11_PARSE(app, argc, argv);
   try {
+    if (*train_pmsc) return animspace::cli::run_train_pmsc(train_pmsc_args, g.json);
     if (*list) return run_list(g);
     if (*health) return run_health(g);
     if (*info) return run_server_info(g);

@@ -164,15 +164,24 @@ TEST(TgfFile, RoundTripIsBitExact) {
   EXPECT_EQ(read->bones, skeleton.bones);
 }
 
-TEST(TgfFile, WriteRefusesBonesOutsideTheJoints) {
+TEST(TgfFile, WriteRefusesWhatReadWouldRefuse) {
   TempDir dir;
-  TgfSkeleton skeleton;
-  skeleton.joints = awkward_matrix(2, 3);
-  skeleton.bones.resize(1, 2);
-  skeleton.bones << 0, 2;
-  const Status written = write_tgf(dir / "s.tgf", skeleton);
-  ASSERT_FALSE(written.ok());
-  EXPECT_EQ(written.error().code, ErrorCode::kInvalidArgument);
+  TgfSkeleton outside;
+  outside.joints = awkward_matrix(2, 3);
+  outside.bones.resize(1, 2);
+  outside.bones << 0, 2;
+  TgfSkeleton self_bone = outside;
+  self_bone.bones << 1, 1;
+  TgfSkeleton no_joints;
+  TgfSkeleton not_finite = outside;
+  not_finite.bones << 0, 1;
+  not_finite.joints(1, 2) = std::numeric_limits<double>::quiet_NaN();
+  for (const TgfSkeleton* skeleton : {&outside, &self_bone, &no_joints, &not_finite}) {
+    const Status written = write_tgf(dir / "s.tgf", *skeleton);
+    ASSERT_FALSE(written.ok());
+    EXPECT_EQ(written.error().code, ErrorCode::kInvalidArgument);
+    EXPECT_NE(written.error().message.find("s.tgf"), std::string::npos) << written.error().message;
+  }
   EXPECT_FALSE(std::filesystem::exists(dir / "s.tgf"));
 }
 

@@ -1,0 +1,41 @@
+// Shared helpers for animspace-bench suites: timing and where the reference data lives.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace animspace::bench {
+
+// Median wall time of `repetitions` runs of `work`, seconds.
+inline double median_seconds(int repetitions, const std::function<void()>& work) {
+  std::vector<double> times;
+  for (int i = 0; i < repetitions; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    work();
+    times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(times.begin(), times.end());
+  return times[times.size() / 2];
+}
+
+// Keeps the optimiser from discarding a computed value.
+template <typename T>
+inline void do_not_optimize(const T& value) {
+  asm volatile("" : : "r,m"(value) : "memory");
+}
+
+struct SuiteOptions {
+  std::optional<std::filesystem::path> data;  // ../shared/data, when present
+  int repetitions = 21;
+  // pmsc: key-selection bound and soft-cache tolerance, fractions of the bounding-box diagonal.
+  double error_bound_diag = 0.0025;
+  double tolerance_diag = 0.01;
+  std::vector<std::string> datasets{"crane", "horse-gallop"};
+};
+
+}  // namespace animspace::bench

@@ -1,0 +1,13 @@
+// The animspace-bench suites. Each prints its table and returns its results as JSON.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include "bench/bench_support.h"
+
+namespace animspace::bench {
+
+nlohmann::json run_io_suite(const SuiteOptions& options);
+nlohmann::json run_pmsc_suite(const SuiteOptions& options);
+
+}  // namespace animspace::bench

@@ -1,0 +1,209 @@
+#include "clients/cpp/cli/train_pmsc.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <optional>
+
+#include "core/container/model_container.h"
+#include "core/mesh_io/sequence_io.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/train.h"
+
+namespace animspace::cli {
+namespace {
+
+FrameMatrix select_rows(const FrameMatrix& frames, const std::vector<int>& rows) {
+  FrameMatrix out(static_cast<long>(rows.size()), frames.cols());
+  for (size_t i = 0; i < rows.size(); ++i) out.row(static_cast<long>(i)) = frames.row(rows[i]);
+  return out;
+}
+
+// Where to write: an explicit file, or <repository>/<model>/<next version>/model.anim.
+std::filesystem::path output_path(const TrainPmscArgs& a) {
+  if (a.model.empty()) return a.output;
+  const std::filesystem::path dir = std::filesystem::path(a.output) / a.model;
+  unsigned version = a.version;
+  if (version == 0) {
+    version = 1;
+    std::error_code ec;
+    for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      if (!name.empty() && name.find_first_not_of("0123456789") == std::string::npos && name[0] != '0') {
+        version = std::max(version, static_cast<unsigned>(std::stoul(name)) + 1);
+      }
+    }
+  }
+  return dir / std::to_string(version) / "model.anim";
+}
+
+}  // namespace
+
+std::vector<int> parse_frame_selection(const std::string& text, int count, std::string* error) {
+  std::vector<std::string> parts{""};
+  for (char c : text) {
+    if (c == ':') parts.emplace_back();
+    else parts.back() += c;
+  }
+  if (parts.size() > 3) {
+    *error = "--select: expected start:stop:step, got '" + text + "'";
+    return {};
+  }
+  auto number = [&](const std::string& s, int fallback, bool* ok) {
+    if (s.empty()) return fallback;
+    try {
+      size_t used = 0;
+      const int v = std::stoi(s, &used);
+      if (used != s.size()) *ok = false;
+      return v;
+    } catch (const std::exception&) {
+      *ok = false;
+      return fallback;
+    }
+  };
+  bool ok = true;
+  const int step = parts.size() > 2 ? number(parts[2], 1, &ok) : 1;
+  int start = number(parts[0], 0, &ok);
+  int stop = parts.size() > 1 ? number(parts[1], count, &ok) : start + 1;
+  if (!ok || step <= 0) {
+    *error = "--select: expected integers start:stop:step with step > 0, got '" + text + "'";
+    return {};
+  }
+  if (start < 0) start += count;
+  if (stop < 0) stop += count;
+  start = std::max(0, start);
+  stop = std::min(count, stop);
+  std::vector<int> frames;
+  for (int f = start; f < stop; f += step) frames.push_back(f);
+  if (frames.empty()) *error = "--select '" + text + "' selects no frame of " + std::to_string(count);
+  return frames;
+}
+
+CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "train-pmsc",
+      "Offline: train a Point Multiplication / Soft Caching model from a mesh sequence and write a model version "
+      "the daemon serves (Meyer & Anderson 2006, 2007)");
+  cmd->add_option("sequence", a.sequence, "Folder with reference.obj + frames.pc2 (or OBJ frames), or a mesh file")
+      ->required();
+  cmd->add_option("--pc2", a.pc2, "Point cache when SEQUENCE is a mesh file");
+  cmd->add_option("--control", a.control, "Cross-PMSC: the control sequence whose key points drive SEQUENCE");
+  cmd->add_option("--control-pc2", a.control_pc2, "Point cache when --control is a mesh file");
+  cmd->add_option("--select", a.select, "Training frames as a slice start:stop:step (e.g. ::2, 0:105)")
+      ->capture_default_str();
+  cmd->add_option("--error-bound-diag", a.error_bound_diag,
+                  "Key selection stops when every training point is within this fraction of the bounding-box "
+                  "diagonal")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--tolerance-diag", a.tolerance_diag,
+                  "Soft cache: ε is calibrated so that poses with a point error above this fraction of the diagonal "
+                  "are flagged")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--basis", a.basis, "Subspace dimension M (default: from the error bound); M < frames");
+  cmd->add_option("--max-key-points", a.max_key_points, "Key point budget")->capture_default_str();
+  cmd->add_option("--block", a.block, "Basis vectors per key-selection block (10–20 in the papers)")
+      ->check(CLI::Range(1, 200))
+      ->capture_default_str();
+  cmd->add_option("--fiducials", a.fiducials, "Point indices seeded as key points first")->delimiter(',');
+  cmd->add_option("--grid", a.grid, "Sparse grid seeds: cells per axis (0 = off)")->capture_default_str();
+  cmd->add_flag("--align", a.align, "Remove rigid motion before PCA (captured whole-body data)");
+  cmd->add_option("--regions", a.regions, "Regions for local fail-through (0 = none)")->capture_default_str();
+  cmd->add_option("--description", a.description, "One-line description stored in the model");
+  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")
+      ->required();
+  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
+  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  return cmd;
+}
+
+int run_train_pmsc(const TrainPmscArgs& a, bool json) {
+  auto sequence = mesh_io::load_sequence(a.sequence, a.pc2);
+  if (!sequence) {
+    std::fprintf(stderr, "animspace train-pmsc: %s\n", sequence.error().message.c_str());
+    return 2;
+  }
+  std::string error;
+  const auto selected = parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
+  if (selected.empty()) {
+    std::fprintf(stderr, "animspace train-pmsc: %s\n", error.c_str());
+    return 2;
+  }
+  const FrameMatrix frames = select_rows(sequence->frames.samples, selected);
+
+  std::optional<mesh_io::LoadedSequence> control;
+  FrameMatrix control_frames;
+  if (!a.control.empty()) {
+    auto loaded = mesh_io::load_sequence(a.control, a.control_pc2);
+    if (!loaded) {
+      std::fprintf(stderr, "animspace train-pmsc: %s\n", loaded.error().message.c_str());
+      return 2;
+    }
+    if (loaded->frames.num_frames() != sequence->frames.num_frames()) {
+      std::fprintf(stderr, "animspace train-pmsc: --control has %d frames, the sequence %d\n",
+                   loaded->frames.num_frames(), sequence->frames.num_frames());
+      return 2;
+    }
+    control_frames = select_rows(loaded->frames.samples, selected);
+    control = std::move(*loaded);
+  }
+
+  // Distances are given relative to the reference's bounding-box diagonal, as in the 2007 paper's
+  // "1% of the diagonal of the head bounding box".
+  const Eigen::VectorXf reference = Eigen::Map<const Eigen::VectorXf>(sequence->reference.V.data(),
+                                                                      sequence->reference.V.size());
+  const double diagonal = pmsc::bounding_box_diagonal(reference);
+  pmsc::TrainingOptions options;
+  options.error_bound = a.error_bound_diag * diagonal;
+  options.error_tolerance = a.tolerance_diag * diagonal;
+  options.basis_size = a.basis;
+  options.max_key_points = a.max_key_points;
+  options.block_size = a.block;
+  options.fiducial_points = a.fiducials;
+  options.grid_cells = a.grid;
+  options.remove_rigid_motion = a.align;
+  options.region_count = a.regions;
+
+  pmsc::TrainingReport report;
+  auto model = control ? pmsc::train_cross(control_frames, frames, options, &report)
+                       : pmsc::train(frames, options, &report);
+  if (!model) {
+    std::fprintf(stderr, "animspace train-pmsc: %s\n", model.error().message.c_str());
+    return 2;
+  }
+  const std::string description =
+      a.description.empty() ? "PMSC model of " + a.sequence + " (" + std::to_string(frames.rows()) + " frames)"
+                            : a.description;
+  const auto container = pmsc::make_container(sequence->reference, frames, control ? &control_frames : nullptr,
+                                              *model, report, description);
+  const auto path = output_path(a);
+  std::error_code ec;
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
+  if (auto written = container::write_file(path, container); !written.ok()) {
+    std::fprintf(stderr, "animspace train-pmsc: %s\n", written.error().message.c_str());
+    return 2;
+  }
+  if (json) {
+    std::printf(
+        "{\"output\": \"%s\", \"frames\": %d, \"basis\": %d, \"key_points\": %d, \"max_training_error\": %g, "
+        "\"converged\": %s, \"condition_number\": %g, \"epsilon_min\": %g, \"epsilon_max\": %g, \"seconds\": %g}\n",
+        path.c_str(), report.frames, report.basis_size, report.key_points, report.max_training_error,
+        report.converged ? "true" : "false", report.condition_number, model->epsilon.epsilon_min,
+        model->epsilon.epsilon_max, report.seconds);
+  } else {
+    std::printf("trained on %d frames in %.2f s: basis M = %d, %d key points%s\n", report.frames, report.seconds,
+                report.basis_size, report.key_points, control ? " (cross-PMSC)" : "");
+    std::printf("max training error %.4g (%.3f%% of the diagonal; bound %.3f%%)%s\n", report.max_training_error,
+                100 * report.max_training_error / diagonal, 100 * a.error_bound_diag,
+                report.converged ? "" : "  — key budget spent before the bound");
+    std::printf("A_key condition number %.3g%s\n", report.condition_number,
+                report.regularization > 0 ? " (regularised)" : "");
+    std::printf("soft cache ε = [%.4g, %.4g] from %d held-out frames (error ratio %.3g)\n",
+                model->epsilon.epsilon_min, model->epsilon.epsilon_max, report.calibration_frames,
+                report.error_ratio);
+    std::printf("wrote %s\n", path.c_str());
+  }
+  return 0;
+}
+
+}  // namespace animspace::cli

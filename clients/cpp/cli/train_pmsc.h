@@ -1,0 +1,40 @@
+// `animspace train-pmsc`: train a PMSC / KPSA model from a mesh sequence and write a servable
+// model version.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+namespace animspace::cli {
+
+struct TrainPmscArgs {
+  std::string sequence;        // folder (reference.obj + frames.pc2, or OBJ frames) or reference mesh
+  std::string pc2;             // point cache when `sequence` is a mesh file
+  std::string control;         // cross-PMSC: control sequence (folder or mesh; --control-pc2)
+  std::string control_pc2;
+  std::string select = "::";   // frames, Python slice start:stop:step
+  double error_bound_diag = 0.0025;
+  double tolerance_diag = 0.01;
+  int basis = 0;
+  int max_key_points = 200;
+  int block = 12;
+  std::vector<int> fiducials;
+  int grid = 0;
+  bool align = false;
+  int regions = 8;
+  std::string description;
+  std::string output;          // model.anim path, or a repository with --model
+  std::string model;
+  unsigned version = 0;        // 0: next free version
+};
+
+CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& args);
+int run_train_pmsc(const TrainPmscArgs& args, bool json);
+
+// Parses a Python-style slice "start:stop:step" (each part optional, negative counts from the
+// end) over `count` items. Errors go to `error` and yield an empty list.
+std::vector<int> parse_frame_selection(const std::string& text, int count, std::string* error);
+
+}  // namespace animspace::cli

@@ -1,0 +1,44 @@
+#include "core/mesh_io/sequence_io.h"
+
+#include "core/mesh_io/obj_sequence.h"
+#include "core/mesh_io/triangle_mesh_io.h"
+
+namespace animspace::mesh_io {
+
+Result<LoadedSequence> load_sequence(const std::filesystem::path& path, const std::filesystem::path& pc2) {
+  std::error_code ec;
+  std::filesystem::path reference_path = path;
+  std::filesystem::path cache_path = pc2;
+  if (std::filesystem::is_directory(path, ec)) {
+    if (std::filesystem::exists(path / "reference.obj", ec) && std::filesystem::exists(path / "frames.pc2", ec)) {
+      reference_path = path / "reference.obj";
+      cache_path = path / "frames.pc2";
+    } else {
+      auto files = list_obj_sequence(path);
+      if (!files) return files.error();
+      auto sequence = read_obj_sequence(*files);
+      if (!sequence) return sequence.error();
+      LoadedSequence out;
+      out.reference.F = sequence->F;
+      out.reference.V = sequence->frames.frame(0);
+      out.frames = std::move(sequence->frames);
+      return out;
+    }
+  }
+  if (cache_path.empty()) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      path.string() + ": a reference mesh needs a point cache (.pc2) to form a sequence");
+  }
+  auto reference = read_triangle_mesh(reference_path);
+  if (!reference) return reference.error();
+  auto frames = read_pc2(cache_path);
+  if (!frames) return frames.error();
+  if (frames->num_points != reference->V.rows()) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      cache_path.string() + " has " + std::to_string(frames->num_points) + " points but " +
+                          reference_path.string() + " has " + std::to_string(reference->V.rows()) + " vertices");
+  }
+  return LoadedSequence{std::move(*reference), std::move(*frames)};
+}
+
+}  // namespace animspace::mesh_io

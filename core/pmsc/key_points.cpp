@@ -1,0 +1,134 @@
+#include "core/pmsc/key_points.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <Eigen/SVD>
+
+#include "core/pmsc/pca.h"
+#include "core/pmsc/pmsc_model.h"
+#include "core/pmsc/varimax.h"
+
+namespace animspace::pmsc {
+
+Eigen::MatrixXd gather_key_rows(const Eigen::MatrixXd& rows, const std::vector<int>& key_points, int channels) {
+  Eigen::MatrixXd out(static_cast<long>(key_points.size()) * channels, rows.cols());
+  for (size_t k = 0; k < key_points.size(); ++k) {
+    out.middleRows(static_cast<long>(k) * channels, channels) =
+        rows.middleRows(static_cast<long>(key_points[k]) * channels, channels);
+  }
+  return out;
+}
+
+namespace {
+
+// Eqs. 6 and 7 on one rotated basis vector v (R values, D per point): i maximises ‖v_i‖, j
+// minimises v_i·v_k, both among candidates not already chosen. Returns how many were added.
+int choose_from_vector(const Eigen::VectorXd& v, int channels, int candidate_count, std::vector<char>& chosen,
+                       std::vector<int>& keys) {
+  const long D = channels;
+  int best_i = -1;
+  double best_norm = -1;
+  for (int k = 0; k < candidate_count; ++k) {
+    if (chosen[static_cast<size_t>(k)]) continue;
+    const double norm = v.segment(k * D, D).squaredNorm();
+    if (norm > best_norm) {
+      best_norm = norm;
+      best_i = k;
+    }
+  }
+  if (best_i < 0 || best_norm <= 0) return 0;
+  chosen[static_cast<size_t>(best_i)] = 1;
+  keys.push_back(best_i);
+
+  const Eigen::VectorXd vi = v.segment(best_i * D, D);
+  int best_j = -1;
+  double most_negative = 0;  // only a genuinely anti-correlated point qualifies
+  for (int k = 0; k < candidate_count; ++k) {
+    if (chosen[static_cast<size_t>(k)]) continue;
+    const double dot = vi.dot(v.segment(k * D, D));
+    if (dot < most_negative) {
+      most_negative = dot;
+      best_j = k;
+    }
+  }
+  if (best_j < 0) return 1;
+  chosen[static_cast<size_t>(best_j)] = 1;
+  keys.push_back(best_j);
+  return 2;
+}
+
+}  // namespace
+
+Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eigen::MatrixXd& basis,
+                                            const KeyPointOptions& o) {
+  const int D = o.channels;
+  if (D < 1 || T.rows() % D != 0) {
+    return make_error(ErrorCode::kInvalidArgument, "channels: " + std::to_string(D) + " does not divide the " +
+                                                       std::to_string(T.rows()) + " rows of the training matrix");
+  }
+  const int N = static_cast<int>(T.rows() / D);
+  const int candidates = o.candidate_count > 0 ? o.candidate_count : N;
+  if (candidates > N) {
+    return make_error(ErrorCode::kInvalidArgument, "candidate_count " + std::to_string(candidates) +
+                                                       " exceeds the " + std::to_string(N) + " points");
+  }
+  if (basis.rows() != T.rows() || basis.cols() < 1) {
+    return make_error(ErrorCode::kInvalidArgument, "basis must have " + std::to_string(T.rows()) + " rows");
+  }
+  if (o.block_size < 1) return make_error(ErrorCode::kInvalidArgument, "block_size must be ≥ 1");
+  if (!(o.error_bound >= 0)) return make_error(ErrorCode::kInvalidArgument, "error_bound must be ≥ 0");
+
+  KeyPointSelection out;
+  std::vector<char> chosen(static_cast<size_t>(N), 0);
+  for (int seed : o.seed_points) {
+    if (seed < 0 || seed >= candidates) {
+      return make_error(ErrorCode::kInvalidArgument, "seed point " + std::to_string(seed) + " is outside [0, " +
+                                                         std::to_string(candidates) + ")");
+    }
+    if (chosen[static_cast<size_t>(seed)]) continue;  // a fiducial listed twice counts once
+    chosen[static_cast<size_t>(seed)] = 1;
+    out.key_points.push_back(seed);
+  }
+
+  // Residual of the KPSA reconstruction of T with the current keys.
+  const auto reconstruct_residual = [&](const std::vector<int>& keys) {
+    const Eigen::MatrixXd P = least_squares_projection(gather_key_rows(basis, keys, D), kMaxConditionNumber, nullptr, nullptr);
+    const Eigen::MatrixXd coordinates = P * gather_key_rows(T, keys, D);
+    Eigen::MatrixXd residual = T;
+    residual.noalias() -= basis * coordinates;
+    return residual;
+  };
+
+  Eigen::MatrixXd residual = out.key_points.empty() ? T : reconstruct_residual(out.key_points);
+  for (int iteration = 0; iteration < o.max_iterations; ++iteration) {
+    const double max_residual = max_point_error(residual, D);
+    if (!out.key_points.empty()) out.max_residual.push_back(max_residual);
+    if (!out.key_points.empty() && max_residual <= o.error_bound) {
+      out.converged = true;
+      break;
+    }
+    if (static_cast<int>(out.key_points.size()) >= o.max_key_points) break;
+
+    // A block of basis vectors from the residual, localised by Varimax.
+    const PcaBasis block = thin_pca(residual, o.block_size);
+    if (block.basis.cols() == 0) break;  // the residual is numerically zero
+    // Only the argmax points of the rotated vectors are used, so a loose tolerance suffices.
+    const VarimaxResult rotated = varimax(block.basis, 100, 1e-6);
+
+    int added = 0;
+    for (long c = 0; c < rotated.rotated.cols(); ++c) {
+      if (static_cast<int>(out.key_points.size()) >= o.max_key_points) break;
+      added += choose_from_vector(rotated.rotated.col(c), D, candidates, chosen, out.key_points);
+    }
+    if (static_cast<int>(out.key_points.size()) > o.max_key_points) out.key_points.resize(static_cast<size_t>(o.max_key_points));
+    if (added == 0) break;  // every candidate is already a key
+    residual = reconstruct_residual(out.key_points);
+  }
+  if (out.max_residual.empty()) out.max_residual.push_back(max_point_error(residual, D));
+  return out;
+}
+
+}  // namespace animspace::pmsc

@@ -1,0 +1,56 @@
+// Key point selection (Meyer & Anderson 2006 §4; 2007 §2.2).
+//
+//   keyPoints = fiducial seeds
+//   resid = T
+//   until max residual ≤ bound (or the key budget is spent):
+//     block of 10–20 basis vectors from resid (PCA)
+//     Varimax-rotate the block (localises each vector)
+//     from each rotated vector v: i = argmax_k ‖v_k‖, j = argmin_k v_i·v_k (eqs. 6, 7),
+//       skipping points already chosen
+//     T̂ = KPSA reconstruction of T with the current keys and the runtime basis
+//     resid = T − T̂
+//
+// The block vectors of later iterations are discarded: reconstruction always uses the runtime
+// basis computed from the initial training matrix (2007 §2.2, last paragraph).
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/result.h"
+
+namespace animspace::pmsc {
+
+struct KeyPointOptions {
+  int channels = 3;  // D
+  // Basis vectors per block, 10–20 in the papers.
+  int block_size = 12;
+  // Stop when every point of every training frame is reconstructed within this distance
+  // (Euclidean over the D channels, model units).
+  double error_bound = 0;
+  int max_key_points = 200;
+  int max_iterations = 200;
+  // Points chosen first (designer fiducials, a sparse grid), in order.
+  std::vector<int> seed_points;
+  // Keys are chosen among points [0, candidate_count): the control points of a cross-PMSC
+  // model, which come first in the stacked training matrix. 0 means all points.
+  int candidate_count = 0;
+};
+
+struct KeyPointSelection {
+  std::vector<int> key_points;          // seeds first, then in order of selection
+  std::vector<double> max_residual;     // after each iteration (model units)
+  bool converged = false;               // max residual ≤ error_bound
+};
+
+// T: R × F mean-centred training matrix (R = points·D, point-major rows); basis: R × M runtime
+// basis from T. Errors: kInvalidArgument naming the option for bad sizes or seeds outside the
+// candidates.
+Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eigen::MatrixXd& basis,
+                                            const KeyPointOptions& options);
+
+// Rows of the key points: (K·D) × cols, gathered from point-major `rows`.
+Eigen::MatrixXd gather_key_rows(const Eigen::MatrixXd& rows, const std::vector<int>& key_points, int channels);
+
+}  // namespace animspace::pmsc

@@ -1,0 +1,68 @@
+// Thin PCA of a tall training matrix and the choice of the subspace dimension M.
+//
+// Meyer & Anderson 2006, "Key Point Subspace Acceleration and Soft Caching", §3 (seed 000) and
+// Meyer & Anderson 2007 §2.1 (seed 001): the subspace basis vectors a_i are the left singular
+// vectors of the mean-centred training matrix Q (EOF analysis), in order of decreasing singular
+// value, and M "is chosen such that the subspace projection error of the training set is
+// acceptably small".
+//
+// Layout of a training matrix X (R × F): R = N·D rows, point-major (row p·D + c holds channel c
+// of point p; D = 3 for positions), one column per training frame, mean-centred by the caller.
+// In our use F (frames, tens to a few hundred) is much smaller than R (e.g. 30006 × 88).
+//
+// Precision: double throughout. These run at training time, once per model or once per
+// key-selection iteration, where accuracy of the subspace matters more than speed; the points
+// that fill X arrive as float32 and are promoted.
+#pragma once
+
+#include <Eigen/Core>
+
+namespace animspace::pmsc {
+
+// σ_i below this fraction of σ_0 are treated as zero: thin_pca keeps only directions with
+// σ_i > kRelativeSingularValueFloor · σ_0. See pca.cpp for why 1e-7.
+inline constexpr double kRelativeSingularValueFloor = 1e-7;
+
+// A thin PCA basis of a training matrix X (R × F).
+struct PcaBasis {
+  // R × k, orthonormal columns a_0 … a_{k-1} (basisᵀ·basis = I to ~1e-15), ordered by
+  // decreasing singular value. Sign convention: each column's entry of largest magnitude (the
+  // first such entry on ties) is positive, so equal inputs give equal bases and X and -X give
+  // the same basis.
+  Eigen::MatrixXd basis;
+  // k, the singular values σ_i of X belonging to the columns, descending, all > 0.
+  Eigen::VectorXd singular_values;
+};
+
+// The leading left singular vectors of X (R × F): k = min(max_vectors, numerical rank of X)
+// columns, where the numerical rank counts σ_i > kRelativeSingularValueFloor · σ_0. X all zero
+// (or with no rows or columns) gives k = 0: an R × 0 basis. max_vectors >= 0.
+//
+// For R > F it eigen-decomposes the F × F Gram matrix XᵀX = V Λ Vᵀ and forms a_i = X v_i / σ_i
+// with σ_i = ‖X v_i‖, then re-orthonormalises the columns once. Cost: R·F²/2 (Gram) + R·F·k
+// (X V) + 2·R·k² (re-orthonormalisation) flops, plus O(F³); memory R·k + F². For F >= R it
+// takes the thin U of a bidiagonal divide-and-conquer SVD of X instead.
+PcaBasis thin_pca(const Eigen::MatrixXd& X, int max_vectors);
+
+// The subspace dimension M (seed 001 §2.1): the smallest M in 1 … min(max_basis,
+// pca.basis.cols()) such that the projection residual X − A_M A_Mᵀ X (A_M = the first M basis
+// columns) has, at every point and frame, Euclidean norm ≤ point_error_bound (the norm over the
+// point's `channels` consecutive rows; same units as X). If no M qualifies, the largest allowed
+// value; 0 only when the basis is empty.
+//
+// X: R × F, the matrix `pca` was computed from (or any matrix with R rows); channels >= 1
+// divides R; point_error_bound >= 0; max_basis >= 1. Incremental: the residual loses one rank-1
+// term a_m (a_mᵀ E) per step, so the cost is ~5·R·F flops per candidate M (O(M·R·F) in all,
+// not O(M²·R·F)) and one R × F copy of X.
+int choose_basis_size(const Eigen::MatrixXd& X, const PcaBasis& pca, int channels,
+                      double point_error_bound, int max_basis);
+
+// F: for each column (frame) f of residual (R × F), max over points p of ‖residual(p·D … p·D+D-1,
+// f)‖₂ with D = channels (>= 1, divides R). Zero for R = 0.
+Eigen::VectorXd max_point_error_per_frame(const Eigen::MatrixXd& residual, int channels);
+
+// The largest per-point Euclidean error over all frames and points of residual (R × F), as
+// above; 0 for an empty matrix.
+double max_point_error(const Eigen::MatrixXd& residual, int channels);
+
+}  // namespace animspace::pmsc

@@ -1,0 +1,283 @@
+#include "core/pmsc/pmsc_model.h"
+
+#include <cassert>
+#include <cmath>
+#include <string>
+
+#include <limits>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+
+namespace animspace::pmsc {
+namespace {
+
+Error shape_error(const std::string& member, const std::string& expected, long rows, long cols) {
+  return make_error(ErrorCode::kInvalidArgument, "pmsc model: " + member + " should be " + expected + ", got " +
+                                                     std::to_string(rows) + "×" + std::to_string(cols));
+}
+
+// Gauss–Newton for the rigid motion estimated from the key points alone: it usually converges
+// in 3–4 steps; stop when a step turns by less than this (radians) and moves by less than this
+// times the model's extent.
+constexpr int kMaxAlignmentIterations = 8;
+constexpr double kAlignmentTolerance = 1e-7;
+
+// Key rows as a 3 × K matrix of points (channels == 3).
+Eigen::Matrix3Xd as_points(const Eigen::VectorXd& rows) {
+  return Eigen::Map<const Eigen::Matrix3Xd>(rows.data(), 3, rows.size() / 3);
+}
+
+}  // namespace
+
+Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, double max_condition,
+                                         double* condition_number, double* regularization, Eigen::MatrixXd* range) {
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(key_basis, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::VectorXd& s = svd.singularValues();
+  const double s_max = s.size() > 0 ? s(0) : 0.0;
+  const double s_min = s.size() > 0 ? s(s.size() - 1) : 0.0;
+  const double kappa = s_min > 0 ? s_max / s_min : std::numeric_limits<double>::infinity();
+  double lambda = 0;
+  Eigen::VectorXd inverse = Eigen::VectorXd::Zero(s.size());
+  if (kappa > max_condition) {
+    // Bounds the amplification of key-point noise at ~max_condition instead of 1/σ_min.
+    lambda = std::pow(s_max / max_condition, 2);
+    for (long i = 0; i < s.size(); ++i) inverse(i) = s(i) / (s(i) * s(i) + lambda);
+  } else {
+    inverse = s.cwiseInverse();
+  }
+  if (condition_number) *condition_number = kappa;
+  if (regularization) *regularization = lambda;
+  if (range) {
+    long rank = 0;
+    while (rank < s.size() && s(rank) > 0) ++rank;
+    *range = svd.matrixU().leftCols(rank);
+  }
+  return svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose();
+}
+
+Status prepare_projection(PmscModel& m) {
+  const long D = m.channels;
+  const long M = m.basis.cols();
+  const long K = static_cast<long>(m.key_points.size());
+  if (m.channels < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: channels must be ≥ 1");
+  if (m.aligned && m.channels != 3) {
+    return make_error(ErrorCode::kInvalidArgument, "pmsc model: rigid alignment needs 3 channels, got " +
+                                                       std::to_string(m.channels));
+  }
+  if (m.point_count < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: point_count must be ≥ 1");
+  if (m.mean.size() != m.point_count * D) {
+    return shape_error("mean", std::to_string(m.point_count * D) + "×1", m.mean.size(), 1);
+  }
+  if (m.basis.rows() != m.point_count * D || M < 1) {
+    return shape_error("basis", std::to_string(m.point_count * D) + "×M (M ≥ 1)", m.basis.rows(), M);
+  }
+  if (K < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: no key points");
+  for (long k = 0; k < K; ++k) {
+    if (m.key_points[k] < 0 || m.key_points[k] >= m.control_point_count) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "pmsc model: key point " + std::to_string(k) + " is " + std::to_string(m.key_points[k]) +
+                            ", outside [0, " + std::to_string(m.control_point_count) + ")");
+    }
+  }
+  if (m.key_mean.size() != K * D) return shape_error("key_mean", std::to_string(K * D) + "×1", m.key_mean.size(), 1);
+  if (m.key_basis.rows() != K * D || m.key_basis.cols() != M) {
+    return shape_error("key_basis", std::to_string(K * D) + "×" + std::to_string(M), m.key_basis.rows(),
+                       m.key_basis.cols());
+  }
+  if (K * D < M) {
+    return make_error(ErrorCode::kFailedPrecondition,
+                      "pmsc model: " + std::to_string(K) + " key points × " + std::to_string(D) +
+                          " channels give fewer equations than the " + std::to_string(M) + " basis vectors");
+  }
+  if (!m.mean.allFinite() || !m.basis.allFinite() || !m.key_mean.allFinite() || !m.key_basis.allFinite()) {
+    return make_error(ErrorCode::kInvalidArgument, "pmsc model: mean or basis holds NaN or Inf");
+  }
+  ANIMSPACE_RETURN_IF_ERROR(validate(m.epsilon));
+  if (m.region_count > 0) {
+    if (static_cast<long>(m.point_regions.size()) != m.point_count ||
+        static_cast<long>(m.key_regions.size()) != K) {
+      return make_error(ErrorCode::kInvalidArgument, "pmsc model: regions must give one region per point and key");
+    }
+    for (int r : m.point_regions) {
+      if (r < 0 || r >= m.region_count) return make_error(ErrorCode::kInvalidArgument, "pmsc model: region out of range");
+    }
+    for (int r : m.key_regions) {
+      if (r < 0 || r >= m.region_count) return make_error(ErrorCode::kInvalidArgument, "pmsc model: region out of range");
+    }
+  }
+
+  m.projection = least_squares_projection(m.key_basis, kMaxConditionNumber, &m.condition_number, &m.regularization,
+                                          m.aligned ? &m.key_range : nullptr);
+  if (m.aligned) {
+    m.key_range_translation = Eigen::MatrixXd::Zero(m.key_range.cols(), 3);
+    for (long k = 0; k < K; ++k) m.key_range_translation += m.key_range.middleRows(3 * k, 3).transpose();
+  }
+  if (!m.projection.allFinite()) return make_error(ErrorCode::kFailedPrecondition, "pmsc model: key basis is degenerate");
+  return Status::Ok();
+}
+
+namespace {
+
+// Skew-symmetric matrix [v]× with [v]× w = v × w.
+Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+// Eq. 2 for one pose: p from the key values, and the key residual f_key − f̂_key in the subspace
+// frame. With alignment the rigid motion and p are solved together, by Gauss–Newton on
+//   min over (R, t, p) of ‖Rᵀ(f_key − t) − key_mean − A_key p‖²
+// started from a Procrustes fit of the mean key shape. (Alternating Procrustes and projection
+// converges very slowly: the aligned subspace still holds rotation-like directions.) Each step
+// linearises the aligned keys, a + [a]×δω − δt, and eliminates p through the range U of A_key:
+//   (GᵀG − (UᵀG)ᵀUᵀG) δ = Gᵀb − (UᵀG)ᵀUᵀb,   G_k = [−[a_k]×  I],  b = a − key_mean,
+// where GᵀG and Gᵀb are sums over keys of 3×3 blocks and UᵀG costs O(K·r): each step is a few
+// passes over the key rows and a 6×6 solve. `transform` maps the aligned frame to the world.
+Eigen::VectorXd project_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                             Eigen::VectorXd& p, RigidTransform& transform) {
+  Eigen::VectorXd keys = key_values.cast<double>();
+  transform = RigidTransform();
+  if (!m.aligned) {
+    p.noalias() = m.projection * (keys - m.key_mean);
+    return keys - m.key_mean - m.key_basis * p;
+  }
+  const long K = keys.size() / 3;
+  const long r = m.key_range.cols();
+  const Eigen::Matrix3Xd observed = as_points(keys);
+  Eigen::Map<Eigen::Matrix3Xd> aligned(keys.data(), 3, K);
+  using Strided = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, 3>>;
+  const Strided U_x(m.key_range.data() + 0, K, r, Eigen::Stride<Eigen::Dynamic, 3>(3 * K, 3));
+  const Strided U_y(m.key_range.data() + 1, K, r, Eigen::Stride<Eigen::Dynamic, 3>(3 * K, 3));
+  const Strided U_z(m.key_range.data() + 2, K, r, Eigen::Stride<Eigen::Dynamic, 3>(3 * K, 3));
+  const double scale = std::max(1.0, m.key_mean.cwiseAbs().maxCoeff());
+
+  transform = fit_rigid(as_points(m.key_mean), observed);
+  Eigen::VectorXd b;
+  Eigen::MatrixXd UG(r, 6);
+  for (int iteration = 0; iteration < kMaxAlignmentIterations; ++iteration) {
+    const RigidTransform to_aligned = transform.inverse();
+    aligned = (to_aligned.rotation * observed).colwise() + to_aligned.translation;
+    b = keys - m.key_mean;
+    const Eigen::Map<const Eigen::Matrix3Xd> b_points(b.data(), 3, K);
+    // Uᵀ G: column j of the rotation part is Σ_k U_kᵀ (e_j × a_k).
+    UG.col(0).noalias() = U_z.transpose() * aligned.row(1).transpose() - U_y.transpose() * aligned.row(2).transpose();
+    UG.col(1).noalias() = U_x.transpose() * aligned.row(2).transpose() - U_z.transpose() * aligned.row(0).transpose();
+    UG.col(2).noalias() = U_y.transpose() * aligned.row(0).transpose() - U_x.transpose() * aligned.row(1).transpose();
+    UG.rightCols(3) = m.key_range_translation;
+    const Eigen::VectorXd Ub = m.key_range.transpose() * b;
+    // GᵀG and Gᵀb: Σ(|a|²I − a aᵀ), Σ[a]×, K·I; Σ a × b, Σ b.
+    Eigen::Matrix<double, 6, 6> normal;
+    const Eigen::Vector3d a_sum = aligned.rowwise().sum();
+    normal.topLeftCorner<3, 3>() = aligned.squaredNorm() * Eigen::Matrix3d::Identity() - aligned * aligned.transpose();
+    normal.topRightCorner<3, 3>() = skew(a_sum);
+    normal.bottomLeftCorner<3, 3>() = skew(a_sum).transpose();
+    normal.bottomRightCorner<3, 3>() = static_cast<double>(K) * Eigen::Matrix3d::Identity();
+    Eigen::Matrix<double, 6, 1> rhs;
+    rhs.head<3>().setZero();
+    for (long k = 0; k < K; ++k) rhs.head<3>() += aligned.col(k).cross(b_points.col(k));
+    rhs.tail<3>() = b_points.rowwise().sum();
+    normal.noalias() -= UG.transpose() * UG;
+    rhs.noalias() -= UG.transpose() * Ub;
+    // The aligned subspace may itself contain near-rigid directions: keep the 6×6 solve posed.
+    normal.diagonal().array() += 1e-12 * std::max(1.0, normal.diagonal().maxCoeff());
+    const Eigen::Matrix<double, 6, 1> delta = normal.ldlt().solve(rhs);
+    // Apply the step to the aligned frame, a ← exp(−[δω]×) a − δt, composed exactly.
+    const Eigen::Vector3d omega = delta.head<3>();
+    const double angle = omega.norm();
+    const Eigen::Matrix3d step =
+        angle > 0 ? Eigen::AngleAxisd(-angle, omega / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
+    RigidTransform updated;
+    updated.rotation = step * to_aligned.rotation;
+    updated.translation = step * to_aligned.translation - delta.tail<3>();
+    transform = updated.inverse();
+    if (angle < kAlignmentTolerance && delta.tail<3>().norm() < kAlignmentTolerance * scale) break;
+  }
+  const RigidTransform to_aligned = transform.inverse();
+  aligned = (to_aligned.rotation * observed).colwise() + to_aligned.translation;
+  b = keys - m.key_mean;
+  p.noalias() = m.projection * b;
+  return b - m.key_basis * p;
+}
+
+double rms(const Eigen::VectorXd& residual) {
+  return std::sqrt(residual.squaredNorm() / static_cast<double>(residual.size()));
+}
+
+// Moves the N points of `frame` (3N values) from the aligned frame to the world.
+void to_world(const RigidTransform& t, int point_count, float* frame) {
+  Eigen::Map<Eigen::Matrix3Xf> points(frame, 3, point_count);
+  points = (t.rotation.cast<float>() * points).colwise() + t.translation.cast<float>();
+}
+
+}  // namespace
+
+void evaluate(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values, PoseEstimate& out) {
+  assert(key_values.size() == m.key_mean.size());
+  assert(m.projection.rows() == m.basis.cols());
+  const Eigen::VectorXd key_residual = project_keys(m, key_values, out.coordinates, out.alignment);
+  out.key_point_error = rms(key_residual);
+
+  // f̂ = mean + A p: the one large product, in float like the stored basis.
+  out.points = m.mean;
+  out.points.noalias() += m.basis * out.coordinates.cast<float>();
+  if (m.aligned) to_world(out.alignment, m.point_count, out.points.data());
+
+  // Local fail-through: the same RMS, restricted to the key points of each region.
+  out.region_errors.assign(static_cast<size_t>(m.region_count), 0.0);
+  if (m.region_count > 0) {
+    std::vector<long> counts(static_cast<size_t>(m.region_count), 0);
+    const long D = m.channels;
+    for (size_t k = 0; k < m.key_regions.size(); ++k) {
+      const auto r = static_cast<size_t>(m.key_regions[k]);
+      out.region_errors[r] += key_residual.segment(static_cast<long>(k) * D, D).squaredNorm();
+      counts[r] += D;
+    }
+    for (size_t r = 0; r < counts.size(); ++r) {
+      out.region_errors[r] = counts[r] > 0 ? std::sqrt(out.region_errors[r] / static_cast<double>(counts[r])) : 0.0;
+    }
+  }
+}
+
+void evaluate_batch(const PmscModel& m, const Eigen::Ref<const Eigen::MatrixXf>& key_values, Eigen::MatrixXf& points,
+                    Eigen::VectorXd& key_point_errors) {
+  assert(key_values.rows() == m.key_mean.size());
+  const long B = key_values.cols();
+  key_point_errors.resize(B);
+  Eigen::MatrixXd coordinates(m.basis.cols(), B);
+  std::vector<RigidTransform> transforms;
+  if (m.aligned) {
+    // The rigid fit is per pose; the reconstruction below is still one matrix product.
+    transforms.resize(static_cast<size_t>(B));
+    Eigen::VectorXd p;
+    for (long b = 0; b < B; ++b) {
+      key_point_errors(b) = rms(project_keys(m, key_values.col(b), p, transforms[static_cast<size_t>(b)]));
+      coordinates.col(b) = p;
+    }
+  } else {
+    const Eigen::MatrixXd centred = key_values.cast<double>().colwise() - m.key_mean;
+    coordinates.noalias() = m.projection * centred;
+    const Eigen::MatrixXd residual = centred - m.key_basis * coordinates;
+    key_point_errors =
+        (residual.colwise().squaredNorm() / static_cast<double>(residual.rows())).cwiseSqrt().transpose();
+  }
+  points.noalias() = m.basis * coordinates.cast<float>();
+  points.colwise() += m.mean;
+  for (size_t b = 0; b < transforms.size(); ++b) {
+    to_world(transforms[b], m.point_count, points.col(static_cast<long>(b)).data());
+  }
+}
+
+Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
+  const long D = m.channels;
+  assert(control_frame.size() == m.control_point_count * D);
+  Eigen::VectorXf keys(static_cast<long>(m.key_points.size()) * D);
+  for (size_t k = 0; k < m.key_points.size(); ++k) {
+    keys.segment(static_cast<long>(k) * D, D) = control_frame.segment(static_cast<long>(m.key_points[k]) * D, D);
+  }
+  return keys;
+}
+
+}  // namespace animspace::pmsc

@@ -1,0 +1,99 @@
+// A trained PMSC / KPSA subspace and its runtime (Meyer & Anderson 2007 §2, eqs. 1, 2, 8).
+//
+//   f̂ = mean + A p,   p = argmin ‖f_key − mean_key − A_key p‖
+//
+// A (the basis) comes from PCA of the initial training matrix only (2007 §2.2, last paragraph).
+// The least-squares projection P = A_key⁺ is precomputed once (libigl style: *_precompute then
+// evaluate), guarded for conditioning: keys must supply at least as many equations as there are
+// basis vectors, and when A_key is ill-conditioned a Tikhonov term is added and reported.
+//
+// Cross-PMSC (2007 §3.1): the key points belong to a control point set and the output is a
+// different point set; the joint subspace is trained on stacked (control, output) frames, and
+// only the key rows of the control part (key_mean, key_basis) and the output part (mean, basis)
+// are kept. No full calculation exists for the output, so fail-through is impossible.
+//
+// Rigid alignment (beyond the papers): captured whole-body data moves across the room, which a
+// linear subspace spends most of its dimensions on. With `aligned`, training frames were aligned
+// to a reference before PCA; at run time the rigid transform is estimated from the key points
+// alone (alternating Procrustes and projection), the subspace runs in the aligned frame, and the
+// estimate is moved back.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/result.h"
+#include "core/pmsc/rigid_alignment.h"
+#include "core/pmsc/soft_cache.h"
+
+namespace animspace::pmsc {
+
+struct PmscModel {
+  int channels = 3;             // D
+  int point_count = 0;          // N, output points
+  int control_point_count = 0;  // points key indices refer to (== N unless cross)
+  bool cross = false;
+  bool aligned = false;         // requires channels == 3
+
+  Eigen::VectorXf mean;                 // N·D, output mean, point-major (x0 y0 z0 x1 …)
+  Eigen::MatrixXf basis;                // N·D × M, output basis A (column-major for the GEMV)
+  std::vector<int> key_points;          // K indices into the control points, fiducials first
+  Eigen::VectorXd key_mean;             // K·D, mean at the key rows
+  Eigen::MatrixXd key_basis;            // K·D × M, A_key
+  SoftCacheThresholds epsilon;
+  // Local fail-through: region of each output point (0 … region_count−1) and of each key point.
+  int region_count = 0;
+  std::vector<int> point_regions;  // N (empty when region_count == 0)
+  std::vector<int> key_regions;    // K
+
+  // Precomputed by prepare_projection():
+  Eigen::MatrixXd projection;   // M × K·D, P with p = P (f_key − key_mean)
+  double condition_number = 0;  // σ_max / σ_min of A_key
+  double regularization = 0;    // Tikhonov λ added (0 when well conditioned)
+  // Aligned models only: an orthonormal basis U (K·D × r) of the range of A_key, and Σ_k U_kᵀ
+  // (r × 3), the constant translation part of Uᵀ G in the rigid Gauss–Newton step.
+  Eigen::MatrixXd key_range;
+  Eigen::MatrixXd key_range_translation;
+
+  int basis_size() const { return static_cast<int>(basis.cols()); }
+  int key_point_count() const { return static_cast<int>(key_points.size()); }
+};
+
+// Largest condition number of A_key accepted without regularisation.
+inline constexpr double kMaxConditionNumber = 1e6;
+
+// Least-squares projection P (M × K·D) for key rows `key_basis` (K·D × M) through the SVD, with
+// Tikhonov regularisation λ = (σ_max/max_condition)² when σ_max/σ_min > max_condition; also the
+// minimum-norm solution when K·D < M. Reports σ_max/σ_min and λ.
+// `range` (optional) receives the left singular vectors of A_key with σ > 0.
+Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, double max_condition,
+                                         double* condition_number, double* regularization,
+                                         Eigen::MatrixXd* range = nullptr);
+
+// Checks the shapes and values of every member (except the precomputed ones) and computes the
+// projection. Errors: kInvalidArgument naming the member and the expected vs actual shape;
+// kFailedPrecondition when K·D < M (fewer key equations than basis vectors).
+Status prepare_projection(PmscModel& model);
+
+struct PoseEstimate {
+  Eigen::VectorXf points;            // N·D estimate f̂ (world frame when aligned)
+  Eigen::VectorXd coordinates;       // M, subspace coordinates p
+  double key_point_error = 0;        // e_key = rms(f_key − f̂_key), eq. 8
+  std::vector<double> region_errors; // per region RMS key error (empty without regions)
+  RigidTransform alignment;          // aligned frame → world (identity unless aligned)
+};
+
+// One pose. `key_values` holds K·D values in key order. The model must be prepared. Values are
+// assumed finite (the caller validates input; asserted in debug builds).
+void evaluate(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values, PoseEstimate& out);
+
+// A batch: `key_values` is K·D × B (one pose per column); `points` becomes N·D × B and
+// `key_point_errors` B. Uses matrix–matrix products for the reconstruction.
+void evaluate_batch(const PmscModel& model, const Eigen::Ref<const Eigen::MatrixXf>& key_values,
+                    Eigen::MatrixXf& points, Eigen::VectorXd& key_point_errors);
+
+// Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
+Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);
+
+}  // namespace animspace::pmsc

@@ -1,0 +1,75 @@
+// Training a PMSC / KPSA model from example frames (Meyer & Anderson 2006 §3–4, §6 "Preprocess";
+// 2007 §2.1–2.2), with the soft-cache thresholds calibrated on held-out training frames.
+#pragma once
+
+#include <vector>
+
+#include "core/common/result.h"
+#include "core/common/types.h"
+#include "core/pmsc/pmsc_model.h"
+
+namespace animspace::pmsc {
+
+struct TrainingOptions {
+  int channels = 3;  // D
+  // Largest per-point training error (Euclidean over D channels, model units) that the key
+  // selection iterates towards; the basis is chosen to project the training set within half of it.
+  double error_bound = 0;
+  // Subspace dimension M; 0 chooses it from error_bound. Must be < the number of frames.
+  int basis_size = 0;
+  int max_basis = 256;
+  // When M is chosen from error_bound it is also kept ≤ this fraction of F. With M close to F
+  // every training frame lies in the subspace and is reproduced exactly by any K·D ≥ M keys, so
+  // the key selection stops at the bare minimum of keys and generalises badly (measured on
+  // crane: 48 keys at M = 80 of 88 frames vs 200 keys at M = 60, 97.7% vs 98.9% of held-out
+  // frames under 1% error). The papers train on F ≫ M (2503 poses, M = 85) and never meet this.
+  double max_basis_fraction = 0.7;
+  int block_size = 12;       // basis vectors per key-selection block, 10–20 in the papers
+  int max_key_points = 200;  // key budget
+  std::vector<int> fiducial_points;  // seeded first (2007 §2.2)
+  // Sparse grid seeds: cells per axis over the reference positions' bounding box (0 = off;
+  // needs channels == 3 or explicit `positions`).
+  int grid_cells = 0;
+  // Optional N×3 positions for the grid (e.g. the rest mesh for colour data); default: the mean.
+  PointMatrix positions;
+  // Remove rigid motion before PCA (channels == 3 only).
+  bool remove_rigid_motion = false;
+  // Per-point error that must not pass as a hit: ε is calibrated so that held-out training
+  // frames whose max point error exceeds this would be flagged (blend or miss). Model units, > 0.
+  double error_tolerance = 0;
+  // Held-out folds for that calibration (each fold retrains the basis without its frames).
+  int calibration_folds = 5;
+  // ε_max / ε_min (the papers' example uses [0.1, 0.15]).
+  double blend_zone_ratio = 1.5;
+  // Regions for local fail-through (0 = none; cross-PMSC models have none).
+  int region_count = 8;
+};
+
+struct TrainingReport {
+  int frames = 0;
+  int basis_size = 0;
+  int key_points = 0;
+  double max_training_error = 0;          // per-point, after key reconstruction, model units
+  std::vector<double> max_residual_per_iteration;
+  bool converged = false;                 // key selection reached error_bound
+  double condition_number = 0;
+  double regularization = 0;
+  // ε calibration on held-out frames: the largest observed (max point error / e_key).
+  double error_ratio = 0;
+  int calibration_frames = 0;
+  double seconds = 0;
+};
+
+// frames: F × N·D (one frame per row, point-major). Errors: kInvalidArgument naming the option
+// or the data (shape, NaN/Inf, M ≥ F, …).
+Result<PmscModel> train(const FrameMatrix& frames, const TrainingOptions& options, TrainingReport* report);
+
+// Cross-PMSC (2007 §3.1): `control_frames` (F × N_c·D) drive `output_frames` (F × N_o·D); keys
+// are chosen among the control points; the model outputs the output points.
+Result<PmscModel> train_cross(const FrameMatrix& control_frames, const FrameMatrix& output_frames,
+                              const TrainingOptions& options, TrainingReport* report);
+
+// Axis-aligned bounding-box diagonal of one frame's points (N·D values, D = 3), model units.
+double bounding_box_diagonal(const Eigen::Ref<const Eigen::VectorXf>& frame);
+
+}  // namespace animspace::pmsc

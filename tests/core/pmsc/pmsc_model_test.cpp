@@ -1,0 +1,144 @@
+#include "core/pmsc/pmsc_model.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+namespace animspace::pmsc {
+namespace {
+
+// Three points, one channel, a one-vector subspace a = (1, 2, 2)/3, zero mean: small enough to
+// work by hand.
+PmscModel three_point_model(std::vector<int> keys) {
+  PmscModel m;
+  m.channels = 1;
+  m.point_count = 3;
+  m.control_point_count = 3;
+  m.mean = Eigen::VectorXf::Zero(3);
+  m.basis.resize(3, 1);
+  m.basis << 1.0f / 3, 2.0f / 3, 2.0f / 3;
+  m.key_points = keys;
+  m.key_mean = Eigen::VectorXd::Zero(static_cast<long>(keys.size()));
+  m.key_basis.resize(static_cast<long>(keys.size()), 1);
+  for (size_t k = 0; k < keys.size(); ++k) m.key_basis(static_cast<long>(k), 0) = m.basis(keys[k], 0);
+  m.epsilon = {0.1, 0.2};
+  return m;
+}
+
+TEST(PmscModel, HandWorkedThreePointExample) {
+  PmscModel m = three_point_model({0, 1});
+  ASSERT_TRUE(prepare_projection(m).ok());
+  // A_key = (1/3, 2/3): p = A_keyᵀ f / A_keyᵀA_key = (1/3 + 2/3) / (5/9) = 9/5 for f_key = (1, 1).
+  Eigen::VectorXf keys(2);
+  keys << 1, 1;
+  PoseEstimate estimate;
+  evaluate(m, keys, estimate);
+  ASSERT_EQ(estimate.coordinates.size(), 1);
+  EXPECT_NEAR(estimate.coordinates(0), 1.8, 1e-6);  // the basis is stored in float
+  // f̂ = 1.8 · (1, 2, 2)/3 = (0.6, 1.2, 1.2); key residual (0.4, −0.2); e_key = √(0.2/2).
+  EXPECT_NEAR(estimate.points(0), 0.6, 1e-6);
+  EXPECT_NEAR(estimate.points(1), 1.2, 1e-6);
+  EXPECT_NEAR(estimate.points(2), 1.2, 1e-6);
+  EXPECT_NEAR(estimate.key_point_error, std::sqrt(0.1), 1e-7);
+  EXPECT_DOUBLE_EQ(m.condition_number, 1.0);  // one singular value
+}
+
+TEST(PmscModel, PoseInTheSubspaceIsReconstructedExactlyFromOneKey) {
+  PmscModel m = three_point_model({2});
+  ASSERT_TRUE(prepare_projection(m).ok());
+  Eigen::VectorXf keys(1);
+  keys << 0.5f * 2.0f / 3;  // the key value of the pose f = 0.5 a
+  PoseEstimate estimate;
+  evaluate(m, keys, estimate);
+  EXPECT_NEAR(estimate.points(0), 0.5 / 3, 1e-7);
+  EXPECT_NEAR(estimate.points(1), 1.0 / 3, 1e-7);
+  EXPECT_NEAR(estimate.key_point_error, 0.0, 1e-7);
+}
+
+TEST(PmscModel, BatchEqualsOnePoseAtATime) {
+  PmscModel m = three_point_model({0, 1});
+  ASSERT_TRUE(prepare_projection(m).ok());
+  Eigen::MatrixXf keys(2, 4);
+  keys << 1, 0, -2, 0.3f, 1, 3, 0.5f, 0.6f;
+  Eigen::MatrixXf points;
+  Eigen::VectorXd errors;
+  evaluate_batch(m, keys, points, errors);
+  ASSERT_EQ(points.cols(), 4);
+  for (long b = 0; b < 4; ++b) {
+    PoseEstimate one;
+    evaluate(m, keys.col(b), one);
+    EXPECT_TRUE(points.col(b).isApprox(one.points, 1e-6f)) << b;
+    EXPECT_NEAR(errors(b), one.key_point_error, 1e-9) << b;
+  }
+}
+
+TEST(PmscModel, TooFewKeyEquationsAreRefused) {
+  PmscModel m = three_point_model({0});
+  m.basis.conservativeResize(3, 2);
+  m.basis.col(1) << 2.0f / 3, 1.0f / 3, -2.0f / 3;
+  m.key_basis.conservativeResize(1, 2);
+  m.key_basis(0, 1) = 2.0 / 3;
+  auto status = prepare_projection(m);
+  ASSERT_FALSE(status.ok());
+  EXPECT_EQ(status.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_NE(status.error().message.find("fewer equations"), std::string::npos);
+}
+
+TEST(PmscModel, IllConditionedKeysAreRegularisedNeverNaN) {
+  // Two nearly parallel basis directions seen through two keys: σ_min/σ_max ≈ 1e-9.
+  PmscModel m;
+  m.channels = 1;
+  m.point_count = 2;
+  m.control_point_count = 2;
+  m.mean = Eigen::VectorXf::Zero(2);
+  m.basis.resize(2, 2);
+  m.basis << 1, 1, 1, 1.000001f;
+  m.key_points = {0, 1};
+  m.key_mean = Eigen::VectorXd::Zero(2);
+  m.key_basis.resize(2, 2);
+  m.key_basis << 1, 1, 1, 1 + 1e-9;
+  m.epsilon = {0.1, 0.2};
+  ASSERT_TRUE(prepare_projection(m).ok());
+  EXPECT_GT(m.condition_number, kMaxConditionNumber);
+  EXPECT_GT(m.regularization, 0);
+  EXPECT_TRUE(m.projection.allFinite());
+  Eigen::VectorXf keys(2);
+  keys << 1, -1;  // the direction the keys can hardly see
+  PoseEstimate estimate;
+  evaluate(m, keys, estimate);
+  EXPECT_TRUE(estimate.points.allFinite());
+  EXPECT_TRUE(std::isfinite(estimate.key_point_error));
+  // Without regularisation p would be ~1e9; with it the answer stays bounded.
+  EXPECT_LT(estimate.coordinates.cwiseAbs().maxCoeff(), 1e7);
+}
+
+TEST(PmscModel, BadShapesNameTheMember) {
+  PmscModel m = three_point_model({0, 1});
+  m.key_mean.resize(5);
+  auto status = prepare_projection(m);
+  ASSERT_FALSE(status.ok());
+  EXPECT_NE(status.error().message.find("key_mean"), std::string::npos);
+
+  PmscModel out_of_range = three_point_model({0, 3});
+  status = prepare_projection(out_of_range);
+  ASSERT_FALSE(status.ok());
+  EXPECT_NE(status.error().message.find("outside [0, 3)"), std::string::npos);
+}
+
+TEST(PmscModel, RegionErrorsSplitTheKeyResidual) {
+  PmscModel m = three_point_model({0, 1});
+  m.region_count = 2;
+  m.point_regions = {0, 1, 1};
+  m.key_regions = {0, 1};
+  ASSERT_TRUE(prepare_projection(m).ok());
+  Eigen::VectorXf keys(2);
+  keys << 1, 1;
+  PoseEstimate estimate;
+  evaluate(m, keys, estimate);
+  ASSERT_EQ(estimate.region_errors.size(), 2u);
+  EXPECT_NEAR(estimate.region_errors[0], 0.4, 1e-6);  // |1 − 0.6|
+  EXPECT_NEAR(estimate.region_errors[1], 0.2, 1e-6);  // |1 − 1.2|
+}
+
+}  // namespace
+}  // namespace animspace::pmsc

@@ -1,0 +1,276 @@
+#include "core/pmsc/train.h"
+
+#include <random>
+#include <set>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "core/container/model_container.h"
+#include "core/pmsc/pmsc_io.h"
+
+namespace animspace::pmsc {
+namespace {
+
+// Frames that lie exactly in a rank-`rank` affine subspace: mean + B c_t, B random (N·3 × rank).
+struct SyntheticSet {
+  Eigen::VectorXd mean;
+  Eigen::MatrixXd B;
+  FrameMatrix frames;  // F × N·3
+  Eigen::VectorXf frame(const Eigen::VectorXd& c) const { return (mean + B * c).cast<float>(); }
+};
+
+SyntheticSet exact_subspace(int points, int frames, int rank, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal;
+  SyntheticSet s;
+  s.mean = Eigen::VectorXd::NullaryExpr(points * 3, [&] { return scale * normal(rng); });
+  // Smooth-ish per-point motions so that points have distinct magnitudes.
+  s.B = Eigen::MatrixXd::NullaryExpr(points * 3, rank, [&] { return 0.1 * scale * normal(rng); });
+  s.frames.resize(frames, points * 3);
+  for (int f = 0; f < frames; ++f) {
+    const Eigen::VectorXd c = Eigen::VectorXd::NullaryExpr(rank, [&] { return normal(rng); });
+    s.frames.row(f) = s.frame(c).transpose();
+  }
+  return s;
+}
+
+TrainingOptions options_for(double scale) {
+  TrainingOptions o;
+  o.error_bound = 1e-5 * scale;
+  o.error_tolerance = 1e-3 * scale;
+  o.region_count = 4;
+  return o;
+}
+
+double max_abs(const Eigen::VectorXf& v) { return static_cast<double>(v.cwiseAbs().maxCoeff()); }
+
+TEST(PmscTrain, ExactSubspaceReconstructsToRounding) {
+  const auto data = exact_subspace(150, 30, 5, 1.0, 7);
+  TrainingReport report;
+  auto model = train(data.frames, options_for(1.0), &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  EXPECT_EQ(model->basis_size(), 5);
+  EXPECT_TRUE(report.converged);
+  EXPECT_GE(model->key_point_count() * 3, 5);
+
+  // A pose never seen in training, but inside the subspace.
+  std::mt19937 rng(99);
+  std::normal_distribution<double> normal;
+  const Eigen::VectorXd c = Eigen::VectorXd::NullaryExpr(5, [&] { return 2 * normal(rng); });
+  const Eigen::VectorXf truth = data.frame(c);
+  PoseEstimate estimate;
+  evaluate(*model, gather_key_values(*model, truth), estimate);
+  EXPECT_LT(max_abs(estimate.points - truth), 1e-4 * max_abs(truth));
+  EXPECT_LT(estimate.key_point_error, 1e-4);
+  EXPECT_EQ(decide(estimate.key_point_error, model->epsilon).status, CacheStatus::kHit);
+}
+
+TEST(PmscTrain, KeyPointsAreDistinctAndFiducialsComeFirst) {
+  const auto data = exact_subspace(120, 40, 12, 1.0, 3);
+  auto o = options_for(1.0);
+  o.fiducial_points = {17, 3, 17};  // a repeated seed counts once
+  auto model = train(data.frames, o, nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  ASSERT_GE(model->key_points.size(), 2u);
+  EXPECT_EQ(model->key_points[0], 17);
+  EXPECT_EQ(model->key_points[1], 3);
+  const std::set<int> unique(model->key_points.begin(), model->key_points.end());
+  EXPECT_EQ(unique.size(), model->key_points.size());
+}
+
+TEST(PmscTrain, ScaleRobustness) {
+  // The same data ×1e-4 and ×1e4 (with bounds scaled alike) gives the same keys and the same
+  // relative reconstruction.
+  std::vector<int> reference_keys;
+  for (double scale : {1.0, 1e-4, 1e4}) {
+    const auto data = exact_subspace(100, 25, 4, scale, 11);
+    auto model = train(data.frames, options_for(scale), nullptr);
+    ASSERT_TRUE(model.ok()) << scale << ": " << model.error().message;
+    if (reference_keys.empty()) reference_keys = model->key_points;
+    EXPECT_EQ(model->key_points, reference_keys) << "scale " << scale;
+    const Eigen::VectorXf truth = data.frames.row(3).transpose();
+    PoseEstimate estimate;
+    evaluate(*model, gather_key_values(*model, truth), estimate);
+    EXPECT_LT(max_abs(estimate.points - truth) / max_abs(truth), 1e-4) << "scale " << scale;
+  }
+}
+
+TEST(PmscTrain, BasisMustBeSmallerThanTheFrameCount) {
+  const auto data = exact_subspace(50, 10, 3, 1.0, 1);
+  auto o = options_for(1.0);
+  o.basis_size = 10;
+  auto model = train(data.frames, o, nullptr);
+  ASSERT_FALSE(model.ok());
+  EXPECT_EQ(model.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(model.error().message.find("basis_size"), std::string::npos);
+  EXPECT_NE(model.error().message.find("M < F"), std::string::npos);
+}
+
+TEST(PmscTrain, BadInputIsRefusedWithTheReason) {
+  auto data = exact_subspace(50, 10, 3, 1.0, 1);
+  data.frames(2, 7) = std::numeric_limits<float>::quiet_NaN();
+  auto nan = train(data.frames, options_for(1.0), nullptr);
+  ASSERT_FALSE(nan.ok());
+  EXPECT_NE(nan.error().message.find("NaN"), std::string::npos);
+
+  const FrameMatrix one_frame = FrameMatrix::Ones(1, 30);
+  EXPECT_FALSE(train(one_frame, options_for(1.0), nullptr).ok());
+
+  const FrameMatrix still = FrameMatrix::Ones(5, 30);
+  auto motionless = train(still, options_for(1.0), nullptr);
+  ASSERT_FALSE(motionless.ok());
+  EXPECT_NE(motionless.error().message.find("identical"), std::string::npos);
+
+  auto o = options_for(1.0);
+  o.error_bound = 0;
+  EXPECT_FALSE(train(exact_subspace(50, 10, 3, 1.0, 1).frames, o, nullptr).ok());
+}
+
+TEST(PmscTrain, ColourChannelsWork) {
+  // D = 1 and D = 4 are just different point sizes.
+  for (int D : {1, 4}) {
+    std::mt19937 rng(5);
+    std::normal_distribution<double> normal;
+    const int N = 80, F = 20, rank = 3;
+    const Eigen::MatrixXd B = Eigen::MatrixXd::NullaryExpr(N * D, rank, [&] { return normal(rng); });
+    FrameMatrix frames(F, N * D);
+    for (int f = 0; f < F; ++f) {
+      frames.row(f) = (B * Eigen::VectorXd::NullaryExpr(rank, [&] { return normal(rng); })).cast<float>().transpose();
+    }
+    auto o = options_for(1.0);
+    o.channels = D;
+    auto model = train(frames, o, nullptr);
+    ASSERT_TRUE(model.ok()) << model.error().message;
+    EXPECT_EQ(model->channels, D);
+    EXPECT_EQ(model->point_count, N);
+    EXPECT_GE(model->key_point_count() * D, rank);
+  }
+}
+
+TEST(PmscTrain, RigidAlignmentRemovesRoomScaleMotion) {
+  // A shape that deforms in a 2-D subspace while it moves and turns across the room: without
+  // alignment the motion is non-linear in the points; with it the subspace is exact.
+  const auto shape = exact_subspace(120, 40, 2, 1.0, 21);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> angle(-1.5, 1.5), offset(-20, 20);
+  auto rigid = [&](const Eigen::VectorXf& frame) {
+    const Eigen::Matrix3f R =
+        Eigen::AngleAxisd(angle(rng), Eigen::Vector3d(0.2, 1, 0.1).normalized()).toRotationMatrix().cast<float>();
+    const Eigen::Vector3f t(static_cast<float>(offset(rng)), 0, static_cast<float>(offset(rng)));
+    Eigen::VectorXf out = frame;
+    Eigen::Map<Eigen::Matrix3Xf> points(out.data(), 3, out.size() / 3);
+    points = (R * points).colwise() + t;
+    return out;
+  };
+  FrameMatrix moving(40, shape.frames.cols());
+  for (int f = 0; f < 40; ++f) moving.row(f) = rigid(shape.frames.row(f).transpose()).transpose();
+  Eigen::VectorXd c(2);
+  c << 0.7, -1.1;
+  const Eigen::VectorXf test = rigid(shape.frame(c));
+
+  // Same budget for both: a rigid motion multiplies the dimension of the frame set by ~9, so a
+  // small basis can only hold it once the motion is removed.
+  auto o = options_for(1.0);
+  o.basis_size = 6;
+  o.max_key_points = 40;
+  o.remove_rigid_motion = true;
+  auto aligned = train(moving, o, nullptr);
+  ASSERT_TRUE(aligned.ok()) << aligned.error().message;
+  EXPECT_TRUE(aligned->aligned);
+  o.remove_rigid_motion = false;
+  auto plain = train(moving, o, nullptr);
+  ASSERT_TRUE(plain.ok()) << plain.error().message;
+
+  PoseEstimate a, p;
+  evaluate(*aligned, gather_key_values(*aligned, test), a);
+  evaluate(*plain, gather_key_values(*plain, test), p);
+  const double aligned_error = max_abs(a.points - test);
+  const double plain_error = max_abs(p.points - test);
+  // Procrustes absorbs a little deformation into the estimated rotation, so "exact" is ~1e-3 of
+  // the shape's 20-unit extent.
+  EXPECT_LT(aligned_error, 1e-2) << "plain " << plain_error;
+  EXPECT_GT(plain_error, 10 * aligned_error);
+}
+
+TEST(PmscTrain, CrossPmscDrivesAnotherPointSet) {
+  // Control and output points are two linear views of the same 3 pose parameters.
+  std::mt19937 rng(8);
+  std::normal_distribution<double> normal;
+  const int F = 30, rank = 3, Nc = 40, No = 90;
+  const Eigen::MatrixXd Bc = Eigen::MatrixXd::NullaryExpr(Nc * 3, rank, [&] { return normal(rng); });
+  const Eigen::MatrixXd Bo = Eigen::MatrixXd::NullaryExpr(No * 3, rank, [&] { return normal(rng); });
+  FrameMatrix control(F, Nc * 3), output(F, No * 3);
+  for (int f = 0; f < F; ++f) {
+    const Eigen::VectorXd c = Eigen::VectorXd::NullaryExpr(rank, [&] { return normal(rng); });
+    control.row(f) = (Bc * c).cast<float>().transpose();
+    output.row(f) = (Bo * c).cast<float>().transpose();
+  }
+  auto model = train_cross(control, output, options_for(1.0), nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  EXPECT_TRUE(model->cross);
+  EXPECT_EQ(model->point_count, No);
+  EXPECT_EQ(model->control_point_count, Nc);
+  for (int k : model->key_points) EXPECT_LT(k, Nc);
+
+  Eigen::VectorXd c(rank);
+  c << 1.5, -0.3, 0.8;
+  const Eigen::VectorXf control_pose = (Bc * c).cast<float>();
+  const Eigen::VectorXf truth = (Bo * c).cast<float>();
+  PoseEstimate estimate;
+  evaluate(*model, gather_key_values(*model, control_pose), estimate);
+  EXPECT_LT(max_abs(estimate.points - truth), 1e-4 * max_abs(truth));
+}
+
+TEST(PmscTrain, EpsilonComesFromHeldOutFramesAndTheZoneRatio) {
+  // Data outside any small subspace (random frames): held-out errors are large, so ε is finite,
+  // positive and scaled by the zone ratio.
+  std::mt19937 rng(2);
+  std::normal_distribution<double> normal;
+  FrameMatrix frames = FrameMatrix::NullaryExpr(24, 60 * 3, [&] { return static_cast<float>(normal(rng)); });
+  auto o = options_for(1.0);
+  o.error_bound = 0.5;
+  o.error_tolerance = 0.1;
+  o.max_key_points = 30;
+  TrainingReport report;
+  auto model = train(frames, o, &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  EXPECT_GT(report.calibration_frames, 0);
+  EXPECT_GT(report.error_ratio, 1.0);  // the max point error exceeds the RMS key error
+  EXPECT_NEAR(model->epsilon.epsilon_min, 0.1 / report.error_ratio, 1e-12);
+  EXPECT_NEAR(model->epsilon.epsilon_max, 1.5 * model->epsilon.epsilon_min, 1e-12);
+}
+
+TEST(PmscIo, ContainerRoundTripServesTheSameEstimates) {
+  const auto data = exact_subspace(60, 20, 4, 1.0, 13);
+  TrainingReport report;
+  auto model = train(data.frames, options_for(1.0), &report);
+  ASSERT_TRUE(model.ok());
+  TriangleMesh mesh;
+  mesh.V = Eigen::Map<const PointMatrix>(data.frames.row(0).data(), 60, 3);
+  const auto container = make_container(mesh, data.frames, nullptr, *model, report, "synthetic");
+  auto parsed = container::parse(container::serialize(container), "memory");
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  EXPECT_EQ(parsed->metadata_value("kind"), "pmsc");
+  auto loaded = load(*parsed, "memory");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->key_points, model->key_points);
+  EXPECT_EQ(loaded->point_regions, model->point_regions);
+  EXPECT_EQ(loaded->epsilon.epsilon_min, model->epsilon.epsilon_min);
+  const Eigen::VectorXf pose = data.frames.row(5).transpose();
+  PoseEstimate a, b;
+  evaluate(*model, gather_key_values(*model, pose), a);
+  evaluate(*loaded, gather_key_values(*loaded, pose), b);
+  EXPECT_TRUE(a.points.isApprox(b.points, 1e-6f));
+
+  // A damaged model is refused with the section named.
+  container::ModelContainer broken = *parsed;
+  broken.set_matrix("pmsc.key_mean", container::Float64Matrix(container::Float64Matrix::Zero(1, 2)));
+  auto refused = load(broken, "broken.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("broken.anim"), std::string::npos);
+  EXPECT_NE(refused.error().message.find("key_mean"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace animspace::pmsc
