@@ -1,5 +1,8 @@
 #include "core/demo/demo_repository.h"
 
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/train.h"
+
 #include <cassert>
 #include <string>
 #include <system_error>
@@ -62,20 +65,95 @@ container::ModelContainer make_demo_container(const BendingArmOptions& options, 
   return model;
 }
 
+namespace {
+
+// The expensive rig's frames (F × 3N) and, optionally, plain LBS frames of the same poses.
+void pose_animation(int frames, FrameMatrix* expensive, FrameMatrix* linear_blend, TriangleMesh* rest) {
+  const ArmRig rig = make_arm_rig();
+  const std::vector<ArmPose> poses = demo_animation(frames);
+  const Eigen::Index n = rig.rest.V.rows();
+  *rest = rig.rest;
+  expensive->resize(frames, 3 * n);
+  if (linear_blend) linear_blend->resize(frames, 3 * n);
+  for (int f = 0; f < frames; ++f) {
+    const PointMatrix P = pose_expensive(poses[static_cast<size_t>(f)], rig);
+    expensive->row(f) = Eigen::Map<const Eigen::RowVectorXf>(P.data(), 3 * n);
+    if (linear_blend) {
+      const PointMatrix L = pose_linear_blend(poses[static_cast<size_t>(f)], rig);
+      linear_blend->row(f) = Eigen::Map<const Eigen::RowVectorXf>(L.data(), 3 * n);
+    }
+  }
+}
+
+FrameMatrix even_rows(const FrameMatrix& frames) {
+  FrameMatrix out((frames.rows() + 1) / 2, frames.cols());
+  for (Eigen::Index f = 0; f < frames.rows(); f += 2) out.row(f / 2) = frames.row(f);
+  return out;
+}
+
+pmsc::TrainingOptions demo_training_options(const TriangleMesh& rest) {
+  const Eigen::VectorXf rest_points = Eigen::Map<const Eigen::VectorXf>(rest.V.data(), rest.V.size());
+  const double diagonal = pmsc::bounding_box_diagonal(rest_points);
+  pmsc::TrainingOptions options;
+  options.error_bound = 0.0025 * diagonal;
+  options.error_tolerance = 0.01 * diagonal;
+  options.max_key_points = 60;
+  return options;
+}
+
+Result<container::ModelContainer> make_pmsc_demo(int frames, bool cross) {
+  FrameMatrix expensive, linear_blend;
+  TriangleMesh rest;
+  pose_animation(frames, &expensive, cross ? &linear_blend : nullptr, &rest);
+  const FrameMatrix output = even_rows(expensive);
+  const FrameMatrix control = cross ? even_rows(linear_blend) : FrameMatrix();
+  pmsc::TrainingReport report;
+  auto model = cross ? pmsc::train_cross(control, output, demo_training_options(rest), &report)
+                     : pmsc::train(output, demo_training_options(rest), &report);
+  if (!model) return model.error();
+  const std::string description =
+      cross ? "Cross-PMSC: key points of the linear-blend-skinned arm drive the expensive rig's arm "
+              "(no fail-through possible)."
+            : "PMSC soft cache of the bending arm's expensive rig, trained on every other demo frame.";
+  auto container = pmsc::make_container(rest, output, cross ? &control : nullptr, *model, report, description);
+  container.metadata()["generator"] = "animspace demo bending arm";
+  container.metadata()["units"] = "arbitrary (arm length 2)";
+  container.metadata()["up_axis"] = "y";
+  return container;
+}
+
+Status write_model(const std::filesystem::path& repository, std::string_view name,
+                   const container::ModelContainer& model) {
+  const std::filesystem::path path =
+      repository / std::string(name) / std::to_string(kDemoModelVersion) / std::string(kDemoModelFileName);
+  std::error_code error;
+  std::filesystem::create_directories(path.parent_path(), error);
+  if (error) {
+    return make_error(ErrorCode::kIo, "cannot create the demo model directory " + path.parent_path().string() +
+                                          ": " + error.message());
+  }
+  return container::write_file(path, model);
+}
+
+}  // namespace
+
+Result<container::ModelContainer> make_demo_pmsc_container(int frames) { return make_pmsc_demo(frames, false); }
+
+Result<container::ModelContainer> make_demo_cross_pmsc_container(int frames) { return make_pmsc_demo(frames, true); }
+
 std::filesystem::path demo_model_path(const std::filesystem::path& repository) {
   return repository / std::string(kDemoModelName) / std::to_string(kDemoModelVersion) /
          std::string(kDemoModelFileName);
 }
 
 Status write_demo_repository(const std::filesystem::path& repository) {
-  const std::filesystem::path path = demo_model_path(repository);
-  std::error_code error;
-  std::filesystem::create_directories(path.parent_path(), error);
-  if (error) {
-    return make_error(ErrorCode::kIo, "cannot create the demo model directory " +
-                                          path.parent_path().string() + ": " + error.message());
-  }
-  return container::write_file(path, make_demo_container());
+  ANIMSPACE_RETURN_IF_ERROR(write_model(repository, kDemoModelName, make_demo_container()));
+  auto pmsc_model = make_demo_pmsc_container();
+  if (!pmsc_model) return pmsc_model.error();
+  ANIMSPACE_RETURN_IF_ERROR(write_model(repository, kDemoPmscModelName, *pmsc_model));
+  auto cross_model = make_demo_cross_pmsc_container();
+  if (!cross_model) return cross_model.error();
+  return write_model(repository, kDemoCrossPmscModelName, *cross_model);
 }
 
 }  // namespace animspace::demo

@@ -34,11 +34,26 @@ inline constexpr int kDemoFrames = 120;
 container::ModelContainer make_demo_container(const BendingArmOptions& options = {},
                                               int frames = kDemoFrames);
 
+// Names of the PMSC demo models trained from the arm's frames.
+inline constexpr std::string_view kDemoPmscModelName = "arm-pmsc";
+inline constexpr std::string_view kDemoCrossPmscModelName = "arm-cross-pmsc";
+
+// The arm as a PMSC model (Meyer & Anderson 2007 §2): trained on every other frame of the demo
+// animation posed by the expensive rig, so the frames in between are poses the soft cache has not
+// seen. Key selection bound 0.25% and soft-cache tolerance 1% of the rest mesh's diagonal.
+// Errors: the trainer's (none are expected for the built-in data).
+Result<container::ModelContainer> make_demo_pmsc_container(int frames = kDemoFrames);
+
+// Cross-PMSC (2007 §3.1): key points of the cheap linear-blend-skinned arm drive the expensive
+// rig's mesh (biceps bulge and elbow correction included) — a posing engine that can only afford
+// LBS gets the expensive deformation. Fail-through is impossible for it.
+Result<container::ModelContainer> make_demo_cross_pmsc_container(int frames = kDemoFrames);
+
 // The path of the demo model's file inside `repository`.
 std::filesystem::path demo_model_path(const std::filesystem::path& repository);
 
-// Writes the demo model (default options, kDemoFrames frames) to demo_model_path(repository),
-// creating directories as needed; the file is replaced atomically if it exists. Errors: kIo
+// Writes the demo models (default options, kDemoFrames frames) — arm, arm-pmsc and
+// arm-cross-pmsc, version 1 each — creating directories as needed; files are replaced atomically. Errors: kIo
 // naming the directory that could not be created, or the container writer's error.
 Status write_demo_repository(const std::filesystem::path& repository);
 

@@ -89,12 +89,14 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   wait_until_serving(client);
 
   const auto models = client.list_models();
-  ASSERT_EQ(models.size(), 3u);
+  ASSERT_EQ(models.size(), 5u);
   EXPECT_EQ(models[0].name(), "arm");
-  EXPECT_EQ(models[1].name(), "broken");
-  EXPECT_EQ(models[2].name(), "tetra");
+  EXPECT_EQ(models[1].name(), "arm-cross-pmsc");
+  EXPECT_EQ(models[2].name(), "arm-pmsc");
+  EXPECT_EQ(models[3].name(), "broken");
+  EXPECT_EQ(models[4].name(), "tetra");
 
-  const auto& tetra = models[2];
+  const auto& tetra = models[4];
   EXPECT_EQ(tetra.default_version(), 3u);
   ASSERT_EQ(tetra.versions_size(), 1);
   const auto& v = tetra.versions(0);
@@ -108,7 +110,7 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   EXPECT_EQ(v.file_size_bytes(), std::filesystem::file_size(repo_ / "tetra/3/model.anim"));
 
   // The refused model is visible with its reason, and has nothing to serve.
-  const auto& broken = models[1];
+  const auto& broken = models[3];
   EXPECT_EQ(broken.default_version(), 0u);
   ASSERT_EQ(broken.versions_size(), 1);
   EXPECT_EQ(broken.versions(0).state(), v1::VERSION_STATE_FAILED);
@@ -122,6 +124,21 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   EXPECT_EQ(arm.versions(0).point_count(), arm_file->points("mesh.rest_points")->rows());
   EXPECT_EQ(arm.versions(0).bone_count(), 2u);
   EXPECT_EQ(arm.versions(0).frame_count(), static_cast<uint32_t>(demo::kDemoFrames));
+
+  // The PMSC demo models describe their soft cache, read back from the files independently.
+  for (const char* name : {"arm-pmsc", "arm-cross-pmsc"}) {
+    auto file = container::read_file(repo_ / name / "1" / "model.anim");
+    ASSERT_TRUE(file.ok()) << name;
+    const auto described = client.describe_model(name).versions(0);
+    const bool cross = std::string(name) == "arm-cross-pmsc";
+    EXPECT_EQ(described.kind(), cross ? v1::MODEL_KIND_CROSS_PMSC : v1::MODEL_KIND_PMSC) << name;
+    EXPECT_EQ(described.fail_through(), cross ? v1::FAIL_THROUGH_IMPOSSIBLE : v1::FAIL_THROUGH_CLIENT) << name;
+    EXPECT_EQ(described.key_point_count(), file->int_matrix("pmsc.key_points")->rows()) << name;
+    EXPECT_EQ(described.basis_size(), file->float_matrix("pmsc.basis")->cols()) << name;
+    EXPECT_EQ(described.epsilon_min(), static_cast<float>((*file->double_matrix("pmsc.epsilon"))(0, 0))) << name;
+    EXPECT_GT(described.epsilon_min(), 0.0f) << name;
+    EXPECT_GE(described.epsilon_max(), described.epsilon_min()) << name;
+  }
 
   daemon->send_signal(SIGTERM);
   EXPECT_EQ(daemon->wait_for_exit(std::chrono::seconds(15)), 0) << daemon->log();
@@ -257,7 +274,7 @@ TEST_F(DaemonTest, PrometheusMetricsCountCalls) {
   ASSERT_TRUE(result) << "no answer from the metrics endpoint";
   EXPECT_EQ(result->status, 200);
   const std::string& body = result->body;
-  EXPECT_NE(body.find("animspace_models_loaded 2\n"), std::string::npos) << body;
+  EXPECT_NE(body.find("animspace_models_loaded 4\n"), std::string::npos) << body;
   EXPECT_NE(body.find("animspace_requests_total{rpc=\"ModelService/DescribeModel\",model=\"tetra\",code=\"OK\"} 2\n"),
             std::string::npos)
       << body;
@@ -303,9 +320,11 @@ TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   Client client(daemon.address());
   wait_until_serving(client);
   const auto models = client.list_models();
-  ASSERT_EQ(models.size(), 1u);
+  ASSERT_EQ(models.size(), 3u);
+  for (const auto& model : models) {
+    EXPECT_EQ(model.versions(0).state(), v1::VERSION_STATE_AVAILABLE) << model.name() << ": " << model.versions(0).error();
+  }
   EXPECT_EQ(models[0].name(), "arm");
-  EXPECT_EQ(models[0].versions(0).state(), v1::VERSION_STATE_AVAILABLE);
   daemon.send_signal(SIGTERM);
   EXPECT_EQ(daemon.wait_for_exit(std::chrono::seconds(15)), 0) << daemon.log();
 }
