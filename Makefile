@@ -25,6 +25,7 @@ run: build
 
 test: build
 	ctest --preset $(PRESET) -j $(JOBS) --timeout 300
+	PYTHONPATH=$(BUILD_DIR)/python ANIMSPACE_BUILD=$(BUILD_DIR) /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python
 
 bench: build
 	$(BUILD_DIR)/bin/animspace-bench io --data ../shared/data --json $(BUILD_DIR)/bench-io.json
