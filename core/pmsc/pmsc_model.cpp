@@ -270,6 +270,28 @@ void evaluate_batch(const PmscModel& m, const Eigen::Ref<const Eigen::MatrixXf>&
   }
 }
 
+void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                     const Eigen::VectorXf* full_values, CachedPose& out) {
+  assert(full_values == nullptr || full_values->size() == m.mean.size());
+  PoseEstimate estimate;
+  evaluate(m, key_values, estimate);
+  const SoftCacheDecision decision = decide(estimate.key_point_error, m.epsilon);
+  out.status = decision.status;
+  out.alpha = decision.alpha;
+  out.key_point_error = estimate.key_point_error;
+  out.region_errors = std::move(estimate.region_errors);
+  out.full_evaluation_needed = false;
+  if (decision.status == CacheStatus::kHit || m.cross) {
+    out.points = std::move(estimate.points);
+  } else if (full_values != nullptr) {
+    out.points.resize(estimate.points.size());
+    blend(estimate.points, *full_values, decision.alpha, out.points);
+  } else {
+    out.points = std::move(estimate.points);
+    out.full_evaluation_needed = true;
+  }
+}
+
 Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
   const long D = m.channels;
   assert(control_frame.size() == m.control_point_count * D);

@@ -93,6 +93,24 @@ void evaluate(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& k
 void evaluate_batch(const PmscModel& model, const Eigen::Ref<const Eigen::MatrixXf>& key_values,
                     Eigen::MatrixXf& points, Eigen::VectorXd& key_point_errors);
 
+// The soft-cached answer for one pose (Meyer & Anderson 2007 §2.4, runtime step 4): what a caller
+// returns to a client. Always carries status, e_key and α.
+struct CachedPose {
+  Eigen::VectorXf points;  // N·D: f̂ (hit), α f + (1 − α) f̂ (blend), f (miss) — or f̂ when no f
+  CacheStatus status = CacheStatus::kHit;
+  double key_point_error = 0;
+  double alpha = 0;
+  // Blend or miss, but no full values were given: `points` is the estimate and the caller must
+  // supply f (or accept f̂). Never set for cross-PMSC models, where no full calculation exists.
+  bool full_evaluation_needed = false;
+  std::vector<double> region_errors;
+};
+
+// Evaluates one pose through the soft cache. `full_values` (N·D, optional) is the expensive
+// calculation for this pose when the caller has it; it is only read on a blend or miss.
+void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                     const Eigen::VectorXf* full_values, CachedPose& out);
+
 // Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
 Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);
 

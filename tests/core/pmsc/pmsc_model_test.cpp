@@ -142,3 +142,41 @@ TEST(PmscModel, RegionErrorsSplitTheKeyResidual) {
 
 }  // namespace
 }  // namespace animspace::pmsc
+
+namespace animspace::pmsc {
+namespace {
+
+TEST(PmscModel, CachedEvaluationBlendsWithFullValuesOnlyOutsideTheHitZone) {
+  PmscModel m = three_point_model({0, 1});
+  m.epsilon = {0.2, 0.4};
+  ASSERT_TRUE(prepare_projection(m).ok());
+  Eigen::VectorXf keys(2);
+  keys << 1, 1;  // e_key = √0.1 ≈ 0.316: a blend with α = (0.316 − 0.2)/0.2
+  const double alpha = (std::sqrt(0.1) - 0.2) / 0.2;
+  Eigen::VectorXf full(3);
+  full << 1, 1, 1;
+
+  CachedPose without_full;
+  evaluate_cached(m, keys, nullptr, without_full);
+  EXPECT_EQ(without_full.status, CacheStatus::kBlend);
+  EXPECT_NEAR(without_full.alpha, alpha, 1e-6);
+  EXPECT_TRUE(without_full.full_evaluation_needed);
+  EXPECT_NEAR(without_full.points(0), 0.6, 1e-6);  // the estimate
+
+  CachedPose with_full;
+  evaluate_cached(m, keys, &full, with_full);
+  EXPECT_FALSE(with_full.full_evaluation_needed);
+  // α f + (1 − α) f̂ at point 0: α·1 + (1 − α)·0.6.
+  EXPECT_NEAR(with_full.points(0), alpha + (1 - alpha) * 0.6, 1e-6);
+  EXPECT_NEAR(with_full.key_point_error, std::sqrt(0.1), 1e-7);
+
+  // A cross-PMSC model never asks for a full calculation.
+  m.cross = true;
+  CachedPose cross;
+  evaluate_cached(m, keys, nullptr, cross);
+  EXPECT_EQ(cross.status, CacheStatus::kBlend);
+  EXPECT_FALSE(cross.full_evaluation_needed);
+}
+
+}  // namespace
+}  // namespace animspace::pmsc
