@@ -13,6 +13,8 @@
 #include <Eigen/SVD>
 #include <gtest/gtest.h>
 
+#include "tests/support/random_matrices.h"
+
 namespace animspace::pmsc {
 namespace {
 
@@ -20,21 +22,8 @@ using Eigen::Index;
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
-MatrixXd gaussian_matrix(Index rows, Index cols, uint64_t seed) {
-  std::mt19937_64 engine(seed);
-  std::normal_distribution<double> normal;
-  MatrixXd m(rows, cols);
-  for (Index j = 0; j < cols; ++j) {
-    for (Index i = 0; i < rows; ++i) m(i, j) = normal(engine);
-  }
-  return m;
-}
-
-// rows × cols with orthonormal columns (the thin Q of a Gaussian matrix).
-MatrixXd random_orthonormal(Index rows, Index cols, uint64_t seed) {
-  const Eigen::HouseholderQR<MatrixXd> qr(gaussian_matrix(rows, cols, seed));
-  return qr.householderQ() * MatrixXd::Identity(rows, cols);
-}
+using testing::gaussian_matrix;
+using testing::random_orthonormal;
 
 // R × F with singular values exactly `s` (up to the rounding of the product): B diag(s) Wᵀ.
 MatrixXd with_singular_values(Index R, Index F, const VectorXd& s, uint64_t seed) {

@@ -15,26 +15,16 @@
 #include <Eigen/SVD>
 #include <gtest/gtest.h>
 
+#include "tests/support/random_matrices.h"
+
 namespace animspace::pmsc {
 namespace {
 
 using Eigen::Index;
 using Eigen::MatrixXd;
 
-MatrixXd gaussian_matrix(Index rows, Index cols, uint64_t seed) {
-  std::mt19937_64 engine(seed);
-  std::normal_distribution<double> normal;
-  MatrixXd m(rows, cols);
-  for (Index j = 0; j < cols; ++j) {
-    for (Index i = 0; i < rows; ++i) m(i, j) = normal(engine);
-  }
-  return m;
-}
-
-MatrixXd random_orthonormal(Index rows, Index cols, uint64_t seed) {
-  const Eigen::HouseholderQR<MatrixXd> qr(gaussian_matrix(rows, cols, seed));
-  return qr.householderQ() * MatrixXd::Identity(rows, cols);
-}
+using testing::gaussian_matrix;
+using testing::random_orthonormal;
 
 // Loadings that look like a PCA block of localised motions: each column a smooth bump on its
 // own range of rows plus a little global motion, mixed by a random rotation.
