@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <charconv>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -551,6 +552,17 @@ class Parser {
 }  // namespace
 
 // --- ModelContainer ----------------------------------------------------------------------------
+
+Result<int> ModelContainer::metadata_int(const std::string& key) const {
+  const std::string text = metadata_value(key);
+  int value = 0;
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (text.empty() || error != std::errc() || end != text.data() + text.size()) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "metadata '" + key + "' should be an integer, got '" + text + "'");
+  }
+  return value;
+}
 
 std::string ModelContainer::metadata_value(const std::string& key,
                                            const std::string& fallback) const {

@@ -59,6 +59,9 @@ class ModelContainer {
   const std::map<std::string, std::string>& metadata() const { return metadata_; }
   // The metadata value for `key`, or `fallback` when absent.
   std::string metadata_value(const std::string& key, const std::string& fallback = "") const;
+  // The metadata value for `key` as a decimal integer. Errors: kInvalidArgument naming the key
+  // and the text when it is absent or not exactly an integer.
+  Result<int> metadata_int(const std::string& key) const;
 
   // Adds or replaces a section. Names must be 1..kMaxSectionNameLength printable ASCII
   // characters (0x20–0x7E), must not be kMetadataSectionName, and a container holds at most

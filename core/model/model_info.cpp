@@ -1,7 +1,6 @@
 #include "core/model/model_info.h"
 
 #include <array>
-#include <cstdlib>
 #include <utility>
 
 namespace animspace::model {
@@ -51,11 +50,13 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
   info.description = model.metadata_value("description");
 
   if (info.kind == ModelKind::kPmsc || info.kind == ModelKind::kCrossPmsc) {
-    const std::string channels = model.metadata_value("pmsc.channels", "3");
-    info.channel_count = std::atoi(channels.c_str());
-    if (info.channel_count < 1) {
-      return make_error(ErrorCode::kInvalidArgument, source + ": metadata 'pmsc.channels' must be ≥ 1, got '" + channels + "'");
+    auto channels = model.metadata_int("pmsc.channels");
+    if (!channels) return make_error(ErrorCode::kInvalidArgument, source + ": " + channels.error().message);
+    if (*channels < 1) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata 'pmsc.channels' must be ≥ 1, got " + std::to_string(*channels));
     }
+    info.channel_count = *channels;
   }
 
   // The rest mesh fixes N; every other per-point section must agree with it.

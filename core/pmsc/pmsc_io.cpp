@@ -1,6 +1,5 @@
 #include "core/pmsc/pmsc_io.h"
 
-#include <charconv>
 
 namespace animspace::pmsc {
 namespace {
@@ -12,17 +11,6 @@ Int32Matrix as_column(const std::vector<int>& values) {
   Int32Matrix column(static_cast<long>(values.size()), 1);
   for (size_t i = 0; i < values.size(); ++i) column(static_cast<long>(i), 0) = values[i];
   return column;
-}
-
-Result<int> metadata_int(const container::ModelContainer& in, const std::string& key, const std::string& source) {
-  const std::string text = in.metadata_value(key);
-  int value = 0;
-  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (text.empty() || ec != std::errc() || ptr != text.data() + text.size()) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      source + ": metadata '" + key + "' should be an integer, got '" + text + "'");
-  }
-  return value;
 }
 
 Error with_source(const Error& e, const std::string& source) {
@@ -54,12 +42,12 @@ void store(const PmscModel& m, container::ModelContainer& out) {
 
 Result<PmscModel> load(const container::ModelContainer& in, const std::string& source) {
   PmscModel m;
-  auto channels = metadata_int(in, "pmsc.channels", source);
-  if (!channels) return channels.error();
-  auto control = metadata_int(in, "pmsc.control_point_count", source);
-  if (!control) return control.error();
-  auto regions = metadata_int(in, "pmsc.region_count", source);
-  if (!regions) return regions.error();
+  auto channels = in.metadata_int("pmsc.channels");
+  if (!channels) return with_source(channels.error(), source);
+  auto control = in.metadata_int("pmsc.control_point_count");
+  if (!control) return with_source(control.error(), source);
+  auto regions = in.metadata_int("pmsc.region_count");
+  if (!regions) return with_source(regions.error(), source);
   m.channels = *channels;
   m.control_point_count = *control;
   m.region_count = *regions;
