@@ -16,7 +16,7 @@ class DaemonProcess {
   // going to `log_path`, and waits until it has written its port. Throws std::runtime_error
   // (failing the test) when it does not come up within `timeout`.
   DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,
-                std::chrono::milliseconds timeout = std::chrono::seconds(30));
+                std::chrono::milliseconds timeout = std::chrono::seconds(90));
   // Kills the process if it is still running.
   ~DaemonProcess();
   DaemonProcess(const DaemonProcess&) = delete;

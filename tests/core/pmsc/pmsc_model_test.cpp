@@ -20,7 +20,10 @@ PmscModel three_point_model(std::vector<int> keys) {
   m.key_points = keys;
   m.key_mean = Eigen::VectorXd::Zero(static_cast<long>(keys.size()));
   m.key_basis.resize(static_cast<long>(keys.size()), 1);
-  for (size_t k = 0; k < keys.size(); ++k) m.key_basis(static_cast<long>(k), 0) = m.basis(keys[k], 0);
+  for (size_t k = 0; k < keys.size(); ++k) {
+    // Keys outside the model are legal input here: prepare_projection must refuse them.
+    m.key_basis(static_cast<long>(k), 0) = keys[k] >= 0 && keys[k] < 3 ? m.basis(keys[k], 0) : 0.0f;
+  }
   m.epsilon = {0.1, 0.2};
   return m;
 }
