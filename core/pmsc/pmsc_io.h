@@ -23,9 +23,9 @@ void store(const PmscModel& model, container::ModelContainer& out);
 // Reads, validates and prepares a model. Errors name `source` and the section.
 Result<PmscModel> load(const container::ModelContainer& in, const std::string& source);
 
-// A complete, servable model container: the output mesh (rest points = the training mean shape
-// unless `mesh.V` is given, faces), the training frames (kept so that retraining can start from
-// them, SPEC "train each night"), the model, and the training report as metadata.
+// A complete, servable model container: the output mesh (`mesh.V`: N × 3 positions of the output
+// points; faces optional), the training frames (kept so that retraining can start from them, SPEC
+// "train each night"), the model, and the training report as metadata.
 // `training_frames` is F × N·D output frames; `control_frames` (cross-PMSC only) F × N_c·D.
 container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMatrix& training_frames,
                                          const FrameMatrix* control_frames, const PmscModel& model,
