@@ -3,6 +3,8 @@
 #include <array>
 #include <utility>
 
+#include "core/animspace/animspace_io.h"
+
 namespace animspace::model {
 namespace {
 
@@ -124,6 +126,27 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
                            std::to_string(info.frame_count) + "×" + std::to_string(16 * info.bone_count),
                            bones->rows(), bones->cols());
       }
+    }
+  }
+  if (info.kind == ModelKind::kAnimationSpace) {
+    // Shapes only; animation_space::load validates the values (weights, bones, finiteness).
+    if (!model.has_section(sections::kSkeletonParents)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": an animation_space model needs section 'skeleton.parents'");
+    }
+    auto offsets = model.int_matrix(animation_space::sections::kInfluenceOffsets, 1);
+    if (!offsets) return offsets.error();
+    if (offsets->rows() != info.point_count + 1L) {
+      return shape_error(source, animation_space::sections::kInfluenceOffsets,
+                         std::to_string(info.point_count + 1) + "×1", offsets->rows(), offsets->cols());
+    }
+    auto bones = model.int_matrix(animation_space::sections::kInfluenceBones, 1);
+    if (!bones) return bones.error();
+    auto positions = model.double_matrix(animation_space::sections::kPositions, 4);
+    if (!positions) return positions.error();
+    if (positions->rows() != bones->rows()) {
+      return shape_error(source, animation_space::sections::kPositions, std::to_string(bones->rows()) + "×4",
+                         positions->rows(), positions->cols());
     }
   }
   if (info.kind == ModelKind::kPmsc || info.kind == ModelKind::kCrossPmsc) {

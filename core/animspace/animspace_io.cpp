@@ -1,0 +1,132 @@
+#include "core/animspace/animspace_io.h"
+
+#include "core/model/model_info.h"
+
+namespace animspace::animation_space {
+namespace {
+
+using container::Float64Matrix;
+using container::Int32Matrix;
+
+Int32Matrix as_column(const std::vector<int32_t>& values) {
+  Int32Matrix column(static_cast<Eigen::Index>(values.size()), 1);
+  for (size_t i = 0; i < values.size(); ++i) column(static_cast<Eigen::Index>(i), 0) = values[i];
+  return column;
+}
+
+Error with_source(const Error& e, const std::string& source) { return make_error(e.code, source + ": " + e.message); }
+
+Error shape_error(const std::string& source, const char* section, const std::string& expected, Eigen::Index rows,
+                  Eigen::Index cols) {
+  return make_error(ErrorCode::kInvalidArgument, source + ": section '" + section + "' should be " + expected +
+                                                     ", got " + std::to_string(rows) + "×" + std::to_string(cols));
+}
+
+}  // namespace
+
+TransformList rest_pose(const Skeleton& skeleton) { return skeleton.rest; }
+
+Float64Matrix pose_row(const TransformList& globals) {
+  Float64Matrix row(1, 16 * static_cast<Eigen::Index>(globals.size()));
+  for (size_t j = 0; j < globals.size(); ++j) {
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < 4; ++c) row(0, 16 * static_cast<Eigen::Index>(j) + 4 * r + c) = globals[j](r, c);
+    }
+  }
+  return row;
+}
+
+TransformList pose_from_row(const Float64Matrix& rows, Eigen::Index row, int bone_count) {
+  assert(rows.cols() == 16L * bone_count);
+  TransformList globals(static_cast<size_t>(bone_count));
+  for (int j = 0; j < bone_count; ++j) {
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < 4; ++c) globals[static_cast<size_t>(j)](r, c) = rows(row, 16L * j + 4 * r + c);
+    }
+  }
+  return globals;
+}
+
+void store_skeleton(const Skeleton& skeleton, container::ModelContainer& out) {
+  out.set_matrix(model::sections::kSkeletonParents, as_column(skeleton.parents));
+  Float64Matrix rest(skeleton.bone_count(), 16);
+  for (int j = 0; j < skeleton.bone_count(); ++j) rest.row(j) = pose_row({skeleton.rest[static_cast<size_t>(j)]});
+  out.set_matrix(model::sections::kSkeletonRest, rest);
+}
+
+Result<Skeleton> load_skeleton(const container::ModelContainer& in, const std::string& source) {
+  auto parents = in.int_matrix(model::sections::kSkeletonParents, 1);
+  if (!parents) return parents.error();
+  auto rest = in.double_matrix(model::sections::kSkeletonRest, 16);
+  if (!rest) return rest.error();
+  if (rest->rows() != parents->rows()) {
+    return shape_error(source, model::sections::kSkeletonRest, std::to_string(parents->rows()) + "×16", rest->rows(),
+                       rest->cols());
+  }
+  Skeleton skeleton;
+  skeleton.parents.assign(parents->data(), parents->data() + parents->size());
+  for (Eigen::Index j = 0; j < rest->rows(); ++j) skeleton.rest.push_back(pose_from_row(*rest, j, 1)[0]);
+  const Status status = validate(skeleton);
+  if (!status.ok()) return with_source(status.error(), source);
+  return skeleton;
+}
+
+void store(const AnimationSpaceModel& model, container::ModelContainer& out) {
+  assert(validate(model).ok());
+  out.metadata()["kind"] = model::kind_name(model::ModelKind::kAnimationSpace);
+  store_skeleton(model.skeleton, out);
+  out.set_matrix(sections::kInfluenceOffsets, as_column(model.influences.offsets));
+  out.set_matrix(sections::kInfluenceBones, as_column(model.influences.bones));
+  out.set_matrix(sections::kPositions, Float64Matrix(model.positions.transpose()));
+  if (model.has_tangents()) {
+    Float64Matrix tangents(model.positions.cols(), 8);
+    tangents.leftCols<4>() = model.tangent_s.transpose();
+    tangents.rightCols<4>() = model.tangent_t.transpose();
+    out.set_matrix(sections::kTangents, tangents);
+  }
+  PointMatrix rest_points;
+  evaluate(model, rest_pose(model.skeleton), rest_points);
+  out.set_points(model::sections::kRestPoints, rest_points);
+  if (model.faces.rows() > 0) out.set_faces(model::sections::kFaces, model.faces);
+}
+
+Result<AnimationSpaceModel> load(const container::ModelContainer& in, const std::string& source) {
+  AnimationSpaceModel model;
+  auto skeleton = load_skeleton(in, source);
+  if (!skeleton) return skeleton.error();
+  model.skeleton = std::move(*skeleton);
+
+  auto offsets = in.int_matrix(sections::kInfluenceOffsets, 1);
+  if (!offsets) return offsets.error();
+  auto bones = in.int_matrix(sections::kInfluenceBones, 1);
+  if (!bones) return bones.error();
+  auto positions = in.double_matrix(sections::kPositions, 4);
+  if (!positions) return positions.error();
+  if (positions->rows() != bones->rows()) {
+    return shape_error(source, sections::kPositions, std::to_string(bones->rows()) + "×4", positions->rows(),
+                       positions->cols());
+  }
+  model.influences.offsets.assign(offsets->data(), offsets->data() + offsets->size());
+  model.influences.bones.assign(bones->data(), bones->data() + bones->size());
+  model.positions = positions->transpose();
+  if (in.has_section(sections::kTangents)) {
+    auto tangents = in.double_matrix(sections::kTangents, 8);
+    if (!tangents) return tangents.error();
+    if (tangents->rows() != bones->rows()) {
+      return shape_error(source, sections::kTangents, std::to_string(bones->rows()) + "×8", tangents->rows(),
+                         tangents->cols());
+    }
+    model.tangent_s = tangents->leftCols<4>().transpose();
+    model.tangent_t = tangents->rightCols<4>().transpose();
+  }
+  if (in.has_section(model::sections::kFaces)) {
+    auto faces = in.faces(model::sections::kFaces);
+    if (!faces) return faces.error();
+    model.faces = *faces;
+  }
+  const Status status = validate(model);
+  if (!status.ok()) return with_source(status.error(), source);
+  return model;
+}
+
+}  // namespace animspace::animation_space

@@ -1,0 +1,46 @@
+// Storing an animation-space model in the model container, and loading it back for serving.
+//
+// Sections (docs/FORMATS.md): skeleton.parents (B × 1 i32), skeleton.rest_transforms (B × 16
+// f64, Ĝ_j row-major), animspace.influence_offsets (V+1 × 1 i32), animspace.influence_bones
+// (I × 1 i32), animspace.positions (I × 4 f64, p_j per influence), animspace.tangents (I × 8
+// f64: s_j then t_j, optional), mesh.rest_points (V × 3 f32: the model evaluated in its rest
+// pose, what DescribeModel, thumbnails and LOD start from), mesh.faces (optional). Positions stay
+// float64: fitting and the L2,2 metric are done in double (thesis §8.1 found even double needed
+// care), and a model is small next to the frames it was fitted to.
+#pragma once
+
+#include <string>
+
+#include "core/animspace/model.h"
+#include "core/common/result.h"
+#include "core/container/model_container.h"
+
+namespace animspace::animation_space {
+
+namespace sections {
+inline constexpr const char* kInfluenceOffsets = "animspace.influence_offsets";
+inline constexpr const char* kInfluenceBones = "animspace.influence_bones";
+inline constexpr const char* kPositions = "animspace.positions";
+inline constexpr const char* kTangents = "animspace.tangents";
+}  // namespace sections
+
+// Writes the skeleton and model sections and mesh.rest_points / mesh.faces; sets metadata
+// "kind" = "animation_space". `model` must be valid (asserted in debug builds).
+void store(const AnimationSpaceModel& model, container::ModelContainer& out);
+
+// Reads and validates (validate(AnimationSpaceModel)) a stored model. Errors name `source` and
+// the section, with expected vs actual shape.
+Result<AnimationSpaceModel> load(const container::ModelContainer& in, const std::string& source);
+
+// The rest pose G_j = Ĝ_j of the model's skeleton.
+TransformList rest_pose(const Skeleton& skeleton);
+
+// Skeleton sections alone (shared with other kinds that carry a rig).
+void store_skeleton(const Skeleton& skeleton, container::ModelContainer& out);
+Result<Skeleton> load_skeleton(const container::ModelContainer& in, const std::string& source);
+
+// A pose as stored in sequence.bone_transforms: one row of B·16 row-major 4×4 matrices.
+container::Float64Matrix pose_row(const TransformList& globals);
+TransformList pose_from_row(const container::Float64Matrix& rows, Eigen::Index row, int bone_count);
+
+}  // namespace animspace::animation_space
