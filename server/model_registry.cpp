@@ -8,6 +8,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/animspace/animspace_io.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::server {
@@ -86,6 +87,14 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
       return entry;
     }
     loaded->pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
+  }
+  if (info->kind == model::ModelKind::kAnimationSpace) {
+    auto runtime = animation_space::load(*container, path.string());
+    if (!runtime) {
+      entry.error = runtime.error().message;
+      return entry;
+    }
+    loaded->animation_space = std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*runtime));
   }
   loaded->name = name;
   loaded->version = version;

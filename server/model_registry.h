@@ -19,6 +19,7 @@
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/model/model_info.h"
+#include "core/animspace/model.h"
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::server {
@@ -36,6 +37,8 @@ struct LoadedModel {
   model::ModelInfo info;
   // The prepared soft-cache runtime of a PMSC / cross-PMSC model (null for other kinds).
   std::shared_ptr<const pmsc::PmscModel> pmsc;
+  // The validated skinning model of an animation-space model (null for other kinds).
+  std::shared_ptr<const animation_space::AnimationSpaceModel> animation_space;
 };
 
 struct VersionEntry {
