@@ -29,6 +29,14 @@ inline void do_not_optimize(const T& value) {
   asm volatile("" : : "r,m"(value) : "memory");
 }
 
+// skinning: datasets and the fitting settings shared by both methods.
+struct SkinningSuiteOptions {
+  std::vector<std::string> datasets{"horse-gallop", "cow-rig"};
+  int bones = 24;                       // horse-gallop: rigid parts found automatically
+  double edge_regularisation = 0.005;   // δ, Merry 2007 §8.2's horse
+  double vertex_regularisation = 1e-6;  // λ
+};
+
 struct SuiteOptions {
   std::optional<std::filesystem::path> data;  // ../shared/data, when present
   int repetitions = 21;
@@ -36,6 +44,7 @@ struct SuiteOptions {
   double error_bound_diag = 0.0025;
   double tolerance_diag = 0.01;
   std::vector<std::string> datasets{"crane", "horse-gallop"};
+  SkinningSuiteOptions skinning;
 };
 
 }  // namespace animspace::bench

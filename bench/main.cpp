@@ -15,8 +15,9 @@ int main(int argc, char** argv) {
   std::string json_path;
   animspace::bench::SuiteOptions options;
   CLI::App app{"animspace-bench — benchmark suites with same-run baselines"};
-  app.add_option("suite", suite, "io: file parsing; pmsc: PMSC training, accuracy and speed on real sequences")
-      ->check(CLI::IsMember({"io", "pmsc"}))
+  app.add_option("suite", suite, "io: file parsing; pmsc: PMSC training, accuracy and speed on real sequences; skinning: animation "
+                  "space vs linear blend skinning (fit, accuracy, evaluation speed)")
+      ->check(CLI::IsMember({"io", "pmsc", "skinning"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -28,6 +29,18 @@ int main(int argc, char** argv) {
   app.add_option("--tolerance-diag", options.tolerance_diag, "pmsc: soft-cache tolerance (fraction of diagonal)")
       ->capture_default_str();
   app.add_option("--datasets", options.datasets, "pmsc: datasets under --data")->capture_default_str();
+  app.add_option("--skinning-datasets", options.skinning.datasets, "skinning: datasets under --data")
+      ->capture_default_str();
+  app.add_option("--bones", options.skinning.bones, "skinning: rigid parts for sequences without a skeleton")
+      ->check(CLI::Range(1, 200))
+      ->capture_default_str();
+  app.add_option("--edge-regularisation", options.skinning.edge_regularisation, "skinning: δ of Merry 2007 eq. 4.4")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--vertex-regularisation", options.skinning.vertex_regularisation,
+                 "skinning: λ of Merry 2007 eq. 4.3")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   if (std::filesystem::is_directory(data_dir)) {
@@ -35,8 +48,9 @@ int main(int argc, char** argv) {
   } else {
     std::printf("note: %s not found; suites that need it use synthetic data or are skipped\n", data_dir.c_str());
   }
-  nlohmann::json results = suite == "io" ? animspace::bench::run_io_suite(options)
-                                         : animspace::bench::run_pmsc_suite(options);
+  nlohmann::json results = suite == "io"     ? animspace::bench::run_io_suite(options)
+                           : suite == "pmsc" ? animspace::bench::run_pmsc_suite(options)
+                                             : animspace::bench::run_skinning_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);
     json << nlohmann::json{{"suite", suite}, {"repetitions", options.repetitions}, {"results", results}}.dump(2)

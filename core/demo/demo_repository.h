@@ -49,11 +49,22 @@ Result<container::ModelContainer> make_demo_pmsc_container(int frames = kDemoFra
 // LBS gets the expensive deformation. Fail-through is impossible for it.
 Result<container::ModelContainer> make_demo_cross_pmsc_container(int frames = kDemoFrames);
 
+inline constexpr std::string_view kDemoAnimationSpaceModelName = "arm-animspace";
+
+// The arm as an animation-space model (Merry 2007 §4.1): fitted by least squares, with edge
+// regularisation δ = 0.02 (the thesis's arm, §8.2), to every other frame of the expensive rig with
+// the rig's own bone transforms. Bone 0 is a fixed root, 1 the upper arm, 2 the forearm; every
+// vertex may be influenced by both arm bones, so the fit can learn the biceps bulge and the
+// elbow's kept volume as far as they are linear in the bone matrices — which LBS cannot (§2.2.2).
+// The training frames and their bone transforms are kept (sequence.frames,
+// sequence.bone_transforms) for refitting. Errors: the fitter's (none expected).
+Result<container::ModelContainer> make_demo_animation_space_container(int frames = kDemoFrames);
+
 // The path of the demo model's file inside `repository`.
 std::filesystem::path demo_model_path(const std::filesystem::path& repository);
 
-// Writes the demo models (default options, kDemoFrames frames) — arm, arm-pmsc and
-// arm-cross-pmsc, version 1 each — creating directories as needed; files are replaced atomically. Errors: kIo
+// Writes the demo models (default options, kDemoFrames frames) — arm, arm-pmsc, arm-cross-pmsc
+// and arm-animspace, version 1 each — creating directories as needed; files are replaced atomically. Errors: kIo
 // naming the directory that could not be created, or the container writer's error.
 Status write_demo_repository(const std::filesystem::path& repository);
 

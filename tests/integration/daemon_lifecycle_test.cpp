@@ -89,14 +89,15 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   wait_until_serving(client);
 
   const auto models = client.list_models();
-  ASSERT_EQ(models.size(), 5u);
+  ASSERT_EQ(models.size(), 6u);
   EXPECT_EQ(models[0].name(), "arm");
-  EXPECT_EQ(models[1].name(), "arm-cross-pmsc");
-  EXPECT_EQ(models[2].name(), "arm-pmsc");
-  EXPECT_EQ(models[3].name(), "broken");
-  EXPECT_EQ(models[4].name(), "tetra");
+  EXPECT_EQ(models[1].name(), "arm-animspace");
+  EXPECT_EQ(models[2].name(), "arm-cross-pmsc");
+  EXPECT_EQ(models[3].name(), "arm-pmsc");
+  EXPECT_EQ(models[4].name(), "broken");
+  EXPECT_EQ(models[5].name(), "tetra");
 
-  const auto& tetra = models[4];
+  const auto& tetra = models[5];
   EXPECT_EQ(tetra.default_version(), 3u);
   ASSERT_EQ(tetra.versions_size(), 1);
   const auto& v = tetra.versions(0);
@@ -110,7 +111,7 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   EXPECT_EQ(v.file_size_bytes(), std::filesystem::file_size(repo_ / "tetra/3/model.anim"));
 
   // The refused model is visible with its reason, and has nothing to serve.
-  const auto& broken = models[3];
+  const auto& broken = models[4];
   EXPECT_EQ(broken.default_version(), 0u);
   ASSERT_EQ(broken.versions_size(), 1);
   EXPECT_EQ(broken.versions(0).state(), v1::VERSION_STATE_FAILED);
@@ -124,6 +125,14 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   EXPECT_EQ(arm.versions(0).point_count(), arm_file->points("mesh.rest_points")->rows());
   EXPECT_EQ(arm.versions(0).bone_count(), 2u);
   EXPECT_EQ(arm.versions(0).frame_count(), static_cast<uint32_t>(demo::kDemoFrames));
+
+  // The animation-space demo: kind, root + 2 arm bones, and its points, read from the file.
+  auto animspace_file = container::read_file(repo_ / "arm-animspace" / "1" / "model.anim");
+  ASSERT_TRUE(animspace_file.ok());
+  const auto animspace_model = client.describe_model("arm-animspace").versions(0);
+  EXPECT_EQ(animspace_model.kind(), v1::MODEL_KIND_ANIMATION_SPACE);
+  EXPECT_EQ(animspace_model.bone_count(), 3u);
+  EXPECT_EQ(animspace_model.point_count(), animspace_file->points("mesh.rest_points")->rows());
 
   // The PMSC demo models describe their soft cache, read back from the files independently.
   for (const char* name : {"arm-pmsc", "arm-cross-pmsc"}) {
@@ -274,7 +283,7 @@ TEST_F(DaemonTest, PrometheusMetricsCountCalls) {
   ASSERT_TRUE(result) << "no answer from the metrics endpoint";
   EXPECT_EQ(result->status, 200);
   const std::string& body = result->body;
-  EXPECT_NE(body.find("animspace_models_loaded 4\n"), std::string::npos) << body;
+  EXPECT_NE(body.find("animspace_models_loaded 5\n"), std::string::npos) << body;
   EXPECT_NE(body.find("animspace_requests_total{rpc=\"ModelService/DescribeModel\",model=\"tetra\",code=\"OK\"} 2\n"),
             std::string::npos)
       << body;
@@ -320,7 +329,7 @@ TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   Client client(daemon.address());
   wait_until_serving(client);
   const auto models = client.list_models();
-  ASSERT_EQ(models.size(), 3u);
+  ASSERT_EQ(models.size(), 4u);
   for (const auto& model : models) {
     EXPECT_EQ(model.versions(0).state(), v1::VERSION_STATE_AVAILABLE) << model.name() << ": " << model.versions(0).error();
   }

@@ -11,7 +11,7 @@ def wait_until_loaded(stub):
     deadline = time.time() + 30
     while time.time() < deadline:
         models = stub.ListModels(models_pb2.ListModelsRequest(), timeout=5).models
-        if len(models) == 3:
+        if len(models) == 4:
             return models
         time.sleep(0.05)
     pytest.fail("the demo repository never finished loading")
@@ -20,7 +20,10 @@ def wait_until_loaded(stub):
 def test_demo_models_are_listed_with_their_kinds(channel):
     stub = models_pb2_grpc.ModelServiceStub(channel)
     models = {m.name: m for m in wait_until_loaded(stub)}
-    assert sorted(models) == ["arm", "arm-cross-pmsc", "arm-pmsc"]
+    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc"]
+    animspace = models["arm-animspace"].versions[0]
+    assert animspace.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE
+    assert animspace.bone_count == 3 and animspace.point_count > 0
     pmsc = models["arm-pmsc"].versions[0]
     assert pmsc.kind == models_pb2.MODEL_KIND_PMSC
     assert pmsc.key_point_count > 0 and 0 < pmsc.basis_size < pmsc.frame_count

@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 #include <google/protobuf/util/json_util.h>
 
+#include "clients/cpp/cli/fit.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/container/model_container.h"
@@ -222,10 +223,16 @@ int main(int argc, char** argv) {
 
   animspace::cli::TrainPmscArgs train_pmsc_args;
   auto* train_pmsc = animspace::cli::add_train_pmsc(app, train_pmsc_args);
+  animspace::cli::FitArgs fit_args;
+  auto* fit = animspace::cli::add_fit(app, fit_args);
+  animspace::cli::ImportRigArgs import_rig_args;
+  auto* import_rig = animspace::cli::add_import_rig(app, import_rig_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
     if (*train_pmsc) return animspace::cli::run_train_pmsc(train_pmsc_args, g.json);
+    if (*fit) return animspace::cli::run_fit(fit_args, g.json);
+    if (*import_rig) return animspace::cli::run_import_rig(import_rig_args, g.json);
     if (*list) return run_list(g);
     if (*health) return run_health(g);
     if (*info) return run_server_info(g);

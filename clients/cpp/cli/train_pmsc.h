@@ -33,8 +33,4 @@ struct TrainPmscArgs {
 CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& args);
 int run_train_pmsc(const TrainPmscArgs& args, bool json);
 
-// Parses a Python-style slice "start:stop:step" (each part optional, negative counts from the
-// end) over `count` items. Errors go to `error` and yield an empty list.
-std::vector<int> parse_frame_selection(const std::string& text, int count, std::string* error);
-
 }  // namespace animspace::cli

@@ -1,0 +1,223 @@
+#include "clients/cpp/cli/fit.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "clients/cpp/cli/offline_common.h"
+#include "core/animspace/animspace_io.h"
+#include "core/animspace/fit_sequence.h"
+#include "core/animspace/import.h"
+#include "core/animspace/tangents.h"
+#include "core/mesh_io/sequence_io.h"
+#include "core/model/model_info.h"
+
+namespace animspace::cli {
+namespace {
+
+int fail(const char* command, const std::string& message) {
+  std::fprintf(stderr, "animspace %s: %s\n", command, message.c_str());
+  return 2;
+}
+
+// Tangent planes fitted to the geometry (Merry 2007 §4.3.1), so that served poses carry normals.
+Status add_tangents(animation_space::AnimationSpaceModel& model) {
+  auto planes = animation_space::fit_tangent_planes(model);
+  if (!planes) return planes.error();
+  model.tangent_s = std::move(planes->s);
+  model.tangent_t = std::move(planes->t);
+  return Status::Ok();
+}
+
+double rms_over(const animation_space::AnimationSpaceModel& model, const std::vector<animation_space::TransformList>& poses,
+                const FrameMatrix& frames, double* max_error) {
+  double sum = 0;
+  *max_error = 0;
+  PointMatrix posed;
+  for (size_t f = 0; f < poses.size(); ++f) {
+    animation_space::evaluate(model, poses[f], posed);
+    const Eigen::Map<const PointMatrix> captured(frames.row(static_cast<Eigen::Index>(f)).data(), posed.rows(), 3);
+    const Eigen::VectorXd d = (posed - captured).cast<double>().rowwise().norm();
+    sum += d.squaredNorm();
+    *max_error = std::max(*max_error, d.maxCoeff());
+  }
+  return std::sqrt(sum / static_cast<double>(poses.size() * static_cast<size_t>(posed.rows())));
+}
+
+}  // namespace
+
+CLI::App* add_fit(CLI::App& app, FitArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "fit",
+      "Offline: fit an animation-space model to a mesh sequence — skeleton found automatically from near-rigid "
+      "parts, then least squares with edge regularisation (Merry 2007 §4.1) — and write a model version");
+  cmd->add_option("sequence", a.sequence, "Folder with reference.obj + frames.pc2 (or OBJ frames), or a mesh file")
+      ->required();
+  cmd->add_option("--pc2", a.pc2, "Point cache when SEQUENCE is a mesh file");
+  cmd->add_option("--select", a.select, "Example frames as a slice start:stop:step (e.g. ::2)")->capture_default_str();
+  cmd->add_option("--bones", a.bones, "Rigid parts to find (bones besides the fixed root)")
+      ->check(CLI::Range(1, 500))
+      ->capture_default_str();
+  cmd->add_option("--edge-regularisation", a.edge_regularisation,
+                  "δ of eq. 4.4 in unit-box units (0.005 horse, 0.02 arm in the thesis; 0 = off)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--vertex-regularisation", a.vertex_regularisation, "λ of eq. 4.3 in unit-box units")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--rings", a.rings, "Influence sets: bones of parts within this many edges")
+      ->check(CLI::Range(0, 16))
+      ->capture_default_str();
+  cmd->add_option("--max-influences", a.max_influences, "Influence sets: at most this many bones per vertex")
+      ->check(CLI::Range(1, 32))
+      ->capture_default_str();
+  cmd->add_flag("--linear-blend", a.linear_blend,
+                "Fit linear blend skinning weights only (the baseline of thesis Table 8.2), stored in animation-space "
+                "form");
+  cmd->add_option("--description", a.description, "One-line description stored in the model");
+  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")->required();
+  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
+  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  return cmd;
+}
+
+int run_fit(const FitArgs& a, bool json) {
+  auto sequence = mesh_io::load_sequence(a.sequence, a.pc2);
+  if (!sequence) return fail("fit", sequence.error().message);
+  std::string error;
+  const auto selected = parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
+  if (selected.empty()) return fail("fit", error);
+  const FrameMatrix frames = select_rows(sequence->frames.samples, selected);
+
+  animation_space::SequenceFitOptions options;
+  options.segmentation.bone_count = a.bones;
+  options.influences.rings = a.rings;
+  options.influences.max_influences = a.max_influences;
+  options.fit.edge_regularisation = a.edge_regularisation;
+  options.fit.vertex_regularisation = a.vertex_regularisation;
+  animation_space::SequenceFitReport report;
+  auto skeleton = animation_space::fit_sequence_skeleton(sequence->reference, frames, options, &report);
+  if (!skeleton) return fail("fit", skeleton.error().message);
+  const auto start = std::chrono::steady_clock::now();
+  Result<animation_space::AnimationSpaceModel> model = make_error(ErrorCode::kInternal, "not fitted");
+  if (a.linear_blend) {
+    auto lbs = animation_space::fit_sequence_linear_blend(sequence->reference, frames, *skeleton, options.fit,
+                                                          &report.fit);
+    if (!lbs) return fail("fit", lbs.error().message);
+    model = animation_space::from_linear_blend(*lbs);
+  } else {
+    model = animation_space::fit_sequence_model(sequence->reference, frames, *skeleton, options.fit, &report.fit);
+  }
+  if (!model) return fail("fit", model.error().message);
+  report.fit_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (auto added = add_tangents(*model); !added.ok()) return fail("fit", added.error().message);
+
+  double max_error = 0;
+  const double rms = rms_over(*model, skeleton->training_poses, frames, &max_error);
+  const double diagonal =
+      (sequence->reference.V.colwise().maxCoeff() - sequence->reference.V.colwise().minCoeff()).cast<double>().norm();
+
+  container::ModelContainer out;
+  animation_space::store(*model, out);
+  out.metadata()["description"] =
+      a.description.empty() ? std::string(a.linear_blend ? "Linear blend skinning" : "Animation-space") +
+                                  " model fitted to " + a.sequence + " (" + std::to_string(frames.rows()) + " frames)"
+                            : a.description;
+  out.metadata()["generator"] = "animspace fit";
+  out.metadata()["animspace.edge_regularisation"] = std::to_string(a.edge_regularisation);
+  out.metadata()["animspace.vertex_regularisation"] = std::to_string(a.vertex_regularisation);
+  out.metadata()["animspace.fit_rms"] = std::to_string(rms);
+  out.set_matrix(model::sections::kSequenceFrames, frames);
+  container::Float64Matrix bone_rows(frames.rows(), 16L * model->bone_count());
+  for (Eigen::Index f = 0; f < frames.rows(); ++f) {
+    bone_rows.row(f) = animation_space::pose_row(skeleton->training_poses[static_cast<size_t>(f)]);
+  }
+  out.set_matrix(model::sections::kSequenceBoneTransforms, bone_rows);
+  const auto path = model_output_path(a.output, a.model, a.version);
+  if (auto written = write_model_file(path, out); !written.ok()) return fail("fit", written.error().message);
+
+  const double total = report.segmentation_seconds + report.skeleton_seconds + report.fit_seconds;
+  if (json) {
+    std::printf(
+        "{\"output\": \"%s\", \"frames\": %d, \"bones\": %d, \"influences_per_vertex\": %g, \"rms_error\": %g, "
+        "\"max_error\": %g, \"rms_over_diagonal\": %g, \"segmentation_seconds\": %g, \"skeleton_seconds\": %g, "
+        "\"fit_seconds\": %g, \"seconds\": %g}\n",
+        path.c_str(), static_cast<int>(frames.rows()), model->bone_count() - 1,
+        static_cast<double>(model->influences.influence_count()) / model->vertex_count(), rms, max_error,
+        rms / diagonal, report.segmentation_seconds, report.skeleton_seconds, report.fit_seconds, total);
+  } else {
+    std::printf("fitted %d frames in %.2f s (parts %.2f s, skeleton %.2f s, least squares %.2f s)\n",
+                static_cast<int>(frames.rows()), total, report.segmentation_seconds, report.skeleton_seconds,
+                report.fit_seconds);
+    std::printf("%d bones + root, %.2f influences per vertex, %s\n", model->bone_count() - 1,
+                static_cast<double>(model->influences.influence_count()) / model->vertex_count(),
+                a.linear_blend ? "linear blend weights" : "animation space");
+    std::printf("training error: RMS %.4g (%.3f%% of the diagonal), max %.4g (%.3f%%)\n", rms, 100 * rms / diagonal,
+                max_error, 100 * max_error / diagonal);
+    std::printf("wrote %s\n", path.c_str());
+  }
+  return 0;
+}
+
+CLI::App* add_import_rig(CLI::App& app, ImportRigArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "import-rig",
+      "Offline: convert a linear-blend-skinned rig to an animation-space model version, exactly (p_j = w_j Ĝ_j⁻¹ v̂, "
+      "Merry 2007 §3.1), with tangent planes from its normals (§4.3.2)");
+  cmd->add_option("--mesh", a.mesh, "libigl rig: rest mesh (OBJ, PLY, OFF)");
+  cmd->add_option("--tgf", a.tgf, "libigl rig: skeleton (TGF)");
+  cmd->add_option("--dmat", a.dmat, "libigl rig: weights (DMAT, #V × #bones)");
+  cmd->add_option("--gltf", a.gltf, "A glTF 2.0 file (.gltf or .glb) with a skinned mesh");
+  cmd->add_option("--description", a.description, "One-line description stored in the model");
+  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")->required();
+  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
+  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  return cmd;
+}
+
+int run_import_rig(const ImportRigArgs& a, bool json) {
+  const bool libigl = !a.mesh.empty() || !a.tgf.empty() || !a.dmat.empty();
+  if (libigl == !a.gltf.empty()) return fail("import-rig", "give either --gltf, or all of --mesh, --tgf and --dmat");
+  if (libigl && (a.mesh.empty() || a.tgf.empty() || a.dmat.empty())) {
+    return fail("import-rig", "a libigl rig needs all of --mesh, --tgf and --dmat");
+  }
+  animation_space::ImportedRig rig;
+  Eigen::MatrixX3d normals;
+  if (libigl) {
+    auto read = animation_space::read_libigl_rig(a.mesh, a.tgf, a.dmat);
+    if (!read) return fail("import-rig", read.error().message);
+    rig = std::move(*read);
+  } else {
+    auto read = animation_space::read_gltf_rig(a.gltf);
+    if (!read) return fail("import-rig", read.error().message);
+    rig = std::move(read->rig);
+    normals = std::move(read->rest_normals);
+  }
+  animation_space::AnimationSpaceModel model = animation_space::from_linear_blend(rig.model);
+  if (normals.rows() == 0) normals = animation_space::area_weighted_normals(rig.model.rest_points.transpose(), model.faces);
+  auto planes = animation_space::tangent_planes_from_normals(model, normals);
+  if (!planes) return fail("import-rig", planes.error().message);
+  model.tangent_s = std::move(planes->s);
+  model.tangent_t = std::move(planes->t);
+
+  container::ModelContainer out;
+  animation_space::store(model, out);
+  const std::string source = libigl ? a.tgf : a.gltf;
+  out.metadata()["description"] =
+      a.description.empty() ? "Linear-blend-skinned rig " + source + " in animation space" : a.description;
+  out.metadata()["generator"] = "animspace import-rig";
+  const auto path = model_output_path(a.output, a.model, a.version);
+  if (auto written = write_model_file(path, out); !written.ok()) return fail("import-rig", written.error().message);
+  if (json) {
+    std::printf("{\"output\": \"%s\", \"vertices\": %d, \"bones\": %d, \"influences\": %d}\n", path.c_str(),
+                model.vertex_count(), model.bone_count() - 1, model.influences.influence_count());
+  } else {
+    std::printf("imported %d vertices, %d bones + root, %d influences (%.2f per vertex)\nwrote %s\n",
+                model.vertex_count(), model.bone_count() - 1, model.influences.influence_count(),
+                static_cast<double>(model.influences.influence_count()) / model.vertex_count(), path.c_str());
+  }
+  return 0;
+}
+
+}  // namespace animspace::cli

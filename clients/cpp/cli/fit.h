@@ -1,0 +1,46 @@
+// `animspace fit`: turn a mesh sequence (any geometry cache) into an animation-space model
+// version (Merry 2007 §4.1 with an automatic skeleton, core/animspace/fit_sequence.h), and
+// `animspace import-rig`: convert a linear-blend-skinned rig (libigl TGF + DMAT, or a glTF 2.0
+// skin) to animation space exactly (§3.1).
+#pragma once
+
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace animspace::cli {
+
+struct FitArgs {
+  std::string sequence;  // folder (reference.obj + frames.pc2, or OBJ frames) or reference mesh
+  std::string pc2;
+  std::string select = "::";
+  int bones = 20;
+  double edge_regularisation = 0.005;
+  double vertex_regularisation = 1e-6;
+  int rings = 1;
+  int max_influences = 4;
+  bool linear_blend = false;
+  std::string description;
+  std::string output;
+  std::string model;
+  unsigned version = 0;
+};
+
+struct ImportRigArgs {
+  std::string mesh;  // rest mesh (libigl rigs)
+  std::string tgf;
+  std::string dmat;
+  std::string gltf;
+  std::string description;
+  std::string output;
+  std::string model;
+  unsigned version = 0;
+};
+
+CLI::App* add_fit(CLI::App& app, FitArgs& args);
+int run_fit(const FitArgs& args, bool json);
+
+CLI::App* add_import_rig(CLI::App& app, ImportRigArgs& args);
+int run_import_rig(const ImportRigArgs& args, bool json);
+
+}  // namespace animspace::cli
