@@ -26,6 +26,76 @@ Error shape_error(const std::string& source, const char* section, const std::str
 
 TransformList rest_pose(const Skeleton& skeleton) { return skeleton.rest; }
 
+Result<StoredMetrics> stored_metrics_from_poses(const AnimationSpaceModel& model, const std::vector<TransformList>& poses) {
+  auto metrics = metrics_from_poses(model.skeleton, poses);
+  if (!metrics) return metrics.error();
+  auto sphere = pose_bounding_sphere(model, *metrics);
+  if (!sphere) return sphere.error();
+  return StoredMetrics{std::move(*metrics), *sphere};
+}
+
+void store_metrics(const StoredMetrics& stored, container::ModelContainer& out) {
+  const AnimationSpaceMetrics& m = stored.metrics;
+  const int b = m.bone_count();
+  assert(m.P.rows() == 4L * b && static_cast<int>(m.expected_joints.size()) == b);
+  out.set_matrix(sections::kExpectation, Float64Matrix(m.P));
+  Float64Matrix joints(b, 16), bounds(b, 5);
+  for (int j = 0; j < b; ++j) {
+    joints.row(j) = pose_row({m.expected_joints[static_cast<size_t>(j)]});
+    const JointBound& bound = m.joint_bounds[static_cast<size_t>(j)];
+    bounds.row(j) << bound.linear_norm, bound.translation_centre.transpose(), bound.translation_radius;
+  }
+  out.set_matrix(sections::kExpectedJoints, joints);
+  out.set_matrix(sections::kJointBounds, bounds);
+  Float64Matrix sphere(1, 4);
+  sphere << stored.bounding_sphere.centre.transpose(), stored.bounding_sphere.radius;
+  out.set_matrix(sections::kBoundingSphere, sphere);
+}
+
+Result<StoredMetrics> load_metrics(const container::ModelContainer& in, int bone_count, const std::string& source) {
+  if (!in.has_section(sections::kExpectation)) {
+    return make_error(ErrorCode::kNotFound, source + ": the model stores no metrics (section '" +
+                                                std::string(sections::kExpectation) + "')");
+  }
+  auto P = in.double_matrix(sections::kExpectation, 4 * bone_count);
+  if (!P) return P.error();
+  if (P->rows() != 4L * bone_count) {
+    return shape_error(source, sections::kExpectation, std::to_string(4 * bone_count) + "×" + std::to_string(4 * bone_count),
+                       P->rows(), P->cols());
+  }
+  auto joints = in.double_matrix(sections::kExpectedJoints, 16);
+  if (!joints) return joints.error();
+  auto bounds = in.double_matrix(sections::kJointBounds, 5);
+  if (!bounds) return bounds.error();
+  auto sphere = in.double_matrix(sections::kBoundingSphere, 4);
+  if (!sphere) return sphere.error();
+  if (joints->rows() != bone_count) {
+    return shape_error(source, sections::kExpectedJoints, std::to_string(bone_count) + "×16", joints->rows(), joints->cols());
+  }
+  if (bounds->rows() != bone_count) {
+    return shape_error(source, sections::kJointBounds, std::to_string(bone_count) + "×5", bounds->rows(), bounds->cols());
+  }
+  if (sphere->rows() != 1 || !sphere->allFinite() || (*sphere)(0, 3) < 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      source + ": section 'animspace.bounding_sphere' should be 1×4 finite values with radius ≥ 0");
+  }
+  StoredMetrics stored;
+  stored.metrics.P = *P;
+  for (int j = 0; j < bone_count; ++j) {
+    stored.metrics.expected_joints.push_back(pose_from_row(*joints, j, 1)[0]);
+    JointBound bound;
+    bound.linear_norm = (*bounds)(j, 0);
+    bound.translation_centre = bounds->row(j).segment<3>(1).transpose();
+    bound.translation_radius = (*bounds)(j, 4);
+    stored.metrics.joint_bounds.push_back(bound);
+  }
+  stored.bounding_sphere.centre = sphere->row(0).head<3>().transpose();
+  stored.bounding_sphere.radius = (*sphere)(0, 3);
+  const Status status = validate(stored.metrics, bone_count);
+  if (!status.ok()) return with_source(status.error(), source);
+  return stored;
+}
+
 Float64Matrix pose_row(const TransformList& globals) {
   Float64Matrix row(1, 16 * static_cast<Eigen::Index>(globals.size()));
   for (size_t j = 0; j < globals.size(); ++j) {

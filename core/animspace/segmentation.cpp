@@ -58,9 +58,9 @@ struct Adjacency {
 struct Sequence {
   int vertex_count = 0;
   int frame_count = 0;
-  Eigen::Matrix3Xd rest;          // 3 × V
-  Eigen::MatrixXd trajectories;   // 3F × V: column i is vertex i in frames 0 … F-1 (x y z each)
-  Eigen::MatrixXd positions;      // 3V × F: column k is frame k (x y z per vertex)
+  Eigen::Matrix3Xd rest;         // 3 × V
+  Eigen::MatrixXd trajectories;  // 3F × V: column i is vertex i in frames 0 … F-1 (x y z each)
+  Eigen::MatrixXd positions;     // 3V × F: column k is frame k (x y z per vertex)
   Vector3d rest_centroid;
   Eigen::VectorXd frame_centroids;  // 3F: centroid of frame k at 3k … 3k+2
   Adjacency adjacency;
@@ -79,7 +79,8 @@ Status validate_inputs(const PointMatrix& rest, const FaceMatrix& faces, const F
     return invalid("options.bone_count must be in [1, #V = " + std::to_string(V) + "], got " +
                    std::to_string(options.bone_count));
   }
-  if (options.iterations < 0) return invalid("options.iterations must be ≥ 0, got " + std::to_string(options.iterations));
+  if (options.iterations < 0)
+    return invalid("options.iterations must be ≥ 0, got " + std::to_string(options.iterations));
   if (options.init_iterations < 0) {
     return invalid("options.init_iterations must be ≥ 0, got " + std::to_string(options.init_iterations));
   }
@@ -93,9 +94,11 @@ Status validate_inputs(const PointMatrix& rest, const FaceMatrix& faces, const F
     return invalid("options.tolerance must be finite and ≥ 0, got " + std::to_string(options.tolerance));
   }
   if (!std::isfinite(options.core_error_factor) || !(options.core_error_factor > 0.0)) {
-    return invalid("options.core_error_factor must be finite and > 0, got " + std::to_string(options.core_error_factor));
+    return invalid("options.core_error_factor must be finite and > 0, got " +
+                   std::to_string(options.core_error_factor));
   }
-  if (frames.rows() < 1) return invalid("frames must have at least 1 frame (row), got " + shape(frames.rows(), frames.cols()));
+  if (frames.rows() < 1)
+    return invalid("frames must have at least 1 frame (row), got " + shape(frames.rows(), frames.cols()));
   if (frames.cols() != 3 * V) {
     return invalid("frames must have 3·#V = " + std::to_string(3 * V) + " columns, got " +
                    shape(frames.rows(), frames.cols()));
@@ -670,9 +673,10 @@ Hierarchy build_hierarchy(const Adjacency& adjacency, const std::vector<int32_t>
       int64_t cost = 0;
       for (int32_t q : order) cost += int64_t{size[static_cast<size_t>(q)]} * hops[static_cast<size_t>(q)];
       for (int32_t q : order) hops[static_cast<size_t>(q)] = -1;
-      const bool better = cost < best_cost ||
-                          (cost == best_cost && (size[static_cast<size_t>(r)] > size[static_cast<size_t>(root)] ||
-                                                 (size[static_cast<size_t>(r)] == size[static_cast<size_t>(root)] && r < root)));
+      const bool better =
+          cost < best_cost ||
+          (cost == best_cost && (size[static_cast<size_t>(r)] > size[static_cast<size_t>(root)] ||
+                                 (size[static_cast<size_t>(r)] == size[static_cast<size_t>(root)] && r < root)));
       if (better) {
         best_cost = cost;
         root = r;
@@ -842,7 +846,8 @@ Result<RigidSegmentation> segment_rigid_parts(const PointMatrix& rest, const Fac
     queue.pop();
     for (int32_t k = s.adjacency.begin(i); k < s.adjacency.end(i); ++k) {
       const int32_t j = s.adjacency.at(k);
-      if (labels[static_cast<size_t>(j)] != labels[static_cast<size_t>(i)] || ring[static_cast<size_t>(j)] != INT_MAX) continue;
+      if (labels[static_cast<size_t>(j)] != labels[static_cast<size_t>(i)] || ring[static_cast<size_t>(j)] != INT_MAX)
+        continue;
       ring[static_cast<size_t>(j)] = ring[static_cast<size_t>(i)] + 1;
       queue.push(j);
     }
@@ -860,7 +865,8 @@ Result<RigidSegmentation> segment_rigid_parts(const PointMatrix& rest, const Fac
     const auto select = [&](int rings, bool filter_error) {
       core.clear();
       for (int32_t i : part) {
-        if (ring[static_cast<size_t>(i)] > rings && (!filter_error || result.fit_error(i) <= threshold)) core.push_back(i);
+        if (ring[static_cast<size_t>(i)] > rings && (!filter_error || result.fit_error(i) <= threshold))
+          core.push_back(i);
       }
       return spans_plane(s.rest, core);
     };

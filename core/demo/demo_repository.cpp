@@ -2,6 +2,7 @@
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit.h"
+#include "core/animspace/tangents.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
@@ -183,9 +184,18 @@ Result<container::ModelContainer> make_demo_animation_space_container(int frames
   auto model = animation_space::fit_animation_space(skeleton, examples, rig.rest.F, influences, options);
   if (!model) return model.error();
   model->faces = rig.rest.F;
+  // Normals from tangent planes fitted to the geometry (§3.5, §4.3.1).
+  auto planes = animation_space::fit_tangent_planes(*model);
+  if (!planes) return planes.error();
+  model->tangent_s = std::move(planes->s);
+  model->tangent_t = std::move(planes->t);
+  // L2,2 expectations and the every-pose bounding sphere from the example poses (§3.3, §7.2).
+  auto metrics = animation_space::stored_metrics_from_poses(*model, examples.poses);
+  if (!metrics) return metrics.error();
 
   container::ModelContainer out;
   animation_space::store(*model, out);
+  animation_space::store_metrics(*metrics, out);
   out.metadata()["description"] =
       "Animation-space model of the bending arm, fitted (Merry 2007 section 4.1) to every other frame of the "
       "expensive rig: it learns the biceps bulge and the kept elbow volume that linear blend skinning loses.";

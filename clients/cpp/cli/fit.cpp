@@ -118,8 +118,12 @@ int run_fit(const FitArgs& a, bool json) {
   const double diagonal =
       (sequence->reference.V.colwise().maxCoeff() - sequence->reference.V.colwise().minCoeff()).cast<double>().norm();
 
+  auto metrics = animation_space::stored_metrics_from_poses(*model, skeleton->training_poses);
+  if (!metrics) return fail("fit", metrics.error().message);
+
   container::ModelContainer out;
   animation_space::store(*model, out);
+  animation_space::store_metrics(*metrics, out);
   out.metadata()["description"] =
       a.description.empty() ? std::string(a.linear_blend ? "Linear blend skinning" : "Animation-space") +
                                   " model fitted to " + a.sequence + " (" + std::to_string(frames.rows()) + " frames)"

@@ -80,3 +80,39 @@ TEST(AnimationSpaceIoTest, RefusesAWeightThatIsNotOne) {
 
 }  // namespace
 }  // namespace animspace::animation_space
+
+namespace animspace::animation_space {
+namespace {
+
+TEST(AnimationSpaceIoTest, MetricsRoundTripAndTheSphereHoldsInTheExamplePoses) {
+  const AnimationSpaceModel model = small_model();
+  std::mt19937_64 engine(23);
+  std::vector<TransformList> poses;
+  for (int p = 0; p < 50; ++p) poses.push_back(testing::random_pose(model.skeleton, engine, 1.0));
+  auto stored = stored_metrics_from_poses(model, poses);
+  ASSERT_TRUE(stored.ok()) << stored.error().message;
+  container::ModelContainer out;
+  store(model, out);
+  store_metrics(*stored, out);
+  auto parsed = container::parse(container::serialize(out), "memory");
+  ASSERT_TRUE(parsed.ok());
+  auto loaded = load_metrics(*parsed, model.bone_count(), "memory");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->metrics.P, stored->metrics.P);
+  EXPECT_EQ(loaded->bounding_sphere.radius, stored->bounding_sphere.radius);
+  // Every vertex of every example pose lies inside the stored sphere.
+  PointMatrix posed;
+  for (const auto& pose : poses) {
+    evaluate(model, pose, posed);
+    for (int i = 0; i < posed.rows(); ++i) {
+      EXPECT_LE((posed.row(i).cast<double>().transpose() - loaded->bounding_sphere.centre).norm(),
+                loaded->bounding_sphere.radius * (1 + 1e-6));
+    }
+  }
+  container::ModelContainer bare;
+  store(model, bare);
+  EXPECT_EQ(load_metrics(bare, model.bone_count(), "bare").error().code, ErrorCode::kNotFound);
+}
+
+}  // namespace
+}  // namespace animspace::animation_space

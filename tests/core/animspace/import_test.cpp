@@ -605,7 +605,7 @@ TEST_P(ImportGltfTest, PoseThroughAnimationSpaceEqualsGltfSkinning) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Encodings, ImportGltfTest,
+INSTANTIATE_TEST_SUITE_P(ImportGltfEncodings, ImportGltfTest,
                          ::testing::Values(BoxEncoding{kUnsignedByte, kFloat, GltfBuilder::Layout::kExternalBin, "box.gltf"},
                                            BoxEncoding{kUnsignedShort, kUnsignedByte, GltfBuilder::Layout::kDataUri, "box.gltf"},
                                            BoxEncoding{kUnsignedByte, kUnsignedShort, GltfBuilder::Layout::kGlb, "box.glb"}));
@@ -662,7 +662,7 @@ void halve_weight(GltfBuilder& builder) {
 }
 
 INSTANTIATE_TEST_SUITE_P(
-    Broken, ImportGltfErrorTest,
+    ImportGltfBroken, ImportGltfErrorTest,
     ::testing::Values(
         BrokenGltf{"MissingPosition", [](GltfBuilder& b) { primitive(b)["attributes"].erase("POSITION"); },
                    "mesh 0 primitive 0 has no POSITION attribute"},

@@ -5,13 +5,12 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
-#include <map>
 #include <queue>
 #include <random>
 #include <set>
 
-#include <Eigen/Geometry>
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include "core/mesh_io/sequence_io.h"
 #include "tests/support/test_support.h"
@@ -34,8 +33,8 @@ struct ArticulatedTube {
   PointMatrix rest;
   FaceMatrix faces;
   FrameMatrix frames;
-  std::vector<int> segment;                                        // #V: true part
-  std::vector<std::vector<Eigen::Matrix4d>> motions;               // [frame][segment]: rest → frame
+  std::vector<int> segment;                                         // #V: true part
+  std::vector<std::vector<Eigen::Matrix4d>> motions;                // [frame][segment]: rest → frame
   std::vector<Vector3d, Eigen::aligned_allocator<Vector3d>> joint;  // [segment], joint[0] unused
 };
 
@@ -83,12 +82,14 @@ ArticulatedTube make_tube(int segment_count, int rings_per_segment, int frame_co
     for (int s = 1; s < segment_count; ++s) {
       const Vector3d axis = Vector3d(unit(engine), unit(engine), unit(engine) + 2.0).normalized();
       const Vector3d& u = tube.joint[static_cast<size_t>(s)];
-      const Eigen::Affine3d turn = Eigen::Translation3d(u) * Eigen::AngleAxisd(1.2 * unit(engine), axis) * Eigen::Translation3d(-u);
+      const Eigen::Affine3d turn =
+          Eigen::Translation3d(u) * Eigen::AngleAxisd(1.2 * unit(engine), axis) * Eigen::Translation3d(-u);
       G.push_back(G.back() * turn.matrix());
     }
     for (Eigen::Index i = 0; i < tube.rest.rows(); ++i) {
       const Vector3d v = (G[static_cast<size_t>(tube.segment[static_cast<size_t>(i)])] *
-                          tube.rest.row(i).cast<double>().transpose().homogeneous()).head<3>();
+                          tube.rest.row(i).cast<double>().transpose().homogeneous())
+                             .head<3>();
       tube.frames.block<1, 3>(k, 3 * i) = v.cast<float>().transpose();
     }
   }
@@ -97,8 +98,10 @@ ArticulatedTube make_tube(int segment_count, int rings_per_segment, int frame_co
 
 // Bone → true segment, by majority of the bone's vertices; -1 for bone 0.
 std::vector<int> bone_to_segment(const RigidSegmentation& result, const std::vector<int>& segment, int segment_count) {
-  std::vector<std::vector<int>> votes(static_cast<size_t>(result.bone_count()), std::vector<int>(static_cast<size_t>(segment_count), 0));
-  for (size_t i = 0; i < segment.size(); ++i) ++votes[static_cast<size_t>(result.labels[i])][static_cast<size_t>(segment[i])];
+  std::vector<std::vector<int>> votes(static_cast<size_t>(result.bone_count()),
+                                      std::vector<int>(static_cast<size_t>(segment_count), 0));
+  for (size_t i = 0; i < segment.size(); ++i)
+    ++votes[static_cast<size_t>(result.labels[i])][static_cast<size_t>(segment[i])];
   std::vector<int> mapping(static_cast<size_t>(result.bone_count()), -1);
   for (size_t j = 1; j < votes.size(); ++j) {
     mapping[j] = static_cast<int>(std::max_element(votes[j].begin(), votes[j].end()) - votes[j].begin());
@@ -144,7 +147,8 @@ double rigid_reconstruction_rms(const RigidSegmentation& result, const PointMatr
   double sum = 0.0;
   for (Eigen::Index k = 0; k < frames.rows(); ++k) {
     for (Eigen::Index i = 0; i < rest.rows(); ++i) {
-      const Eigen::Matrix4d& M = result.transforms[static_cast<size_t>(k)][static_cast<size_t>(result.labels[static_cast<size_t>(i)])];
+      const Eigen::Matrix4d& M =
+          result.transforms[static_cast<size_t>(k)][static_cast<size_t>(result.labels[static_cast<size_t>(i)])];
       const Vector3d v = (M * rest.row(i).cast<double>().transpose().homogeneous()).head<3>();
       sum += (v - frames.block<1, 3>(k, 3 * i).cast<double>().transpose()).squaredNorm();
     }
@@ -200,15 +204,18 @@ void expect_tube_segmented_exactly(uint32_t seed) {
   const std::vector<int> mapping = bone_to_segment(*result, tube.segment, kSegments);
   EXPECT_EQ(std::set<int>(mapping.begin() + 1, mapping.end()).size(), static_cast<size_t>(kSegments));
   size_t agree = 0;
-  for (size_t i = 0; i < tube.segment.size(); ++i) agree += mapping[static_cast<size_t>(result->labels[i])] == tube.segment[i];
+  for (size_t i = 0; i < tube.segment.size(); ++i)
+    agree += mapping[static_cast<size_t>(result->labels[i])] == tube.segment[i];
   EXPECT_GE(static_cast<double>(agree), 0.99 * static_cast<double>(tube.segment.size()));
   EXPECT_EQ(agree, tube.segment.size());
 
   // Each bone's transforms are the known motions of its segment (float input: ~1e-6).
   for (int k = 0; k < kFrames; ++k) {
     for (int j = 1; j <= kSegments; ++j) {
-      const Eigen::Matrix4d& expected = tube.motions[static_cast<size_t>(k)][static_cast<size_t>(mapping[static_cast<size_t>(j)])];
-      EXPECT_LT((result->transforms[static_cast<size_t>(k)][static_cast<size_t>(j)] - expected).cwiseAbs().maxCoeff(), 1e-5)
+      const Eigen::Matrix4d& expected =
+          tube.motions[static_cast<size_t>(k)][static_cast<size_t>(mapping[static_cast<size_t>(j)])];
+      EXPECT_LT((result->transforms[static_cast<size_t>(k)][static_cast<size_t>(j)] - expected).cwiseAbs().maxCoeff(),
+                1e-5)
           << "frame " << k << " bone " << j;
     }
   }
@@ -295,8 +302,10 @@ TEST(SegmentationTest, LabelsAreInvariantToScaleAndPlacement) {
   ASSERT_TRUE(reference.ok()) << reference.error().message;
   for (const double scale : {1e-4, 1e4}) {
     for (const float offset : {0.0f, 1000.0f}) {
-      const PointMatrix rest = (tube.rest.array() * static_cast<float>(scale) + offset * static_cast<float>(scale)).matrix();
-      const FrameMatrix frames = (tube.frames.array() * static_cast<float>(scale) + offset * static_cast<float>(scale)).matrix();
+      const PointMatrix rest =
+          (tube.rest.array() * static_cast<float>(scale) + offset * static_cast<float>(scale)).matrix();
+      const FrameMatrix frames =
+          (tube.frames.array() * static_cast<float>(scale) + offset * static_cast<float>(scale)).matrix();
       const Result<RigidSegmentation> result = segment_rigid_parts(rest, tube.faces, frames, options);
       ASSERT_TRUE(result.ok()) << result.error().message;
       EXPECT_EQ(result->labels, reference->labels) << "scale " << scale << " offset " << offset;
@@ -316,7 +325,9 @@ TEST(SegmentationTest, SingleBoneIsOneRigidFitOfEverything) {
   expect_valid_skeleton(*result, 1, tube.segment.size(), 5);
   EXPECT_EQ(result->parents, (std::vector<int32_t>{-1, 0}));
   for (int k = 0; k < 5; ++k) {
-    EXPECT_LT((result->transforms[static_cast<size_t>(k)][1] - tube.motions[static_cast<size_t>(k)][0]).cwiseAbs().maxCoeff(), 1e-5);
+    EXPECT_LT(
+        (result->transforms[static_cast<size_t>(k)][1] - tube.motions[static_cast<size_t>(k)][0]).cwiseAbs().maxCoeff(),
+        1e-5);
   }
 }
 
@@ -407,19 +418,35 @@ TEST(SegmentationTest, InvalidInputIsRejectedWithAPreciseMessage) {
   const ArticulatedTube tube = make_tube(2, 3, 3, 19);
   const int V = static_cast<int>(tube.rest.rows());
   const std::vector<InvalidCase> cases = {
-      {"no bones", [](auto&, auto&, auto&, auto& o) { o.bone_count = 0; }, {"options.bone_count", "[1, #V = 72]", "got 0"}},
-      {"more bones than vertices", [&](auto&, auto&, auto&, auto& o) { o.bone_count = V + 1; }, {"options.bone_count", "got 73"}},
-      {"frames too narrow", [&](auto&, auto&, auto& f, auto&) { f.conservativeResize(Eigen::NoChange, 3 * V - 3); },
+      {"no bones",
+       [](auto&, auto&, auto&, auto& o) { o.bone_count = 0; },
+       {"options.bone_count", "[1, #V = 72]", "got 0"}},
+      {"more bones than vertices",
+       [&](auto&, auto&, auto&, auto& o) { o.bone_count = V + 1; },
+       {"options.bone_count", "got 73"}},
+      {"frames too narrow",
+       [&](auto&, auto&, auto& f, auto&) { f.conservativeResize(Eigen::NoChange, 3 * V - 3); },
        {"frames", "3·#V = 216 columns", "got 3 × 213"}},
-      {"no frames", [&](auto&, auto&, auto& f, auto&) { f.resize(0, 3 * V); }, {"frames", "at least 1 frame", "got 0 × 216"}},
-      {"face index too large", [&](auto&, auto& F, auto&, auto&) { F(5, 2) = V; }, {"faces(5, 2) = 72", "[0, #V = 72)"}},
+      {"no frames",
+       [&](auto&, auto&, auto& f, auto&) { f.resize(0, 3 * V); },
+       {"frames", "at least 1 frame", "got 0 × 216"}},
+      {"face index too large",
+       [&](auto&, auto& F, auto&, auto&) { F(5, 2) = V; },
+       {"faces(5, 2) = 72", "[0, #V = 72)"}},
       {"negative face index", [](auto&, auto& F, auto&, auto&) { F(0, 0) = -1; }, {"faces(0, 0) = -1"}},
       {"NaN in rest", [](auto& r, auto&, auto&, auto&) { r(7, 1) = NAN; }, {"rest vertex 7", "not finite"}},
-      {"infinity in frames", [](auto&, auto&, auto& f, auto&) { f(2, 31) = INFINITY; },
+      {"infinity in frames",
+       [](auto&, auto&, auto& f, auto&) { f(2, 31) = INFINITY; },
        {"frames(2, 31)", "frame 2, vertex 10", "not finite"}},
-      {"negative iterations", [](auto&, auto&, auto&, auto& o) { o.iterations = -1; }, {"options.iterations", "got -1"}},
-      {"negative erosion", [](auto&, auto&, auto&, auto& o) { o.core_erosion_rings = -2; }, {"options.core_erosion_rings", "got -2"}},
-      {"zero error factor", [](auto&, auto&, auto&, auto& o) { o.core_error_factor = 0.0; }, {"options.core_error_factor"}},
+      {"negative iterations",
+       [](auto&, auto&, auto&, auto& o) { o.iterations = -1; },
+       {"options.iterations", "got -1"}},
+      {"negative erosion",
+       [](auto&, auto&, auto&, auto& o) { o.core_erosion_rings = -2; },
+       {"options.core_erosion_rings", "got -2"}},
+      {"zero error factor",
+       [](auto&, auto&, auto&, auto& o) { o.core_error_factor = 0.0; },
+       {"options.core_error_factor"}},
   };
   for (const InvalidCase& c : cases) {
     PointMatrix rest = tube.rest;
@@ -466,9 +493,10 @@ TEST(SegmentationTest, HorseGallopPartsAreRigidAndConnected) {
 
   const double rms_one = rigid_reconstruction_rms(*one, rest, frames);
   const double rms = rigid_reconstruction_rms(*result, rest, frames);
-  std::printf("horse-gallop: B = 20 in %.2f s (%d refinement iterations); rigid-part RMS %.4f%% of the diagonal, "
-              "one rigid body %.4f%%\n",
-              seconds, result->iterations, 100 * rms / diagonal, 100 * rms_one / diagonal);
+  std::printf(
+      "horse-gallop: B = 20 in %.2f s (%d refinement iterations); rigid-part RMS %.4f%% of the diagonal, "
+      "one rigid body %.4f%%\n",
+      seconds, result->iterations, 100 * rms / diagonal, 100 * rms_one / diagonal);
   EXPECT_NEAR(result->rms_error, rms, 1e-6 * diagonal);
   EXPECT_LT(rms, 0.02 * diagonal);
   EXPECT_LT(rms, 0.25 * rms_one);
