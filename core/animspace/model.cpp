@@ -126,7 +126,7 @@ Eigen::VectorXd dense_position(const AnimationSpaceModel& model, int vertex) {
 
 PoseMatrices pose_matrices(const TransformList& globals) {
   PoseMatrices matrices(globals.size());
-  for (size_t j = 0; j < globals.size(); ++j) matrices[j] = globals[j].topRows<3>();
+  for (size_t j = 0; j < globals.size(); ++j) matrices[j] = globals[j];
   return matrices;
 }
 
@@ -138,11 +138,11 @@ void evaluate(const AnimationSpaceModel& model, const TransformList& globals, Po
   const double* p = model.positions.data();
   for_vertex_chunks(model.influences, [&](int64_t first, int64_t last) {
     for (int64_t i = first; i < last; ++i) {
-      Eigen::Vector3d v = Eigen::Vector3d::Zero();
+      Eigen::Vector4d v = Eigen::Vector4d::Zero();
       for (int k = model.influences.offsets[static_cast<size_t>(i)]; k < model.influences.offsets[static_cast<size_t>(i) + 1]; ++k) {
-        v.noalias() += G[static_cast<size_t>(bones[k])] * Eigen::Map<const Eigen::Vector4d>(p + 4L * k);
+        v.noalias() += G[static_cast<size_t>(bones[k])] * Eigen::Map<const Eigen::Vector4d, Eigen::Aligned16>(p + 4L * k);
       }
-      out.row(i) = v.cast<float>().transpose();
+      out.row(i) = v.head<3>().cast<float>().transpose();
     }
   });
 }
@@ -154,13 +154,13 @@ void evaluate_normals(const AnimationSpaceModel& model, const TransformList& glo
   out.resize(model.vertex_count(), 3);
   for_vertex_chunks(model.influences, [&](int64_t first, int64_t last) {
     for (int64_t i = first; i < last; ++i) {
-      Eigen::Vector3d s = Eigen::Vector3d::Zero(), t = Eigen::Vector3d::Zero();
+      Eigen::Vector4d s = Eigen::Vector4d::Zero(), t = Eigen::Vector4d::Zero();
       for (int k = model.influences.offsets[static_cast<size_t>(i)]; k < model.influences.offsets[static_cast<size_t>(i) + 1]; ++k) {
         const auto& Gj = G[static_cast<size_t>(model.influences.bones[static_cast<size_t>(k)])];
         s.noalias() += Gj * model.tangent_s.col(k);
         t.noalias() += Gj * model.tangent_t.col(k);
       }
-      const Eigen::Vector3d n = s.cross(t);
+      const Eigen::Vector3d n = s.head<3>().cross(t.head<3>());
       const double length = n.norm();
       out.row(i) = (length > 0 ? Eigen::Vector3d(n / length) : Eigen::Vector3d::Zero()).cast<float>().transpose();
     }
@@ -201,11 +201,11 @@ void evaluate(const LinearBlendModel& model, const TransformList& globals, Point
   for_vertex_chunks(model.influences, [&](int64_t first, int64_t last) {
     for (int64_t i = first; i < last; ++i) {
       const Eigen::Vector4d rest = model.rest_points.col(i).homogeneous();
-      Eigen::Vector3d v = Eigen::Vector3d::Zero();
+      Eigen::Vector4d v = Eigen::Vector4d::Zero();
       for (int k = model.influences.offsets[static_cast<size_t>(i)]; k < model.influences.offsets[static_cast<size_t>(i) + 1]; ++k) {
         v.noalias() += model.weights(k) * (M[static_cast<size_t>(bones[k])] * rest);
       }
-      out.row(i) = v.cast<float>().transpose();
+      out.row(i) = v.head<3>().cast<float>().transpose();
     }
   });
 }

@@ -75,8 +75,9 @@ Eigen::VectorXd vertex_weights(const AnimationSpaceModel& model);
 // Dense 4b-vector p of one vertex (for analysis and tests; the model itself stays sparse).
 Eigen::VectorXd dense_position(const AnimationSpaceModel& model, int vertex);
 
-// The per-pose 3×4 matrices (top three rows of G_j), the only per-bone work of an evaluation.
-using PoseMatrices = std::vector<Eigen::Matrix<double, 3, 4>, Eigen::aligned_allocator<Eigen::Matrix<double, 3, 4>>>;
+// The per-pose matrices G_j, gathered once per evaluation. Full 4×4 (not 3×4) on purpose: a
+// 4-row column is two SIMD packets, so G_j p_j vectorises; the 4th row costs nothing extra.
+using PoseMatrices = TransformList;
 PoseMatrices pose_matrices(const TransformList& globals);
 
 // v = Σ_j G_j p_j for every vertex (eq. 3.1). `globals` holds one G_j per bone (validated by the
