@@ -148,6 +148,7 @@ Status check_inputs(const Skeleton& skeleton, const FitExamples& examples, const
   const int n = examples.example_count();
   const int V = influences.vertex_count();
   if (n < 1) return invalid("fit: no example poses; expected at least one");
+  if (V < 1) return invalid("fit: the influence sets have no vertices; expected at least one");
   for (int k = 0; k < n; ++k) {
     ANIMSPACE_RETURN_IF_ERROR(validate_pose(skeleton, examples.poses[static_cast<size_t>(k)],
                                             "fit: example pose " + std::to_string(k)));

@@ -495,6 +495,11 @@ TEST(GrowInfluenceSetsTest, GrowsByRingsAddsParentAndCaps) {
   sets = grow_influence_sets(skeleton, labels, faces, options);
   ASSERT_TRUE(sets.ok());
   EXPECT_EQ(bones_of(*sets, 5), (std::vector<int32_t>{2, 3}));
+  options.include_parent = true;
+  options.max_influences = 1;  // vertex 6's parent bone 2 owns more vertices in range, but own comes first
+  sets = grow_influence_sets(skeleton, labels, faces, options);
+  ASSERT_TRUE(sets.ok());
+  EXPECT_EQ(bones_of(*sets, 6), (std::vector<int32_t>{3}));
 
   labels[4] = 9;
   const auto bad = grow_influence_sets(skeleton, labels, faces, options);
