@@ -29,6 +29,8 @@ test: build
 
 bench: build
 	$(BUILD_DIR)/bin/animspace-bench io --data ../shared/data --json $(BUILD_DIR)/bench-io.json
+	$(BUILD_DIR)/bin/animspace-bench pmsc --data ../shared/data --json $(BUILD_DIR)/bench-pmsc.json
+	$(BUILD_DIR)/bin/animspace-bench skinning --data ../shared/data --json $(BUILD_DIR)/bench-skinning.json
 
 # The whole suite under AddressSanitizer + UndefinedBehaviorSanitizer.
 asan: deps
