@@ -47,26 +47,6 @@ double diagonal_of(const PointMatrix& points) {
   return (points.colwise().maxCoeff() - points.colwise().minCoeff()).cast<double>().norm();
 }
 
-struct Errors {
-  double rmse = 0;
-  double max = 0;
-};
-
-// Distances between posed models and the captured frames, over every vertex of every frame.
-template <typename Model>
-Errors errors_of(const Model& model, const std::vector<TransformList>& poses, const FrameMatrix& frames) {
-  double sum = 0, max = 0;
-  PointMatrix posed;
-  for (size_t f = 0; f < poses.size(); ++f) {
-    evaluate(model, poses[f], posed);
-    const Eigen::Map<const PointMatrix> captured(frames.row(static_cast<Eigen::Index>(f)).data(), posed.rows(), 3);
-    const Eigen::VectorXd distances = (posed - captured).cast<double>().rowwise().norm();
-    sum += distances.squaredNorm();
-    max = std::max(max, distances.maxCoeff());
-  }
-  return {std::sqrt(sum / (static_cast<double>(poses.size()) * static_cast<double>(frames.cols() / 3))), max};
-}
-
 template <typename Model>
 double vertices_per_second(const Model& model, const std::vector<TransformList>& poses, int repetitions) {
   PointMatrix posed;
@@ -113,8 +93,8 @@ nlohmann::json run_case(const Case& c, int repetitions) {
 
   nlohmann::json rows = nlohmann::json::array();
   auto row = [&](const char* method, const auto& model, double fit_seconds, const FitReport& report) {
-    const Errors train = errors_of(model, c.train_poses, c.train);
-    const Errors test = errors_of(model, c.test_poses, c.test);
+    const ReconstructionError train = reconstruction_error(model, c.train_poses, c.train);
+    const ReconstructionError test = reconstruction_error(model, c.test_poses, c.test);
     const nlohmann::json r = {{"dataset", c.dataset},
                               {"method", method},
                               {"bones", c.skeleton.bone_count() - 1},
@@ -128,14 +108,14 @@ nlohmann::json run_case(const Case& c, int repetitions) {
                               {"unknowns", report.unknowns},
                               {"edge_regularisation", options.edge_regularisation},
                               {"vertex_regularisation", options.vertex_regularisation},
-                              {"rmse_over_diag_train", train.rmse / diagonal},
-                              {"rmse_over_diag_test", test.rmse / diagonal},
+                              {"rmse_over_diag_train", train.rms / diagonal},
+                              {"rmse_over_diag_test", test.rms / diagonal},
                               {"max_error_over_diag_test", test.max / diagonal},
                               {"eval_vertices_per_second", std::string(method) == "animspace" ? as_speed : lbs_speed},
                               {"lbs_eval_vertices_per_second", lbs_speed}};
     std::printf("%-13s %-9s %5d %5zu %5zu %8.2f %8.2f %10.5f %10.5f %10.4f %12.3g %12.3g\n", c.dataset.c_str(), method,
                 c.skeleton.bone_count() - 1, c.train_poses.size(), c.test_poses.size(), c.skeleton_seconds + fit_seconds,
-                fit_seconds, 100 * train.rmse / diagonal, 100 * test.rmse / diagonal, 100 * test.max / diagonal,
+                fit_seconds, 100 * train.rms / diagonal, 100 * test.rms / diagonal, 100 * test.max / diagonal,
                 r["eval_vertices_per_second"].get<double>(), lbs_speed);
     rows.push_back(r);
   };

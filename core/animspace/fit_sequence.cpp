@@ -1,6 +1,8 @@
 #include "core/animspace/fit_sequence.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 
 namespace animspace::animation_space {
 namespace {
@@ -16,7 +18,35 @@ FitExamples make_examples(const FrameMatrix& frames, const std::vector<Transform
   return examples;
 }
 
+template <typename Model>
+ReconstructionError reconstruction_error_of(const Model& model, const std::vector<TransformList>& poses,
+                                            const FrameMatrix& frames) {
+  assert(static_cast<Eigen::Index>(poses.size()) == frames.rows());
+  ReconstructionError error;
+  double sum = 0;
+  PointMatrix posed;
+  for (size_t f = 0; f < poses.size(); ++f) {
+    evaluate(model, poses[f], posed);
+    const Eigen::Map<const PointMatrix> captured(frames.row(static_cast<Eigen::Index>(f)).data(), posed.rows(), 3);
+    const Eigen::VectorXd distances = (posed - captured).cast<double>().rowwise().norm();
+    sum += distances.squaredNorm();
+    error.max = std::max(error.max, distances.maxCoeff());
+  }
+  error.rms = std::sqrt(sum / (static_cast<double>(poses.size()) * static_cast<double>(model.vertex_count())));
+  return error;
+}
+
 }  // namespace
+
+ReconstructionError reconstruction_error(const AnimationSpaceModel& model, const std::vector<TransformList>& poses,
+                                         const FrameMatrix& frames) {
+  return reconstruction_error_of(model, poses, frames);
+}
+
+ReconstructionError reconstruction_error(const LinearBlendModel& model, const std::vector<TransformList>& poses,
+                                         const FrameMatrix& frames) {
+  return reconstruction_error_of(model, poses, frames);
+}
 
 Result<SequenceSkeleton> fit_sequence_skeleton(const TriangleMesh& reference, const FrameMatrix& frames,
                                                const SequenceFitOptions& options, SequenceFitReport* report) {

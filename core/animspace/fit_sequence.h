@@ -72,6 +72,18 @@ Result<LinearBlendModel> fit_sequence_linear_blend(const TriangleMesh& reference
 Result<AnimationSpaceModel> fit_sequence(const TriangleMesh& reference, const FrameMatrix& frames,
                                          const SequenceFitOptions& options, SequenceFitReport* report = nullptr);
 
+// How far a model posed by `poses` is from `frames` (one row of 3V values per pose), over every
+// vertex of every frame: RMS and largest vertex distance, model units. Used by `animspace fit`
+// and the skinning benchmark, so both report the same statistic.
+struct ReconstructionError {
+  double rms = 0;
+  double max = 0;
+};
+ReconstructionError reconstruction_error(const AnimationSpaceModel& model, const std::vector<TransformList>& poses,
+                                         const FrameMatrix& frames);
+ReconstructionError reconstruction_error(const LinearBlendModel& model, const std::vector<TransformList>& poses,
+                                         const FrameMatrix& frames);
+
 // G_j for a frame (3V values, x0 y0 z0 x1 …) that was not fitted: M_j from the rigid fit of bone
 // j's core vertices (reference → frame), G_j = M_j Ĝ_j; a bone without usable core vertices moves
 // with its parent. `frame` must hold 3·#reference values (asserted).

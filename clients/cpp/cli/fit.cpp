@@ -30,21 +30,6 @@ Status add_tangents(animation_space::AnimationSpaceModel& model) {
   return Status::Ok();
 }
 
-double rms_over(const animation_space::AnimationSpaceModel& model, const std::vector<animation_space::TransformList>& poses,
-                const FrameMatrix& frames, double* max_error) {
-  double sum = 0;
-  *max_error = 0;
-  PointMatrix posed;
-  for (size_t f = 0; f < poses.size(); ++f) {
-    animation_space::evaluate(model, poses[f], posed);
-    const Eigen::Map<const PointMatrix> captured(frames.row(static_cast<Eigen::Index>(f)).data(), posed.rows(), 3);
-    const Eigen::VectorXd d = (posed - captured).cast<double>().rowwise().norm();
-    sum += d.squaredNorm();
-    *max_error = std::max(*max_error, d.maxCoeff());
-  }
-  return std::sqrt(sum / static_cast<double>(poses.size() * static_cast<size_t>(posed.rows())));
-}
-
 }  // namespace
 
 CLI::App* add_fit(CLI::App& app, FitArgs& a) {
@@ -113,8 +98,8 @@ int run_fit(const FitArgs& a, bool json) {
   report.fit_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (auto added = add_tangents(*model); !added.ok()) return fail("fit", added.error().message);
 
-  double max_error = 0;
-  const double rms = rms_over(*model, skeleton->training_poses, frames, &max_error);
+  const auto training_error = animation_space::reconstruction_error(*model, skeleton->training_poses, frames);
+  const double rms = training_error.rms, max_error = training_error.max;
   const double diagonal =
       (sequence->reference.V.colwise().maxCoeff() - sequence->reference.V.colwise().minCoeff()).cast<double>().norm();
 
