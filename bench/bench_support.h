@@ -45,6 +45,8 @@ struct SuiteOptions {
   double tolerance_diag = 0.01;
   std::vector<std::string> datasets{"crane", "horse-gallop"};
   SkinningSuiteOptions skinning;
+  // lod: datasets (the horse is fitted with the skinning options above).
+  std::vector<std::string> lod_datasets{"cow-rig", "horse-gallop"};
 };
 
 }  // namespace animspace::bench

@@ -16,8 +16,9 @@ int main(int argc, char** argv) {
   animspace::bench::SuiteOptions options;
   CLI::App app{"animspace-bench — benchmark suites with same-run baselines"};
   app.add_option("suite", suite, "io: file parsing; pmsc: PMSC training, accuracy and speed on real sequences; skinning: animation "
-                  "space vs linear blend skinning (fit, accuracy, evaluation speed)")
-      ->check(CLI::IsMember({"io", "pmsc", "skinning"}))
+                  "space vs linear blend skinning (fit, accuracy, evaluation speed); lod: animation-space level of detail vs rest-pose "
+                  "simplifiers (error across poses)")
+      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -31,7 +32,8 @@ int main(int argc, char** argv) {
   app.add_option("--datasets", options.datasets, "pmsc: datasets under --data")->capture_default_str();
   app.add_option("--skinning-datasets", options.skinning.datasets, "skinning: datasets under --data")
       ->capture_default_str();
-  app.add_option("--bones", options.skinning.bones, "skinning: rigid parts for sequences without a skeleton")
+  app.add_option("--lod-datasets", options.lod_datasets, "lod: datasets under --data")->capture_default_str();
+  app.add_option("--bones", options.skinning.bones, "skinning, lod: rigid parts for sequences without a skeleton (horse-gallop)")
       ->check(CLI::Range(1, 200))
       ->capture_default_str();
   app.add_option("--edge-regularisation", options.skinning.edge_regularisation, "skinning: δ of Merry 2007 eq. 4.4")
@@ -50,6 +52,7 @@ int main(int argc, char** argv) {
   }
   nlohmann::json results = suite == "io"     ? animspace::bench::run_io_suite(options)
                            : suite == "pmsc" ? animspace::bench::run_pmsc_suite(options)
+                           : suite == "lod"  ? animspace::bench::run_lod_suite(options)
                                              : animspace::bench::run_skinning_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);

@@ -176,23 +176,14 @@ std::optional<Case> cow_case(const std::filesystem::path& data, const FitOptions
   c.influences = rig->model.influences;
   c.reference.F = rig->model.faces;
   c.reference.V = rig->model.rest_points.transpose().cast<float>();
-  // Random poses of the ground-truth rig: every joint turns about a random axis through its rest
-  // frame by a uniform angle in [-kCowMaxJointAngle, kCowMaxJointAngle]; posed by the rig itself.
-  std::mt19937_64 engine(2026);
-  std::normal_distribution<double> normal;
-  std::uniform_real_distribution<double> angle(-kCowMaxJointAngle, kCowMaxJointAngle);
-  const TransformList rest_joints = rest_joint_transforms(c.skeleton);
+  // Random poses of the ground-truth rig, posed by the rig itself.
+  const std::vector<TransformList> poses = random_joint_rotation_poses(c.skeleton, kCowPoses, kCowMaxJointAngle, 2026);
   const int vertices = rig->model.vertex_count();
   c.train.resize(kCowTrainPoses, 3L * vertices);
   c.test.resize(kCowPoses - kCowTrainPoses, 3L * vertices);
   PointMatrix posed;
   for (int p = 0; p < kCowPoses; ++p) {
-    TransformList joints = rest_joints;
-    for (size_t j = 1; j < joints.size(); ++j) {
-      const Eigen::Vector3d axis = Eigen::Vector3d(normal(engine), normal(engine), normal(engine)).normalized();
-      joints[j].topLeftCorner<3, 3>() = joints[j].topLeftCorner<3, 3>() * Eigen::AngleAxisd(angle(engine), axis).toRotationMatrix();
-    }
-    const TransformList globals = global_transforms(c.skeleton, joints);
+    const TransformList& globals = poses[static_cast<size_t>(p)];
     evaluate(rig->model, globals, posed);
     const Eigen::Map<const Eigen::RowVectorXf> flat(posed.data(), posed.size());
     if (p < kCowTrainPoses) {

@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/animspace/animspace_io.h"
+#include "core/lod/lod_io.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::server {
@@ -94,7 +95,13 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
       entry.error = runtime.error().message;
       return entry;
     }
+    auto levels = lod::load_levels(*container, *runtime, path.string());
+    if (!levels) {
+      entry.error = levels.error().message;
+      return entry;
+    }
     loaded->animation_space = std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*runtime));
+    loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*levels));
   }
   loaded->name = name;
   loaded->version = version;

@@ -20,6 +20,7 @@
 #include "core/container/model_container.h"
 #include "core/model/model_info.h"
 #include "core/animspace/model.h"
+#include "core/lod/levels.h"
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::server {
@@ -39,6 +40,8 @@ struct LoadedModel {
   std::shared_ptr<const pmsc::PmscModel> pmsc;
   // The validated skinning model of an animation-space model (null for other kinds).
   std::shared_ptr<const animation_space::AnimationSpaceModel> animation_space;
+  // Its validated LOD levels (Merry 2007 §7.3); level 0 is the model itself (null for other kinds).
+  std::shared_ptr<const lod::LodLevels> lod_levels;
 };
 
 struct VersionEntry {

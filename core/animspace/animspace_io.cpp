@@ -141,19 +141,55 @@ Result<Skeleton> load_skeleton(const container::ModelContainer& in, const std::s
   return skeleton;
 }
 
-void store(const AnimationSpaceModel& model, container::ModelContainer& out) {
-  assert(validate(model).ok());
-  out.metadata()["kind"] = model::kind_name(model::ModelKind::kAnimationSpace);
-  store_skeleton(model.skeleton, out);
-  out.set_matrix(sections::kInfluenceOffsets, as_column(model.influences.offsets));
-  out.set_matrix(sections::kInfluenceBones, as_column(model.influences.bones));
-  out.set_matrix(sections::kPositions, Float64Matrix(model.positions.transpose()));
+void store_influences(const AnimationSpaceModel& model, const std::string& prefix, container::ModelContainer& out) {
+  out.set_matrix(prefix + "influence_offsets", as_column(model.influences.offsets));
+  out.set_matrix(prefix + "influence_bones", as_column(model.influences.bones));
+  out.set_matrix(prefix + "positions", Float64Matrix(model.positions.transpose()));
   if (model.has_tangents()) {
     Float64Matrix tangents(model.positions.cols(), 8);
     tangents.leftCols<4>() = model.tangent_s.transpose();
     tangents.rightCols<4>() = model.tangent_t.transpose();
-    out.set_matrix(sections::kTangents, tangents);
+    out.set_matrix(prefix + "tangents", tangents);
   }
+}
+
+Status load_influences(const container::ModelContainer& in, const std::string& prefix, const std::string& source,
+                       AnimationSpaceModel& model) {
+  const std::string offsets_name = prefix + "influence_offsets";
+  const std::string bones_name = prefix + "influence_bones";
+  const std::string positions_name = prefix + "positions";
+  const std::string tangents_name = prefix + "tangents";
+  auto offsets = in.int_matrix(offsets_name, 1);
+  if (!offsets) return offsets.error();
+  auto bones = in.int_matrix(bones_name, 1);
+  if (!bones) return bones.error();
+  auto positions = in.double_matrix(positions_name, 4);
+  if (!positions) return positions.error();
+  if (positions->rows() != bones->rows()) {
+    return shape_error(source, positions_name.c_str(), std::to_string(bones->rows()) + "×4", positions->rows(),
+                       positions->cols());
+  }
+  model.influences.offsets.assign(offsets->data(), offsets->data() + offsets->size());
+  model.influences.bones.assign(bones->data(), bones->data() + bones->size());
+  model.positions = positions->transpose();
+  if (in.has_section(tangents_name)) {
+    auto tangents = in.double_matrix(tangents_name, 8);
+    if (!tangents) return tangents.error();
+    if (tangents->rows() != bones->rows()) {
+      return shape_error(source, tangents_name.c_str(), std::to_string(bones->rows()) + "×8", tangents->rows(),
+                         tangents->cols());
+    }
+    model.tangent_s = tangents->leftCols<4>().transpose();
+    model.tangent_t = tangents->rightCols<4>().transpose();
+  }
+  return Status::Ok();
+}
+
+void store(const AnimationSpaceModel& model, container::ModelContainer& out) {
+  assert(validate(model).ok());
+  out.metadata()["kind"] = model::kind_name(model::ModelKind::kAnimationSpace);
+  store_skeleton(model.skeleton, out);
+  store_influences(model, sections::kModelPrefix, out);
   PointMatrix rest_points;
   evaluate(model, rest_pose(model.skeleton), rest_points);
   out.set_points(model::sections::kRestPoints, rest_points);
@@ -166,29 +202,7 @@ Result<AnimationSpaceModel> load(const container::ModelContainer& in, const std:
   if (!skeleton) return skeleton.error();
   model.skeleton = std::move(*skeleton);
 
-  auto offsets = in.int_matrix(sections::kInfluenceOffsets, 1);
-  if (!offsets) return offsets.error();
-  auto bones = in.int_matrix(sections::kInfluenceBones, 1);
-  if (!bones) return bones.error();
-  auto positions = in.double_matrix(sections::kPositions, 4);
-  if (!positions) return positions.error();
-  if (positions->rows() != bones->rows()) {
-    return shape_error(source, sections::kPositions, std::to_string(bones->rows()) + "×4", positions->rows(),
-                       positions->cols());
-  }
-  model.influences.offsets.assign(offsets->data(), offsets->data() + offsets->size());
-  model.influences.bones.assign(bones->data(), bones->data() + bones->size());
-  model.positions = positions->transpose();
-  if (in.has_section(sections::kTangents)) {
-    auto tangents = in.double_matrix(sections::kTangents, 8);
-    if (!tangents) return tangents.error();
-    if (tangents->rows() != bones->rows()) {
-      return shape_error(source, sections::kTangents, std::to_string(bones->rows()) + "×8", tangents->rows(),
-                         tangents->cols());
-    }
-    model.tangent_s = tangents->leftCols<4>().transpose();
-    model.tangent_t = tangents->rightCols<4>().transpose();
-  }
+  ANIMSPACE_RETURN_IF_ERROR(load_influences(in, sections::kModelPrefix, source, model));
   if (in.has_section(model::sections::kFaces)) {
     auto faces = in.faces(model::sections::kFaces);
     if (!faces) return faces.error();

@@ -23,6 +23,9 @@
 namespace animspace::animation_space {
 
 namespace sections {
+// The influence sections below are this prefix + "influence_offsets", "influence_bones",
+// "positions", "tangents"; LOD levels store the same four under "lod.<l>." (core/lod/lod_io.h).
+inline constexpr const char* kModelPrefix = "animspace.";
 inline constexpr const char* kInfluenceOffsets = "animspace.influence_offsets";
 inline constexpr const char* kInfluenceBones = "animspace.influence_bones";
 inline constexpr const char* kPositions = "animspace.positions";
@@ -59,6 +62,13 @@ Result<StoredMetrics> load_metrics(const container::ModelContainer& in, int bone
 
 // The rest pose G_j = Ĝ_j of the model's skeleton.
 TransformList rest_pose(const Skeleton& skeleton);
+
+// The four influence sections of `model` (offsets, bones, positions, optional tangents) under
+// `prefix`, and reading them back into `model` (sizes checked against each other, not validated:
+// the caller validates the assembled model). Errors name `source` and the section.
+void store_influences(const AnimationSpaceModel& model, const std::string& prefix, container::ModelContainer& out);
+Status load_influences(const container::ModelContainer& in, const std::string& prefix, const std::string& source,
+                       AnimationSpaceModel& model);
 
 // Skeleton sections alone (shared with other kinds that carry a rig).
 void store_skeleton(const Skeleton& skeleton, container::ModelContainer& out);

@@ -1,7 +1,9 @@
 #include "core/animspace/skeleton.h"
 
 #include <cmath>
+#include <random>
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 
 namespace animspace::animation_space {
@@ -114,6 +116,27 @@ Status validate_pose(const Skeleton& skeleton, const TransformList& globals, con
     }
   }
   return Status::Ok();
+}
+
+std::vector<TransformList> random_joint_rotation_poses(const Skeleton& skeleton, int count, double max_angle,
+                                                       uint64_t seed) {
+  std::mt19937_64 engine(seed);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> angle(-max_angle, max_angle);
+  const TransformList rest_joints = rest_joint_transforms(skeleton);
+  std::vector<TransformList> poses;
+  poses.reserve(static_cast<size_t>(std::max(count, 0)));
+  for (int p = 0; p < count; ++p) {
+    TransformList joints = rest_joints;
+    for (size_t j = 1; j < joints.size(); ++j) {
+      const double x = normal(engine), y = normal(engine), z = normal(engine);
+      const Eigen::Vector3d axis = Eigen::Vector3d(x, y, z).normalized();
+      joints[j].topLeftCorner<3, 3>() =
+          joints[j].topLeftCorner<3, 3>() * Eigen::AngleAxisd(angle(engine), axis).toRotationMatrix();
+    }
+    poses.push_back(global_transforms(skeleton, joints));
+  }
+  return poses;
 }
 
 }  // namespace animspace::animation_space

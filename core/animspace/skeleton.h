@@ -62,4 +62,11 @@ Transform affine_inverse(const Transform& transform);
 // A rigid transform: rotation R (3×3, orthonormal) then translation t.
 Transform make_transform(const Eigen::Matrix3d& rotation, const Eigen::Vector3d& translation);
 
+// `count` random poses: every non-root joint turned, in its rest frame about its origin, by an
+// angle uniform in [−max_angle, max_angle] (radians) about a uniformly random axis; translations
+// stay the rest ones (§3.3.1's "rotations, fixed translations"). Deterministic for a seed. How
+// P = E[GᵀG] is estimated for a rig that comes without example poses.
+std::vector<TransformList> random_joint_rotation_poses(const Skeleton& skeleton, int count, double max_angle,
+                                                       uint64_t seed);
+
 }  // namespace animspace::animation_space

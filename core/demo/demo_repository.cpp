@@ -3,6 +3,8 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit.h"
 #include "core/animspace/tangents.h"
+#include "core/lod/lod_io.h"
+#include "core/lod/simplify.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
@@ -193,9 +195,15 @@ Result<container::ModelContainer> make_demo_animation_space_container(int frames
   auto metrics = animation_space::stored_metrics_from_poses(*model, examples.poses);
   if (!metrics) return metrics.error();
 
+  // Discrete levels of detail under the same metric (Merry 2007 ch. 6, §7.3): memoryless APS in
+  // animation space with influence simplification.
+  auto progressive = lod::build_progressive_mesh(*model, metrics->metrics);
+  if (!progressive) return progressive.error();
+
   container::ModelContainer out;
   animation_space::store(*model, out);
   animation_space::store_metrics(*metrics, out);
+  lod::store_levels(lod::make_levels(*progressive), out);
   out.metadata()["description"] =
       "Animation-space model of the bending arm, fitted (Merry 2007 section 4.1) to every other frame of the "
       "expensive rig: it learns the biceps bulge and the kept elbow volume that linear blend skinning loses.";

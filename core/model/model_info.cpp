@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "core/animspace/animspace_io.h"
+#include "core/lod/lod_io.h"
 
 namespace animspace::model {
 namespace {
@@ -147,6 +148,11 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     if (positions->rows() != bones->rows()) {
       return shape_error(source, animation_space::sections::kPositions, std::to_string(bones->rows()) + "×4",
                          positions->rows(), positions->cols());
+    }
+    if (model.has_section(lod::sections::kErrors)) {
+      auto errors = model.double_matrix(lod::sections::kErrors, 1);
+      if (!errors) return errors.error();
+      info.lod_level_count = static_cast<int>(errors->rows());
     }
   }
   if (info.kind == ModelKind::kPmsc || info.kind == ModelKind::kCrossPmsc) {

@@ -8,6 +8,7 @@
 #include <google/protobuf/util/json_util.h>
 
 #include "clients/cpp/cli/fit.h"
+#include "clients/cpp/cli/lod.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/container/model_container.h"
@@ -227,12 +228,18 @@ int main(int argc, char** argv) {
   auto* fit = animspace::cli::add_fit(app, fit_args);
   animspace::cli::ImportRigArgs import_rig_args;
   auto* import_rig = animspace::cli::add_import_rig(app, import_rig_args);
+  animspace::cli::BuildLodArgs build_lod_args;
+  auto* build_lod = animspace::cli::add_build_lod(app, build_lod_args);
+  animspace::cli::ExportLodArgs export_lod_args;
+  auto* export_lod = animspace::cli::add_export_lod(app, export_lod_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
     if (*train_pmsc) return animspace::cli::run_train_pmsc(train_pmsc_args, g.json);
     if (*fit) return animspace::cli::run_fit(fit_args, g.json);
     if (*import_rig) return animspace::cli::run_import_rig(import_rig_args, g.json);
+    if (*build_lod) return animspace::cli::run_build_lod(build_lod_args, g.json);
+    if (*export_lod) return animspace::cli::run_export_lod(export_lod_args, g.json);
     if (*list) return run_list(g);
     if (*health) return run_health(g);
     if (*info) return run_server_info(g);

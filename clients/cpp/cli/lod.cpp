@@ -1,0 +1,208 @@
+#include "clients/cpp/cli/lod.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+
+#include "clients/cpp/cli/offline_common.h"
+#include "core/animspace/animspace_io.h"
+#include "core/lod/export.h"
+#include "core/lod/lod_io.h"
+#include "core/lod/simplify.h"
+#include "core/model/model_info.h"
+
+namespace animspace::cli {
+namespace {
+
+namespace as = animation_space;
+
+int fail(const char* command, const std::string& message) {
+  std::fprintf(stderr, "animspace %s: %s\n", command, message.c_str());
+  return 2;
+}
+
+}  // namespace
+
+CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "build-lod",
+      "Offline: add levels of detail to an animation-space model — memoryless appearance-preserving simplification "
+      "in animation space with influence simplification (Merry 2007 ch. 6), levels halving the influences (§7.3) — "
+      "and write a model version");
+  cmd->add_option("input", a.input, "An animation-space model.anim (from fit or import-rig)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmd->add_flag("--no-influence-simplification", a.no_influence_simplification,
+                "Edge collapses only (no §6.3 influence removals)");
+  cmd->add_option("--max-levels", a.max_levels, "Levels to keep, level 0 included")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  cmd->add_option("--max-normal-deviation", a.max_normal_deviation_degrees,
+                  "Refuse collapses that turn a face by more than this (degrees, rest pose)")
+      ->check(CLI::Range(1.0, 180.0))
+      ->capture_default_str();
+  cmd->add_option("--sample-poses", a.sample_poses,
+                  "For a model without stored metrics: estimate P = E[GᵀG] from this many random poses")
+      ->check(CLI::Range(0, 100000));
+  cmd->add_option("--max-joint-angle", a.max_joint_angle_degrees, "Random poses: largest joint rotation, degrees")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
+  cmd->add_option("--seed", a.seed, "Random poses: seed")->capture_default_str();
+  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")->required();
+  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
+  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  return cmd;
+}
+
+int run_build_lod(const BuildLodArgs& a, bool json) {
+  auto in = container::read_file(a.input);
+  if (!in) return fail("build-lod", in.error().message);
+  auto model = as::load(*in, a.input);
+  if (!model) return fail("build-lod", model.error().message);
+  container::ModelContainer out = *in;
+  as::StoredMetrics stored;
+  if (a.sample_poses > 0) {
+    auto sampled = as::stored_metrics_from_poses(
+        *model, as::random_joint_rotation_poses(model->skeleton, a.sample_poses,
+                                                a.max_joint_angle_degrees * std::numbers::pi / 180, a.seed));
+    if (!sampled) return fail("build-lod", sampled.error().message);
+    stored = std::move(*sampled);
+    as::store_metrics(stored, out);
+    out.metadata()["animspace.metrics"] = "sampled: " + std::to_string(a.sample_poses) + " random poses up to " +
+                                          std::to_string(a.max_joint_angle_degrees) + " degrees per joint";
+  } else {
+    auto loaded = as::load_metrics(*in, model->bone_count(), a.input);
+    if (!loaded) {
+      return fail("build-lod", loaded.error().message + "; give --sample-poses N to estimate them from random poses");
+    }
+    stored = std::move(*loaded);
+  }
+  lod::SimplifyOptions options;
+  options.influence_simplification = !a.no_influence_simplification;
+  options.max_normal_deviation_degrees = a.max_normal_deviation_degrees;
+  const auto start = std::chrono::steady_clock::now();
+  auto pm = lod::build_progressive_mesh(*model, stored.metrics, options);
+  if (!pm) return fail("build-lod", pm.error().message);
+  const lod::LodLevels levels = lod::make_levels(*pm, a.max_levels);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  lod::store_levels(levels, out);
+  out.metadata()["lod.influence_simplification"] = options.influence_simplification ? "true" : "false";
+  const auto path = model_output_path(a.output, a.model, a.version);
+  if (auto written = write_model_file(path, out); !written.ok()) return fail("build-lod", written.error().message);
+
+  if (json) {
+    std::printf("{\"output\": \"%s\", \"seconds\": %g, \"steps\": %zu, \"levels\": [", path.c_str(), seconds,
+                pm->steps.size());
+    for (int l = 0; l < levels.count(); ++l) {
+      const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
+      std::printf("%s{\"level\": %d, \"vertices\": %d, \"faces\": %d, \"influences\": %d, \"error\": %g}",
+                  l ? ", " : "", l, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
+                  level.model.influences.influence_count(), level.error);
+    }
+    std::printf("]}\n");
+  } else {
+    std::printf("progressive mesh: %zu steps in %.2f s\n%6s %9s %9s %11s %12s\n", pm->steps.size(), seconds, "level",
+                "vertices", "faces", "influences", "ε^l");
+    for (int l = 0; l < levels.count(); ++l) {
+      const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
+      std::printf("%6d %9d %9d %11d %12.4g\n", l, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
+                  level.model.influences.influence_count(), level.error);
+    }
+    std::printf("wrote %s\n", path.c_str());
+  }
+  return 0;
+}
+
+CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "export-lod",
+      "Offline: write one level of detail of an animation-space model, posed, as OBJ, PLY or glTF 2.0 (.glb/.gltf), "
+      "ordered for the vertex cache (meshoptimizer); the level is given or chosen for a view by eq. 7.2");
+  cmd->add_option("input", a.input, "An animation-space model.anim with levels (build-lod)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  auto* level = cmd->add_option("--level", a.level, "Level to write (0 = full detail)")->check(CLI::NonNegativeNumber);
+  auto* tolerance = cmd->add_option("--tolerance-px", a.tolerance_pixels, "Pixel error tolerance p (eq. 7.2)")
+                        ->check(CLI::PositiveNumber);
+  cmd->add_option("--distance", a.distance, "Camera distance to the model's bounding-sphere centre, model units")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--fov", a.fov_degrees, "Horizontal field of view 2θ, degrees")
+      ->check(CLI::Range(1.0, 179.0))
+      ->capture_default_str();
+  cmd->add_option("--width", a.viewport_width, "Viewport width w, pixels")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--frame", a.frame, "Pose: the model's stored training frame K (default: the rest pose)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("-o,--output", a.output, "Output mesh: .obj, .ply, .glb or .gltf")->required();
+  level->excludes(tolerance);
+  return cmd;
+}
+
+int run_export_lod(const ExportLodArgs& a, bool json) {
+  auto in = container::read_file(a.input);
+  if (!in) return fail("export-lod", in.error().message);
+  auto model = as::load(*in, a.input);
+  if (!model) return fail("export-lod", model.error().message);
+  auto levels = lod::load_levels(*in, *model, a.input);
+  if (!levels) return fail("export-lod", levels.error().message);
+
+  int chosen = 0;
+  double tolerated = 0;
+  if (a.level >= 0) {
+    if (a.level >= levels->count()) {
+      return fail("export-lod", "--level: expected 0 … " + std::to_string(levels->count() - 1) + ", got " +
+                                    std::to_string(a.level));
+    }
+    chosen = a.level;
+  } else if (a.tolerance_pixels > 0) {
+    if (a.distance <= 0) return fail("export-lod", "--tolerance-px needs --distance (camera to the model)");
+    auto stored = as::load_metrics(*in, model->bone_count(), a.input);
+    if (!stored) return fail("export-lod", stored.error().message);
+    // Eq. 7.2 uses the least depth of any point of the bounding sphere (§7.3).
+    const double depth = a.distance - stored->bounding_sphere.radius;
+    if (depth > 0) {
+      lod::LodView view;
+      view.tolerance_pixels = a.tolerance_pixels;
+      view.viewport_width_pixels = a.viewport_width;
+      view.horizontal_fov_radians = a.fov_degrees * std::numbers::pi / 180;
+      view.nearest_depth = depth;
+      auto e = lod::tolerated_error(view);
+      if (!e) return fail("export-lod", e.error().message);
+      tolerated = *e;
+      // A discrete file cannot geomorph: take the finer of the two bracketing levels.
+      chosen = static_cast<int>(std::floor(lod::select_level(*levels, tolerated)));
+    }
+  }
+  const lod::LodLevel& level = levels->levels[static_cast<size_t>(chosen)];
+
+  as::TransformList pose = model->skeleton.rest;
+  if (a.frame >= 0) {
+    auto rows = in->double_matrix(model::sections::kSequenceBoneTransforms, 16 * model->bone_count());
+    if (!rows) return fail("export-lod", rows.error().message);
+    if (a.frame >= rows->rows()) {
+      return fail("export-lod", "--frame: expected 0 … " + std::to_string(rows->rows() - 1) + ", got " +
+                                    std::to_string(a.frame));
+    }
+    pose = as::pose_from_row(*rows, a.frame, model->bone_count());
+  }
+  lod::PosedMesh mesh;
+  as::evaluate(level.model, pose, mesh.points);
+  mesh.faces = level.model.faces;
+  if (level.model.has_tangents()) as::evaluate_normals(level.model, pose, mesh.normals);
+  if (auto written = lod::write_posed_mesh(a.output, mesh); !written.ok()) {
+    return fail("export-lod", written.error().message);
+  }
+  if (json) {
+    std::printf("{\"output\": \"%s\", \"level\": %d, \"error\": %g, \"tolerated_error\": %g, \"vertices\": %d, "
+                "\"faces\": %d}\n",
+                a.output.c_str(), chosen, level.error, tolerated, level.model.vertex_count(),
+                static_cast<int>(level.model.faces.rows()));
+  } else {
+    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.error,
+                a.tolerance_pixels > 0 ? (", tolerated " + std::to_string(tolerated)).c_str() : "",
+                level.model.vertex_count(), static_cast<int>(level.model.faces.rows()), a.output.c_str());
+  }
+  return 0;
+}
+
+}  // namespace animspace::cli

@@ -1,0 +1,43 @@
+// `animspace build-lod`: add discrete levels of detail to an animation-space model version
+// (Merry 2007 ch. 6, §7.3; core/lod), and `animspace export-lod`: write one level, posed, as a
+// mesh file a render farm or a DCC tool opens (OBJ, PLY, glTF 2.0).
+#pragma once
+
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace animspace::cli {
+
+struct BuildLodArgs {
+  std::string input;  // model.anim of an animation-space model
+  bool no_influence_simplification = false;
+  int max_levels = 16;
+  double max_normal_deviation_degrees = 90;
+  // Metrics when the model stores none (an imported rig): P from random joint rotations.
+  int sample_poses = 0;
+  double max_joint_angle_degrees = 35;
+  unsigned seed = 1;
+  std::string output;
+  std::string model;
+  unsigned version = 0;
+};
+
+struct ExportLodArgs {
+  std::string input;
+  int level = -1;                // explicit level, or chosen from the view below
+  double tolerance_pixels = 0;   // eq. 7.2: p
+  double distance = 0;           // camera to bounding-sphere centre, model units
+  double fov_degrees = 45;       // horizontal field of view 2θ
+  double viewport_width = 1920;  // w, pixels
+  int frame = -1;                // a stored training pose (sequence.bone_transforms); default rest
+  std::string output;
+};
+
+CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& args);
+int run_build_lod(const BuildLodArgs& args, bool json);
+
+CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& args);
+int run_export_lod(const ExportLodArgs& args, bool json);
+
+}  // namespace animspace::cli

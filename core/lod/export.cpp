@@ -1,0 +1,242 @@
+#include "core/lod/export.h"
+
+#include <cassert>
+#include <cstdint>
+#include <cstring>
+#include <exception>
+#include <limits>
+#include <new>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <meshoptimizer.h>
+// The implementation is compiled once, in core/animspace/tiny_gltf_impl.cpp; the configuration
+// macros (no stb_image, no external images) come from core/CMakeLists.txt.
+#include <tiny_gltf.h>
+
+#include "core/common/atomic_file.h"
+#include "core/mesh_io/text_io.h"
+#include "core/mesh_io/triangle_mesh_io.h"
+
+namespace animspace::lod {
+namespace {
+
+enum class ExportFormat { kObj, kPly, kGlb, kGltf };
+
+Result<ExportFormat> format_of(const std::filesystem::path& path) {
+  const std::string extension = mesh_io::lowercase_extension(path);
+  if (extension == ".obj") return ExportFormat::kObj;
+  if (extension == ".ply") return ExportFormat::kPly;
+  if (extension == ".glb") return ExportFormat::kGlb;
+  if (extension == ".gltf") return ExportFormat::kGltf;
+  return make_error(ErrorCode::kInvalidArgument,
+                    path.string() + ": unknown posed mesh file extension '" + path.extension().string() +
+                        "' (supported: .obj, .ply, .glb, .gltf)");
+}
+
+// The conditions every writer needs; `destination` prefixes the messages.
+Status check_mesh(const PosedMesh& mesh, const std::string& destination) {
+  const Eigen::Index vertex_count = mesh.points.rows();
+  if (vertex_count == 0) return make_error(ErrorCode::kInvalidArgument, destination + ": mesh has no vertices");
+  if (mesh.faces.rows() == 0) return make_error(ErrorCode::kInvalidArgument, destination + ": mesh has no faces");
+  for (Eigen::Index v = 0; v < vertex_count; ++v) {
+    if (!mesh.points.row(v).allFinite()) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        destination + ": vertex " + std::to_string(v) + " has a non-finite coordinate");
+    }
+  }
+  for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
+    if (mesh.faces.row(f).minCoeff() < 0 || mesh.faces.row(f).maxCoeff() >= vertex_count) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        destination + ": face " + std::to_string(f) + " has a vertex index outside 0.." +
+                            std::to_string(vertex_count - 1));
+    }
+  }
+  if (mesh.normals.rows() != 0) {
+    if (mesh.normals.rows() != vertex_count) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        destination + ": " + std::to_string(mesh.normals.rows()) + " normals for " +
+                            std::to_string(vertex_count) + " vertices");
+    }
+    for (Eigen::Index v = 0; v < vertex_count; ++v) {
+      if (!mesh.normals.row(v).allFinite()) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          destination + ": normal " + std::to_string(v) + " has a non-finite component");
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+template <typename Matrix>
+void append_bytes(std::vector<unsigned char>& out, const Matrix& matrix) {
+  const auto* bytes = reinterpret_cast<const unsigned char*>(matrix.data());
+  out.insert(out.end(), bytes, bytes + sizeof(typename Matrix::Scalar) * static_cast<size_t>(matrix.size()));
+}
+
+// Appends a tightly packed buffer view over buffer 0 and an accessor on it; returns the accessor.
+int add_accessor(tinygltf::Model& model, size_t byte_offset, size_t byte_length, int target, int component_type,
+                 int type, size_t count) {
+  tinygltf::BufferView view;
+  view.buffer = 0;
+  view.byteOffset = byte_offset;
+  view.byteLength = byte_length;
+  view.target = target;
+  model.bufferViews.push_back(std::move(view));
+  tinygltf::Accessor accessor;
+  accessor.bufferView = static_cast<int>(model.bufferViews.size() - 1);
+  accessor.byteOffset = 0;
+  accessor.componentType = component_type;
+  accessor.type = type;
+  accessor.count = count;
+  model.accessors.push_back(std::move(accessor));
+  return static_cast<int>(model.accessors.size() - 1);
+}
+
+Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) {
+  const char* kind = binary ? "glb" : "gltf";
+  ANIMSPACE_RETURN_IF_ERROR(check_mesh(mesh, kind));
+  const size_t vertex_count = static_cast<size_t>(mesh.points.rows());
+  const size_t index_count = 3 * static_cast<size_t>(mesh.faces.rows());
+  const bool has_normals = mesh.normals.rows() != 0;
+  const size_t position_bytes = 3 * sizeof(float) * vertex_count;
+  const size_t normal_bytes = has_normals ? position_bytes : 0;
+  const size_t index_bytes = sizeof(uint32_t) * index_count;
+  // glTF sizes are uint32 in a .glb header; keep well inside that (and inside int byte offsets).
+  if (position_bytes + normal_bytes + index_bytes > size_t{std::numeric_limits<int32_t>::max()} - (size_t{1} << 20)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      std::string(kind) + ": mesh of " + std::to_string(vertex_count) + " vertices and " +
+                          std::to_string(index_count / 3) + " faces is too large for a glTF buffer");
+  }
+  try {
+    tinygltf::Model model;
+    model.asset.version = "2.0";
+    model.asset.generator = "animspace";
+
+    tinygltf::Buffer buffer;
+    buffer.data.reserve(position_bytes + normal_bytes + index_bytes);
+    append_bytes(buffer.data, mesh.points);  // row-major float32: x0 y0 z0 x1 …
+    if (has_normals) append_bytes(buffer.data, mesh.normals);
+    append_bytes(buffer.data, mesh.faces);  // int32 indices in [0, #V): the same bytes as uint32
+    model.buffers.push_back(std::move(buffer));
+
+    tinygltf::Primitive primitive;
+    primitive.mode = TINYGLTF_MODE_TRIANGLES;
+    const int position = add_accessor(model, 0, position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
+                                      TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
+    // min/max are required for POSITION; float32 values are exact in double.
+    const Eigen::RowVector3f lo = mesh.points.colwise().minCoeff();
+    const Eigen::RowVector3f hi = mesh.points.colwise().maxCoeff();
+    model.accessors[static_cast<size_t>(position)].minValues = {lo.x(), lo.y(), lo.z()};
+    model.accessors[static_cast<size_t>(position)].maxValues = {hi.x(), hi.y(), hi.z()};
+    primitive.attributes["POSITION"] = position;
+    if (has_normals) {
+      primitive.attributes["NORMAL"] = add_accessor(model, position_bytes, normal_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
+                                                    TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
+    }
+    primitive.indices =
+        add_accessor(model, position_bytes + normal_bytes, index_bytes, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER,
+                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, index_count);
+
+    tinygltf::Mesh gltf_mesh;
+    gltf_mesh.primitives.push_back(std::move(primitive));
+    model.meshes.push_back(std::move(gltf_mesh));
+    tinygltf::Node node;
+    node.mesh = 0;
+    model.nodes.push_back(std::move(node));
+    tinygltf::Scene scene;
+    scene.nodes.push_back(0);
+    model.scenes.push_back(std::move(scene));
+    model.defaultScene = 0;
+
+    tinygltf::TinyGLTF writer;
+    std::ostringstream stream(std::ios::out | std::ios::binary);
+    if (!writer.WriteGltfSceneToStream(&model, stream, /*prettyPrint=*/!binary, /*writeBinary=*/binary) ||
+        !stream) {
+      return make_error(ErrorCode::kInternal, std::string(kind) + ": tinygltf could not serialise the document");
+    }
+    return std::move(stream).str();
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted, std::string(kind) + ": out of memory while serialising");
+  } catch (const std::exception& exception) {
+    return make_error(ErrorCode::kInternal,
+                      std::string(kind) + ": tinygltf failed while serialising: " + exception.what());
+  }
+}
+
+}  // namespace
+
+PosedMesh optimise_for_rendering(const PosedMesh& mesh) {
+  const size_t vertex_count = static_cast<size_t>(mesh.points.rows());
+  const size_t index_count = 3 * static_cast<size_t>(mesh.faces.rows());
+  assert(mesh.normals.rows() == 0 || mesh.normals.rows() == mesh.points.rows());
+  assert(mesh.faces.size() == 0 ||
+         (mesh.faces.minCoeff() >= 0 && mesh.faces.maxCoeff() < static_cast<int32_t>(vertex_count)));
+
+  PosedMesh out;
+  if (index_count == 0) {  // every vertex is unused
+    out.points.resize(0, 3);
+    out.faces.resize(0, 3);
+    out.normals.resize(0, 3);
+    return out;
+  }
+  std::vector<unsigned int> indices(index_count);
+  for (size_t i = 0; i < index_count; ++i) indices[i] = static_cast<unsigned int>(mesh.faces.data()[i]);
+
+  std::vector<unsigned int> cache_order(index_count);
+  meshopt_optimizeVertexCache(cache_order.data(), indices.data(), index_count, vertex_count);
+  std::vector<unsigned int> remap(vertex_count);
+  const size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), cache_order.data(), index_count, vertex_count);
+
+  out.faces.resize(static_cast<Eigen::Index>(index_count / 3), 3);
+  static_assert(sizeof(unsigned int) == sizeof(int32_t));
+  meshopt_remapIndexBuffer(reinterpret_cast<unsigned int*>(out.faces.data()), cache_order.data(), index_count,
+                           remap.data());
+  out.points.resize(static_cast<Eigen::Index>(used), 3);
+  meshopt_remapVertexBuffer(out.points.data(), mesh.points.data(), vertex_count, 3 * sizeof(float), remap.data());
+  if (mesh.normals.rows() != 0) {
+    out.normals.resize(static_cast<Eigen::Index>(used), 3);
+    meshopt_remapVertexBuffer(out.normals.data(), mesh.normals.data(), vertex_count, 3 * sizeof(float),
+                              remap.data());
+  } else {
+    out.normals.resize(0, 3);
+  }
+  return out;
+}
+
+Result<std::string> serialize_glb(const PosedMesh& mesh) { return serialize_gltf_document(mesh, true); }
+
+Result<std::string> serialize_gltf(const PosedMesh& mesh) { return serialize_gltf_document(mesh, false); }
+
+Status write_posed_mesh(const std::filesystem::path& path, const PosedMesh& mesh) {
+  const auto format = format_of(path);
+  if (!format.ok()) return format.error();
+  ANIMSPACE_RETURN_IF_ERROR(check_mesh(mesh, path.string()));
+  try {
+    const PosedMesh optimised = optimise_for_rendering(mesh);
+    switch (*format) {
+      case ExportFormat::kObj:
+      case ExportFormat::kPly: {
+        TriangleMesh triangles{optimised.points, optimised.faces};
+        return write_file_atomically(path, *format == ExportFormat::kObj ? mesh_io::serialize_obj(triangles)
+                                                                          : mesh_io::serialize_ply(triangles));
+      }
+      case ExportFormat::kGlb:
+      case ExportFormat::kGltf: {
+        auto bytes = *format == ExportFormat::kGlb ? serialize_glb(optimised) : serialize_gltf(optimised);
+        if (!bytes.ok()) {
+          Error error = bytes.error();
+          error.message = path.string() + ": " + error.message;
+          return error;
+        }
+        return write_file_atomically(path, *bytes);
+      }
+    }
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted, path.string() + ": out of memory while writing");
+  }
+  return make_error(ErrorCode::kInternal, path.string() + ": unhandled posed mesh format");
+}
+
+}  // namespace animspace::lod

@@ -1,0 +1,40 @@
+// Writing a posed mesh for a render farm or a DCC tool: OBJ, PLY, glTF 2.0 (.gltf / .glb).
+//
+// Before writing, the triangles are reordered for the post-transform vertex cache and the
+// vertices for fetch locality with meshoptimizer (Debian's libmeshoptimizer), which is what a
+// renderer wants from a mesh it will draw many times; positions are float32.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "core/common/result.h"
+#include "core/common/types.h"
+
+namespace animspace::lod {
+
+// A posed mesh, optionally with unit normals (#V × 3, or empty).
+struct PosedMesh {
+  PointMatrix points;
+  FaceMatrix faces;
+  PointMatrix normals;
+};
+
+// The same mesh with faces in meshopt_optimizeVertexCache order and vertices in
+// meshopt_optimizeVertexFetch order (normals follow their vertices). Vertices no face uses are
+// dropped. The set of triangles (as point triples, each with its orientation) is unchanged.
+PosedMesh optimise_for_rendering(const PosedMesh& mesh);
+
+// The glTF 2.0 document (one mesh, one primitive: POSITION with min/max, NORMAL when present,
+// uint32 indices) as .glb bytes or as .gltf JSON with an embedded base64 buffer.
+// Errors: kInvalidArgument for an empty mesh, non-finite values, indices out of range or
+// normals whose row count differs from the points'.
+Result<std::string> serialize_glb(const PosedMesh& mesh);
+Result<std::string> serialize_gltf(const PosedMesh& mesh);
+
+// Writes `mesh` after optimise_for_rendering, choosing the format by the extension of `path`
+// (.obj, .ply, .glb, .gltf, any case), atomically. OBJ/PLY carry positions and faces.
+// Errors: kInvalidArgument for an unknown extension or a bad mesh (as above); kIo on failure.
+Status write_posed_mesh(const std::filesystem::path& path, const PosedMesh& mesh);
+
+}  // namespace animspace::lod

@@ -1,0 +1,167 @@
+#include "core/lod/levels.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+namespace animspace::lod {
+
+namespace as = animation_space;
+
+namespace {
+
+// Where each vertex went: a collapse u → v sends u to v; follow until a live vertex.
+int32_t representative(std::vector<int32_t>& parent, int32_t v) {
+  int32_t root = v;
+  while (parent[static_cast<size_t>(root)] != root) root = parent[static_cast<size_t>(root)];
+  while (parent[static_cast<size_t>(v)] != root) {
+    const int32_t next = parent[static_cast<size_t>(v)];
+    parent[static_cast<size_t>(v)] = root;
+    v = next;
+  }
+  return root;
+}
+
+LodLevel cut_level(const MeshState& state, const as::Skeleton& skeleton, double error, int64_t steps) {
+  LodLevel level;
+  level.model = state.to_model(skeleton, &level.vertex_ids);
+  level.error = error;
+  level.step_count = steps;
+  return level;
+}
+
+// Fills finer.coarser_vertex from the collapse forest.
+void link_levels(LodLevel& finer, const LodLevel& coarser, std::vector<int32_t>& parent, int input_vertices) {
+  std::vector<int32_t> compact(static_cast<size_t>(input_vertices), -1);
+  for (size_t k = 0; k < coarser.vertex_ids.size(); ++k) compact[static_cast<size_t>(coarser.vertex_ids[k])] = static_cast<int32_t>(k);
+  finer.coarser_vertex.resize(finer.vertex_ids.size());
+  for (size_t k = 0; k < finer.vertex_ids.size(); ++k) {
+    const int32_t target = compact[static_cast<size_t>(representative(parent, finer.vertex_ids[k]))];
+    assert(target >= 0);
+    finer.coarser_vertex[k] = target;
+  }
+}
+
+}  // namespace
+
+LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels) {
+  assert(max_levels >= 1);
+  LodLevels lods;
+  MeshState state = mesh.state_after(0);
+  std::vector<int32_t> parent(static_cast<size_t>(mesh.input_vertex_count));
+  for (int32_t v = 0; v < mesh.input_vertex_count; ++v) parent[static_cast<size_t>(v)] = v;
+  lods.levels.push_back(cut_level(state, mesh.skeleton, 0, 0));
+  double error = 0;
+  int budget = state.live_influence_count() / 2;
+  for (size_t k = 0; k < mesh.steps.size() && lods.count() < max_levels; ++k) {
+    const Simplification& step = mesh.steps[k];
+    state.apply(step);
+    error = std::max(error, step.cost);
+    if (step.kind == SimplificationKind::kEdgeCollapse) parent[static_cast<size_t>(step.vertex)] = step.target;
+    const bool last = k + 1 == mesh.steps.size();
+    if (state.live_influence_count() <= budget || (last && lods.levels.back().step_count < static_cast<int64_t>(k + 1))) {
+      lods.levels.push_back(cut_level(state, mesh.skeleton, error, static_cast<int64_t>(k + 1)));
+      link_levels(lods.levels[lods.levels.size() - 2], lods.levels.back(), parent, mesh.input_vertex_count);
+      budget = state.live_influence_count() / 2;
+    }
+  }
+  return lods;
+}
+
+as::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveMesh& mesh, int vertex_count,
+                                                 std::vector<int32_t>* vertex_ids, double* error) {
+  MeshState state = mesh.state_after(0);
+  double worst = 0;
+  for (size_t k = 0; k < mesh.steps.size() && state.live_vertex_count() > vertex_count; ++k) {
+    state.apply(mesh.steps[k]);
+    worst = std::max(worst, mesh.steps[k].cost);
+  }
+  if (error) *error = worst;
+  return state.to_model(mesh.skeleton, vertex_ids);
+}
+
+Geomorph geomorph(const LodLevels& lods, int level) {
+  assert(level >= 0 && level + 1 < lods.count());
+  const LodLevel& fine = lods.levels[static_cast<size_t>(level)];
+  const LodLevel& coarse = lods.levels[static_cast<size_t>(level) + 1];
+  const as::InfluenceSets& fi = fine.model.influences;
+  const as::InfluenceSets& ci = coarse.model.influences;
+  Geomorph morph;
+  std::vector<Eigen::Vector4d> position;
+  std::vector<Eigen::Vector4d> delta;
+  for (int v = 0; v < fine.model.vertex_count(); ++v) {
+    const int c = fine.coarser_vertex[static_cast<size_t>(v)];
+    int i = fi.begin(v);
+    int j = ci.begin(c);
+    // Merge the two sorted bone lists: p^l and p^{l+1} on their union.
+    while (i < fi.end(v) || j < ci.end(c)) {
+      const int32_t bi = i < fi.end(v) ? fi.bones[static_cast<size_t>(i)] : INT32_MAX;
+      const int32_t bj = j < ci.end(c) ? ci.bones[static_cast<size_t>(j)] : INT32_MAX;
+      const int32_t bone = std::min(bi, bj);
+      const Eigen::Vector4d p = bi == bone ? Eigen::Vector4d(fine.model.positions.col(i++)) : Eigen::Vector4d::Zero();
+      const Eigen::Vector4d q = bj == bone ? Eigen::Vector4d(coarse.model.positions.col(j++)) : Eigen::Vector4d::Zero();
+      morph.aligned.bones.push_back(bone);
+      position.push_back(p);
+      delta.push_back(q - p);
+    }
+    morph.aligned.offsets.push_back(static_cast<int32_t>(morph.aligned.bones.size()));
+  }
+  morph.position.resize(4, static_cast<Eigen::Index>(position.size()));
+  morph.delta.resize(4, static_cast<Eigen::Index>(delta.size()));
+  for (size_t k = 0; k < position.size(); ++k) {
+    morph.position.col(static_cast<Eigen::Index>(k)) = position[k];
+    morph.delta.col(static_cast<Eigen::Index>(k)) = delta[k];
+  }
+  return morph;
+}
+
+as::AnimationSpaceModel geomorphed_model(const LodLevels& lods, int level, double t) {
+  assert(t >= 0 && t <= 1);
+  const LodLevel& fine = lods.levels[static_cast<size_t>(level)];
+  const Geomorph morph = geomorph(lods, level);
+  as::AnimationSpaceModel model;
+  model.skeleton = fine.model.skeleton;
+  model.faces = fine.model.faces;
+  model.influences = morph.aligned;
+  model.positions = morph.position + t * morph.delta;  // eq. 7.1
+  return model;
+}
+
+Result<double> tolerated_error(const LodView& view) {
+  const auto bad = [](const char* field, const std::string& expected, double got) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      std::string(field) + ": expected " + expected + ", got " + std::to_string(got));
+  };
+  if (!std::isfinite(view.tolerance_pixels) || view.tolerance_pixels <= 0) {
+    return bad("tolerance_pixels", "a finite value > 0", view.tolerance_pixels);
+  }
+  if (!std::isfinite(view.viewport_width_pixels) || view.viewport_width_pixels <= 0) {
+    return bad("viewport_width_pixels", "a finite value > 0", view.viewport_width_pixels);
+  }
+  if (!std::isfinite(view.horizontal_fov_radians) || view.horizontal_fov_radians <= 0 ||
+      view.horizontal_fov_radians >= std::numbers::pi) {
+    return bad("horizontal_fov_radians", "a value in (0, π)", view.horizontal_fov_radians);
+  }
+  if (!std::isfinite(view.nearest_depth) || view.nearest_depth <= 0) {
+    return bad("nearest_depth", "a finite value > 0", view.nearest_depth);
+  }
+  const double theta = view.horizontal_fov_radians / 2;
+  return 2 * view.tolerance_pixels * view.nearest_depth * std::sin(theta) / view.viewport_width_pixels;  // eq. 7.2
+}
+
+double select_level(const LodLevels& lods, double tolerated) {
+  assert(lods.count() >= 1);
+  const int last = lods.count() - 1;
+  int k = 0;
+  for (int l = 1; l <= last; ++l) {
+    if (lods.levels[static_cast<size_t>(l)].error <= tolerated) k = l;
+  }
+  if (k == last) return last;
+  const double lo = lods.levels[static_cast<size_t>(k)].error;
+  const double hi = lods.levels[static_cast<size_t>(k) + 1].error;
+  return k + (tolerated - lo) / (hi - lo);
+}
+
+}  // namespace animspace::lod

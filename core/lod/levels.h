@@ -1,0 +1,81 @@
+// Discrete levels of detail cut from a progressive mesh, choosing one for a view, and geomorphs
+// between neighbours (Merry 2007 §7.3).
+//
+// Level 0 is the input; level l+1 is the first state of the sequence with at most half the
+// influences of level l (counted over live vertices), and so on down to the base mesh. Each level
+// carries ε^l, the largest cost of any step taken to reach it — a bound, in model units, on the
+// RMS deviation any one step introduced (memoryless: the steps' deviations are not summed, §8.5).
+//
+// A viewer with pixel tolerance p, viewport width w pixels, horizontal field of view 2θ and the
+// model's nearest bounding-sphere depth d may use geometric error ε = 2pd sinθ / w (eq. 7.2);
+// the real-valued level l is found by linear interpolation between the two levels whose ε^l
+// bracket ε, and the vertices are geomorphed (eq. 7.1) between ⌊l⌋ and ⌊l⌋+1.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/animspace/model.h"
+#include "core/common/result.h"
+#include "core/lod/progressive_mesh.h"
+
+namespace animspace::lod {
+
+// Geomorph data from a level to the next coarser one (§7.3): for each vertex of the finer level,
+// its position p^l and Δp = p^{l+1} − p^l on the union of both influence sets (aligned), where
+// p^{l+1} is the position of the coarser vertex it was collapsed into.
+struct Geomorph {
+  animation_space::InfluenceSets aligned;     // finer level's vertex count
+  animation_space::InfluenceVectors position;  // 4 × I_aligned, p^l
+  animation_space::InfluenceVectors delta;     // 4 × I_aligned, Δp (weight 0)
+};
+
+struct LodLevel {
+  animation_space::AnimationSpaceModel model;  // compact, vertices in input order
+  std::vector<int32_t> vertex_ids;             // input vertex of each vertex of this level
+  double error = 0;                            // ε^l (0 for level 0)
+  int64_t step_count = 0;                      // steps of the sequence applied
+  // For each vertex of this level, the vertex of level l+1 it ends up in (empty for the last).
+  std::vector<int32_t> coarser_vertex;
+};
+
+struct LodLevels {
+  std::vector<LodLevel> levels;  // levels[0] is the input
+
+  int count() const { return static_cast<int>(levels.size()); }
+};
+
+// Cuts the levels from `mesh`: each with at most half the influences of the previous one, until
+// the base mesh or `max_levels` levels (≥ 1) in all.
+LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels = 16);
+
+// The state after the first step at which at most `vertex_count` vertices are live (or the base
+// mesh), as a compact model; `error` receives the largest cost so far when not null.
+animation_space::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveMesh& mesh, int vertex_count,
+                                                              std::vector<int32_t>* vertex_ids = nullptr,
+                                                              double* error = nullptr);
+
+// Δp and the aligned influences from level `level` to `level + 1` (asserted: level + 1 < count).
+Geomorph geomorph(const LodLevels& lods, int level);
+
+// The finer level's vertices moved a fraction t ∈ [0, 1] of the way to the coarser level
+// (eq. 7.1): p = p^l + t Δp, on the finer level's connectivity.
+animation_space::AnimationSpaceModel geomorphed_model(const LodLevels& lods, int level, double t);
+
+// A view for eq. 7.2.
+struct LodView {
+  double tolerance_pixels = 1;             // p > 0
+  double viewport_width_pixels = 1024;     // w > 0
+  double horizontal_fov_radians = 0.8;     // 2θ in (0, π)
+  double nearest_depth = 1;                // d > 0: least depth of any point of the bounding sphere
+};
+
+// ε = 2pd sinθ / w (eq. 7.2). Errors: kInvalidArgument naming the field that is not finite or
+// out of range.
+Result<double> tolerated_error(const LodView& view);
+
+// The real-valued level for a tolerated error ε ≥ 0: the largest l with interpolated ε^l ≤ ε
+// (0 when ε < ε^1, the last level when ε ≥ its ε^l). Levels with equal ε^l: the coarser wins.
+double select_level(const LodLevels& lods, double tolerated);
+
+}  // namespace animspace::lod

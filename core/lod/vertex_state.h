@@ -1,0 +1,35 @@
+// One vertex of an animation-space model while it is being simplified (Merry 2007 ch. 6).
+//
+// The simplifier and the progressive mesh handle vertices one at a time — an edge collapse
+// removes one, an influence removal (§6.3) rewrites one — so a vertex is kept as its own small
+// sparse record rather than as a slice of the model's compressed rows.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/animspace/model.h"
+
+namespace animspace::lod {
+
+struct VertexState {
+  std::vector<int32_t> bones;           // strictly increasing
+  animation_space::InfluenceVectors position;  // 4 × bones.size(), weight Σ p̲_j = 1
+  // Tangent plane (§3.5): both empty, or both 4 × bones.size() with weight 0.
+  animation_space::InfluenceVectors tangent_s;
+  animation_space::InfluenceVectors tangent_t;
+
+  int influence_count() const { return static_cast<int>(bones.size()); }
+  bool has_tangents() const { return tangent_s.cols() > 0; }
+  friend bool operator==(const VertexState& a, const VertexState& b) {
+    return a.bones == b.bones && a.position == b.position && a.tangent_s == b.tangent_s &&
+           a.tangent_t == b.tangent_t;
+  }
+};
+
+// Vertex `vertex` of `model` (asserted in range).
+VertexState vertex_state(const animation_space::AnimationSpaceModel& model, int vertex);
+
+}  // namespace animspace::lod
