@@ -266,11 +266,11 @@ nlohmann::json run_dataset(const Dataset& d) {
   const int V = d.model.vertex_count();
   std::printf("\n%s: %d vertices, %d influences, %d bones, %zu poses\n", d.name.c_str(), V,
               d.model.influences.influence_count(), d.model.bone_count(), d.poses.size());
-  std::printf("%-28s %8s %9s %11s %14s %14s %9s\n", "method", "target", "vertices", "influences", "rms/diag",
+  std::printf("%-30s %8s %9s %11s %14s %14s %9s\n", "method", "target", "vertices", "influences", "rms/diag",
               "max/diag", "build s");
   const auto row = [&](const std::string& method, double fraction, const as::AnimationSpaceModel& m, double seconds) {
     const Error e = measure(d, m);
-    std::printf("%-28s %7.0f%% %9d %11d %14.6f %14.6f %9.3f\n", method.c_str(), 100 * fraction, m.vertex_count(),
+    std::printf("%-30s %7.0f%% %9d %11d %14.6f %14.6f %9.3f\n", method.c_str(), 100 * fraction, m.vertex_count(),
                 m.influences.influence_count(), e.rms, e.max, seconds);
     std::fflush(stdout);
     rows.push_back({{"dataset", d.name},

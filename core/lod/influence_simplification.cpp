@@ -75,7 +75,7 @@ Eigen::MatrixXd InfluenceSimplifier::restricted_metric(const std::vector<int32_t
   return PI;
 }
 
-Result<const InfluenceSimplifier::SetQuadric*> InfluenceSimplifier::set_quadric(const std::vector<int32_t>& bones) {
+Result<InfluenceSimplifier::SetQuadric*> InfluenceSimplifier::set_quadric(const std::vector<int32_t>& bones) {
   const auto found = sets_.find(bones);
   if (found != sets_.end()) return &found->second;
   SetQuadric set;
@@ -86,14 +86,16 @@ Result<const InfluenceSimplifier::SetQuadric*> InfluenceSimplifier::set_quadric(
                       "influence simplification on bones " + bone_list(bones) + " failed: " + quadric.error().message);
   }
   set.quadric = std::move(*quadric);
+  set.slots.resize(bones.size());
   return &sets_.emplace(bones, std::move(set)).first->second;
 }
 
 Result<const InfluenceSimplifier::SlotOperator*> InfluenceSimplifier::solution_operator(
     const std::vector<int32_t>& bones, int slot) {
-  auto key = std::make_pair(bones, slot);
-  const auto found = cache_.find(key);
-  if (found != cache_.end()) return &found->second;
+  Result<SetQuadric*> set = set_quadric(bones);
+  if (!set.ok()) return set.error();
+  std::optional<SlotOperator>& cached = (*set)->slots[static_cast<size_t>(slot)];
+  if (cached) return &*cached;
 
   // §6.3 with the bones outside I(p) eliminated (eq. 6.1): unknowns s_I (4k, bone by bone),
   // objective s_Iᵀ P_I s_I, and the five constraints s_slot = b_0..3, Σ_j s_j,w = b_4.
@@ -101,8 +103,6 @@ Result<const InfluenceSimplifier::SlotOperator*> InfluenceSimplifier::solution_o
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(kConstraintCount, 4 * k);
   A.block<4, 4>(0, 4 * Eigen::Index{slot}).setIdentity();
   for (Eigen::Index j = 0; j < k; ++j) A(4, 4 * j + 3) = 1.0;
-  Result<const SetQuadric*> set = set_quadric(bones);
-  if (!set.ok()) return set.error();
   const Eigen::MatrixXd& PI = (*set)->PI;
   Result<Eigen::MatrixXd> K = constrained_least_squares_operator((*set)->quadric, A);
   if (!K.ok()) {
@@ -116,7 +116,9 @@ Result<const InfluenceSimplifier::SlotOperator*> InfluenceSimplifier::solution_o
   const Eigen::MatrixXd F = K->leftCols<4>();
   op.cost_form = F.transpose() * PI * F;
   op.K = std::move(*K);
-  return &cache_.emplace(std::move(key), std::move(op)).first->second;
+  cached = std::move(op);
+  ++operator_count_;
+  return &*cached;
 }
 
 Status InfluenceSimplifier::check(const VertexState& state, int slot) const {

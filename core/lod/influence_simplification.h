@@ -23,6 +23,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -60,7 +61,7 @@ class InfluenceSimplifier {
   void apply(const InfluenceRemoval& removal, VertexState& state);
 
   // Number of distinct (influence set, bone) operators computed so far (for tests and benches).
-  size_t cached_operator_count() const { return cache_.size(); }
+  size_t cached_operator_count() const { return operator_count_; }
 
  private:
   // K for (bones, slot), and the 4 × 4 form Fᵀ P_I F of its first four columns F: with
@@ -79,16 +80,18 @@ class InfluenceSimplifier {
   // P restricted to `bones` (P_I of eq. 6.1), 4k × 4k.
   Eigen::MatrixXd restricted_metric(const std::vector<int32_t>& bones) const;
 
-  // P_I and its diagonalisation per influence set: shared by every bone removed from the set.
+  // P_I and its diagonalisation per influence set, shared by every bone removed from the set,
+  // and the operators of the slots used so far.
   struct SetQuadric {
     Eigen::MatrixXd PI;
     DiagonalisedQuadric quadric;
+    std::vector<std::optional<SlotOperator>> slots;  // one per bone of the set
   };
-  Result<const SetQuadric*> set_quadric(const std::vector<int32_t>& bones);
+  Result<SetQuadric*> set_quadric(const std::vector<int32_t>& bones);
 
   Eigen::MatrixXd P_;
   std::map<std::vector<int32_t>, SetQuadric> sets_;
-  std::map<std::pair<std::vector<int32_t>, int>, SlotOperator> cache_;
+  size_t operator_count_ = 0;
 };
 
 }  // namespace animspace::lod
