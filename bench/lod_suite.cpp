@@ -122,6 +122,8 @@ Simplified openmesh_quadric(const as::AnimationSpaceModel& model, int target_ver
     mesh.add_face(Mesh::VertexHandle(model.faces(f, 0)), Mesh::VertexHandle(model.faces(f, 1)),
                   Mesh::VertexHandle(model.faces(f, 2)));
   }
+  mesh.request_face_normals();  // the normal-flipping module reads them
+  mesh.update_face_normals();
   OpenMesh::Decimater::DecimaterT<Mesh> decimater(mesh);
   OpenMesh::Decimater::ModQuadricT<Mesh>::Handle quadric;
   OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle flipping;

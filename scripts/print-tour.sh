@@ -10,6 +10,7 @@ In another terminal:
   build/bin/animspace --server ${listen} health          # SERVING once the models are loaded
   build/bin/animspace --server ${listen} list            # models and versions
   build/bin/animspace --server ${listen} describe arm    # sizes, metadata, sections
+  build/bin/animspace --server ${listen} describe arm-animspace   # skeleton model with LOD levels
   build/bin/animspace --server ${listen} server-info     # limits and implemented RPCs
   build/bin/animspace --server ${listen} stats           # per-model requests, hit rates, latency
   curl -s http://${metrics}/metrics                      # Prometheus metrics

@@ -4,6 +4,7 @@
 #include "core/animspace/animspace_io.h"
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
+#include "core/lod/lod_io.h"
 #include "core/model/model_info.h"
 
 namespace animspace::demo {
@@ -39,6 +40,24 @@ TEST(DemoAnimationSpaceTest, BeatsLinearBlendSkinningOnUnseenFrames) {
   }
   EXPECT_LT(animation_space_error, 0.5 * linear_blend_error)
       << "animation space " << animation_space_error << " vs LBS " << linear_blend_error;
+}
+
+TEST(DemoAnimationSpaceTest, CarriesLevelsOfDetail) {
+  auto container = make_demo_animation_space_container();
+  ASSERT_TRUE(container.ok()) << container.error().message;
+  auto info = model::describe(*container, "demo");
+  ASSERT_TRUE(info.ok());
+  auto model = animation_space::load(*container, "demo");
+  ASSERT_TRUE(model.ok());
+  auto levels = lod::load_levels(*container, *model, "demo");
+  ASSERT_TRUE(levels.ok()) << levels.error().message;
+  EXPECT_GE(levels->count(), 4);
+  EXPECT_EQ(info->lod_level_count, levels->count());
+  // Each level but the base keeps at most half the influences of the one before (§7.3).
+  for (int l = 1; l + 1 < levels->count(); ++l) {
+    EXPECT_LE(levels->levels[static_cast<size_t>(l)].model.influences.influence_count(),
+              levels->levels[static_cast<size_t>(l) - 1].model.influences.influence_count() / 2);
+  }
 }
 
 }  // namespace

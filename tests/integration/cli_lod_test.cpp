@@ -1,0 +1,78 @@
+// `animspace build-lod` and `animspace export-lod` end to end: the command line builds levels into
+// a model file, and the mesh it exports is the core's level posed, point for point.
+#include <algorithm>
+#include <array>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/animspace/animspace_io.h"
+#include "core/container/model_container.h"
+#include "core/demo/demo_repository.h"
+#include "core/lod/lod_io.h"
+#include "core/mesh_io/triangle_mesh_io.h"
+#include "tests/support/test_support.h"
+
+namespace animspace {
+namespace {
+
+int run(const std::string& arguments) {
+  const std::string command = std::string(ANIMSPACE_CLI_PATH) + " " + arguments + " > /dev/null 2>&1";
+  return std::system(command.c_str());
+}
+
+std::vector<std::array<float, 3>> sorted_rows(const PointMatrix& points) {
+  std::vector<std::array<float, 3>> rows;
+  for (Eigen::Index i = 0; i < points.rows(); ++i) rows.push_back({points(i, 0), points(i, 1), points(i, 2)});
+  std::sort(rows.begin(), rows.end());
+  return rows;
+}
+
+TEST(CliLod, BuildsLevelsAndExportsTheCoresLevel) {
+  testing::TempDir dir;
+  // The demo's animation-space arm, without its levels: build-lod must add them.
+  auto demo = demo::make_demo_animation_space_container();
+  ASSERT_TRUE(demo.ok());
+  container::ModelContainer input;
+  input.metadata() = demo->metadata();
+  input.metadata().erase("lod_levels");
+  auto model = animation_space::load(*demo, "demo");
+  ASSERT_TRUE(model.ok());
+  animation_space::store(*model, input);
+  auto metrics = animation_space::load_metrics(*demo, model->bone_count(), "demo");
+  ASSERT_TRUE(metrics.ok());
+  animation_space::store_metrics(*metrics, input);
+  ASSERT_FALSE(input.has_section(lod::sections::kErrors));
+  ASSERT_TRUE(container::write_file(dir / "arm.anim", input).ok());
+
+  ASSERT_EQ(run("build-lod " + (dir / "arm.anim").string() + " --max-levels 5 -o " + (dir / "arm-lod.anim").string()), 0);
+  auto built = container::read_file(dir / "arm-lod.anim");
+  ASSERT_TRUE(built.ok());
+  auto levels = lod::load_levels(*built, *model, "arm-lod.anim");
+  ASSERT_TRUE(levels.ok()) << levels.error().message;
+  ASSERT_EQ(levels->count(), 5);
+
+  ASSERT_EQ(run("export-lod " + (dir / "arm-lod.anim").string() + " --level 3 -o " + (dir / "l3.obj").string()), 0);
+  auto mesh = mesh_io::read_triangle_mesh(dir / "l3.obj");
+  ASSERT_TRUE(mesh.ok());
+  const lod::LodLevel& level = levels->levels[3];
+  PointMatrix expected;
+  animation_space::evaluate(level.model, model->skeleton.rest, expected);
+  EXPECT_EQ(mesh->F.rows(), level.model.faces.rows());
+  EXPECT_EQ(sorted_rows(mesh->V), sorted_rows(expected));  // reordered for the vertex cache, same points
+
+  // Refusals: a level that does not exist, a model without metrics and no --sample-poses.
+  EXPECT_NE(run("export-lod " + (dir / "arm-lod.anim").string() + " --level 9 -o " + (dir / "x.obj").string()), 0);
+  container::ModelContainer bare;
+  animation_space::store(*model, bare);
+  ASSERT_TRUE(container::write_file(dir / "bare.anim", bare).ok());
+  EXPECT_NE(run("build-lod " + (dir / "bare.anim").string() + " -o " + (dir / "y.anim").string()), 0);
+  EXPECT_EQ(run("build-lod " + (dir / "bare.anim").string() + " --sample-poses 50 --max-levels 3 -o " +
+                (dir / "y.anim").string()),
+            0);
+}
+
+}  // namespace
+}  // namespace animspace
