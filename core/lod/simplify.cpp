@@ -176,11 +176,13 @@ class Simplifier {
     int face_count() const { return static_cast<int>(vertices.size()) - (boundary ? 1 : 0); }
   };
 
-  Ring ring_of(int u) const {
-    Ring ring;
+  void ring_of(int u, Ring& ring) const {
+    ring.vertices.clear();
+    ring.outgoing.clear();
+    ring.boundary = false;
     const auto vh = Mesh::VertexHandle(u);
     const Mesh::HalfedgeHandle start = mesh_.halfedge_handle(vh);
-    if (!start.is_valid()) return ring;
+    if (!start.is_valid()) return;
     ring.boundary = mesh_.is_boundary(start);  // OpenMesh keeps a boundary halfedge as outgoing
     Mesh::HalfedgeHandle h = start;
     do {
@@ -190,7 +192,6 @@ class Simplifier {
       if (mesh_.is_boundary(back)) break;  // reached the other boundary edge
       h = mesh_.next_halfedge_handle(back);  // the next outgoing halfedge, across face(back)
     } while (h != start);
-    return ring;
   }
 
   // OpenMesh's decimater legality tests (BaseDecimaterT::is_collapse_legal) for u → v.
@@ -223,7 +224,8 @@ class Simplifier {
     const int faces = ring.face_count();
     const auto next = [n](int k) { return (k + 1) % n; };
     // Faces of the old fan that survive, as (a_k, a_{k+1}); the two (or one) on edge u–v vanish.
-    std::vector<int> kept;
+    std::vector<int>& kept = scratch_.kept;
+    kept.clear();
     for (int k = 0; k < faces; ++k) {
       if (k != m && next(k) != m) kept.push_back(k);
     }
@@ -296,22 +298,29 @@ class Simplifier {
   // The cheapest legal collapse out of u, pushed onto the queue.
   void schedule_collapse(int u) {
     ++collapse_version_[static_cast<size_t>(u)];
-    const Ring ring = ring_of(u);
+    // Scratch buffers live in the simplifier: this runs hundreds of thousands of times.
+    Ring& ring = scratch_.ring;
+    ring_of(u, ring);
     const int n = static_cast<int>(ring.vertices.size());
     if (n < 2) return;
     // d_k = p_{a_k} − p_u in normalised animation space, and their L2,2 Gram matrix.
-    Eigen::MatrixXd d(normalised_.rows(), n);
+    Eigen::MatrixXd& d = scratch_.d;
+    d.resize(normalised_.rows(), n);
     for (int k = 0; k < n; ++k) d.col(k) = normalised_.col(ring.vertices[static_cast<size_t>(k)]) - normalised_.col(u);
-    const Eigen::MatrixXd gram = d.transpose() * d;
+    Eigen::MatrixXd& gram = scratch_.gram;
+    gram.resize(n, n);
+    gram.noalias() = d.transpose() * d;
     // Polar map (the flattening): |q_k| = ‖d_k‖₂,₂, and the angles between consecutive d_k
     // measured by ⟨·,·⟩₂,₂, scaled to 2π (interior) or π (boundary) as in Floater's map.
     const int faces = ring.face_count();
-    std::vector<double> length(static_cast<size_t>(n));
+    std::vector<double>& length = scratch_.length;
+    length.resize(static_cast<size_t>(n));
     for (int k = 0; k < n; ++k) length[static_cast<size_t>(k)] = std::sqrt(std::max(0.0, gram(k, k)));
     for (const double l : length) {
       if (!(l > 0)) return;  // a zero-length edge under P: no flattening
     }
-    std::vector<double> angle(static_cast<size_t>(faces));
+    std::vector<double>& angle = scratch_.angle;
+    angle.resize(static_cast<size_t>(faces));
     double total = 0;
     for (int k = 0; k < faces; ++k) {
       const int k1 = (k + 1) % n;
@@ -321,7 +330,8 @@ class Simplifier {
     }
     if (!(total > 0)) return;
     const double scale = (ring.boundary ? std::numbers::pi : 2 * std::numbers::pi) / total;
-    std::vector<Vector2> q(static_cast<size_t>(n));
+    std::vector<Vector2>& q = scratch_.q;
+    q.resize(static_cast<size_t>(n));
     double phi = 0;
     for (int k = 0; k < n; ++k) {
       q[static_cast<size_t>(k)] = length[static_cast<size_t>(k)] * Vector2(std::cos(phi), std::sin(phi));
@@ -332,7 +342,8 @@ class Simplifier {
       }
     }
     // Cheapest first, so OpenMesh's topology test runs only until one candidate passes.
-    std::vector<std::pair<double, int>> costs;
+    std::vector<std::pair<double, int>>& costs = scratch_.costs;
+    costs.clear();
     for (int m = 0; m < n; ++m) {
       if (ring.boundary && m != 0 && m != n - 1) continue;  // boundary vertices move along the boundary
       const std::optional<double> cost = collapse_cost(u, ring, m, q, gram);
@@ -440,6 +451,15 @@ class Simplifier {
   Queue collapses_;
   Queue removals_;
   std::vector<Simplification> steps_;
+  struct Scratch {
+    Ring ring;
+    Eigen::MatrixXd d, gram;
+    std::vector<double> length, angle;
+    std::vector<Vector2> q;
+    std::vector<std::pair<double, int>> costs;
+    std::vector<int> kept;
+  };
+  mutable Scratch scratch_;
 };
 
 }  // namespace
