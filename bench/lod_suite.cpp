@@ -40,6 +40,7 @@
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
 #include "core/common/parallel.h"
+#include "core/common/timing.h"
 #include "core/lod/levels.h"
 #include "core/lod/simplify.h"
 #include "core/lod/surface_distance.h"
@@ -53,10 +54,6 @@ namespace as = animation_space;
 constexpr double kMaxJointAngle = 35.0 * std::numbers::pi / 180.0;
 constexpr int kCowPoses = 200;
 constexpr double kFractions[] = {0.5, 0.25, 0.1, 0.05};
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 struct Dataset {
   std::string name;

@@ -28,6 +28,7 @@
 #include "bench/suites.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
+#include "core/common/timing.h"
 #include "core/mesh_io/sequence_io.h"
 
 namespace animspace::bench {
@@ -38,10 +39,6 @@ using namespace animation_space;
 constexpr double kCowMaxJointAngle = 35.0 * std::numbers::pi / 180.0;
 constexpr int kCowPoses = 50;
 constexpr int kCowTrainPoses = 40;
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 double diagonal_of(const PointMatrix& points) {
   return (points.colwise().maxCoeff() - points.colwise().minCoeff()).cast<double>().norm();

@@ -6,13 +6,6 @@ namespace animspace::animation_space {
 namespace {
 
 using container::Float64Matrix;
-using container::Int32Matrix;
-
-Int32Matrix as_column(const std::vector<int32_t>& values) {
-  Int32Matrix column(static_cast<Eigen::Index>(values.size()), 1);
-  for (size_t i = 0; i < values.size(); ++i) column(static_cast<Eigen::Index>(i), 0) = values[i];
-  return column;
-}
 
 Error with_source(const Error& e, const std::string& source) { return make_error(e.code, source + ": " + e.message); }
 
@@ -118,7 +111,7 @@ TransformList pose_from_row(const Float64Matrix& rows, Eigen::Index row, int bon
 }
 
 void store_skeleton(const Skeleton& skeleton, container::ModelContainer& out) {
-  out.set_matrix(model::sections::kSkeletonParents, as_column(skeleton.parents));
+  out.set_matrix(model::sections::kSkeletonParents, container::as_column(skeleton.parents));
   Float64Matrix rest(skeleton.bone_count(), 16);
   for (int j = 0; j < skeleton.bone_count(); ++j) rest.row(j) = pose_row({skeleton.rest[static_cast<size_t>(j)]});
   out.set_matrix(model::sections::kSkeletonRest, rest);
@@ -142,8 +135,8 @@ Result<Skeleton> load_skeleton(const container::ModelContainer& in, const std::s
 }
 
 void store_influences(const AnimationSpaceModel& model, const std::string& prefix, container::ModelContainer& out) {
-  out.set_matrix(prefix + "influence_offsets", as_column(model.influences.offsets));
-  out.set_matrix(prefix + "influence_bones", as_column(model.influences.bones));
+  out.set_matrix(prefix + "influence_offsets", container::as_column(model.influences.offsets));
+  out.set_matrix(prefix + "influence_bones", container::as_column(model.influences.bones));
   out.set_matrix(prefix + "positions", Float64Matrix(model.positions.transpose()));
   if (model.has_tangents()) {
     Float64Matrix tangents(model.positions.cols(), 8);

@@ -28,6 +28,7 @@
 #include <Eigen/SparseCholesky>
 
 #include "core/common/parallel.h"
+#include "core/common/timing.h"
 
 namespace animspace::animation_space {
 namespace {
@@ -551,10 +552,6 @@ Result<InfluenceVectors> fit_positions(const FitExamples& examples, const FaceMa
   InfluenceVectors positions = positions_from_unknowns(P, y);
   measure_residual(P, positions, normalisation.scale, report);
   return positions;
-}
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 }  // namespace

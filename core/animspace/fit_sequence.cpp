@@ -4,12 +4,10 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/common/timing.h"
+
 namespace animspace::animation_space {
 namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 FitExamples make_examples(const FrameMatrix& frames, const std::vector<TransformList>& poses) {
   FitExamples examples;

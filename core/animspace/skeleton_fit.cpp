@@ -11,6 +11,8 @@
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
+#include "core/common/timing.h"
+
 namespace animspace::animation_space {
 namespace {
 
@@ -42,10 +44,6 @@ Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> scatter(const Eigen::Matrix3Xd& p
   mean = points.rowwise().mean();
   const Eigen::Matrix3Xd centred = points.colwise() - mean;
   return Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(centred * centred.transpose());
-}
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 Status check_inputs(const PointMatrix& reference_points, const FrameMatrix& meshes, const Skeleton& user_skeleton,

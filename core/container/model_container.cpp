@@ -24,6 +24,12 @@
 
 namespace animspace::container {
 
+Int32Matrix as_column(std::span<const int32_t> values) {
+  Int32Matrix column(static_cast<Eigen::Index>(values.size()), 1);
+  for (size_t i = 0; i < values.size(); ++i) column(static_cast<Eigen::Index>(i), 0) = values[i];
+  return column;
+}
+
 // The format is little-endian and payloads are memcpy'd to and from Eigen storage as they are.
 // A big-endian port would byte-swap in load/store and in the matrix copies.
 static_assert(std::endian::native == std::endian::little,

@@ -50,6 +50,9 @@ struct Section {
   std::string bytes;  // payload (for matrices: rows·cols elements, little-endian, row-major)
 };
 
+// A list of indices as an N × 1 int32 section (offsets, ids, maps).
+Int32Matrix as_column(std::span<const int32_t> values);
+
 class ModelContainer {
  public:
   // Free-form string metadata (kind, description, creator, …), stored as a JSON object in the

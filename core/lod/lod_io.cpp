@@ -9,17 +9,10 @@ namespace animspace::lod {
 
 namespace as = animation_space;
 using container::Float64Matrix;
-using container::Int32Matrix;
 
 namespace {
 
 std::string prefix(int level) { return "lod." + std::to_string(level) + "."; }
-
-Int32Matrix as_column(const std::vector<int32_t>& values) {
-  Int32Matrix column(static_cast<Eigen::Index>(values.size()), 1);
-  for (size_t i = 0; i < values.size(); ++i) column(static_cast<Eigen::Index>(i), 0) = values[i];
-  return column;
-}
 
 Error invalid(const std::string& source, const std::string& message) {
   return make_error(ErrorCode::kInvalidArgument, source + ": " + message);
@@ -47,9 +40,9 @@ void store_levels(const LodLevels& lods, container::ModelContainer& out) {
     if (l > 0) {
       as::store_influences(level.model, prefix(l), out);
       out.set_faces(prefix(l) + "faces", level.model.faces);
-      out.set_matrix(prefix(l) + "vertex_ids", as_column(level.vertex_ids));
+      out.set_matrix(prefix(l) + "vertex_ids", container::as_column(level.vertex_ids));
     }
-    if (l + 1 < lods.count()) out.set_matrix(prefix(l) + "coarser_vertex", as_column(level.coarser_vertex));
+    if (l + 1 < lods.count()) out.set_matrix(prefix(l) + "coarser_vertex", container::as_column(level.coarser_vertex));
   }
   out.set_matrix(sections::kErrors, errors);
   out.metadata()["lod_levels"] = std::to_string(lods.count());

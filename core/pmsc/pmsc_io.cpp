@@ -5,13 +5,6 @@ namespace animspace::pmsc {
 namespace {
 
 using container::Float64Matrix;
-using container::Int32Matrix;
-
-Int32Matrix as_column(const std::vector<int>& values) {
-  Int32Matrix column(static_cast<long>(values.size()), 1);
-  for (size_t i = 0; i < values.size(); ++i) column(static_cast<long>(i), 0) = values[i];
-  return column;
-}
 
 Error with_source(const Error& e, const std::string& source) {
   return make_error(e.code, source + ": " + e.message);
@@ -28,15 +21,15 @@ void store(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()["pmsc.region_count"] = std::to_string(m.region_count);
   out.set_matrix("pmsc.mean", FrameMatrix(m.mean.transpose()));
   out.set_matrix("pmsc.basis", FrameMatrix(m.basis));
-  out.set_matrix("pmsc.key_points", as_column(m.key_points));
+  out.set_matrix("pmsc.key_points", container::as_column(m.key_points));
   out.set_matrix("pmsc.key_mean", Float64Matrix(m.key_mean.transpose()));
   out.set_matrix("pmsc.key_basis", Float64Matrix(m.key_basis));
   Float64Matrix epsilon(1, 2);
   epsilon << m.epsilon.epsilon_min, m.epsilon.epsilon_max;
   out.set_matrix("pmsc.epsilon", epsilon);
   if (m.region_count > 0) {
-    out.set_matrix("pmsc.point_regions", as_column(m.point_regions));
-    out.set_matrix("pmsc.key_regions", as_column(m.key_regions));
+    out.set_matrix("pmsc.point_regions", container::as_column(m.point_regions));
+    out.set_matrix("pmsc.key_regions", container::as_column(m.key_regions));
   }
 }
 

@@ -16,11 +16,6 @@
 namespace animspace::cli {
 namespace {
 
-int fail(const char* command, const std::string& message) {
-  std::fprintf(stderr, "animspace %s: %s\n", command, message.c_str());
-  return 2;
-}
-
 // Tangent planes fitted to the geometry (Merry 2007 §4.3.1), so that served poses carry normals.
 Status add_tangents(animation_space::AnimationSpaceModel& model) {
   auto planes = animation_space::fit_tangent_planes(model);

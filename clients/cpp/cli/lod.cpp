@@ -13,16 +13,8 @@
 #include "core/model/model_info.h"
 
 namespace animspace::cli {
-namespace {
 
 namespace as = animation_space;
-
-int fail(const char* command, const std::string& message) {
-  std::fprintf(stderr, "animspace %s: %s\n", command, message.c_str());
-  return 2;
-}
-
-}  // namespace
 
 CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
   auto* cmd = app.add_subcommand(

@@ -1,8 +1,14 @@
 #include "clients/cpp/cli/offline_common.h"
 
 #include <algorithm>
+#include <cstdio>
 
 namespace animspace::cli {
+
+int fail(const char* command, const std::string& message) {
+  std::fprintf(stderr, "animspace %s: %s\n", command, message.c_str());
+  return 2;
+}
 
 std::vector<int> parse_frame_selection(const std::string& text, int count, std::string* error) {
   std::vector<std::string> parts{""};

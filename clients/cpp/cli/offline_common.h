@@ -11,6 +11,10 @@
 
 namespace animspace::cli {
 
+// Prints "animspace <command>: <message>" to stderr and returns the offline commands' exit
+// status for bad input or a failed step (2).
+int fail(const char* command, const std::string& message);
+
 // Parses a Python-style slice "start:stop:step" (each part optional, negative counts from the
 // end) over `count` items. Errors go to `error` and yield an empty list.
 std::vector<int> parse_frame_selection(const std::string& text, int count, std::string* error);

@@ -54,14 +54,12 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
 int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   auto sequence = mesh_io::load_sequence(a.sequence, a.pc2);
   if (!sequence) {
-    std::fprintf(stderr, "animspace train-pmsc: %s\n", sequence.error().message.c_str());
-    return 2;
+    return fail("train-pmsc", sequence.error().message);
   }
   std::string error;
   const auto selected = parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
   if (selected.empty()) {
-    std::fprintf(stderr, "animspace train-pmsc: %s\n", error.c_str());
-    return 2;
+    return fail("train-pmsc", error);
   }
   const FrameMatrix frames = select_rows(sequence->frames.samples, selected);
 
@@ -70,8 +68,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   if (!a.control.empty()) {
     auto loaded = mesh_io::load_sequence(a.control, a.control_pc2);
     if (!loaded) {
-      std::fprintf(stderr, "animspace train-pmsc: %s\n", loaded.error().message.c_str());
-      return 2;
+      return fail("train-pmsc", loaded.error().message);
     }
     if (loaded->frames.num_frames() != sequence->frames.num_frames()) {
       std::fprintf(stderr, "animspace train-pmsc: --control has %d frames, the sequence %d\n",
@@ -102,8 +99,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   auto model = control ? pmsc::train_cross(control_frames, frames, options, &report)
                        : pmsc::train(frames, options, &report);
   if (!model) {
-    std::fprintf(stderr, "animspace train-pmsc: %s\n", model.error().message.c_str());
-    return 2;
+    return fail("train-pmsc", model.error().message);
   }
   const std::string description =
       a.description.empty() ? "PMSC model of " + a.sequence + " (" + std::to_string(frames.rows()) + " frames)"
@@ -112,8 +108,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                                               *model, report, description);
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, container); !written.ok()) {
-    std::fprintf(stderr, "animspace train-pmsc: %s\n", written.error().message.c_str());
-    return 2;
+    return fail("train-pmsc", written.error().message);
   }
   if (json) {
     std::printf(

@@ -19,10 +19,13 @@
 #include <Eigen/SVD>
 #include <gtest/gtest.h>
 
+#include "tests/support/constrained_least_squares_reference.h"
+
 namespace animspace::lod {
 namespace {
 
 using Eigen::MatrixXd;
+using testing::null_space_solution;
 using Eigen::VectorXd;
 
 MatrixXd gaussian(Eigen::Index rows, Eigen::Index cols, std::mt19937_64& engine) {
@@ -54,42 +57,6 @@ VectorXd kkt_solution(const MatrixXd& P, const MatrixXd& A, const VectorXd& b) {
   VectorXd rhs = VectorXd::Zero(n + m);
   rhs.tail(m) = b;
   return Eigen::FullPivLU<MatrixXd>(M).solve(rhs).head(n);
-}
-
-// Brute force for any non-negative definite P: x0 = A⁺b, N an orthonormal basis of null(A)
-// (SVD), z* = −(NᵀPN)⁺ NᵀP x0 minimises (x0 + Nz)ᵀP(x0 + Nz); the minimisers are
-// z* + null(NᵀPN), and the one of least ‖x‖ is x0 + Nz* with its component along N·null(NᵀPN)
-// removed.
-VectorXd null_space_solution(const MatrixXd& P, const MatrixXd& A, const VectorXd& b) {
-  const Eigen::Index n = A.cols();
-  const Eigen::Index m = A.rows();
-  const Eigen::JacobiSVD<MatrixXd> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  const VectorXd x0 = svd.solve(b);
-  if (m == n) return x0;  // a single feasible point
-  const MatrixXd N = svd.matrixV().rightCols(n - m);
-  MatrixXd M = N.transpose() * P * N;
-  M = 0.5 * (M + M.transpose());
-  const Eigen::SelfAdjointEigenSolver<MatrixXd> eigen(M);
-  const double p_max = Eigen::SelfAdjointEigenSolver<MatrixXd>(P).eigenvalues().cwiseAbs().maxCoeff();
-  const double threshold = 1e-10 * p_max;
-  const VectorXd g = N.transpose() * P * x0;
-  VectorXd z = VectorXd::Zero(n - m);
-  std::vector<Eigen::Index> flat;
-  for (Eigen::Index i = 0; i < n - m; ++i) {
-    const double lambda = eigen.eigenvalues()(i);
-    const VectorXd v = eigen.eigenvectors().col(i);
-    if (lambda > threshold) {
-      z -= v * (v.dot(g) / lambda);
-    } else {
-      flat.push_back(i);
-    }
-  }
-  VectorXd x = x0 + N * z;
-  for (const Eigen::Index i : flat) {
-    const VectorXd direction = N * eigen.eigenvectors().col(i);  // orthonormal set
-    x -= direction * direction.dot(x);
-  }
-  return x;
 }
 
 double objective(const MatrixXd& P, const VectorXd& x) { return x.dot(P * x); }

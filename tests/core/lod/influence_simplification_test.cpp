@@ -20,6 +20,7 @@
 #include "core/animspace/metrics.h"
 #include "core/lod/vertex_state.h"
 #include "tests/support/animspace_fixtures.h"
+#include "tests/support/constrained_least_squares_reference.h"
 
 namespace animspace::lod {
 namespace {
@@ -27,43 +28,9 @@ namespace {
 using animation_space::InfluenceVectors;
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
+using testing::null_space_solution;
 
 constexpr int kBones = 6;
-
-// Least-norm minimiser of xᵀPx s.t. Ax = b by the null space of A (see the
-// constrained_least_squares test): x0 = A⁺b, N = null(A), z* = −(NᵀPN)⁺NᵀPx0, then drop the
-// component along N·null(NᵀPN).
-VectorXd null_space_solution(const MatrixXd& P, const MatrixXd& A, const VectorXd& b) {
-  const Eigen::Index n = A.cols();
-  const Eigen::Index m = A.rows();
-  const Eigen::JacobiSVD<MatrixXd> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  const VectorXd x0 = svd.solve(b);
-  if (m == n) return x0;
-  const MatrixXd N = svd.matrixV().rightCols(n - m);
-  MatrixXd M = N.transpose() * P * N;
-  M = 0.5 * (M + M.transpose());
-  const Eigen::SelfAdjointEigenSolver<MatrixXd> eigen(M);
-  const double p_max = Eigen::SelfAdjointEigenSolver<MatrixXd>(P).eigenvalues().cwiseAbs().maxCoeff();
-  const double threshold = 1e-10 * p_max;
-  const VectorXd g = N.transpose() * P * x0;
-  VectorXd z = VectorXd::Zero(n - m);
-  std::vector<Eigen::Index> flat;
-  for (Eigen::Index i = 0; i < n - m; ++i) {
-    const double lambda = eigen.eigenvalues()(i);
-    const VectorXd v = eigen.eigenvectors().col(i);
-    if (lambda > threshold) {
-      z -= v * (v.dot(g) / lambda);
-    } else {
-      flat.push_back(i);
-    }
-  }
-  VectorXd x = x0 + N * z;
-  for (const Eigen::Index i : flat) {
-    const VectorXd direction = N * eigen.eigenvectors().col(i);
-    x -= direction * direction.dot(x);
-  }
-  return x;
-}
 
 // P = E[GᵀG] averaged over random poses (rotations, fixed translations) of a random skeleton.
 MatrixXd pose_metric(uint64_t seed, int bones = kBones, int pose_count = 40) {
