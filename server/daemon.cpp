@@ -10,7 +10,10 @@
 #include "core/common/atomic_file.h"
 #include "server/services/model_service.h"
 #include "server/services/pending_services.h"
+#include "server/services/pose_service.h"
+#include "server/services/skinning_service.h"
 #include "server/services/stats_service.h"
+#include "server/services/training_service.h"
 
 namespace animspace::server {
 namespace {
@@ -42,7 +45,7 @@ Result<std::pair<std::string, int>> split_host_port(const std::string& address, 
 }  // namespace
 
 Daemon::Daemon(ServerOptions options)
-    : options_(std::move(options)), registry_(options_.repository), env_{registry_, metrics_, options_} {}
+    : options_(std::move(options)), registry_(options_.repository), admission_(options_.max_concurrent_calls) {}
 
 Daemon::~Daemon() { shutdown(); }
 
@@ -53,24 +56,43 @@ Status Daemon::start() {
                       "--model-repository: '" + options_.repository.string() + "' is not a directory");
   }
 
-  model_service_ = std::make_unique<ModelServiceImpl>(env_);
-  stats_service_ = std::make_unique<StatsServiceImpl>(env_);
-  pose_service_ = std::make_unique<PoseServiceImpl>(env_);
-  skinning_service_ = std::make_unique<SkinningServiceImpl>(env_);
-  lod_service_ = std::make_unique<LodServiceImpl>(env_);
-  render_service_ = std::make_unique<RenderServiceImpl>(env_);
-  training_service_ = std::make_unique<TrainingServiceImpl>(env_);
+  auto authenticator = Authenticator::from_options(options_);
+  if (!authenticator) return authenticator.error();
+  authenticator_ = std::make_unique<Authenticator>(std::move(*authenticator));
+  auto credentials = make_server_credentials(options_);
+  if (!credentials) return credentials.error();
+  auto fsync_policy = misslog::parse_fsync_policy(options_.miss_log_fsync);
+  if (!fsync_policy) return fsync_policy.error();
+  const auto miss_log_dir = options_.miss_log_dir.empty() ? options_.repository : options_.miss_log_dir;
+  if (!std::filesystem::is_directory(miss_log_dir, ec)) {
+    return make_error(ErrorCode::kNotFound, "--miss-log-dir: '" + miss_log_dir.string() + "' is not a directory");
+  }
+  miss_logs_ = std::make_unique<MissLogs>(miss_log_dir, *fsync_policy, options_.miss_log_fsync_interval);
+  request_pool_ = std::make_unique<WorkPool>(
+      options_.work_threads > 0 ? options_.work_threads : default_work_threads(), "animspace-work");
+  admin_pool_ = std::make_unique<WorkPool>(1, "animspace-admin");
+  env_ = std::make_unique<ServiceEnvironment>(ServiceEnvironment{registry_, metrics_, options_, *request_pool_,
+                                                                 *admin_pool_, admission_, *authenticator_,
+                                                                 *miss_logs_});
+
+  model_service_ = std::make_unique<ModelServiceImpl>(*env_);
+  stats_service_ = std::make_unique<StatsServiceImpl>(*env_);
+  pose_service_ = std::make_unique<PoseServiceImpl>(*env_);
+  skinning_service_ = std::make_unique<SkinningServiceImpl>(*env_);
+  lod_service_ = std::make_unique<LodServiceImpl>(*env_);
+  render_service_ = std::make_unique<RenderServiceImpl>(*env_);
+  training_service_ = std::make_unique<TrainingServiceImpl>(*env_);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(options_.listen_address, grpc::InsecureServerCredentials(), &port_);
+  builder.AddListeningPort(options_.listen_address, *credentials, &port_);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options_.max_message_bytes));
   builder.SetMaxSendMessageSize(static_cast<int>(options_.max_message_bytes));
   grpc::ResourceQuota quota("animspaced");
   quota.SetMaxThreads(std::max(2, options_.worker_threads));
   builder.SetResourceQuota(quota);
-  // Sync-server pollers wake at this period; it bounds how long shutdown waits for idle pollers.
+  // Sync-server pollers (the health service) wake at this period; it bounds shutdown's wait.
   builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
   builder.RegisterService(model_service_.get());
   builder.RegisterService(stats_service_.get());
@@ -95,8 +117,13 @@ Status Daemon::start() {
   ANIMSPACE_RETURN_IF_ERROR(start_metrics_endpoint());
 
   const int loaded = registry_.load_all();
-  metrics_.set_models_loaded(loaded);
+  refresh_model_gauges(*env_);
   spdlog::info("repository {}: {} model version(s) loaded", options_.repository.string(), loaded);
+  spdlog::info("work pool: {} thread(s); at most {} concurrent calls; miss logs in {} (fsync {}){}{}",
+               request_pool_->thread_count(), options_.max_concurrent_calls, miss_log_dir.string(),
+               options_.miss_log_fsync, tls_enabled(options_) ? "; TLS" : "",
+               authenticator_->enabled() ? "; bearer tokens required" : "");
+  if (options_.poll_interval_s > 0) poll_thread_ = std::thread([this] { poll_repository(); });
   server_->GetHealthCheckService()->SetServingStatus(true);
   spdlog::info("health SERVING");
   return Status::Ok();
@@ -126,6 +153,16 @@ Status Daemon::start_metrics_endpoint() {
   return Status::Ok();
 }
 
+void Daemon::poll_repository() {
+  const auto period = std::chrono::duration<double>(options_.poll_interval_s);
+  std::unique_lock lock(poll_mutex_);
+  while (!poll_wake_.wait_for(lock, period, [this] { return polling_stopped_; })) {
+    lock.unlock();
+    if (registry_.load_new_versions() > 0) refresh_model_gauges(*env_);
+    lock.lock();
+  }
+}
+
 void Daemon::shutdown() {
   if (stopped_) return;
   stopped_ = true;
@@ -148,6 +185,16 @@ void Daemon::shutdown() {
     stopper.join();
     server_->Wait();
   }
+  {
+    std::lock_guard lock(poll_mutex_);
+    polling_stopped_ = true;
+  }
+  poll_wake_.notify_all();
+  if (poll_thread_.joinable()) poll_thread_.join();
+  // The gRPC server has finished every call, so nothing queues work any more.
+  if (request_pool_) request_pool_->stop();
+  if (admin_pool_) admin_pool_->stop();
+  if (miss_logs_) miss_logs_->sync_all();
   if (metrics_http_) {
     metrics_http_->stop();
     if (metrics_thread_.joinable()) metrics_thread_.join();

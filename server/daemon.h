@@ -3,14 +3,20 @@
 // grace period, exit.
 #pragma once
 
+#include <condition_variable>
 #include <memory>
+#include <mutex>
 #include <thread>
 
 #include "core/common/result.h"
+#include "server/admission.h"
+#include "server/auth.h"
 #include "server/metrics.h"
+#include "server/miss_logs.h"
 #include "server/model_registry.h"
 #include "server/options.h"
 #include "server/service_environment.h"
+#include "server/work_pool.h"
 
 namespace grpc {
 class Server;
@@ -36,9 +42,10 @@ class Daemon {
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;
 
-  // Binds the gRPC (and metrics) addresses, then loads every model in the repository and turns
-  // health to SERVING. Errors: kInvalidArgument when an address cannot be bound, kNotFound when
-  // the repository does not exist.
+  // Reads the security files, binds the gRPC (and metrics) addresses, then loads every model in
+  // the repository and turns health to SERVING. Errors: kInvalidArgument when an address cannot
+  // be bound or a flag is inconsistent, kNotFound when the repository or a security file does
+  // not exist.
   Status start();
 
   // The bound gRPC port (after start()).
@@ -50,11 +57,19 @@ class Daemon {
 
  private:
   Status start_metrics_endpoint();
+  // Loads new versions every options_.poll_interval_s until shutdown.
+  void poll_repository();
+  void update_model_gauges();
 
   ServerOptions options_;
   ModelRegistry registry_;
   Metrics metrics_;
-  ServiceEnvironment env_;
+  Admission admission_;
+  std::unique_ptr<Authenticator> authenticator_;
+  std::unique_ptr<MissLogs> miss_logs_;
+  std::unique_ptr<WorkPool> request_pool_;
+  std::unique_ptr<WorkPool> admin_pool_;
+  std::unique_ptr<ServiceEnvironment> env_;
   std::unique_ptr<ModelServiceImpl> model_service_;
   std::unique_ptr<StatsServiceImpl> stats_service_;
   std::unique_ptr<PoseServiceImpl> pose_service_;
@@ -65,6 +80,10 @@ class Daemon {
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<httplib::Server> metrics_http_;
   std::thread metrics_thread_;
+  std::thread poll_thread_;
+  std::mutex poll_mutex_;
+  std::condition_variable poll_wake_;
+  bool polling_stopped_ = false;
   int port_ = 0;
   bool stopped_ = false;
 };

@@ -12,6 +12,12 @@ inline constexpr const char* kImplementedRpcs[] = {
     "animspace.v1.ModelService/UnloadModel",
     "animspace.v1.ModelService/GetServerInfo",
     "animspace.v1.StatsService/GetStats",
+    "animspace.v1.PoseService/DescribeKeyPoints",
+    "animspace.v1.PoseService/EvaluateKeyPoints",
+    "animspace.v1.PoseService/StreamKeyPoints",
+    "animspace.v1.PoseService/CompleteMiss",
+    "animspace.v1.SkinningService/EvaluateSkeletonPose",
+    "animspace.v1.TrainingService/Retrain",
     "grpc.health.v1.Health/Check",
     "grpc.health.v1.Health/Watch",
 };

@@ -64,9 +64,36 @@ int main(int argc, char** argv) {
   app.add_option("--shutdown-grace-ms", grace_ms, "Time in-flight calls get to finish after SIGTERM/SIGINT")
       ->check(CLI::Range(int64_t{0}, int64_t{600000}))
       ->capture_default_str();
+  app.add_option("--work-threads", options.work_threads,
+                 "Threads that run request work (evaluation, skinning); 0 = one per core")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
+  app.add_option("--poll-interval-s", options.poll_interval_s,
+                 "Poll the repository for new model versions every this many seconds (0 = never)")
+      ->check(CLI::Range(0.0, 86400.0))
+      ->capture_default_str();
+  app.add_option("--miss-log-dir", options.miss_log_dir,
+                 "Where per-model miss logs (<model>.misses) are written; default: the repository");
+  app.add_option("--miss-log-fsync", options.miss_log_fsync,
+                 "Miss log durability: always (fsync each record), interval, never")
+      ->check(CLI::IsMember({"always", "interval", "never"}))
+      ->capture_default_str();
+  int64_t fsync_ms = options.miss_log_fsync_interval.count();
+  app.add_option("--miss-log-fsync-interval-ms", fsync_ms, "With --miss-log-fsync interval: longest time between fsyncs")
+      ->check(CLI::Range(int64_t{1}, int64_t{3600000}))
+      ->capture_default_str();
+  app.add_option("--tls-cert", options.tls_cert, "TLS: server certificate chain (PEM); with --tls-key");
+  app.add_option("--tls-key", options.tls_key, "TLS: server private key (PEM)");
+  app.add_option("--tls-client-ca", options.tls_client_ca,
+                 "TLS: require client certificates signed by this CA bundle (PEM)");
+  app.add_option("--auth-token-file", options.auth_token_file,
+                 "Bearer tokens accepted on every RPC but health, one per line ('#' comments)");
+  app.add_option("--admin-token-file", options.admin_token_file,
+                 "Bearer tokens required for LoadModel, UnloadModel, Retrain and GetStats reset");
   app.add_option("--port-file", options.port_file, "Write the bound gRPC port to this file once listening");
   CLI11_PARSE(app, argc, argv);
   options.shutdown_grace = std::chrono::milliseconds(grace_ms);
+  options.miss_log_fsync_interval = std::chrono::milliseconds(fsync_ms);
 
   spdlog::set_level(spdlog::level::from_str(options.log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %^%l%$ animspaced[%P] %v");

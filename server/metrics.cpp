@@ -109,6 +109,11 @@ void Metrics::set_models_loaded(int count) {
   models_loaded_ = count;
 }
 
+void Metrics::set_served_versions(std::vector<ServedVersion> versions) {
+  std::lock_guard lock(mutex_);
+  served_versions_ = std::move(versions);
+}
+
 std::map<std::string, ModelStatistics> Metrics::model_statistics() const {
   std::lock_guard lock(mutex_);
   return models_;
@@ -138,6 +143,13 @@ std::string Metrics::prometheus_text() const {
       << "# HELP animspace_calls_in_flight RPC handlers running now.\n"
       << "# TYPE animspace_calls_in_flight gauge\n"
       << "animspace_calls_in_flight " << calls_in_flight() << '\n';
+  out << "# HELP animspace_model_version_serving Model versions loaded and serving (1 each); default=\"1\" "
+         "marks the version a request for version 0 gets.\n"
+      << "# TYPE animspace_model_version_serving gauge\n";
+  for (const auto& served : served_versions_) {
+    out << "animspace_model_version_serving{model=\"" << escape_label(served.model) << "\",version=\""
+        << served.version << "\",default=\"" << (served.is_default ? 1 : 0) << "\"} 1\n";
+  }
 
   out << "# HELP animspace_requests_total Finished RPCs by method, model and status code.\n"
       << "# TYPE animspace_requests_total counter\n";

@@ -64,6 +64,13 @@ class Metrics {
   // One pose through the soft cache.
   void record_pose(std::string_view model, CacheOutcome outcome, double key_point_error);
   void set_models_loaded(int count);
+  // Versions serving now, per model, and the default of each (animspace_model_versions).
+  struct ServedVersion {
+    std::string model;
+    uint64_t version = 0;
+    bool is_default = false;
+  };
+  void set_served_versions(std::vector<ServedVersion> versions);
 
   // Calls whose handler is running (CallScope brackets every handler).
   void call_started() { in_flight_.fetch_add(1, std::memory_order_relaxed); }
@@ -91,6 +98,7 @@ class Metrics {
   std::map<std::string, ModelStatistics> models_;
   std::chrono::system_clock::time_point since_;
   int models_loaded_ = 0;
+  std::vector<ServedVersion> served_versions_;
   std::atomic<int64_t> in_flight_{0};
 };
 

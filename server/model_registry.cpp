@@ -89,7 +89,8 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
     }
     loaded->pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
   }
-  if (info->kind == model::ModelKind::kAnimationSpace) {
+  // An animation-space model, or a PMSC model's posing engine (FAIL_THROUGH_SERVER).
+  if (info->kind == model::ModelKind::kAnimationSpace || info->fail_through == model::FailThrough::kServer) {
     auto runtime = animation_space::load(*container, path.string());
     if (!runtime) {
       entry.error = runtime.error().message;
@@ -134,14 +135,18 @@ Result<std::vector<uint64_t>> ModelRegistry::scan_versions(const std::string& na
   return versions;
 }
 
-int ModelRegistry::load_all() {
+int ModelRegistry::load_all() { return scan(true); }
+
+int ModelRegistry::load_new_versions() { return scan(false); }
+
+int ModelRegistry::scan(bool retry_known) {
   std::vector<std::string> names;
   std::error_code ec;
   for (std::filesystem::directory_iterator it(repository_, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     if (!it->is_directory(ec)) continue;
     if (!validate_model_name(name).ok()) {
-      spdlog::warn("repository: skipping directory '{}': not a valid model name", name);
+      if (retry_known) spdlog::warn("repository: skipping directory '{}': not a valid model name", name);
       continue;
     }
     names.push_back(name);
@@ -149,11 +154,54 @@ int ModelRegistry::load_all() {
   if (ec) spdlog::error("repository: cannot list {}: {}", repository_.string(), ec.message());
   int loaded = 0;
   for (const auto& name : names) {
-    auto entry = load(name, 0);
-    if (!entry) continue;
-    for (const auto& [version, v] : entry->versions) loaded += v.model ? 1 : 0;
+    if (retry_known) {
+      auto entry = load(name, 0);
+      if (!entry) continue;
+      for (const auto& [version, v] : entry->versions) loaded += v.model ? 1 : 0;
+      continue;
+    }
+    // Polling: only versions never seen and not unloaded on purpose.
+    auto versions = scan_versions(name);
+    if (!versions) continue;
+    for (uint64_t v : *versions) {
+      {
+        std::shared_lock lock(mutex_);
+        const auto known = models_.find(name);
+        if (known != models_.end() && known->second.versions.count(v)) continue;
+        if (dismissed_.count({name, v})) continue;
+      }
+      loaded += load(name, v) ? 1 : 0;
+    }
   }
   return loaded;
+}
+
+Result<uint64_t> ModelRegistry::publish(const std::string& name, const container::ModelContainer& model) {
+  ANIMSPACE_RETURN_IF_ERROR(validate_model_name(name));
+  std::lock_guard publishing(publish_mutex_);
+  auto versions = scan_versions(name);
+  if (!versions) return versions.error();
+  const uint64_t version = versions->empty() ? 1 : versions->back() + 1;
+  const auto final_dir = repository_ / name / std::to_string(version);
+  const auto staging = repository_ / name / (".publish-" + std::to_string(version));
+  std::error_code ec;
+  std::filesystem::remove_all(staging, ec);
+  if (!std::filesystem::create_directories(staging, ec) && ec) {
+    return make_error(ErrorCode::kIo, "cannot create " + staging.string() + ": " + ec.message());
+  }
+  if (auto written = container::write_file(staging / kModelFileName, model); !written) {
+    std::filesystem::remove_all(staging, ec);
+    return written.error();
+  }
+  std::filesystem::rename(staging, final_dir, ec);
+  if (ec) {
+    std::filesystem::remove_all(staging, ec);
+    return make_error(ErrorCode::kIo, "cannot rename " + staging.string() + " to " + final_dir.string() + ": " +
+                                          ec.message());
+  }
+  auto loaded = load(name, version);
+  if (!loaded) return loaded.error();
+  return version;
 }
 
 Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version) {
@@ -167,6 +215,12 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
 
   // Read files without holding the lock: loading may take seconds, serving must not wait.
   std::vector<VersionEntry> fresh;
+  {
+    std::unique_lock lock(mutex_);
+    for (uint64_t v : *versions) {
+      if (version == 0 || v == version) dismissed_.erase({name, v});
+    }
+  }
   {
     std::shared_lock lock(mutex_);
     const auto existing = models_.find(name);
@@ -212,10 +266,12 @@ Status ModelRegistry::unload(const std::string& name, uint64_t version) {
   auto it = models_.find(name);
   if (it == models_.end()) return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
   if (version == 0) {
+    for (const auto& [v, entry] : it->second.versions) dismissed_.insert({name, v});
     models_.erase(it);
     spdlog::info("model {} unloaded (all versions)", name);
     return Status::Ok();
   }
+  if (it->second.versions.count(version)) dismissed_.insert({name, version});
   if (it->second.versions.erase(version) == 0) {
     return make_error(ErrorCode::kNotFound,
                       "model '" + name + "' has no loaded version " + std::to_string(version));

@@ -11,6 +11,8 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <mutex>
+#include <set>
 #include <shared_mutex>
 #include <string>
 #include <string_view>
@@ -38,7 +40,8 @@ struct LoadedModel {
   model::ModelInfo info;
   // The prepared soft-cache runtime of a PMSC / cross-PMSC model (null for other kinds).
   std::shared_ptr<const pmsc::PmscModel> pmsc;
-  // The validated skinning model of an animation-space model (null for other kinds).
+  // The validated skinning model of an animation-space model, or the posing engine a PMSC model
+  // carries for server fail-through (null otherwise).
   std::shared_ptr<const animation_space::AnimationSpaceModel> animation_space;
   // Its validated LOD levels (Merry 2007 §7.3); level 0 is the model itself (null for other kinds).
   std::shared_ptr<const lod::LodLevels> lod_levels;
@@ -72,6 +75,18 @@ class ModelRegistry {
   // that loaded; refusals are recorded in the entries (and logged).
   int load_all();
 
+  // The repository poll (--poll-interval-s): loads versions that appeared since the last scan.
+  // Versions already known — loaded or refused — are left alone, so a refused file is logged
+  // once, not on every poll (LoadModel re-reads it on request). Returns the versions loaded.
+  int load_new_versions();
+
+  // Writes `model` as the next version of `name` (one above the newest directory) and loads it,
+  // which makes it the default: calls in flight keep the version they hold, later calls get the
+  // new one (hot swap). The version directory is written under a hidden temporary name and
+  // renamed into place, so neither a poll nor a crash ever sees a half-written version.
+  // Errors: kIo naming the path (e.g. a read-only repository), or the loader's.
+  Result<uint64_t> publish(const std::string& name, const container::ModelContainer& model);
+
   // Loads one model: every version in its directory (version 0) or exactly one. Versions
   // already loaded are re-read only when named explicitly. Errors: kNotFound when the
   // directory does not exist; the loader's error when the one named version is refused.
@@ -89,6 +104,7 @@ class ModelRegistry {
   int loaded_version_count() const;
 
  private:
+  int scan(bool retry_known);
   // Reads and checks one version file; never throws.
   static VersionEntry load_version(const std::string& name, uint64_t version,
                                    const std::filesystem::path& dir);
@@ -97,7 +113,10 @@ class ModelRegistry {
 
   std::filesystem::path repository_;
   mutable std::shared_mutex mutex_;
+  std::mutex publish_mutex_;  // one publish at a time, so version numbers never collide
   std::map<std::string, ModelEntry> models_;
+  // Versions unloaded on purpose: the poll does not bring them back (LoadModel does).
+  std::set<std::pair<std::string, uint64_t>> dismissed_;
 };
 
 }  // namespace animspace::server

@@ -29,6 +29,28 @@ struct ServerOptions {
   std::string log_level = "info";
   // How long in-flight calls may run after SIGTERM/SIGINT before they are cancelled.
   std::chrono::milliseconds shutdown_grace{5000};
+  // Threads of the pool that runs request work (evaluation, retraining, loading); 0 = one per
+  // core. gRPC's own threads only receive and send.
+  int work_threads = 0;
+  // Poll the repository for new model versions every this many seconds (0 = never).
+  double poll_interval_s = 0;
+  // Where per-model miss logs live (<dir>/<model>.misses); empty = the repository itself.
+  std::filesystem::path miss_log_dir;
+  // Miss log durability: "always" (fsync every record), "interval" (fsync at most every
+  // miss_log_fsync_interval), "never" (leave it to the OS).
+  std::string miss_log_fsync = "interval";
+  std::chrono::milliseconds miss_log_fsync_interval{1000};
+  // TLS: server certificate chain and private key (PEM). Both empty: plaintext.
+  std::filesystem::path tls_cert;
+  std::filesystem::path tls_key;
+  // TLS: CA bundle (PEM) that client certificates must chain to; set = client certs required.
+  std::filesystem::path tls_client_ca;
+  // Bearer tokens (one per line, '#' comments) accepted on every RPC except health; empty = no
+  // authentication.
+  std::filesystem::path auth_token_file;
+  // Bearer tokens required for admin RPCs (LoadModel, UnloadModel, Retrain, GetStats reset);
+  // empty = admin RPCs need only what every RPC needs.
+  std::filesystem::path admin_token_file;
   // File to write the bound gRPC port to once listening (for tests and supervisors); optional.
   std::filesystem::path port_file;
 };

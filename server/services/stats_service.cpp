@@ -1,6 +1,6 @@
 #include "server/services/stats_service.h"
 
-#include "server/call_scope.h"
+#include "server/unary_call.h"
 #include "server/status_mapping.h"
 
 namespace animspace::server {
@@ -31,26 +31,33 @@ void to_proto(const std::string& name, const ModelStatistics& s, v1::ModelStats*
 
 }  // namespace
 
-grpc::Status StatsServiceImpl::GetStats(grpc::ServerContext*, const v1::GetStatsRequest* request,
-                                        v1::GetStatsResponse* response) {
-  CallScope scope(env_.metrics, "StatsService/GetStats");
-  const std::string& name = request->model();
-  // Statistics exist for every model that is loaded, including ones never called yet.
-  std::map<std::string, ModelStatistics> stats = env_.metrics.model_statistics();
-  for (const auto& entry : env_.registry.list()) stats.try_emplace(entry.name);
-  if (!name.empty()) {
-    scope.set_model(name);
-    if (auto valid = validate_model_name(name, "model"); !valid) return scope.finish(to_grpc_status(valid.error()));
-    auto it = stats.find(name);
-    if (it == stats.end()) return scope.finish(not_found("model: model '" + name + "' is not loaded"));
-    to_proto(it->first, it->second, response->add_models());
-  } else {
-    for (const auto& [model, s] : stats) to_proto(model, s, response->add_models());
-  }
-  response->set_since_unix_s(
-      std::chrono::duration_cast<std::chrono::seconds>(env_.metrics.statistics_since().time_since_epoch()).count());
-  if (request->reset()) env_.metrics.reset_model_statistics(name);
-  return scope.finish(grpc::Status::OK);
+grpc::ServerUnaryReactor* StatsServiceImpl::GetStats(grpc::CallbackServerContext* context,
+                                                     const v1::GetStatsRequest* request,
+                                                     v1::GetStatsResponse* response) {
+  // Reading is for everyone; zeroing the counters is an operator's decision.
+  const Access access = request->reset() ? Access::kAdmin : Access::kUser;
+  return serve_unary(
+      env_, context, "StatsService/GetStats", access, env_.request_pool,
+      [this, request, response](const CallControl& call) {
+        const std::string& name = request->model();
+        // Statistics exist for every model that is loaded, including ones never called yet.
+        std::map<std::string, ModelStatistics> stats = env_.metrics.model_statistics();
+        for (const auto& entry : env_.registry.list()) stats.try_emplace(entry.name);
+        if (!name.empty()) {
+          if (auto valid = validate_model_name(name, "model"); !valid) return to_grpc_status(valid.error());
+          auto it = stats.find(name);
+          if (it == stats.end()) return not_found("model: model '" + name + "' is not loaded");
+          call.set_model(name);
+          to_proto(it->first, it->second, response->add_models());
+        } else {
+          for (const auto& [model, s] : stats) to_proto(model, s, response->add_models());
+        }
+        response->set_since_unix_s(std::chrono::duration_cast<std::chrono::seconds>(
+                                       env_.metrics.statistics_since().time_since_epoch())
+                                       .count());
+        if (request->reset()) env_.metrics.reset_model_statistics(name);
+        return grpc::Status::OK;
+      });
 }
 
 }  // namespace animspace::server

@@ -6,11 +6,11 @@
 
 namespace animspace::server {
 
-class StatsServiceImpl final : public v1::StatsService::Service {
+class StatsServiceImpl final : public v1::StatsService::CallbackService {
  public:
   explicit StatsServiceImpl(ServiceEnvironment& env) : env_(env) {}
-  grpc::Status GetStats(grpc::ServerContext* context, const v1::GetStatsRequest* request,
-                        v1::GetStatsResponse* response) override;
+  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context, const v1::GetStatsRequest* request,
+                                     v1::GetStatsResponse* response) override;
 
  private:
   ServiceEnvironment& env_;

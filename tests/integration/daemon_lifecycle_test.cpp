@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "animspace/v1/poses.grpc.pb.h"
+#include "animspace/v1/render.grpc.pb.h"
 #include "clients/cpp/client.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
@@ -89,15 +89,16 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   wait_until_serving(client);
 
   const auto models = client.list_models();
-  ASSERT_EQ(models.size(), 6u);
+  ASSERT_EQ(models.size(), 7u);
   EXPECT_EQ(models[0].name(), "arm");
   EXPECT_EQ(models[1].name(), "arm-animspace");
   EXPECT_EQ(models[2].name(), "arm-cross-pmsc");
   EXPECT_EQ(models[3].name(), "arm-pmsc");
-  EXPECT_EQ(models[4].name(), "broken");
-  EXPECT_EQ(models[5].name(), "tetra");
+  EXPECT_EQ(models[4].name(), "arm-pmsc-engine");
+  EXPECT_EQ(models[5].name(), "broken");
+  EXPECT_EQ(models[6].name(), "tetra");
 
-  const auto& tetra = models[5];
+  const auto& tetra = models[6];
   EXPECT_EQ(tetra.default_version(), 3u);
   ASSERT_EQ(tetra.versions_size(), 1);
   const auto& v = tetra.versions(0);
@@ -111,7 +112,7 @@ TEST_F(DaemonTest, ServesTheRepositoryAndStopsCleanlyOnSigterm) {
   EXPECT_EQ(v.file_size_bytes(), std::filesystem::file_size(repo_ / "tetra/3/model.anim"));
 
   // The refused model is visible with its reason, and has nothing to serve.
-  const auto& broken = models[4];
+  const auto& broken = models[5];
   EXPECT_EQ(broken.default_version(), 0u);
   ASSERT_EQ(broken.versions_size(), 1);
   EXPECT_EQ(broken.versions(0).state(), v1::VERSION_STATE_FAILED);
@@ -194,12 +195,12 @@ TEST_F(DaemonTest, BadRequestsGetPreciseStatuses) {
   }
 
   // RPCs of issues that have not landed say so, with a message.
-  auto poses = v1::PoseService::NewStub(client.channel());
+  auto lod = v1::RenderService::NewStub(client.channel());
   grpc::ClientContext context;
-  v1::EvaluateKeyPointsRequest request;
+  v1::RenderThumbnailRequest request;
   request.mutable_model()->set_name("tetra");
-  v1::EvaluateKeyPointsResponse response;
-  const auto status = poses->EvaluateKeyPoints(&context, request, &response);
+  v1::RenderThumbnailResponse response;
+  const auto status = lod->RenderThumbnail(&context, request, &response);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::UNIMPLEMENTED);
   EXPECT_NE(status.error_message().find("not implemented"), std::string::npos) << status.error_message();
 }
@@ -283,11 +284,15 @@ TEST_F(DaemonTest, PrometheusMetricsCountCalls) {
   ASSERT_TRUE(result) << "no answer from the metrics endpoint";
   EXPECT_EQ(result->status, 200);
   const std::string& body = result->body;
-  EXPECT_NE(body.find("animspace_models_loaded 5\n"), std::string::npos) << body;
+  EXPECT_NE(body.find("animspace_models_loaded 6\n"), std::string::npos) << body;
   EXPECT_NE(body.find("animspace_requests_total{rpc=\"ModelService/DescribeModel\",model=\"tetra\",code=\"OK\"} 2\n"),
             std::string::npos)
       << body;
-  EXPECT_NE(body.find("rpc=\"ModelService/DescribeModel\",model=\"nosuchmodel\",code=\"NOT_FOUND\"} 1\n"),
+  // An unknown model is counted, but its name never becomes a label (clients could mint them).
+  EXPECT_NE(body.find("rpc=\"ModelService/DescribeModel\",model=\"\",code=\"NOT_FOUND\"} 1\n"), std::string::npos)
+      << body;
+  EXPECT_EQ(body.find("nosuchmodel"), std::string::npos) << body;
+  EXPECT_NE(body.find("animspace_model_version_serving{model=\"tetra\",version=\"3\",default=\"1\"} 1\n"),
             std::string::npos)
       << body;
 
@@ -329,7 +334,7 @@ TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   Client client(daemon.address());
   wait_until_serving(client);
   const auto models = client.list_models();
-  ASSERT_EQ(models.size(), 4u);
+  ASSERT_EQ(models.size(), 5u);
   for (const auto& model : models) {
     EXPECT_EQ(model.versions(0).state(), v1::VERSION_STATE_AVAILABLE) << model.name() << ": " << model.versions(0).error();
   }

@@ -1,0 +1,40 @@
+#include "server/miss_logs.h"
+
+#include <spdlog/spdlog.h>
+
+namespace animspace::server {
+
+MissLogs::MissLogs(std::filesystem::path directory, misslog::FsyncPolicy policy,
+                   std::chrono::milliseconds fsync_interval)
+    : directory_(std::move(directory)), policy_(policy), fsync_interval_(fsync_interval) {}
+
+std::filesystem::path MissLogs::path_of(const std::string& model) const { return directory_ / (model + ".misses"); }
+
+Result<misslog::MissLog*> MissLogs::open(const std::string& model) {
+  std::lock_guard lock(mutex_);
+  auto it = logs_.find(model);
+  if (it != logs_.end()) return it->second.get();
+  auto log = misslog::MissLog::open(path_of(model), policy_, fsync_interval_);
+  if (!log) return log.error();
+  const auto& recovery = (*log)->recovery();
+  if (recovery.truncated_bytes > 0) {
+    spdlog::warn("miss log {}: recovered {} records, cut {} bytes of torn tail ({})", path_of(model).string(),
+                 recovery.records, recovery.truncated_bytes, recovery.reason);
+  }
+  return logs_.emplace(model, std::move(*log)).first->second.get();
+}
+
+Result<uint64_t> MissLogs::append(const std::string& model, misslog::MissRecord& record) {
+  auto log = open(model);
+  if (!log) return log.error();
+  return (*log)->append(record);
+}
+
+void MissLogs::sync_all() {
+  std::lock_guard lock(mutex_);
+  for (auto& [model, log] : logs_) {
+    if (auto synced = log->sync(); !synced) spdlog::error("miss log of {}: {}", model, synced.error().message);
+  }
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,39 @@
+// The daemon's miss logs: one durable append-only file per model (core/misslog/miss_log.h),
+// <miss-log-dir>/<model>.misses, opened on the model's first miss. Retraining reads them back.
+#pragma once
+
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "core/common/result.h"
+#include "core/misslog/miss_log.h"
+
+namespace animspace::server {
+
+class MissLogs {
+ public:
+  MissLogs(std::filesystem::path directory, misslog::FsyncPolicy policy, std::chrono::milliseconds fsync_interval);
+
+  // Appends one record to `model`'s log (a validated model name), assigning its sequence.
+  // Errors: the log's (kIo, kDataLoss for a log whose header is not ours).
+  Result<uint64_t> append(const std::string& model, misslog::MissRecord& record);
+
+  std::filesystem::path path_of(const std::string& model) const;
+  // Flushes every open log to disk (shutdown).
+  void sync_all();
+
+ private:
+  Result<misslog::MissLog*> open(const std::string& model);
+
+  std::filesystem::path directory_;
+  misslog::FsyncPolicy policy_;
+  std::chrono::milliseconds fsync_interval_;
+  std::mutex mutex_;
+  std::map<std::string, std::unique_ptr<misslog::MissLog>> logs_;
+};
+
+}  // namespace animspace::server

@@ -1,0 +1,128 @@
+#include "server/pose_evaluation.h"
+
+#include <chrono>
+
+#include <spdlog/spdlog.h>
+
+#include "core/animspace/model.h"
+#include "core/pmsc/pmsc_model.h"
+#include "server/validation.h"
+
+namespace animspace::server {
+namespace {
+
+v1::CacheStatus to_proto(pmsc::CacheStatus status) {
+  switch (status) {
+    case pmsc::CacheStatus::kHit: return v1::CACHE_STATUS_HIT;
+    case pmsc::CacheStatus::kBlend: return v1::CACHE_STATUS_BLEND;
+    case pmsc::CacheStatus::kMiss: return v1::CACHE_STATUS_MISS;
+  }
+  return v1::CACHE_STATUS_UNSPECIFIED;
+}
+
+CacheOutcome to_outcome(pmsc::CacheStatus status) {
+  switch (status) {
+    case pmsc::CacheStatus::kHit: return CacheOutcome::kHit;
+    case pmsc::CacheStatus::kBlend: return CacheOutcome::kBlend;
+    case pmsc::CacheStatus::kMiss: return CacheOutcome::kMiss;
+  }
+  return CacheOutcome::kMiss;
+}
+
+int64_t unix_now_us() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+grpc::Status require_pmsc(const LoadedModel& model) {
+  if (model.pmsc) return grpc::Status::OK;
+  std::string hint = model.animation_space ? " (evaluate it with SkinningService.EvaluateSkeletonPose)" : "";
+  return {grpc::StatusCode::FAILED_PRECONDITION,
+          "model '" + model.name + "' version " + std::to_string(model.version) + " is a " +
+              model::kind_name(model.info.kind) + " model: it has no key points to evaluate" + hint};
+}
+
+grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
+                         PoseInput& out) {
+  const pmsc::PmscModel& m = *model.pmsc;
+  if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
+                                     static_cast<uint32_t>(m.key_point_count()), static_cast<uint32_t>(m.channels),
+                                     "key points", out.key_values);
+      !s.ok()) {
+    return s;
+  }
+  out.has_skeleton = pose.has_skeleton_pose();
+  if (!out.has_skeleton) return grpc::Status::OK;
+  if (!model.animation_space) {
+    return {grpc::StatusCode::INVALID_ARGUMENT,
+            field + ".skeleton_pose: model '" + model.name + "' has no posing engine on the server (fail-through " +
+                (m.cross ? "is impossible" : "is by the client: send full values with CompleteMiss") +
+                "); leave skeleton_pose unset"};
+  }
+  return decode_skeleton_pose(pose.skeleton_pose(), field + ".skeleton_pose", model.animation_space->skeleton,
+                              out.globals);
+}
+
+bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                   const PoseOptions& options, v1::PoseResult* out) {
+  const pmsc::PmscModel& m = *model.pmsc;
+  pmsc::CachedPose cached;
+  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
+  pmsc::evaluate_cached(m, input.key_values, client_full, cached);
+
+  // Server fail-through: the posing engine computes f, and the blend happens here (2007 §2.4).
+  Eigen::VectorXf engine_full;
+  if (cached.full_evaluation_needed && input.has_skeleton) {
+    PointMatrix posed;
+    animation_space::evaluate(*model.animation_space, input.globals, posed);
+    engine_full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+    Eigen::VectorXf blended(cached.points.size());
+    pmsc::blend(cached.points, engine_full, cached.alpha, blended);
+    cached.points.swap(blended);
+    cached.full_evaluation_needed = false;
+  }
+
+  out->set_status(to_proto(cached.status));
+  out->set_key_point_error(static_cast<float>(cached.key_point_error));
+  out->set_blend_weight(static_cast<float>(cached.alpha));
+  out->set_model_version(model.version);
+  out->set_full_evaluation_needed(cached.full_evaluation_needed);
+  if (!options.omit_points) {
+    encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channels),
+                  out->mutable_points());
+  }
+  if (options.include_region_errors) {
+    for (size_t r = 0; r < cached.region_errors.size(); ++r) {
+      auto* region = out->add_region_errors();
+      region->set_region(static_cast<uint32_t>(r));
+      region->set_key_point_error(static_cast<float>(cached.region_errors[r]));
+      region->set_status(to_proto(pmsc::decide(cached.region_errors[r], m.epsilon).status));
+    }
+  }
+  if (options.count_in_statistics) {
+    env.metrics.record_pose(model.name, to_outcome(cached.status), cached.key_point_error);
+  }
+  if (cached.status == pmsc::CacheStatus::kHit) return false;
+
+  misslog::MissRecord record;
+  record.model_version = model.version;
+  record.unix_time_us = unix_now_us();
+  record.status = static_cast<uint8_t>(to_proto(cached.status));
+  record.key_point_error = cached.key_point_error;
+  record.blend_weight = cached.alpha;
+  record.channels = static_cast<uint32_t>(m.channels);
+  record.key_values.assign(input.key_values.data(), input.key_values.data() + input.key_values.size());
+  const Eigen::VectorXf* full = client_full != nullptr ? client_full : (engine_full.size() > 0 ? &engine_full : nullptr);
+  if (full != nullptr) record.full_values.assign(full->data(), full->data() + full->size());
+  auto appended = env.miss_logs.append(model.name, record);
+  if (!appended) {
+    // The answer is still right; only the retraining data is short. Say so loudly.
+    spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,48 @@
+// One pose through a served PMSC model: decode and check the client's values, evaluate the soft
+// cache (Meyer & Anderson 2007 §2.4), fail through to the server's posing engine when the model
+// has one and the pose carries a skeleton (FAIL_THROUGH_SERVER), record the outcome in the
+// statistics and append every blend or miss to the model's miss log. Shared by the unary, the
+// streaming and the CompleteMiss RPCs so that the three answer a pose identically.
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+#include <grpcpp/support/status.h>
+
+#include "animspace/v1/poses.pb.h"
+#include "core/animspace/skeleton.h"
+#include "server/model_registry.h"
+#include "server/service_environment.h"
+
+namespace animspace::server {
+
+// A pose's inputs, decoded and checked.
+struct PoseInput {
+  Eigen::VectorXf key_values;                // K·D
+  bool has_skeleton = false;
+  animation_space::TransformList globals;    // G_j, when has_skeleton
+  Eigen::VectorXf full_values;               // N·D from CompleteMiss, else empty
+};
+
+// The served PMSC runtime of `model`, or FAILED_PRECONDITION naming the model's kind and the
+// RPC to use instead.
+grpc::Status require_pmsc(const LoadedModel& model);
+
+// Decodes `pose` (named `field` in messages, e.g. "poses[3]"). A skeleton pose is accepted only
+// for a model with a posing engine.
+grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
+                         PoseInput& out);
+
+struct PoseOptions {
+  bool include_region_errors = false;
+  bool omit_points = false;
+  // CompleteMiss answers a pose that EvaluateKeyPoints already counted: log it, don't count it.
+  bool count_in_statistics = true;
+};
+
+// Evaluates one decoded pose into `out`. Returns whether the pose was appended to the miss log.
+bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                   const PoseOptions& options, v1::PoseResult* out);
+
+}  // namespace animspace::server

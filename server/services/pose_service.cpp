@@ -1,0 +1,120 @@
+#include "server/services/pose_service.h"
+
+#include "server/model_lookup.h"
+#include "server/pose_evaluation.h"
+#include "server/services/key_point_stream.h"
+#include "server/unary_call.h"
+#include "server/validation.h"
+
+namespace animspace::server {
+namespace {
+
+v1::FailThrough fail_through_of(const LoadedModel& model) {
+  if (model.pmsc->cross) return v1::FAIL_THROUGH_IMPOSSIBLE;
+  return model.animation_space ? v1::FAIL_THROUGH_SERVER : v1::FAIL_THROUGH_CLIENT;
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServerContext* context,
+                                                             const v1::DescribeKeyPointsRequest* request,
+                                                             v1::DescribeKeyPointsResponse* response) {
+  return serve_unary(env_, context, "PoseService/DescribeKeyPoints", Access::kUser,
+                     env_.request_pool, [this, request, response](const CallControl& call) {
+                       std::shared_ptr<const LoadedModel> model;
+                       if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) {
+                         return s;
+                       }
+                       if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
+                       const pmsc::PmscModel& m = *model->pmsc;
+                       response->set_model_version(model->version);
+                       for (int k : m.key_points) response->add_key_point_indices(static_cast<uint32_t>(k));
+                       response->set_channel_count(static_cast<uint32_t>(m.channels));
+                       response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
+                       for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
+                       response->set_fail_through(fail_through_of(*model));
+                       return grpc::Status::OK;
+                     });
+}
+
+grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServerContext* context,
+                                                             const v1::EvaluateKeyPointsRequest* request,
+                                                             v1::EvaluateKeyPointsResponse* response) {
+  return serve_unary(
+      env_, context, "PoseService/EvaluateKeyPoints", Access::kUser, env_.request_pool,
+      [this, request, response](const CallControl& call) {
+        std::shared_ptr<const LoadedModel> model;
+        if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
+        if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
+        if (grpc::Status s = check_batch_size(request->poses_size(), env_.options.max_batch_poses, "poses"); !s.ok()) {
+          return s;
+        }
+        const uint64_t bytes_per_pose =
+            request->omit_points() ? 0 : uint64_t{4} * static_cast<uint64_t>(model->pmsc->point_count) *
+                                             static_cast<uint64_t>(model->pmsc->channels);
+        if (grpc::Status s = check_response_size(request->poses_size(), bytes_per_pose, env_.options.max_message_bytes,
+                                                 "poses");
+            !s.ok()) {
+          return s;
+        }
+        // Every pose is checked before any is evaluated: a bad batch logs no misses and counts no poses.
+        std::vector<PoseInput> inputs(static_cast<size_t>(request->poses_size()));
+        for (int i = 0; i < request->poses_size(); ++i) {
+          if (grpc::Status s = decode_pose(*model, request->poses(i), "poses[" + std::to_string(i) + "]",
+                                           inputs[static_cast<size_t>(i)]);
+              !s.ok()) {
+            return s;
+          }
+        }
+        PoseOptions options;
+        options.include_region_errors = request->include_region_errors();
+        options.omit_points = request->omit_points();
+        for (const PoseInput& input : inputs) {
+          if (grpc::Status stop = call.stop_status(); !stop.ok()) return stop;
+          evaluate_pose(env_, *model, input, options, response->add_results());
+        }
+        return grpc::Status::OK;
+      });
+}
+
+grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerContext* context,
+                                                        const v1::CompleteMissRequest* request,
+                                                        v1::CompleteMissResponse* response) {
+  return serve_unary(
+      env_, context, "PoseService/CompleteMiss", Access::kUser, env_.request_pool,
+      [this, request, response](const CallControl& call) {
+        std::shared_ptr<const LoadedModel> model;
+        if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
+        if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
+        const pmsc::PmscModel& m = *model->pmsc;
+        if (m.cross) {
+          return grpc::Status{grpc::StatusCode::FAILED_PRECONDITION,
+                              "model '" + model->name +
+                                  "' is cross-PMSC: its key points drive a different point set, so no full "
+                                  "values exist to complete a miss with (fail-through impossible)"};
+        }
+        PoseInput input;
+        if (grpc::Status s = decode_points(request->key_values(), "key_values",
+                                           static_cast<uint32_t>(m.key_point_count()),
+                                           static_cast<uint32_t>(m.channels), "key points", input.key_values);
+            !s.ok()) {
+          return s;
+        }
+        if (grpc::Status s = decode_points(request->full_values(), "full_values", static_cast<uint32_t>(m.point_count),
+                                           static_cast<uint32_t>(m.channels), "points", input.full_values);
+            !s.ok()) {
+          return s;
+        }
+        PoseOptions options;
+        options.count_in_statistics = false;
+        response->set_logged(evaluate_pose(env_, *model, input, options, response->mutable_result()));
+        return grpc::Status::OK;
+      });
+}
+
+grpc::ServerBidiReactor<v1::KeyPointFrame, v1::PoseResult>* PoseServiceImpl::StreamKeyPoints(
+    grpc::CallbackServerContext* context) {
+  return KeyPointStream::start(env_, context);
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,74 @@
+// The one path every unary RPC takes: authenticate, admit, run the handler body on a pool the
+// server owns, record the outcome, finish. Handlers only validate and compute.
+//
+//   return serve_unary(env_, context, "PoseService/EvaluateKeyPoints", Access::kUser,
+//                      env_.request_pool, [=](const CallControl& call) {
+//                        …; return grpc::Status::OK;
+//                      });
+//
+// Deadlines and cancellation: a call whose deadline passed or whose client went away while it
+// waited in the queue is never started; long bodies poll `call.stop_status()` between units of
+// work (poses of a batch, stages of a retrain) and return it.
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <utility>
+
+#include <grpcpp/grpcpp.h>
+
+#include "server/call_scope.h"
+#include "server/service_environment.h"
+
+namespace animspace::server {
+
+// What a handler body may ask about its call while it runs.
+class CallControl {
+ public:
+  CallControl(grpc::CallbackServerContext* context, CallScope* scope) : context_(context), scope_(scope) {}
+  // CANCELLED when the client cancelled (or went away), DEADLINE_EXCEEDED when the deadline has
+  // passed, else OK.
+  grpc::Status stop_status() const;
+  grpc::CallbackServerContext* context() const { return context_; }
+  // Labels the call's metrics and log line with a model, once the model is known to exist
+  // (names of unknown models never become metric labels: a client could mint them at will).
+  void set_model(const std::string& model) const {
+    if (scope_ != nullptr) scope_->set_model(model);
+  }
+
+ private:
+  grpc::CallbackServerContext* context_;
+  CallScope* scope_;
+};
+
+// Authentication and admission, shared by unary and streaming calls. OK with a ticket, or the
+// status to finish with.
+grpc::Status admit(ServiceEnvironment& env, const grpc::CallbackServerContext* context, std::string_view rpc,
+                   Access access, std::shared_ptr<Admission::Ticket>* ticket);
+
+template <typename Body>
+grpc::ServerUnaryReactor* serve_unary(ServiceEnvironment& env, grpc::CallbackServerContext* context,
+                                      const char* rpc, Access access, WorkPool& pool, Body body) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  auto scope = std::make_shared<CallScope>(env.metrics, rpc);
+  std::shared_ptr<Admission::Ticket> ticket;
+  if (grpc::Status refused = admit(env, context, rpc, access, &ticket); !refused.ok()) {
+    reactor->Finish(scope->finish(refused));
+    return reactor;
+  }
+  const bool queued = pool.submit([reactor, context, scope, ticket, body = std::move(body)]() mutable {
+    const CallControl call(context, scope.get());
+    grpc::Status status = call.stop_status();
+    if (status.ok()) status = body(call);
+    ticket->release();
+    reactor->Finish(scope->finish(std::move(status)));
+  });
+  if (!queued) {
+    ticket->release();
+    reactor->Finish(scope->finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"}));
+  }
+  return reactor;
+}
+
+}  // namespace animspace::server

@@ -1,0 +1,133 @@
+#include "server/validation.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+
+#include "server/model_registry.h"
+#include "server/status_mapping.h"
+
+namespace animspace::server {
+namespace {
+
+// The wire format is little-endian float32 (common.proto); this build copies bytes as they are.
+static_assert(std::endian::native == std::endian::little, "animspaced assumes a little-endian host");
+
+std::string join(std::string_view field, std::string_view member) {
+  return std::string(field) + "." + std::string(member);
+}
+
+}  // namespace
+
+grpc::Status check_model_ref(const v1::ModelRef& ref, std::string_view field) {
+  if (auto valid = validate_model_name(ref.name(), join(field, "name")); !valid) {
+    return to_grpc_status(valid.error());
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status check_batch_size(int size, uint32_t max_batch, std::string_view field) {
+  if (size == 0) {
+    return invalid_argument(std::string(field) + ": empty batch, expected 1.." + std::to_string(max_batch) +
+                            " entries");
+  }
+  if (static_cast<uint64_t>(size) > max_batch) {
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+            std::string(field) + ": " + std::to_string(size) + " entries, the limit is " + std::to_string(max_batch) +
+                " (--max-batch-poses); split the batch"};
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status check_response_size(int count, uint64_t bytes_per_entry, int64_t max_message_bytes,
+                                 std::string_view field) {
+  // Field tags, lengths and the small members of each entry: a generous allowance.
+  constexpr uint64_t kOverheadPerEntry = 64;
+  const uint64_t bytes = static_cast<uint64_t>(count) * (bytes_per_entry + kOverheadPerEntry);
+  if (bytes > static_cast<uint64_t>(max_message_bytes)) {
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+            std::string(field) + ": the response to " + std::to_string(count) + " entries would be about " +
+                std::to_string(bytes) + " bytes, the limit is " + std::to_string(max_message_bytes) +
+                " (--max-message-bytes); send fewer per request"};
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status decode_points(const v1::PointArray& array, std::string_view field, uint32_t points,
+                           uint32_t channels, std::string_view what_points, Eigen::VectorXf& out) {
+  if (array.point_count() != points) {
+    return invalid_argument(join(field, "point_count") + ": expected " + std::to_string(points) + " " +
+                            std::string(what_points) + ", got " + std::to_string(array.point_count()));
+  }
+  if (array.channel_count() != channels) {
+    return invalid_argument(join(field, "channel_count") + ": expected " + std::to_string(channels) + ", got " +
+                            std::to_string(array.channel_count()));
+  }
+  const uint64_t values = uint64_t{points} * channels;
+  if (array.data().size() != values * sizeof(float)) {
+    return invalid_argument(join(field, "data") + ": expected " + std::to_string(values * sizeof(float)) +
+                            " bytes (4 · " + std::to_string(points) + " · " + std::to_string(channels) + "), got " +
+                            std::to_string(array.data().size()));
+  }
+  out.resize(static_cast<Eigen::Index>(values));
+  std::memcpy(out.data(), array.data().data(), array.data().size());
+  if (!out.allFinite()) {
+    for (Eigen::Index i = 0; i < out.size(); ++i) {
+      if (std::isfinite(out[i])) continue;
+      return invalid_argument(join(field, "data") + ": value of point " + std::to_string(i / channels) +
+                              ", channel " + std::to_string(i % channels) + " is " +
+                              (std::isnan(out[i]) ? "NaN" : "infinite") + "; expected finite values");
+    }
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status decode_skeleton_pose(const v1::SkeletonPose& pose, std::string_view field,
+                                  const animation_space::Skeleton& skeleton, animation_space::TransformList& globals) {
+  const auto bones = static_cast<uint32_t>(skeleton.parents.size());
+  if (pose.space() != v1::SkeletonPose::SPACE_LOCAL && pose.space() != v1::SkeletonPose::SPACE_GLOBAL) {
+    return invalid_argument(join(field, "space") + ": expected SPACE_LOCAL or SPACE_GLOBAL, got " +
+                            std::to_string(static_cast<int>(pose.space())));
+  }
+  if (pose.bone_count() != bones) {
+    return invalid_argument(join(field, "bone_count") + ": expected " + std::to_string(bones) + ", got " +
+                            std::to_string(pose.bone_count()));
+  }
+  const size_t expected_bytes = size_t{bones} * 12 * sizeof(float);
+  if (pose.transforms().size() != expected_bytes) {
+    return invalid_argument(join(field, "transforms") + ": expected " + std::to_string(expected_bytes) +
+                            " bytes (4 · 12 · " + std::to_string(bones) + " bones), got " +
+                            std::to_string(pose.transforms().size()));
+  }
+  animation_space::TransformList transforms(bones, animation_space::Transform::Identity());
+  const char* bytes = pose.transforms().data();
+  for (uint32_t j = 0; j < bones; ++j) {
+    float rows[12];
+    std::memcpy(rows, bytes + size_t{j} * sizeof(rows), sizeof(rows));
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 4; ++c) {
+        const float value = rows[r * 4 + c];
+        if (!std::isfinite(value)) {
+          return invalid_argument(join(field, "transforms") + ": bone " + std::to_string(j) + ", entry (" +
+                                  std::to_string(r) + "," + std::to_string(c) + ") is " +
+                                  (std::isnan(value) ? "NaN" : "infinite") + "; expected finite values");
+        }
+        transforms[j](r, c) = value;
+      }
+    }
+  }
+  globals = pose.space() == v1::SkeletonPose::SPACE_LOCAL ? animation_space::global_transforms(skeleton, transforms)
+                                                         : std::move(transforms);
+  if (auto valid = animation_space::validate_pose(skeleton, globals, join(field, "transforms")); !valid) {
+    return to_grpc_status(valid.error());
+  }
+  return grpc::Status::OK;
+}
+
+void encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointArray* out) {
+  out->set_point_count(points);
+  out->set_channel_count(channels);
+  out->set_data(values, size_t{points} * channels * sizeof(float));
+}
+
+}  // namespace animspace::server

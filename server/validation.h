@@ -1,0 +1,44 @@
+// Request validation: every field a client sends is checked here before any core code sees it,
+// and a refusal names the field with the expected and the actual value
+// ("poses[3].key_values.point_count: expected 60, got 59"). Nothing is allocated from a size
+// the client claims until that size has been checked against the model.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include <Eigen/Core>
+#include <grpcpp/support/status.h>
+
+#include "animspace/v1/common.pb.h"
+#include "core/animspace/skeleton.h"
+
+namespace animspace::server {
+
+// The model reference: a valid name (see validate_model_name). `field` is e.g. "model".
+grpc::Status check_model_ref(const v1::ModelRef& ref, std::string_view field);
+
+// Batch size: INVALID_ARGUMENT for an empty batch, RESOURCE_EXHAUSTED above `max_batch`.
+grpc::Status check_batch_size(int size, uint32_t max_batch, std::string_view field);
+
+// The answer to `count` entries of about `bytes_per_entry` each must fit in one message:
+// RESOURCE_EXHAUSTED naming `field`, the size and the limit otherwise (checked before any work).
+grpc::Status check_response_size(int count, uint64_t bytes_per_entry, int64_t max_message_bytes,
+                                 std::string_view field);
+
+// A PointArray of exactly `points` × `channels` finite float32 values, decoded into `out`
+// (points·channels values, point-major). `what_points` names the points in messages
+// ("key points", "points").
+grpc::Status decode_points(const v1::PointArray& array, std::string_view field, uint32_t points,
+                           uint32_t channels, std::string_view what_points, Eigen::VectorXf& out);
+
+// A skeleton pose for `skeleton`, as global transforms G_j (local poses are composed down the
+// hierarchy, Merry 2007 §2.2).
+grpc::Status decode_skeleton_pose(const v1::SkeletonPose& pose, std::string_view field,
+                                  const animation_space::Skeleton& skeleton, animation_space::TransformList& globals);
+
+// Packs `points`·`channels` floats into a PointArray.
+void encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointArray* out);
+
+}  // namespace animspace::server
