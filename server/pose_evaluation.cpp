@@ -36,12 +36,16 @@ int64_t unix_now_us() {
 
 }  // namespace
 
-grpc::Status require_pmsc(const LoadedModel& model) {
+grpc::Status require_pmsc(const LoadedModel& model, std::string_view why) {
   if (model.pmsc) return grpc::Status::OK;
-  std::string hint = model.animation_space ? " (evaluate it with SkinningService.EvaluateSkeletonPose)" : "";
-  return {grpc::StatusCode::FAILED_PRECONDITION,
-          "model '" + model.name + "' version " + std::to_string(model.version) + " is a " +
-              model::kind_name(model.info.kind) + " model: it has no key points to evaluate" + hint};
+  std::string reason(why);
+  if (reason.empty()) {
+    reason = "it has no key points to evaluate";
+    if (model.animation_space) reason += " (evaluate it with SkinningService.EvaluateSkeletonPose)";
+  }
+  return {grpc::StatusCode::FAILED_PRECONDITION, "model '" + model.name + "' version " +
+                                                     std::to_string(model.version) + " is of kind " +
+                                                     model::kind_name(model.info.kind) + ": " + reason};
 }
 
 grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,

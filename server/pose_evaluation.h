@@ -25,9 +25,9 @@ struct PoseInput {
   Eigen::VectorXf full_values;               // N·D from CompleteMiss, else empty
 };
 
-// The served PMSC runtime of `model`, or FAILED_PRECONDITION naming the model's kind and the
-// RPC to use instead.
-grpc::Status require_pmsc(const LoadedModel& model);
+// OK for a PMSC model, or FAILED_PRECONDITION naming the model's kind and `why` the call needs
+// PMSC (default: key points; a model with a skeleton is pointed at EvaluateSkeletonPose).
+grpc::Status require_pmsc(const LoadedModel& model, std::string_view why = {});
 
 // Decodes `pose` (named `field` in messages, e.g. "poses[3]"). A skeleton pose is accepted only
 // for a model with a posing engine.

@@ -6,7 +6,13 @@ namespace {
 std::shared_ptr<grpc::Channel> make_channel(const std::string& target, const ClientOptions& options) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
-  return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+  if (!options.tls) return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+  grpc::SslCredentialsOptions ssl;
+  ssl.pem_root_certs = options.tls_root_certificates;
+  ssl.pem_cert_chain = options.tls_client_certificate;
+  ssl.pem_private_key = options.tls_client_key;
+  if (!options.tls_server_name.empty()) args.SetSslTargetNameOverride(options.tls_server_name);
+  return grpc::CreateCustomChannel(target, grpc::SslCredentials(ssl), args);
 }
 
 void check(const char* rpc, const grpc::Status& status) {
@@ -39,10 +45,15 @@ Client::Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options)
       channel_(std::move(channel)),
       models_(v1::ModelService::NewStub(channel_)),
       stats_(v1::StatsService::NewStub(channel_)),
+      poses_(v1::PoseService::NewStub(channel_)),
+      training_(v1::TrainingService::NewStub(channel_)),
       health_(grpc::health::v1::Health::NewStub(channel_)) {}
 
-void Client::prepare(grpc::ClientContext* context) const {
-  context->set_deadline(std::chrono::system_clock::now() + options_.deadline);
+void Client::prepare(grpc::ClientContext* context) const { prepare(context, options_.deadline); }
+
+void Client::prepare(grpc::ClientContext* context, std::chrono::milliseconds deadline) const {
+  context->set_deadline(std::chrono::system_clock::now() + deadline);
+  if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
 }
 
 grpc::health::v1::HealthCheckResponse::ServingStatus Client::health(const std::string& service) {
@@ -111,6 +122,41 @@ v1::GetStatsResponse Client::stats(const std::string& model, bool reset) {
   request.set_reset(reset);
   v1::GetStatsResponse response;
   check("GetStats", stats_->GetStats(&context, request, &response));
+  return response;
+}
+
+v1::DescribeKeyPointsResponse Client::describe_key_points(const std::string& model, uint64_t version) {
+  grpc::ClientContext context;
+  prepare(&context);
+  v1::DescribeKeyPointsRequest request;
+  request.mutable_model()->set_name(model);
+  request.mutable_model()->set_version(version);
+  v1::DescribeKeyPointsResponse response;
+  check("DescribeKeyPoints", poses_->DescribeKeyPoints(&context, request, &response));
+  return response;
+}
+
+v1::EvaluateKeyPointsResponse Client::evaluate_key_points(const v1::EvaluateKeyPointsRequest& request) {
+  grpc::ClientContext context;
+  prepare(&context);
+  v1::EvaluateKeyPointsResponse response;
+  check("EvaluateKeyPoints", poses_->EvaluateKeyPoints(&context, request, &response));
+  return response;
+}
+
+v1::CompleteMissResponse Client::complete_miss(const v1::CompleteMissRequest& request) {
+  grpc::ClientContext context;
+  prepare(&context);
+  v1::CompleteMissResponse response;
+  check("CompleteMiss", poses_->CompleteMiss(&context, request, &response));
+  return response;
+}
+
+v1::RetrainResponse Client::retrain(const v1::RetrainRequest& request, std::chrono::milliseconds deadline) {
+  grpc::ClientContext context;
+  prepare(&context, deadline);
+  v1::RetrainResponse response;
+  check("Retrain", training_->Retrain(&context, request, &response));
   return response;
 }
 

@@ -14,7 +14,9 @@
 #include <grpcpp/grpcpp.h>
 
 #include "animspace/v1/models.grpc.pb.h"
+#include "animspace/v1/poses.grpc.pb.h"
 #include "animspace/v1/stats.grpc.pb.h"
+#include "animspace/v1/training.grpc.pb.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace animspace {
@@ -36,6 +38,16 @@ struct ClientOptions {
   std::chrono::milliseconds deadline{10000};
   // Largest message received, bytes (poses and LOD chunks can be large).
   int max_receive_message_bytes = 64 << 20;
+  // Bearer token sent as "authorization: Bearer <token>" on every call (empty: none).
+  std::string token;
+  // TLS: PEM of the CA that signed the server's certificate; empty with `tls` false = plaintext.
+  bool tls = false;
+  std::string tls_root_certificates;  // empty: the system's roots
+  // TLS client certificate and key (PEM), for servers that require them.
+  std::string tls_client_certificate;
+  std::string tls_client_key;
+  // Name the server certificate must carry, when it differs from the target's host.
+  std::string tls_server_name;
 };
 
 class Client {
@@ -53,16 +65,25 @@ class Client {
   void unload_model(const std::string& name, uint64_t version = 0);
   v1::GetServerInfoResponse server_info();
   v1::GetStatsResponse stats(const std::string& model = "", bool reset = false);
+  // The key points a PMSC model needs, in the order evaluate_key_points expects them.
+  v1::DescribeKeyPointsResponse describe_key_points(const std::string& model, uint64_t version = 0);
+  v1::EvaluateKeyPointsResponse evaluate_key_points(const v1::EvaluateKeyPointsRequest& request);
+  v1::CompleteMissResponse complete_miss(const v1::CompleteMissRequest& request);
+  // Retraining can take minutes: `deadline` overrides the client's default for this call.
+  v1::RetrainResponse retrain(const v1::RetrainRequest& request, std::chrono::milliseconds deadline);
 
   const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
 
  private:
   void prepare(grpc::ClientContext* context) const;
+  void prepare(grpc::ClientContext* context, std::chrono::milliseconds deadline) const;
 
   ClientOptions options_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::ModelService::Stub> models_;
   std::unique_ptr<v1::StatsService::Stub> stats_;
+  std::unique_ptr<v1::PoseService::Stub> poses_;
+  std::unique_ptr<v1::TrainingService::Stub> training_;
   std::unique_ptr<grpc::health::v1::Health::Stub> health_;
 };
 

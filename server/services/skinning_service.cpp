@@ -17,9 +17,9 @@ grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::Callba
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
         if (!model->animation_space) {
           return grpc::Status{grpc::StatusCode::FAILED_PRECONDITION,
-                              "model '" + model->name + "' version " + std::to_string(model->version) + " is a " +
+                              "model '" + model->name + "' version " + std::to_string(model->version) + " is of kind " +
                                   model::kind_name(model->info.kind) +
-                                  " model without a skeleton: it cannot evaluate skeleton poses"};
+                                  " and has no skeleton: it cannot evaluate skeleton poses"};
         }
         const animation_space::AnimationSpaceModel* skinned = model->animation_space.get();
         if (request->lod_level() != 0) {

@@ -47,7 +47,9 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
       [this, request, response](const CallControl& call) {
         std::shared_ptr<const LoadedModel> model;
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
-        if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
+        if (grpc::Status s = require_pmsc(*model, "only PMSC subspaces are retrained from logged misses"); !s.ok()) {
+          return s;
+        }
         if (request->error_bound() < 0 || !std::isfinite(request->error_bound())) {
           return invalid_argument("error_bound: expected a finite value ≥ 0 (0 keeps the model's), got " +
                                   std::to_string(request->error_bound()));

@@ -318,7 +318,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          }));
        }},
       {"mesh sequence has no key points", grpc::StatusCode::FAILED_PRECONDITION,
-       "model 'arm' version 1 is a mesh_sequence model: it has no key points to evaluate",
+       "model 'arm' version 1 is of kind mesh_sequence: it has no key points to evaluate",
        [&] { return eval(request_with("arm", 1, no_edit)); }},
       {"complete a cross-PMSC miss", grpc::StatusCode::FAILED_PRECONDITION, "is cross-PMSC",
        [&] {
@@ -349,7 +349,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          return poses->DescribeKeyPoints(&context, request, &response);
        }},
       {"skeleton pose on a model without skeleton", grpc::StatusCode::FAILED_PRECONDITION,
-       "model 'arm-pmsc' version 1 is a pmsc model without a skeleton",
+       "model 'arm-pmsc' version 1 is of kind pmsc and has no skeleton",
        [&] {
          grpc::ClientContext context;
          v1::EvaluateSkeletonPoseRequest request;
@@ -389,7 +389,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          v1::EvaluateSkeletonPoseResponse response;
          return skinning->EvaluateSkeletonPose(&context, request, &response);
        }},
-      {"retrain a skinning model", grpc::StatusCode::FAILED_PRECONDITION, "model 'arm-animspace' version 1 is a animation_space model",
+      {"retrain a skinning model", grpc::StatusCode::FAILED_PRECONDITION, "model 'arm-animspace' version 1 is of kind animation_space: only PMSC subspaces are retrained",
        [&] {
          grpc::Status status;
          retrain(*training, "arm-animspace", true, &status);

@@ -1,4 +1,5 @@
 // animspace: the command line for animspaced (queries) and for offline work on model files.
+#include <cctype>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -11,6 +12,7 @@
 #include "clients/cpp/cli/lod.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
+#include "core/common/atomic_file.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/model/model_info.h"
@@ -21,7 +23,23 @@ struct Globals {
   std::string server = "127.0.0.1:50051";
   int deadline_ms = 10000;
   bool json = false;
+  std::string token_file;
+  bool tls = false;
+  std::string tls_ca;
+  std::string tls_cert;
+  std::string tls_key;
+  std::string tls_server_name;
 };
+
+// Contents of a file named by a flag; exits with a message naming the flag when unreadable.
+std::string read_flag_file(const char* flag, const std::string& path) {
+  auto text = animspace::read_whole_file(path);
+  if (!text) {
+    std::fprintf(stderr, "animspace: %s: %s\n", flag, text.error().message.c_str());
+    std::exit(2);
+  }
+  return *text;
+}
 
 std::string to_json(const google::protobuf::Message& message) {
   std::string out;
@@ -35,6 +53,18 @@ std::string to_json(const google::protobuf::Message& message) {
 animspace::Client connect(const Globals& g) {
   animspace::ClientOptions options;
   options.deadline = std::chrono::milliseconds(g.deadline_ms);
+  if (const char* token = std::getenv("ANIMSPACE_TOKEN"); token != nullptr) options.token = token;
+  if (!g.token_file.empty()) {
+    options.token = read_flag_file("--token-file", g.token_file);
+    while (!options.token.empty() && std::isspace(static_cast<unsigned char>(options.token.back()))) {
+      options.token.pop_back();
+    }
+  }
+  options.tls = g.tls || !g.tls_ca.empty() || !g.tls_cert.empty();
+  if (!g.tls_ca.empty()) options.tls_root_certificates = read_flag_file("--tls-ca", g.tls_ca);
+  if (!g.tls_cert.empty()) options.tls_client_certificate = read_flag_file("--tls-cert", g.tls_cert);
+  if (!g.tls_key.empty()) options.tls_client_key = read_flag_file("--tls-key", g.tls_key);
+  options.tls_server_name = g.tls_server_name;
   return animspace::Client(g.server, options);
 }
 
@@ -144,6 +174,61 @@ int run_stats(const Globals& g, const std::string& model, bool reset) {
   return 0;
 }
 
+int run_keys(const Globals& g, const std::string& model, uint64_t version) {
+  auto client = connect(g);
+  const auto keys = client.describe_key_points(model, version);
+  if (g.json) {
+    std::cout << to_json(keys);
+    return 0;
+  }
+  std::printf("%s version %llu: %d key points × %u channels out of %u control points, fail-through %s\n",
+              model.c_str(), static_cast<unsigned long long>(keys.model_version()), keys.key_point_indices_size(),
+              keys.channel_count(), keys.control_point_count(),
+              animspace::v1::FailThrough_Name(keys.fail_through()).c_str());
+  for (int k = 0; k < keys.key_point_indices_size(); ++k) {
+    std::printf("%s%u", k == 0 ? "  " : (k % 16 == 0 ? "\n  " : " "), keys.key_point_indices(k));
+  }
+  std::printf("\n");
+  return 0;
+}
+
+int run_retrain(const Globals& g, const animspace::v1::RetrainRequest& request, int deadline_s) {
+  auto client = connect(g);
+  const auto result = client.retrain(request, std::chrono::seconds(deadline_s));
+  if (g.json) {
+    std::cout << to_json(result);
+    return 0;
+  }
+  if (request.dry_run()) {
+    std::printf("dry run: nothing written\n");
+  } else {
+    std::printf("%s: version %llu published and serving\n", request.model().name().c_str(),
+                static_cast<unsigned long long>(result.new_version()));
+  }
+  std::printf("  %u training frames (%u from logged misses), basis %u, %u key points\n", result.training_frames(),
+              result.misses_used(), result.basis_size(), result.key_point_count());
+  std::printf("  max training error %.6g, condition number %.3g, %.2f s\n", result.max_training_error(),
+              result.condition_number(), result.training_seconds());
+  return 0;
+}
+
+int run_load(const Globals& g, const std::string& model, uint64_t version, bool unload) {
+  auto client = connect(g);
+  if (unload) {
+    client.unload_model(model, version);
+    std::printf("%s%s unloaded\n", model.c_str(),
+                version == 0 ? "" : (" version " + std::to_string(version)).c_str());
+    return 0;
+  }
+  const auto summary = client.load_model(model, version);
+  if (g.json) {
+    std::cout << to_json(summary);
+    return 0;
+  }
+  print_summary(summary);
+  return 0;
+}
+
 int run_inspect(const Globals& g, const std::string& path) {
   auto container = animspace::container::read_file(path);
   if (!container) {
@@ -199,6 +284,14 @@ int main(int argc, char** argv) {
   app.add_option("-s,--server", g.server, "animspaced address (gRPC target)")->capture_default_str();
   app.add_option("--deadline-ms", g.deadline_ms, "Deadline for each call")->capture_default_str();
   app.add_flag("--json", g.json, "Print JSON for scripts instead of tables");
+  app.add_option("--token-file", g.token_file,
+                 "File holding the bearer token for servers started with --auth-token-file "
+                 "(or set ANIMSPACE_TOKEN)");
+  app.add_flag("--tls", g.tls, "Connect with TLS, trusting the system's CAs");
+  app.add_option("--tls-ca", g.tls_ca, "Connect with TLS, trusting this CA bundle (PEM)");
+  app.add_option("--tls-cert", g.tls_cert, "TLS client certificate (PEM), for servers that require one");
+  app.add_option("--tls-key", g.tls_key, "TLS client private key (PEM)");
+  app.add_option("--tls-server-name", g.tls_server_name, "Name the server certificate must carry, if not the host");
 
   auto* list = app.add_subcommand("list", "List the models the server serves, with their versions");
   auto* health = app.add_subcommand("health", "grpc.health.v1 status of the server (exit 0 when SERVING)");
@@ -214,6 +307,37 @@ int main(int argc, char** argv) {
   auto* stats = app.add_subcommand("stats", "Per-model soft-cache hit rates and latency");
   stats->add_option("model", model, "Model name (default: every model)");
   stats->add_flag("--reset", reset, "Zero the counters after reading");
+
+  auto* keys = app.add_subcommand("keys", "The key points a PMSC model needs, in the order evaluation expects");
+  keys->add_option("model", model, "Model name")->required();
+  keys->add_option("--version", version, "Version (default: the one served for version 0)");
+
+  animspace::v1::RetrainRequest retrain_request;
+  std::string retrain_model;
+  uint64_t retrain_version = 0;
+  bool exclude_misses = false;
+  bool dry_run = false;
+  float error_bound = 0;
+  uint32_t max_key_points = 0;
+  int retrain_deadline_s = 1800;
+  auto* retrain = app.add_subcommand(
+      "retrain",
+      "Admin: retrain a PMSC model on its training frames plus the logged misses that carry full values, "
+      "publish it as the next version and hot-swap it in (calls in flight finish on the old one)");
+  retrain->add_option("model", retrain_model, "Model name")->required();
+  retrain->add_option("--version", retrain_version, "Version to start from (default: the served one)");
+  retrain->add_flag("--exclude-misses", exclude_misses, "Ignore the miss log (retrain with new options only)");
+  retrain->add_option("--error-bound", error_bound, "New bound on the max per-point training error, model units");
+  retrain->add_option("--max-key-points", max_key_points, "New key point budget");
+  retrain->add_flag("--dry-run", dry_run, "Train and report, but write nothing");
+  retrain->add_option("--deadline-s", retrain_deadline_s, "Deadline for the retrain call")->capture_default_str();
+
+  auto* load = app.add_subcommand("load", "Admin: (re)load a model, or one version, from the repository");
+  load->add_option("model", model, "Model name")->required();
+  load->add_option("--version", version, "One version (default: every version found)");
+  auto* unload = app.add_subcommand("unload", "Admin: stop serving a model, or one version");
+  unload->add_option("model", model, "Model name")->required();
+  unload->add_option("--version", version, "One version (default: all)");
 
   std::string path;
   auto* inspect = app.add_subcommand("inspect", "Offline: print a model file's metadata and sections and check it");
@@ -245,6 +369,18 @@ int main(int argc, char** argv) {
     if (*info) return run_server_info(g);
     if (*describe) return run_describe(g, model, version);
     if (*stats) return run_stats(g, model, reset);
+    if (*keys) return run_keys(g, model, version);
+    if (*retrain) {
+      retrain_request.mutable_model()->set_name(retrain_model);
+      retrain_request.mutable_model()->set_version(retrain_version);
+      retrain_request.set_exclude_misses(exclude_misses);
+      retrain_request.set_error_bound(error_bound);
+      retrain_request.set_max_key_points(max_key_points);
+      retrain_request.set_dry_run(dry_run);
+      return run_retrain(g, retrain_request, retrain_deadline_s);
+    }
+    if (*load) return run_load(g, model, version, false);
+    if (*unload) return run_load(g, model, version, true);
     if (*inspect) return run_inspect(g, path);
     if (*demo) return run_demo_repository(path);
   } catch (const animspace::RpcError& error) {

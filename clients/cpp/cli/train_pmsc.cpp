@@ -104,8 +104,10 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   const std::string description =
       a.description.empty() ? "PMSC model of " + a.sequence + " (" + std::to_string(frames.rows()) + " frames)"
                             : a.description;
-  const auto container = pmsc::make_container(sequence->reference, frames, control ? &control_frames : nullptr,
-                                              *model, report, description);
+  auto container = pmsc::make_container(sequence->reference, frames, control ? &control_frames : nullptr, *model,
+                                        report, description);
+  // Kept so that the daemon can retrain the model from its frames and logged misses.
+  pmsc::store_training_options(options, container);
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, container); !written.ok()) {
     return fail("train-pmsc", written.error().message);
