@@ -116,6 +116,7 @@ Status Daemon::start() {
   }
   ANIMSPACE_RETURN_IF_ERROR(start_metrics_endpoint());
 
+  miss_logs_->recover_existing();
   const int loaded = registry_.load_all();
   refresh_model_gauges(*env_);
   spdlog::info("repository {}: {} model version(s) loaded", options_.repository.string(), loaded);

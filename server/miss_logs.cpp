@@ -24,6 +24,23 @@ Result<misslog::MissLog*> MissLogs::open(const std::string& model) {
   return logs_.emplace(model, std::move(*log)).first->second.get();
 }
 
+int MissLogs::recover_existing() {
+  int opened = 0;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(directory_, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->path().extension() != ".misses" || !it->is_regular_file(ec)) continue;
+    const std::string model = it->path().stem().string();
+    auto log = open(model);
+    if (!log) {
+      spdlog::error("miss log {}: {}", it->path().string(), log.error().message);
+      continue;
+    }
+    spdlog::info("miss log {}: {} records", it->path().string(), (*log)->record_count());
+    ++opened;
+  }
+  return opened;
+}
+
 Result<uint64_t> MissLogs::append(const std::string& model, misslog::MissRecord& record) {
   auto log = open(model);
   if (!log) return log.error();

@@ -23,6 +23,9 @@ class MissLogs {
   Result<uint64_t> append(const std::string& model, misslog::MissRecord& record);
 
   std::filesystem::path path_of(const std::string& model) const;
+  // Opens every existing log in the directory at start-up, so a torn tail left by a crash is
+  // cut (and reported) before serving begins. Returns how many logs were opened.
+  int recover_existing();
   // Flushes every open log to disk (shutdown).
   void sync_all();
 
