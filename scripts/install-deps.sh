@@ -16,7 +16,7 @@ packages=(
   # headless rendering (Mesa's surfaceless EGL, llvmpipe) and PNG
   libegl-dev libgles-dev libegl1 libgles2 libegl-mesa0 libgl1-mesa-dri libpng-dev
   # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev libbenchmark-dev openssl
   # Python client (always run with /usr/bin/python3)
   python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-matplotlib
 )

@@ -105,7 +105,8 @@ Status Daemon::start() {
   if (!server_ || port_ == 0) {
     server_.reset();
     return make_error(ErrorCode::kInvalidArgument,
-                      "--listen: cannot bind '" + options_.listen_address + "' (in use or not a local address?)");
+                      "--listen: cannot bind '" + options_.listen_address + "' (in use or not a local address?" +
+                          (tls_enabled(options_) ? " Or --tls-cert and --tls-key do not belong together?)" : ")"));
   }
   // Health is NOT_SERVING until the repository is loaded, so that load balancers and probes
   // wait for a replica that can answer.

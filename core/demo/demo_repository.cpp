@@ -113,15 +113,16 @@ Result<container::ModelContainer> make_pmsc_demo(int frames, bool cross) {
   pose_animation(frames, &expensive, cross ? &linear_blend : nullptr, &rest);
   const FrameMatrix output = even_rows(expensive);
   const FrameMatrix control = cross ? even_rows(linear_blend) : FrameMatrix();
+  const pmsc::TrainingOptions options = demo_training_options(rest);
   pmsc::TrainingReport report;
-  auto model = cross ? pmsc::train_cross(control, output, demo_training_options(rest), &report)
-                     : pmsc::train(output, demo_training_options(rest), &report);
+  auto model = cross ? pmsc::train_cross(control, output, options, &report) : pmsc::train(output, options, &report);
   if (!model) return model.error();
   const std::string description =
       cross ? "Cross-PMSC: key points of the linear-blend-skinned arm drive the expensive rig's arm "
               "(no fail-through possible)."
             : "PMSC soft cache of the bending arm's expensive rig, trained on every other demo frame.";
   auto container = pmsc::make_container(rest, output, cross ? &control : nullptr, *model, report, description);
+  pmsc::store_training_options(options, container);
   container.metadata()["generator"] = "animspace demo bending arm";
   container.metadata()["units"] = "arbitrary (arm length 2)";
   container.metadata()["up_axis"] = "y";
@@ -216,6 +217,52 @@ Result<container::ModelContainer> make_demo_animation_space_container(int frames
   return out;
 }
 
+Result<container::ModelContainer> make_demo_pmsc_engine_container(int frames) {
+  auto animation_space_demo = make_demo_animation_space_container(frames);
+  if (!animation_space_demo) return animation_space_demo.error();
+  return make_demo_pmsc_engine_container(*animation_space_demo);
+}
+
+Result<container::ModelContainer> make_demo_pmsc_engine_container(
+    const container::ModelContainer& animation_space_demo) {
+  const std::string source(kDemoAnimationSpaceModelName);
+  auto engine = animation_space::load(animation_space_demo, source);
+  if (!engine) return engine.error();
+  auto bone_rows = animation_space_demo.double_matrix(model::sections::kSequenceBoneTransforms,
+                                                       16 * engine->bone_count());
+  if (!bone_rows) return bone_rows.error();
+  TriangleMesh rest;
+  auto rest_points = animation_space_demo.points(model::sections::kRestPoints);
+  if (!rest_points) return rest_points.error();
+  rest.V = std::move(*rest_points);
+  rest.F = engine->faces;
+
+  // The engine's own output at the poses it was fitted to: the full calculation the cache
+  // approximates, so a server-side fail-through gives exactly what training saw.
+  const Eigen::Index n = engine->vertex_count();
+  FrameMatrix frames(bone_rows->rows(), 3 * n);
+  PointMatrix posed;
+  for (Eigen::Index f = 0; f < bone_rows->rows(); ++f) {
+    animation_space::evaluate(*engine, animation_space::pose_from_row(*bone_rows, f, engine->bone_count()), posed);
+    frames.row(f) = Eigen::Map<const Eigen::RowVectorXf>(posed.data(), 3 * n);
+  }
+  const pmsc::TrainingOptions options = demo_training_options(rest);
+  pmsc::TrainingReport report;
+  auto model = pmsc::train(frames, options, &report);
+  if (!model) return model.error();
+  auto container = pmsc::make_container(
+      rest, frames, nullptr, *model, report,
+      "PMSC soft cache in front of the arm's animation-space model (arm-animspace), which it carries as its posing "
+      "engine: on a blend or miss the server poses the engine itself, so fail-through is exact.");
+  pmsc::store_training_options(options, container);
+  ANIMSPACE_RETURN_IF_ERROR(pmsc::attach_posing_engine(*engine, container));
+  container.set_matrix(model::sections::kSequenceBoneTransforms, *bone_rows);
+  container.metadata()["generator"] = "animspace demo bending arm";
+  container.metadata()["units"] = "arbitrary (arm length 2)";
+  container.metadata()["up_axis"] = "y";
+  return container;
+}
+
 std::filesystem::path demo_model_path(const std::filesystem::path& repository) {
   return repository / std::string(kDemoModelName) / std::to_string(kDemoModelVersion) /
          std::string(kDemoModelFileName);
@@ -231,7 +278,10 @@ Status write_demo_repository(const std::filesystem::path& repository) {
   ANIMSPACE_RETURN_IF_ERROR(write_model(repository, kDemoCrossPmscModelName, *cross_model));
   auto animation_space_model = make_demo_animation_space_container();
   if (!animation_space_model) return animation_space_model.error();
-  return write_model(repository, kDemoAnimationSpaceModelName, *animation_space_model);
+  ANIMSPACE_RETURN_IF_ERROR(write_model(repository, kDemoAnimationSpaceModelName, *animation_space_model));
+  auto engine_model = make_demo_pmsc_engine_container(*animation_space_model);
+  if (!engine_model) return engine_model.error();
+  return write_model(repository, kDemoPmscEngineModelName, *engine_model);
 }
 
 }  // namespace animspace::demo

@@ -34,7 +34,8 @@ inline constexpr int kDemoFrames = 120;
 container::ModelContainer make_demo_container(const BendingArmOptions& options = {},
                                               int frames = kDemoFrames);
 
-// Names of the PMSC demo models trained from the arm's frames.
+// Names of the PMSC demo models trained from the arm's frames. Both store their training options
+// (pmsc.options.*), so the server can retrain them.
 inline constexpr std::string_view kDemoPmscModelName = "arm-pmsc";
 inline constexpr std::string_view kDemoCrossPmscModelName = "arm-cross-pmsc";
 
@@ -60,12 +61,30 @@ inline constexpr std::string_view kDemoAnimationSpaceModelName = "arm-animspace"
 // sequence.bone_transforms) for refitting. Errors: the fitter's (none expected).
 Result<container::ModelContainer> make_demo_animation_space_container(int frames = kDemoFrames);
 
+inline constexpr std::string_view kDemoPmscEngineModelName = "arm-pmsc-engine";
+
+// A PMSC soft cache in front of a posing engine (Meyer & Anderson 2007 §2.4 with the full
+// calculation on the server): trained, with the arm-pmsc options, on the arm-animspace model's
+// own output at its stored (even-frame) bone transforms, and carrying that animation-space model
+// as its posing engine (pmsc::attach_posing_engine). On a blend or miss the server evaluates the
+// engine at the client's bone transforms, so fail-through is exact: the full values are what the
+// cache was trained to approximate. Sections as a PMSC model (pmsc_io.h) plus skeleton.* and
+// animspace.* (the engine), sequence.frames (the engine's output, F/2 × 3N) and
+// sequence.bone_transforms (the poses it was evaluated at, F/2 × 48); the training options are
+// stored, so it can be retrained. Errors: the fitter's and trainer's (none expected).
+Result<container::ModelContainer> make_demo_pmsc_engine_container(int frames = kDemoFrames);
+// The same from an arm-animspace container already made (make_demo_animation_space_container):
+// write_demo_repository fits the engine once for both models.
+Result<container::ModelContainer> make_demo_pmsc_engine_container(
+    const container::ModelContainer& animation_space_demo);
+
 // The path of the demo model's file inside `repository`.
 std::filesystem::path demo_model_path(const std::filesystem::path& repository);
 
-// Writes the demo models (default options, kDemoFrames frames) — arm, arm-pmsc, arm-cross-pmsc
-// and arm-animspace, version 1 each — creating directories as needed; files are replaced atomically. Errors: kIo
-// naming the directory that could not be created, or the container writer's error.
+// Writes the demo models (default options, kDemoFrames frames) — arm, arm-pmsc, arm-cross-pmsc,
+// arm-animspace and arm-pmsc-engine, version 1 each — creating directories as needed; files are
+// replaced atomically. Errors: kIo naming the directory that could not be created, the container
+// writer's error, or a model builder's.
 Status write_demo_repository(const std::filesystem::path& repository);
 
 }  // namespace animspace::demo

@@ -23,6 +23,31 @@ Error shape_error(const std::string& source, const char* section, const std::str
                         std::to_string(actual_rows) + "×" + std::to_string(actual_cols));
 }
 
+// Shapes only of the skeleton-and-influences sections of an animation-space model over
+// `point_count` points (an animation_space model, or a PMSC model's posing engine);
+// animation_space::load validates the values (weights, bones, finiteness).
+Status check_animation_space_shapes(const container::ModelContainer& model, int point_count, const std::string& what,
+                                    const std::string& source) {
+  if (!model.has_section(sections::kSkeletonParents)) {
+    return make_error(ErrorCode::kInvalidArgument, source + ": " + what + " needs section 'skeleton.parents'");
+  }
+  auto offsets = model.int_matrix(animation_space::sections::kInfluenceOffsets, 1);
+  if (!offsets) return offsets.error();
+  if (offsets->rows() != point_count + 1L) {
+    return shape_error(source, animation_space::sections::kInfluenceOffsets, std::to_string(point_count + 1) + "×1",
+                       offsets->rows(), offsets->cols());
+  }
+  auto bones = model.int_matrix(animation_space::sections::kInfluenceBones, 1);
+  if (!bones) return bones.error();
+  auto positions = model.double_matrix(animation_space::sections::kPositions, 4);
+  if (!positions) return positions.error();
+  if (positions->rows() != bones->rows()) {
+    return shape_error(source, animation_space::sections::kPositions, std::to_string(bones->rows()) + "×4",
+                       positions->rows(), positions->cols());
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 const char* kind_name(ModelKind kind) {
@@ -130,25 +155,8 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     }
   }
   if (info.kind == ModelKind::kAnimationSpace) {
-    // Shapes only; animation_space::load validates the values (weights, bones, finiteness).
-    if (!model.has_section(sections::kSkeletonParents)) {
-      return make_error(ErrorCode::kInvalidArgument,
-                        source + ": an animation_space model needs section 'skeleton.parents'");
-    }
-    auto offsets = model.int_matrix(animation_space::sections::kInfluenceOffsets, 1);
-    if (!offsets) return offsets.error();
-    if (offsets->rows() != info.point_count + 1L) {
-      return shape_error(source, animation_space::sections::kInfluenceOffsets,
-                         std::to_string(info.point_count + 1) + "×1", offsets->rows(), offsets->cols());
-    }
-    auto bones = model.int_matrix(animation_space::sections::kInfluenceBones, 1);
-    if (!bones) return bones.error();
-    auto positions = model.double_matrix(animation_space::sections::kPositions, 4);
-    if (!positions) return positions.error();
-    if (positions->rows() != bones->rows()) {
-      return shape_error(source, animation_space::sections::kPositions, std::to_string(bones->rows()) + "×4",
-                         positions->rows(), positions->cols());
-    }
+    ANIMSPACE_RETURN_IF_ERROR(
+        check_animation_space_shapes(model, info.point_count, "an animation_space model", source));
     if (model.has_section(lod::sections::kErrors)) {
       auto errors = model.double_matrix(lod::sections::kErrors, 1);
       if (!errors) return errors.error();
@@ -173,7 +181,22 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     info.key_point_count = static_cast<int>(keys->rows());
     info.epsilon_min = static_cast<float>((*epsilon)(0, 0));
     info.epsilon_max = static_cast<float>((*epsilon)(0, 1));
-    info.fail_through = info.kind == ModelKind::kCrossPmsc ? FailThrough::kImpossible : FailThrough::kClient;
+    if (info.kind == ModelKind::kCrossPmsc) {
+      // 2007 §3.1: the outputs have no full calculation at all.
+      info.fail_through = FailThrough::kImpossible;
+    } else if (model.has_section(animation_space::sections::kInfluenceOffsets)) {
+      // A posing engine (pmsc_io.h, attach_posing_engine): an animation-space model of the same
+      // points, from which the server computes the full values itself on a blend or miss.
+      if (info.channel_count != 3) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          source + ": a pmsc model with a posing engine (section 'animspace.influence_offsets') "
+                                   "must have pmsc.channels = 3, got " + std::to_string(info.channel_count));
+      }
+      ANIMSPACE_RETURN_IF_ERROR(check_animation_space_shapes(model, info.point_count, "a posing engine", source));
+      info.fail_through = FailThrough::kServer;
+    } else {
+      info.fail_through = FailThrough::kClient;
+    }
   }
   return info;
 }

@@ -1,5 +1,12 @@
 #include "core/pmsc/pmsc_io.h"
 
+#include <charconv>
+#include <cmath>
+#include <set>
+#include <system_error>
+
+#include "core/animspace/animspace_io.h"
+#include "core/model/model_info.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -8,6 +15,61 @@ using container::Float64Matrix;
 
 Error with_source(const Error& e, const std::string& source) {
   return make_error(e.code, source + ": " + e.message);
+}
+
+// The persisted TrainingOptions fields, one table for writing and reading so the two cannot
+// drift apart. `positions` is deliberately absent (see store_training_options).
+struct IntOption {
+  const char* name;
+  int TrainingOptions::*member;
+};
+struct DoubleOption {
+  const char* name;
+  double TrainingOptions::*member;
+};
+constexpr IntOption kIntOptions[] = {
+    {"channels", &TrainingOptions::channels},
+    {"basis_size", &TrainingOptions::basis_size},
+    {"max_basis", &TrainingOptions::max_basis},
+    {"block_size", &TrainingOptions::block_size},
+    {"max_key_points", &TrainingOptions::max_key_points},
+    {"grid_cells", &TrainingOptions::grid_cells},
+    {"calibration_folds", &TrainingOptions::calibration_folds},
+    {"region_count", &TrainingOptions::region_count},
+};
+constexpr DoubleOption kDoubleOptions[] = {
+    {"error_bound", &TrainingOptions::error_bound},
+    {"max_basis_fraction", &TrainingOptions::max_basis_fraction},
+    {"error_tolerance", &TrainingOptions::error_tolerance},
+    {"blend_zone_ratio", &TrainingOptions::blend_zone_ratio},
+};
+constexpr const char* kFiducialPoints = "fiducial_points";
+constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
+
+std::string option_key(const char* name) { return std::string(kOptionsPrefix) + name; }
+
+// Shortest decimal that parses back to the same double (std::to_chars guarantees the round trip;
+// std::to_string's fixed six decimals would turn a 1e-7 bound into 0).
+std::string format_double(double value) {
+  char buffer[64];
+  const auto [end, error] = std::to_chars(buffer, buffer + sizeof buffer, value);
+  assert(error == std::errc());
+  return std::string(buffer, end);
+}
+
+// Whole-string parses: no leading '+' or spaces, no trailing characters.
+template <typename T>
+bool parse_exactly(const std::string& text, T& value) {
+  if (text.empty()) return false;
+  const char* end = text.data() + text.size();
+  const auto [stop, error] = std::from_chars(text.data(), end, value);
+  return error == std::errc() && stop == end;
+}
+
+Error unparsable(const std::string& source, const std::string& key, const std::string& expected,
+                 const std::string& text) {
+  return make_error(ErrorCode::kInvalidArgument,
+                    source + ": metadata '" + key + "' should be " + expected + ", got '" + text + "'");
 }
 
 }  // namespace
@@ -93,16 +155,187 @@ container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMa
   container::ModelContainer out;
   store(model, out);
   out.metadata()["description"] = description;
-  out.metadata()["pmsc.training_frames"] = std::to_string(report.frames);
-  out.metadata()["pmsc.max_training_error"] = std::to_string(report.max_training_error);
-  out.metadata()["pmsc.condition_number"] = std::to_string(report.condition_number);
-  out.metadata()["pmsc.error_ratio"] = std::to_string(report.error_ratio);
-  out.metadata()["pmsc.training_seconds"] = std::to_string(report.seconds);
+  store_training_report(report, out);
   out.set_points("mesh.rest_points", mesh.V);
   if (mesh.F.rows() > 0) out.set_faces("mesh.faces", mesh.F);
   out.set_matrix("sequence.frames", training_frames);
   if (control_frames) out.set_matrix("sequence.control_frames", *control_frames);
   return out;
+}
+
+void store_training_report(const TrainingReport& report, container::ModelContainer& out) {
+  out.metadata()["pmsc.training_frames"] = std::to_string(report.frames);
+  out.metadata()["pmsc.max_training_error"] = format_double(report.max_training_error);
+  out.metadata()["pmsc.condition_number"] = format_double(report.condition_number);
+  out.metadata()["pmsc.error_ratio"] = format_double(report.error_ratio);
+  out.metadata()["pmsc.training_seconds"] = format_double(report.seconds);
+}
+
+void store_training_options(const TrainingOptions& options, container::ModelContainer& out) {
+  auto& metadata = out.metadata();
+  for (const IntOption& option : kIntOptions) {
+    metadata[option_key(option.name)] = std::to_string(options.*option.member);
+  }
+  for (const DoubleOption& option : kDoubleOptions) {
+    metadata[option_key(option.name)] = format_double(options.*option.member);
+  }
+  std::string fiducials;
+  for (size_t k = 0; k < options.fiducial_points.size(); ++k) {
+    if (k > 0) fiducials += ',';
+    fiducials += std::to_string(options.fiducial_points[k]);
+  }
+  metadata[option_key(kFiducialPoints)] = fiducials;
+  metadata[option_key(kRemoveRigidMotion)] = options.remove_rigid_motion ? "1" : "0";
+}
+
+Result<TrainingOptions> load_training_options(const container::ModelContainer& in, const std::string& source) {
+  const auto& metadata = in.metadata();
+  const std::string prefix = kOptionsPrefix;
+  const auto first = metadata.lower_bound(prefix);
+  if (first == metadata.end() || first->first.compare(0, prefix.size(), prefix) != 0) {
+    return make_error(ErrorCode::kFailedPrecondition,
+                      source + ": model was trained before training options were stored (no pmsc.options.*); "
+                               "retrain it from the CLI");
+  }
+  std::set<std::string> known;
+  auto value_of = [&](const char* name) -> Result<std::string> {
+    const std::string key = option_key(name);
+    known.insert(key);
+    const auto found = metadata.find(key);
+    if (found == metadata.end()) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata '" + key + "' is missing (the other training options are stored)");
+    }
+    return found->second;
+  };
+
+  TrainingOptions options;
+  for (const IntOption& option : kIntOptions) {
+    auto text = value_of(option.name);
+    if (!text) return text.error();
+    if (!parse_exactly(*text, options.*option.member)) {
+      return unparsable(source, option_key(option.name), "a decimal integer", *text);
+    }
+  }
+  for (const DoubleOption& option : kDoubleOptions) {
+    auto text = value_of(option.name);
+    if (!text) return text.error();
+    if (!parse_exactly(*text, options.*option.member) || !std::isfinite(options.*option.member)) {
+      return unparsable(source, option_key(option.name), "a finite decimal number", *text);
+    }
+  }
+  auto fiducials = value_of(kFiducialPoints);
+  if (!fiducials) return fiducials.error();
+  for (size_t begin = 0; begin < fiducials->size();) {
+    size_t end = fiducials->find(',', begin);
+    if (end == std::string::npos) end = fiducials->size();
+    int index = 0;
+    if (!parse_exactly(fiducials->substr(begin, end - begin), index)) {
+      return unparsable(source, option_key(kFiducialPoints), "comma-separated point indices", *fiducials);
+    }
+    options.fiducial_points.push_back(index);
+    // A trailing comma would leave an empty last index: refuse it rather than drop it.
+    if (end + 1 == fiducials->size()) {
+      return unparsable(source, option_key(kFiducialPoints), "comma-separated point indices", *fiducials);
+    }
+    begin = end + 1;
+  }
+  auto rigid = value_of(kRemoveRigidMotion);
+  if (!rigid) return rigid.error();
+  if (*rigid != "0" && *rigid != "1") return unparsable(source, option_key(kRemoveRigidMotion), "0 or 1", *rigid);
+  options.remove_rigid_motion = *rigid == "1";
+
+  for (auto it = first; it != metadata.end() && it->first.compare(0, prefix.size(), prefix) == 0; ++it) {
+    if (!known.contains(it->first)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata '" + it->first +
+                            "' is not a training option this version knows; retraining without it would not "
+                            "reproduce the model's training");
+    }
+  }
+  return options;
+}
+
+bool has_posing_engine(const container::ModelContainer& in) {
+  return in.has_section(model::sections::kSkeletonParents) &&
+         in.has_section(animation_space::sections::kInfluenceOffsets);
+}
+
+Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, container::ModelContainer& out) {
+  const std::string kind = out.metadata_value("kind");
+  if (kind != model::kind_name(model::ModelKind::kPmsc) || out.metadata_value("pmsc.cross") == "1") {
+    const std::string why = kind == "cross_pmsc" ? " (cross-PMSC outputs have no full calculation)" : "";
+    return make_error(ErrorCode::kFailedPrecondition,
+                      "a posing engine computes the full values of a pmsc model's own points; this container has "
+                      "kind '" + kind + "'" + why);
+  }
+  auto channels = out.metadata_int("pmsc.channels");
+  if (!channels) return channels.error();
+  if (*channels != 3) {
+    return make_error(ErrorCode::kInvalidArgument, "a posing engine makes positions, so pmsc.channels must be 3, got " +
+                                                       std::to_string(*channels));
+  }
+  if (const Status valid = animation_space::validate(engine); !valid.ok()) {
+    return make_error(ErrorCode::kInvalidArgument, "posing engine: " + valid.error().message);
+  }
+  auto rest = out.points(model::sections::kRestPoints);
+  if (!rest) return rest.error();
+  if (engine.vertex_count() != rest->rows()) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "posing engine has " + std::to_string(engine.vertex_count()) + " vertices, expected the PMSC "
+                      "model's N = " + std::to_string(rest->rows()) + " points");
+  }
+  if (out.has_section(model::sections::kSequenceBoneTransforms)) {
+    auto bones = out.double_matrix(model::sections::kSequenceBoneTransforms);
+    if (!bones) return bones.error();
+    if (bones->cols() != 16L * engine.bone_count()) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "section 'sequence.bone_transforms' has " + std::to_string(bones->cols()) +
+                            " columns, expected 16·B = " + std::to_string(16 * engine.bone_count()) +
+                            " for the posing engine's bones");
+    }
+  }
+  // A previous engine's tangents would outlive an engine without them; the container cannot
+  // remove a section, so rebuild it without the stale one.
+  const std::string stale_tangents = animation_space::sections::kTangents;
+  if (!engine.has_tangents() && out.has_section(stale_tangents)) {
+    container::ModelContainer rebuilt;
+    rebuilt.metadata() = out.metadata();
+    copy_sections(out, [&](const std::string& name) { return name != stale_tangents; }, rebuilt);
+    out = std::move(rebuilt);
+  }
+  animation_space::store_skeleton(engine.skeleton, out);
+  animation_space::store_influences(engine, animation_space::sections::kModelPrefix, out);
+  if (!out.has_section(model::sections::kFaces) && engine.faces.rows() > 0) {
+    out.set_faces(model::sections::kFaces, engine.faces);
+  }
+  return Status::Ok();
+}
+
+void copy_sections(const container::ModelContainer& in, const std::function<bool(const std::string&)>& keep,
+                   container::ModelContainer& out) {
+  using container::SectionType;
+  for (const auto& [name, section] : in.sections()) {
+    if (!keep(name)) continue;
+    // Each read below is of the section's own type, so it cannot fail.
+    switch (section.type) {
+      case SectionType::kBytes:
+        out.set_bytes(name, *in.bytes(name));
+        break;
+      case SectionType::kText:
+        out.set_text(name, *in.text(name));
+        break;
+      case SectionType::kFloat32Matrix:
+        out.set_matrix(name, *in.float_matrix(name));
+        break;
+      case SectionType::kInt32Matrix:
+        out.set_matrix(name, *in.int_matrix(name));
+        break;
+      case SectionType::kFloat64Matrix:
+        out.set_matrix(name, *in.double_matrix(name));
+        break;
+    }
+  }
 }
 
 }  // namespace animspace::pmsc

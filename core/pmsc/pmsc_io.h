@@ -6,10 +6,18 @@
 // pmsc.key_regions (K × 1 i32, optional); metadata pmsc.channels, pmsc.cross, pmsc.aligned,
 // pmsc.control_point_count, pmsc.region_count. The projection is not stored: it is recomputed
 // (and its conditioning re-checked) at load, so there is one source of truth.
+//
+// Beside the model a container keeps what retraining needs ("train each night, better
+// tomorrow", core/pmsc/retrain.h): the training frames (sequence.frames), the training options
+// (metadata pmsc.options.<name>) and, optionally, a posing engine — an animation-space model of
+// the same N points (skeleton.*, animspace.*; core/animspace/animspace_io.h) with which the
+// server computes the full values itself on a blend or miss (fail-through "server").
 #pragma once
 
+#include <functional>
 #include <string>
 
+#include "core/animspace/model.h"
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/pmsc/pmsc_model.h"
@@ -30,5 +38,50 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
 container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMatrix& training_frames,
                                          const FrameMatrix* control_frames, const PmscModel& model,
                                          const TrainingReport& report, const std::string& description);
+
+// The training report as metadata: pmsc.training_frames, pmsc.max_training_error,
+// pmsc.condition_number, pmsc.error_ratio, pmsc.training_seconds (make_container writes it).
+void store_training_report(const TrainingReport& report, container::ModelContainer& out);
+
+// Prefix of the persisted training options' metadata keys.
+inline constexpr const char* kOptionsPrefix = "pmsc.options.";
+
+// Writes every TrainingOptions field that retraining needs as metadata "pmsc.options.<field>":
+// channels, error_bound, basis_size, max_basis, max_basis_fraction, block_size, max_key_points,
+// fiducial_points (comma-separated indices, empty for none), grid_cells, remove_rigid_motion
+// ("1"/"0"), error_tolerance, calibration_folds, blend_zone_ratio, region_count. Doubles are
+// written in the shortest form that reads back to the same bits. `positions` (explicit grid
+// positions) is not stored: a retrained model that uses grid seeds places them on the mean of
+// its own training frames, the default — so the grid may move a little when misses join.
+void store_training_options(const TrainingOptions& options, container::ModelContainer& out);
+
+// Reads the options stored by store_training_options (`positions` left empty).
+// Errors: kFailedPrecondition "<source>: model was trained before training options were stored
+// (no pmsc.options.*); retrain it from the CLI" when no pmsc.options.* key exists;
+// kInvalidArgument naming the key when one is missing, unparsable (not exactly a decimal of the
+// field's type) or unknown (written by a newer trainer: retraining without it would differ).
+Result<TrainingOptions> load_training_options(const container::ModelContainer& in, const std::string& source);
+
+// Posing engine. Stores `engine`'s skeleton (skeleton.*) and influences (animspace.*) in a pmsc
+// container `out`, so that the server can compute the full values f = Σ_j G_j p_j (Merry 2007
+// eq. 3.1) for a blend or miss itself: model::describe then reports fail_through kServer and the
+// engine's bone_count, and animation_space::load(out) returns the engine. The container's own
+// mesh.rest_points (the PMSC reference) is kept; mesh.faces is taken from the engine only when
+// the container has none. Metrics and LOD levels of the engine are not stored.
+// Errors: kInvalidArgument when the engine is invalid (validate), its vertex count differs from
+// the container's point count N (mesh.rest_points), pmsc.channels is not 3 (an engine makes
+// positions), or sequence.bone_transforms exists with a width other than 16·B; kFailedPrecondition
+// when `out` is not a (non-cross) pmsc container — cross-PMSC outputs have no full calculation.
+Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, container::ModelContainer& out);
+
+// Whether `in` carries a posing engine (skeleton.parents and animspace.influence_offsets);
+// model::describe checks the sections' shapes, animation_space::load their values.
+bool has_posing_engine(const container::ModelContainer& in);
+
+// Copies every section of `in` whose name `keep` accepts into `out` (type and shape kept; a
+// section of the same name in `out` is replaced). Metadata is not copied. ModelContainer has no
+// way to remove a section, so dropping sections means copying the others into a new container.
+void copy_sections(const container::ModelContainer& in, const std::function<bool(const std::string&)>& keep,
+                   container::ModelContainer& out);
 
 }  // namespace animspace::pmsc

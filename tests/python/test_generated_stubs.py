@@ -4,14 +4,16 @@ import time
 import grpc
 import pytest
 
-from animspace.v1 import common_pb2, models_pb2, models_pb2_grpc, poses_pb2, poses_pb2_grpc
+import struct
+
+from animspace.v1 import common_pb2, models_pb2, models_pb2_grpc, poses_pb2, poses_pb2_grpc, render_pb2, render_pb2_grpc
 
 
 def wait_until_loaded(stub):
     deadline = time.time() + 30
     while time.time() < deadline:
         models = stub.ListModels(models_pb2.ListModelsRequest(), timeout=5).models
-        if len(models) == 4:
+        if len(models) == 5:
             return models
         time.sleep(0.05)
     pytest.fail("the demo repository never finished loading")
@@ -20,7 +22,7 @@ def wait_until_loaded(stub):
 def test_demo_models_are_listed_with_their_kinds(channel):
     stub = models_pb2_grpc.ModelServiceStub(channel)
     models = {m.name: m for m in wait_until_loaded(stub)}
-    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc"]
+    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine"]
     animspace = models["arm-animspace"].versions[0]
     assert animspace.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE
     assert animspace.bone_count == 3 and animspace.point_count > 0
@@ -30,6 +32,8 @@ def test_demo_models_are_listed_with_their_kinds(channel):
     assert 0 < pmsc.epsilon_min <= pmsc.epsilon_max
     cross = models["arm-cross-pmsc"].versions[0]
     assert cross.fail_through == common_pb2.FAIL_THROUGH_IMPOSSIBLE
+    engine = models["arm-pmsc-engine"].versions[0]
+    assert engine.fail_through == common_pb2.FAIL_THROUGH_SERVER and engine.bone_count == 3
 
 
 def test_unknown_model_is_not_found_with_its_name(channel):
@@ -41,8 +45,33 @@ def test_unknown_model_is_not_found_with_its_name(channel):
 
 
 def test_pending_rpcs_say_unimplemented(channel):
-    stub = poses_pb2_grpc.PoseServiceStub(channel)
+    stub = render_pb2_grpc.RenderServiceStub(channel)
     with pytest.raises(grpc.RpcError) as error:
-        stub.EvaluateKeyPoints(poses_pb2.EvaluateKeyPointsRequest(model={"name": "arm-pmsc"}), timeout=5)
+        stub.RenderThumbnail(render_pb2.RenderThumbnailRequest(model={"name": "arm-pmsc"}), timeout=5)
     assert error.value.code() == grpc.StatusCode.UNIMPLEMENTED
     assert "not implemented" in error.value.details()
+
+
+def test_key_points_evaluate_through_the_soft_cache(channel):
+    models = models_pb2_grpc.ModelServiceStub(channel)
+    wait_until_loaded(models)
+    poses = poses_pb2_grpc.PoseServiceStub(channel)
+    keys = poses.DescribeKeyPoints(poses_pb2.DescribeKeyPointsRequest(model={"name": "arm-pmsc"}), timeout=5)
+    count = len(keys.key_point_indices)
+    assert count > 0 and keys.channel_count == 3
+    # A pose with every key point at the origin: nothing like the arm, so not a hit.
+    values = struct.pack("<%df" % (3 * count), *([0.0] * (3 * count)))
+    request = poses_pb2.EvaluateKeyPointsRequest(
+        model={"name": "arm-pmsc"},
+        poses=[{"key_values": {"point_count": count, "channel_count": 3, "data": values}}])
+    result = poses.EvaluateKeyPoints(request, timeout=5).results[0]
+    assert result.status in (common_pb2.CACHE_STATUS_BLEND, common_pb2.CACHE_STATUS_MISS)
+    assert result.full_evaluation_needed and result.model_version == keys.model_version
+    assert result.points.point_count == keys.control_point_count
+    assert len(result.points.data) == 12 * keys.control_point_count
+    # One key point too few is refused, naming the field.
+    request.poses[0].key_values.point_count = count - 1
+    with pytest.raises(grpc.RpcError) as error:
+        poses.EvaluateKeyPoints(request, timeout=5)
+    assert error.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+    assert "poses[0].key_values.point_count: expected %d key points, got %d" % (count, count - 1) in error.value.details()

@@ -10,6 +10,7 @@
 
 #include "clients/cpp/cli/fit.h"
 #include "clients/cpp/cli/lod.h"
+#include "clients/cpp/cli/play.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/common/atomic_file.h"
@@ -332,6 +333,9 @@ int main(int argc, char** argv) {
   retrain->add_flag("--dry-run", dry_run, "Train and report, but write nothing");
   retrain->add_option("--deadline-s", retrain_deadline_s, "Deadline for the retrain call")->capture_default_str();
 
+  animspace::cli::PlayArgs play_args;
+  auto* play = animspace::cli::add_play(app, play_args);
+
   auto* load = app.add_subcommand("load", "Admin: (re)load a model, or one version, from the repository");
   load->add_option("model", model, "Model name")->required();
   load->add_option("--version", version, "One version (default: every version found)");
@@ -370,6 +374,10 @@ int main(int argc, char** argv) {
     if (*describe) return run_describe(g, model, version);
     if (*stats) return run_stats(g, model, reset);
     if (*keys) return run_keys(g, model, version);
+    if (*play) {
+      auto client = connect(g);
+      return animspace::cli::run_play(play_args, client, g.json);
+    }
     if (*retrain) {
       retrain_request.mutable_model()->set_name(retrain_model);
       retrain_request.mutable_model()->set_version(retrain_version);

@@ -1,0 +1,684 @@
+// The miss log's byte layout is specified in docs/FORMATS.md ("Miss log (`<model>.misses`)");
+// the constants below are that table, and the two must change together.
+//
+// The scanner is written for hostile input like the container parser: every length is checked
+// against the bytes left in the file and against kMaxPayloadBytes before anything is allocated,
+// all arithmetic is 64-bit, and every multi-byte load goes through memcpy.
+#include "core/misslog/miss_log.h"
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <functional>
+#include <new>
+#include <utility>
+
+#include "core/container/crc32.h"
+
+namespace animspace::misslog {
+
+// Fields are stored with memcpy as they lie in memory; a big-endian port would byte-swap in
+// load/store and in the float copies.
+static_assert(std::endian::native == std::endian::little,
+              "the miss log code assumes a little-endian host");
+static_assert(sizeof(float) == 4 && sizeof(double) == 8);
+
+namespace {
+
+// --- Layout (docs/FORMATS.md) ------------------------------------------------------------------
+
+// PNG-style signature, as the model container's: the high-bit byte catches 7-bit channels,
+// CR LF / LF catch newline conversion, 0x1A stops `type` on Windows.
+constexpr std::string_view kFileMagic{"\x89" "MIS\r\n\x1a\n", 8};
+constexpr uint64_t kFileHeaderSize = 16;
+constexpr size_t kVersionAt = 8;
+constexpr size_t kReservedAt = 12;
+
+// "MREC" in a hex dump.
+constexpr uint32_t kRecordMagic = 0x4345524DU;
+constexpr uint64_t kRecordHeaderSize = 12;
+constexpr size_t kRecordMagicAt = 0;
+constexpr size_t kPayloadLengthAt = 4;
+constexpr size_t kPayloadCrcAt = 8;
+
+// Payload field offsets.
+constexpr size_t kSequenceAt = 0;
+constexpr size_t kModelVersionAt = 8;
+constexpr size_t kUnixTimeAt = 16;
+constexpr size_t kKeyPointErrorAt = 24;
+constexpr size_t kBlendWeightAt = 32;
+constexpr size_t kChannelsAt = 40;
+constexpr size_t kStatusAt = 44;  // then 3 reserved zero bytes
+constexpr size_t kKeyCountAt = 48;
+constexpr size_t kFullCountAt = 52;
+constexpr uint64_t kFixedPayloadSize = 56;  // the float arrays follow
+
+static_assert(kFullCountAt + 4 == kFixedPayloadSize);
+static_assert(kMaxPayloadBytes < (uint64_t{1} << 32), "payload length is a uint32 field");
+
+// Fuzzers cannot forge CRCs (see core/container/model_container.cpp).
+#ifdef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
+constexpr bool kVerifyChecksums = false;
+#else
+constexpr bool kVerifyChecksums = true;
+#endif
+
+// --- Little-endian fields ----------------------------------------------------------------------
+
+template <typename T>
+T load(std::string_view bytes, size_t at) {
+  assert(at <= bytes.size() && bytes.size() - at >= sizeof(T));
+  T value{};
+  std::memcpy(&value, bytes.data() + at, sizeof value);
+  return value;
+}
+
+template <typename T>
+void store(std::string& out, size_t at, T value) {
+  assert(at <= out.size() && out.size() - at >= sizeof(T));
+  std::memcpy(out.data() + at, &value, sizeof value);
+}
+
+std::string expected_file_header() {
+  std::string header(kFileHeaderSize, '\0');
+  header.replace(0, kFileMagic.size(), kFileMagic);
+  store<uint32_t>(header, kVersionAt, kFormatVersion);
+  store<uint32_t>(header, kReservedAt, 0);
+  return header;
+}
+
+std::string hex32(uint32_t value) {
+  char text[11];
+  std::snprintf(text, sizeof text, "0x%08x", static_cast<unsigned>(value));
+  return text;
+}
+
+std::string hex_bytes(std::string_view bytes) {
+  std::string text;
+  for (const char c : bytes) {
+    char byte[4];
+    std::snprintf(byte, sizeof byte, "%02x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+    if (!text.empty()) text += ' ';
+    text += byte;
+  }
+  return text;
+}
+
+// --- System calls ------------------------------------------------------------------------------
+
+Error io_error(const std::filesystem::path& path, std::string_view what, int error_number) {
+  return make_error(ErrorCode::kIo, path.string() + ": " + std::string(what) + ": " +
+                                        std::strerror(error_number));
+}
+
+// Closes a descriptor on scope exit unless released first.
+class FileDescriptor {
+ public:
+  explicit FileDescriptor(int fd) : fd_(fd) {}
+  ~FileDescriptor() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  FileDescriptor(const FileDescriptor&) = delete;
+  FileDescriptor& operator=(const FileDescriptor&) = delete;
+  int get() const { return fd_; }
+  int release() { return std::exchange(fd_, -1); }
+
+ private:
+  int fd_;
+};
+
+// Reads up to `size` bytes at `offset`, stopping early only at end of file (the file may shrink
+// under a concurrent reader). Returns the count read, or -errno.
+int64_t read_at(int fd, char* data, uint64_t size, uint64_t offset) {
+  uint64_t done = 0;
+  while (done < size) {
+    const ssize_t count = ::pread(fd, data + done, size - done, static_cast<off_t>(offset + done));
+    if (count < 0) {
+      if (errno == EINTR) continue;
+      return -errno;
+    }
+    if (count == 0) break;
+    done += static_cast<uint64_t>(count);
+  }
+  return static_cast<int64_t>(done);
+}
+
+// Writes all of `bytes` at `offset`: one pwrite() of the whole buffer, continued only if the
+// kernel wrote part of it (a signal or the file size limit). Returns 0 or errno.
+int write_at(int fd, std::string_view bytes, uint64_t offset) {
+  uint64_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t count = ::pwrite(fd, bytes.data() + done, bytes.size() - done,
+                                   static_cast<off_t>(offset + done));
+    if (count < 0) {
+      if (errno == EINTR) continue;
+      return errno;
+    }
+    if (count == 0) return EIO;  // no progress and no reason; do not spin
+    done += static_cast<uint64_t>(count);
+  }
+  return 0;
+}
+
+int fdatasync_retrying(int fd) {
+  while (::fdatasync(fd) != 0) {
+    if (errno != EINTR) return errno;
+  }
+  return 0;
+}
+
+int ftruncate_retrying(int fd, uint64_t size) {
+  while (::ftruncate(fd, static_cast<off_t>(size)) != 0) {
+    if (errno != EINTR) return errno;
+  }
+  return 0;
+}
+
+// A new directory entry is durable only once its directory is fsynced.
+Status fsync_directory(const std::filesystem::path& path) {
+  std::filesystem::path directory = path.parent_path();
+  if (directory.empty()) directory = ".";
+  const int fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return io_error(path, "created, but cannot open its directory to fsync it", errno);
+  FileDescriptor directory_file(fd);
+  while (::fsync(directory_file.get()) != 0) {
+    if (errno != EINTR) return io_error(path, "created, but cannot fsync its directory", errno);
+  }
+  return Status::Ok();
+}
+
+// --- File header -------------------------------------------------------------------------------
+
+enum class HeaderState { kComplete, kIncomplete };
+
+// Checks the first min(size, 16) bytes. A file shorter than the header whose bytes are a prefix
+// of it is a creation that never finished (kIncomplete); anything else that differs is kDataLoss
+// naming the offset.
+Result<HeaderState> check_file_header(const std::filesystem::path& path, std::string_view bytes) {
+  const std::string expected = expected_file_header();
+  if (bytes.size() < kFileHeaderSize) {
+    for (size_t i = 0; i < bytes.size(); ++i) {
+      if (bytes[i] != expected[i]) {
+        return make_error(ErrorCode::kDataLoss,
+                          path.string() + ": byte " + std::to_string(i) + ": not a miss log (" +
+                              std::to_string(bytes.size()) + "-byte file starting " +
+                              hex_bytes(bytes) + ", expected a prefix of " + hex_bytes(expected) +
+                              ")");
+      }
+    }
+    return HeaderState::kIncomplete;
+  }
+  const std::string_view magic = bytes.substr(0, kFileMagic.size());
+  if (magic != kFileMagic) {
+    return make_error(ErrorCode::kDataLoss, path.string() + ": byte 0: not a miss log (magic " +
+                                                hex_bytes(magic) + ", expected " +
+                                                hex_bytes(kFileMagic) + ")");
+  }
+  const auto version = load<uint32_t>(bytes, kVersionAt);
+  if (version != kFormatVersion) {
+    return make_error(ErrorCode::kDataLoss,
+                      path.string() + ": byte " + std::to_string(kVersionAt) +
+                          ": miss log format version " + std::to_string(version) +
+                          ", this build reads only version " + std::to_string(kFormatVersion));
+  }
+  const auto reserved = load<uint32_t>(bytes, kReservedAt);
+  if (reserved != 0) {
+    return make_error(ErrorCode::kDataLoss, path.string() + ": byte " +
+                                                std::to_string(kReservedAt) + ": reserved field " +
+                                                hex32(reserved) + ", expected 0");
+  }
+  return HeaderState::kComplete;
+}
+
+// --- Records -----------------------------------------------------------------------------------
+
+// Checks a payload whose CRC matched; returns an empty string or what is wrong.
+std::string check_payload(std::string_view payload, uint64_t previous_sequence) {
+  const auto sequence = load<uint64_t>(payload, kSequenceAt);
+  const auto channels = load<uint32_t>(payload, kChannelsAt);
+  const auto key_count = load<uint32_t>(payload, kKeyCountAt);
+  const auto full_count = load<uint32_t>(payload, kFullCountAt);
+  const uint64_t expected_length =
+      kFixedPayloadSize + 4 * (uint64_t{key_count} + uint64_t{full_count});
+  if (expected_length != payload.size()) {
+    return "payload length " + std::to_string(payload.size()) + " does not match " +
+           std::to_string(key_count) + " key and " + std::to_string(full_count) +
+           " full values (expected " + std::to_string(expected_length) + ")";
+  }
+  if (channels == 0) return "channels is 0";
+  if (key_count % channels != 0 || full_count % channels != 0) {
+    return std::to_string(key_count) + " key and " + std::to_string(full_count) +
+           " full values are not multiples of " + std::to_string(channels) + " channels";
+  }
+  if (sequence <= previous_sequence) {
+    return "sequence " + std::to_string(sequence) + " does not follow " +
+           std::to_string(previous_sequence);
+  }
+  return {};
+}
+
+MissRecord decode_payload(std::string_view payload) {
+  MissRecord record;
+  record.sequence = load<uint64_t>(payload, kSequenceAt);
+  record.model_version = load<uint64_t>(payload, kModelVersionAt);
+  record.unix_time_us = load<int64_t>(payload, kUnixTimeAt);
+  record.key_point_error = load<double>(payload, kKeyPointErrorAt);
+  record.blend_weight = load<double>(payload, kBlendWeightAt);
+  record.channels = load<uint32_t>(payload, kChannelsAt);
+  record.status = load<uint8_t>(payload, kStatusAt);
+  const auto key_count = load<uint32_t>(payload, kKeyCountAt);
+  const auto full_count = load<uint32_t>(payload, kFullCountAt);
+  record.key_values.resize(key_count);
+  record.full_values.resize(full_count);
+  const char* floats = payload.data() + kFixedPayloadSize;
+  if (key_count > 0) std::memcpy(record.key_values.data(), floats, 4 * size_t{key_count});
+  if (full_count > 0) {
+    std::memcpy(record.full_values.data(), floats + 4 * size_t{key_count}, 4 * size_t{full_count});
+  }
+  return record;
+}
+
+struct ScanResult {
+  uint64_t records = 0;
+  uint64_t last_sequence = 0;
+  uint64_t end_offset = kFileHeaderSize;  // end of the last good record
+  std::string reason;                     // why scanning stopped before `file_size`
+};
+
+// Walks the records from the file header to `file_size`, calling `on_record` with each valid
+// payload, and stops at the first incomplete or invalid one (the recovery policy in
+// miss_log.h). Allocates at most one payload, never more than the bytes left in the file.
+Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesystem::path& path,
+                                const std::function<void(std::string_view)>& on_record) {
+  ScanResult scan;
+  std::string header(kRecordHeaderSize, '\0');
+  std::string payload;
+  while (scan.end_offset < file_size) {
+    const uint64_t at = scan.end_offset;
+    const std::string where = " at byte " + std::to_string(at) + ": ";
+    const uint64_t remaining = file_size - at;
+    if (remaining < kRecordHeaderSize) {
+      scan.reason = "torn record" + where + std::to_string(remaining) +
+                    " bytes left, a record header needs " + std::to_string(kRecordHeaderSize);
+      break;
+    }
+    const int64_t header_read = read_at(fd, header.data(), kRecordHeaderSize, at);
+    if (header_read < 0) return io_error(path, "cannot read", static_cast<int>(-header_read));
+    if (static_cast<uint64_t>(header_read) < kRecordHeaderSize) {
+      scan.reason = "torn record" + where + "the file ended inside the record header";
+      break;
+    }
+    const auto magic = load<uint32_t>(header, kRecordMagicAt);
+    const auto length = uint64_t{load<uint32_t>(header, kPayloadLengthAt)};
+    const auto stored_crc = load<uint32_t>(header, kPayloadCrcAt);
+    if (magic != kRecordMagic) {
+      scan.reason = "corrupt record" + where + "record magic " + hex32(magic) + ", expected " +
+                    hex32(kRecordMagic);
+      break;
+    }
+    if (length < kFixedPayloadSize || length > kMaxPayloadBytes) {
+      scan.reason = "corrupt record" + where + "payload length " + std::to_string(length) +
+                    " outside [" + std::to_string(kFixedPayloadSize) + ", " +
+                    std::to_string(kMaxPayloadBytes) + "]";
+      break;
+    }
+    if (length > remaining - kRecordHeaderSize) {
+      scan.reason = "torn record" + where + "payload length " + std::to_string(length) +
+                    " runs past the end of the file (" +
+                    std::to_string(remaining - kRecordHeaderSize) + " bytes left)";
+      break;
+    }
+    payload.resize(length);
+    const int64_t payload_read = read_at(fd, payload.data(), length, at + kRecordHeaderSize);
+    if (payload_read < 0) return io_error(path, "cannot read", static_cast<int>(-payload_read));
+    if (static_cast<uint64_t>(payload_read) < length) {
+      scan.reason = "torn record" + where + "the file ended inside the payload";
+      break;
+    }
+    const uint32_t actual_crc = container::crc32(payload);
+    if (kVerifyChecksums && actual_crc != stored_crc) {
+      scan.reason = "corrupt record" + where + "payload CRC " + hex32(actual_crc) +
+                    ", stored " + hex32(stored_crc);
+      break;
+    }
+    if (std::string problem = check_payload(payload, scan.last_sequence); !problem.empty()) {
+      scan.reason = "corrupt record" + where + problem;
+      break;
+    }
+    on_record(payload);
+    scan.last_sequence = load<uint64_t>(payload, kSequenceAt);
+    scan.records += 1;
+    scan.end_offset = at + kRecordHeaderSize + length;
+  }
+  return scan;
+}
+
+// Refuses what the format cannot hold or what would poison retraining (STYLE.md §5: no silent
+// clamping). Returns the payload length.
+Result<uint64_t> check_record(const MissRecord& record) {
+  if (record.status != kStatusBlend && record.status != kStatusMiss) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record status " + std::to_string(record.status) + ", expected " +
+                          std::to_string(kStatusBlend) + " (blend) or " +
+                          std::to_string(kStatusMiss) + " (miss)");
+  }
+  if (record.channels == 0) {
+    return make_error(ErrorCode::kInvalidArgument, "miss record channels is 0, expected ≥ 1");
+  }
+  if (record.key_values.size() % record.channels != 0 ||
+      record.full_values.size() % record.channels != 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record key_values (" + std::to_string(record.key_values.size()) +
+                          ") and full_values (" + std::to_string(record.full_values.size()) +
+                          ") must be multiples of channels (" + std::to_string(record.channels) +
+                          ")");
+  }
+  const uint64_t length = kFixedPayloadSize + 4 * (uint64_t{record.key_values.size()} +
+                                                   uint64_t{record.full_values.size()});
+  if (length > kMaxPayloadBytes) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record of " + std::to_string(record.key_values.size()) + " key and " +
+                          std::to_string(record.full_values.size()) +
+                          " full values needs a payload of " + std::to_string(length) +
+                          " bytes, more than the format's " + std::to_string(kMaxPayloadBytes));
+  }
+  if (!std::isfinite(record.key_point_error) || !std::isfinite(record.blend_weight)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record key_point_error and blend_weight must be finite");
+  }
+  const auto first_non_finite = [](const std::vector<float>& values) {
+    for (size_t i = 0; i < values.size(); ++i) {
+      if (!std::isfinite(values[i])) return static_cast<int64_t>(i);
+    }
+    return int64_t{-1};
+  };
+  if (const int64_t i = first_non_finite(record.key_values); i >= 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record key_values[" + std::to_string(i) + "] is not finite");
+  }
+  if (const int64_t i = first_non_finite(record.full_values); i >= 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record full_values[" + std::to_string(i) + "] is not finite");
+  }
+  return length;
+}
+
+// The framed record (header + payload) with the sequence field and CRC left to fill in.
+std::string encode_unsealed(const MissRecord& record, uint64_t payload_length) {
+  std::string framed(kRecordHeaderSize + payload_length, '\0');
+  store<uint32_t>(framed, kRecordMagicAt, kRecordMagic);
+  store<uint32_t>(framed, kPayloadLengthAt, static_cast<uint32_t>(payload_length));
+  const size_t p = kRecordHeaderSize;
+  store<uint64_t>(framed, p + kModelVersionAt, record.model_version);
+  store<int64_t>(framed, p + kUnixTimeAt, record.unix_time_us);
+  store<double>(framed, p + kKeyPointErrorAt, record.key_point_error);
+  store<double>(framed, p + kBlendWeightAt, record.blend_weight);
+  store<uint32_t>(framed, p + kChannelsAt, record.channels);
+  store<uint8_t>(framed, p + kStatusAt, record.status);
+  store<uint32_t>(framed, p + kKeyCountAt, static_cast<uint32_t>(record.key_values.size()));
+  store<uint32_t>(framed, p + kFullCountAt, static_cast<uint32_t>(record.full_values.size()));
+  char* floats = framed.data() + p + kFixedPayloadSize;
+  if (!record.key_values.empty()) {
+    std::memcpy(floats, record.key_values.data(), 4 * record.key_values.size());
+  }
+  if (!record.full_values.empty()) {
+    std::memcpy(floats + 4 * record.key_values.size(), record.full_values.data(),
+                4 * record.full_values.size());
+  }
+  return framed;
+}
+
+void seal(std::string& framed, uint64_t sequence) {
+  store<uint64_t>(framed, kRecordHeaderSize + kSequenceAt, sequence);
+  const std::string_view payload = std::string_view(framed).substr(kRecordHeaderSize);
+  store<uint32_t>(framed, kPayloadCrcAt, container::crc32(payload));
+}
+
+Result<uint64_t> file_size_of(int fd, const std::filesystem::path& path) {
+  struct stat info {};
+  if (::fstat(fd, &info) != 0) return io_error(path, "cannot stat", errno);
+  if (!S_ISREG(info.st_mode)) {
+    return make_error(ErrorCode::kIo, path.string() + ": not a regular file");
+  }
+  return static_cast<uint64_t>(info.st_size);
+}
+
+// The first min(size, 16) bytes of the file.
+Result<std::string> read_header_bytes(int fd, uint64_t file_size,
+                                      const std::filesystem::path& path) {
+  std::string bytes(std::min(file_size, kFileHeaderSize), '\0');
+  const int64_t count = read_at(fd, bytes.data(), bytes.size(), 0);
+  if (count < 0) return io_error(path, "cannot read", static_cast<int>(-count));
+  bytes.resize(static_cast<size_t>(count));
+  return bytes;
+}
+
+}  // namespace
+
+Result<FsyncPolicy> parse_fsync_policy(std::string_view text) {
+  if (text == "always") return FsyncPolicy::kAlways;
+  if (text == "interval") return FsyncPolicy::kInterval;
+  if (text == "never") return FsyncPolicy::kNever;
+  return make_error(ErrorCode::kInvalidArgument, "miss log fsync policy \"" + std::string(text) +
+                                                     "\", expected always, interval or never");
+}
+
+MissLog::MissLog(std::filesystem::path path, int fd, FsyncPolicy policy,
+                 std::chrono::milliseconds fsync_interval)
+    : path_(std::move(path)),
+      fd_(fd),
+      policy_(policy),
+      fsync_interval_(fsync_interval),
+      last_sync_(std::chrono::steady_clock::now()) {}
+
+MissLog::~MissLog() {
+  {
+    std::lock_guard lock(mutex_);
+    // A destructor cannot report the error; callers that care call sync() first.
+    (void)sync_locked();
+  }
+  ::close(fd_);  // releases the flock
+}
+
+Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path,
+                                               FsyncPolicy policy,
+                                               std::chrono::milliseconds fsync_interval) {
+  // O_EXCL first, to know whether the directory entry is new and must be made durable.
+  bool created = true;
+  int raw_fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (raw_fd < 0 && errno == EEXIST) {
+    created = false;
+    raw_fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+  }
+  if (raw_fd < 0) return io_error(path, "cannot open miss log", errno);
+  FileDescriptor file(raw_fd);
+
+  // One writer per file: two would hand out the same sequence numbers and overwrite each other.
+  while (::flock(file.get(), LOCK_EX | LOCK_NB) != 0) {
+    if (errno == EINTR) continue;
+    if (errno == EWOULDBLOCK) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        path.string() + ": miss log is already open for writing (by this or "
+                                        "another process)");
+    }
+    return io_error(path, "cannot lock miss log", errno);
+  }
+
+  auto size = file_size_of(file.get(), path);
+  if (!size.ok()) return size.error();
+  auto header = read_header_bytes(file.get(), *size, path);
+  if (!header.ok()) return header.error();
+  auto state = check_file_header(path, *header);
+  if (!state.ok()) return state.error();  // nothing has been written
+
+  RecoveryReport recovery;
+  uint64_t end_offset = kFileHeaderSize;
+  uint64_t last_sequence = 0;
+  if (*state == HeaderState::kIncomplete) {
+    // New, or a creation cut short: the bytes present are a prefix of the header; complete it.
+    if (!header->empty()) {
+      recovery.reason = "incomplete file header (" + std::to_string(header->size()) + " of " +
+                        std::to_string(kFileHeaderSize) + " bytes), completed";
+    }
+    if (int e = write_at(file.get(), expected_file_header(), 0); e != 0) {
+      return io_error(path, "cannot write miss log header", e);
+    }
+    if (int e = fdatasync_retrying(file.get()); e != 0) {
+      return io_error(path, "cannot fsync miss log header", e);
+    }
+  } else {
+    ScanResult scan;
+    try {
+      auto scanned = scan_records(file.get(), *size, path, [](std::string_view) {});
+      if (!scanned.ok()) return scanned.error();
+      scan = std::move(*scanned);
+    } catch (const std::bad_alloc&) {
+      return io_error(path, "cannot scan miss log", ENOMEM);
+    }
+    recovery.records = scan.records;
+    end_offset = scan.end_offset;
+    last_sequence = scan.last_sequence;
+    if (scan.end_offset < *size) {
+      // Cut the tail so that the next record follows the last good one; make the cut durable
+      // before anything is appended after it.
+      if (int e = ftruncate_retrying(file.get(), scan.end_offset); e != 0) {
+        return io_error(path, "cannot truncate the damaged tail (" + scan.reason + ")", e);
+      }
+      if (int e = fdatasync_retrying(file.get()); e != 0) {
+        return io_error(path, "cannot fsync after truncating the damaged tail", e);
+      }
+      recovery.truncated_bytes = *size - scan.end_offset;
+      recovery.reason = std::move(scan.reason);
+    }
+  }
+  if (created) ANIMSPACE_RETURN_IF_ERROR(fsync_directory(path));
+
+  std::unique_ptr<MissLog> log(new MissLog(path, file.release(), policy, fsync_interval));
+  log->recovery_ = std::move(recovery);
+  log->end_offset_ = end_offset;
+  log->record_count_ = log->recovery_.records;
+  log->last_sequence_ = last_sequence;
+  return log;
+}
+
+Result<uint64_t> MissLog::append(MissRecord& record) {
+  auto length = check_record(record);
+  if (!length.ok()) return length.error();
+  std::string framed;
+  try {
+    framed = encode_unsealed(record, *length);
+  } catch (const std::bad_alloc&) {
+    return io_error(path_, "cannot encode miss record", ENOMEM);
+  }
+
+  std::lock_guard lock(mutex_);
+  if (needs_truncate_) {
+    if (int e = ftruncate_retrying(fd_, end_offset_); e != 0) {
+      return io_error(path_, "cannot truncate the remains of a failed append", e);
+    }
+    needs_truncate_ = false;
+  }
+  const uint64_t sequence = last_sequence_ + 1;
+  seal(framed, sequence);
+  if (int e = write_at(fd_, framed, end_offset_); e != 0) {
+    // Cut the partial record so that the next append follows the last good one; if even that
+    // fails, retry before the next append (pwrite at end_offset_ would otherwise leave the
+    // partial record's tail behind a shorter record).
+    needs_truncate_ = ftruncate_retrying(fd_, end_offset_) != 0;
+    return io_error(path_, "cannot append miss record " + std::to_string(sequence), e);
+  }
+  end_offset_ += framed.size();
+  last_sequence_ = sequence;
+  record_count_ += 1;
+  dirty_ = true;
+  record.sequence = sequence;
+
+  const bool sync_now =
+      policy_ == FsyncPolicy::kAlways ||
+      (policy_ == FsyncPolicy::kInterval &&
+       std::chrono::steady_clock::now() - last_sync_ >= fsync_interval_);
+  if (sync_now) {
+    // The record is in the file (and its sequence used); only its durability is in doubt.
+    if (Status synced = sync_locked(); !synced.ok()) {
+      return make_error(ErrorCode::kIo, "appended miss record " + std::to_string(sequence) +
+                                            ", but " + synced.error().message);
+    }
+  }
+  return sequence;
+}
+
+Status MissLog::sync() {
+  std::lock_guard lock(mutex_);
+  return sync_locked();
+}
+
+Status MissLog::sync_locked() {
+  if (!dirty_) return Status::Ok();
+  if (int e = fdatasync_retrying(fd_); e != 0) return io_error(path_, "cannot fsync miss log", e);
+  dirty_ = false;
+  last_sync_ = std::chrono::steady_clock::now();
+  return Status::Ok();
+}
+
+uint64_t MissLog::record_count() const {
+  std::lock_guard lock(mutex_);
+  return record_count_;
+}
+
+uint64_t MissLog::last_sequence() const {
+  std::lock_guard lock(mutex_);
+  return last_sequence_;
+}
+
+Result<std::vector<MissRecord>> read_records(const std::filesystem::path& path,
+                                             uint64_t after_sequence, ReadReport* report) {
+  const int raw_fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (raw_fd < 0) {
+    if (errno == ENOENT) return make_error(ErrorCode::kNotFound, path.string() + ": no such file");
+    return io_error(path, "cannot open miss log", errno);
+  }
+  FileDescriptor file(raw_fd);
+  // Records appended after this point are not read: a snapshot of the size bounds the scan.
+  auto size = file_size_of(file.get(), path);
+  if (!size.ok()) return size.error();
+  auto header = read_header_bytes(file.get(), *size, path);
+  if (!header.ok()) return header.error();
+  auto state = check_file_header(path, *header);
+  if (!state.ok()) return state.error();
+
+  ReadReport local;
+  std::vector<MissRecord> records;
+  if (*state == HeaderState::kIncomplete) {
+    // A writer is creating the file right now (or crashed doing so): no records yet.
+    local.ignored_tail_bytes = header->size();
+    if (!header->empty()) {
+      local.reason = "incomplete file header (" + std::to_string(header->size()) + " of " +
+                     std::to_string(kFileHeaderSize) + " bytes)";
+    }
+  } else {
+    try {
+      auto scanned = scan_records(file.get(), *size, path, [&](std::string_view payload) {
+        if (load<uint64_t>(payload, kSequenceAt) > after_sequence) {
+          records.push_back(decode_payload(payload));
+        }
+      });
+      if (!scanned.ok()) return scanned.error();
+      local.records = scanned->records;
+      local.ignored_tail_bytes = *size - scanned->end_offset;
+      local.reason = std::move(scanned->reason);
+    } catch (const std::bad_alloc&) {
+      return io_error(path, "cannot read miss log", ENOMEM);
+    }
+  }
+  if (report != nullptr) *report = std::move(local);
+  return records;
+}
+
+}  // namespace animspace::misslog
