@@ -125,7 +125,7 @@ Status Daemon::start() {
                request_pool_->thread_count(), options_.max_concurrent_calls, miss_log_dir.string(),
                options_.miss_log_fsync, tls_enabled(options_) ? "; TLS" : "",
                authenticator_->enabled() ? "; bearer tokens required" : "");
-  if (options_.poll_interval_s > 0) poll_thread_ = std::thread([this] { poll_repository(); });
+  housekeeping_thread_ = std::thread([this] { housekeeping(); });
   server_->GetHealthCheckService()->SetServingStatus(true);
   spdlog::info("health SERVING");
   return Status::Ok();
@@ -155,12 +155,21 @@ Status Daemon::start_metrics_endpoint() {
   return Status::Ok();
 }
 
-void Daemon::poll_repository() {
-  const auto period = std::chrono::duration<double>(options_.poll_interval_s);
-  std::unique_lock lock(poll_mutex_);
-  while (!poll_wake_.wait_for(lock, period, [this] { return polling_stopped_; })) {
+void Daemon::housekeeping() {
+  // Wakes at the miss-log fsync interval (so an "interval" log is durable within it even when no
+  // further miss arrives) and polls the repository when its period has passed.
+  const auto tick = options_.miss_log_fsync_interval;
+  const auto poll_period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(options_.poll_interval_s));
+  auto next_poll = std::chrono::steady_clock::now() + poll_period;
+  std::unique_lock lock(housekeeping_mutex_);
+  while (!housekeeping_wake_.wait_for(lock, tick, [this] { return housekeeping_stopped_; })) {
     lock.unlock();
-    if (registry_.load_new_versions() > 0) refresh_model_gauges(*env_);
+    miss_logs_->sync_all();
+    if (options_.poll_interval_s > 0 && std::chrono::steady_clock::now() >= next_poll) {
+      if (registry_.load_new_versions() > 0) refresh_model_gauges(*env_);
+      next_poll = std::chrono::steady_clock::now() + poll_period;
+    }
     lock.lock();
   }
 }
@@ -188,11 +197,11 @@ void Daemon::shutdown() {
     server_->Wait();
   }
   {
-    std::lock_guard lock(poll_mutex_);
-    polling_stopped_ = true;
+    std::lock_guard lock(housekeeping_mutex_);
+    housekeeping_stopped_ = true;
   }
-  poll_wake_.notify_all();
-  if (poll_thread_.joinable()) poll_thread_.join();
+  housekeeping_wake_.notify_all();
+  if (housekeeping_thread_.joinable()) housekeeping_thread_.join();
   // The gRPC server has finished every call, so nothing queues work any more.
   if (request_pool_) request_pool_->stop();
   if (admin_pool_) admin_pool_->stop();

@@ -57,9 +57,9 @@ class Daemon {
 
  private:
   Status start_metrics_endpoint();
-  // Loads new versions every options_.poll_interval_s until shutdown.
-  void poll_repository();
-  void update_model_gauges();
+  // Until shutdown: flushes the miss logs every fsync interval and loads new model versions
+  // every --poll-interval-s.
+  void housekeeping();
 
   ServerOptions options_;
   ModelRegistry registry_;
@@ -80,10 +80,10 @@ class Daemon {
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<httplib::Server> metrics_http_;
   std::thread metrics_thread_;
-  std::thread poll_thread_;
-  std::mutex poll_mutex_;
-  std::condition_variable poll_wake_;
-  bool polling_stopped_ = false;
+  std::thread housekeeping_thread_;
+  std::mutex housekeeping_mutex_;
+  std::condition_variable housekeeping_wake_;
+  bool housekeeping_stopped_ = false;
   int port_ = 0;
   bool stopped_ = false;
 };

@@ -809,3 +809,40 @@ TEST_F(ServeTest, ServerFailThroughAndSkeletonPosesMatchTheAnimationSpaceModel) 
 
 }  // namespace
 }  // namespace animspace
+
+namespace animspace {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// The repository poll picks up new versions; an unloaded model stays unloaded.
+
+TEST_F(ServeTest, PollingLoadsNewVersionsAndRespectsUnloads) {
+  auto daemon = start({"--poll-interval-s", "0.1"});
+  Client client(daemon->address());
+  EXPECT_EQ(client.describe_model("arm-pmsc").default_version(), 1u);
+
+  // Publish version 2 the way a nightly job should: write it aside, rename it into place.
+  std::filesystem::create_directories(repo_ / "arm-pmsc" / ".staging");
+  std::filesystem::copy_file(repo_ / "arm-pmsc" / "1" / "model.anim", repo_ / "arm-pmsc" / ".staging" / "model.anim");
+  std::filesystem::rename(repo_ / "arm-pmsc" / ".staging", repo_ / "arm-pmsc" / "2");
+  uint64_t served = 0;
+  for (int attempt = 0; attempt < 300 && served != 2; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    served = client.describe_model("arm-pmsc").default_version();
+  }
+  EXPECT_EQ(served, 2u);
+
+  client.unload_model("arm-cross-pmsc");
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // four polls
+  try {
+    client.describe_model("arm-cross-pmsc");
+    ADD_FAILURE() << "the poll brought back a model unloaded on purpose";
+  } catch (const RpcError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::NOT_FOUND);
+  }
+  // LoadModel brings it back.
+  EXPECT_EQ(client.load_model("arm-cross-pmsc").default_version(), 1u);
+}
+
+}  // namespace
+}  // namespace animspace
