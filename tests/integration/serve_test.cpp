@@ -846,3 +846,65 @@ TEST_F(ServeTest, PollingLoadsNewVersionsAndRespectsUnloads) {
 
 }  // namespace
 }  // namespace animspace
+
+namespace animspace {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Deadlines: a call whose deadline passes while it waits for a worker is never started.
+
+TEST_F(ServeTest, ACallWhoseDeadlinePassedInTheQueueIsNeverStarted) {
+  const int metrics_port = testing::free_tcp_port();
+  auto daemon = start({"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
+  auto ch = channel(*daemon);
+  auto training = v1::TrainingService::NewStub(ch);
+  // A version 2 of arm-pmsc on disk that only an explicit LoadModel would load (no polling).
+  std::filesystem::create_directories(repo_ / "arm-pmsc" / "2");
+  std::filesystem::copy_file(repo_ / "arm-pmsc" / "1" / "model.anim", repo_ / "arm-pmsc" / "2" / "model.anim");
+
+  // Occupy the admin thread with retrains (dry runs: nothing published), then queue a LoadModel
+  // with a deadline far shorter than the work ahead of it.
+  std::vector<std::thread> retrains;
+  for (const char* model : {"bend", "arm-pmsc-engine", "bend", "arm-pmsc-engine"}) {
+    retrains.emplace_back([&, model] {
+      grpc::Status status;
+      retrain(*training, model, true, &status);
+      EXPECT_TRUE(status.ok()) << status.error_message();
+    });
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  auto models = v1::ModelService::NewStub(ch);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(5));
+  v1::LoadModelRequest load;
+  load.mutable_model()->set_name("arm-pmsc");
+  load.mutable_model()->set_version(2);
+  v1::LoadModelResponse loaded;
+  EXPECT_EQ(models->LoadModel(&context, load, &loaded).error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  for (auto& thread : retrains) thread.join();
+
+  // The server dropped the call unstarted: version 2 was never loaded, and the call was counted
+  // as cancelled or past its deadline.
+  Client client(daemon->address());
+  const auto arm = client.describe_model("arm-pmsc");
+  EXPECT_EQ(arm.default_version(), 1u);
+  EXPECT_EQ(arm.versions_size(), 1);
+  // The dropped call is counted when the admin thread reaches it, just after the retrains.
+  httplib::Client http("127.0.0.1", metrics_port);
+  bool dropped = false;
+  std::string body;
+  for (int attempt = 0; attempt < 200 && !dropped; ++attempt) {
+    auto scraped = http.Get("/metrics");
+    ASSERT_TRUE(scraped);
+    body = scraped->body;
+    dropped = body.find("rpc=\"ModelService/LoadModel\",model=\"\",code=\"DEADLINE_EXCEEDED\"} 1") !=
+                  std::string::npos ||
+              body.find("rpc=\"ModelService/LoadModel\",model=\"\",code=\"CANCELLED\"} 1") != std::string::npos;
+    if (!dropped) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(client.describe_model("arm-pmsc").versions_size(), 1);
+  EXPECT_TRUE(dropped) << body.substr(0, 4000);
+}
+
+}  // namespace
+}  // namespace animspace
