@@ -1,5 +1,7 @@
 #include "core/common/atomic_file.h"
 
+#include "core/common/posix_file.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -13,35 +15,6 @@
 
 namespace animspace {
 namespace {
-
-std::string describe_errno(int error_number) { return std::strerror(error_number); }
-
-Error io_error(const std::filesystem::path& path, std::string_view what, int error_number) {
-  return make_error(ErrorCode::kIo, path.string() + ": " + std::string(what) + ": " +
-                                        describe_errno(error_number));
-}
-
-// Closes a descriptor on scope exit unless released first.
-class FileDescriptor {
- public:
-  explicit FileDescriptor(int fd) : fd_(fd) {}
-  ~FileDescriptor() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  FileDescriptor(const FileDescriptor&) = delete;
-  FileDescriptor& operator=(const FileDescriptor&) = delete;
-  int get() const { return fd_; }
-  // Closes now and reports close()'s error: on NFS and some other file systems a failed write
-  // surfaces only here.
-  int close_checked() {
-    const int fd = fd_;
-    fd_ = -1;
-    return ::close(fd) == 0 ? 0 : errno;
-  }
-
- private:
-  int fd_;
-};
 
 // A name no other writer uses: the pid separates processes, the counter separates threads and
 // calls of this process, the clock separates a pid reused after a crash. O_EXCL makes a

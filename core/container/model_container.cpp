@@ -7,6 +7,8 @@
 // allocated, and every multi-byte load goes through memcpy (no alignment assumed).
 #include "core/container/model_container.h"
 
+#include "core/common/posix_file.h"
+
 #include <algorithm>
 #include <bit>
 #include <charconv>
@@ -112,23 +114,6 @@ void store_u64(std::string& out, size_t at, uint64_t value) {
 }
 
 uint64_t align_up(uint64_t n) { return (n + kAlignment - 1) / kAlignment * kAlignment; }
-
-std::string hex32(uint32_t value) {
-  char text[11];
-  std::snprintf(text, sizeof text, "0x%08x", static_cast<unsigned>(value));
-  return text;
-}
-
-std::string hex_bytes(std::string_view bytes) {
-  std::string text;
-  for (const char c : bytes) {
-    char byte[4];
-    std::snprintf(byte, sizeof byte, "%02x", static_cast<unsigned>(static_cast<unsigned char>(c)));
-    if (!text.empty()) text += ' ';
-    text += byte;
-  }
-  return text;
-}
 
 // --- Section types -----------------------------------------------------------------------------
 

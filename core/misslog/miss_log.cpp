@@ -6,6 +6,8 @@
 // all arithmetic is 64-bit, and every multi-byte load goes through memcpy.
 #include "core/misslog/miss_log.h"
 
+#include "core/common/posix_file.h"
+
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
@@ -94,45 +96,8 @@ std::string expected_file_header() {
   return header;
 }
 
-std::string hex32(uint32_t value) {
-  char text[11];
-  std::snprintf(text, sizeof text, "0x%08x", static_cast<unsigned>(value));
-  return text;
-}
-
-std::string hex_bytes(std::string_view bytes) {
-  std::string text;
-  for (const char c : bytes) {
-    char byte[4];
-    std::snprintf(byte, sizeof byte, "%02x", static_cast<unsigned>(static_cast<unsigned char>(c)));
-    if (!text.empty()) text += ' ';
-    text += byte;
-  }
-  return text;
-}
-
 // --- System calls ------------------------------------------------------------------------------
 
-Error io_error(const std::filesystem::path& path, std::string_view what, int error_number) {
-  return make_error(ErrorCode::kIo, path.string() + ": " + std::string(what) + ": " +
-                                        std::strerror(error_number));
-}
-
-// Closes a descriptor on scope exit unless released first.
-class FileDescriptor {
- public:
-  explicit FileDescriptor(int fd) : fd_(fd) {}
-  ~FileDescriptor() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  FileDescriptor(const FileDescriptor&) = delete;
-  FileDescriptor& operator=(const FileDescriptor&) = delete;
-  int get() const { return fd_; }
-  int release() { return std::exchange(fd_, -1); }
-
- private:
-  int fd_;
-};
 
 // Reads up to `size` bytes at `offset`, stopping early only at end of file (the file may shrink
 // under a concurrent reader). Returns the count read, or -errno.

@@ -12,6 +12,7 @@
 #include "core/demo/demo_repository.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "tests/support/daemon_process.h"
+#include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
 // Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
@@ -23,6 +24,11 @@ namespace {
 using grpc::health::v1::HealthCheckResponse;
 using testing::DaemonProcess;
 using testing::TempDir;
+using testing::write_model;
+
+void wait_until_serving(Client& client) {
+  ASSERT_TRUE(testing::wait_until_serving(client)) << "never SERVING";
+}
 
 // A tetrahedron with two frames: every count below is known by hand.
 container::ModelContainer tetrahedron_model() {
@@ -42,25 +48,6 @@ container::ModelContainer tetrahedron_model() {
   return model;
 }
 
-void write_model(const std::filesystem::path& repo, const std::string& name, int version,
-                 const container::ModelContainer& model) {
-  const auto dir = repo / name / std::to_string(version);
-  std::filesystem::create_directories(dir);
-  ASSERT_TRUE(container::write_file(dir / "model.anim", model).ok());
-}
-
-// Polls health until SERVING (it is NOT_SERVING while the repository loads).
-void wait_until_serving(Client& client) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < deadline) {
-    try {
-      if (client.health() == HealthCheckResponse::SERVING) return;
-    } catch (const RpcError&) {
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  FAIL() << "server never reported SERVING";
-}
 
 class DaemonTest : public ::testing::Test {
  protected:

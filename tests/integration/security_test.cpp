@@ -6,6 +6,7 @@
 
 #include "clients/cpp/client.h"
 #include "tests/support/daemon_process.h"
+#include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 #include "tests/support/tls_fixtures.h"
 #include "core/demo/demo_repository.h"
@@ -15,6 +16,7 @@ namespace {
 
 using testing::DaemonProcess;
 using testing::TempDir;
+using testing::wait_until_serving;
 
 class SecurityTest : public ::testing::Test {
  protected:
@@ -52,18 +54,6 @@ class SecurityTest : public ::testing::Test {
   testing::TlsFiles tls_;
 };
 
-// Polls health until SERVING (it is NOT_SERVING while the repository loads).
-bool wait_until_serving(Client& client) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < deadline) {
-    try {
-      if (client.health() == grpc::health::v1::HealthCheckResponse::SERVING) return true;
-    } catch (const RpcError&) {
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return false;
-}
 
 grpc::StatusCode code_of(const std::function<void()>& call) {
   try {

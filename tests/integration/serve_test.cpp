@@ -26,6 +26,7 @@
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
 #include "tests/support/daemon_process.h"
+#include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
 // Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
@@ -36,6 +37,7 @@ namespace {
 
 using testing::DaemonProcess;
 using testing::TempDir;
+using testing::write_model;
 
 constexpr double kDegree = 3.14159265358979323846 / 180.0;
 
@@ -118,24 +120,6 @@ container::ModelContainer narrow_arm_model() {
   return out;
 }
 
-void write_model(const std::filesystem::path& repo, const std::string& name, int version,
-                 const container::ModelContainer& model) {
-  const auto dir = repo / name / std::to_string(version);
-  std::filesystem::create_directories(dir);
-  ASSERT_TRUE(container::write_file(dir / "model.anim", model).ok());
-}
-
-void wait_until_serving(Client& client) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < deadline) {
-    try {
-      if (client.health() == grpc::health::v1::HealthCheckResponse::SERVING) return;
-    } catch (const RpcError&) {
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  FAIL() << "daemon never became SERVING";
-}
 
 class ServeTest : public ::testing::Test {
  protected:
@@ -159,7 +143,7 @@ class ServeTest : public ::testing::Test {
     args.insert(args.end(), extra.begin(), extra.end());
     auto daemon = std::make_unique<DaemonProcess>(args, work_.path());
     Client client(daemon->address());
-    wait_until_serving(client);
+    EXPECT_TRUE(testing::wait_until_serving(client)) << "never SERVING";
     return daemon;
   }
 
