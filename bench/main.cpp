@@ -17,8 +17,9 @@ int main(int argc, char** argv) {
   CLI::App app{"animspace-bench — benchmark suites with same-run baselines"};
   app.add_option("suite", suite, "io: file parsing; pmsc: PMSC training, accuracy and speed on real sequences; skinning: animation "
                   "space vs linear blend skinning (fit, accuracy, evaluation speed); lod: animation-space level of detail vs rest-pose "
-                  "simplifiers (error across poses)")
-      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod"}))
+                  "simplifiers (error across poses); serve: a real animspaced on loopback (unary and streamed PMSC "
+                  "poses against in-process evaluation)")
+      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "serve"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -50,10 +51,11 @@ int main(int argc, char** argv) {
   } else {
     std::printf("note: %s not found; suites that need it use synthetic data or are skipped\n", data_dir.c_str());
   }
-  nlohmann::json results = suite == "io"     ? animspace::bench::run_io_suite(options)
-                           : suite == "pmsc" ? animspace::bench::run_pmsc_suite(options)
-                           : suite == "lod"  ? animspace::bench::run_lod_suite(options)
-                                             : animspace::bench::run_skinning_suite(options);
+  nlohmann::json results = suite == "io"      ? animspace::bench::run_io_suite(options)
+                           : suite == "pmsc"  ? animspace::bench::run_pmsc_suite(options)
+                           : suite == "lod"   ? animspace::bench::run_lod_suite(options)
+                           : suite == "serve" ? animspace::bench::run_serve_suite(options)
+                                              : animspace::bench::run_skinning_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);
     json << nlohmann::json{{"suite", suite}, {"repetitions", options.repetitions}, {"results", results}}.dump(2)
