@@ -8,8 +8,11 @@
 //   in_process             pmsc::evaluate_cached, one pose after another (1 thread), and in 2
 //                          threads (the ceiling of a server that evaluates poses one by one here)
 //   in_process_after_idle  the same with the thread asleep for 1 ms before each pose, as a server
-//                          thread is between requests: on this VM an idle vCPU comes back to a
-//                          cold cache, and the 7.3 MB float basis is streamed from memory again
+//                          thread is between requests: whether the 7.3 MB float basis is still
+//                          in cache when a request comes (on this VM, whose L3 other tenants of
+//                          the host share, it is not: it is streamed from memory again)
+//   in_process_after_spin  the same with 1 ms of busy-waiting instead, which tells the pause
+//                          apart from the vCPU going idle
 //   in_process_batch[_after_idle]
 //                          pmsc::evaluate_batch on 8 poses (the stream's read-ahead window): what
 //                          a server that batched a stream's frames into one GEMM would pay
@@ -17,6 +20,7 @@
 //                          one EvaluateKeyPointsResponse with N·D points built and serialised /
 //                          parsed: the protobuf share of every answer
 // Served:
+//   describe_key_points    DescribeKeyPoints, 1 thread: the unary round trip with no evaluation
 //   unary                  EvaluateKeyPoints, one pose per request, points returned, sync stubs;
 //                          1/4/16 client threads on one shared channel, and 4/16 with a channel
 //                          (own TCP connection) per thread; unary_omit_points without the points
@@ -46,6 +50,7 @@
 #include <numeric>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <utility>
@@ -230,13 +235,21 @@ v1::PointArray point_array(const std::string& packed, int points) {
 // In process
 
 // Each odd frame `passes` times, one pose after another (or after `idle` asleep), µs per pose.
+enum class Gap { kNone, kSleep, kSpin };
+
+// Each odd frame `passes` times, one pose after another, or after kIdleGap asleep or busy-waiting;
+// µs per pose.
 std::vector<double> evaluate_poses(const pmsc::PmscModel& model, const Workload& work, int passes,
-                                   std::chrono::microseconds idle = {}) {
+                                   Gap gap = Gap::kNone) {
   std::vector<double> samples;
   pmsc::CachedPose cached;
   for (int pass = 0; pass < passes; ++pass) {
     for (const Eigen::VectorXf& keys : work.keys) {
-      if (idle.count() > 0) std::this_thread::sleep_for(idle);
+      if (gap == Gap::kSleep) std::this_thread::sleep_for(kIdleGap);
+      if (gap == Gap::kSpin) {
+        for (const auto until = Clock::now() + kIdleGap; Clock::now() < until;) {
+        }
+      }
       const auto start = Clock::now();
       pmsc::evaluate_cached(model, keys, nullptr, cached);
       do_not_optimize(cached.points.data());
@@ -246,14 +259,15 @@ std::vector<double> evaluate_poses(const pmsc::PmscModel& model, const Workload&
   return samples;
 }
 
-Row measure_in_process(const pmsc::PmscModel& model, const Workload& work, int passes, bool after_idle) {
-  Row row(after_idle ? "in_process_after_idle" : "in_process");
-  evaluate_poses(model, work, 1);  // warm
+Row measure_in_process(const pmsc::PmscModel& model, const Workload& work, int passes, Gap gap) {
+  Row row(gap == Gap::kSleep ? "in_process_after_idle" : gap == Gap::kSpin ? "in_process_after_spin" : "in_process");
+  // Warm up for a while: right after training the process is still returning memory to the OS.
+  for (const auto t0 = Clock::now(); seconds_since(t0) < kWarmupSeconds;) evaluate_poses(model, work, 1);
   const auto t0 = Clock::now();
-  row.latency_us = evaluate_poses(model, work, passes, after_idle ? kIdleGap : std::chrono::microseconds{});
+  row.latency_us = evaluate_poses(model, work, passes, gap);
   row.seconds = seconds_since(t0);
-  // After idle: throughput from the evaluation time alone, the sleeps excluded.
-  if (after_idle) row.seconds = std::accumulate(row.latency_us.begin(), row.latency_us.end(), 0.0) * 1e-6;
+  // With gaps: throughput from the evaluation time alone, the gaps excluded.
+  if (gap != Gap::kNone) row.seconds = std::accumulate(row.latency_us.begin(), row.latency_us.end(), 0.0) * 1e-6;
   row.poses = static_cast<long>(row.latency_us.size());
   return row;
 }
@@ -472,7 +486,8 @@ Row measure_unary(const std::string& address, pid_t daemon, const Workload& work
   while (ready.load() < concurrency) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   CpuMeter cpu(daemon);
   const auto measure_start = Clock::now();
-  measure_end = measure_start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kMeasureSeconds));
+  measure_end =
+      measure_start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kMeasureSeconds));
   go = true;
   for (auto& thread : threads) thread.join();
   row.seconds = seconds_since(measure_start);
@@ -484,6 +499,38 @@ Row measure_unary(const std::string& address, pid_t daemon, const Workload& work
     row.outcomes.merge(w.outcomes);
     if (row.error.empty()) row.error = w.error;
   }
+  row.poses = static_cast<long>(row.latency_us.size());
+  return row;
+}
+
+// DescribeKeyPoints back to back from one thread: a unary round trip through the same admission
+// and work-pool hop as EvaluateKeyPoints, with no evaluation and a 1 KB answer — the floor under
+// every unary call on this machine.
+Row measure_round_trip(const std::string& address, pid_t daemon) {
+  Row row("describe_key_points");
+  auto stub = v1::PoseService::NewStub(make_channel(address, false));
+  v1::DescribeKeyPointsRequest request;
+  request.mutable_model()->set_name(kModelName);
+  auto call = [&]() -> bool {
+    grpc::ClientContext context;
+    v1::DescribeKeyPointsResponse response;
+    const grpc::Status status = stub->DescribeKeyPoints(&context, request, &response);
+    if (!status.ok()) row.error = "DescribeKeyPoints: " + status.error_message();
+    return status.ok();
+  };
+  for (const auto warm_until = Clock::now() + std::chrono::duration<double>(kWarmupSeconds);
+       Clock::now() < warm_until && call();) {
+  }
+  CpuMeter cpu(daemon);
+  const auto t0 = Clock::now();
+  while (row.error.empty() && seconds_since(t0) < kMeasureSeconds / 2) {
+    const auto start = Clock::now();
+    if (call()) row.latency_us.push_back(1e6 * seconds_since(start));
+  }
+  row.seconds = seconds_since(t0);
+  cpu.stop();
+  row.daemon_cpu_seconds = cpu.daemon_seconds;
+  row.client_cpu_seconds = cpu.client_seconds;
   row.poses = static_cast<long>(row.latency_us.size());
   return row;
 }
@@ -604,7 +651,9 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
   if (!row.channels.empty()) json["channels"] = row.channels;
   if (row.work_threads) {
     json["work_threads"] = *row.work_threads;
-    if (*row.work_threads > 0) variant = "wt=" + std::to_string(*row.work_threads) + (variant.empty() ? "" : " ") + variant;
+    if (*row.work_threads > 0) {
+      variant = "wt=" + std::to_string(*row.work_threads) + (variant.empty() ? "" : " ") + variant;
+    }
   }
   const long total = row.outcomes.total();
   char hit[16] = "-", mismatched[16] = "-";
@@ -631,9 +680,10 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
   }
   if (!row.error.empty()) json["error"] = row.error;
   if (row.mode.starts_with("stream") && !row.in_order && row.error.empty()) json["error"] = "results out of order";
-  std::printf("%-27s %4d %-10s %9.0f %9.1f %9.1f %8.1f %6s %6s %6s %6s %4s %5.1f%s%s\n", row.mode.c_str(),
-              row.concurrency, variant.empty() ? "-" : variant.c_str(), pps, p50, p99, baseline, daemon_ratio, daemon_cpu, client_cpu, hit, mismatched, row.load_average,
-              json.contains("error") ? " ERROR " : "", json.contains("error") ? json["error"].get<std::string>().c_str() : "");
+  const std::string error = json.contains("error") ? " ERROR " + json["error"].get<std::string>() : "";
+  std::printf("%-27s %4d %-10s %9.0f %9.1f %9.1f %8.1f %6s %6s %6s %6s %4s %5.1f%s\n", row.mode.c_str(),
+              row.concurrency, variant.empty() ? "-" : variant.c_str(), pps, p50, p99, baseline, daemon_ratio,
+              daemon_cpu, client_cpu, hit, mismatched, row.load_average, error.c_str());
   std::fflush(stdout);
   out.push_back(json);
 }
@@ -719,7 +769,14 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
               1e-6 * sizeof(float) * static_cast<double>(model->basis.size()), odd.size(),
               sizeof(float) * 3 * static_cast<size_t>(model->point_count));
 
-  ScratchDirectory scratch;
+  std::unique_ptr<ScratchDirectory> scratch_owner;
+  try {
+    scratch_owner = std::make_unique<ScratchDirectory>();
+  } catch (const std::exception& e) {
+    std::printf("serve: %s\n", e.what());
+    return nlohmann::json::array();
+  }
+  const ScratchDirectory& scratch = *scratch_owner;
   const auto repository = scratch.path() / "repository";
   std::filesystem::create_directories(repository / kModelName / "1");
   const auto container = pmsc::make_container(sequence->reference, train_frames, nullptr, *model, training_report,
@@ -732,14 +789,15 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
   print_header();
   // Baselines, before any daemon exists.
   const int passes = std::max(3, options.repetitions);
-  Row in_process = measure_in_process(*model, work, passes, false);
+  Row in_process = measure_in_process(*model, work, passes, Gap::kNone);
   const double run_baseline_us = median(in_process.latency_us);
   auto measured = [&](Row row) {
     row.load_average = load_average_1m();
     report(row, run_baseline_us, results);
   };
   measured(std::move(in_process));
-  measured(measure_in_process(*model, work, std::max(1, passes / 7), true));
+  measured(measure_in_process(*model, work, std::max(1, passes / 7), Gap::kSleep));
+  measured(measure_in_process(*model, work, std::max(1, passes / 7), Gap::kSpin));
   measured(measure_in_process_parallel(*model, work, 2));
   measured(measure_in_process_batch(*model, work, 4 * passes, false));
   measured(measure_in_process_batch(*model, work, passes, true));
@@ -768,6 +826,7 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
     auto stream = [&](int streams, bool omit) {
       served([&] { return measure_stream(address, pid, work, streams, omit); }, work_threads);
     };
+    if (work_threads == 0) served([&] { return measure_round_trip(address, pid); }, work_threads);
     unary(1, false, false);
     if (work_threads == 0) {
       unary(1, false, true);
@@ -785,12 +844,12 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
 
   std::printf(
       "conc: client threads (in_process: evaluating threads; stream: concurrent streams). variant: unary channel use; "
-      "wt=1: the daemon ran with --work-threads 1 (else one per core). p50/p99: per call (unary), per pose "
-      "(in_process; batch: per pose of each batch), send→result per frame including the frames queued ahead of it "
-      "(stream), per response (encode/decode). base: in-process µs per pose measured right before and after the row "
-      "(baseline rows: the first in_process row). d cpu / c cpu: CPU µs per pose spent by the daemon / this client; "
-      "dcpu/b: d cpu over base. "
-      "mism: answers whose soft-cache status differs from the in-process one. load: 1-minute load average.\n");
+      "wt=1: the daemon ran with --work-threads 1 (else one per core). p50/p99: per call (unary, describe_key_points), "
+      "per pose (in_process; batch: per pose of each batch), per response (encode/decode), send→result per frame "
+      "including the frames queued ahead of it (stream). base: in-process µs per pose measured right before and after "
+      "the row (baseline rows: the first in_process row). d cpu / c cpu: CPU µs per pose spent by the daemon / this "
+      "client; dcpu/b: d cpu over base. mism: answers whose soft-cache status differs from the in-process one. load: "
+      "1-minute load average.\n");
   return results;
 }
 
