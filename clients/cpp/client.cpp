@@ -1,5 +1,7 @@
 #include "clients/cpp/client.h"
 
+#include <bit>
+
 namespace animspace {
 namespace {
 
@@ -53,7 +55,20 @@ void Client::prepare(grpc::ClientContext* context) const { prepare(context, opti
 
 void Client::prepare(grpc::ClientContext* context, std::chrono::milliseconds deadline) const {
   context->set_deadline(std::chrono::system_clock::now() + deadline);
+  authorize(context);
+}
+
+void Client::authorize(grpc::ClientContext* context) const {
   if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+}
+
+v1::PointArray make_point_array(const float* values, uint32_t points, uint32_t channels) {
+  static_assert(std::endian::native == std::endian::little, "the wire format is little-endian float32");
+  v1::PointArray out;
+  out.set_point_count(points);
+  out.set_channel_count(channels);
+  out.set_data(values, size_t{points} * channels * sizeof(float));
+  return out;
 }
 
 grpc::health::v1::HealthCheckResponse::ServingStatus Client::health(const std::string& service) {

@@ -73,6 +73,9 @@ class Client {
   v1::RetrainResponse retrain(const v1::RetrainRequest& request, std::chrono::milliseconds deadline);
 
   const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
+  // Adds the bearer token (if any) to a context, for calls made on channel() directly, such as
+  // a stream that must outlive the per-call deadline.
+  void authorize(grpc::ClientContext* context) const;
 
  private:
   void prepare(grpc::ClientContext* context) const;
@@ -86,6 +89,9 @@ class Client {
   std::unique_ptr<v1::TrainingService::Stub> training_;
   std::unique_ptr<grpc::health::v1::Health::Stub> health_;
 };
+
+// N points × D channels as the API's packed little-endian float32 PointArray.
+v1::PointArray make_point_array(const float* values, uint32_t points, uint32_t channels);
 
 // Name of a gRPC status code ("NOT_FOUND").
 const char* status_code_name(grpc::StatusCode code);

@@ -41,14 +41,6 @@ using testing::write_model;
 
 constexpr double kDegree = 3.14159265358979323846 / 180.0;
 
-v1::PointArray point_array(const float* values, uint32_t points, uint32_t channels) {
-  v1::PointArray out;
-  out.set_point_count(points);
-  out.set_channel_count(channels);
-  out.set_data(values, size_t{points} * channels * sizeof(float));
-  return out;
-}
-
 Eigen::VectorXf decode(const v1::PointArray& array) {
   Eigen::VectorXf out(static_cast<Eigen::Index>(array.point_count()) * array.channel_count());
   EXPECT_EQ(array.data().size(), static_cast<size_t>(out.size()) * sizeof(float));
@@ -219,7 +211,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
     v1::EvaluateKeyPointsRequest request;
     request.mutable_model()->set_name(model);
     for (int i = 0; i < pose_count; ++i) {
-      *request.add_poses()->mutable_key_values() = point_array(good.data(), K, 3);
+      *request.add_poses()->mutable_key_values() = make_point_array(good.data(), K, 3);
     }
     edit(request);
     return request;
@@ -251,7 +243,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
        "poses[1].key_values.point_count: expected " + k + " key points, got " + std::to_string(K - 1),
        [&] {
          return eval(request_with("arm-pmsc", 2, [&](auto& r) {
-           *r.mutable_poses(1)->mutable_key_values() = point_array(good.data(), K - 1, 3);
+           *r.mutable_poses(1)->mutable_key_values() = make_point_array(good.data(), K - 1, 3);
          }));
        }},
       {"wrong channel count", grpc::StatusCode::INVALID_ARGUMENT, "poses[0].key_values.channel_count: expected 3, got 2",
@@ -274,7 +266,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          return eval(request_with("arm-pmsc", 2, [&](auto& r) {
            Eigen::VectorXf bad = good;
            bad[2 * 3 + 1] = std::numeric_limits<float>::quiet_NaN();
-           *r.mutable_poses(1)->mutable_key_values() = point_array(bad.data(), K, 3);
+           *r.mutable_poses(1)->mutable_key_values() = make_point_array(bad.data(), K, 3);
          }));
        }},
       {"infinity", grpc::StatusCode::INVALID_ARGUMENT, "poses[0].key_values.data: value of point 0, channel 0 is infinite",
@@ -282,7 +274,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          return eval(request_with("arm-pmsc", 1, [&](auto& r) {
            Eigen::VectorXf bad = good;
            bad[0] = std::numeric_limits<float>::infinity();
-           *r.mutable_poses(0)->mutable_key_values() = point_array(bad.data(), K, 3);
+           *r.mutable_poses(0)->mutable_key_values() = make_point_array(bad.data(), K, 3);
          }));
        }},
       {"oversize message", grpc::StatusCode::RESOURCE_EXHAUSTED, "",
@@ -318,8 +310,8 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          grpc::ClientContext context;
          v1::CompleteMissRequest request;
          request.mutable_model()->set_name("arm-pmsc");
-         *request.mutable_key_values() = point_array(good.data(), K, 3);
-         *request.mutable_full_values() = point_array(full.data(), 3, 3);
+         *request.mutable_key_values() = make_point_array(good.data(), K, 3);
+         *request.mutable_full_values() = make_point_array(full.data(), 3, 3);
          v1::CompleteMissResponse response;
          return poses->CompleteMiss(&context, request, &response);
        }},
@@ -395,7 +387,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
       v1::KeyPointFrame frame;
       if (s == 5) frame.mutable_model()->set_name("arm-pmsc");
       frame.set_sequence(s);
-      *frame.mutable_pose()->mutable_key_values() = point_array(good.data(), s == 7 ? K - 1 : K, 3);
+      *frame.mutable_pose()->mutable_key_values() = make_point_array(good.data(), s == 7 ? K - 1 : K, 3);
       ASSERT_TRUE(stream->Write(frame));
     }
     stream->WritesDone();
@@ -453,7 +445,7 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
 
   v1::EvaluateKeyPointsRequest request;
   request.mutable_model()->set_name("bend");
-  *request.add_poses()->mutable_key_values() = point_array(gather(keys, bent).data(), keys.key_point_indices_size(), 3);
+  *request.add_poses()->mutable_key_values() = make_point_array(gather(keys, bent).data(), keys.key_point_indices_size(), 3);
   v1::EvaluateKeyPointsResponse response;
   ASSERT_TRUE(evaluate(*poses, request, &response).ok());
   ASSERT_EQ(response.results_size(), 1);
@@ -469,7 +461,7 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
     v1::CompleteMissRequest complete;
     complete.mutable_model()->set_name("bend");
     *complete.mutable_key_values() = request.poses(0).key_values();
-    *complete.mutable_full_values() = point_array(bent.data(), static_cast<uint32_t>(bent.size() / 3), 3);
+    *complete.mutable_full_values() = make_point_array(bent.data(), static_cast<uint32_t>(bent.size() / 3), 3);
     v1::CompleteMissResponse completed;
     ASSERT_TRUE(poses->CompleteMiss(&context, complete, &completed).ok());
     EXPECT_TRUE(completed.logged());
@@ -490,7 +482,7 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
   keys = describe_keys(*poses, "bend");
   EXPECT_EQ(keys.model_version(), 2u);
   request.mutable_poses(0)->mutable_key_values()->CopyFrom(
-      point_array(gather(keys, bent).data(), keys.key_point_indices_size(), 3));
+      make_point_array(gather(keys, bent).data(), keys.key_point_indices_size(), 3));
   response.Clear();
   ASSERT_TRUE(evaluate(*poses, request, &response).ok());
   const auto& hit = response.results(0);
@@ -506,7 +498,7 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
   const auto keys_v1 = describe_keys(*poses, "bend", 1);
   request.mutable_model()->set_version(1);
   *request.mutable_poses(0)->mutable_key_values() =
-      point_array(gather(keys_v1, bent).data(), keys_v1.key_point_indices_size(), 3);
+      make_point_array(gather(keys_v1, bent).data(), keys_v1.key_point_indices_size(), 3);
   response.Clear();
   ASSERT_TRUE(evaluate(*poses, request, &response).ok());
   EXPECT_EQ(response.results(0).model_version(), 1u);
@@ -569,7 +561,7 @@ TEST_F(ServeTest, HotSwapWhileStreamingAThousandPosesFailsNothing) {
       if (s == 0) frame.mutable_model()->set_name("arm-pmsc");
       frame.set_sequence(static_cast<uint64_t>(s));
       frame.set_omit_points(s % 2 == 1);
-      *frame.mutable_pose()->mutable_key_values() = point_array(key_frames[s % key_frames.size()].data(), K, 3);
+      *frame.mutable_pose()->mutable_key_values() = make_point_array(key_frames[s % key_frames.size()].data(), K, 3);
       if (!stream->Write(frame)) break;
     }
     stream->WritesDone();
@@ -628,8 +620,8 @@ TEST_F(ServeTest, KillNineMidAppendKeepsEveryCompleteMissRecord) {
           context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
           v1::CompleteMissRequest request;
           request.mutable_model()->set_name("bend");
-          *request.mutable_key_values() = point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
-          *request.mutable_full_values() = point_array(full.data(), static_cast<uint32_t>(full.size() / 3), 3);
+          *request.mutable_key_values() = make_point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
+          *request.mutable_full_values() = make_point_array(full.data(), static_cast<uint32_t>(full.size() / 3), 3);
           v1::CompleteMissResponse response;
           attempted.fetch_add(1);
           if (stub->CompleteMiss(&context, request, &response).ok() && response.logged()) acknowledged.fetch_add(1);
@@ -667,8 +659,8 @@ TEST_F(ServeTest, KillNineMidAppendKeepsEveryCompleteMissRecord) {
   grpc::ClientContext context;
   v1::CompleteMissRequest request;
   request.mutable_model()->set_name("bend");
-  *request.mutable_key_values() = point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
-  *request.mutable_full_values() = point_array(full.data(), static_cast<uint32_t>(full.size() / 3), 3);
+  *request.mutable_key_values() = make_point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
+  *request.mutable_full_values() = make_point_array(full.data(), static_cast<uint32_t>(full.size() / 3), 3);
   v1::CompleteMissResponse response;
   ASSERT_TRUE(poses->CompleteMiss(&context, request, &response).ok());
   EXPECT_TRUE(response.logged());
@@ -752,7 +744,7 @@ TEST_F(ServeTest, ServerFailThroughAndSkeletonPosesMatchTheAnimationSpaceModel) 
   v1::EvaluateKeyPointsRequest request;
   request.mutable_model()->set_name("arm-pmsc-engine");
   auto* pose = request.add_poses();
-  *pose->mutable_key_values() = point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
+  *pose->mutable_key_values() = make_point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
   *pose->mutable_skeleton_pose() = skeleton_pose(globals);
   v1::EvaluateKeyPointsResponse response;
   ASSERT_TRUE(evaluate(*poses, request, &response).ok());

@@ -25,14 +25,6 @@ Result<FrameMatrix> load_frames(const PlayArgs& a) {
   return FrameMatrix(sequence->frames.samples);
 }
 
-v1::PointArray point_array(const float* values, uint32_t points, uint32_t channels) {
-  v1::PointArray out;
-  out.set_point_count(points);
-  out.set_channel_count(channels);
-  out.set_data(values, size_t{points} * channels * sizeof(float));
-  return out;
-}
-
 }  // namespace
 
 CLI::App* add_play(CLI::App& app, PlayArgs& a) {
@@ -71,16 +63,15 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   auto gather = [&](int frame) {
     Eigen::VectorXf out(static_cast<long>(K) * D);
     for (uint32_t k = 0; k < K; ++k) {
-      out.segment(k * D, D) = frames->row(frame).segment(static_cast<long>(keys.key_point_indices(static_cast<int>(k))) * D, D).transpose();
+      const long point = keys.key_point_indices(static_cast<int>(k));
+      out.segment(k * D, D) = frames->row(frame).segment(point * D, D).transpose();
     }
     return out;
   };
 
   auto stub = v1::PoseService::NewStub(client.channel());
   grpc::ClientContext context;
-  if (const char* token = std::getenv("ANIMSPACE_TOKEN"); token != nullptr) {
-    context.AddMetadata("authorization", std::string("Bearer ") + token);
-  }
+  client.authorize(&context);  // the stream runs as long as the sequence: no per-call deadline
   const auto start = std::chrono::steady_clock::now();
   auto stream = stub->StreamKeyPoints(&context);
   std::thread writer([&] {
@@ -93,7 +84,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       frame.set_sequence(static_cast<uint64_t>(selected[i]));
       frame.set_omit_points(true);
       const Eigen::VectorXf values = gather(selected[i]);
-      *frame.mutable_pose()->mutable_key_values() = point_array(values.data(), K, static_cast<uint32_t>(D));
+      *frame.mutable_pose()->mutable_key_values() = make_point_array(values.data(), K, static_cast<uint32_t>(D));
       if (!stream->Write(frame)) break;
     }
     stream->WritesDone();
@@ -125,9 +116,10 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       request.mutable_model()->set_name(a.model);
       request.mutable_model()->set_version(keys.model_version());
       const Eigen::VectorXf values = gather(static_cast<int>(frame));
-      *request.mutable_key_values() = point_array(values.data(), K, static_cast<uint32_t>(D));
+      *request.mutable_key_values() = make_point_array(values.data(), K, static_cast<uint32_t>(D));
       *request.mutable_full_values() =
-          point_array(frames->row(static_cast<long>(frame)).data(), keys.control_point_count(), static_cast<uint32_t>(D));
+          make_point_array(frames->row(static_cast<long>(frame)).data(), keys.control_point_count(),
+                           static_cast<uint32_t>(D));
       completed += client.complete_miss(request).logged() ? 1 : 0;
     }
   }
