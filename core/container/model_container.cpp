@@ -219,6 +219,23 @@ Result<Matrix> read_matrix(const std::map<std::string, Section, std::less<>>& se
   return m;
 }
 
+// One row of a matrix section, copied alone (a frame of a long sequence without the rest).
+template <typename Matrix>
+Result<Matrix> read_matrix_row(const std::map<std::string, Section, std::less<>>& sections,
+                               std::string_view name, SectionType wanted, int64_t row) {
+  auto found = find_section(sections, name, wanted);
+  if (!found.ok()) return found.error();
+  const Section& section = **found;
+  if (row < 0 || row >= static_cast<int64_t>(section.rows)) {
+    return make_error(ErrorCode::kOutOfRange, "section '" + std::string(name) + "': row " + std::to_string(row) +
+                                                  " out of range (" + std::to_string(section.rows) + " rows)");
+  }
+  const size_t row_bytes = size_t{section.cols} * sizeof(typename Matrix::Scalar);
+  Matrix m(1, static_cast<Eigen::Index>(section.cols));
+  if (row_bytes > 0) std::memcpy(m.data(), section.bytes.data() + static_cast<size_t>(row) * row_bytes, row_bytes);
+  return m;
+}
+
 // --- Metadata as JSON --------------------------------------------------------------------------
 
 std::string metadata_to_json(const std::map<std::string, std::string>& metadata) {
@@ -621,6 +638,10 @@ Result<std::string> ModelContainer::text(std::string_view name) const {
 
 Result<FrameMatrix> ModelContainer::float_matrix(std::string_view name, int expected_cols) const {
   return read_matrix<FrameMatrix>(sections_, name, SectionType::kFloat32Matrix, expected_cols);
+}
+
+Result<FrameMatrix> ModelContainer::float_matrix_row(std::string_view name, int64_t row) const {
+  return read_matrix_row<FrameMatrix>(sections_, name, SectionType::kFloat32Matrix, row);
 }
 
 Result<Int32Matrix> ModelContainer::int_matrix(std::string_view name, int expected_cols) const {

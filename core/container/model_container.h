@@ -87,6 +87,8 @@ class ModelContainer {
   Result<std::string> bytes(std::string_view name) const;
   Result<std::string> text(std::string_view name) const;
   Result<FrameMatrix> float_matrix(std::string_view name, int expected_cols = -1) const;
+  // Row `row` alone (1 × cols). Errors as above, and kOutOfRange naming the row and the count.
+  Result<FrameMatrix> float_matrix_row(std::string_view name, int64_t row) const;
   Result<Int32Matrix> int_matrix(std::string_view name, int expected_cols = -1) const;
   Result<Float64Matrix> double_matrix(std::string_view name, int expected_cols = -1) const;
   Result<PointMatrix> points(std::string_view name) const;  // a float32 matrix with 3 columns

@@ -493,5 +493,30 @@ TEST(ModelContainerTest, ReadFileErrorsNameThePath) {
   EXPECT_EQ(wrong.error().message.rfind(text_file.string() + ": ", 0), 0U) << wrong.error().message;
 }
 
+TEST(ModelContainerTest, OneRowIsThatRowOfTheWholeMatrix) {
+  ModelContainer c;
+  FrameMatrix frames(5, 6);
+  for (Eigen::Index r = 0; r < frames.rows(); ++r) {
+    for (Eigen::Index k = 0; k < frames.cols(); ++k) frames(r, k) = static_cast<float>(10 * r + k) + 0.25f;
+  }
+  c.set_matrix("frames", frames);
+  for (int64_t r = 0; r < 5; ++r) {
+    auto row = c.float_matrix_row("frames", r);
+    ASSERT_TRUE(row.ok()) << row.error().message;
+    ASSERT_EQ(row->rows(), 1);
+    EXPECT_EQ(*row, frames.row(r));
+  }
+  for (int64_t bad : {int64_t{-1}, int64_t{5}}) {
+    auto row = c.float_matrix_row("frames", bad);
+    ASSERT_FALSE(row.ok());
+    EXPECT_EQ(row.error().code, ErrorCode::kOutOfRange);
+    EXPECT_NE(row.error().message.find("row " + std::to_string(bad) + " out of range (5 rows)"), std::string::npos)
+        << row.error().message;
+  }
+  EXPECT_EQ(c.float_matrix_row("missing", 0).error().code, ErrorCode::kNotFound);
+  c.set_matrix("ints", Int32Matrix(Int32Matrix::Zero(2, 2)));
+  EXPECT_EQ(c.float_matrix_row("ints", 0).error().code, ErrorCode::kInvalidArgument);
+}
+
 }  // namespace
 }  // namespace animspace::container
