@@ -1,0 +1,86 @@
+// What the renderer draws: a posed triangle mesh, a camera, shading and overlays.
+//
+// Plain data with no GL in it, so that the server can build a scene on any thread and hand it to
+// the one thread that owns the context (server/render_thread.h).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/types.h"
+
+namespace animspace::render {
+
+// A perspective camera in the model's object frame.
+struct Camera {
+  Eigen::Vector3d eye = Eigen::Vector3d(0, 0, 3);
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();
+  Eigen::Vector3d up = Eigen::Vector3d::UnitY();
+  double vertical_fov_radians = 0.8;  // in (0, π)
+};
+
+enum class Shading { kLambert, kBlinnPhong };
+
+// Thumbnails are small and drawn once: the shading is a fixed, documented model rather than a
+// material system, so that a test can compute the value of any pixel by hand.
+//
+// One white directional "headlight" shining from the eye along the view direction l = v =
+// normalise(eye − p). With albedo a, ambient k_a, diffuse k_d, specular k_s and shininess s:
+//   Lambert:      c = a · (k_a + k_d · max(n·l, 0))
+//   Blinn-Phong:  c = a · (k_a + k_d · max(n·l, 0)) + k_s · max(n·h, 0)^s,  h = normalise(l + v) = l
+// each channel clamped to [0, 1], written as 8-bit (round to nearest) with no gamma curve.
+// Back faces are lit with their flipped normal (thumbnails of open meshes stay readable).
+struct Material {
+  Eigen::Vector3f albedo = Eigen::Vector3f(0.80f, 0.78f, 0.74f);
+  float ambient = 0.15f;
+  float diffuse = 0.85f;
+  float specular = 0.25f;
+  float shininess = 32;
+};
+
+struct Scene {
+  int width = 256;   // pixels, ≥ 1
+  int height = 256;  // pixels, ≥ 1
+  PointMatrix points;  // #V × 3, posed
+  FaceMatrix faces;    // #F × 3, counter-clockwise seen from outside
+  // Unit vertex normals (#V × 3, e.g. animation-space tangent planes, Merry 2007 §4.3), or empty:
+  // area-weighted normals are computed from the faces.
+  PointMatrix normals;
+  // Absent: frame_bounding_box(points, width / height).
+  std::optional<Camera> camera;
+  Eigen::Vector4f background = Eigen::Vector4f(0.18f, 0.18f, 0.20f, 1.0f);  // RGBA in [0, 1]
+  Shading shading = Shading::kBlinnPhong;
+  Material material;
+  int samples = 4;  // multisampling: 1, 2, 4 or 8
+
+  // Overlays.
+  // Vertices drawn as dots on top of the surface (the key points of Meyer & Anderson 2007, Fig. 1).
+  std::vector<int32_t> key_points;
+  float key_point_radius_px = 3.0f;
+  Eigen::Vector3f key_point_colour = Eigen::Vector3f(1.0f, 0.85f, 0.1f);
+  // Per-vertex values (#V, ≥ 0) drawn as a heat map instead of the albedo (thesis Fig. 8.6):
+  // 0 is blue, heat_max (or the largest value when heat_max ≤ 0) is red, through green/yellow.
+  // The map is piecewise linear in t = heat / heat_max clamped to [0, 1] (blue at 0, green at 1/3,
+  // yellow at 2/3, red at 1), evaluated per fragment on the interpolated value, and the colour
+  // replaces the albedo a in the shading model above (still lit, so the shape stays readable).
+  Eigen::VectorXf heat;
+  float heat_max = 0;
+  // Triangle edges drawn on top of the shaded surface.
+  bool wireframe = false;
+  Eigen::Vector3f wireframe_colour = Eigen::Vector3f(0.05f, 0.05f, 0.05f);
+};
+
+// 8-bit RGBA, rows top to bottom (as PNG stores them).
+struct Image {
+  int width = 0;
+  int height = 0;
+  std::vector<uint8_t> rgba;  // width · height · 4
+
+  const uint8_t* pixel(int x, int y) const { return rgba.data() + 4 * (static_cast<size_t>(y) * width + x); }
+};
+
+}  // namespace animspace::render

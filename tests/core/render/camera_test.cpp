@@ -1,0 +1,199 @@
+// Tests of the camera arithmetic (core/render/camera.h) against closed-form pinhole geometry.
+#include "core/render/camera.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <string>
+#include <utility>
+
+#include <gtest/gtest.h>
+
+#include "tests/core/render/render_test_geometry.h"
+
+namespace animspace::render {
+namespace {
+
+Camera make_camera(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up, double fov) {
+  Camera camera;
+  camera.eye = eye;
+  camera.target = target;
+  camera.up = up;
+  camera.vertical_fov_radians = fov;
+  return camera;
+}
+
+TEST(CameraTest, TargetProjectsToTheImageCentre) {
+  const Camera camera = make_camera({1.5, -2, 7}, {0.2, 0.4, -1}, {0.1, 1, 0.3}, 0.9);
+  const Projected p = project_to_pixel(camera, 320, 200, camera.target);
+  EXPECT_NEAR(p.pixel.x(), 160, 1e-9);
+  EXPECT_NEAR(p.pixel.y(), 100, 1e-9);
+  EXPECT_NEAR(p.depth, (camera.target - camera.eye).norm(), 1e-9);
+}
+
+TEST(CameraTest, OffsetsFromTheViewAxisFollowTheFieldOfView) {
+  // Eye on +z looking at the origin: a point at height h in the plane z = 0 is at angle atan(h/5)
+  // and lands tan(angle) / tan(fov/2) half-heights above the centre.
+  const double fov = 0.8;
+  const Camera camera = make_camera({0, 0, 5}, {0, 0, 0}, {0, 1, 0}, fov);
+  const int width = 400, height = 200;
+  const double half_height_at_target = 5 * std::tan(fov / 2);
+  const double half_width_at_target = 2 * half_height_at_target;
+
+  Projected up = project_to_pixel(camera, width, height, {0, half_height_at_target / 2, 0});
+  EXPECT_NEAR(up.pixel.x(), 200, 1e-9);
+  EXPECT_NEAR(up.pixel.y(), 50, 1e-9);  // halfway to the top edge
+  EXPECT_NEAR(up.depth, 5, 1e-12);
+
+  Projected right = project_to_pixel(camera, width, height, {half_width_at_target, 0, 0});
+  EXPECT_NEAR(right.pixel.x(), 400, 1e-9);  // NDC x = +1 is the right edge, pixel coordinate = width
+  EXPECT_NEAR(right.pixel.y(), 100, 1e-9);
+
+  Projected corner = project_to_pixel(camera, width, height, {-half_width_at_target, -half_height_at_target, 0});
+  EXPECT_NEAR(corner.pixel.x(), 0, 1e-9);
+  EXPECT_NEAR(corner.pixel.y(), 200, 1e-9);
+
+  // Twice as far along the axis, the same offset subtends half as much.
+  Projected far = project_to_pixel(camera, width, height, {0, half_height_at_target, -5});
+  EXPECT_NEAR(far.pixel.y(), 50, 1e-9);
+  EXPECT_NEAR(far.depth, 10, 1e-12);
+
+  Projected behind = project_to_pixel(camera, width, height, {0, 0, 6});
+  EXPECT_LT(behind.depth, 0);
+}
+
+TEST(CameraTest, MatricesMapTheFrustumToClipSpace) {
+  const Camera camera = make_camera({2, 1, 4}, {0, 0.5, 0}, {0, 1, 0}, 0.7);
+  const Eigen::Matrix4d view = view_matrix(camera);
+  const Eigen::Vector4d eye = view * camera.eye.homogeneous();
+  EXPECT_NEAR(eye.head<3>().norm(), 0, 1e-12);
+  const double distance = (camera.target - camera.eye).norm();
+  const Eigen::Vector4d target = view * camera.target.homogeneous();
+  EXPECT_NEAR(target.x(), 0, 1e-12);
+  EXPECT_NEAR(target.y(), 0, 1e-12);
+  EXPECT_NEAR(target.z(), -distance, 1e-12);  // right-handed, looking down −z
+
+  const double near_distance = 0.5, far_distance = 20, aspect = 1.6;
+  const Eigen::Matrix4d projection = projection_matrix(camera, aspect, near_distance, far_distance);
+  const auto ndc = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector4d clip = projection * Eigen::Vector4d(p.x(), p.y(), p.z(), 1);
+    return Eigen::Vector3d(clip.head<3>() / clip.w());
+  };
+  EXPECT_NEAR(ndc({0, 0, -near_distance}).z(), -1, 1e-12);
+  EXPECT_NEAR(ndc({0, 0, -far_distance}).z(), 1, 1e-12);
+  // The top of the frustum at depth 3 is at y = 3·tan(fov/2), its right side at aspect times that.
+  const double top = 3 * std::tan(0.35);
+  EXPECT_NEAR(ndc({0, top, -3}).y(), 1, 1e-12);
+  EXPECT_NEAR(ndc({aspect * top, 0, -3}).x(), 1, 1e-12);
+}
+
+TEST(CameraTest, HorizontalFieldOfView) {
+  const Camera camera = make_camera({0, 0, 3}, {0, 0, 0}, {0, 1, 0}, 0.8);
+  EXPECT_NEAR(horizontal_fov(camera, 1), 0.8, 1e-12);
+  EXPECT_NEAR(horizontal_fov(camera, 2), 2 * std::atan(2 * std::tan(0.4)), 1e-12);
+  EXPECT_LT(horizontal_fov(camera, 0.5), 0.8);
+}
+
+TEST(CameraTest, FrameBoundingBoxKeepsEveryPointInsideTheImage) {
+  std::mt19937 engine(7);
+  std::uniform_real_distribution<float> coordinate(-3, 5);
+  PointMatrix points(500, 3);
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    points.row(i) << coordinate(engine), 0.2f * coordinate(engine), 2 * coordinate(engine);
+  }
+  for (const auto& [width, height] : {std::pair(256, 256), std::pair(400, 100), std::pair(90, 300)}) {
+    SCOPED_TRACE(std::to_string(width) + " × " + std::to_string(height));
+    Result<Camera> camera = frame_bounding_box(points, static_cast<double>(width) / height);
+    ASSERT_TRUE(camera.ok()) << camera.error().message;
+    // Looks at the bounding-box centre from +z with +y up.
+    const Eigen::Vector3d centre =
+        ((points.colwise().minCoeff() + points.colwise().maxCoeff()).cast<double>() / 2).transpose();
+    EXPECT_TRUE(camera->target.isApprox(centre, 1e-9));
+    EXPECT_NEAR((camera->eye - camera->target).normalized().z(), 1, 1e-12);
+    EXPECT_TRUE(camera->up.isApprox(Eigen::Vector3d::UnitY()));
+    EXPECT_TRUE(validate_camera(*camera, "camera").ok());
+    const testing::Pinhole pinhole(camera->eye, camera->target, camera->up, camera->vertical_fov_radians, width,
+                                   height);
+    double margin = std::numeric_limits<double>::infinity();
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+      const Eigen::Vector3d p = points.row(i).cast<double>().transpose();
+      const Projected projected = project_to_pixel(*camera, width, height, p);
+      EXPECT_GT(projected.depth, 0);
+      EXPECT_TRUE(projected.pixel.isApprox(pinhole.project(p), 1e-9));
+      margin = std::min({margin, projected.pixel.x(), width - projected.pixel.x(), projected.pixel.y(),
+                         height - projected.pixel.y()});
+    }
+    EXPECT_GT(margin, 0);
+  }
+}
+
+TEST(CameraTest, FrameBoundingBoxRefusesNoPointsAndNonFinitePoints) {
+  Result<Camera> empty = frame_bounding_box(PointMatrix(0, 3), 1);
+  ASSERT_FALSE(empty.ok());
+  EXPECT_EQ(empty.error().code, ErrorCode::kInvalidArgument);
+  PointMatrix points = PointMatrix::Zero(3, 3);
+  points(1, 2) = std::numeric_limits<float>::quiet_NaN();
+  Result<Camera> nan = frame_bounding_box(points, 1);
+  ASSERT_FALSE(nan.ok());
+  EXPECT_EQ(nan.error().code, ErrorCode::kInvalidArgument);
+  // A single point still gets a usable camera.
+  Result<Camera> single = frame_bounding_box(PointMatrix::Ones(1, 3), 1);
+  ASSERT_TRUE(single.ok());
+  EXPECT_TRUE(validate_camera(*single, "camera").ok());
+}
+
+TEST(CameraTest, ClipRangeEnclosesTheSphere) {
+  const Camera camera = make_camera({0, 0, 10}, {0, 0, 0}, {0, 1, 0}, 0.8);
+  const ClipRange range = clip_range(camera, BoundingSphere{Eigen::Vector3d(0, 0, 1), 2});
+  EXPECT_GT(range.near_distance, 0);
+  EXPECT_LT(range.near_distance, 10 - 1 - 2);
+  EXPECT_GT(range.far_distance, 10 - 1 + 2);
+  // Eye inside the sphere: a small positive near plane, not zero or negative.
+  const ClipRange inside = clip_range(camera, BoundingSphere{Eigen::Vector3d(0, 0, 9), 3});
+  EXPECT_GT(inside.near_distance, 0);
+  EXPECT_GT(inside.far_distance, 1 + 3);
+}
+
+TEST(CameraTest, ValidateCameraNamesTheField) {
+  const Camera good = make_camera({0, 0, 3}, {0, 0, 0}, {0, 1, 0}, 0.8);
+  EXPECT_TRUE(validate_camera(good, "camera").ok());
+
+  const auto message = [](const Camera& camera) {
+    const Status status = validate_camera(camera, "camera");
+    EXPECT_FALSE(status.ok());
+    if (status.ok()) return std::string();
+    EXPECT_EQ(status.error().code, ErrorCode::kInvalidArgument);
+    return status.error().message;
+  };
+  Camera camera = good;
+  camera.up = Eigen::Vector3d(0, 0, -2);
+  EXPECT_EQ(message(camera), "camera.up: parallel to the view direction (target − eye)");
+  camera = good;
+  camera.vertical_fov_radians = 3.5;
+  EXPECT_EQ(message(camera), "camera.vertical_fov_rad: expected in (0, π), got 3.5");
+  camera.vertical_fov_radians = 0;
+  EXPECT_EQ(message(camera).rfind("camera.vertical_fov_rad:", 0), 0u);
+  camera.vertical_fov_radians = std::numbers::pi;
+  EXPECT_EQ(message(camera).rfind("camera.vertical_fov_rad:", 0), 0u);
+  camera = good;
+  camera.target = camera.eye;
+  EXPECT_EQ(message(camera).rfind("camera.target:", 0), 0u);
+  camera = good;
+  camera.eye.x() = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(message(camera).rfind("camera.eye:", 0), 0u);
+  camera = good;
+  camera.up = Eigen::Vector3d::Zero();
+  EXPECT_EQ(message(camera).rfind("camera.up:", 0), 0u);
+  camera = good;
+  camera.target.y() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(message(camera).rfind("camera.target:", 0), 0u);
+  // The prefix is the caller's.
+  const Status nested = validate_camera(camera, "request.camera");
+  ASSERT_FALSE(nested.ok());
+  EXPECT_EQ(nested.error().message.rfind("request.camera.target:", 0), 0u);
+}
+
+}  // namespace
+}  // namespace animspace::render
