@@ -8,9 +8,10 @@
 #include <spdlog/spdlog.h>
 
 #include "core/common/atomic_file.h"
+#include "server/services/lod_service.h"
 #include "server/services/model_service.h"
-#include "server/services/pending_services.h"
 #include "server/services/pose_service.h"
+#include "server/services/render_service.h"
 #include "server/services/skinning_service.h"
 #include "server/services/stats_service.h"
 #include "server/services/training_service.h"
@@ -75,6 +76,8 @@ Status Daemon::start() {
                                                                  *admin_pool_, admission_, *authenticator_,
                                                                  *miss_logs_});
 
+  ANIMSPACE_RETURN_IF_ERROR(start_renderer());
+
   model_service_ = std::make_unique<ModelServiceImpl>(*env_);
   stats_service_ = std::make_unique<StatsServiceImpl>(*env_);
   pose_service_ = std::make_unique<PoseServiceImpl>(*env_);
@@ -128,6 +131,28 @@ Status Daemon::start() {
   housekeeping_thread_ = std::thread([this] { housekeeping(); });
   server_->GetHealthCheckService()->SetServingStatus(true);
   spdlog::info("health SERVING");
+  return Status::Ok();
+}
+
+Status Daemon::start_renderer() {
+  if (options_.renderer == "none") {
+    env_->renderer_unavailable = "the server was started with --renderer none";
+    return Status::Ok();
+  }
+  auto platform = render::parse_egl_platform(options_.renderer);
+  if (!platform) return make_error(ErrorCode::kInvalidArgument, "--renderer: " + platform.error().message);
+  auto thread = RenderThread::start(*platform, options_.render_queue_depth);
+  if (!thread) {
+    if (*platform != render::EglPlatform::kAuto) {
+      return make_error(thread.error().code, "--renderer " + options_.renderer + ": " + thread.error().message);
+    }
+    env_->renderer_unavailable = "no EGL platform could be opened: " + thread.error().message;
+    spdlog::warn("thumbnails disabled: {}", env_->renderer_unavailable);
+    return Status::Ok();
+  }
+  render_thread_ = std::move(*thread);
+  env_->renderer = render_thread_.get();
+  spdlog::info("renderer: {} (queue depth {})", render_thread_->description(), options_.render_queue_depth);
   return Status::Ok();
 }
 
@@ -203,6 +228,8 @@ void Daemon::shutdown() {
   housekeeping_wake_.notify_all();
   if (housekeeping_thread_.joinable()) housekeeping_thread_.join();
   // The gRPC server has finished every call, so nothing queues work any more.
+  if (env_) env_->renderer = nullptr;
+  render_thread_.reset();
   if (request_pool_) request_pool_->stop();
   if (admin_pool_) admin_pool_->stop();
   if (miss_logs_) miss_logs_->sync_all();

@@ -15,6 +15,7 @@
 #include "server/miss_logs.h"
 #include "server/model_registry.h"
 #include "server/options.h"
+#include "server/render_thread.h"
 #include "server/service_environment.h"
 #include "server/work_pool.h"
 
@@ -57,6 +58,9 @@ class Daemon {
 
  private:
   Status start_metrics_endpoint();
+  // Opens the EGL platform --renderer names on the render thread. With "auto", a failure leaves
+  // the server without thumbnails (logged); an explicit platform that fails stops start-up.
+  Status start_renderer();
   // Until shutdown: flushes the miss logs every fsync interval and loads new model versions
   // every --poll-interval-s.
   void housekeeping();
@@ -69,6 +73,7 @@ class Daemon {
   std::unique_ptr<MissLogs> miss_logs_;
   std::unique_ptr<WorkPool> request_pool_;
   std::unique_ptr<WorkPool> admin_pool_;
+  std::unique_ptr<RenderThread> render_thread_;
   std::unique_ptr<ServiceEnvironment> env_;
   std::unique_ptr<ModelServiceImpl> model_service_;
   std::unique_ptr<StatsServiceImpl> stats_service_;

@@ -5,6 +5,8 @@
 
 namespace animspace::server {
 
+inline constexpr const char* kRenderThumbnailRpc = "animspace.v1.RenderService/RenderThumbnail";
+
 inline constexpr const char* kImplementedRpcs[] = {
     "animspace.v1.ModelService/ListModels",
     "animspace.v1.ModelService/DescribeModel",
@@ -17,7 +19,9 @@ inline constexpr const char* kImplementedRpcs[] = {
     "animspace.v1.PoseService/StreamKeyPoints",
     "animspace.v1.PoseService/CompleteMiss",
     "animspace.v1.SkinningService/EvaluateSkeletonPose",
+    "animspace.v1.LodService/GetLod",
     "animspace.v1.TrainingService/Retrain",
+    kRenderThumbnailRpc,
     "grpc.health.v1.Health/Check",
     "grpc.health.v1.Health/Watch",
 };

@@ -51,6 +51,15 @@ int main(int argc, char** argv) {
   app.add_option("--max-thumbnail-px", options.max_thumbnail_px, "Largest thumbnail edge in pixels")
       ->check(CLI::Range(16u, 4096u))
       ->capture_default_str();
+  app.add_option("--renderer", options.renderer,
+                 "Thumbnails: EGL platform auto (a GPU's EGL device, else Mesa surfaceless), surfaceless, device, "
+                 "or none (RenderThumbnail answers UNAVAILABLE)")
+      ->check(CLI::IsMember({"auto", "surfaceless", "device", "none"}))
+      ->capture_default_str();
+  app.add_option("--render-queue-depth", options.render_queue_depth,
+                 "Thumbnails waiting for the render thread before RESOURCE_EXHAUSTED")
+      ->check(CLI::Range(1u, 4096u))
+      ->capture_default_str();
   app.add_option("--max-concurrent-calls", options.max_concurrent_calls,
                  "Calls served at once before RESOURCE_EXHAUSTED")
       ->check(CLI::Range(1u, 100000u))

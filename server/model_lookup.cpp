@@ -15,4 +15,10 @@ grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, 
   return grpc::Status::OK;
 }
 
+grpc::Status unsupported_by_kind(const LoadedModel& model, std::string_view reason) {
+  return {grpc::StatusCode::FAILED_PRECONDITION, "model '" + model.name + "' version " + std::to_string(model.version) +
+                                                     " is of kind " + model::kind_name(model.info.kind) + ": " +
+                                                     std::string(reason)};
+}
+
 }  // namespace animspace::server

@@ -18,4 +18,8 @@ namespace animspace::server {
 grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
                         std::shared_ptr<const LoadedModel>& out, const CallControl* call = nullptr);
 
+// FAILED_PRECONDITION for a call the model's kind cannot serve:
+// "model 'arm' version 2 is of kind animation_space: <reason>".
+grpc::Status unsupported_by_kind(const LoadedModel& model, std::string_view reason);
+
 }  // namespace animspace::server

@@ -10,6 +10,7 @@
 
 #include "core/animspace/animspace_io.h"
 #include "core/lod/lod_io.h"
+#include "core/lod/selection.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::server {
@@ -101,6 +102,12 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
       entry.error = levels.error().message;
       return entry;
     }
+    auto sphere = lod::model_bounding_sphere(*container, *runtime, path.string());
+    if (!sphere) {
+      entry.error = sphere.error().message;
+      return entry;
+    }
+    loaded->bounding_sphere = *sphere;
     loaded->animation_space = std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*runtime));
     loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*levels));
   }

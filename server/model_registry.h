@@ -21,6 +21,7 @@
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/model/model_info.h"
+#include "core/animspace/metrics.h"
 #include "core/animspace/model.h"
 #include "core/lod/levels.h"
 #include "core/pmsc/pmsc_model.h"
@@ -45,6 +46,8 @@ struct LoadedModel {
   std::shared_ptr<const animation_space::AnimationSpaceModel> animation_space;
   // Its validated LOD levels (Merry 2007 §7.3); level 0 is the model itself (null for other kinds).
   std::shared_ptr<const lod::LodLevels> lod_levels;
+  // The sphere eq. 7.2 measures depth to (lod::model_bounding_sphere), when lod_levels is set.
+  animation_space::BoundingSphere bounding_sphere;
 };
 
 struct VersionEntry {

@@ -21,6 +21,12 @@ struct ServerOptions {
   uint32_t max_batch_poses = 1024;
   // Largest thumbnail edge, pixels.
   uint32_t max_thumbnail_px = 4096;
+  // EGL platform of the render thread: "auto", "surfaceless", "device" or "none". With "auto" a
+  // machine where EGL cannot be opened serves everything but thumbnails; an explicit platform
+  // that cannot be opened stops start-up.
+  std::string renderer = "auto";
+  // Thumbnails queued for the render thread before RESOURCE_EXHAUSTED.
+  uint32_t render_queue_depth = 16;
   // Calls served at once before RESOURCE_EXHAUSTED.
   uint32_t max_concurrent_calls = 256;
   // host:port for the Prometheus text endpoint (GET /metrics); empty disables it.

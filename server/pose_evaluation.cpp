@@ -6,6 +6,7 @@
 
 #include "core/animspace/model.h"
 #include "core/pmsc/pmsc_model.h"
+#include "server/model_lookup.h"
 #include "server/validation.h"
 
 namespace animspace::server {
@@ -43,9 +44,7 @@ grpc::Status require_pmsc(const LoadedModel& model, std::string_view why) {
     reason = "it has no key points to evaluate";
     if (model.animation_space) reason += " (evaluate it with SkinningService.EvaluateSkeletonPose)";
   }
-  return {grpc::StatusCode::FAILED_PRECONDITION, "model '" + model.name + "' version " +
-                                                     std::to_string(model.version) + " is of kind " +
-                                                     model::kind_name(model.info.kind) + ": " + reason};
+  return unsupported_by_kind(model, reason);
 }
 
 grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,

@@ -10,6 +10,7 @@
 #include "server/miss_logs.h"
 #include "server/model_registry.h"
 #include "server/options.h"
+#include "server/render_thread.h"
 #include "server/work_pool.h"
 
 namespace animspace::server {
@@ -25,6 +26,10 @@ struct ServiceEnvironment {
   Admission& admission;
   const Authenticator& authenticator;
   MissLogs& miss_logs;
+  // The thread that owns the EGL context; null when the server draws no thumbnails, and then
+  // `renderer_unavailable` says why.
+  RenderThread* renderer = nullptr;
+  std::string renderer_unavailable = {};
   std::chrono::system_clock::time_point started_at = std::chrono::system_clock::now();
 };
 

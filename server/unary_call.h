@@ -47,9 +47,30 @@ class CallControl {
 grpc::Status admit(ServiceEnvironment& env, const grpc::CallbackServerContext* context, std::string_view rpc,
                    Access access, std::shared_ptr<Admission::Ticket>* ticket);
 
+// Finishes a deferred call exactly once, from any thread: records the outcome, frees the
+// admission slot and answers the client.
+class CallFinisher {
+ public:
+  CallFinisher(grpc::ServerUnaryReactor* reactor, std::shared_ptr<CallScope> scope,
+               std::shared_ptr<Admission::Ticket> ticket)
+      : reactor_(reactor), scope_(std::move(scope)), ticket_(std::move(ticket)) {}
+  void operator()(grpc::Status status) const {
+    ticket_->release();
+    reactor_->Finish(scope_->finish(std::move(status)));
+  }
+
+ private:
+  grpc::ServerUnaryReactor* reactor_;
+  std::shared_ptr<CallScope> scope_;
+  std::shared_ptr<Admission::Ticket> ticket_;
+};
+
+// For bodies that hand the rest of their work to another thread (the render thread): the body
+// runs on `pool` as in serve_unary and must make `finish(status)` happen exactly once — itself,
+// or later from wherever the work ends.
 template <typename Body>
-grpc::ServerUnaryReactor* serve_unary(ServiceEnvironment& env, grpc::CallbackServerContext* context,
-                                      const char* rpc, Access access, WorkPool& pool, Body body) {
+grpc::ServerUnaryReactor* serve_unary_deferred(ServiceEnvironment& env, grpc::CallbackServerContext* context,
+                                               const char* rpc, Access access, WorkPool& pool, Body body) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   auto scope = std::make_shared<CallScope>(env.metrics, rpc);
   std::shared_ptr<Admission::Ticket> ticket;
@@ -57,18 +78,26 @@ grpc::ServerUnaryReactor* serve_unary(ServiceEnvironment& env, grpc::CallbackSer
     reactor->Finish(scope->finish(refused));
     return reactor;
   }
-  const bool queued = pool.submit([reactor, context, scope, ticket, body = std::move(body)]() mutable {
+  const CallFinisher finish(reactor, scope, ticket);
+  const bool queued = pool.submit([context, scope, finish, body = std::move(body)]() mutable {
     const CallControl call(context, scope.get());
-    grpc::Status status = call.stop_status();
-    if (status.ok()) status = body(call);
-    ticket->release();
-    reactor->Finish(scope->finish(std::move(status)));
+    if (grpc::Status stop = call.stop_status(); !stop.ok()) {
+      finish(std::move(stop));
+      return;
+    }
+    body(call, finish);
   });
-  if (!queued) {
-    ticket->release();
-    reactor->Finish(scope->finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"}));
-  }
+  if (!queued) finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
   return reactor;
+}
+
+template <typename Body>
+grpc::ServerUnaryReactor* serve_unary(ServiceEnvironment& env, grpc::CallbackServerContext* context,
+                                      const char* rpc, Access access, WorkPool& pool, Body body) {
+  return serve_unary_deferred(env, context, rpc, access, pool,
+                              [body = std::move(body)](const CallControl& call, const CallFinisher& finish) mutable {
+                                finish(body(call));
+                              });
 }
 
 }  // namespace animspace::server

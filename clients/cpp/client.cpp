@@ -49,6 +49,8 @@ Client::Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options)
       stats_(v1::StatsService::NewStub(channel_)),
       poses_(v1::PoseService::NewStub(channel_)),
       training_(v1::TrainingService::NewStub(channel_)),
+      lod_(v1::LodService::NewStub(channel_)),
+      render_(v1::RenderService::NewStub(channel_)),
       health_(grpc::health::v1::Health::NewStub(channel_)) {}
 
 void Client::prepare(grpc::ClientContext* context) const { prepare(context, options_.deadline); }
@@ -172,6 +174,14 @@ v1::RetrainResponse Client::retrain(const v1::RetrainRequest& request, std::chro
   prepare(&context, deadline);
   v1::RetrainResponse response;
   check("Retrain", training_->Retrain(&context, request, &response));
+  return response;
+}
+
+v1::RenderThumbnailResponse Client::render_thumbnail(const v1::RenderThumbnailRequest& request) {
+  grpc::ClientContext context;
+  prepare(&context);
+  v1::RenderThumbnailResponse response;
+  check("RenderThumbnail", render_->RenderThumbnail(&context, request, &response));
   return response;
 }
 

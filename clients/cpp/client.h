@@ -13,8 +13,10 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "animspace/v1/lod.grpc.pb.h"
 #include "animspace/v1/models.grpc.pb.h"
 #include "animspace/v1/poses.grpc.pb.h"
+#include "animspace/v1/render.grpc.pb.h"
 #include "animspace/v1/stats.grpc.pb.h"
 #include "animspace/v1/training.grpc.pb.h"
 #include "grpc/health/v1/health.grpc.pb.h"
@@ -31,6 +33,23 @@ class RpcError : public std::runtime_error {
  private:
   grpc::StatusCode code_;
   std::string server_message_;
+};
+
+// One level of detail, reassembled from LodService.GetLod's chunks (clients/cpp/lod_mesh.cpp).
+// Arrays are flat and host-endian, ready for Eigen::Map (e.g. a V×3 row-major float map over
+// `positions`).
+struct LodMesh {
+  v1::LodHeader header;
+  std::vector<float> positions;           // FORM_POSED: vertex_count × 3
+  std::vector<uint32_t> influence_offsets;  // FORM_ANIMATION_SPACE: vertex_count + 1 (CSR)
+  std::vector<uint32_t> bone_indices;       // one per influence
+  std::vector<float> animation_positions;   // 4 per influence (p_j, Σ_j p_j.w = 1)
+  std::vector<float> geomorph_delta;        // 4 per influence, when requested
+  std::vector<uint32_t> indices;            // face_count × 3
+  v1::Skeleton skeleton;                    // FORM_ANIMATION_SPACE
+  // What the stream took: chunks read and their serialized bytes (for transfer reports).
+  uint64_t chunk_count = 0;
+  uint64_t bytes_received = 0;
 };
 
 struct ClientOptions {
@@ -72,6 +91,11 @@ class Client {
   // Retraining can take minutes: `deadline` overrides the client's default for this call.
   v1::RetrainResponse retrain(const v1::RetrainRequest& request, std::chrono::milliseconds deadline);
 
+  // Streams one level and reassembles it, checking that the blocks arrive in order and add up to
+  // the header's counts (std::runtime_error otherwise). `deadline` 0 = the client's default.
+  LodMesh get_lod(const v1::GetLodRequest& request, std::chrono::milliseconds deadline = {});
+  v1::RenderThumbnailResponse render_thumbnail(const v1::RenderThumbnailRequest& request);
+
   const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
   // Adds the bearer token (if any) to a context, for calls made on channel() directly, such as
   // a stream that must outlive the per-call deadline.
@@ -87,6 +111,8 @@ class Client {
   std::unique_ptr<v1::StatsService::Stub> stats_;
   std::unique_ptr<v1::PoseService::Stub> poses_;
   std::unique_ptr<v1::TrainingService::Stub> training_;
+  std::unique_ptr<v1::LodService::Stub> lod_;
+  std::unique_ptr<v1::RenderService::Stub> render_;
   std::unique_ptr<grpc::health::v1::Health::Stub> health_;
 };
 

@@ -92,8 +92,13 @@ grpc::ServerUnaryReactor* ModelServiceImpl::GetServerInfo(grpc::CallbackServerCo
                        response->set_max_batch_poses(env_.options.max_batch_poses);
                        response->set_max_thumbnail_px(env_.options.max_thumbnail_px);
                        response->set_max_concurrent_calls(env_.options.max_concurrent_calls);
-                       response->set_renderer("none");
-                       for (const char* rpc : kImplementedRpcs) response->add_implemented_rpcs(rpc);
+                       response->set_renderer(env_.renderer != nullptr ? env_.renderer->description()
+                                                                       : "none (" + env_.renderer_unavailable + ")");
+                       for (const char* rpc : kImplementedRpcs) {
+                         // Without a renderer the RPC answers UNAVAILABLE: not one to plan on.
+                         if (env_.renderer == nullptr && std::string_view(rpc) == kRenderThumbnailRpc) continue;
+                         response->add_implemented_rpcs(rpc);
+                       }
                        return grpc::Status::OK;
                      });
 }

@@ -1,6 +1,7 @@
 #include "server/services/skinning_service.h"
 
 #include "core/animspace/model.h"
+#include "server/lod_selection.h"
 #include "server/model_lookup.h"
 #include "server/unary_call.h"
 #include "server/validation.h"
@@ -21,17 +22,9 @@ grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::Callba
                                   model::kind_name(model->info.kind) +
                                   " and has no skeleton: it cannot evaluate skeleton poses"};
         }
-        const animation_space::AnimationSpaceModel* skinned = model->animation_space.get();
-        if (request->lod_level() != 0) {
-          const int levels = model->lod_levels ? model->lod_levels->count() : 1;
-          if (request->lod_level() >= static_cast<uint32_t>(levels)) {
-            return grpc::Status{grpc::StatusCode::INVALID_ARGUMENT,
-                                "lod_level: expected 0.." + std::to_string(levels - 1) + " (model '" + model->name +
-                                    "' has " + std::to_string(levels) + " level" + (levels == 1 ? "" : "s") +
-                                    "), got " + std::to_string(request->lod_level())};
-          }
-          skinned = &model->lod_levels->levels[request->lod_level()].model;
-        }
+        const lod::LodLevel* level = nullptr;
+        if (grpc::Status s = find_lod_level(*model, request->lod_level(), "lod_level", &level); !s.ok()) return s;
+        const animation_space::AnimationSpaceModel* skinned = &level->model;
         if (request->include_normals() && !skinned->has_tangents()) {
           return grpc::Status{grpc::StatusCode::FAILED_PRECONDITION,
                               "include_normals: model '" + model->name +

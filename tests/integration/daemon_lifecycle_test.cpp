@@ -180,16 +180,6 @@ TEST_F(DaemonTest, BadRequestsGetPreciseStatuses) {
       EXPECT_NE(e.server_message().find(c.message_part), std::string::npos) << e.server_message();
     }
   }
-
-  // RPCs of issues that have not landed say so, with a message.
-  auto lod = v1::RenderService::NewStub(client.channel());
-  grpc::ClientContext context;
-  v1::RenderThumbnailRequest request;
-  request.mutable_model()->set_name("tetra");
-  v1::RenderThumbnailResponse response;
-  const auto status = lod->RenderThumbnail(&context, request, &response);
-  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNIMPLEMENTED);
-  EXPECT_NE(status.error_message().find("not implemented"), std::string::npos) << status.error_message();
 }
 
 TEST_F(DaemonTest, LoadAndUnloadAtRunTime) {

@@ -3,12 +3,17 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <numbers>
+#include <sstream>
+#include <vector>
 
 #include "clients/cpp/cli/offline_common.h"
 #include "core/animspace/animspace_io.h"
+#include "core/common/atomic_file.h"
 #include "core/lod/export.h"
 #include "core/lod/lod_io.h"
+#include "core/lod/selection.h"
 #include "core/lod/simplify.h"
 #include "core/model/model_info.h"
 
@@ -148,22 +153,17 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
     chosen = a.level;
   } else if (a.tolerance_pixels > 0) {
     if (a.distance <= 0) return fail("export-lod", "--tolerance-px needs --distance (camera to the model)");
-    auto stored = as::load_metrics(*in, model->bone_count(), a.input);
-    if (!stored) return fail("export-lod", stored.error().message);
-    // Eq. 7.2 uses the least depth of any point of the bounding sphere (§7.3).
-    const double depth = a.distance - stored->bounding_sphere.radius;
-    if (depth > 0) {
-      lod::LodView view;
-      view.tolerance_pixels = a.tolerance_pixels;
-      view.viewport_width_pixels = a.viewport_width;
-      view.horizontal_fov_radians = a.fov_degrees * std::numbers::pi / 180;
-      view.nearest_depth = depth;
-      auto e = lod::tolerated_error(view);
-      if (!e) return fail("export-lod", e.error().message);
-      tolerated = *e;
-      // A discrete file cannot geomorph: take the finer of the two bracketing levels.
-      chosen = static_cast<int>(std::floor(lod::select_level(*levels, tolerated)));
-    }
+    auto sphere = lod::model_bounding_sphere(*in, *model, a.input);
+    if (!sphere) return fail("export-lod", sphere.error().message);
+    lod::ViewAtDistance view;
+    view.tolerance_pixels = a.tolerance_pixels;
+    view.viewport_width_pixels = a.viewport_width;
+    view.horizontal_fov_radians = a.fov_degrees * std::numbers::pi / 180;
+    view.distance = a.distance;
+    auto choice = lod::level_for_view(*levels, view, sphere->radius);
+    if (!choice) return fail("export-lod", choice.error().message);
+    chosen = choice->level;
+    tolerated = choice->tolerated_error;
   }
   const lod::LodLevel& level = levels->levels[static_cast<size_t>(chosen)];
 
@@ -193,6 +193,145 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
     std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.error,
                 a.tolerance_pixels > 0 ? (", tolerated " + std::to_string(tolerated)).c_str() : "",
                 level.model.vertex_count(), static_cast<int>(level.model.faces.rows()), a.output.c_str());
+  }
+  return 0;
+}
+
+}  // namespace animspace::cli
+
+namespace animspace::cli {
+namespace {
+
+// The pose file's numbers (see LodArgs::pose_file) as a SkeletonPose; "" or the problem.
+std::string read_pose_file(const LodArgs& a, v1::SkeletonPose* pose) {
+  auto text = read_whole_file(a.pose_file);
+  if (!text) return text.error().message;
+  std::vector<float> values;
+  std::istringstream lines(*text);
+  std::string line;
+  for (int number = 1; std::getline(lines, line); ++number) {
+    line = line.substr(0, line.find('#'));
+    std::istringstream words(line);
+    std::string word;
+    while (words >> word) {
+      char* end = nullptr;
+      const float value = std::strtof(word.c_str(), &end);
+      if (end != word.c_str() + word.size() || !std::isfinite(value)) {
+        return a.pose_file + ":" + std::to_string(number) + ": expected a finite number, got '" + word + "'";
+      }
+      values.push_back(value);
+    }
+  }
+  if (values.empty() || values.size() % 12 != 0) {
+    return a.pose_file + ": expected 12 numbers per bone (the top three rows of each bone's matrix), got " +
+           std::to_string(values.size());
+  }
+  pose->set_space(a.pose_space == "local" ? v1::SkeletonPose::SPACE_LOCAL : v1::SkeletonPose::SPACE_GLOBAL);
+  pose->set_bone_count(static_cast<uint32_t>(values.size() / 12));
+  pose->set_transforms(values.data(), values.size() * sizeof(float));
+  return "";
+}
+
+}  // namespace
+
+CLI::App* add_lod(CLI::App& app, LodArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "lod",
+      "Fetch one level of detail of a served animation-space model (LodService.GetLod), posed, and write it as "
+      "OBJ, PLY or glTF 2.0 (.glb/.gltf) — the level is given, chosen for a view by eq. 7.2, or the finest within a "
+      "vertex budget");
+  cmd->add_option("model", a.model, "Model name")->required();
+  cmd->add_option("--version", a.version, "Model version (default: the served one)");
+  auto* selection = cmd->add_option_group("selection", "Which level (exactly one)");
+  selection->add_option("--level", a.level, "Level (0 = full detail)")->check(CLI::NonNegativeNumber);
+  auto* tolerance = selection->add_option("--tolerance-px", a.tolerance_pixels, "Pixel error tolerance p (eq. 7.2)")
+                        ->check(CLI::PositiveNumber);
+  selection->add_option("--max-vertices", a.max_vertices, "Vertex budget: the finest level within it")
+      ->check(CLI::PositiveNumber);
+  selection->require_option(1);
+  auto* distance =
+      cmd->add_option("--distance", a.distance, "With --tolerance-px: camera distance to the bounding-sphere centre")
+          ->check(CLI::PositiveNumber);
+  cmd->add_option("--fov", a.fov_degrees, "Horizontal field of view 2θ, degrees")
+      ->check(CLI::Range(1.0, 179.0))
+      ->capture_default_str();
+  cmd->add_option("--width", a.viewport_width, "Viewport width w, pixels")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  tolerance->needs(distance);
+  cmd->add_option("--pose-file", a.pose_file,
+                  "Skeleton pose: B × 12 numbers, each bone's top three matrix rows (default: the rest pose)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--pose-space", a.pose_space, "The pose file's matrices: global G_j or local (joint) L_j")
+      ->check(CLI::IsMember({"global", "local"}))
+      ->capture_default_str();
+  cmd->add_option("--vertices-per-chunk", a.vertices_per_chunk, "Vertices per streamed block (default: the server's)");
+  cmd->add_option("--deadline-s", a.deadline_s, "Deadline for the whole stream")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("-o,--output", a.output, "Output mesh: .obj, .ply, .glb or .gltf")->required();
+  return cmd;
+}
+
+int run_lod(const LodArgs& a, Client& client, bool json) {
+  v1::GetLodRequest request;
+  request.mutable_model()->set_name(a.model);
+  request.mutable_model()->set_version(a.version);
+  // A render-farm node that writes a file wants the mesh as drawn: posed, not animation space.
+  request.set_form(v1::GetLodRequest::FORM_POSED);
+  request.set_vertices_per_chunk(a.vertices_per_chunk);
+  if (a.level >= 0) {
+    request.set_level(static_cast<uint32_t>(a.level));
+  } else if (a.max_vertices > 0) {
+    request.mutable_budget()->set_max_vertices(a.max_vertices);
+  } else {
+    auto* view = request.mutable_pixel_tolerance();
+    view->set_tolerance_px(static_cast<float>(a.tolerance_pixels));
+    view->set_distance(static_cast<float>(a.distance));
+    view->set_horizontal_fov_rad(static_cast<float>(a.fov_degrees * std::numbers::pi / 180));
+    view->set_viewport_width_px(a.viewport_width);
+  }
+  if (!a.pose_file.empty()) {
+    if (std::string problem = read_pose_file(a, request.mutable_pose()); !problem.empty()) {
+      return fail("lod", "--pose-file: " + problem);
+    }
+  }
+
+  LodMesh received;
+  try {
+    received = client.get_lod(request, std::chrono::seconds(a.deadline_s));
+  } catch (const RpcError&) {
+    throw;  // main reports RPC failures with their code
+  } catch (const std::runtime_error& error) {
+    return fail("lod", error.what());
+  }
+  const v1::LodHeader& h = received.header;
+  const auto vertices = static_cast<Eigen::Index>(h.vertex_count());
+  const auto faces = static_cast<Eigen::Index>(h.face_count());
+  lod::PosedMesh mesh;
+  mesh.points = Eigen::Map<const PointMatrix>(received.positions.data(), vertices, 3);
+  mesh.faces = Eigen::Map<const Eigen::Matrix<uint32_t, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+                   received.indices.data(), faces, 3)
+                   .cast<int32_t>();
+  if (auto written = lod::write_posed_mesh(a.output, mesh); !written.ok()) {
+    return fail("lod", written.error().message);
+  }
+  if (json) {
+    std::printf("{\"output\": \"%s\", \"model\": \"%s\", \"version\": %llu, \"level\": %u, \"level_count\": %u, "
+                "\"epsilon\": %.9g, \"tolerated_error\": %.9g, \"vertices\": %u, \"faces\": %u, "
+                "\"bytes_received\": %llu, \"chunks\": %llu}\n",
+                a.output.c_str(), a.model.c_str(), static_cast<unsigned long long>(h.model_version()), h.level(),
+                h.level_count(), static_cast<double>(h.epsilon()), static_cast<double>(h.tolerated_error()),
+                h.vertex_count(), h.face_count(), static_cast<unsigned long long>(received.bytes_received),
+                static_cast<unsigned long long>(received.chunk_count));
+  } else {
+    std::printf("%s version %llu, level %u of %u (ε = %.4g", a.model.c_str(),
+                static_cast<unsigned long long>(h.model_version()), h.level(), h.level_count(),
+                static_cast<double>(h.epsilon()));
+    if (request.has_pixel_tolerance()) std::printf(", tolerated %.4g", static_cast<double>(h.tolerated_error()));
+    std::printf("): %u vertices, %u faces; %llu bytes in %llu chunks\nwrote %s\n", h.vertex_count(), h.face_count(),
+                static_cast<unsigned long long>(received.bytes_received),
+                static_cast<unsigned long long>(received.chunk_count), a.output.c_str());
   }
   return 0;
 }

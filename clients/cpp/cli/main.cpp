@@ -11,6 +11,7 @@
 #include "clients/cpp/cli/fit.h"
 #include "clients/cpp/cli/lod.h"
 #include "clients/cpp/cli/play.h"
+#include "clients/cpp/cli/thumbnail.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/common/atomic_file.h"
@@ -335,6 +336,10 @@ int main(int argc, char** argv) {
 
   animspace::cli::PlayArgs play_args;
   auto* play = animspace::cli::add_play(app, play_args);
+  animspace::cli::LodArgs lod_args;
+  auto* lod = animspace::cli::add_lod(app, lod_args);
+  animspace::cli::ThumbnailArgs thumbnail_args;
+  auto* thumbnail = animspace::cli::add_thumbnail(app, thumbnail_args);
 
   auto* load = app.add_subcommand("load", "Admin: (re)load a model, or one version, from the repository");
   load->add_option("model", model, "Model name")->required();
@@ -377,6 +382,14 @@ int main(int argc, char** argv) {
     if (*play) {
       auto client = connect(g);
       return animspace::cli::run_play(play_args, client, g.json);
+    }
+    if (*lod) {
+      auto client = connect(g);
+      return animspace::cli::run_lod(lod_args, client, g.json);
+    }
+    if (*thumbnail) {
+      auto client = connect(g);
+      return animspace::cli::run_thumbnail(thumbnail_args, client, g.json);
     }
     if (*retrain) {
       retrain_request.mutable_model()->set_name(retrain_model);

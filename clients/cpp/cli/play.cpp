@@ -4,28 +4,10 @@
 #include <cstdio>
 #include <thread>
 
+#include "clients/cpp/cli/key_frames.h"
 #include "clients/cpp/cli/offline_common.h"
-#include "core/container/model_container.h"
-#include "core/mesh_io/sequence_io.h"
-#include "core/model/model_info.h"
 
 namespace animspace::cli {
-namespace {
-
-// The frames to play: a mesh sequence on disk, or the sequence.frames of a model file (the demo
-// repository's `arm` holds the expensive rig's frames).
-Result<FrameMatrix> load_frames(const PlayArgs& a) {
-  if (std::filesystem::path(a.sequence).extension() == ".anim") {
-    auto container = container::read_file(a.sequence);
-    if (!container) return container.error();
-    return container->float_matrix(model::sections::kSequenceFrames);
-  }
-  auto sequence = mesh_io::load_sequence(a.sequence, a.pc2);
-  if (!sequence) return sequence.error();
-  return FrameMatrix(sequence->frames.samples);
-}
-
-}  // namespace
 
 CLI::App* add_play(CLI::App& app, PlayArgs& a) {
   auto* cmd = app.add_subcommand(
@@ -46,7 +28,7 @@ CLI::App* add_play(CLI::App& app, PlayArgs& a) {
 }
 
 int run_play(const PlayArgs& a, Client& client, bool json) {
-  auto frames = load_frames(a);
+  auto frames = load_sequence_frames(a.sequence, a.pc2);
   if (!frames) return fail("play", frames.error().message);
   std::string error;
   const auto selected = parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
@@ -60,14 +42,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
                             std::to_string(keys.control_point_count()));
   }
   const auto K = static_cast<uint32_t>(keys.key_point_indices_size());
-  auto gather = [&](int frame) {
-    Eigen::VectorXf out(static_cast<long>(K) * D);
-    for (uint32_t k = 0; k < K; ++k) {
-      const long point = keys.key_point_indices(static_cast<int>(k));
-      out.segment(k * D, D) = frames->row(frame).segment(point * D, D).transpose();
-    }
-    return out;
-  };
+  auto gather = [&](int frame) { return gather_key_values(*frames, frame, keys); };
 
   auto stub = v1::PoseService::NewStub(client.channel());
   grpc::ClientContext context;

@@ -1,0 +1,22 @@
+// Frames of a sequence and their key points, as `play` streams them and `thumbnail` draws them.
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+#include "animspace/v1/poses.pb.h"
+#include "core/common/result.h"
+#include "core/common/types.h"
+
+namespace animspace::cli {
+
+// The frames (F × N·3) of a mesh sequence on disk (a folder with reference.obj + frames.pc2 or
+// OBJ frames, or a mesh file with `pc2`), or the sequence.frames of a model.anim (the demo
+// repository's `arm` holds the expensive rig's frames).
+Result<FrameMatrix> load_sequence_frames(const std::string& sequence, const std::string& pc2);
+
+// Frame `frame`'s key values (K × D) in the order DescribeKeyPoints gave.
+Eigen::VectorXf gather_key_values(const FrameMatrix& frames, int frame, const v1::DescribeKeyPointsResponse& keys);
+
+}  // namespace animspace::cli

@@ -1,0 +1,126 @@
+#include "clients/cpp/cli/thumbnail.h"
+
+#include <cstdio>
+#include <numbers>
+
+#include "clients/cpp/cli/key_frames.h"
+#include "clients/cpp/cli/offline_common.h"
+#include "core/common/atomic_file.h"
+
+namespace animspace::cli {
+
+CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "thumbnail",
+      "Draw a served model headless on the daemon (EGL) and save the PNG: the rest pose, a stored frame, or a "
+      "sequence frame's key points through the soft cache, with key points, error heat map and wireframe overlays");
+  cmd->add_option("model", a.model, "Model name")->required();
+  cmd->add_option("-o,--output", a.output, "PNG file to write")->required();
+  cmd->add_option("--version", a.version, "Model version (default: the served one)");
+  cmd->add_option("--width", a.width, "Width, pixels")->capture_default_str();
+  cmd->add_option("--height", a.height, "Height, pixels")->capture_default_str();
+  auto* frame = cmd->add_option("--frame", a.frame, "Draw the model's own stored frame K (sequence.frames)")
+                    ->check(CLI::NonNegativeNumber);
+  auto* sequence = cmd->add_option("--sequence", a.sequence,
+                                   "PMSC models: pose from the key points of a frame of this sequence (folder with "
+                                   "reference.obj + frames.pc2, a mesh with --pc2, or a model.anim)");
+  cmd->add_option("--pc2", a.pc2, "Point cache when --sequence is a mesh file");
+  cmd->add_option("--sequence-frame", a.sequence_frame, "Which frame of --sequence")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--key-points", a.key_points, "Draw the key points as dots (PMSC models)");
+  cmd->add_flag("--heat", a.heat,
+                "Colour each point by |full − returned| (blue 0 → red max): the soft cache's error, from "
+                "--sequence's full frame")
+      ->needs(sequence);
+  cmd->add_flag("--wireframe", a.wireframe, "Draw the triangle edges");
+  cmd->add_flag("--lambert", a.lambert, "Lambert shading instead of Blinn-Phong");
+  cmd->add_option("--samples", a.samples, "Multisampling: 1, 2, 4 or 8")->capture_default_str();
+  cmd->add_option("--background", a.background, "Background RGBA in [0, 1], e.g. --background 1 1 1 1")
+      ->expected(4);
+  cmd->add_option("--tolerance-px", a.tolerance_px,
+                  "Animation-space models: draw the coarsest level of detail whose error stays under this many "
+                  "pixels (eq. 7.2)");
+  cmd->add_option("--eye", a.eye, "Camera position x y z (default: framed from the bounding box)")->expected(3);
+  cmd->add_option("--target", a.target, "Point looked at x y z")->expected(3);
+  cmd->add_option("--up", a.up, "Up direction x y z")->expected(3);
+  cmd->add_option("--fov", a.fov_degrees, "Vertical field of view, degrees (with --eye)");
+  frame->excludes(sequence);
+  return cmd;
+}
+
+int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
+  v1::RenderThumbnailRequest request;
+  request.mutable_model()->set_name(a.model);
+  request.mutable_model()->set_version(a.version);
+  request.set_width_px(a.width);
+  request.set_height_px(a.height);
+  request.set_samples(a.samples);
+  request.set_shading(a.lambert ? v1::RenderThumbnailRequest::SHADING_LAMBERT
+                                : v1::RenderThumbnailRequest::SHADING_BLINN_PHONG);
+  request.set_show_key_points(a.key_points);
+  request.set_show_wireframe(a.wireframe);
+  request.set_pixel_tolerance(a.tolerance_px);
+  for (float c : a.background) request.add_background_rgba(c);
+  if (!a.eye.empty()) {
+    auto* camera = request.mutable_camera();
+    camera->mutable_eye()->Add(a.eye.begin(), a.eye.end());
+    const std::vector<float> target = a.target.empty() ? std::vector<float>{0, 0, 0} : a.target;
+    const std::vector<float> up = a.up.empty() ? std::vector<float>{0, 1, 0} : a.up;
+    camera->mutable_target()->Add(target.begin(), target.end());
+    camera->mutable_up()->Add(up.begin(), up.end());
+    camera->set_vertical_fov_rad((a.fov_degrees > 0 ? a.fov_degrees : 45.0f) * std::numbers::pi_v<float> / 180);
+  }
+  if (a.frame >= 0) request.set_sequence_frame(static_cast<uint32_t>(a.frame));
+  if (!a.sequence.empty()) {
+    auto frames = load_sequence_frames(a.sequence, a.pc2);
+    if (!frames) return fail("thumbnail", frames.error().message);
+    if (a.sequence_frame >= frames->rows()) {
+      return fail("thumbnail", "--sequence-frame: expected 0.." + std::to_string(frames->rows() - 1) + ", got " +
+                                   std::to_string(a.sequence_frame));
+    }
+    const auto keys = client.describe_key_points(a.model, a.version);
+    const auto D = keys.channel_count();
+    if (frames->cols() != static_cast<long>(keys.control_point_count()) * D) {
+      return fail("thumbnail", "the sequence has " + std::to_string(frames->cols() / std::max<long>(1, D)) +
+                                   " points per frame, model '" + a.model + "' expects " +
+                                   std::to_string(keys.control_point_count()));
+    }
+    const Eigen::VectorXf values = gather_key_values(*frames, a.sequence_frame, keys);
+    *request.mutable_key_points()->mutable_key_values() =
+        make_point_array(values.data(), static_cast<uint32_t>(keys.key_point_indices_size()), D);
+    request.mutable_model()->set_version(keys.model_version());
+    if (a.heat) {
+      *request.mutable_full_values() =
+          make_point_array(frames->row(a.sequence_frame).data(), keys.control_point_count(), D);
+    }
+  }
+
+  const auto response = client.render_thumbnail(request);
+  if (auto written = write_file_atomically(a.output, response.png()); !written.ok()) {
+    return fail("thumbnail", written.error().message);
+  }
+  const bool posed = response.has_pose();
+  const std::string outcome = posed ? v1::CacheStatus_Name(response.pose().status()).substr(13) : "";
+  if (json) {
+    std::printf("{\"output\": \"%s\", \"width\": %u, \"height\": %u, \"bytes\": %zu, \"model_version\": %llu, "
+                "\"lod_level\": %u, \"render_ms\": %.3f%s}\n",
+                a.output.c_str(), response.width_px(), response.height_px(), response.png().size(),
+                static_cast<unsigned long long>(response.model_version()), response.lod_level(), response.render_ms(),
+                posed ? (", \"cache_status\": \"" + outcome + "\", \"key_point_error\": " +
+                         std::to_string(response.pose().key_point_error()))
+                            .c_str()
+                      : "");
+    return 0;
+  }
+  std::printf("%s version %llu: %u×%u, level of detail %u, drawn and encoded in %.1f ms%s\nwrote %s (%zu bytes)\n",
+              a.model.c_str(), static_cast<unsigned long long>(response.model_version()), response.width_px(),
+              response.height_px(), response.lod_level(), response.render_ms(),
+              posed ? ("; soft cache " + outcome + ", e_key " + std::to_string(response.pose().key_point_error()))
+                          .c_str()
+                    : "",
+              a.output.c_str(), response.png().size());
+  return 0;
+}
+
+}  // namespace animspace::cli

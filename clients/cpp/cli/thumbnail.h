@@ -1,0 +1,39 @@
+// `animspace thumbnail`: a PNG of a served model drawn by the daemon's render thread
+// (RenderService.RenderThumbnail) — its rest pose, a stored frame, or a sequence frame's key
+// points through the soft cache with the key points and the error heat map drawn over it.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "clients/cpp/client.h"
+
+namespace animspace::cli {
+
+struct ThumbnailArgs {
+  std::string model;
+  uint64_t version = 0;
+  std::string output;
+  uint32_t width = 256;
+  uint32_t height = 256;
+  int frame = -1;            // the model's stored frame (sequence_frame)
+  std::string sequence;      // key points of a frame of this sequence (PMSC models)
+  std::string pc2;
+  int sequence_frame = 0;
+  bool key_points = false;   // draw the key points
+  bool heat = false;         // heat map of |full − returned| (needs --sequence)
+  bool wireframe = false;
+  bool lambert = false;
+  uint32_t samples = 4;
+  std::vector<float> background;
+  float tolerance_px = 0;
+  std::vector<float> eye, target, up;
+  float fov_degrees = 0;
+};
+
+CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& args);
+int run_thumbnail(const ThumbnailArgs& args, Client& client, bool json);
+
+}  // namespace animspace::cli

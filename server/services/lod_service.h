@@ -1,0 +1,28 @@
+// LodService: one level of detail of an animation-space model for a render-farm node, chosen by
+// pixel tolerance and view (eq. 7.2), by vertex budget or by index (server/lod_selection.h),
+// streamed in chunks (Merry 2007 §7.3).
+//
+// The stream is written one chunk at a time: each chunk is built on the request pool while the
+// one before it is on the wire, and the next is started only when gRPC reports a write done, so a
+// slow client holds back the server (flow control) and at most two chunks exist beyond the level
+// itself. The level is already in memory (the registry's LoadedModel); the posed form evaluates it
+// once at the start, as SkinningService does, and include_geomorph builds lod::geomorph's aligned
+// set once (§7.3); the blocks are cut from those.
+#pragma once
+
+#include "animspace/v1/lod.grpc.pb.h"
+#include "server/service_environment.h"
+
+namespace animspace::server {
+
+class LodServiceImpl final : public v1::LodService::CallbackService {
+ public:
+  explicit LodServiceImpl(ServiceEnvironment& env) : env_(env) {}
+  grpc::ServerWriteReactor<v1::LodChunk>* GetLod(grpc::CallbackServerContext* context,
+                                                 const v1::GetLodRequest* request) override;
+
+ private:
+  ServiceEnvironment& env_;
+};
+
+}  // namespace animspace::server

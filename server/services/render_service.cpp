@@ -1,0 +1,325 @@
+#include "server/services/render_service.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <utility>
+
+#include "core/animspace/animspace_io.h"
+#include "core/animspace/model.h"
+#include "core/lod/selection.h"
+#include "core/render/camera.h"
+#include "core/render/png.h"
+#include "server/model_lookup.h"
+#include "server/pose_evaluation.h"
+#include "server/status_mapping.h"
+#include "server/unary_call.h"
+#include "server/validation.h"
+
+namespace animspace::server {
+namespace {
+
+using Request = v1::RenderThumbnailRequest;
+using Clock = std::chrono::steady_clock;
+
+constexpr int kDefaultSamples = 4;
+
+// Size, samples, background, shading and camera: everything that does not depend on the model.
+grpc::Status read_view(const Request& request, const ServerOptions& options, render::Scene& scene) {
+  const uint32_t max_px = options.max_thumbnail_px;
+  for (const auto& [field, value] : {std::pair{"width_px", request.width_px()}, {"height_px", request.height_px()}}) {
+    if (value < 1 || value > max_px) {
+      return invalid_argument(std::string(field) + ": expected 1.." + std::to_string(max_px) +
+                              " pixels (--max-thumbnail-px), got " + std::to_string(value));
+    }
+  }
+  scene.width = static_cast<int>(request.width_px());
+  scene.height = static_cast<int>(request.height_px());
+
+  scene.samples = request.samples() == 0 ? kDefaultSamples : static_cast<int>(request.samples());
+  if (scene.samples != 1 && scene.samples != 2 && scene.samples != 4 && scene.samples != 8) {
+    return invalid_argument("samples: expected 1, 2, 4 or 8 (0 = 4), got " + std::to_string(request.samples()));
+  }
+
+  if (request.background_rgba_size() != 0) {
+    if (request.background_rgba_size() != 4) {
+      return invalid_argument("background_rgba: expected 4 values (RGBA), got " +
+                              std::to_string(request.background_rgba_size()));
+    }
+    for (int c = 0; c < 4; ++c) {
+      const float v = request.background_rgba(c);
+      if (!(v >= 0 && v <= 1)) {
+        return invalid_argument("background_rgba[" + std::to_string(c) + "]: expected a value in [0, 1], got " +
+                                std::to_string(v));
+      }
+      scene.background[c] = v;
+    }
+  }
+
+  switch (request.shading()) {
+    case Request::SHADING_UNSPECIFIED:
+    case Request::SHADING_BLINN_PHONG:
+      scene.shading = render::Shading::kBlinnPhong;
+      break;
+    case Request::SHADING_LAMBERT:
+      scene.shading = render::Shading::kLambert;
+      break;
+    default:
+      return invalid_argument("shading: unknown value " + std::to_string(static_cast<int>(request.shading())));
+  }
+
+  if (!std::isfinite(request.pixel_tolerance()) || request.pixel_tolerance() < 0) {
+    return invalid_argument("pixel_tolerance: expected a finite value ≥ 0 (0 = full detail), got " +
+                            std::to_string(request.pixel_tolerance()));
+  }
+
+  if (request.has_camera()) {
+    const v1::Camera& c = request.camera();
+    render::Camera camera;
+    for (const auto& [field, values, out] :
+         {std::tuple{"camera.eye", &c.eye(), &camera.eye}, {"camera.target", &c.target(), &camera.target},
+          {"camera.up", &c.up(), &camera.up}}) {
+      if (values->size() != 3) {
+        return invalid_argument(std::string(field) + ": expected 3 values, got " + std::to_string(values->size()));
+      }
+      *out = Eigen::Vector3d((*values)[0], (*values)[1], (*values)[2]);
+    }
+    camera.vertical_fov_radians = c.vertical_fov_rad();
+    if (Status valid = render::validate_camera(camera, "camera"); !valid.ok()) return to_grpc_status(valid.error());
+    scene.camera = camera;
+  }
+  return grpc::Status::OK;
+}
+
+// The rows of a float32 PointArray the server itself encoded, as N × 3 points.
+PointMatrix points_of(const v1::PointArray& array) {
+  PointMatrix points(static_cast<Eigen::Index>(array.point_count()), 3);
+  std::memcpy(points.data(), array.data().data(), array.data().size());
+  return points;
+}
+
+grpc::Status stored_faces(const LoadedModel& model, render::Scene& scene) {
+  if (!model.container.has_section(model::sections::kFaces)) {
+    return unsupported_by_kind(model, "it stores no faces (section " + std::string(model::sections::kFaces) +
+                                          "), so there is no surface to draw");
+  }
+  auto faces = model.container.faces(model::sections::kFaces);
+  if (!faces) return to_grpc_status(faces.error());
+  scene.faces = std::move(*faces);
+  return grpc::Status::OK;
+}
+
+// Poses the animation-space model (or a PMSC model's engine) at `globals`, at the level the
+// thumbnail's pixel tolerance allows (eq. 7.2 with the thumbnail's own camera and width).
+grpc::Status pose_skinned(const LoadedModel& model, const animation_space::TransformList& globals,
+                          const Request& request, bool level_zero_only, render::Scene& scene, uint32_t& level_out) {
+  const animation_space::AnimationSpaceModel* skinned = model.animation_space.get();
+  animation_space::evaluate(*skinned, globals, scene.points);
+  const auto& lods = model.lod_levels;
+  if (request.pixel_tolerance() > 0 && lods && lods->count() > 1 && !level_zero_only) {
+    const double aspect = static_cast<double>(scene.width) / scene.height;
+    if (!scene.camera) {
+      auto framed = render::frame_bounding_box(scene.points, aspect);
+      if (!framed) return to_grpc_status(framed.error());
+      scene.camera = *framed;
+    }
+    // Eq. 7.2 needs the depth of the nearest point of a sphere around the posed mesh.
+    const Eigen::Vector3f lo = scene.points.colwise().minCoeff();
+    const Eigen::Vector3f hi = scene.points.colwise().maxCoeff();
+    const Eigen::Vector3f centre = (lo + hi) / 2;
+    const double radius = (scene.points.rowwise() - centre.transpose()).rowwise().norm().maxCoeff();
+    lod::ViewAtDistance view;
+    view.tolerance_pixels = request.pixel_tolerance();
+    view.viewport_width_pixels = scene.width;
+    view.horizontal_fov_radians = render::horizontal_fov(*scene.camera, aspect);
+    view.distance = (scene.camera->eye - centre.cast<double>()).norm();
+    auto choice = lod::level_for_view(*lods, view, radius);
+    if (!choice) return to_grpc_status(choice.error());
+    if (choice->level > 0) {
+      skinned = &lods->levels[static_cast<size_t>(choice->level)].model;
+      animation_space::evaluate(*skinned, globals, scene.points);
+    }
+    level_out = static_cast<uint32_t>(choice->level);
+  }
+  scene.faces = skinned->faces;
+  if (skinned->has_tangents()) animation_space::evaluate_normals(*skinned, globals, scene.normals);
+  return grpc::Status::OK;
+}
+
+// Fills the scene's geometry and overlays from the request's source (SPEC: a posed mesh from
+// PMSC key points, a skeleton pose, a stored sequence frame, or the rest pose).
+grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const Request& request,
+                        render::Scene& scene, v1::RenderThumbnailResponse* response) {
+  uint32_t level = 0;
+  if (request.show_key_points() && !model.pmsc) {
+    return unsupported_by_kind(model, "show_key_points: it has no key points (only PMSC models do)");
+  }
+  if (request.has_full_values() && request.source_case() != Request::kKeyPoints) {
+    return invalid_argument(
+        "full_values: the heat map compares what the soft cache returns for key_points with the full values; "
+        "set key_points as the source");
+  }
+  switch (request.source_case()) {
+    case Request::kKeyPoints: {
+      if (grpc::Status s = require_pmsc(model, "key_points: it has no soft cache to pose from key points");
+          !s.ok()) {
+        return s;
+      }
+      if (model.info.channel_count != 3) {
+        return unsupported_by_kind(model, "key_points: its points have " + std::to_string(model.info.channel_count) +
+                                              " channels, not 3-D positions to draw");
+      }
+      PoseInput input;
+      if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
+      v1::PoseResult* result = response->mutable_pose();
+      evaluate_pose(env, model, input, PoseOptions{}, result);
+      scene.points = points_of(result->points());
+      result->clear_points();  // the client asked for a picture; it has the points API for points
+      if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
+      if (request.has_full_values()) {
+        Eigen::VectorXf full;
+        const auto n = static_cast<uint32_t>(model.info.point_count);
+        if (grpc::Status s = decode_points(request.full_values(), "full_values", n, 3, "points", full); !s.ok()) {
+          return s;
+        }
+        // Thesis Fig. 8.6 style: per point, how far what the cache returned is from the truth.
+        const auto truth = Eigen::Map<const PointMatrix>(full.data(), n, 3);
+        scene.heat = (truth - scene.points).rowwise().norm();
+        // Red means an error as large as ε_max, the key-point error at which the soft cache
+        // gives up on its estimate (2007 §2.4): a hit stays blue, whatever its tiny errors.
+        scene.heat_max = model.info.epsilon_max;
+      }
+      break;
+    }
+    case Request::kSkeletonPose: {
+      if (!model.animation_space) {
+        return unsupported_by_kind(model, "skeleton_pose: it has no skeleton to pose");
+      }
+      animation_space::TransformList globals;
+      if (grpc::Status s = decode_skeleton_pose(request.skeleton_pose(), "skeleton_pose",
+                                                model.animation_space->skeleton, globals);
+          !s.ok()) {
+        return s;
+      }
+      // Key points index the full-detail mesh: with the overlay on, draw full detail.
+      if (grpc::Status s = pose_skinned(model, globals, request, request.show_key_points(), scene, level); !s.ok()) {
+        return s;
+      }
+      break;
+    }
+    case Request::kSequenceFrame: {
+      if (!model.container.has_section(model::sections::kSequenceFrames) || model.info.channel_count != 3) {
+        return unsupported_by_kind(model, "sequence_frame: it stores no sequence of 3-D frames");
+      }
+      auto row = model.container.float_matrix_row(model::sections::kSequenceFrames, request.sequence_frame());
+      if (!row) {
+        return invalid_argument("sequence_frame: expected 0.." + std::to_string(model.info.frame_count - 1) +
+                                " (the model stores " + std::to_string(model.info.frame_count) + " frames), got " +
+                                std::to_string(request.sequence_frame()));
+      }
+      scene.points = Eigen::Map<const PointMatrix>(row->data(), model.info.point_count, 3);
+      if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
+      break;
+    }
+    case Request::SOURCE_NOT_SET: {
+      if (model.animation_space && model.info.kind == model::ModelKind::kAnimationSpace) {
+        const auto rest = animation_space::rest_pose(model.animation_space->skeleton);
+        if (grpc::Status s = pose_skinned(model, rest, request, false, scene, level); !s.ok()) return s;
+        break;
+      }
+      auto rest = model.container.points(model::sections::kRestPoints);
+      if (!rest) return unsupported_by_kind(model, "it stores no rest pose to draw");
+      scene.points = std::move(*rest);
+      if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
+      break;
+    }
+  }
+  scene.wireframe = request.show_wireframe();
+  if (request.show_key_points()) scene.key_points.assign(model.pmsc->key_points.begin(), model.pmsc->key_points.end());
+  response->set_lod_level(level);
+  return grpc::Status::OK;
+}
+
+// Runs on the request pool after the render thread has drawn: PNG, then the answer.
+void encode_and_finish(render::Image image, Clock::time_point drawn_from, int64_t max_message_bytes,
+                       v1::RenderThumbnailResponse* response, const CallFinisher& finish) {
+  auto png = render::encode_png(image);
+  if (!png) {
+    finish(to_grpc_status(png.error()));
+    return;
+  }
+  // The response also carries a few small fields; the PNG is what can be large.
+  constexpr int64_t kAllowance = 1024;
+  if (static_cast<int64_t>(png->size()) + kAllowance > max_message_bytes) {
+    finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
+            "png: the thumbnail encodes to " + std::to_string(png->size()) + " bytes, over --max-message-bytes " +
+                std::to_string(max_message_bytes) + "; ask for a smaller width_px/height_px"});
+    return;
+  }
+  response->set_png(std::move(*png));
+  response->set_render_ms(std::chrono::duration<double, std::milli>(Clock::now() - drawn_from).count());
+  finish(grpc::Status::OK);
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* RenderServiceImpl::RenderThumbnail(grpc::CallbackServerContext* context,
+                                                             const Request* request,
+                                                             v1::RenderThumbnailResponse* response) {
+  return serve_unary_deferred(
+      env_, context, "RenderService/RenderThumbnail", Access::kUser, env_.request_pool,
+      [this, request, response](const CallControl& call, const CallFinisher& finish) {
+        if (env_.renderer == nullptr) {
+          finish({grpc::StatusCode::UNAVAILABLE, "this server draws no thumbnails: " + env_.renderer_unavailable});
+          return;
+        }
+        std::shared_ptr<const LoadedModel> model;
+        if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) {
+          finish(std::move(s));
+          return;
+        }
+        render::Scene scene;
+        if (grpc::Status s = read_view(*request, env_.options, scene); !s.ok()) {
+          finish(std::move(s));
+          return;
+        }
+        if (grpc::Status s = pose_scene(env_, *model, *request, scene, response); !s.ok()) {
+          finish(std::move(s));
+          return;
+        }
+        response->set_width_px(request->width_px());
+        response->set_height_px(request->height_px());
+        response->set_model_version(model->version);
+
+        const auto started = Clock::now();
+        grpc::CallbackServerContext* ctx = call.context();
+        WorkPool& pool = env_.request_pool;
+        const int64_t max_bytes = env_.options.max_message_bytes;
+        RenderThread::Job job;
+        job.scene = std::move(scene);
+        job.abandoned = [ctx] { return !CallControl(ctx, nullptr).stop_status().ok(); };
+        job.done = [ctx, started, max_bytes, response, finish, &pool](Result<render::Image> image) {
+          if (!image) {
+            finish(to_grpc_status(image.error()));
+            return;
+          }
+          auto encode = [image = std::move(*image), started, max_bytes, response, finish]() mutable {
+            encode_and_finish(std::move(image), started, max_bytes, response, finish);
+          };
+          // PNG encoding leaves the render thread free for the next draw.
+          if (!pool.submit(encode)) encode();
+        };
+        job.dropped = [ctx, finish](const char* why) {
+          grpc::Status stop = CallControl(ctx, nullptr).stop_status();
+          finish(stop.ok() ? grpc::Status(grpc::StatusCode::UNAVAILABLE, why) : stop);
+        };
+        if (!env_.renderer->submit(std::move(job))) {
+          finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                  "render queue full: " + std::to_string(env_.renderer->queue_depth()) +
+                      " thumbnails are already waiting (--render-queue-depth); retry with backoff"});
+        }
+      });
+}
+
+}  // namespace animspace::server
