@@ -23,6 +23,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -101,7 +102,10 @@ std::optional<Mesh> write_cow_model(const std::filesystem::path& data, const std
   const std::string import = cli + " import-rig --mesh " + (dir / "cow.obj").string() + " --tgf " +
                              (dir / "cow.tgf").string() + " --dmat " + (dir / "cow.DMAT").string() + " -o " +
                              imported.string() + " > /dev/null";
-  const std::string build = cli + " build-lod " + imported.string() + " --sample-poses 16 -o " +
+  // One level only: the cow's coarser levels are refused by the loader today (level 1's weights
+  // drift to Σ p̲ = 0.999996 in float32 storage, outside its tolerance; see docs/BENCHMARKS.md).
+  // Level 0 is what this suite draws and streams.
+  const std::string build = cli + " build-lod " + imported.string() + " --max-levels 1 --sample-poses 16 -o " +
                             repository.string() + " --model cow --version 1 > /dev/null";
   const auto t0 = Clock::now();
   if (std::system(import.c_str()) != 0 || std::system(build.c_str()) != 0) {
@@ -312,6 +316,14 @@ nlohmann::json run_render_suite(const SuiteOptions& options) {
     return results;
   }
   Client client(daemon->address());
+  // Health turns SERVING once the repository is loaded.
+  for (int i = 0; i < 600; ++i) {
+    try {
+      if (client.health() == grpc::health::v1::HealthCheckResponse::SERVING) break;
+    } catch (const RpcError&) {
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
   const auto info = client.server_info();
   std::printf("render: daemon renderer: %s\n", info.renderer().c_str());
   results["daemon_renderer"] = info.renderer();
