@@ -96,23 +96,6 @@ as::TransformList float_rounded(const as::TransformList& globals) {
   return out;
 }
 
-v1::SkeletonPose global_pose(const as::TransformList& globals) {
-  v1::SkeletonPose pose;
-  pose.set_space(v1::SkeletonPose::SPACE_GLOBAL);
-  pose.set_bone_count(static_cast<uint32_t>(globals.size()));
-  std::string bytes;
-  for (const auto& G : globals) {
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 4; ++c) {
-        const float value = static_cast<float>(G(r, c));
-        bytes.append(reinterpret_cast<const char*>(&value), sizeof(value));
-      }
-    }
-  }
-  pose.set_transforms(bytes);
-  return pose;
-}
-
 v1::GetLodRequest level_request(uint32_t level, Form form, const std::string& model = kModel) {
   v1::GetLodRequest request;
   request.mutable_model()->set_name(model);
@@ -326,7 +309,7 @@ TEST_F(LodServiceTest, PosedFormEqualsTheCoresEvaluation) {
     EXPECT_EQ(rest.skeleton.parents_size(), 0);
 
     v1::GetLodRequest request = level_request(static_cast<uint32_t>(l), v1::GetLodRequest::FORM_POSED);
-    *request.mutable_pose() = global_pose(pose);
+    *request.mutable_pose() = testing::global_skeleton_pose(pose);
     LodMesh posed = client_->get_lod(request);
     as::evaluate(core, pose, want);
     EXPECT_TRUE(same_bytes(posed.positions, points_f32(want)));
@@ -351,7 +334,7 @@ TEST_F(LodServiceTest, SmallChunksReassembleExactly) {
     SCOPED_TRACE(std::string(v1::GetLodRequest::Form_Name(variant.form)) + (variant.geomorph ? " + geomorph" : ""));
     v1::GetLodRequest request = level_request(l, variant.form);
     request.set_include_geomorph(variant.geomorph);
-    if (variant.form == v1::GetLodRequest::FORM_POSED) *request.mutable_pose() = global_pose(stored_pose(3));
+    if (variant.form == v1::GetLodRequest::FORM_POSED) *request.mutable_pose() = testing::global_skeleton_pose(stored_pose(3));
 
     request.set_vertices_per_chunk(1u << 20);
     const LodMesh whole = client_->get_lod(request);
@@ -618,7 +601,7 @@ TEST_F(LodServiceTest, BadRequestsGetTheExactStatusAndNameTheField) {
        "pose: expected no pose with FORM_ANIMATION_SPACE",
        [&](auto& r) {
          r.set_form(v1::GetLodRequest::FORM_ANIMATION_SPACE);
-         *r.mutable_pose() = global_pose(model_->skeleton.rest);
+         *r.mutable_pose() = testing::global_skeleton_pose(model_->skeleton.rest);
        }},
       {"geomorph with the posed form", grpc::StatusCode::INVALID_ARGUMENT,
        "include_geomorph: expected FORM_ANIMATION_SPACE (Δp is per influence, §7.3), got FORM_POSED",
@@ -626,18 +609,18 @@ TEST_F(LodServiceTest, BadRequestsGetTheExactStatusAndNameTheField) {
       {"pose bone count", grpc::StatusCode::INVALID_ARGUMENT, "pose.bone_count: expected " + bones + ", got 2",
        [&](auto& r) {
          as::TransformList two(model_->skeleton.rest.begin(), model_->skeleton.rest.begin() + 2);
-         *r.mutable_pose() = global_pose(two);
+         *r.mutable_pose() = testing::global_skeleton_pose(two);
        }},
       {"pose space", grpc::StatusCode::INVALID_ARGUMENT, "pose.space: expected SPACE_LOCAL or SPACE_GLOBAL, got 0",
        [&](auto& r) {
-         *r.mutable_pose() = global_pose(model_->skeleton.rest);
+         *r.mutable_pose() = testing::global_skeleton_pose(model_->skeleton.rest);
          r.mutable_pose()->set_space(v1::SkeletonPose::SPACE_UNSPECIFIED);
        }},
       {"pose NaN", grpc::StatusCode::INVALID_ARGUMENT, "pose.transforms: bone 1, entry (0,3) is NaN",
        [&](auto& r) {
          as::TransformList pose = model_->skeleton.rest;
          pose[1](0, 3) = std::numeric_limits<double>::quiet_NaN();
-         *r.mutable_pose() = global_pose(pose);
+         *r.mutable_pose() = testing::global_skeleton_pose(pose);
        }},
       {"oversize chunks", grpc::StatusCode::INVALID_ARGUMENT,
        "vertices_per_chunk: expected 0 (the default, 65536) or 1..1048576, got 2000000",

@@ -62,23 +62,6 @@ Eigen::VectorXf gather(const v1::DescribeKeyPointsResponse& keys, const Eigen::V
   return out;
 }
 
-v1::SkeletonPose skeleton_pose(const animation_space::TransformList& globals) {
-  v1::SkeletonPose pose;
-  pose.set_space(v1::SkeletonPose::SPACE_GLOBAL);
-  pose.set_bone_count(static_cast<uint32_t>(globals.size()));
-  std::string bytes;
-  for (const auto& G : globals) {
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 4; ++c) {
-        const float value = static_cast<float>(G(r, c));
-        bytes.append(reinterpret_cast<const char*>(&value), sizeof(value));
-      }
-    }
-  }
-  pose.set_transforms(bytes);
-  return pose;
-}
-
 // The bending arm, posed by the expensive rig (biceps bulge and elbow correction included).
 Eigen::VectorXf expensive_frame(double elbow_deg, double shoulder_deg) {
   static const demo::ArmRig rig = demo::make_arm_rig();
@@ -290,7 +273,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
        "poses[0].skeleton_pose: model 'arm-pmsc' has no posing engine on the server",
        [&] {
          return eval(request_with("arm-pmsc", 1, [&](auto& r) {
-           *r.mutable_poses(0)->mutable_skeleton_pose() = skeleton_pose({animation_space::Transform::Identity()});
+           *r.mutable_poses(0)->mutable_skeleton_pose() = testing::global_skeleton_pose({animation_space::Transform::Identity()});
          }));
        }},
       {"mesh sequence has no key points", grpc::StatusCode::FAILED_PRECONDITION,
@@ -330,7 +313,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          grpc::ClientContext context;
          v1::EvaluateSkeletonPoseRequest request;
          request.mutable_model()->set_name("arm-pmsc");
-         *request.add_poses() = skeleton_pose({animation_space::Transform::Identity()});
+         *request.add_poses() = testing::global_skeleton_pose({animation_space::Transform::Identity()});
          v1::EvaluateSkeletonPoseResponse response;
          return skinning->EvaluateSkeletonPose(&context, request, &response);
        }},
@@ -339,7 +322,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          grpc::ClientContext context;
          v1::EvaluateSkeletonPoseRequest request;
          request.mutable_model()->set_name("arm-animspace");
-         *request.add_poses() = skeleton_pose({animation_space::Transform::Identity()});
+         *request.add_poses() = testing::global_skeleton_pose({animation_space::Transform::Identity()});
          v1::EvaluateSkeletonPoseResponse response;
          return skinning->EvaluateSkeletonPose(&context, request, &response);
        }},
@@ -350,7 +333,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          v1::EvaluateSkeletonPoseRequest request;
          request.mutable_model()->set_name("arm-animspace");
          auto* pose = request.add_poses();
-         *pose = skeleton_pose(animation_space::TransformList(3, animation_space::Transform::Identity()));
+         *pose = testing::global_skeleton_pose(animation_space::TransformList(3, animation_space::Transform::Identity()));
          pose->set_space(v1::SkeletonPose::SPACE_UNSPECIFIED);
          v1::EvaluateSkeletonPoseResponse response;
          return skinning->EvaluateSkeletonPose(&context, request, &response);
@@ -361,7 +344,7 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          v1::EvaluateSkeletonPoseRequest request;
          request.mutable_model()->set_name("arm-animspace");
          request.set_lod_level(99);
-         *request.add_poses() = skeleton_pose(animation_space::TransformList(3, animation_space::Transform::Identity()));
+         *request.add_poses() = testing::global_skeleton_pose(animation_space::TransformList(3, animation_space::Transform::Identity()));
          v1::EvaluateSkeletonPoseResponse response;
          return skinning->EvaluateSkeletonPose(&context, request, &response);
        }},
@@ -745,7 +728,7 @@ TEST_F(ServeTest, ServerFailThroughAndSkeletonPosesMatchTheAnimationSpaceModel) 
   request.mutable_model()->set_name("arm-pmsc-engine");
   auto* pose = request.add_poses();
   *pose->mutable_key_values() = make_point_array(gather(keys, full).data(), keys.key_point_indices_size(), 3);
-  *pose->mutable_skeleton_pose() = skeleton_pose(globals);
+  *pose->mutable_skeleton_pose() = testing::global_skeleton_pose(globals);
   v1::EvaluateKeyPointsResponse response;
   ASSERT_TRUE(evaluate(*poses, request, &response).ok());
   const auto& result = response.results(0);
@@ -760,7 +743,7 @@ TEST_F(ServeTest, ServerFailThroughAndSkeletonPosesMatchTheAnimationSpaceModel) 
   v1::EvaluateSkeletonPoseRequest skin;
   skin.mutable_model()->set_name("arm-animspace");
   skin.set_include_normals(true);
-  *skin.add_poses() = skeleton_pose(globals);
+  *skin.add_poses() = testing::global_skeleton_pose(globals);
   v1::EvaluateSkeletonPoseResponse skinned;
   ASSERT_TRUE(skinning->EvaluateSkeletonPose(&context, skin, &skinned).ok());
   auto animspace_container = container::read_file(repo_ / "arm-animspace" / "1" / "model.anim");

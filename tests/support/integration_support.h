@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "clients/cpp/client.h"
+#include "core/animspace/skeleton.h"
 #include "core/container/model_container.h"
 
 namespace animspace::testing {
@@ -32,6 +33,24 @@ inline bool wait_until_serving(Client& client) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   return false;
+}
+
+// Global transforms G_j as the API's SkeletonPose (SPACE_GLOBAL, 12 float32 per bone, rows 0–2).
+inline v1::SkeletonPose global_skeleton_pose(const animation_space::TransformList& globals) {
+  v1::SkeletonPose pose;
+  pose.set_space(v1::SkeletonPose::SPACE_GLOBAL);
+  pose.set_bone_count(static_cast<uint32_t>(globals.size()));
+  std::string bytes;
+  for (const auto& G : globals) {
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 4; ++c) {
+        const float value = static_cast<float>(G(r, c));
+        bytes.append(reinterpret_cast<const char*>(&value), sizeof(value));
+      }
+    }
+  }
+  pose.set_transforms(bytes);
+  return pose;
 }
 
 }  // namespace animspace::testing
