@@ -16,14 +16,7 @@
 namespace animspace::render {
 namespace {
 
-Camera make_camera(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up, double fov) {
-  Camera camera;
-  camera.eye = eye;
-  camera.target = target;
-  camera.up = up;
-  camera.vertical_fov_radians = fov;
-  return camera;
-}
+using testing::make_camera;
 
 TEST(CameraTest, TargetProjectsToTheImageCentre) {
   const Camera camera = make_camera({1.5, -2, 7}, {0.2, 0.4, -1}, {0.1, 1, 0.3}, 0.9);

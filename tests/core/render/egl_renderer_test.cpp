@@ -28,6 +28,8 @@
 namespace animspace::render {
 namespace {
 
+using testing::make_camera;
+
 using testing::Pinhole;
 
 using Rgb = std::array<int, 3>;
@@ -57,15 +59,6 @@ bool colour_near(const Image& image, int x, int y, const Rgb& colour) {
     }
   }
   return false;
-}
-
-Camera make_camera(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up, double fov) {
-  Camera camera;
-  camera.eye = eye;
-  camera.target = target;
-  camera.up = up;
-  camera.vertical_fov_radians = fov;
-  return camera;
 }
 
 Pinhole pinhole(const Scene& scene) {

@@ -16,6 +16,7 @@
 #include <Eigen/Geometry>
 
 #include "core/common/types.h"
+#include "core/render/scene.h"
 
 namespace animspace::render::testing {
 
@@ -119,6 +120,17 @@ inline std::optional<double> hit_sphere(const Eigen::Vector3d& origin, const Eig
   const double t = -b - std::sqrt(discriminant);
   if (t <= 0) return std::nullopt;
   return t;
+}
+
+// A camera in one expression.
+inline Camera make_camera(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up,
+                          double fov) {
+  Camera camera;
+  camera.eye = eye;
+  camera.target = target;
+  camera.up = up;
+  camera.vertical_fov_radians = fov;
+  return camera;
 }
 
 }  // namespace animspace::render::testing
