@@ -44,12 +44,19 @@ def test_unknown_model_is_not_found_with_its_name(channel):
     assert "no-such-model" in error.value.details()
 
 
-def test_pending_rpcs_say_unimplemented(channel):
+def test_thumbnails_are_pngs_of_the_requested_size_and_bad_sizes_name_the_field(channel):
+    wait_until_loaded(models_pb2_grpc.ModelServiceStub(channel))
     stub = render_pb2_grpc.RenderServiceStub(channel)
     with pytest.raises(grpc.RpcError) as error:
-        stub.RenderThumbnail(render_pb2.RenderThumbnailRequest(model={"name": "arm-pmsc"}), timeout=5)
-    assert error.value.code() == grpc.StatusCode.UNIMPLEMENTED
-    assert "not implemented" in error.value.details()
+        stub.RenderThumbnail(render_pb2.RenderThumbnailRequest(model={"name": "arm-pmsc"}), timeout=30)
+    assert error.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+    assert "width_px" in error.value.details()
+    thumb = stub.RenderThumbnail(
+        render_pb2.RenderThumbnailRequest(model={"name": "arm-animspace"}, width_px=96, height_px=64), timeout=30)
+    assert thumb.png[:8] == b"\x89PNG\r\n\x1a\n"
+    # The PNG IHDR chunk: width and height, big-endian, right after the signature and chunk header.
+    assert struct.unpack(">II", thumb.png[16:24]) == (96, 64)
+    assert (thumb.width_px, thumb.height_px) == (96, 64)
 
 
 def test_key_points_evaluate_through_the_soft_cache(channel):
