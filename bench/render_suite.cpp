@@ -169,8 +169,8 @@ void thumbnails(Client& client, render::Renderer* renderer, const std::vector<Me
           const auto response = client.render_thumbnail(thumbnail_request(mesh.name, size));
           if (i < kWarmup) continue;
           wall.push_back(ms_since(t0));
-          server.push_back(response.render_ms());
-          png_bytes = response.png().size();
+          server.push_back(response.render_ms);
+          png_bytes = response.png.size();
         } catch (const RpcError& e) {
           error = e.what();
         }

@@ -48,6 +48,7 @@ Client::Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options)
       models_(v1::ModelService::NewStub(channel_)),
       stats_(v1::StatsService::NewStub(channel_)),
       poses_(v1::PoseService::NewStub(channel_)),
+      skinning_(v1::SkinningService::NewStub(channel_)),
       training_(v1::TrainingService::NewStub(channel_)),
       lod_(v1::LodService::NewStub(channel_)),
       render_(v1::RenderService::NewStub(channel_)),
@@ -142,7 +143,7 @@ v1::GetStatsResponse Client::stats(const std::string& model, bool reset) {
   return response;
 }
 
-v1::DescribeKeyPointsResponse Client::describe_key_points(const std::string& model, uint64_t version) {
+KeyPoints Client::describe_key_points(const std::string& model, uint64_t version) {
   grpc::ClientContext context;
   prepare(&context);
   v1::DescribeKeyPointsRequest request;
@@ -150,23 +151,100 @@ v1::DescribeKeyPointsResponse Client::describe_key_points(const std::string& mod
   request.mutable_model()->set_version(version);
   v1::DescribeKeyPointsResponse response;
   check("DescribeKeyPoints", poses_->DescribeKeyPoints(&context, request, &response));
-  return response;
+  KeyPoints out;
+  out.model_version = response.model_version();
+  out.indices.assign(response.key_point_indices().begin(), response.key_point_indices().end());
+  out.channels = response.channel_count();
+  out.control_point_count = response.control_point_count();
+  out.regions.assign(response.key_point_regions().begin(), response.key_point_regions().end());
+  out.fail_through = response.fail_through();
+  for (uint32_t index : out.indices) {
+    if (index >= out.control_point_count) {
+      throw std::runtime_error("malformed DescribeKeyPoints answer: key point index " + std::to_string(index) +
+                               " ≥ control_point_count " + std::to_string(out.control_point_count));
+    }
+  }
+  return out;
 }
 
-v1::EvaluateKeyPointsResponse Client::evaluate_key_points(const v1::EvaluateKeyPointsRequest& request) {
+PoseResult Client::evaluate_key_points(const std::string& model, const KeyPointPose& pose,
+                                       const EvaluateOptions& options) {
+  return std::move(evaluate_key_points_batch(model, std::span(&pose, 1), options).front());
+}
+
+std::vector<PoseResult> Client::evaluate_key_points_batch(const std::string& model,
+                                                          std::span<const KeyPointPose> poses,
+                                                          const EvaluateOptions& options) {
+  v1::EvaluateKeyPointsRequest request;
+  request.mutable_model()->set_name(model);
+  request.mutable_model()->set_version(options.version);
+  request.set_omit_points(options.omit_points);
+  request.set_include_region_errors(options.include_region_errors);
+  for (const KeyPointPose& pose : poses) *request.add_poses() = encode_key_point_pose(pose);
   grpc::ClientContext context;
   prepare(&context);
   v1::EvaluateKeyPointsResponse response;
   check("EvaluateKeyPoints", poses_->EvaluateKeyPoints(&context, request, &response));
-  return response;
+  if (static_cast<size_t>(response.results_size()) != poses.size()) {
+    throw std::runtime_error("EvaluateKeyPoints answered " + std::to_string(response.results_size()) +
+                             " results for " + std::to_string(poses.size()) + " poses");
+  }
+  std::vector<PoseResult> out;
+  out.reserve(poses.size());
+  for (const auto& result : response.results()) out.push_back(decode_pose_result(result));
+  return out;
 }
 
-v1::CompleteMissResponse Client::complete_miss(const v1::CompleteMissRequest& request) {
+std::unique_ptr<KeyPointStream> Client::open_stream(const std::string& model, const StreamOptions& options) {
+  auto context = std::make_unique<grpc::ClientContext>();
+  authorize(context.get());  // the stream's own deadline, if any, replaces the per-call one
+  return std::unique_ptr<KeyPointStream>(new KeyPointStream(*poses_, std::move(context), model, options));
+}
+
+CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
+                                    std::span<const float> full_values) {
+  v1::CompleteMissRequest request;
+  request.mutable_model()->set_name(model);
+  request.mutable_model()->set_version(version);
+  v1::KeyPointPose encoded = encode_key_point_pose(pose);
+  *request.mutable_key_values() = std::move(*encoded.mutable_key_values());
+  const uint32_t channels = pose.channels;
+  if (full_values.size() % channels != 0) {
+    throw std::invalid_argument("complete_miss: full_values holds " + std::to_string(full_values.size()) +
+                                " floats, not a whole number of " + std::to_string(channels) + "-channel points");
+  }
+  *request.mutable_full_values() =
+      make_point_array(full_values.data(), static_cast<uint32_t>(full_values.size() / channels), channels);
   grpc::ClientContext context;
   prepare(&context);
   v1::CompleteMissResponse response;
   check("CompleteMiss", poses_->CompleteMiss(&context, request, &response));
-  return response;
+  return {decode_pose_result(response.result()), response.logged()};
+}
+
+SkinningResult Client::evaluate_skeleton_pose(const std::string& model, std::span<const SkeletonPose> poses,
+                                              const SkinningOptions& options) {
+  v1::EvaluateSkeletonPoseRequest request;
+  request.mutable_model()->set_name(model);
+  request.mutable_model()->set_version(options.version);
+  request.set_include_normals(options.include_normals);
+  request.set_lod_level(options.lod_level);
+  for (const SkeletonPose& pose : poses) *request.add_poses() = encode_skeleton_pose(pose);
+  grpc::ClientContext context;
+  prepare(&context);
+  v1::EvaluateSkeletonPoseResponse response;
+  check("EvaluateSkeletonPose", skinning_->EvaluateSkeletonPose(&context, request, &response));
+  if (static_cast<size_t>(response.poses_size()) != poses.size()) {
+    throw std::runtime_error("EvaluateSkeletonPose answered " + std::to_string(response.poses_size()) +
+                             " poses for " + std::to_string(poses.size()));
+  }
+  SkinningResult out;
+  out.model_version = response.model_version();
+  for (const auto& pose : response.poses()) {
+    out.poses.push_back({decode_points(pose.points()),
+                         pose.has_normals() ? decode_points(pose.normals()) : Points{}});
+  }
+  return out;
 }
 
 v1::RetrainResponse Client::retrain(const v1::RetrainRequest& request, std::chrono::milliseconds deadline) {
@@ -177,12 +255,20 @@ v1::RetrainResponse Client::retrain(const v1::RetrainRequest& request, std::chro
   return response;
 }
 
-v1::RenderThumbnailResponse Client::render_thumbnail(const v1::RenderThumbnailRequest& request) {
+Thumbnail Client::render_thumbnail(const v1::RenderThumbnailRequest& request) {
   grpc::ClientContext context;
   prepare(&context);
   v1::RenderThumbnailResponse response;
   check("RenderThumbnail", render_->RenderThumbnail(&context, request, &response));
-  return response;
+  Thumbnail out;
+  out.png = std::move(*response.mutable_png());
+  out.width = response.width_px();
+  out.height = response.height_px();
+  out.model_version = response.model_version();
+  out.lod_level = response.lod_level();
+  if (response.has_pose()) out.pose = decode_pose_result(response.pose());
+  out.render_ms = response.render_ms();
+  return out;
 }
 
 }  // namespace animspace

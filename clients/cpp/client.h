@@ -7,6 +7,8 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -19,6 +21,9 @@
 #include "animspace/v1/render.grpc.pb.h"
 #include "animspace/v1/stats.grpc.pb.h"
 #include "animspace/v1/training.grpc.pb.h"
+#include "animspace/v1/skinning.grpc.pb.h"
+#include "clients/cpp/key_point_stream.h"
+#include "clients/cpp/results.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace animspace {
@@ -50,6 +55,17 @@ struct LodMesh {
   // What the stream took: chunks read and their serialized bytes (for transfer reports).
   uint64_t chunk_count = 0;
   uint64_t bytes_received = 0;
+};
+
+// RenderService.RenderThumbnail's answer.
+struct Thumbnail {
+  std::string png;  // 8-bit RGBA PNG
+  uint32_t width = 0;
+  uint32_t height = 0;
+  uint64_t model_version = 0;
+  uint32_t lod_level = 0;
+  std::optional<PoseResult> pose;  // the soft cache's verdict when drawn from key points (no points)
+  double render_ms = 0;
 };
 
 struct ClientOptions {
@@ -85,16 +101,27 @@ class Client {
   v1::GetServerInfoResponse server_info();
   v1::GetStatsResponse stats(const std::string& model = "", bool reset = false);
   // The key points a PMSC model needs, in the order evaluate_key_points expects them.
-  v1::DescribeKeyPointsResponse describe_key_points(const std::string& model, uint64_t version = 0);
-  v1::EvaluateKeyPointsResponse evaluate_key_points(const v1::EvaluateKeyPointsRequest& request);
-  v1::CompleteMissResponse complete_miss(const v1::CompleteMissRequest& request);
+  KeyPoints describe_key_points(const std::string& model, uint64_t version = 0);
+  // The soft cache (Meyer & Anderson 2006 §5): one pose, or a batch answered in order.
+  PoseResult evaluate_key_points(const std::string& model, const KeyPointPose& pose, const EvaluateOptions& options = {});
+  std::vector<PoseResult> evaluate_key_points_batch(const std::string& model, std::span<const KeyPointPose> poses,
+                                                    const EvaluateOptions& options = {});
+  // A session for playing a sequence (see key_point_stream.h).
+  std::unique_ptr<KeyPointStream> open_stream(const std::string& model, const StreamOptions& options = {});
+  // Client fail-through: the full N×D values of a pose that blended or missed, from the caller's
+  // own posing engine; `version` is the result's model_version.
+  CompletedMiss complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
+                              std::span<const float> full_values);
+  // Skinning through an animation-space model (Merry 2007 §3.1): one result per pose, in order.
+  SkinningResult evaluate_skeleton_pose(const std::string& model, std::span<const SkeletonPose> poses,
+                                        const SkinningOptions& options = {});
   // Retraining can take minutes: `deadline` overrides the client's default for this call.
   v1::RetrainResponse retrain(const v1::RetrainRequest& request, std::chrono::milliseconds deadline);
 
   // Streams one level and reassembles it, checking that the blocks arrive in order and add up to
   // the header's counts (std::runtime_error otherwise). `deadline` 0 = the client's default.
   LodMesh get_lod(const v1::GetLodRequest& request, std::chrono::milliseconds deadline = {});
-  v1::RenderThumbnailResponse render_thumbnail(const v1::RenderThumbnailRequest& request);
+  Thumbnail render_thumbnail(const v1::RenderThumbnailRequest& request);
 
   const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
   // Adds the bearer token (if any) to a context, for calls made on channel() directly, such as
@@ -110,6 +137,7 @@ class Client {
   std::unique_ptr<v1::ModelService::Stub> models_;
   std::unique_ptr<v1::StatsService::Stub> stats_;
   std::unique_ptr<v1::PoseService::Stub> poses_;
+  std::unique_ptr<v1::SkinningService::Stub> skinning_;
   std::unique_ptr<v1::TrainingService::Stub> training_;
   std::unique_ptr<v1::LodService::Stub> lod_;
   std::unique_ptr<v1::RenderService::Stub> render_;

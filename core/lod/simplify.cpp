@@ -93,7 +93,11 @@ class Simplifier {
       apply_influence_removal(c, /*update_neighbours=*/false);
     }
     for (int v = 0; v < V; ++v) schedule_collapse(v);
-    while (true) {
+    const int64_t collapsible = std::max(0, V - options_.min_vertices);
+    for (size_t step = 0;; ++step) {
+      if (step % 1024 == 0) {
+        report_progress(options_.progress, "simplification", V - state_.live_vertex_count(), collapsible);
+      }
       const bool collapses_allowed = state_.live_vertex_count() > options_.min_vertices;
       const Candidate* collapse = collapses_allowed ? top(collapses_, collapse_version_) : nullptr;
       const Candidate* removal = top(removals_, influence_version_);
@@ -116,6 +120,7 @@ class Simplifier {
         apply_influence_removal(c);
       }
     }
+    report_progress(options_.progress, "simplification", collapsible, collapsible);
     ProgressiveMesh pm;
     pm.skeleton = model_.skeleton;
     pm.input_vertex_count = V;

@@ -20,6 +20,7 @@
 #include "core/animspace/metrics.h"
 #include "core/animspace/model.h"
 #include "core/common/result.h"
+#include "core/common/progress.h"
 #include "core/lod/progressive_mesh.h"
 
 namespace animspace::lod {
@@ -37,6 +38,8 @@ struct SimplifyOptions {
   // Stop when this few vertices are left (the base mesh keeps at least this many, if topology
   // allows); influence removals continue until every vertex has one bone.
   int min_vertices = 4;
+  // Vertices collapsed so far, of the input's count less min_vertices (core/common/progress.h).
+  ProgressCallback progress = {};
 };
 
 // The whole progressive mesh of `model` under the L2,2 metric of `metrics` (P = E[GᵀG]).

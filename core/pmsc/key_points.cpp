@@ -125,6 +125,7 @@ Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eige
     }
     if (static_cast<int>(out.key_points.size()) > o.max_key_points) out.key_points.resize(static_cast<size_t>(o.max_key_points));
     if (added == 0) break;  // every candidate is already a key
+    report_progress(o.progress, "key points", static_cast<int64_t>(out.key_points.size()), o.max_key_points);
     residual = reconstruct_residual(out.key_points);
   }
   if (out.max_residual.empty()) out.max_residual.push_back(max_point_error(residual, D));

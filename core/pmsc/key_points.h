@@ -18,6 +18,7 @@
 
 #include <Eigen/Core>
 
+#include "core/common/progress.h"
 #include "core/common/result.h"
 
 namespace animspace::pmsc {
@@ -36,6 +37,8 @@ struct KeyPointOptions {
   // Keys are chosen among points [0, candidate_count): the control points of a cross-PMSC
   // model, which come first in the stacked training matrix. 0 means all points.
   int candidate_count = 0;
+  // Keys chosen so far, of max_key_points.
+  ProgressCallback progress = {};
 };
 
 struct KeyPointSelection {

@@ -182,6 +182,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   key_options.error_bound = o.error_bound;
   key_options.max_key_points = o.max_key_points;
   key_options.candidate_count = static_cast<int>(control_points);
+  key_options.progress = o.progress;
   key_options.seed_points = o.fiducial_points;
   if (o.grid_cells > 0) {
     PointMatrix positions = o.positions;
@@ -222,6 +223,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     Eigen::MatrixXd T_fold(rows, static_cast<long>(train_columns.size()));
     for (size_t c = 0; c < train_columns.size(); ++c) T_fold.col(static_cast<long>(c)) = T.col(train_columns[c]);
     PmscModel fold_model = model;
+    report_progress(o.progress, "calibration", fold, folds);
     if (!assemble(fit_subspace(T_fold, fold_basis), control_rows, cross, model.key_points, fold_model).ok()) continue;
     PoseEstimate estimate;
     for (long f : held_out) {
@@ -241,6 +243,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   }
   // Without any usable frame fall back to the bound e_key ≤ max point error (the RMS over keys
   // never exceeds the largest key error), i.e. a ratio of 1.
+  report_progress(o.progress, "calibration", folds, folds);
   model.epsilon.epsilon_min = o.error_tolerance / std::max(worst_ratio, 1.0);
   model.epsilon.epsilon_max = model.epsilon.epsilon_min * o.blend_zone_ratio;
 

@@ -4,6 +4,7 @@
 
 #include <vector>
 
+#include "core/common/progress.h"
 #include "core/common/result.h"
 #include "core/common/types.h"
 #include "core/pmsc/pmsc_model.h"
@@ -43,6 +44,8 @@ struct TrainingOptions {
   double blend_zone_ratio = 1.5;
   // Regions for local fail-through (0 = none; cross-PMSC models have none).
   int region_count = 8;
+  // Key point selection, then the calibration folds (core/common/progress.h).
+  ProgressCallback progress = {};
 };
 
 struct TrainingReport {

@@ -71,8 +71,8 @@ class RenderServiceTest : public ::testing::Test {
     return r;
   }
 
-  static render::Image decode(const v1::RenderThumbnailResponse& response) {
-    auto image = render::decode_png(response.png(), "thumbnail");
+  static render::Image decode(const Thumbnail& thumbnail) {
+    auto image = render::decode_png(thumbnail.png, "thumbnail");
     EXPECT_TRUE(image.ok()) << image.error().message;
     return image.ok() ? std::move(*image) : render::Image{};
   }
@@ -108,10 +108,10 @@ TEST_F(RenderServiceTest, DrawsTheRestPoseAtTheRequestedSizeOnTheRequestedBackgr
   for (const char* model : {"arm", "arm-animspace", "arm-pmsc"}) {
     SCOPED_TRACE(model);
     const auto response = client.render_thumbnail(request(model, 160, 96));
-    EXPECT_EQ(response.width_px(), 160u);
-    EXPECT_EQ(response.height_px(), 96u);
-    EXPECT_GT(response.model_version(), 0u);
-    EXPECT_GT(response.render_ms(), 0.0);
+    EXPECT_EQ(response.width, 160u);
+    EXPECT_EQ(response.height, 96u);
+    EXPECT_GT(response.model_version, 0u);
+    EXPECT_GT(response.render_ms, 0.0);
     const render::Image image = decode(response);
     ASSERT_EQ(image.width, 160);
     ASSERT_EQ(image.height, 96);
@@ -156,23 +156,14 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
   const std::string model = std::string(demo::kDemoPmscModelName);
   const auto keys = client.describe_key_points(model);
   const int frame = 7;  // an odd frame: one the cache was not trained on
-  const long D = keys.channel_count();
-  Eigen::VectorXf key_values(keys.key_point_indices_size() * D);
-  for (int k = 0; k < keys.key_point_indices_size(); ++k) {
-    key_values.segment(k * D, D) = frames->row(frame).segment(long{keys.key_point_indices(k)} * D, D).transpose();
-  }
+  const std::vector<float> key_values =
+      keys.gather(std::span<const float>(frames->row(frame).data(), static_cast<size_t>(frames->cols())));
   const auto key_array =
-      make_point_array(key_values.data(), static_cast<uint32_t>(keys.key_point_indices_size()), static_cast<uint32_t>(D));
+      make_point_array(key_values.data(), static_cast<uint32_t>(keys.indices.size()), keys.channels);
 
   // What the soft cache returns for these key points, evaluated separately.
-  v1::EvaluateKeyPointsRequest evaluate;
-  evaluate.mutable_model()->set_name(model);
-  *evaluate.add_poses()->mutable_key_values() = key_array;
-  const auto evaluated = client.evaluate_key_points(evaluate);
-  ASSERT_EQ(evaluated.results_size(), 1);
-  const auto& points = evaluated.results(0).points();
-  PointMatrix estimate(static_cast<Eigen::Index>(points.point_count()), 3);
-  std::memcpy(estimate.data(), points.data().data(), points.data().size());
+  const PoseResult evaluated = client.evaluate_key_points(model, {key_values, keys.channels});
+  const PointMatrix estimate = Eigen::Map<const PointMatrix>(evaluated.points.values.data(), evaluated.points.count, 3);
 
   // A known camera looking at the arm from the front.
   render::Camera camera;
@@ -193,9 +184,9 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
   for (float v : {0.0f, 1.0f, 0.0f}) r.mutable_camera()->add_up(v);
   r.mutable_camera()->set_vertical_fov_rad(static_cast<float>(camera.vertical_fov_radians));
   const auto response = client.render_thumbnail(r);
-  ASSERT_TRUE(response.has_pose());
-  EXPECT_EQ(response.pose().status(), evaluated.results(0).status());
-  EXPECT_EQ(response.pose().points().data().size(), 0u) << "the thumbnail's pose carries no points";
+  ASSERT_TRUE(response.pose.has_value());
+  EXPECT_EQ(response.pose->status, evaluated.status);
+  EXPECT_TRUE(response.pose->points.empty()) << "the thumbnail's pose carries no points";
   const render::Image image = decode(response);
   ASSERT_EQ(image.width, 320);
 
@@ -203,8 +194,8 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
   // high, blue low), which neither the grey arm nor the blue background has.
   const render::Scene defaults;
   const Eigen::Vector3f key_colour = defaults.key_point_colour * 255.0f;
-  for (int k = 0; k < keys.key_point_indices_size(); ++k) {
-    const Eigen::Vector3d p = estimate.row(keys.key_point_indices(k)).cast<double>().transpose();
+  for (size_t k = 0; k < keys.indices.size(); ++k) {
+    const Eigen::Vector3d p = estimate.row(keys.indices[k]).cast<double>().transpose();
     const auto projected = render::project_to_pixel(camera, 320, 240, p);
     const int x = static_cast<int>(projected.pixel.x());
     const int y = static_cast<int>(projected.pixel.y());
@@ -255,7 +246,7 @@ TEST_F(RenderServiceTest, PixelToleranceDrawsTheLevelEquation72Allows) {
     auto r = request(model, width, height);
     r.set_pixel_tolerance(tolerance);
     const auto response = client.render_thumbnail(r);
-    EXPECT_EQ(static_cast<int>(response.lod_level()), expected);
+    EXPECT_EQ(static_cast<int>(response.lod_level), expected);
     coarsest_seen = std::max(coarsest_seen, expected);
     const render::Image image = decode(response);
     EXPECT_FALSE(is_background(image, width / 2, height / 2));
@@ -327,7 +318,7 @@ TEST_F(RenderServiceTest, BadRequestsAreRefusedPreciselyAndTheRenderThreadCarrie
   // The render thread is still there and still draws what it drew before.
   const auto first = client.render_thumbnail(request("arm", 64, 64));
   const auto again = client.render_thumbnail(request("arm", 64, 64));
-  EXPECT_EQ(first.png(), again.png());
+  EXPECT_EQ(first.png, again.png);
   EXPECT_EQ(decode(again).width, 64);
 }
 

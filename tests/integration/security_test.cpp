@@ -90,7 +90,7 @@ TEST_F(SecurityTest, TlsAndTokensGuardEveryRpcButHealth) {
 
   Client farm(daemon->address(), tls_options("artist-token-2"));
   EXPECT_EQ(farm.list_models().size(), 5u);
-  EXPECT_GT(farm.describe_key_points("arm-pmsc").key_point_indices_size(), 0);
+  EXPECT_GT(farm.describe_key_points("arm-pmsc").indices.size(), 0);
   // Admin RPCs need the admin token.
   v1::RetrainRequest retrain;
   retrain.mutable_model()->set_name("arm-pmsc");

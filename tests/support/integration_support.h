@@ -35,22 +35,21 @@ inline bool wait_until_serving(Client& client) {
   return false;
 }
 
-// Global transforms G_j as the API's SkeletonPose (SPACE_GLOBAL, 12 float32 per bone, rows 0–2).
-inline v1::SkeletonPose global_skeleton_pose(const animation_space::TransformList& globals) {
-  v1::SkeletonPose pose;
-  pose.set_space(v1::SkeletonPose::SPACE_GLOBAL);
-  pose.set_bone_count(static_cast<uint32_t>(globals.size()));
-  std::string bytes;
+// Global transforms G_j as the client's SkeletonPose (SPACE_GLOBAL, 12 floats per bone, rows 0–2).
+inline SkeletonPose client_skeleton_pose(const animation_space::TransformList& globals) {
+  SkeletonPose pose;
+  pose.space = v1::SkeletonPose::SPACE_GLOBAL;
   for (const auto& G : globals) {
     for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 4; ++c) {
-        const float value = static_cast<float>(G(r, c));
-        bytes.append(reinterpret_cast<const char*>(&value), sizeof(value));
-      }
+      for (int c = 0; c < 4; ++c) pose.transforms.push_back(static_cast<float>(G(r, c)));
     }
   }
-  pose.set_transforms(bytes);
   return pose;
+}
+
+// The same pose on the wire.
+inline v1::SkeletonPose global_skeleton_pose(const animation_space::TransformList& globals) {
+  return encode_skeleton_pose(client_skeleton_pose(globals));
 }
 
 }  // namespace animspace::testing

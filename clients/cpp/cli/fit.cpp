@@ -4,8 +4,10 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "clients/cpp/cli/offline_common.h"
+#include "clients/cpp/cli/output.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
@@ -77,8 +79,13 @@ int run_fit(const FitArgs& a, bool json) {
   options.fit.edge_regularisation = a.edge_regularisation;
   options.fit.vertex_regularisation = a.vertex_regularisation;
   animation_space::SequenceFitReport report;
+  // Three stages, each one call into the core: rigid parts and skeleton (§5), the least-squares
+  // fit (§4.1), tangent planes and metrics.
+  std::optional<ProgressBar> progress(std::in_place, "fit", 3);
+  progress->update(0, "rigid parts and skeleton");
   auto skeleton = animation_space::fit_sequence_skeleton(sequence->reference, frames, options, &report);
   if (!skeleton) return fail("fit", skeleton.error().message);
+  progress->update(1, "least squares");
   const auto start = std::chrono::steady_clock::now();
   Result<animation_space::AnimationSpaceModel> model = make_error(ErrorCode::kInternal, "not fitted");
   if (a.linear_blend) {
@@ -91,6 +98,7 @@ int run_fit(const FitArgs& a, bool json) {
   }
   if (!model) return fail("fit", model.error().message);
   report.fit_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  progress->update(2, "tangent planes and metrics");
   if (auto added = add_tangents(*model); !added.ok()) return fail("fit", added.error().message);
 
   const auto training_error = animation_space::reconstruction_error(*model, skeleton->training_poses, frames);
@@ -118,18 +126,24 @@ int run_fit(const FitArgs& a, bool json) {
     bone_rows.row(f) = animation_space::pose_row(skeleton->training_poses[static_cast<size_t>(f)]);
   }
   out.set_matrix(model::sections::kSequenceBoneTransforms, bone_rows);
+  progress->update(3);
+  progress.reset();
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("fit", written.error().message);
 
   const double total = report.segmentation_seconds + report.skeleton_seconds + report.fit_seconds;
   if (json) {
-    std::printf(
-        "{\"output\": \"%s\", \"frames\": %d, \"bones\": %d, \"influences_per_vertex\": %g, \"rms_error\": %g, "
-        "\"max_error\": %g, \"rms_over_diagonal\": %g, \"segmentation_seconds\": %g, \"skeleton_seconds\": %g, "
-        "\"fit_seconds\": %g, \"seconds\": %g}\n",
-        path.c_str(), static_cast<int>(frames.rows()), model->bone_count() - 1,
-        static_cast<double>(model->influences.influence_count()) / model->vertex_count(), rms, max_error,
-        rms / diagonal, report.segmentation_seconds, report.skeleton_seconds, report.fit_seconds, total);
+    print_json({{"output", path.string()},
+                {"frames", frames.rows()},
+                {"bones", model->bone_count() - 1},
+                {"influences_per_vertex", double(model->influences.influence_count()) / model->vertex_count()},
+                {"rms_error", rms},
+                {"max_error", max_error},
+                {"rms_over_diagonal", rms / diagonal},
+                {"segmentation_seconds", report.segmentation_seconds},
+                {"skeleton_seconds", report.skeleton_seconds},
+                {"fit_seconds", report.fit_seconds},
+                {"seconds", total}});
   } else {
     std::printf("fitted %d frames in %.2f s (parts %.2f s, skeleton %.2f s, least squares %.2f s)\n",
                 static_cast<int>(frames.rows()), total, report.segmentation_seconds, report.skeleton_seconds,
@@ -194,8 +208,10 @@ int run_import_rig(const ImportRigArgs& a, bool json) {
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("import-rig", written.error().message);
   if (json) {
-    std::printf("{\"output\": \"%s\", \"vertices\": %d, \"bones\": %d, \"influences\": %d}\n", path.c_str(),
-                model.vertex_count(), model.bone_count() - 1, model.influences.influence_count());
+    print_json({{"output", path.string()},
+                {"vertices", model.vertex_count()},
+                {"bones", model.bone_count() - 1},
+                {"influences", model.influences.influence_count()}});
   } else {
     std::printf("imported %d vertices, %d bones + root, %d influences (%.2f per vertex)\nwrote %s\n",
                 model.vertex_count(), model.bone_count() - 1, model.influences.influence_count(),

@@ -19,15 +19,4 @@ Result<FrameMatrix> load_sequence_frames(const std::string& sequence, const std:
   return FrameMatrix(loaded->frames.samples);
 }
 
-Eigen::VectorXf gather_key_values(const FrameMatrix& frames, int frame, const v1::DescribeKeyPointsResponse& keys) {
-  const long D = keys.channel_count();
-  const auto K = static_cast<long>(keys.key_point_indices_size());
-  Eigen::VectorXf out(K * D);
-  for (long k = 0; k < K; ++k) {
-    const long point = keys.key_point_indices(static_cast<int>(k));
-    out.segment(k * D, D) = frames.row(frame).segment(point * D, D).transpose();
-  }
-  return out;
-}
-
 }  // namespace animspace::cli

@@ -3,9 +3,6 @@
 
 #include <string>
 
-#include <Eigen/Core>
-
-#include "animspace/v1/poses.pb.h"
 #include "core/common/result.h"
 #include "core/common/types.h"
 
@@ -15,8 +12,5 @@ namespace animspace::cli {
 // OBJ frames, or a mesh file with `pc2`), or the sequence.frames of a model.anim (the demo
 // repository's `arm` holds the expensive rig's frames).
 Result<FrameMatrix> load_sequence_frames(const std::string& sequence, const std::string& pc2);
-
-// Frame `frame`'s key values (K × D) in the order DescribeKeyPoints gave.
-Eigen::VectorXf gather_key_values(const FrameMatrix& frames, int frame, const v1::DescribeKeyPointsResponse& keys);
 
 }  // namespace animspace::cli

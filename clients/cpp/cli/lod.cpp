@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "clients/cpp/cli/offline_common.h"
+#include "clients/cpp/cli/output.h"
+#include "clients/cpp/cli/pose_file.h"
 #include "core/animspace/animspace_io.h"
 #include "core/common/atomic_file.h"
 #include "core/lod/export.h"
@@ -78,8 +80,10 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
   lod::SimplifyOptions options;
   options.influence_simplification = !a.no_influence_simplification;
   options.max_normal_deviation_degrees = a.max_normal_deviation_degrees;
+  options.progress = progress_bars("build-lod");
   const auto start = std::chrono::steady_clock::now();
   auto pm = lod::build_progressive_mesh(*model, stored.metrics, options);
+  options.progress = nullptr;  // ends the bar's line before the report
   if (!pm) return fail("build-lod", pm.error().message);
   const lod::LodLevels levels = lod::make_levels(*pm, a.max_levels);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -89,15 +93,16 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
   if (auto written = write_model_file(path, out); !written.ok()) return fail("build-lod", written.error().message);
 
   if (json) {
-    std::printf("{\"output\": \"%s\", \"seconds\": %g, \"steps\": %zu, \"levels\": [", path.c_str(), seconds,
-                pm->steps.size());
+    nlohmann::json rows = nlohmann::json::array();
     for (int l = 0; l < levels.count(); ++l) {
       const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
-      std::printf("%s{\"level\": %d, \"vertices\": %d, \"faces\": %d, \"influences\": %d, \"error\": %g}",
-                  l ? ", " : "", l, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
-                  level.model.influences.influence_count(), level.error);
+      rows.push_back({{"level", l},
+                      {"vertices", level.model.vertex_count()},
+                      {"faces", level.model.faces.rows()},
+                      {"influences", level.model.influences.influence_count()},
+                      {"error", level.error}});
     }
-    std::printf("]}\n");
+    print_json({{"output", path.string()}, {"seconds", seconds}, {"steps", pm->steps.size()}, {"levels", rows}});
   } else {
     std::printf("progressive mesh: %zu steps in %.2f s\n%6s %9s %9s %11s %12s\n", pm->steps.size(), seconds, "level",
                 "vertices", "faces", "influences", "ε^l");
@@ -185,10 +190,12 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
     return fail("export-lod", written.error().message);
   }
   if (json) {
-    std::printf("{\"output\": \"%s\", \"level\": %d, \"error\": %g, \"tolerated_error\": %g, \"vertices\": %d, "
-                "\"faces\": %d}\n",
-                a.output.c_str(), chosen, level.error, tolerated, level.model.vertex_count(),
-                static_cast<int>(level.model.faces.rows()));
+    print_json({{"output", a.output},
+                {"level", chosen},
+                {"error", level.error},
+                {"tolerated_error", tolerated},
+                {"vertices", level.model.vertex_count()},
+                {"faces", level.model.faces.rows()}});
   } else {
     std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.error,
                 a.tolerance_pixels > 0 ? (", tolerated " + std::to_string(tolerated)).c_str() : "",
@@ -200,39 +207,6 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
 }  // namespace animspace::cli
 
 namespace animspace::cli {
-namespace {
-
-// The pose file's numbers (see LodArgs::pose_file) as a SkeletonPose; "" or the problem.
-std::string read_pose_file(const LodArgs& a, v1::SkeletonPose* pose) {
-  auto text = read_whole_file(a.pose_file);
-  if (!text) return text.error().message;
-  std::vector<float> values;
-  std::istringstream lines(*text);
-  std::string line;
-  for (int number = 1; std::getline(lines, line); ++number) {
-    line = line.substr(0, line.find('#'));
-    std::istringstream words(line);
-    std::string word;
-    while (words >> word) {
-      char* end = nullptr;
-      const float value = std::strtof(word.c_str(), &end);
-      if (end != word.c_str() + word.size() || !std::isfinite(value)) {
-        return a.pose_file + ":" + std::to_string(number) + ": expected a finite number, got '" + word + "'";
-      }
-      values.push_back(value);
-    }
-  }
-  if (values.empty() || values.size() % 12 != 0) {
-    return a.pose_file + ": expected 12 numbers per bone (the top three rows of each bone's matrix), got " +
-           std::to_string(values.size());
-  }
-  pose->set_space(a.pose_space == "local" ? v1::SkeletonPose::SPACE_LOCAL : v1::SkeletonPose::SPACE_GLOBAL);
-  pose->set_bone_count(static_cast<uint32_t>(values.size() / 12));
-  pose->set_transforms(values.data(), values.size() * sizeof(float));
-  return "";
-}
-
-}  // namespace
 
 CLI::App* add_lod(CLI::App& app, LodArgs& a) {
   auto* cmd = app.add_subcommand(
@@ -292,9 +266,9 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
     view->set_viewport_width_px(a.viewport_width);
   }
   if (!a.pose_file.empty()) {
-    if (std::string problem = read_pose_file(a, request.mutable_pose()); !problem.empty()) {
-      return fail("lod", "--pose-file: " + problem);
-    }
+    auto poses = read_pose_file(a.pose_file, pose_space(a.pose_space));
+    if (!poses) return fail("lod", "--pose-file: " + poses.error().message);
+    *request.mutable_pose() = encode_skeleton_pose(poses->front());
   }
 
   LodMesh received;
@@ -317,13 +291,17 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
     return fail("lod", written.error().message);
   }
   if (json) {
-    std::printf("{\"output\": \"%s\", \"model\": \"%s\", \"version\": %llu, \"level\": %u, \"level_count\": %u, "
-                "\"epsilon\": %.9g, \"tolerated_error\": %.9g, \"vertices\": %u, \"faces\": %u, "
-                "\"bytes_received\": %llu, \"chunks\": %llu}\n",
-                a.output.c_str(), a.model.c_str(), static_cast<unsigned long long>(h.model_version()), h.level(),
-                h.level_count(), static_cast<double>(h.epsilon()), static_cast<double>(h.tolerated_error()),
-                h.vertex_count(), h.face_count(), static_cast<unsigned long long>(received.bytes_received),
-                static_cast<unsigned long long>(received.chunk_count));
+    print_json({{"output", a.output},
+                {"model", a.model},
+                {"version", h.model_version()},
+                {"level", h.level()},
+                {"level_count", h.level_count()},
+                {"epsilon", h.epsilon()},
+                {"tolerated_error", h.tolerated_error()},
+                {"vertices", h.vertex_count()},
+                {"faces", h.face_count()},
+                {"bytes_received", received.bytes_received},
+                {"chunks", received.chunk_count}});
   } else {
     std::printf("%s version %llu, level %u of %u (ε = %.4g", a.model.c_str(),
                 static_cast<unsigned long long>(h.model_version()), h.level(), h.level_count(),

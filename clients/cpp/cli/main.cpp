@@ -6,11 +6,13 @@
 #include <string>
 
 #include <CLI/CLI.hpp>
-#include <google/protobuf/util/json_util.h>
 
 #include "clients/cpp/cli/fit.h"
+#include "clients/cpp/cli/evaluate.h"
 #include "clients/cpp/cli/lod.h"
+#include "clients/cpp/cli/output.h"
 #include "clients/cpp/cli/play.h"
+#include "clients/cpp/cli/pose.h"
 #include "clients/cpp/cli/thumbnail.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
@@ -41,15 +43,6 @@ std::string read_flag_file(const char* flag, const std::string& path) {
     std::exit(2);
   }
   return *text;
-}
-
-std::string to_json(const google::protobuf::Message& message) {
-  std::string out;
-  google::protobuf::util::JsonPrintOptions options;
-  options.add_whitespace = true;
-  options.preserve_proto_field_names = true;
-  (void)google::protobuf::util::MessageToJsonString(message, &out, options);
-  return out;
 }
 
 animspace::Client connect(const Globals& g) {
@@ -100,7 +93,7 @@ int run_list(const Globals& g) {
   if (g.json) {
     animspace::v1::ListModelsResponse response;
     for (auto& m : models) *response.add_models() = m;
-    std::cout << to_json(response);
+    animspace::cli::print_json(animspace::cli::proto_json(response));
     return 0;
   }
   if (models.empty()) std::printf("no models loaded\n");
@@ -112,7 +105,7 @@ int run_describe(const Globals& g, const std::string& name, uint64_t version) {
   auto client = connect(g);
   auto model = client.describe_model(name, version);
   if (g.json) {
-    std::cout << to_json(model);
+    animspace::cli::print_json(animspace::cli::proto_json(model));
     return 0;
   }
   print_summary(model);
@@ -133,7 +126,7 @@ int run_health(const Globals& g) {
   const auto status = client.health();
   const std::string name = grpc::health::v1::HealthCheckResponse::ServingStatus_Name(status);
   if (g.json) {
-    std::printf("{\"status\": \"%s\"}\n", name.c_str());
+    animspace::cli::print_json({{"status", name}});
   } else {
     std::printf("%s\n", name.c_str());
   }
@@ -144,7 +137,7 @@ int run_server_info(const Globals& g) {
   auto client = connect(g);
   auto info = client.server_info();
   if (g.json) {
-    std::cout << to_json(info);
+    animspace::cli::print_json(animspace::cli::proto_json(info));
     return 0;
   }
   std::printf("animspaced %s (%s), renderer %s\n", info.server_version().c_str(), info.api().c_str(),
@@ -161,7 +154,7 @@ int run_stats(const Globals& g, const std::string& model, bool reset) {
   auto client = connect(g);
   auto stats = client.stats(model, reset);
   if (g.json) {
-    std::cout << to_json(stats);
+    animspace::cli::print_json(animspace::cli::proto_json(stats));
     return 0;
   }
   std::printf("%-24s %10s %10s %10s %10s %10s %8s %10s %10s\n", "model", "requests", "errors", "poses", "hits",
@@ -178,17 +171,23 @@ int run_stats(const Globals& g, const std::string& model, bool reset) {
 
 int run_keys(const Globals& g, const std::string& model, uint64_t version) {
   auto client = connect(g);
-  const auto keys = client.describe_key_points(model, version);
+  const animspace::KeyPoints keys = client.describe_key_points(model, version);
+  const std::string fail_through = animspace::v1::FailThrough_Name(keys.fail_through);
   if (g.json) {
-    std::cout << to_json(keys);
+    animspace::cli::print_json({{"model", model},
+                                {"model_version", keys.model_version},
+                                {"key_point_indices", keys.indices},
+                                {"key_point_regions", keys.regions},
+                                {"channel_count", keys.channels},
+                                {"control_point_count", keys.control_point_count},
+                                {"fail_through", fail_through}});
     return 0;
   }
-  std::printf("%s version %llu: %d key points × %u channels out of %u control points, fail-through %s\n",
-              model.c_str(), static_cast<unsigned long long>(keys.model_version()), keys.key_point_indices_size(),
-              keys.channel_count(), keys.control_point_count(),
-              animspace::v1::FailThrough_Name(keys.fail_through()).c_str());
-  for (int k = 0; k < keys.key_point_indices_size(); ++k) {
-    std::printf("%s%u", k == 0 ? "  " : (k % 16 == 0 ? "\n  " : " "), keys.key_point_indices(k));
+  std::printf("%s version %llu: %zu key points × %u channels out of %u control points, fail-through %s\n",
+              model.c_str(), static_cast<unsigned long long>(keys.model_version), keys.indices.size(), keys.channels,
+              keys.control_point_count, fail_through.c_str());
+  for (size_t k = 0; k < keys.indices.size(); ++k) {
+    std::printf("%s%u", k == 0 ? "  " : (k % 16 == 0 ? "\n  " : " "), keys.indices[k]);
   }
   std::printf("\n");
   return 0;
@@ -198,7 +197,7 @@ int run_retrain(const Globals& g, const animspace::v1::RetrainRequest& request, 
   auto client = connect(g);
   const auto result = client.retrain(request, std::chrono::seconds(deadline_s));
   if (g.json) {
-    std::cout << to_json(result);
+    animspace::cli::print_json(animspace::cli::proto_json(result));
     return 0;
   }
   if (request.dry_run()) {
@@ -218,13 +217,17 @@ int run_load(const Globals& g, const std::string& model, uint64_t version, bool 
   auto client = connect(g);
   if (unload) {
     client.unload_model(model, version);
+    if (g.json) {
+      animspace::cli::print_json({{"model", model}, {"version", version}, {"unloaded", true}});
+      return 0;
+    }
     std::printf("%s%s unloaded\n", model.c_str(),
                 version == 0 ? "" : (" version " + std::to_string(version)).c_str());
     return 0;
   }
   const auto summary = client.load_model(model, version);
   if (g.json) {
-    std::cout << to_json(summary);
+    animspace::cli::print_json(animspace::cli::proto_json(summary));
     return 0;
   }
   print_summary(summary);
@@ -239,20 +242,15 @@ int run_inspect(const Globals& g, const std::string& path) {
   }
   auto info = animspace::model::describe(*container, path);
   if (g.json) {
-    std::printf("{\"metadata\": {");
-    bool first = true;
-    for (const auto& [key, value] : container->metadata()) {
-      std::printf("%s\"%s\": \"%s\"", first ? "" : ", ", key.c_str(), value.c_str());
-      first = false;
-    }
-    std::printf("}, \"sections\": [");
-    first = true;
+    nlohmann::json sections = nlohmann::json::array();
     for (const auto& [name, section] : container->sections()) {
-      std::printf("%s{\"name\": \"%s\", \"rows\": %u, \"cols\": %u, \"bytes\": %zu}", first ? "" : ", ",
-                  name.c_str(), section.rows, section.cols, section.bytes.size());
-      first = false;
+      sections.push_back({{"name", name}, {"rows", section.rows}, {"cols", section.cols}, {"bytes", section.bytes.size()}});
     }
-    std::printf("]}\n");
+    animspace::cli::print_json({{"file", path},
+                                {"metadata", container->metadata()},
+                                {"sections", sections},
+                                {"loadable", info.ok()},
+                                {"error", info.ok() ? "" : info.error().message}});
   } else {
     std::printf("%s\n", path.c_str());
     for (const auto& [key, value] : container->metadata()) std::printf("  %s = %s\n", key.c_str(), value.c_str());
@@ -334,8 +332,12 @@ int main(int argc, char** argv) {
   retrain->add_flag("--dry-run", dry_run, "Train and report, but write nothing");
   retrain->add_option("--deadline-s", retrain_deadline_s, "Deadline for the retrain call")->capture_default_str();
 
+  animspace::cli::EvaluateArgs evaluate_args;
+  auto* evaluate = animspace::cli::add_evaluate(app, evaluate_args);
   animspace::cli::PlayArgs play_args;
   auto* play = animspace::cli::add_play(app, play_args);
+  animspace::cli::PoseArgs pose_args;
+  auto* pose = animspace::cli::add_pose(app, pose_args);
   animspace::cli::LodArgs lod_args;
   auto* lod = animspace::cli::add_lod(app, lod_args);
   animspace::cli::ThumbnailArgs thumbnail_args;
@@ -379,6 +381,14 @@ int main(int argc, char** argv) {
     if (*describe) return run_describe(g, model, version);
     if (*stats) return run_stats(g, model, reset);
     if (*keys) return run_keys(g, model, version);
+    if (*evaluate) {
+      auto client = connect(g);
+      return animspace::cli::run_evaluate(evaluate_args, client, g.json);
+    }
+    if (*pose) {
+      auto client = connect(g);
+      return animspace::cli::run_pose(pose_args, client, g.json);
+    }
     if (*play) {
       auto client = connect(g);
       return animspace::cli::run_play(play_args, client, g.json);

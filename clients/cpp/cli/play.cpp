@@ -6,6 +6,7 @@
 
 #include "clients/cpp/cli/key_frames.h"
 #include "clients/cpp/cli/offline_common.h"
+#include "clients/cpp/cli/output.h"
 
 namespace animspace::cli {
 
@@ -34,90 +35,91 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   const auto selected = parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
   if (selected.empty()) return fail("play", error);
 
-  const auto keys = client.describe_key_points(a.model, a.version);
-  const long D = keys.channel_count();
-  if (frames->cols() != static_cast<long>(keys.control_point_count()) * D) {
+  const KeyPoints keys = client.describe_key_points(a.model, a.version);
+  const long D = keys.channels;
+  if (frames->cols() != static_cast<long>(keys.control_point_count) * D) {
     return fail("play", "the sequence has " + std::to_string(frames->cols() / std::max(1L, D)) +
                             " points per frame, model '" + a.model + "' expects " +
-                            std::to_string(keys.control_point_count()));
+                            std::to_string(keys.control_point_count));
   }
-  const auto K = static_cast<uint32_t>(keys.key_point_indices_size());
-  auto gather = [&](int frame) { return gather_key_values(*frames, frame, keys); };
+  auto frame_values = [&](int frame) {
+    return std::span<const float>(frames->row(frame).data(), static_cast<size_t>(frames->cols()));
+  };
 
-  auto stub = v1::PoseService::NewStub(client.channel());
-  grpc::ClientContext context;
-  client.authorize(&context);  // the stream runs as long as the sequence: no per-call deadline
+  // The stream pins the version DescribeKeyPoints answered for, so the key points stay valid
+  // even if a retrain publishes a new version mid-sequence.
+  StreamOptions options;
+  options.version = keys.model_version;
+  options.omit_points = true;
+  auto stream = client.open_stream(a.model, options);
   const auto start = std::chrono::steady_clock::now();
-  auto stream = stub->StreamKeyPoints(&context);
   std::thread writer([&] {
-    for (size_t i = 0; i < selected.size(); ++i) {
-      v1::KeyPointFrame frame;
-      if (i == 0) {
-        frame.mutable_model()->set_name(a.model);
-        frame.mutable_model()->set_version(keys.model_version());
-      }
-      frame.set_sequence(static_cast<uint64_t>(selected[i]));
-      frame.set_omit_points(true);
-      const Eigen::VectorXf values = gather(selected[i]);
-      *frame.mutable_pose()->mutable_key_values() = make_point_array(values.data(), K, static_cast<uint32_t>(D));
-      if (!stream->Write(frame)) break;
+    for (int frame : selected) {
+      const std::vector<float> values = keys.gather(frame_values(frame));
+      if (!stream->write({values, keys.channels}, static_cast<uint64_t>(frame))) break;
     }
-    stream->WritesDone();
+    stream->writes_done();
   });
+  ProgressBar progress("play " + a.model, selected.size());
   uint64_t counts[4] = {0, 0, 0, 0};
   double sum_error = 0, max_error = 0;
-  uint64_t completed = 0;
-  v1::PoseResult result;
   std::vector<uint64_t> to_complete;
-  while (stream->Read(&result)) {
-    counts[result.status()] += 1;
-    sum_error += result.key_point_error();
-    max_error = std::max(max_error, double(result.key_point_error()));
-    if (result.full_evaluation_needed()) to_complete.push_back(result.sequence());
-    if (a.verbose) {
-      std::printf("frame %5llu  %-5s  e_key %.6g  alpha %.3f\n", static_cast<unsigned long long>(result.sequence()),
-                  v1::CacheStatus_Name(result.status()).substr(13).c_str(), result.key_point_error(),
-                  result.blend_weight());
+  try {
+    while (auto result = stream->read()) {
+      counts[result->status] += 1;
+      sum_error += result->key_point_error;
+      max_error = std::max(max_error, double(result->key_point_error));
+      if (result->full_evaluation_needed) to_complete.push_back(result->sequence);
+      if (a.verbose) {
+        std::printf("frame %5llu  %-5s  e_key %.6g  alpha %.3f\n", static_cast<unsigned long long>(result->sequence),
+                    cache_status_name(result->status), result->key_point_error, result->blend_weight);
+      }
+      const uint64_t read = counts[1] + counts[2] + counts[3];
+      progress.update(read, "hit rate " + std::to_string(100 * counts[1] / read) + "%");
     }
+  } catch (...) {
+    stream->cancel();  // releases a writer blocked on the window
+    writer.join();
+    throw;
   }
   writer.join();
-  const grpc::Status status = stream->Finish();
-  if (!status.ok()) throw RpcError("StreamKeyPoints", status);
+  stream->finish();
+  progress.finish();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
+  uint64_t completed = 0;
   if (a.complete) {
+    ProgressBar completing("complete " + a.model, to_complete.size());
     for (uint64_t frame : to_complete) {
-      v1::CompleteMissRequest request;
-      request.mutable_model()->set_name(a.model);
-      request.mutable_model()->set_version(keys.model_version());
-      const Eigen::VectorXf values = gather(static_cast<int>(frame));
-      *request.mutable_key_values() = make_point_array(values.data(), K, static_cast<uint32_t>(D));
-      *request.mutable_full_values() =
-          make_point_array(frames->row(static_cast<long>(frame)).data(), keys.control_point_count(),
-                           static_cast<uint32_t>(D));
-      completed += client.complete_miss(request).logged() ? 1 : 0;
+      const auto row = frame_values(static_cast<int>(frame));
+      const std::vector<float> values = keys.gather(row);
+      completed += client.complete_miss(a.model, keys.model_version, {values, keys.channels}, row).logged ? 1 : 0;
+      completing.update(completed);
     }
   }
   const uint64_t played = counts[1] + counts[2] + counts[3];
   const double hit_rate = played == 0 ? 0.0 : double(counts[1]) / double(played);
+  const double mean_error = played ? sum_error / double(played) : 0.0;
   if (json) {
-    std::printf("{\"model\": \"%s\", \"version\": %llu, \"frames\": %llu, \"hits\": %llu, \"blends\": %llu, "
-                "\"misses\": %llu, \"hit_rate\": %.6f, \"mean_key_point_error\": %.6g, \"max_key_point_error\": %.6g, "
-                "\"poses_per_second\": %.1f, \"completed\": %llu}\n",
-                a.model.c_str(), static_cast<unsigned long long>(keys.model_version()),
-                static_cast<unsigned long long>(played), static_cast<unsigned long long>(counts[1]),
-                static_cast<unsigned long long>(counts[2]), static_cast<unsigned long long>(counts[3]), hit_rate,
-                played ? sum_error / double(played) : 0.0, max_error, double(played) / seconds,
-                static_cast<unsigned long long>(completed));
+    print_json({{"model", a.model},
+                {"version", keys.model_version},
+                {"frames", played},
+                {"hits", counts[1]},
+                {"blends", counts[2]},
+                {"misses", counts[3]},
+                {"hit_rate", hit_rate},
+                {"mean_key_point_error", mean_error},
+                {"max_key_point_error", max_error},
+                {"poses_per_second", double(played) / seconds},
+                {"completed", completed}});
     return 0;
   }
   std::printf("%s version %llu: %llu frames in %.2f s (%.0f poses/s)\n", a.model.c_str(),
-              static_cast<unsigned long long>(keys.model_version()), static_cast<unsigned long long>(played), seconds,
+              static_cast<unsigned long long>(keys.model_version), static_cast<unsigned long long>(played), seconds,
               double(played) / seconds);
   std::printf("  hits %llu, blends %llu, misses %llu: hit rate %.1f%%; e_key mean %.4g, max %.4g\n",
               static_cast<unsigned long long>(counts[1]), static_cast<unsigned long long>(counts[2]),
-              static_cast<unsigned long long>(counts[3]), 100.0 * hit_rate, played ? sum_error / double(played) : 0.0,
-              max_error);
+              static_cast<unsigned long long>(counts[3]), 100.0 * hit_rate, mean_error, max_error);
   if (a.complete) {
     std::printf("  completed %llu blends/misses with full values (logged for `animspace retrain %s`)\n",
                 static_cast<unsigned long long>(completed), a.model.c_str());

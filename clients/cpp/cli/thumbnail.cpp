@@ -5,6 +5,7 @@
 
 #include "clients/cpp/cli/key_frames.h"
 #include "clients/cpp/cli/offline_common.h"
+#include "clients/cpp/cli/output.h"
 #include "core/common/atomic_file.h"
 
 namespace animspace::cli {
@@ -79,47 +80,49 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
       return fail("thumbnail", "--sequence-frame: expected 0.." + std::to_string(frames->rows() - 1) + ", got " +
                                    std::to_string(a.sequence_frame));
     }
-    const auto keys = client.describe_key_points(a.model, a.version);
-    const auto D = keys.channel_count();
-    if (frames->cols() != static_cast<long>(keys.control_point_count()) * D) {
+    const KeyPoints keys = client.describe_key_points(a.model, a.version);
+    const auto D = keys.channels;
+    if (frames->cols() != static_cast<long>(keys.control_point_count) * D) {
       return fail("thumbnail", "the sequence has " + std::to_string(frames->cols() / std::max<long>(1, D)) +
                                    " points per frame, model '" + a.model + "' expects " +
-                                   std::to_string(keys.control_point_count()));
+                                   std::to_string(keys.control_point_count));
     }
-    const Eigen::VectorXf values = gather_key_values(*frames, a.sequence_frame, keys);
+    const std::span<const float> frame(frames->row(a.sequence_frame).data(), static_cast<size_t>(frames->cols()));
+    const std::vector<float> values = keys.gather(frame);
     *request.mutable_key_points()->mutable_key_values() =
-        make_point_array(values.data(), static_cast<uint32_t>(keys.key_point_indices_size()), D);
-    request.mutable_model()->set_version(keys.model_version());
-    if (a.heat) {
-      *request.mutable_full_values() =
-          make_point_array(frames->row(a.sequence_frame).data(), keys.control_point_count(), D);
-    }
+        make_point_array(values.data(), static_cast<uint32_t>(keys.indices.size()), D);
+    request.mutable_model()->set_version(keys.model_version);
+    if (a.heat) *request.mutable_full_values() = make_point_array(frame.data(), keys.control_point_count, D);
   }
 
-  const auto response = client.render_thumbnail(request);
-  if (auto written = write_file_atomically(a.output, response.png()); !written.ok()) {
+  const Thumbnail thumbnail = client.render_thumbnail(request);
+  if (auto written = write_file_atomically(a.output, thumbnail.png); !written.ok()) {
     return fail("thumbnail", written.error().message);
   }
-  const bool posed = response.has_pose();
-  const std::string outcome = posed ? v1::CacheStatus_Name(response.pose().status()).substr(13) : "";
   if (json) {
-    std::printf("{\"output\": \"%s\", \"width\": %u, \"height\": %u, \"bytes\": %zu, \"model_version\": %llu, "
-                "\"lod_level\": %u, \"render_ms\": %.3f%s}\n",
-                a.output.c_str(), response.width_px(), response.height_px(), response.png().size(),
-                static_cast<unsigned long long>(response.model_version()), response.lod_level(), response.render_ms(),
-                posed ? (", \"cache_status\": \"" + outcome + "\", \"key_point_error\": " +
-                         std::to_string(response.pose().key_point_error()))
-                            .c_str()
-                      : "");
+    nlohmann::json out = {{"output", a.output},
+                          {"width", thumbnail.width},
+                          {"height", thumbnail.height},
+                          {"bytes", thumbnail.png.size()},
+                          {"model_version", thumbnail.model_version},
+                          {"lod_level", thumbnail.lod_level},
+                          {"render_ms", thumbnail.render_ms}};
+    if (thumbnail.pose) {
+      out["cache_status"] = cache_status_name(thumbnail.pose->status);
+      out["key_point_error"] = thumbnail.pose->key_point_error;
+    }
+    print_json(out);
     return 0;
   }
+  std::string verdict;
+  if (thumbnail.pose) {
+    verdict = std::string("; soft cache ") + cache_status_name(thumbnail.pose->status) + ", e_key " +
+              std::to_string(thumbnail.pose->key_point_error);
+  }
   std::printf("%s version %llu: %u×%u, level of detail %u, drawn and encoded in %.1f ms%s\nwrote %s (%zu bytes)\n",
-              a.model.c_str(), static_cast<unsigned long long>(response.model_version()), response.width_px(),
-              response.height_px(), response.lod_level(), response.render_ms(),
-              posed ? ("; soft cache " + outcome + ", e_key " + std::to_string(response.pose().key_point_error()))
-                          .c_str()
-                    : "",
-              a.output.c_str(), response.png().size());
+              a.model.c_str(), static_cast<unsigned long long>(thumbnail.model_version), thumbnail.width,
+              thumbnail.height, thumbnail.lod_level, thumbnail.render_ms, verdict.c_str(), a.output.c_str(),
+              thumbnail.png.size());
   return 0;
 }
 

@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "clients/cpp/cli/offline_common.h"
+#include "clients/cpp/cli/output.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/pmsc/pmsc_io.h"
@@ -94,6 +95,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   options.grid_cells = a.grid;
   options.remove_rigid_motion = a.align;
   options.region_count = a.regions;
+  options.progress = progress_bars("train-pmsc");
 
   pmsc::TrainingReport report;
   auto model = control ? pmsc::train_cross(control_frames, frames, options, &report)
@@ -112,13 +114,18 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   if (auto written = write_model_file(path, container); !written.ok()) {
     return fail("train-pmsc", written.error().message);
   }
+  options.progress = nullptr;  // ends the last bar's line before the report
   if (json) {
-    std::printf(
-        "{\"output\": \"%s\", \"frames\": %d, \"basis\": %d, \"key_points\": %d, \"max_training_error\": %g, "
-        "\"converged\": %s, \"condition_number\": %g, \"epsilon_min\": %g, \"epsilon_max\": %g, \"seconds\": %g}\n",
-        path.c_str(), report.frames, report.basis_size, report.key_points, report.max_training_error,
-        report.converged ? "true" : "false", report.condition_number, model->epsilon.epsilon_min,
-        model->epsilon.epsilon_max, report.seconds);
+    print_json({{"output", path.string()},
+                {"frames", report.frames},
+                {"basis", report.basis_size},
+                {"key_points", report.key_points},
+                {"max_training_error", report.max_training_error},
+                {"converged", report.converged},
+                {"condition_number", report.condition_number},
+                {"epsilon_min", model->epsilon.epsilon_min},
+                {"epsilon_max", model->epsilon.epsilon_max},
+                {"seconds", report.seconds}});
   } else {
     std::printf("trained on %d frames in %.2f s: basis M = %d, %d key points%s\n", report.frames, report.seconds,
                 report.basis_size, report.key_points, control ? " (cross-PMSC)" : "");

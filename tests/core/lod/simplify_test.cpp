@@ -7,7 +7,9 @@
 #include <map>
 #include <numbers>
 #include <set>
+#include <string_view>
 #include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -206,6 +208,32 @@ TEST(ProgressiveMesh, RefusesWhatItCannotSimplify) {
   r = build_progressive_mesh(c.model, arm.metrics, {});  // 3-bone metrics for a 1-bone model
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("metrics"), std::string::npos) << r.error().message;
+}
+
+}  // namespace
+}  // namespace animspace::lod
+
+namespace animspace::lod {
+namespace {
+
+// Progress counts collapsed vertices against all that may go (the input less min_vertices),
+// never goes back, and ends complete.
+TEST(ProgressiveMesh, ReportsCollapsesAsProgress) {
+  const testing::LodCase c = testing::flat_sheet_case(6);
+  SimplifyOptions options;
+  options.min_vertices = 4;
+  std::vector<std::pair<int64_t, int64_t>> calls;
+  options.progress = [&](std::string_view stage, int64_t done, int64_t total) {
+    EXPECT_EQ(stage, "simplification");
+    calls.emplace_back(done, total);
+  };
+  auto pm = build_progressive_mesh(c.model, c.metrics, options);
+  ASSERT_TRUE(pm.ok()) << pm.error().message;
+  ASSERT_GE(calls.size(), 2u);
+  const int64_t collapsible = c.model.vertex_count() - 4;
+  EXPECT_EQ(calls.front(), std::make_pair(int64_t{0}, collapsible));
+  EXPECT_EQ(calls.back(), std::make_pair(collapsible, collapsible));
+  for (size_t k = 1; k < calls.size(); ++k) EXPECT_GE(calls[k].first, calls[k - 1].first);
 }
 
 }  // namespace

@@ -2,6 +2,9 @@
 
 #include <random>
 #include <set>
+#include <string_view>
+#include <tuple>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -270,6 +273,42 @@ TEST(PmscIo, ContainerRoundTripServesTheSameEstimates) {
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.error().message.find("broken.anim"), std::string::npos);
   EXPECT_NE(refused.error().message.find("key_mean"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace animspace::pmsc
+
+namespace animspace::pmsc {
+namespace {
+
+// Progress (for the command line's bars): key points never pass the budget and never go back,
+// every calibration fold is announced, and the last call says the work is complete.
+TEST(PmscTrain, ReportsProgressThroughKeySelectionAndCalibration) {
+  const auto data = exact_subspace(150, 30, 5, 1.0, 7);
+  TrainingOptions o = options_for(1.0);
+  o.calibration_folds = 4;
+  std::vector<std::tuple<std::string, int64_t, int64_t>> calls;
+  o.progress = [&](std::string_view stage, int64_t done, int64_t total) {
+    calls.emplace_back(std::string(stage), done, total);
+  };
+  TrainingReport report;
+  ASSERT_TRUE(train(data.frames, o, &report).ok());
+  int64_t keys_before = 0;
+  std::vector<int64_t> folds;
+  for (const auto& [stage, done, total] : calls) {
+    if (stage == "key points") {
+      EXPECT_EQ(total, o.max_key_points);
+      EXPECT_GE(done, keys_before);
+      EXPECT_LE(done, total);
+      keys_before = done;
+    } else {
+      ASSERT_EQ(stage, "calibration");
+      EXPECT_EQ(total, 4);
+      folds.push_back(done);
+    }
+  }
+  EXPECT_EQ(keys_before, report.key_points);
+  EXPECT_EQ(folds, (std::vector<int64_t>{0, 1, 2, 3, 4}));
 }
 
 }  // namespace

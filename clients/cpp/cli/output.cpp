@@ -1,0 +1,82 @@
+#include "clients/cpp/cli/output.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+
+#include <google/protobuf/util/json_util.h>
+
+namespace animspace::cli {
+
+void print_json(const nlohmann::json& document) { std::cout << document.dump(2) << '\n' << std::flush; }
+
+nlohmann::json proto_json(const google::protobuf::Message& message) {
+  std::string text;
+  google::protobuf::util::JsonPrintOptions options;
+  options.preserve_proto_field_names = true;
+  options.always_print_primitive_fields = true;
+  (void)google::protobuf::util::MessageToJsonString(message, &text, options);
+  return nlohmann::json::parse(text);
+}
+
+ProgressBar::ProgressBar(std::string label, uint64_t total)
+    : label_(std::move(label)),
+      total_(total),
+      enabled_(isatty(STDERR_FILENO) == 1),
+      start_(std::chrono::steady_clock::now()),
+      last_draw_(start_ - std::chrono::seconds(1)) {}
+
+ProgressBar::~ProgressBar() { finish(); }
+
+void ProgressBar::update(uint64_t done, const std::string& detail) {
+  done_ = done;
+  if (!enabled_ || finished_) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_draw_ < std::chrono::milliseconds(100) && done != total_) return;
+  last_draw_ = now;
+  draw(detail);
+}
+
+void ProgressBar::finish() {
+  if (!enabled_ || finished_) return;
+  finished_ = true;
+  std::fputc('\n', stderr);
+}
+
+void ProgressBar::draw(const std::string& detail) {
+  constexpr int kWidth = 30;
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  const double fraction = total_ == 0 ? 0.0 : std::min(1.0, double(done_) / double(total_));
+  const int filled = static_cast<int>(fraction * kWidth);
+  std::string bar(static_cast<size_t>(filled), '#');
+  bar.resize(kWidth, '.');
+  std::string eta;
+  if (done_ > 0 && done_ < total_) {
+    eta = ", ~" + std::to_string(static_cast<long>(seconds * double(total_ - done_) / double(done_))) + " s left";
+  }
+  // \r and clear-to-end-of-line: the bar rewrites itself in place.
+  std::fprintf(stderr, "\r%s [%s] %llu/%llu %3.0f%% %.1f s%s%s%s\033[K", label_.c_str(), bar.c_str(),
+               static_cast<unsigned long long>(done_), static_cast<unsigned long long>(total_), 100.0 * fraction,
+               seconds, eta.c_str(), detail.empty() ? "" : "  ", detail.c_str());
+  std::fflush(stderr);
+}
+
+ProgressCallback progress_bars(const std::string& command) {
+  struct Stages {
+    std::string stage;
+    std::unique_ptr<ProgressBar> bar;
+  };
+  auto stages = std::make_shared<Stages>();
+  return [command, stages](std::string_view stage, int64_t done, int64_t total) {
+    if (!stages->bar || stages->stage != stage) {
+      stages->stage = std::string(stage);
+      stages->bar = std::make_unique<ProgressBar>(command + ": " + stages->stage, static_cast<uint64_t>(total));
+    }
+    stages->bar->set_total(static_cast<uint64_t>(total));
+    stages->bar->update(static_cast<uint64_t>(done));
+  };
+}
+
+}  // namespace animspace::cli

@@ -1,0 +1,54 @@
+// What the command line prints: JSON for scripts (--json) and progress bars for long work.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include <google/protobuf/message.h>
+#include <nlohmann/json.hpp>
+
+#include "core/common/progress.h"
+
+namespace animspace::cli {
+
+// One JSON document on stdout, indented, ending in a newline.
+void print_json(const nlohmann::json& document);
+
+// A protobuf message as JSON with the .proto field names (what `--json` prints for RPC answers).
+nlohmann::json proto_json(const google::protobuf::Message& message);
+
+// A one-line progress bar on stderr, drawn only when stderr is a terminal, so that logs, pipes
+// and `--json` output stay clean. Redraws at most ten times a second; `finish()` (or the
+// destructor) ends the line.
+class ProgressBar {
+ public:
+  ProgressBar(std::string label, uint64_t total);
+  ProgressBar(const ProgressBar&) = delete;
+  ProgressBar& operator=(const ProgressBar&) = delete;
+  ~ProgressBar();
+
+  // `done` of `total` steps; `detail` is shown after the count (e.g. "hit rate 93%").
+  void update(uint64_t done, const std::string& detail = "");
+  // Work whose total is only known once it starts (a simplifier's collapse count).
+  void set_total(uint64_t total) { total_ = total; }
+  void finish();
+
+  bool enabled() const { return enabled_; }
+
+ private:
+  void draw(const std::string& detail);
+
+  std::string label_;
+  uint64_t total_ = 0;
+  uint64_t done_ = 0;
+  bool enabled_ = false;
+  bool finished_ = false;
+  std::chrono::steady_clock::time_point start_;
+  std::chrono::steady_clock::time_point last_draw_;
+};
+
+// A core ProgressCallback drawing one ProgressBar per stage, labelled "<command>: <stage>".
+ProgressCallback progress_bars(const std::string& command);
+
+}  // namespace animspace::cli

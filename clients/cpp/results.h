@@ -1,0 +1,120 @@
+// Plain results of animspace::Client's pose calls, decoded from the wire once so that callers
+// work with contiguous float arrays rather than protobuf bytes.
+//
+// Every point array is N×D float32, point-major (row-major), ready for Eigen without a copy:
+//   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
+//       result.points.values.data(), result.points.count, 3);
+// The client library itself does not depend on Eigen (it links only the generated stubs).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "animspace/v1/common.pb.h"
+#include "animspace/v1/poses.pb.h"
+#include "animspace/v1/skinning.pb.h"
+
+namespace animspace {
+
+// N points × D channels, point-major.
+struct Points {
+  uint32_t count = 0;     // N
+  uint32_t channels = 0;  // D
+  std::vector<float> values;  // N·D
+
+  bool empty() const { return count == 0; }
+  // The D channels of point i.
+  std::span<const float> point(uint32_t i) const {
+    return {values.data() + size_t{i} * channels, channels};
+  }
+};
+
+// The key points a PMSC model needs (PoseService.DescribeKeyPoints).
+struct KeyPoints {
+  uint64_t model_version = 0;
+  // Zero-based indices into the full (or, for cross-PMSC, control) point set, in the order key
+  // values must be sent.
+  std::vector<uint32_t> indices;
+  uint32_t channels = 0;
+  uint32_t control_point_count = 0;
+  // Region of each key point for models with regions (local fail-through), else empty.
+  std::vector<uint32_t> regions;
+  v1::FailThrough fail_through = v1::FAIL_THROUGH_UNSPECIFIED;
+
+  // Gathers a frame's key values from its N×D point-major values (`frame` holds every point).
+  std::vector<float> gather(std::span<const float> frame) const;
+};
+
+// A skeleton pose: for each bone in model order, the top three rows of its 4×4 affine matrix,
+// row-major (12 floats per bone).
+struct SkeletonPose {
+  v1::SkeletonPose::Space space = v1::SkeletonPose::SPACE_LOCAL;
+  std::vector<float> transforms;  // B·12
+};
+
+// One key-point pose to evaluate: K×D values in DescribeKeyPoints order, and optionally the
+// skeleton pose it came from so that a server posing engine can complete a blend or miss.
+struct KeyPointPose {
+  std::span<const float> key_values;
+  uint32_t channels = 3;
+  const SkeletonPose* skeleton_pose = nullptr;
+};
+
+struct RegionError {
+  uint32_t region = 0;
+  float key_point_error = 0;
+  v1::CacheStatus status = v1::CACHE_STATUS_UNSPECIFIED;
+};
+
+// The soft cache's answer for one pose (Meyer & Anderson 2006 §5).
+struct PoseResult {
+  Points points;  // empty when points were omitted
+  v1::CacheStatus status = v1::CACHE_STATUS_UNSPECIFIED;
+  float key_point_error = 0;  // e_key
+  float blend_weight = 0;     // α
+  uint64_t model_version = 0;
+  bool full_evaluation_needed = false;
+  std::vector<RegionError> region_errors;
+  uint64_t sequence = 0;  // streams: the frame this answers
+};
+
+struct CompletedMiss {
+  PoseResult result;
+  bool logged = false;  // appended to the model's miss log for retraining
+};
+
+struct SkinnedPose {
+  Points points;
+  Points normals;  // empty unless requested
+};
+
+struct SkinningResult {
+  uint64_t model_version = 0;
+  std::vector<SkinnedPose> poses;
+};
+
+// Options shared by the key-point evaluations (unary, batch and stream).
+struct EvaluateOptions {
+  uint64_t version = 0;  // 0: the served default
+  bool omit_points = false;
+  bool include_region_errors = false;
+};
+
+struct SkinningOptions {
+  uint64_t version = 0;
+  bool include_normals = false;
+  uint32_t lod_level = 0;
+};
+
+// "HIT", "BLEND", "MISS" (or "UNSPECIFIED").
+const char* cache_status_name(v1::CacheStatus status);
+
+// Wire conversions, shared by the unary calls and the stream session.
+Points decode_points(const v1::PointArray& array);
+PoseResult decode_pose_result(const v1::PoseResult& result);
+v1::KeyPointPose encode_key_point_pose(const KeyPointPose& pose);
+v1::SkeletonPose encode_skeleton_pose(const SkeletonPose& pose);
+
+}  // namespace animspace

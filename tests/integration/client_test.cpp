@@ -1,0 +1,365 @@
+// animspace::Client (clients/cpp) against the real animspaced serving the demo repository. The
+// answers are checked against the core library evaluating the same model files in-process — an
+// independent path that never touches the client or the wire — and the stream session against
+// unary evaluation of the same frames.
+#include <chrono>
+#include <cmath>
+#include <span>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "clients/cpp/client.h"
+#include "core/animspace/animspace_io.h"
+#include "core/animspace/model.h"
+#include "core/container/model_container.h"
+#include "core/demo/demo_repository.h"
+#include "core/model/model_info.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/pmsc_model.h"
+#include "core/pmsc/soft_cache.h"
+#include "tests/support/daemon_process.h"
+#include "tests/support/integration_support.h"
+#include "tests/support/test_support.h"
+
+namespace animspace {
+namespace {
+
+namespace as = animation_space;
+using testing::DaemonProcess;
+using testing::TempDir;
+
+const std::string kPmsc(demo::kDemoPmscModelName);
+const std::string kAnimationSpace(demo::kDemoAnimationSpaceModelName);
+
+class ClientTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    repo_ = new TempDir();
+    work_ = new TempDir();
+    ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
+    daemon_ = new DaemonProcess({"--model-repository", repo_->path().string(), "--miss-log-dir",
+                                 work_->path().string(), "--renderer", "none"},
+                                work_->path());
+    client_ = new Client(daemon_->address());
+    ASSERT_TRUE(testing::wait_until_serving(*client_));
+
+    // The expensive rig's frames (demo `arm`) and the PMSC model trained on them, read here.
+    auto arm = container::read_file(repo_->path() / "arm" / "1" / "model.anim");
+    ASSERT_TRUE(arm.ok());
+    auto frames = arm->float_matrix(model::sections::kSequenceFrames);
+    ASSERT_TRUE(frames.ok());
+    frames_ = new FrameMatrix(std::move(*frames));
+    auto pmsc_file = container::read_file(repo_->path() / kPmsc / "1" / "model.anim");
+    ASSERT_TRUE(pmsc_file.ok());
+    auto pmsc = pmsc::load(*pmsc_file, kPmsc);
+    ASSERT_TRUE(pmsc.ok()) << pmsc.error().message;
+    pmsc_ = new pmsc::PmscModel(std::move(*pmsc));
+    ASSERT_TRUE(pmsc::prepare_projection(*pmsc_).ok());
+  }
+  static void TearDownTestSuite() {
+    delete pmsc_;
+    delete frames_;
+    delete client_;
+    delete daemon_;
+    delete work_;
+    delete repo_;
+  }
+
+  static std::span<const float> frame(int f) {
+    return {frames_->row(f).data(), static_cast<size_t>(frames_->cols())};
+  }
+
+  // What the soft cache makes of frame f, computed in-process from the model file.
+  static pmsc::PoseEstimate expected_estimate(int f) {
+    pmsc::PoseEstimate estimate;
+    pmsc::evaluate(*pmsc_, pmsc::gather_key_values(*pmsc_, frames_->row(f).transpose()), estimate);
+    return estimate;
+  }
+
+  static void expect_matches_core(const PoseResult& result, int f) {
+    const pmsc::PoseEstimate expected = expected_estimate(f);
+    ASSERT_EQ(result.points.channels, 3u);
+    ASSERT_EQ(result.points.values.size(), static_cast<size_t>(expected.points.size()));
+    const float scale = frames_->row(f).cwiseAbs().maxCoeff();
+    for (Eigen::Index i = 0; i < expected.points.size(); ++i) {
+      ASSERT_NEAR(result.points.values[static_cast<size_t>(i)], expected.points(i), 1e-5f * scale)
+          << "frame " << f << ", value " << i;
+    }
+    EXPECT_NEAR(result.key_point_error, expected.key_point_error, 1e-5 * scale + 1e-4 * expected.key_point_error);
+    const pmsc::SoftCacheDecision decision = pmsc::decide(result.key_point_error, pmsc_->epsilon);
+    const v1::CacheStatus expected_status = decision.status == pmsc::CacheStatus::kHit     ? v1::CACHE_STATUS_HIT
+                                            : decision.status == pmsc::CacheStatus::kBlend ? v1::CACHE_STATUS_BLEND
+                                                                                            : v1::CACHE_STATUS_MISS;
+    EXPECT_EQ(result.status, expected_status) << "frame " << f;
+    EXPECT_NEAR(result.blend_weight, decision.alpha, 1e-6);
+  }
+
+  static TempDir* repo_;
+  static TempDir* work_;
+  static DaemonProcess* daemon_;
+  static Client* client_;
+  static FrameMatrix* frames_;
+  static pmsc::PmscModel* pmsc_;
+};
+
+TempDir* ClientTest::repo_ = nullptr;
+TempDir* ClientTest::work_ = nullptr;
+DaemonProcess* ClientTest::daemon_ = nullptr;
+Client* ClientTest::client_ = nullptr;
+FrameMatrix* ClientTest::frames_ = nullptr;
+pmsc::PmscModel* ClientTest::pmsc_ = nullptr;
+
+TEST_F(ClientTest, DescribeKeyPointsGivesTheModelsKeysAndGathersThem) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  ASSERT_EQ(keys.indices.size(), pmsc_->key_points.size());
+  for (size_t k = 0; k < keys.indices.size(); ++k) EXPECT_EQ(keys.indices[k], static_cast<uint32_t>(pmsc_->key_points[k]));
+  EXPECT_EQ(keys.channels, 3u);
+  EXPECT_EQ(keys.control_point_count, static_cast<uint32_t>(pmsc_->control_point_count));
+  EXPECT_EQ(keys.fail_through, v1::FAIL_THROUGH_CLIENT);
+  const std::vector<float> gathered = keys.gather(frame(5));
+  const Eigen::VectorXf expected = pmsc::gather_key_values(*pmsc_, frames_->row(5).transpose());
+  ASSERT_EQ(gathered.size(), static_cast<size_t>(expected.size()));
+  for (size_t i = 0; i < gathered.size(); ++i) EXPECT_EQ(gathered[i], expected(static_cast<Eigen::Index>(i)));
+  EXPECT_THROW(keys.gather(frame(5).first(9)), std::invalid_argument);
+}
+
+TEST_F(ClientTest, UnaryAndBatchEvaluationMatchTheCoreInProcess) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  // Odd frames were held out of training, so some may blend or miss.
+  std::vector<std::vector<float>> values;
+  for (int f = 1; f < 40; f += 3) values.push_back(keys.gather(frame(f)));
+  std::vector<KeyPointPose> poses;
+  for (const auto& v : values) poses.push_back({v, keys.channels});
+  const std::vector<PoseResult> batch = client_->evaluate_key_points_batch(kPmsc, poses);
+  ASSERT_EQ(batch.size(), poses.size());
+  for (size_t i = 0; i < batch.size(); ++i) {
+    expect_matches_core(batch[i], 1 + 3 * static_cast<int>(i));
+    EXPECT_EQ(batch[i].model_version, keys.model_version);
+    const PoseResult single = client_->evaluate_key_points(kPmsc, poses[i]);
+    EXPECT_EQ(single.points.values, batch[i].points.values) << "a batch answers each pose as a single call does";
+  }
+  EvaluateOptions verdicts_only;
+  verdicts_only.omit_points = true;
+  const PoseResult probe = client_->evaluate_key_points(kPmsc, poses[0], verdicts_only);
+  EXPECT_TRUE(probe.points.empty());
+  EXPECT_EQ(probe.status, batch[0].status);
+}
+
+TEST_F(ClientTest, TheStreamSessionAnswersInOrderWithinItsWindow) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  const int count = 90;
+  StreamOptions options;
+  options.window = 3;
+  auto stream = client_->open_stream(kPmsc, options);
+  size_t worst_in_flight = 0;
+  std::thread writer([&] {
+    for (int f = 0; f < count; ++f) {
+      const std::vector<float> v = keys.gather(frame(f));
+      // Sequence numbers need not be contiguous: the client's own frame numbers come back.
+      ASSERT_TRUE(stream->write({v, keys.channels}, 1000 + 7 * static_cast<uint64_t>(f)));
+      worst_in_flight = std::max(worst_in_flight, stream->in_flight());
+    }
+    stream->writes_done();
+  });
+  std::vector<PoseResult> results;
+  while (auto result = stream->read()) {
+    // Slower than the server: without back-pressure the writer would run ahead by the whole sequence.
+    if (results.size() % 10 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    results.push_back(std::move(*result));
+  }
+  writer.join();
+  stream->finish();
+  ASSERT_EQ(results.size(), static_cast<size_t>(count));
+  EXPECT_LE(worst_in_flight, 3u) << "the writer ran past the window";
+  for (int f = 0; f < count; ++f) {
+    EXPECT_EQ(results[static_cast<size_t>(f)].sequence, 1000 + 7 * static_cast<uint64_t>(f));
+    expect_matches_core(results[static_cast<size_t>(f)], f);
+  }
+}
+
+TEST_F(ClientTest, OneThreadCanAlternateWritesAndReads) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  StreamOptions options;
+  options.window = 2;
+  options.omit_points = true;
+  auto stream = client_->open_stream(kPmsc, options);
+  std::vector<uint64_t> answered;
+  for (uint64_t f = 0; f < 20; ++f) {
+    if (stream->in_flight() == stream->window()) answered.push_back(stream->read()->sequence);
+    const std::vector<float> v = keys.gather(frame(static_cast<int>(f)));
+    ASSERT_TRUE(stream->write({v, keys.channels}, f));
+  }
+  stream->writes_done();
+  while (auto result = stream->read()) {
+    EXPECT_TRUE(result->points.empty());
+    answered.push_back(result->sequence);
+  }
+  stream->finish();
+  ASSERT_EQ(answered.size(), 20u);
+  for (uint64_t f = 0; f < 20; ++f) EXPECT_EQ(answered[f], f);
+}
+
+TEST_F(ClientTest, ABadFrameEndsTheStreamWithTheServersStatusAfterTheGoodOnes) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  auto stream = client_->open_stream(kPmsc);
+  std::vector<float> good = keys.gather(frame(2));
+  std::vector<float> short_frame(good.begin(), good.end() - 3);  // one key point too few
+  ASSERT_TRUE(stream->write({good, 3}, 1));
+  ASSERT_TRUE(stream->write({good, 3}, 2));
+  stream->write({short_frame, 3}, 3);  // may already see the broken stream: false is fine
+  stream->writes_done();
+  int read = 0;
+  while (auto result = stream->read()) ++read;
+  EXPECT_EQ(read, 2);
+  try {
+    stream->finish();
+    FAIL() << "a frame with a key point missing was accepted";
+  } catch (const RpcError& error) {
+    EXPECT_EQ(error.code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(error.server_message().find("frame[sequence=3]"), std::string::npos) << error.server_message();
+    EXPECT_NE(error.server_message().find("expected " + std::to_string(keys.indices.size()) + " key points"),
+              std::string::npos)
+        << error.server_message();
+  }
+}
+
+TEST_F(ClientTest, AnAbandonedStreamIsCancelledAndTheServerCarriesOn) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  {
+    auto stream = client_->open_stream(kPmsc);
+    const std::vector<float> v = keys.gather(frame(0));
+    ASSERT_TRUE(stream->write({v, 3}, 0));
+    ASSERT_TRUE(stream->read().has_value());
+    EXPECT_THROW(stream->finish(), std::logic_error) << "finish() before the end would hang gRPC";
+  }  // destroyed unfinished: cancelled
+  EXPECT_EQ(client_->health(), grpc::health::v1::HealthCheckResponse::SERVING);
+  const std::vector<float> v = keys.gather(frame(0));
+  EXPECT_EQ(client_->evaluate_key_points(kPmsc, {v, 3}).points.count, keys.control_point_count);
+}
+
+TEST_F(ClientTest, CompleteMissBlendsTheCallersFullValuesByAlpha) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  // The frame's key points moved: far from anything trained, so the cache blends or misses.
+  std::vector<float> full(frame(3).begin(), frame(3).end());
+  for (size_t i = 0; i < full.size(); i += 3) full[i + 1] += 0.05f * static_cast<float>(i % 7);
+  const std::vector<float> v = keys.gather(full);
+  const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3});
+  ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
+  EXPECT_TRUE(evaluated.full_evaluation_needed);
+  const CompletedMiss completed = client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, full);
+  EXPECT_TRUE(completed.logged);
+  const float alpha = evaluated.blend_weight;
+  ASSERT_EQ(completed.result.points.values.size(), full.size());
+  for (size_t i = 0; i < full.size(); ++i) {
+    const float expected = alpha * full[i] + (1 - alpha) * evaluated.points.values[i];
+    ASSERT_NEAR(completed.result.points.values[i], expected, 1e-5f) << "value " << i;
+  }
+  EXPECT_THROW(client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, std::span(full).first(10)),
+               std::invalid_argument);
+}
+
+TEST_F(ClientTest, SkeletonPosesEvaluateLikeTheCoreModel) {
+  auto file = container::read_file(repo_->path() / kAnimationSpace / "1" / "model.anim");
+  ASSERT_TRUE(file.ok());
+  auto model = as::load(*file, kAnimationSpace);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  auto rows = file->double_matrix(model::sections::kSequenceBoneTransforms, 16 * model->bone_count());
+  ASSERT_TRUE(rows.ok());
+  std::vector<SkeletonPose> poses;
+  std::vector<as::TransformList> globals;
+  for (int f : {0, 17, 33}) {
+    globals.push_back(as::pose_from_row(*rows, f, model->bone_count()));
+    poses.push_back(testing::client_skeleton_pose(globals.back()));
+  }
+  SkinningOptions options;
+  options.include_normals = true;
+  const SkinningResult result = client_->evaluate_skeleton_pose(kAnimationSpace, poses, options);
+  ASSERT_EQ(result.poses.size(), poses.size());
+  for (size_t p = 0; p < poses.size(); ++p) {
+    // The server sees float32 transforms; evaluate the core model with the same rounding.
+    as::TransformList rounded = globals[p];
+    for (auto& G : rounded) G = G.cast<float>().cast<double>();
+    PointMatrix expected;
+    as::evaluate(*model, rounded, expected);
+    const SkinnedPose& got = result.poses[p];
+    ASSERT_EQ(got.points.count, static_cast<uint32_t>(expected.rows()));
+    for (Eigen::Index v = 0; v < expected.rows(); ++v) {
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_NEAR(got.points.point(static_cast<uint32_t>(v))[static_cast<size_t>(c)], expected(v, c), 1e-4f)
+            << "pose " << p << ", vertex " << v;
+      }
+      const auto n = got.normals.point(static_cast<uint32_t>(v));
+      EXPECT_NEAR(std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]), 1.0f, 1e-4f);
+    }
+  }
+  SkinningOptions coarse;
+  coarse.lod_level = 3;
+  const SkinningResult level = client_->evaluate_skeleton_pose(kAnimationSpace, std::span(poses).first(1), coarse);
+  const v1::ModelSummary summary = client_->describe_model(kAnimationSpace);
+  EXPECT_LT(level.poses[0].points.count, result.poses[0].points.count) << "level 3 is coarser than level 0";
+  EXPECT_TRUE(level.poses[0].normals.empty());
+  EXPECT_GT(summary.versions(0).lod_level_count(), 3u);
+}
+
+TEST_F(ClientTest, ErrorsCarryTheCodeAndTheFieldTheServerNamed) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  std::vector<float> v = keys.gather(frame(0));
+  v.resize(v.size() - 3);
+  try {
+    client_->evaluate_key_points(kPmsc, {v, 3});
+    FAIL() << "one key point too few was accepted";
+  } catch (const RpcError& error) {
+    EXPECT_EQ(error.code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_EQ(error.server_message(), "poses[0].key_values.point_count: expected " + std::to_string(keys.indices.size()) +
+                                          " key points, got " + std::to_string(keys.indices.size() - 1));
+    EXPECT_NE(std::string(error.what()).find("EvaluateKeyPoints failed: INVALID_ARGUMENT"), std::string::npos);
+  }
+  try {
+    client_->describe_key_points("no-such-model");
+    FAIL();
+  } catch (const RpcError& error) {
+    EXPECT_EQ(error.code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_NE(error.server_message().find("no-such-model"), std::string::npos);
+  }
+  // A pose whose values are not whole points never leaves the client.
+  const std::vector<float> ragged(10, 0.0f);
+  EXPECT_THROW(client_->evaluate_key_points(kPmsc, {ragged, 3}), std::invalid_argument);
+  SkeletonPose bad;
+  bad.transforms.assign(13, 0.0f);
+  EXPECT_THROW(client_->evaluate_skeleton_pose(kAnimationSpace, std::span(&bad, 1)), std::invalid_argument);
+}
+
+TEST_F(ClientTest, EveryCallHasADeadline) {
+  ClientOptions options;
+  // A second in the past: well beyond gRPC's cached clock, so the call cannot slip through.
+  options.deadline = std::chrono::milliseconds(-1000);
+  Client hurried(daemon_->address(), options);
+  try {
+    hurried.list_models();
+    FAIL() << "a call with a deadline already past succeeded";
+  } catch (const RpcError& error) {
+    EXPECT_EQ(error.code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  }
+}
+
+TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
+  const std::string command = std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + daemon_->address() + " " +
+                              (work_->path() / "tour.png").string() + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string output;
+  char buffer[512];
+  while (fgets(buffer, sizeof buffer, pipe) != nullptr) output += buffer;
+  ASSERT_EQ(pclose(pipe), 0) << output;
+  const auto lod_levels = client_->describe_model(kAnimationSpace).versions(0).lod_level_count();
+  EXPECT_NE(output.find("streamed 100 frames"), std::string::npos) << output;
+  EXPECT_NE(output.find("skinned "), std::string::npos) << output;
+  EXPECT_NE(output.find("LOD level "), std::string::npos) << output;
+  EXPECT_NE(output.find("no thumbnail: "), std::string::npos) << "this daemon runs without a renderer: " << output;
+  EXPECT_GT(lod_levels, 1u);
+}
+
+}  // namespace
+}  // namespace animspace
