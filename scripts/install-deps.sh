@@ -19,6 +19,10 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev openssl
   # Python client (always run with /usr/bin/python3)
   python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-matplotlib
+  # ... and its offline install from pyproject.toml (tested: pip --no-build-isolation)
+  python3-pip python3-setuptools python3-wheel
+  # deploy/: manifests parsed and linted by the tests
+  python3-yaml yamllint
 )
 
 missing=()

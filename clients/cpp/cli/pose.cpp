@@ -109,8 +109,9 @@ int run_pose(const PoseArgs& a, Client& client, bool json) {
                 {"output", a.output}});
     return 0;
   }
-  std::printf("%s version %llu, level %u: %zu poses × %u points%s\n", a.model.c_str(),
-              static_cast<unsigned long long>(result.model_version), a.lod_level, result.poses.size(), points,
+  std::printf("%s version %llu, level %u: %zu pose%s × %u points%s\n", a.model.c_str(),
+              static_cast<unsigned long long>(result.model_version), a.lod_level, result.poses.size(),
+              result.poses.size() == 1 ? "" : "s", points,
               a.normals ? " with normals" : "");
   for (size_t p = 0; p < boxes.size(); ++p) {
     const auto& lo = boxes[p]["min"];

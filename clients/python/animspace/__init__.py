@@ -1,0 +1,79 @@
+"""animspace: the Python client for animspaced, numpy in and out.
+
+animspaced serves character-animation models over gRPC: Point Multiplication / Soft Caching
+(Meyer & Anderson 2006, 2007: key points in, the whole pose out, with HIT / BLEND / MISS) and
+animation-space skinning with levels of detail (Merry 2007), plus PNG thumbnails::
+
+    import numpy as np
+    import animspace
+
+    with animspace.Client("127.0.0.1:50051") as client:
+        keys = client.describe_key_points("arm-pmsc")
+        result = client.evaluate_key_points("arm-pmsc", np.zeros((keys.count, 3)),
+                                            version=keys.model_version)
+        print(result.status, result.key_point_error, result.points.shape)
+
+The generated messages and stubs are importable as ``animspace.v1`` (``from animspace.v1 import
+poses_pb2``) for anything the client does not wrap.
+"""
+from animspace.client import DEFAULT_DEADLINE_S, DEFAULT_MAX_RECEIVE_MESSAGE_BYTES, Client
+from animspace.errors import (Aborted, AlreadyExists, Cancelled, DataLoss, DeadlineExceeded, Error, FailedPrecondition,
+                              Internal, InvalidArgument, NotFound, OutOfRange, PermissionDenied, ProtocolError,
+                              ResourceExhausted, RpcError, Unauthenticated, Unavailable, Unimplemented,
+                              error_from_grpc)
+from animspace.lod import LodHeader, LodMesh, Skeleton
+from animspace.messages import (Camera, HistogramData, KeyPointPose, KeyPoints, MissCompletion, ModelStats,
+                                ModelSummary, ModelVersion, PoseResult, RegionError, RetrainResult, ServerInfo,
+                                SkinnedPose, Stats, Thumbnail)
+from animspace.pc2 import PointCache, read_pc2, write_pc2
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Client",
+    "DEFAULT_DEADLINE_S",
+    "DEFAULT_MAX_RECEIVE_MESSAGE_BYTES",
+    # errors
+    "Error",
+    "RpcError",
+    "ProtocolError",
+    "Aborted",
+    "AlreadyExists",
+    "Cancelled",
+    "DataLoss",
+    "DeadlineExceeded",
+    "FailedPrecondition",
+    "Internal",
+    "InvalidArgument",
+    "NotFound",
+    "OutOfRange",
+    "PermissionDenied",
+    "ResourceExhausted",
+    "Unauthenticated",
+    "Unavailable",
+    "Unimplemented",
+    "error_from_grpc",
+    # results and inputs
+    "Camera",
+    "HistogramData",
+    "KeyPointPose",
+    "KeyPoints",
+    "LodHeader",
+    "LodMesh",
+    "MissCompletion",
+    "ModelStats",
+    "ModelSummary",
+    "ModelVersion",
+    "PoseResult",
+    "RegionError",
+    "RetrainResult",
+    "ServerInfo",
+    "Skeleton",
+    "SkinnedPose",
+    "Stats",
+    "Thumbnail",
+    # point caches
+    "PointCache",
+    "read_pc2",
+    "write_pc2",
+]

@@ -1,0 +1,663 @@
+"""animspace.Client: a thin Python client for animspaced, numpy in and out.
+
+The Python sibling of ``clients/cpp/client.h``: one method per RPC, a deadline on every call, the
+bearer token on every call, and every failure raised as an :class:`~animspace.errors.RpcError`
+subclass carrying the gRPC code and the server's message (which names the offending field).
+Arrays go in as anything numpy can turn into float32 of the right shape and come out as numpy
+arrays in plain frozen dataclasses (``animspace.messages``, ``animspace.lod``).
+
+What the calls are for (Meyer & Anderson 2006, 2007; Merry 2007):
+- PMSC soft cache: a posing engine computes only the K key points of a pose; the server
+  reconstructs every point from the trained subspace and says whether the estimate can be
+  trusted — HIT (e_key ≤ ε_min), BLEND, or MISS (e_key ≥ ε_max) — with the blend weight α.
+- Animation space: v = Σ_j G_j p_j for any skeleton pose, and discrete levels of detail chosen
+  by screen-space error (eq. 7.2).
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from typing import Any, Callable, Iterable, Iterator, List, Optional, Sequence, Tuple, TypeVar, Union
+
+import grpc
+import numpy as np
+import numpy.typing as npt
+
+from animspace import health as health_messages
+from animspace import wire
+from animspace.errors import DeadlineExceeded, ProtocolError, Unavailable, error_from_grpc
+from animspace.lod import FORMS, LodAssembler, LodMesh
+from animspace.messages import (Camera, KeyPointPose, KeyPoints, MissCompletion, ModelSummary, PoseResult,
+                                RetrainResult, ServerInfo, SkinnedPose, Stats, Thumbnail)
+from animspace.v1 import (common_pb2, lod_pb2, lod_pb2_grpc, models_pb2, models_pb2_grpc, poses_pb2, poses_pb2_grpc,
+                          render_pb2, render_pb2_grpc, skinning_pb2, skinning_pb2_grpc, stats_pb2, stats_pb2_grpc,
+                          training_pb2, training_pb2_grpc)
+
+__all__ = ["Client", "DEFAULT_DEADLINE_S", "DEFAULT_MAX_RECEIVE_MESSAGE_BYTES"]
+
+# Same defaults as the C++ ClientOptions: 10 s per call, 64 MiB replies (a dense pose batch or a
+# LOD block can be large; gRPC's own 4 MiB default is too small for a 100k-point batch).
+DEFAULT_DEADLINE_S = 10.0
+DEFAULT_MAX_RECEIVE_MESSAGE_BYTES = 64 << 20
+
+_Response = TypeVar("_Response")
+Pem = Union[bytes, str]
+
+_SHADING = {
+    "blinn_phong": render_pb2.RenderThumbnailRequest.SHADING_BLINN_PHONG,
+    "lambert": render_pb2.RenderThumbnailRequest.SHADING_LAMBERT,
+}
+
+
+def _pem(value: Optional[Pem]) -> Optional[bytes]:
+    return value.encode("ascii") if isinstance(value, str) else value
+
+
+def _model_ref(name: str, version: int) -> common_pb2.ModelRef:
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"model: expected a model name, got {name!r}")
+    if version < 0:
+        raise ValueError(f"version: expected 0 (the default version) or a positive version, got {version}")
+    return common_pb2.ModelRef(name=name, version=version)
+
+
+@contextlib.contextmanager
+def _decoding(rpc: str) -> Iterator[None]:
+    """Turns a reply that cannot be decoded (a PointArray whose bytes do not match its counts)
+    into a ProtocolError: the server never sends one, a proxy or a truncation could."""
+    try:
+        yield
+    except ValueError as error:
+        raise ProtocolError(rpc, str(error)) from error
+
+
+def _point_array(array: np.ndarray) -> common_pb2.PointArray:
+    """An N×D float32 array already checked by wire.as_points, packed as a PointArray."""
+    return common_pb2.PointArray(point_count=array.shape[0], channel_count=array.shape[1],
+                                 data=array.astype(wire.WIRE_FLOAT, copy=False).tobytes())
+
+
+class Client:
+    """A connection to animspaced. Use it as a context manager so the channel is closed::
+
+        with animspace.Client("127.0.0.1:50051") as client:
+            keys = client.describe_key_points("arm-pmsc")
+
+    Args:
+        target: a gRPC target ("host:port", "dns:///name:port", "unix:/path", …). Exactly one of
+            ``target`` and ``channel`` must be given.
+        channel: an existing ``grpc.Channel`` (interceptors, load balancing, credentials set up by
+            the caller). The client does not close a channel it did not create.
+        token: bearer token, sent as ``authorization: Bearer <token>`` metadata on every call
+            (the daemon's ``--auth-token-file``; admin RPCs may need an admin token).
+        deadline_s: deadline of every call, seconds; each method's ``timeout`` overrides it for
+            that call. None: no deadline. For a stream it bounds the whole stream.
+        max_receive_message_bytes: largest reply accepted, bytes.
+        tls: use TLS. Implied by any of the TLS arguments below.
+        root_certificates: PEM of the CA that signed the server's certificate (None: the
+            system's roots).
+        client_certificate, client_key: PEM of this client's certificate chain and key, for a
+            server started with ``--tls-client-ca``. Both or neither.
+        server_name: the name the server's certificate must carry, when it differs from the
+            target's host (``grpc.ssl_target_name_override``).
+        channel_options: further ``grpc`` channel arguments, e.g. ``[("grpc.enable_retries", 0)]``.
+
+    A client may be shared by threads: gRPC channels and stubs are thread-safe, and the client
+    keeps no per-call state.
+    """
+
+    def __init__(self, target: Optional[str] = None, *, channel: Optional[grpc.Channel] = None,
+                 token: Optional[str] = None, deadline_s: Optional[float] = DEFAULT_DEADLINE_S,
+                 max_receive_message_bytes: int = DEFAULT_MAX_RECEIVE_MESSAGE_BYTES, tls: bool = False,
+                 root_certificates: Optional[Pem] = None, client_certificate: Optional[Pem] = None,
+                 client_key: Optional[Pem] = None, server_name: Optional[str] = None,
+                 channel_options: Sequence[Tuple[str, Any]] = ()) -> None:
+        if (target is None) == (channel is None):
+            raise ValueError("Client: give exactly one of target and channel")
+        if deadline_s is not None and not deadline_s > 0:
+            raise ValueError(f"deadline_s: expected seconds > 0 or None, got {deadline_s}")
+        if (client_certificate is None) != (client_key is None):
+            raise ValueError("client_certificate, client_key: give both or neither")
+        if token is not None and (not token or any(not "!" <= c <= "~" for c in token)):
+            # What a gRPC text metadata value can carry, and what animspaced's token files hold.
+            raise ValueError("token: expected printable ASCII without spaces")
+        self._target = target
+        self._deadline_s = deadline_s
+        self._metadata: Optional[Tuple[Tuple[str, str], ...]] = (
+            (("authorization", f"Bearer {token}"),) if token is not None else None)
+        self._owns_channel = channel is None
+        self._closed = False
+        if channel is None:
+            assert target is not None
+            options: List[Tuple[str, Any]] = [("grpc.max_receive_message_length", int(max_receive_message_bytes))]
+            secure = tls or any(x is not None for x in (root_certificates, client_certificate, server_name))
+            if server_name is not None:
+                options.append(("grpc.ssl_target_name_override", server_name))
+            options.extend(channel_options)
+            if secure:
+                credentials = grpc.ssl_channel_credentials(root_certificates=_pem(root_certificates),
+                                                           private_key=_pem(client_key),
+                                                           certificate_chain=_pem(client_certificate))
+                channel = grpc.secure_channel(target, credentials, options=options)
+            else:
+                channel = grpc.insecure_channel(target, options=options)
+        self._channel: grpc.Channel = channel
+        self._models = models_pb2_grpc.ModelServiceStub(channel)
+        self._stats = stats_pb2_grpc.StatsServiceStub(channel)
+        self._poses = poses_pb2_grpc.PoseServiceStub(channel)
+        self._skinning = skinning_pb2_grpc.SkinningServiceStub(channel)
+        self._training = training_pb2_grpc.TrainingServiceStub(channel)
+        self._lod = lod_pb2_grpc.LodServiceStub(channel)
+        self._render = render_pb2_grpc.RenderServiceStub(channel)
+        self._health_check = channel.unary_unary(
+            health_messages.CHECK_METHOD,
+            request_serializer=health_messages.HealthCheckRequest.SerializeToString,
+            response_deserializer=health_messages.HealthCheckResponse.FromString)
+
+    # ------------------------------------------------------------------------------------------
+    # Life cycle
+
+    def __repr__(self) -> str:
+        where = repr(self._target) if self._target is not None else "channel=<given>"
+        return f"animspace.Client({where}, deadline_s={self._deadline_s}{', closed' if self._closed else ''})"
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Closes the channel if this client created it (idempotent). Later calls raise ValueError."""
+        if not self._closed:
+            self._closed = True
+            if self._owns_channel:
+                self._channel.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def channel(self) -> grpc.Channel:
+        """The underlying channel, for calls made on raw stubs (add :attr:`metadata` to them)."""
+        return self._channel
+
+    @property
+    def metadata(self) -> Optional[Tuple[Tuple[str, str], ...]]:
+        """The metadata sent with every call (the bearer token), or None."""
+        return self._metadata
+
+    # ------------------------------------------------------------------------------------------
+    # Plumbing: every call goes through _unary or _stream_call, and every failure through
+    # errors.error_from_grpc.
+
+    def _timeout(self, timeout: Optional[float]) -> Optional[float]:
+        if self._closed:
+            raise ValueError("the animspace.Client is closed")
+        if timeout is None:
+            return self._deadline_s
+        if not timeout > 0:
+            raise ValueError(f"timeout: expected seconds > 0, got {timeout}")
+        return timeout
+
+    def _unary(self, rpc: str, method: Callable[..., _Response], request: Any, timeout: Optional[float]) -> _Response:
+        deadline = self._timeout(timeout)
+        try:
+            return method(request, timeout=deadline, metadata=self._metadata)
+        except grpc.RpcError as error:
+            raise error_from_grpc(rpc, error) from error
+
+    # ------------------------------------------------------------------------------------------
+    # Health and the registry (models.proto)
+
+    def health(self, service: str = "", *, timeout: Optional[float] = None) -> str:
+        """grpc.health.v1 status of ``service`` ("" = the whole server): "SERVING", or
+        "NOT_SERVING" while the repository loads and while the daemon shuts down.
+
+        Raises:
+            NotFound: for a service name the server does not know.
+        """
+        response = self._unary("Health/Check", self._health_check,
+                               health_messages.HealthCheckRequest(service=service), timeout)
+        return health_messages.serving_status_name(response.status)
+
+    def wait_until_serving(self, timeout_s: float = 30.0, *, poll_s: float = 0.05) -> None:
+        """Waits until health is SERVING (the daemon reports NOT_SERVING while it loads its
+        repository, and the channel may not be connected yet).
+
+        Raises:
+            DeadlineExceeded: when the server is not serving within ``timeout_s``; the last
+                status or error is in the message.
+        """
+        give_up = time.monotonic() + timeout_s
+        last = "no answer"
+        while True:
+            left = give_up - time.monotonic()
+            if left <= 0:
+                raise DeadlineExceeded("Health/Check", grpc.StatusCode.DEADLINE_EXCEEDED,
+                                       f"not SERVING after {timeout_s} s; last: {last}")
+            try:
+                last = self.health(timeout=min(left, max(poll_s, 1.0)))
+                if last == "SERVING":
+                    return
+            except (Unavailable, DeadlineExceeded) as error:  # not up yet, or busy starting
+                last = str(error)
+            time.sleep(min(poll_s, max(0.0, give_up - time.monotonic())))
+
+    def list_models(self, *, timeout: Optional[float] = None) -> List[ModelSummary]:
+        """Every model the server knows, sorted by name, with its versions (failed ones included)."""
+        response = self._unary("ListModels", self._models.ListModels, models_pb2.ListModelsRequest(), timeout)
+        return [ModelSummary.from_proto(m) for m in response.models]
+
+    def describe_model(self, name: str, version: int = 0, *, timeout: Optional[float] = None) -> ModelSummary:
+        """One model in detail (version 0: every version). Raises NotFound for an unknown one."""
+        request = models_pb2.DescribeModelRequest(model=_model_ref(name, version))
+        return ModelSummary.from_proto(self._unary("DescribeModel", self._models.DescribeModel, request, timeout).model)
+
+    def load_model(self, name: str, version: int = 0, *, timeout: Optional[float] = None) -> ModelSummary:
+        """Admin: (re)loads a model from the repository (version 0: every version found).
+
+        Raises:
+            NotFound: no such directory. DataLoss / FailedPrecondition: a corrupt or too-new file
+            (the previously loaded version keeps serving). PermissionDenied: admin RPCs locked.
+        """
+        request = models_pb2.LoadModelRequest(model=_model_ref(name, version))
+        return ModelSummary.from_proto(self._unary("LoadModel", self._models.LoadModel, request, timeout).model)
+
+    def unload_model(self, name: str, version: int = 0, *, timeout: Optional[float] = None) -> None:
+        """Admin: stops serving a model (version 0: every version); calls in flight finish."""
+        request = models_pb2.UnloadModelRequest(model=_model_ref(name, version))
+        self._unary("UnloadModel", self._models.UnloadModel, request, timeout)
+
+    def server_info(self, *, timeout: Optional[float] = None) -> ServerInfo:
+        """Server version, limits (max batch, message size, thumbnail size), renderer, RPCs."""
+        response = self._unary("GetServerInfo", self._models.GetServerInfo, models_pb2.GetServerInfoRequest(), timeout)
+        return ServerInfo.from_proto(response)
+
+    def stats(self, model: str = "", *, reset: bool = False, timeout: Optional[float] = None) -> Stats:
+        """Per-model hits/blends/misses, hit rate, e_key and latency histograms ("" = every model).
+        ``reset`` zeroes the counters after reading (admin)."""
+        request = stats_pb2.GetStatsRequest(model=model, reset=reset)
+        return Stats.from_proto(self._unary("GetStats", self._stats.GetStats, request, timeout))
+
+    # ------------------------------------------------------------------------------------------
+    # The soft cache (poses.proto; Meyer & Anderson 2006 §4–5, 2007 §2)
+
+    def describe_key_points(self, model: str, version: int = 0, *, timeout: Optional[float] = None) -> KeyPoints:
+        """The key points a posing engine must compute for a PMSC model, in request order.
+
+        Raises:
+            FailedPrecondition: for a model without key points (not PMSC).
+        """
+        request = poses_pb2.DescribeKeyPointsRequest(model=_model_ref(model, version))
+        return KeyPoints.from_proto(self._unary("DescribeKeyPoints", self._poses.DescribeKeyPoints, request, timeout))
+
+    def evaluate_key_points(self, model: str, key_values: npt.ArrayLike, *, version: int = 0,
+                            skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
+                            include_region_errors: bool = False, omit_points: bool = False,
+                            timeout: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
+        """Key points in, the whole pose out, through the soft cache.
+
+        Args:
+            key_values: K×D key values in ``describe_key_points`` order for one pose (returns one
+                PoseResult), or P×K×D for a batch of P poses (returns a list, request order).
+            version: pin the version the key points belong to (``KeyPoints.model_version``).
+            skeleton_pose: the skeleton pose(s) the key values come from — B×3×4 / B×4×4 for one
+                pose, P×B×3×4 / P×B×4×4 for a batch — so that a model with a server posing engine
+                (fail-through "SERVER") completes blends and misses itself.
+            space: "global" (G_j) or "local" (L_j) for ``skeleton_pose``.
+            include_region_errors: return per-region e_key (models with regions).
+            omit_points: return only the verdicts (``points`` is None): cheap probing.
+
+        Raises:
+            ValueError: for a wrong shape, naming the argument (nothing is sent).
+            InvalidArgument: a key point count or channel count the model does not expect, or
+                non-finite values (the message names ``poses[i].key_values``).
+            ResourceExhausted: a batch over the server's ``max_batch_poses``.
+        """
+        values = wire.as_float32("key_values", key_values)
+        if values.ndim not in (2, 3):
+            raise ValueError(f"key_values: expected shape (K, D) or (P, K, D), got {wire.shape_text(values.shape)}")
+        batch = values.ndim == 3
+        if batch and values.shape[0] == 0:
+            raise ValueError("key_values: expected at least one pose, got shape " + wire.shape_text(values.shape))
+        values = wire.as_points("key_values", values, ndim=values.ndim, points_label="K")
+        poses = values if batch else values[np.newaxis]
+        transforms: Optional[np.ndarray] = None
+        if skeleton_pose is not None:
+            transforms = wire.as_transforms("skeleton_pose", skeleton_pose, batch=batch)
+            if batch and transforms.shape[0] != poses.shape[0]:
+                raise ValueError(f"skeleton_pose: expected {poses.shape[0]} poses like key_values, got shape "
+                                 f"{wire.shape_text(transforms.shape)}")
+            transforms = transforms if batch else transforms[np.newaxis]
+        if space not in wire.SPACES:
+            raise ValueError(f"space: expected 'global' or 'local', got {space!r}")
+        request = poses_pb2.EvaluateKeyPointsRequest(model=_model_ref(model, version),
+                                                     include_region_errors=include_region_errors,
+                                                     omit_points=omit_points)
+        for i in range(poses.shape[0]):
+            pose = request.poses.add()
+            pose.key_values.CopyFrom(_point_array(poses[i]))
+            if transforms is not None:
+                pose.skeleton_pose.CopyFrom(wire.skeleton_pose(f"skeleton_pose[{i}]", transforms[i], space))
+        response = self._unary("EvaluateKeyPoints", self._poses.EvaluateKeyPoints, request, timeout)
+        if len(response.results) != poses.shape[0]:
+            raise ProtocolError("EvaluateKeyPoints", f"{len(response.results)} results for {poses.shape[0]} poses")
+        with _decoding("EvaluateKeyPoints"):
+            results = [PoseResult.from_proto(r, f"results[{i}].points") for i, r in enumerate(response.results)]
+        return results if batch else results[0]
+
+    def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
+                          version: int = 0, omit_points: bool = False, first_sequence: int = 0,
+                          timeout: Optional[float] = None) -> Iterator[PoseResult]:
+        """Plays a sequence through the soft cache over one StreamKeyPoints call: one result per
+        frame, yielded in frame order as they arrive.
+
+        Frames are sent as the server takes them (gRPC flow control), so ``frames`` may be a lazy
+        generator reading a file or a live posing engine. Each frame is a K×D array of key
+        values, or a :class:`KeyPointPose` that also carries its skeleton pose. The stream is
+        pinned to the version its first frame resolves (a retrain never changes the key points
+        under it); frame i is numbered ``first_sequence + i`` and every result's ``sequence`` is
+        checked against it.
+
+        The call starts when iteration starts; ``timeout`` (or the client's deadline) bounds the
+        whole stream — pass a generous one for a long sequence. Stopping the iteration early
+        cancels the call.
+
+        Raises:
+            ValueError: a frame of the wrong shape — after the results of every frame before it.
+                An exception raised by ``frames`` itself is re-raised the same way.
+            ProtocolError: a result out of order, or fewer results than frames.
+            InvalidArgument etc.: a frame the server refused (the message names its sequence).
+        """
+        # Arguments are checked now; the call starts with the iteration.
+        requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence)
+        self._timeout(timeout)
+        return self._stream_key_points(requests, first_sequence, timeout)
+
+    def _stream_key_points(self, requests: "_FrameRequests", first_sequence: int,
+                           timeout: Optional[float]) -> Iterator[PoseResult]:
+        call = self._poses.StreamKeyPoints(iter(requests), timeout=self._timeout(timeout), metadata=self._metadata)
+        expected = first_sequence
+        try:
+            try:
+                for response in call:
+                    if response.sequence != expected:
+                        raise ProtocolError("StreamKeyPoints", f"expected the result of frame {expected}, got "
+                                                               f"sequence {response.sequence}")
+                    with _decoding("StreamKeyPoints"):
+                        result = PoseResult.from_proto(response, f"frame {expected}: points")
+                    yield result
+                    expected += 1
+            except grpc.RpcError as error:
+                if requests.failure is not None:
+                    raise requests.failure from None
+                raise error_from_grpc("StreamKeyPoints", error) from error
+        finally:
+            call.cancel()  # no-op once the call finished; ends it when the caller stopped early
+        if requests.failure is not None:
+            raise requests.failure
+        if expected != first_sequence + requests.sent:
+            raise ProtocolError("StreamKeyPoints",
+                                f"the stream ended after {expected - first_sequence} results for {requests.sent} frames")
+
+    def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
+                      timeout: Optional[float] = None) -> MissCompletion:
+        """Completes a blend or miss with the full pose from the client's posing engine
+        (fail-through "CLIENT"), and logs it for retraining.
+
+        Stateless: pass the same K×D ``key_values`` that were evaluated, the N×D ``full_values``,
+        and the ``version`` that produced the estimate (``PoseResult.model_version``). The answer
+        is α·full + (1−α)·estimate with the α of this pose.
+
+        Raises:
+            FailedPrecondition: for a cross-PMSC model (no full calculation exists).
+        """
+        keys = wire.as_points("key_values", key_values, points_label="K")
+        full = wire.as_points("full_values", full_values)
+        request = poses_pb2.CompleteMissRequest(model=_model_ref(model, version), key_values=_point_array(keys),
+                                                full_values=_point_array(full))
+        response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, timeout)
+        with _decoding("CompleteMiss"):
+            return MissCompletion(result=PoseResult.from_proto(response.result, "result.points"),
+                                  logged=response.logged)
+
+    # ------------------------------------------------------------------------------------------
+    # Animation space (skinning.proto, lod.proto; Merry 2007)
+
+    def evaluate_skeleton_pose(self, model: str, transforms: npt.ArrayLike, *, version: int = 0,
+                               space: str = "global", include_normals: bool = False, lod_level: int = 0,
+                               timeout: Optional[float] = None) -> Union[SkinnedPose, List[SkinnedPose]]:
+        """Poses an animation-space model: v = Σ_j G_j p_j (Merry 2007 §3.1), normals from
+        tangent planes (§3.5).
+
+        Args:
+            transforms: one pose, B×3×4 or B×4×4 (returns a SkinnedPose), or a batch, P×B×3×4 or
+                P×B×4×4 (returns a list). B must equal the model's bone count. 4×4 matrices must
+                be affine: the wire carries the top three rows.
+            space: "global": G_j (world from bone); "local": joint transforms L_j, composed by
+                the server as G_j = G_parent(j) · L_j (§2.2).
+            lod_level: evaluate this level of detail instead of the full mesh (0).
+
+        Raises:
+            FailedPrecondition: a model without a skeleton.
+            InvalidArgument: wrong bone count or non-finite values (naming ``poses[i]``).
+        """
+        array = wire.as_float32("transforms", transforms)
+        batch = array.ndim == 4
+        array = wire.as_transforms("transforms", array, batch=batch)
+        if batch and array.shape[0] == 0:
+            raise ValueError("transforms: expected at least one pose, got shape " + wire.shape_text(array.shape))
+        if space not in wire.SPACES:
+            raise ValueError(f"space: expected 'global' or 'local', got {space!r}")
+        poses = array if batch else array[np.newaxis]
+        request = skinning_pb2.EvaluateSkeletonPoseRequest(model=_model_ref(model, version),
+                                                           include_normals=include_normals, lod_level=lod_level)
+        for pose in poses:
+            request.poses.add(space=wire.SPACES[space], bone_count=pose.shape[0],
+                              transforms=pose.astype(wire.WIRE_FLOAT, copy=False).tobytes())
+        response = self._unary("EvaluateSkeletonPose", self._skinning.EvaluateSkeletonPose, request, timeout)
+        if len(response.poses) != poses.shape[0]:
+            raise ProtocolError("EvaluateSkeletonPose", f"{len(response.poses)} results for {poses.shape[0]} poses")
+        with _decoding("EvaluateSkeletonPose"):
+            results = [SkinnedPose(points=wire.points_from(p.points, f"poses[{i}].points"),
+                                   normals=(wire.points_from(p.normals, f"poses[{i}].normals")
+                                            if p.HasField("normals") else None),
+                                   model_version=response.model_version)
+                       for i, p in enumerate(response.poses)]
+        return results if batch else results[0]
+
+    def get_lod(self, model: str, *, version: int = 0, level: Optional[int] = None,
+                max_vertices: Optional[int] = None, tolerance_px: Optional[float] = None,
+                distance: Optional[float] = None, viewport_width_px: int = 1920,
+                horizontal_fov_rad: float = math.radians(45), form: str = "posed",
+                pose: Optional[npt.ArrayLike] = None, space: str = "global", include_geomorph: bool = False,
+                vertices_per_chunk: int = 0, timeout: Optional[float] = None) -> LodMesh:
+        """One level of detail, streamed in chunks and reassembled (Merry 2007 ch. 6, §7.3).
+
+        Choose the level with exactly one of:
+            level: an index (0 = full detail);
+            max_vertices: the finest level with at most this many vertices;
+            tolerance_px + distance: the coarsest level whose error ε^l projects to at most
+                ``tolerance_px`` pixels at ``distance`` (camera to bounding-sphere centre, model
+                units) in a ``viewport_width_px``-wide view of horizontal field of view
+                ``horizontal_fov_rad`` (eq. 7.2).
+
+        Args:
+            form: "posed": V×3 positions at ``pose`` (the rest pose when None); "animation_space":
+                per-influence p_j, bone indices and the skeleton, for skinning it with any G_j
+                (``LodMesh.pose``).
+            pose: FORM_POSED's skeleton pose, B×3×4 or B×4×4 in ``space``.
+            include_geomorph: animation-space form: Δp towards the next coarser level (eq. 7.1).
+            vertices_per_chunk: most vertices per block (0 = server default).
+
+        Raises:
+            ValueError: not exactly one selection, or a distance without a tolerance.
+            OutOfRange: ``max_vertices`` below the coarsest level's vertex count.
+            FailedPrecondition: a model without levels.
+            ProtocolError: blocks out of order or not adding up to the header.
+        """
+        chosen = [name for name, value in (("level", level), ("max_vertices", max_vertices),
+                                           ("tolerance_px", tolerance_px)) if value is not None]
+        if len(chosen) != 1:
+            raise ValueError("level, max_vertices, tolerance_px: give exactly one, got "
+                             + (", ".join(chosen) if chosen else "none"))
+        if (distance is not None) != (tolerance_px is not None):
+            raise ValueError("distance: give it with tolerance_px (and only then)")
+        if form not in FORMS:
+            raise ValueError(f"form: expected 'posed' or 'animation_space', got {form!r}")
+        request = lod_pb2.GetLodRequest(model=_model_ref(model, version), form=FORMS[form],
+                                        include_geomorph=include_geomorph, vertices_per_chunk=vertices_per_chunk)
+        if level is not None:
+            request.level = level
+        elif max_vertices is not None:
+            request.budget.max_vertices = max_vertices
+        else:
+            request.pixel_tolerance.tolerance_px = float(tolerance_px)  # type: ignore[arg-type]
+            request.pixel_tolerance.distance = float(distance)  # type: ignore[arg-type]
+            request.pixel_tolerance.viewport_width_px = viewport_width_px
+            request.pixel_tolerance.horizontal_fov_rad = horizontal_fov_rad
+        if pose is not None:
+            request.pose.CopyFrom(wire.skeleton_pose("pose", pose, space))
+        call = self._lod.GetLod(request, timeout=self._timeout(timeout), metadata=self._metadata)
+        assembler = LodAssembler()
+        try:
+            for chunk in call:
+                problem = assembler.take(chunk)
+                if problem:
+                    call.cancel()  # the rest of the stream is of no use
+                    raise ProtocolError("GetLod", problem)
+        except grpc.RpcError as error:
+            raise error_from_grpc("GetLod", error) from error
+        problem = assembler.complete()
+        if problem:
+            raise ProtocolError("GetLod", problem)
+        with _decoding("GetLod"):
+            return assembler.mesh()
+
+    # ------------------------------------------------------------------------------------------
+    # Thumbnails and retraining
+
+    def render_thumbnail(self, model: str, width_px: int, height_px: int, *, version: int = 0,
+                         key_values: Optional[npt.ArrayLike] = None, skeleton_pose: Optional[npt.ArrayLike] = None,
+                         space: str = "global", sequence_frame: Optional[int] = None, camera: Optional[Camera] = None,
+                         background_rgba: Optional[Sequence[float]] = None, shading: Optional[str] = None,
+                         samples: int = 0, show_key_points: bool = False, show_wireframe: bool = False,
+                         full_values: Optional[npt.ArrayLike] = None, pixel_tolerance: float = 0.0,
+                         timeout: Optional[float] = None) -> Thumbnail:
+        """A PNG of the model drawn headless by the daemon's render thread.
+
+        What is drawn: the rest pose; or ``key_values`` (K×D) through the soft cache (PMSC; with
+        ``skeleton_pose`` too for a server posing engine; the verdict comes back in
+        ``Thumbnail.pose``); or ``skeleton_pose`` alone through the animation-space model; or
+        stored frame ``sequence_frame``.
+
+        Args:
+            camera: None frames the posed bounding box automatically.
+            background_rgba: 4 floats in [0, 1] (None: opaque dark grey).
+            shading: "blinn_phong" or "lambert" (None: the server's default, Blinn-Phong).
+            samples: multisampling 1, 2, 4 or 8 (0: the server's default, 4).
+            show_key_points, show_wireframe: overlays.
+            full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red ε_max).
+            pixel_tolerance: draw the coarsest level whose error stays under this many pixels
+                (eq. 7.2); 0 draws full detail.
+
+        Raises:
+            InvalidArgument: a size outside 1..max_thumbnail_px (naming ``width_px``) or a bad camera.
+            Unavailable: the server has no renderer. ResourceExhausted: the render queue is full.
+        """
+        if sequence_frame is not None and (key_values is not None or skeleton_pose is not None):
+            raise ValueError("sequence_frame: give it alone, not with key_values or skeleton_pose")
+        request = render_pb2.RenderThumbnailRequest(model=_model_ref(model, version), width_px=width_px,
+                                                    height_px=height_px, samples=samples,
+                                                    show_key_points=show_key_points, show_wireframe=show_wireframe,
+                                                    pixel_tolerance=pixel_tolerance)
+        if key_values is not None:
+            request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
+            if skeleton_pose is not None:
+                request.key_points.skeleton_pose.CopyFrom(wire.skeleton_pose("skeleton_pose", skeleton_pose, space))
+        elif skeleton_pose is not None:
+            request.skeleton_pose.CopyFrom(wire.skeleton_pose("skeleton_pose", skeleton_pose, space))
+        elif sequence_frame is not None:
+            request.sequence_frame = sequence_frame
+        if camera is not None:
+            request.camera.CopyFrom(camera.to_proto())
+        if background_rgba is not None:
+            rgba = [float(v) for v in background_rgba]
+            if len(rgba) != 4:
+                raise ValueError(f"background_rgba: expected 4 floats, got {len(rgba)}")
+            request.background_rgba.extend(rgba)
+        if shading is not None:
+            if shading not in _SHADING:
+                raise ValueError(f"shading: expected 'blinn_phong' or 'lambert', got {shading!r}")
+            request.shading = _SHADING[shading]
+        if full_values is not None:
+            request.full_values.CopyFrom(wire.point_array("full_values", full_values))
+        response = self._unary("RenderThumbnail", self._render.RenderThumbnail, request, timeout)
+        with _decoding("RenderThumbnail"):
+            return Thumbnail.from_proto(response)
+
+    def retrain(self, model: str, *, version: int = 0, exclude_misses: bool = False, error_bound: float = 0.0,
+                max_key_points: int = 0, dry_run: bool = False, timeout: Optional[float] = None) -> RetrainResult:
+        """Admin: "train each night, better tomorrow" — rebuilds the subspace from the model's
+        training frames plus the logged misses that carry full values, writes it as the next
+        version and hot-swaps it in (calls in flight finish on the old one).
+
+        Retraining can take minutes on real data: pass a ``timeout`` to match.
+
+        Args:
+            exclude_misses: train on the original frames only.
+            error_bound: override the bound on the max per-point residual (model units; 0 keeps it).
+            max_key_points: override the key point budget (0 keeps it).
+            dry_run: train and report without writing or serving (``new_version`` is 0).
+
+        Raises:
+            FailedPrecondition: a model that cannot be retrained. Aborted: a retrain of the same
+            model is running. PermissionDenied: admin RPCs are locked.
+        """
+        request = training_pb2.RetrainRequest(model=_model_ref(model, version), exclude_misses=exclude_misses,
+                                              error_bound=error_bound, max_key_points=max_key_points, dry_run=dry_run)
+        return RetrainResult.from_proto(self._unary("Retrain", self._training.Retrain, request, timeout))
+
+
+class _FrameRequests:
+    """StreamKeyPoints' request iterator.
+
+    gRPC consumes it on its own thread, where an exception would only cancel the call with an
+    opaque CANCELLED. So a frame that fails to convert (or a ``frames`` iterable that raises)
+    is remembered instead and ends the request side cleanly: the server answers every frame sent
+    before it, and the caller's iterator re-raises the exception after yielding those results.
+    """
+
+    def __init__(self, model: common_pb2.ModelRef, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]],
+                 omit_points: bool, first_sequence: int) -> None:
+        if first_sequence < 0:
+            raise ValueError(f"first_sequence: expected >= 0, got {first_sequence}")
+        self._model = model
+        self._frames = frames
+        self._omit_points = omit_points
+        self._first_sequence = first_sequence
+        self.sent = 0
+        self.failure: Optional[BaseException] = None
+
+    def __iter__(self) -> Iterator[poses_pb2.KeyPointFrame]:
+        shape: Optional[Tuple[int, ...]] = None
+        try:
+            for i, frame in enumerate(self._frames):
+                pose = frame if isinstance(frame, KeyPointPose) else KeyPointPose(frame)
+                values = wire.as_points(f"frames[{i}]", pose.key_values, points_label="K")
+                if shape is None:
+                    shape = values.shape
+                elif values.shape != shape:
+                    raise ValueError(f"frames[{i}]: expected shape {wire.shape_text(shape)} like frames[0], "
+                                     f"got {wire.shape_text(values.shape)}")
+                message = poses_pb2.KeyPointFrame(sequence=self._first_sequence + i, omit_points=self._omit_points)
+                if i == 0:
+                    message.model.CopyFrom(self._model)  # later frames keep the stream's model
+                message.pose.CopyFrom(KeyPointPose(values, pose.skeleton_pose, pose.space).to_proto(f"frames[{i}]"))
+                self.sent += 1
+                yield message
+        except Exception as error:  # noqa: BLE001 — re-raised on the caller's thread
+            self.failure = error

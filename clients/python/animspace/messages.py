@@ -1,0 +1,418 @@
+"""Plain Python types for what the server returns (and the few structured inputs it takes).
+
+Each result is a frozen dataclass built from its animspace.v1 message by a ``from_proto``
+classmethod: arrays arrive as numpy arrays in their natural shapes (N×D float32 points, uint32
+indices), enums as short upper-case names (``"HIT"``, ``"PMSC"``, ``"SERVER"``), so that code
+using the client never touches protobuf. Dataclasses holding arrays are declared with
+``eq=False``: numpy's element-wise ``==`` has no truth value, so they compare by identity.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+from animspace import wire
+from animspace.v1 import common_pb2, models_pb2, poses_pb2, render_pb2, stats_pb2, training_pb2
+
+__all__ = [
+    "Camera",
+    "KeyPointPose",
+    "ModelVersion",
+    "ModelSummary",
+    "ServerInfo",
+    "HistogramData",
+    "ModelStats",
+    "Stats",
+    "KeyPoints",
+    "RegionError",
+    "PoseResult",
+    "MissCompletion",
+    "SkinnedPose",
+    "Thumbnail",
+    "RetrainResult",
+]
+
+
+def enum_name(enum_type, value: int, prefix: str) -> str:
+    """``CACHE_STATUS_HIT`` → ``"HIT"``; an enum value this client does not know → its number."""
+    try:
+        name = enum_type.Name(value)
+    except ValueError:
+        return str(value)
+    return name[len(prefix):] if name.startswith(prefix) else name
+
+
+def _status(value: int) -> str:
+    return enum_name(common_pb2.CacheStatus, value, "CACHE_STATUS_")
+
+
+def _fail_through(value: int) -> str:
+    return enum_name(common_pb2.FailThrough, value, "FAIL_THROUGH_")
+
+
+# ----------------------------------------------------------------------------------------------
+# Inputs
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A perspective camera for thumbnails, in the model's object frame (common.proto Camera).
+
+    ``up`` need not be normalised but must not be parallel to ``target − eye``;
+    ``vertical_fov_rad`` lies in (0, π).
+    """
+
+    eye: Tuple[float, float, float]
+    target: Tuple[float, float, float]
+    up: Tuple[float, float, float] = (0.0, 1.0, 0.0)
+    vertical_fov_rad: float = 0.8
+
+    def to_proto(self) -> common_pb2.Camera:
+        for name in ("eye", "target", "up"):
+            value = getattr(self, name)
+            if len(value) != 3:
+                raise ValueError(f"camera.{name}: expected 3 floats, got {len(value)}")
+        return common_pb2.Camera(eye=[float(v) for v in self.eye], target=[float(v) for v in self.target],
+                                 up=[float(v) for v in self.up], vertical_fov_rad=float(self.vertical_fov_rad))
+
+
+@dataclass(frozen=True, eq=False)
+class KeyPointPose:
+    """One frame for the soft cache: K×D key values, and optionally the skeleton pose they came from.
+
+    The skeleton pose (B×3×4 or B×4×4, in ``space``) lets a model with a server posing engine
+    (fail-through ``SERVER``) complete a blend or miss itself (Meyer & Anderson 2007 §2: the
+    full calculation runs only when the cache cannot be trusted).
+    """
+
+    key_values: npt.ArrayLike
+    skeleton_pose: Optional[npt.ArrayLike] = None
+    space: str = "global"
+
+    def to_proto(self, name: str) -> poses_pb2.KeyPointPose:
+        """The pose as a message; ``name`` (e.g. "frames[3]") prefixes the argument names in
+        shape errors."""
+        if self.skeleton_pose is None:
+            return poses_pb2.KeyPointPose(key_values=wire.point_array(name, self.key_values, points_label="K"))
+        return poses_pb2.KeyPointPose(
+            key_values=wire.point_array(f"{name}.key_values", self.key_values, points_label="K"),
+            skeleton_pose=wire.skeleton_pose(f"{name}.skeleton_pose", self.skeleton_pose, self.space))
+
+
+# ----------------------------------------------------------------------------------------------
+# Models and the server
+
+
+@dataclass(frozen=True)
+class ModelVersion:
+    """One version of a model as the registry holds it (models.proto ModelVersion).
+
+    ``state`` is "AVAILABLE" or "FAILED" (then ``error`` says why); ``kind`` is "PMSC",
+    "CROSS_PMSC", "ANIMATION_SPACE" or "MESH_SEQUENCE"; ``fail_through`` is "SERVER", "CLIENT",
+    "IMPOSSIBLE" or "UNSPECIFIED" (a model without a soft cache). ε_min ≤ ε_max bound the RMS
+    key-point error of a hit and of a blend (Meyer & Anderson 2006 §5), model units.
+    """
+
+    version: int
+    state: str
+    error: str
+    kind: str
+    description: str
+    point_count: int
+    channel_count: int
+    face_count: int
+    bone_count: int
+    key_point_count: int
+    basis_size: int
+    frame_count: int
+    lod_level_count: int
+    epsilon_min: float
+    epsilon_max: float
+    fail_through: str
+    file_size_bytes: int
+    loaded_at_unix_s: int
+    metadata: Dict[str, str] = field(hash=False)
+    sections: Tuple[str, ...]
+
+    @classmethod
+    def from_proto(cls, m: models_pb2.ModelVersion) -> "ModelVersion":
+        return cls(version=m.version, state=enum_name(models_pb2.VersionState, m.state, "VERSION_STATE_"),
+                   error=m.error, kind=enum_name(models_pb2.ModelKind, m.kind, "MODEL_KIND_"),
+                   description=m.description, point_count=m.point_count, channel_count=m.channel_count,
+                   face_count=m.face_count, bone_count=m.bone_count, key_point_count=m.key_point_count,
+                   basis_size=m.basis_size, frame_count=m.frame_count, lod_level_count=m.lod_level_count,
+                   epsilon_min=m.epsilon_min, epsilon_max=m.epsilon_max, fail_through=_fail_through(m.fail_through),
+                   file_size_bytes=m.file_size_bytes, loaded_at_unix_s=m.loaded_at_unix_s,
+                   metadata=dict(m.metadata), sections=tuple(m.sections))
+
+
+@dataclass(frozen=True)
+class ModelSummary:
+    """A model with every version found in the repository, ascending (refused ones included)."""
+
+    name: str
+    default_version: int
+    versions: Tuple[ModelVersion, ...]
+
+    @property
+    def default(self) -> Optional[ModelVersion]:
+        """The version a request naming version 0 gets (None when no version is serving)."""
+        return next((v for v in self.versions if v.version == self.default_version), None)
+
+    @classmethod
+    def from_proto(cls, m: models_pb2.ModelSummary) -> "ModelSummary":
+        return cls(name=m.name, default_version=m.default_version,
+                   versions=tuple(ModelVersion.from_proto(v) for v in m.versions))
+
+
+@dataclass(frozen=True)
+class ServerInfo:
+    """Server build, limits and uptime (models.proto GetServerInfoResponse), to size requests."""
+
+    server_version: str
+    api: str
+    started_at_unix_s: int
+    max_message_bytes: int
+    max_batch_poses: int
+    max_thumbnail_px: int
+    max_concurrent_calls: int
+    renderer: str
+    implemented_rpcs: Tuple[str, ...]
+
+    @classmethod
+    def from_proto(cls, m: models_pb2.GetServerInfoResponse) -> "ServerInfo":
+        return cls(server_version=m.server_version, api=m.api, started_at_unix_s=m.started_at_unix_s,
+                   max_message_bytes=m.max_message_bytes, max_batch_poses=m.max_batch_poses,
+                   max_thumbnail_px=m.max_thumbnail_px, max_concurrent_calls=m.max_concurrent_calls,
+                   renderer=m.renderer, implemented_rpcs=tuple(m.implemented_rpcs))
+
+
+@dataclass(frozen=True, eq=False)
+class HistogramData:
+    """A Prometheus-style histogram: ``counts[i]`` counts observations ≤ ``upper_bounds[i]``;
+    the last count (one beyond the bounds) is the +Inf bucket. Counts are not cumulative."""
+
+    upper_bounds: np.ndarray  # (K,) float64
+    counts: np.ndarray  # (K + 1,) uint64
+    total_count: int
+    sum: float
+
+    @classmethod
+    def from_proto(cls, m: common_pb2.Histogram) -> "HistogramData":
+        return cls(upper_bounds=np.array(m.upper_bounds, dtype=np.float64), counts=np.array(m.counts, dtype=np.uint64),
+                   total_count=m.total_count, sum=m.sum)
+
+
+@dataclass(frozen=True)
+class ModelStats:
+    """Soft-cache and latency statistics of one model since start or the last reset."""
+
+    model: str
+    requests: int
+    poses: int
+    hits: int
+    blends: int
+    misses: int
+    errors: int
+    hit_rate: float
+    key_point_error: HistogramData = field(hash=False)
+    latency_seconds: HistogramData = field(hash=False)
+    latency_p50_s: float
+    latency_p90_s: float
+    latency_p99_s: float
+
+    @classmethod
+    def from_proto(cls, m: stats_pb2.ModelStats) -> "ModelStats":
+        return cls(model=m.model, requests=m.requests, poses=m.poses, hits=m.hits, blends=m.blends, misses=m.misses,
+                   errors=m.errors, hit_rate=m.hit_rate, key_point_error=HistogramData.from_proto(m.key_point_error),
+                   latency_seconds=HistogramData.from_proto(m.latency_seconds), latency_p50_s=m.latency_p50_s,
+                   latency_p90_s=m.latency_p90_s, latency_p99_s=m.latency_p99_s)
+
+
+@dataclass(frozen=True)
+class Stats:
+    """Every model's statistics, by name, and when counting started."""
+
+    models: Dict[str, ModelStats] = field(hash=False)
+    since_unix_s: int
+
+    @classmethod
+    def from_proto(cls, m: stats_pb2.GetStatsResponse) -> "Stats":
+        return cls(models={s.model: ModelStats.from_proto(s) for s in m.models}, since_unix_s=m.since_unix_s)
+
+
+# ----------------------------------------------------------------------------------------------
+# Poses
+
+
+@dataclass(frozen=True, eq=False)
+class KeyPoints:
+    """The key points a posing engine must compute for a PMSC model, in request order.
+
+    ``indices`` (K,) uint32 index the model's full point set (for cross-PMSC, its control point
+    set of ``control_point_count`` points); fiducial seeds come first (Meyer & Anderson 2007 §2.3).
+    ``regions`` (K,) uint32 is empty unless the model has regions (local fail-through).
+    Pin ``model_version`` in later calls to keep using these indices across a retrain.
+    """
+
+    model_version: int
+    indices: np.ndarray
+    channel_count: int
+    control_point_count: int
+    regions: np.ndarray
+    fail_through: str
+
+    @property
+    def count(self) -> int:
+        """K, the number of key points."""
+        return int(self.indices.shape[0])
+
+    def select(self, points: npt.ArrayLike) -> np.ndarray:
+        """The key values of full pose(s): ``points[..., indices, :]`` of N×D or P×N×D float32.
+
+        Raises:
+            ValueError: when ``points`` does not hold ``control_point_count`` points.
+        """
+        array = np.asarray(points, dtype=np.float32)
+        if array.ndim not in (2, 3) or array.shape[-2] != self.control_point_count:
+            want = f"({self.control_point_count}, D) or (P, {self.control_point_count}, D)"
+            raise ValueError(f"points: expected shape {want}, got {wire.shape_text(array.shape)}")
+        return np.ascontiguousarray(array[..., self.indices.astype(np.intp), :])
+
+    @classmethod
+    def from_proto(cls, m: poses_pb2.DescribeKeyPointsResponse) -> "KeyPoints":
+        return cls(model_version=m.model_version, indices=np.array(m.key_point_indices, dtype=np.uint32),
+                   channel_count=m.channel_count, control_point_count=m.control_point_count,
+                   regions=np.array(m.key_point_regions, dtype=np.uint32), fail_through=_fail_through(m.fail_through))
+
+
+@dataclass(frozen=True)
+class RegionError:
+    """Key-point error of one region (local fail-through: only failing regions need the full pose)."""
+
+    region: int
+    key_point_error: float
+    status: str
+
+    @classmethod
+    def from_proto(cls, m: poses_pb2.RegionError) -> "RegionError":
+        return cls(region=m.region, key_point_error=m.key_point_error, status=_status(m.status))
+
+
+@dataclass(frozen=True, eq=False)
+class PoseResult:
+    """The soft cache's answer for one pose (Meyer & Anderson 2006 §5, "soft caching").
+
+    Attributes:
+        points: N×D float32: the subspace estimate for a hit, α·full + (1−α)·estimate for a blend,
+            the full values for a miss — or the estimate with ``full_evaluation_needed`` when no
+            full values were available. None when the request asked to omit points.
+        status: "HIT" (e_key ≤ ε_min), "BLEND" or "MISS" (e_key ≥ ε_max).
+        key_point_error: e_key, RMS over key points and channels of f_key − f̂_key, model units.
+        blend_weight: α ∈ [0, 1]: 0 for a hit, 1 for a miss.
+        model_version: the version that answered.
+        full_evaluation_needed: a blend or miss whose points are still the estimate: compute the
+            full pose and send it with ``Client.complete_miss`` (or accept the estimate).
+        region_errors: per-region errors when requested and the model has regions.
+        sequence: the frame's sequence number (streams only; 0 otherwise).
+    """
+
+    points: Optional[np.ndarray]
+    status: str
+    key_point_error: float
+    blend_weight: float
+    model_version: int
+    full_evaluation_needed: bool
+    region_errors: Tuple[RegionError, ...] = ()
+    sequence: int = 0
+
+    @property
+    def hit(self) -> bool:
+        return self.status == "HIT"
+
+    @classmethod
+    def from_proto(cls, m: poses_pb2.PoseResult, what: str = "points") -> "PoseResult":
+        points = wire.points_from(m.points, what) if m.HasField("points") else None
+        return cls(points=points, status=_status(m.status), key_point_error=m.key_point_error,
+                   blend_weight=m.blend_weight, model_version=m.model_version,
+                   full_evaluation_needed=m.full_evaluation_needed,
+                   region_errors=tuple(RegionError.from_proto(r) for r in m.region_errors), sequence=m.sequence)
+
+
+@dataclass(frozen=True, eq=False)
+class MissCompletion:
+    """``Client.complete_miss``'s answer: the blended/full result, and whether the miss was logged
+    for retraining ("train each night, better tomorrow")."""
+
+    result: PoseResult
+    logged: bool
+
+
+@dataclass(frozen=True, eq=False)
+class SkinnedPose:
+    """One posed animation-space mesh, v = Σ_j G_j p_j (Merry 2007 §3.1).
+
+    ``points`` N×3 float32 in model units; ``normals`` N×3 unit normals from the tangent planes
+    (§3.5) when requested, else None.
+    """
+
+    points: np.ndarray
+    normals: Optional[np.ndarray]
+    model_version: int
+
+
+# ----------------------------------------------------------------------------------------------
+# Thumbnails and retraining
+
+
+@dataclass(frozen=True, eq=False)
+class Thumbnail:
+    """A rendered PNG (8-bit RGBA) and what was drawn.
+
+    ``pose`` is the soft cache's verdict when the source was key points, else None;
+    ``lod_level`` the level drawn (0 = full detail).
+    """
+
+    png: bytes
+    width_px: int
+    height_px: int
+    model_version: int
+    lod_level: int
+    pose: Optional[PoseResult]
+    render_ms: float
+
+    def save(self, path: str) -> None:
+        """Writes the PNG bytes to ``path``."""
+        with open(path, "wb") as out:
+            out.write(self.png)
+
+    @classmethod
+    def from_proto(cls, m: render_pb2.RenderThumbnailResponse) -> "Thumbnail":
+        return cls(png=m.png, width_px=m.width_px, height_px=m.height_px, model_version=m.model_version,
+                   lod_level=m.lod_level, pose=PoseResult.from_proto(m.pose, "pose.points") if m.HasField("pose") else None,
+                   render_ms=m.render_ms)
+
+
+@dataclass(frozen=True)
+class RetrainResult:
+    """What a retrain built: ``new_version`` is 0 for a dry run."""
+
+    new_version: int
+    training_frames: int
+    misses_used: int
+    basis_size: int
+    key_point_count: int
+    max_training_error: float
+    condition_number: float
+    training_seconds: float
+
+    @classmethod
+    def from_proto(cls, m: training_pb2.RetrainResponse) -> "RetrainResult":
+        return cls(new_version=m.new_version, training_frames=m.training_frames, misses_used=m.misses_used,
+                   basis_size=m.basis_size, key_point_count=m.key_point_count,
+                   max_training_error=m.max_training_error, condition_number=m.condition_number,
+                   training_seconds=m.training_seconds)
+

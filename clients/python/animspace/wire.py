@@ -1,0 +1,173 @@
+"""numpy arrays ⇄ the animspace.v1 wire format.
+
+The API moves point sets as ``PointArray``: N×D little-endian float32, point-major, packed into
+one ``bytes`` field (common.proto), so a 100k-point pose costs one copy each way instead of a
+repeated-float walk. Skeleton poses are B×12 float32: the top three rows of each bone's 4×4
+affine matrix, row-major (``SkeletonPose.transforms``).
+
+Every function here checks shapes before packing and raises ``ValueError`` naming the argument,
+the expected shape and the actual one: a wrong shape is a programming mistake best caught before
+a round trip. Values are not checked here (NaN, ±Inf): the server refuses them naming the field,
+and checking twice would cost a pass over every array.
+"""
+from __future__ import annotations
+
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+from animspace.v1 import common_pb2
+
+__all__ = [
+    "as_float32",
+    "as_points",
+    "as_transforms",
+    "point_array",
+    "points_from",
+    "skeleton_pose",
+    "transforms_from",
+    "SPACES",
+]
+
+# The wire's float: little-endian IEEE-754 binary32 whatever the host's byte order.
+WIRE_FLOAT = np.dtype("<f4")
+WIRE_UINT32 = np.dtype("<u4")
+WIRE_INT32 = np.dtype("<i4")
+
+# SkeletonPose.space by name. Unspecified is refused by the server, so there is no default here:
+# callers choose, and Client methods default to "global" (G_j, world from bone).
+SPACES = {
+    "local": common_pb2.SkeletonPose.SPACE_LOCAL,
+    "global": common_pb2.SkeletonPose.SPACE_GLOBAL,
+}
+
+# Largest deviation of a 4×4 matrix's last row from (0, 0, 0, 1) that is still taken as affine:
+# float32 round-off of a product of a few rigid transforms stays far below it, while a genuinely
+# projective matrix (which the wire cannot carry) is far above it.
+AFFINE_ROW_TOLERANCE = 1e-6
+
+
+def _shape_text(shape: Sequence[object]) -> str:
+    return "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def as_float32(name: str, values: npt.ArrayLike) -> np.ndarray:
+    """``values`` as a C-contiguous float32 array of any shape.
+
+    Raises:
+        ValueError: naming ``name``, when numpy cannot make a float32 array of it (ragged nested
+            lists, strings, objects).
+    """
+    try:
+        return np.ascontiguousarray(values, dtype=np.float32)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name}: expected an array of numbers convertible to float32 ({error})") from None
+
+
+def as_points(name: str, values: npt.ArrayLike, *, ndim: int = 2, channels: Optional[int] = None,
+              count: Optional[int] = None, points_label: str = "N") -> np.ndarray:
+    """``values`` as a C-contiguous float32 array of ``ndim`` dimensions, the last one channels.
+
+    Args:
+        name: the argument's name, for the error message.
+        values: anything ``numpy.asarray`` turns into numbers: N×D for ``ndim`` 2, P×N×D for 3.
+        ndim: 2 for one point set, 3 for a batch of them.
+        channels: D when it is known (3 for positions); None accepts any D ≥ 1.
+        count: N when it is known; None accepts any N.
+        points_label: what the message calls the point axis ("K" for key points).
+
+    Raises:
+        ValueError: for another number of dimensions, channels or points, naming ``name``.
+    """
+    array = as_float32(name, values)
+    expected = ["P", points_label, "D"][3 - ndim:]
+    if array.ndim != ndim or (array.ndim >= 1 and array.shape[-1] == 0 and channels is None):
+        raise ValueError(f"{name}: expected shape {_shape_text(expected)}, got {_shape_text(array.shape)}")
+    if channels is not None and array.shape[-1] != channels:
+        want = expected[:-1] + [channels]
+        raise ValueError(f"{name}: expected shape {_shape_text(want)}, got {_shape_text(array.shape)}")
+    if count is not None and array.shape[-2] != count:
+        want = expected[:-2] + [count, array.shape[-1]]
+        raise ValueError(f"{name}: expected shape {_shape_text(want)}, got {_shape_text(array.shape)}")
+    return array
+
+
+def point_array(name: str, values: npt.ArrayLike, *, channels: Optional[int] = None,
+                count: Optional[int] = None, points_label: str = "N") -> common_pb2.PointArray:
+    """One N×D point set as a ``PointArray`` (see :func:`as_points` for the checks)."""
+    array = as_points(name, values, channels=channels, count=count, points_label=points_label)
+    return common_pb2.PointArray(point_count=array.shape[0], channel_count=array.shape[1],
+                                 data=array.astype(WIRE_FLOAT, copy=False).tobytes())
+
+
+def points_from(message: common_pb2.PointArray, what: str = "points") -> np.ndarray:
+    """A ``PointArray`` as a writable N×D float32 array (native byte order).
+
+    Raises:
+        ValueError: when ``data`` is not exactly 4·N·D bytes (the server never sends that; a
+            proxy or a truncated message could).
+    """
+    n, d = message.point_count, message.channel_count
+    if len(message.data) != 4 * n * d:
+        raise ValueError(f"{what}: {n} × {d} float32 need {4 * n * d} bytes, got {len(message.data)}")
+    return np.frombuffer(message.data, dtype=WIRE_FLOAT).astype(np.float32).reshape(n, d)
+
+
+def as_transforms(name: str, transforms: npt.ArrayLike, *, batch: bool = False) -> np.ndarray:
+    """Affine bone transforms as a C-contiguous float32 array of shape (…, B, 3, 4).
+
+    Accepts B×3×4 (the top rows, as on the wire) or B×4×4 whose last rows are (0, 0, 0, 1)
+    within :data:`AFFINE_ROW_TOLERANCE`; with ``batch`` a leading pose axis P.
+
+    Raises:
+        ValueError: for another shape, or a 4×4 matrix that is not affine (the wire cannot carry
+            a projective row, and dropping it silently would pose a different skeleton).
+    """
+    array = as_float32(name, transforms)
+    expected = "(P, B, 3, 4) or (P, B, 4, 4)" if batch else "(B, 3, 4) or (B, 4, 4)"
+    ndim = 4 if batch else 3
+    if array.ndim != ndim or array.shape[-1] != 4 or array.shape[-2] not in (3, 4):
+        raise ValueError(f"{name}: expected shape {expected}, got {_shape_text(array.shape)}")
+    if array.shape[-2] == 4:
+        last = array[..., 3, :]
+        deviation = np.abs(last - np.array([0, 0, 0, 1], dtype=np.float32))
+        if deviation.size and not np.all(deviation <= AFFINE_ROW_TOLERANCE):
+            where = np.unravel_index(int(np.argmax(deviation.max(axis=-1))), last.shape[:-1])
+            raise ValueError(f"{name}: the last row of every 4×4 transform must be (0, 0, 0, 1); "
+                             f"{name}[{', '.join(str(int(i)) for i in where)}] has {last[where].tolist()}")
+        array = np.ascontiguousarray(array[..., :3, :])
+    return array
+
+
+def skeleton_pose(name: str, transforms: npt.ArrayLike, space: str = "global") -> common_pb2.SkeletonPose:
+    """One skeleton pose (B×3×4 or B×4×4) as a ``SkeletonPose`` in ``space`` ("global" or "local").
+
+    "global": G_j, world from bone, as in v = Σ_j G_j p_j; "local": joint transforms L_j relative
+    to the parent bone, which the server composes as G_j = G_parent(j) · L_j (Merry 2007 §2.2).
+    """
+    if space not in SPACES:
+        raise ValueError(f"space: expected 'global' or 'local', got {space!r}")
+    array = as_transforms(name, transforms)
+    return common_pb2.SkeletonPose(space=SPACES[space], bone_count=array.shape[0],
+                                   transforms=array.astype(WIRE_FLOAT, copy=False).tobytes())
+
+
+def transforms_from(data: bytes, bone_count: int, what: str = "transforms") -> np.ndarray:
+    """B·12 packed float32 (the SkeletonPose layout) as a writable B×3×4 float32 array."""
+    if len(data) != 48 * bone_count:
+        raise ValueError(f"{what}: {bone_count} bones need {48 * bone_count} bytes, got {len(data)}")
+    return np.frombuffer(data, dtype=WIRE_FLOAT).astype(np.float32).reshape(bone_count, 3, 4)
+
+
+def to_4x4(transforms: npt.ArrayLike) -> np.ndarray:
+    """(…, 3, 4) affine transforms completed with the row (0, 0, 0, 1), for composing them."""
+    top = np.asarray(transforms)
+    bottom = np.zeros(top.shape[:-2] + (1, 4), dtype=top.dtype)
+    bottom[..., 0, 3] = 1
+    return np.concatenate([top, bottom], axis=-2)
+
+
+def shape_text(shape: Tuple[int, ...]) -> str:
+    """A shape as Python prints it, "(24, 3)" or "(5,)", for error messages."""
+    return _shape_text(shape)
