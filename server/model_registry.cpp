@@ -11,20 +11,11 @@
 #include "core/animspace/animspace_io.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
+#include "core/model/repository.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::server {
 namespace {
-
-constexpr size_t kMaxModelNameLength = 128;
-
-// Parses a version directory name: a positive decimal integer without sign or leading zeros.
-bool parse_version(const std::string& text, uint64_t* version) {
-  if (text.empty() || text[0] == '0') return false;
-  const char* end = text.data() + text.size();
-  auto [ptr, ec] = std::from_chars(text.data(), end, *version);
-  return ec == std::errc() && ptr == end;
-}
 
 int64_t unix_now_s() {
   return std::chrono::duration_cast<std::chrono::seconds>(
@@ -39,29 +30,6 @@ uint64_t ModelEntry::default_version() const {
     if (it->second.model) return it->first;
   }
   return 0;
-}
-
-Status validate_model_name(std::string_view name, std::string_view field) {
-  const std::string f(field);
-  if (name.empty()) return make_error(ErrorCode::kInvalidArgument, f + " is empty");
-  if (name.size() > kMaxModelNameLength) {
-    return make_error(ErrorCode::kInvalidArgument, f + " is " + std::to_string(name.size()) +
-                                                       " characters long, the limit is " +
-                                                       std::to_string(kMaxModelNameLength));
-  }
-  if (name[0] == '.') {
-    return make_error(ErrorCode::kInvalidArgument, f + " '" + std::string(name) + "' starts with '.'");
-  }
-  for (char c : name) {
-    const bool allowed = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
-                         c == '_' || c == '-' || c == '.';
-    if (!allowed) {
-      return make_error(ErrorCode::kInvalidArgument,
-                        f + " may contain only letters, digits, '_', '-' and '.', got '" +
-                            std::string(name) + "'");
-    }
-  }
-  return Status::Ok();
 }
 
 ModelRegistry::ModelRegistry(std::filesystem::path repository) : repository_(std::move(repository)) {}
@@ -124,22 +92,7 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
 }
 
 Result<std::vector<uint64_t>> ModelRegistry::scan_versions(const std::string& name) const {
-  const auto dir = repository_ / name;
-  std::error_code ec;
-  if (!std::filesystem::is_directory(dir, ec)) {
-    return make_error(ErrorCode::kNotFound,
-                      "model '" + name + "' has no directory in the repository (" + dir.string() + ")");
-  }
-  std::vector<uint64_t> versions;
-  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    uint64_t version = 0;
-    if (it->is_directory(ec) && parse_version(it->path().filename().string(), &version)) {
-      versions.push_back(version);
-    }
-  }
-  if (ec) return make_error(ErrorCode::kIo, "cannot list " + dir.string() + ": " + ec.message());
-  std::sort(versions.begin(), versions.end());
-  return versions;
+  return model::list_versions(repository_, name);
 }
 
 int ModelRegistry::load_all() { return scan(true); }
@@ -184,31 +137,12 @@ int ModelRegistry::scan(bool retry_known) {
 }
 
 Result<uint64_t> ModelRegistry::publish(const std::string& name, const container::ModelContainer& model) {
-  ANIMSPACE_RETURN_IF_ERROR(validate_model_name(name));
   std::lock_guard publishing(publish_mutex_);
-  auto versions = scan_versions(name);
-  if (!versions) return versions.error();
-  const uint64_t version = versions->empty() ? 1 : versions->back() + 1;
-  const auto final_dir = repository_ / name / std::to_string(version);
-  const auto staging = repository_ / name / (".publish-" + std::to_string(version));
-  std::error_code ec;
-  std::filesystem::remove_all(staging, ec);
-  if (!std::filesystem::create_directories(staging, ec) && ec) {
-    return make_error(ErrorCode::kIo, "cannot create " + staging.string() + ": " + ec.message());
-  }
-  if (auto written = container::write_file(staging / kModelFileName, model); !written) {
-    std::filesystem::remove_all(staging, ec);
-    return written.error();
-  }
-  std::filesystem::rename(staging, final_dir, ec);
-  if (ec) {
-    std::filesystem::remove_all(staging, ec);
-    return make_error(ErrorCode::kIo, "cannot rename " + staging.string() + " to " + final_dir.string() + ": " +
-                                          ec.message());
-  }
-  auto loaded = load(name, version);
+  auto version = model::publish_version(repository_, name, model);
+  if (!version) return version.error();
+  auto loaded = load(name, *version);
   if (!loaded) return loaded.error();
-  return version;
+  return *version;
 }
 
 Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version) {

@@ -21,6 +21,7 @@
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/model/model_info.h"
+#include "core/model/repository.h"
 #include "core/animspace/metrics.h"
 #include "core/animspace/model.h"
 #include "core/lod/levels.h"
@@ -28,7 +29,7 @@
 
 namespace animspace::server {
 
-inline constexpr const char* kModelFileName = "model.anim";
+using model::kModelFileName;
 
 // One loaded, immutable model version.
 struct LoadedModel {
@@ -63,10 +64,7 @@ struct ModelEntry {
   uint64_t default_version() const;
 };
 
-// Model names are directory names chosen by people; anything that could escape the repository
-// or hide a file ('..', '/', a leading '.') is refused. Errors: kInvalidArgument naming the
-// field and the rule.
-Status validate_model_name(std::string_view name, std::string_view field = "model.name");
+using model::validate_model_name;  // core/model/repository.h
 
 class ModelRegistry {
  public:

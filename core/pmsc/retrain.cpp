@@ -4,6 +4,7 @@
 #include <charconv>
 #include <system_error>
 
+#include "core/misslog/miss_log.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/pmsc_io.h"
 
@@ -14,12 +15,51 @@ bool starts_with_pmsc(const std::string& name) { return name.rfind("pmsc.", 0) =
 
 }  // namespace
 
-uint64_t misses_through(const container::ModelContainer& in) {
-  const std::string text = in.metadata_value(kMissesThroughKey);
+namespace {
+
+uint64_t parse_sequence(const std::string& text) {
   uint64_t value = 0;
   const char* end = text.data() + text.size();
   const auto [stop, error] = std::from_chars(text.data(), end, value);
   return error == std::errc() && stop == end ? value : 0;
+}
+
+}  // namespace
+
+uint64_t misses_through(const container::ModelContainer& in) {
+  return parse_sequence(in.metadata_value(kMissesThroughKey));
+}
+
+uint64_t misses_through_log(const container::ModelContainer& in, const std::string& log) {
+  return parse_sequence(in.metadata_value(kMissesThroughLogPrefix + log));
+}
+
+void advance_misses_through_log(container::ModelContainer& out, const std::string& log, uint64_t sequence) {
+  out.metadata()[kMissesThroughLogPrefix + log] = std::to_string(std::max(sequence, misses_through_log(out, log)));
+}
+
+Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence, long width) {
+  MissFrames out;
+  out.last_sequence = after_sequence;
+  out.frames.resize(0, width);
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return out;
+  misslog::ReadReport report;
+  auto records = misslog::read_records(path, after_sequence, &report);
+  if (!records) return records.error();
+  long usable = 0;
+  for (const auto& record : *records) usable += static_cast<long>(record.full_values.size()) == width ? 1 : 0;
+  out.frames.resize(usable, width);
+  long row = 0;
+  for (const auto& record : *records) {
+    out.last_sequence = std::max(out.last_sequence, record.sequence);
+    if (static_cast<long>(record.full_values.size()) != width) {
+      ++out.skipped;
+      continue;
+    }
+    out.frames.row(row++) = Eigen::Map<const Eigen::RowVectorXf>(record.full_values.data(), width);
+  }
+  return out;
 }
 
 Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t current_version,
@@ -83,7 +123,8 @@ Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t
   // not a training result.
   container::ModelContainer& out = result.container;
   for (const auto& [key, value] : current.metadata()) {
-    if (!starts_with_pmsc(key)) out.metadata()[key] = value;
+    // Per-log watermarks say which records are folded in, like misses_through: never dropped.
+    if (!starts_with_pmsc(key) || key.rfind(kMissesThroughLogPrefix, 0) == 0) out.metadata()[key] = value;
   }
   store(*model, out);
   store_training_report(result.report, out);

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 
 #include "core/common/result.h"
@@ -23,6 +24,10 @@ namespace animspace::pmsc {
 // Metadata keys written by retrain.
 inline constexpr const char* kMissesThroughKey = "pmsc.misses_through";  // largest miss-log sequence folded in
 inline constexpr const char* kRetrainedFromKey = "pmsc.retrained_from";  // version the retrain started from
+// Offline retrains fold in several logs at once — one per replica, each numbering its records
+// from 1 — so their watermark is kept per log: pmsc.misses_through.<log>, <log> the log's path
+// relative to the miss-log root ("animspaced-7f9c/crane.misses"). retrain() carries these over.
+inline constexpr const char* kMissesThroughLogPrefix = "pmsc.misses_through.";
 
 struct RetrainOptions {
   double error_bound = 0;   // > 0 overrides the stored error_bound (model units)
@@ -43,6 +48,21 @@ struct RetrainResult {
 // when not a decimal integer, where re-reading folded records can only duplicate training rows,
 // never lose a miss.
 uint64_t misses_through(const container::ModelContainer& in);
+// The same for one of several logs (kMissesThroughLogPrefix); 0 when absent.
+uint64_t misses_through_log(const container::ModelContainer& in, const std::string& log);
+// Sets the log's watermark to `sequence` unless it is already past it (never backwards).
+void advance_misses_through_log(container::ModelContainer& out, const std::string& log, uint64_t sequence);
+
+// The full frames of a miss log's records after `after_sequence`, for retrain(): records without
+// full values (misses nobody completed) have nothing to teach and are skipped, counted in
+// `skipped`. A missing file is no misses. `last_sequence` is the newest record read (at least
+// `after_sequence`). Errors: the log reader's (kDataLoss naming the path and byte offset, kIo).
+struct MissFrames {
+  FrameMatrix frames;  // rows × width
+  uint64_t last_sequence = 0;
+  uint64_t skipped = 0;
+};
+Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence, long width);
 
 // Retrains the model of `current` (a pmsc container with sequence.frames and pmsc.options.*; the
 // version `current_version` of its model) on its training frames plus `miss_frames` (R × N·D

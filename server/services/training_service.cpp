@@ -2,7 +2,6 @@
 
 #include <spdlog/spdlog.h>
 
-#include "core/misslog/miss_log.h"
 #include "core/pmsc/retrain.h"
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
@@ -10,35 +9,6 @@
 #include "server/unary_call.h"
 
 namespace animspace::server {
-namespace {
-
-// The full frames of the logged misses after `after_sequence` (records without full values are
-// skipped: nothing to learn from). `last_sequence` receives the newest record read.
-grpc::Status read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence, long width,
-                              FrameMatrix& frames, uint64_t& last_sequence) {
-  last_sequence = after_sequence;
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    frames.resize(0, width);
-    return grpc::Status::OK;
-  }
-  misslog::ReadReport report;
-  auto records = misslog::read_records(path, after_sequence, &report);
-  if (!records) return to_grpc_status(records.error());
-  long usable = 0;
-  for (const auto& record : *records) usable += static_cast<long>(record.full_values.size()) == width ? 1 : 0;
-  frames.resize(usable, width);
-  long row = 0;
-  for (const auto& record : *records) {
-    last_sequence = std::max(last_sequence, record.sequence);
-    if (static_cast<long>(record.full_values.size()) != width) continue;
-    frames.row(row++) = Eigen::Map<const Eigen::RowVectorXf>(record.full_values.data(), width);
-  }
-  return grpc::Status::OK;
-}
-
-}  // namespace
-
 grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerContext* context,
                                                        const v1::RetrainRequest* request,
                                                        v1::RetrainResponse* response) {
@@ -74,11 +44,10 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         FrameMatrix misses(0, width);
         uint64_t last_sequence = pmsc::misses_through(model->container);
         if (!request->exclude_misses()) {
-          if (grpc::Status s = read_miss_frames(env_.miss_logs.path_of(model->name),
-                                                pmsc::misses_through(model->container), width, misses, last_sequence);
-              !s.ok()) {
-            return s;
-          }
+          auto read = pmsc::read_miss_frames(env_.miss_logs.path_of(model->name), last_sequence, width);
+          if (!read) return to_grpc_status(read.error());
+          misses = std::move(read->frames);
+          last_sequence = read->last_sequence;
         }
         if (grpc::Status stop = call.stop_status(); !stop.ok()) return stop;
 

@@ -13,6 +13,7 @@
 #include "clients/cpp/cli/output.h"
 #include "clients/cpp/cli/play.h"
 #include "clients/cpp/cli/pose.h"
+#include "clients/cpp/cli/retrain_offline.h"
 #include "clients/cpp/cli/thumbnail.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
@@ -367,6 +368,8 @@ int main(int argc, char** argv) {
   auto* build_lod = animspace::cli::add_build_lod(app, build_lod_args);
   animspace::cli::ExportLodArgs export_lod_args;
   auto* export_lod = animspace::cli::add_export_lod(app, export_lod_args);
+  animspace::cli::RetrainOfflineArgs retrain_offline_args;
+  auto* retrain_offline = animspace::cli::add_retrain_offline(app, retrain_offline_args);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -375,6 +378,7 @@ int main(int argc, char** argv) {
     if (*import_rig) return animspace::cli::run_import_rig(import_rig_args, g.json);
     if (*build_lod) return animspace::cli::run_build_lod(build_lod_args, g.json);
     if (*export_lod) return animspace::cli::run_export_lod(export_lod_args, g.json);
+    if (*retrain_offline) return animspace::cli::run_retrain_offline(retrain_offline_args, g.json);
     if (*list) return run_list(g);
     if (*health) return run_health(g);
     if (*info) return run_server_info(g);
