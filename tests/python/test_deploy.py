@@ -84,7 +84,7 @@ class Usage:
 
 
 def binary(program):
-    path = BUILD / "bin" / program
+    path = (BUILD / "bin" / program).resolve()  # systemd wants absolute paths; ANIMSPACE_BUILD may be relative
     if not path.exists():
         pytest.skip(f"{path} is not built")
     return path
