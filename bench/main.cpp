@@ -19,8 +19,8 @@ int main(int argc, char** argv) {
                   "space vs linear blend skinning (fit, accuracy, evaluation speed); lod: animation-space level of detail vs rest-pose "
                   "simplifiers (error across poses); serve: a real animspaced on loopback (unary and streamed PMSC "
                   "poses against in-process evaluation); render: thumbnails and LOD streaming from a real animspaced against "
-                  "in-process drawing")
-      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "serve", "render"}))
+                  "in-process drawing; loadtest: animspace-loadtest's concurrency sweep and hit rates on crane against in-process evaluation")
+      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "serve", "render", "loadtest"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -57,6 +57,7 @@ int main(int argc, char** argv) {
                            : suite == "lod"   ? animspace::bench::run_lod_suite(options)
                            : suite == "serve" ? animspace::bench::run_serve_suite(options)
                            : suite == "render" ? animspace::bench::run_render_suite(options)
+                           : suite == "loadtest" ? animspace::bench::run_loadtest_suite(options)
                                               : animspace::bench::run_skinning_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);

@@ -60,6 +60,7 @@
 #include <nlohmann/json.hpp>
 
 #include "animspace/v1/poses.grpc.pb.h"
+#include "bench/crane_split.h"
 #include "bench/suites.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
@@ -73,7 +74,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr const char* kModelName = "crane";
+constexpr const char* kModelName = kCraneModelName;
 // How long each unary and in-process throughput measurement runs, after a short warm-up.
 constexpr double kMeasureSeconds = 2.5;
 constexpr double kWarmupSeconds = 0.3;
@@ -104,27 +105,6 @@ double load_average_1m() {
   in >> load;
   return load;
 }
-
-// A temporary directory for the model repository, the daemon's log and its miss log (which the
-// daemon keeps in the repository); removed with everything in it on destruction.
-class ScratchDirectory {
- public:
-  ScratchDirectory() {
-    std::string pattern = (std::filesystem::temp_directory_path() / "animspace-bench-serve-XXXXXX").string();
-    if (::mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + pattern);
-    path_ = pattern;
-  }
-  ~ScratchDirectory() {
-    std::error_code ignored;
-    std::filesystem::remove_all(path_, ignored);
-  }
-  ScratchDirectory(const ScratchDirectory&) = delete;
-  ScratchDirectory& operator=(const ScratchDirectory&) = delete;
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
 
 // CPU seconds (user + system) of a process: the daemon's from /proc/<pid>/stat, ours from
 // getrusage (every thread, gRPC's included). Clock-tick resolution (10 ms) is fine over seconds.
@@ -721,102 +701,73 @@ std::unique_ptr<testing::DaemonProcess> start_daemon(const ScratchDirectory& scr
 
 nlohmann::json run_serve_suite(const SuiteOptions& options) {
   std::vector<nlohmann::json> results;
-  if (!options.data) {
-    std::printf("serve: ../shared/data is absent; nothing to measure\n");
-    return nlohmann::json::array();
-  }
-  auto sequence = mesh_io::load_sequence(*options.data / "crane");
-  if (!sequence) {
-    std::printf("serve: crane: %s (skipped)\n", sequence.error().message.c_str());
-    return nlohmann::json::array();
-  }
-
-  // Train on the even frames with the pmsc suite's settings (unaligned).
-  const FrameMatrix& all = sequence->frames.samples;
-  std::vector<int> even, odd;
-  for (int f = 0; f < all.rows(); ++f) (f % 2 == 0 ? even : odd).push_back(f);
-  FrameMatrix train_frames(static_cast<long>(even.size()), all.cols());
-  for (size_t i = 0; i < even.size(); ++i) train_frames.row(static_cast<long>(i)) = all.row(even[i]);
-  const Eigen::VectorXf reference =
-      Eigen::Map<const Eigen::VectorXf>(sequence->reference.V.data(), sequence->reference.V.size());
-  const double diagonal = pmsc::bounding_box_diagonal(reference);
-  pmsc::TrainingOptions training;
-  training.error_bound = options.error_bound_diag * diagonal;
-  training.error_tolerance = options.tolerance_diag * diagonal;
-  training.max_key_points = 200;
-  pmsc::TrainingReport training_report;
-  auto model = pmsc::train(train_frames, training, &training_report);
-  if (!model) {
-    std::printf("serve: crane: training failed: %s\n", model.error().message.c_str());
-    return nlohmann::json::array();
-  }
+  auto split = train_crane_even(options, "serve");
+  if (!split) return nlohmann::json::array();
+  const FrameMatrix& all = split->sequence.frames.samples;
+  const std::vector<int>& even = split->even;
+  const std::vector<int>& odd = split->odd;
+  const pmsc::PmscModel& model = split->model;
 
   Workload work;
-  work.point_count = model->point_count;
-  work.key_count = model->key_point_count();
+  work.point_count = model.point_count;
+  work.key_count = model.key_point_count();
   pmsc::CachedPose cached;
   for (int f : odd) {
     const Eigen::VectorXf frame = all.row(f).transpose();
-    work.keys.push_back(pmsc::gather_key_values(*model, frame));
+    work.keys.push_back(pmsc::gather_key_values(model, frame));
     work.packed_keys.push_back(pack_floats(work.keys.back()));
-    pmsc::evaluate_cached(*model, work.keys.back(), nullptr, cached);
+    pmsc::evaluate_cached(model, work.keys.back(), nullptr, cached);
     work.expected.push_back(cached.status);
     work.expected_points.push_back(cached.points);
   }
   std::printf("serve: crane trained on %zu even frames: N = %d points, M = %d, K = %d keys (basis %.1f MB float); "
               "replaying the %zu odd frames; %zu bytes of points per answer\n",
-              even.size(), model->point_count, model->basis_size(), model->key_point_count(),
-              1e-6 * sizeof(float) * static_cast<double>(model->basis.size()), odd.size(),
-              sizeof(float) * 3 * static_cast<size_t>(model->point_count));
+              even.size(), model.point_count, model.basis_size(), model.key_point_count(),
+              1e-6 * sizeof(float) * static_cast<double>(model.basis.size()), odd.size(),
+              sizeof(float) * 3 * static_cast<size_t>(model.point_count));
 
   std::unique_ptr<ScratchDirectory> scratch_owner;
   try {
-    scratch_owner = std::make_unique<ScratchDirectory>();
+    scratch_owner = std::make_unique<ScratchDirectory>("serve");
   } catch (const std::exception& e) {
     std::printf("serve: %s\n", e.what());
     return nlohmann::json::array();
   }
   const ScratchDirectory& scratch = *scratch_owner;
   const auto repository = scratch.path() / "repository";
-  std::filesystem::create_directories(repository / kModelName / "1");
-  const auto container = pmsc::make_container(sequence->reference, train_frames, nullptr, *model, training_report,
-                                              "crane, even frames (animspace-bench serve)");
-  if (Status written = container::write_file(repository / kModelName / "1" / "model.anim", container); !written.ok()) {
-    std::printf("serve: cannot write the model: %s\n", written.error().message.c_str());
-    return nlohmann::json::array();
-  }
+  if (!write_crane_repository(*split, repository, "serve")) return nlohmann::json::array();
 
   print_header();
   // Baselines, before any daemon exists.
   const int passes = std::max(3, options.repetitions);
-  Row in_process = measure_in_process(*model, work, passes, Gap::kNone);
+  Row in_process = measure_in_process(model, work, passes, Gap::kNone);
   const double run_baseline_us = median(in_process.latency_us);
   auto measured = [&](Row row) {
     row.load_average = load_average_1m();
     report(row, run_baseline_us, results);
   };
   measured(std::move(in_process));
-  measured(measure_in_process(*model, work, std::max(1, passes / 7), Gap::kSleep));
-  measured(measure_in_process(*model, work, std::max(1, passes / 7), Gap::kSpin));
-  measured(measure_in_process_parallel(*model, work, 2));
-  measured(measure_in_process_batch(*model, work, 4 * passes, false));
-  measured(measure_in_process_batch(*model, work, passes, true));
+  measured(measure_in_process(model, work, std::max(1, passes / 7), Gap::kSleep));
+  measured(measure_in_process(model, work, std::max(1, passes / 7), Gap::kSpin));
+  measured(measure_in_process_parallel(model, work, 2));
+  measured(measure_in_process_batch(model, work, 4 * passes, false));
+  measured(measure_in_process_batch(model, work, passes, true));
   auto [encode, decode] = measure_protobuf(work, 8 * passes);
   measured(std::move(encode));
   measured(std::move(decode));
 
   // Served rows, each between two in-process passes over the odd frames.
   auto served = [&](auto&& measure, std::optional<int> work_threads) {
-    std::vector<double> around = evaluate_poses(*model, work, 1);
+    std::vector<double> around = evaluate_poses(model, work, 1);
     Row row = measure();
-    const std::vector<double> after = evaluate_poses(*model, work, 1);
+    const std::vector<double> after = evaluate_poses(model, work, 1);
     around.insert(around.end(), after.begin(), after.end());
     row.baseline_us = median(around);
     row.work_threads = work_threads;
     measured(std::move(row));
   };
   for (int work_threads : {0, 1}) {
-    auto daemon = start_daemon(scratch, repository, work_threads, *model, work);
+    auto daemon = start_daemon(scratch, repository, work_threads, model, work);
     if (!daemon) return results;
     const std::string address = daemon->address();
     const pid_t pid = daemon->pid();

@@ -13,5 +13,6 @@ nlohmann::json run_skinning_suite(const SuiteOptions& options);
 nlohmann::json run_lod_suite(const SuiteOptions& options);
 nlohmann::json run_serve_suite(const SuiteOptions& options);
 nlohmann::json run_render_suite(const SuiteOptions& options);
+nlohmann::json run_loadtest_suite(const SuiteOptions& options);
 
 }  // namespace animspace::bench
