@@ -16,6 +16,7 @@ namespace {
 
 using testing::DaemonProcess;
 using testing::TempDir;
+using testing::code_of;
 using testing::wait_until_serving;
 
 class SecurityTest : public ::testing::Test {
@@ -55,14 +56,6 @@ class SecurityTest : public ::testing::Test {
 };
 
 
-grpc::StatusCode code_of(const std::function<void()>& call) {
-  try {
-    call();
-    return grpc::StatusCode::OK;
-  } catch (const RpcError& e) {
-    return e.code();
-  }
-}
 
 TEST_F(SecurityTest, TlsAndTokensGuardEveryRpcButHealth) {
   auto daemon = start({});

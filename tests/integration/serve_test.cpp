@@ -37,6 +37,7 @@ namespace {
 
 using testing::DaemonProcess;
 using testing::TempDir;
+using testing::narrow_arm_model;
 using testing::write_model;
 
 constexpr double kDegree = 3.14159265358979323846 / 180.0;
@@ -65,36 +66,8 @@ Eigen::VectorXf gather(const v1::DescribeKeyPointsResponse& keys, const Eigen::V
 // The bending arm, posed by the expensive rig (biceps bulge and elbow correction included).
 Eigen::VectorXf expensive_frame(double elbow_deg, double shoulder_deg) {
   static const demo::ArmRig rig = demo::make_arm_rig();
-  demo::ArmPose pose;
-  pose.elbow_angle_rad = elbow_deg * kDegree;
-  pose.shoulder_angle_rad = shoulder_deg * kDegree;
-  return flatten(demo::pose_expensive(pose, rig));
+  return testing::expensive_arm_frame(rig, elbow_deg, shoulder_deg);
 }
-
-// A PMSC model of the arm trained only on elbow angles 0°–50°: a bent elbow at 120° is a pose it
-// has never seen (a miss), until it is retrained with that pose.
-container::ModelContainer narrow_arm_model() {
-  const demo::ArmRig rig = demo::make_arm_rig();
-  std::vector<Eigen::VectorXf> frames;
-  for (double elbow = 0; elbow <= 50; elbow += 5) {
-    for (double shoulder : {-20.0, 0.0, 20.0}) frames.push_back(expensive_frame(elbow, shoulder));
-  }
-  FrameMatrix training(static_cast<Eigen::Index>(frames.size()), frames[0].size());
-  for (size_t f = 0; f < frames.size(); ++f) training.row(static_cast<Eigen::Index>(f)) = frames[f].transpose();
-  const double diagonal = pmsc::bounding_box_diagonal(frames[0]);
-  pmsc::TrainingOptions options;
-  options.error_bound = 0.0025 * diagonal;
-  options.error_tolerance = 0.01 * diagonal;
-  options.max_key_points = 60;
-  options.region_count = 0;
-  pmsc::TrainingReport report;
-  auto model = pmsc::train(training, options, &report);
-  EXPECT_TRUE(model.ok()) << model.error().message;
-  auto out = pmsc::make_container(rig.rest, training, nullptr, *model, report, "arm, elbow 0-50 degrees only");
-  pmsc::store_training_options(options, out);
-  return out;
-}
-
 
 class ServeTest : public ::testing::Test {
  protected:

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <thread>
 
@@ -12,6 +13,9 @@
 #include "clients/cpp/client.h"
 #include "core/animspace/skeleton.h"
 #include "core/container/model_container.h"
+#include "core/demo/bending_arm.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/train.h"
 
 namespace animspace::testing {
 
@@ -35,6 +39,16 @@ inline bool wait_until_serving(Client& client) {
   return false;
 }
 
+// The status code `call` ends with: OK, or the code of the RpcError it throws.
+inline grpc::StatusCode code_of(const std::function<void()>& call) {
+  try {
+    call();
+    return grpc::StatusCode::OK;
+  } catch (const RpcError& e) {
+    return e.code();
+  }
+}
+
 // Global transforms G_j as the client's SkeletonPose (SPACE_GLOBAL, 12 floats per bone, rows 0–2).
 inline SkeletonPose client_skeleton_pose(const animation_space::TransformList& globals) {
   SkeletonPose pose;
@@ -50,6 +64,43 @@ inline SkeletonPose client_skeleton_pose(const animation_space::TransformList& g
 // The same pose on the wire.
 inline v1::SkeletonPose global_skeleton_pose(const animation_space::TransformList& globals) {
   return encode_skeleton_pose(client_skeleton_pose(globals));
+}
+
+// The bending arm posed by its expensive rig (biceps bulge and elbow correction included),
+// point-major (x0 y0 z0 x1 …).
+inline Eigen::VectorXf expensive_arm_frame(const demo::ArmRig& rig, double elbow_deg, double shoulder_deg) {
+  constexpr double kDegree = 3.14159265358979323846 / 180.0;
+  demo::ArmPose pose;
+  pose.elbow_angle_rad = elbow_deg * kDegree;
+  pose.shoulder_angle_rad = shoulder_deg * kDegree;
+  const PointMatrix points = demo::pose_expensive(pose, rig);
+  return Eigen::Map<const Eigen::VectorXf>(points.data(), points.size());
+}
+
+// A PMSC model of the arm trained only on elbow angles 0°–50° (every `elbow_step_deg`, shoulder
+// −20°, 0°, 20°): a bent elbow at 120° is a pose it has never seen (a miss) until it is retrained
+// with that pose. A finer `arm` mesh or a smaller step makes a bigger model that trains longer.
+inline container::ModelContainer narrow_arm_model(const demo::BendingArmOptions& arm = {},
+                                                  double elbow_step_deg = 5) {
+  const demo::ArmRig rig = demo::make_arm_rig(arm);
+  std::vector<Eigen::VectorXf> frames;
+  for (double elbow = 0; elbow <= 50; elbow += elbow_step_deg) {
+    for (double shoulder : {-20.0, 0.0, 20.0}) frames.push_back(expensive_arm_frame(rig, elbow, shoulder));
+  }
+  FrameMatrix training(static_cast<Eigen::Index>(frames.size()), frames[0].size());
+  for (size_t f = 0; f < frames.size(); ++f) training.row(static_cast<Eigen::Index>(f)) = frames[f].transpose();
+  const double diagonal = pmsc::bounding_box_diagonal(frames[0]);
+  pmsc::TrainingOptions options;
+  options.error_bound = 0.0025 * diagonal;
+  options.error_tolerance = 0.01 * diagonal;
+  options.max_key_points = 60;
+  options.region_count = 0;
+  pmsc::TrainingReport report;
+  auto model = pmsc::train(training, options, &report);
+  EXPECT_TRUE(model.ok()) << model.error().message;
+  auto out = pmsc::make_container(rig.rest, training, nullptr, *model, report, "arm, elbow 0-50 degrees only");
+  pmsc::store_training_options(options, out);
+  return out;
 }
 
 }  // namespace animspace::testing
