@@ -52,6 +52,12 @@ Status validate(const InfluenceSets& influences, int bone_count) {
   }
   for (int i = 0; i < influences.vertex_count(); ++i) {
     if (influences.end(i) <= influences.begin(i)) return vertex_error(i, "has no influencing bone");
+    // Only the last offset was compared with the count above: a middle one past it would send
+    // the loop below beyond `bones` (found by fuzzing a stored model's offsets).
+    if (influences.end(i) > influences.influence_count()) {
+      return vertex_error(i, "influence offset " + std::to_string(influences.end(i)) + " is past the " +
+                                 std::to_string(influences.influence_count()) + " influences");
+    }
     for (int k = influences.begin(i); k < influences.end(i); ++k) {
       const int bone = influences.bones[static_cast<size_t>(k)];
       if (bone < 0 || bone >= bone_count) {

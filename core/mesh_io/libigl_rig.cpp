@@ -29,6 +29,7 @@ void append_line(std::string& out, const Eigen::DenseBase<Derived>& values) {
 
 template <typename Derived>
 Status check_finite(const Eigen::MatrixBase<Derived>& values, std::string_view source, std::string_view what) {
+  if (values.size() == 0) return Status::Ok();  // not one turn per column of a 0-row matrix
   for (Eigen::Index j = 0; j < values.cols(); ++j) {
     for (Eigen::Index i = 0; i < values.rows(); ++i) {
       if (!std::isfinite(values(i, j))) {
@@ -41,20 +42,47 @@ Status check_finite(const Eigen::MatrixBase<Derived>& values, std::string_view s
   return Status::Ok();
 }
 
-// Runs `parse` on the file's text, turning an allocation failure into an error.
+// Runs `parse` on the file's contents.
 template <typename T, typename Parse>
 Result<T> parse_file(const std::filesystem::path& path, Parse parse) {
   const auto text = read_whole_file(path);
   if (!text.ok()) return text.error();
   const std::string source = path.string();
-  try {
-    return parse(std::string_view(*text), std::string_view(source));
-  } catch (const std::bad_alloc&) {
-    return make_error(ErrorCode::kResourceExhausted, source + ": out of memory while reading");
-  }
+  return parse(std::string_view(*text), std::string_view(source));
 }
 
-Result<TgfSkeleton> parse_tgf(std::string_view text, std::string_view source) {
+// What a parser returns when an allocation fails (no exception leaves a public function).
+Error out_of_memory(std::string_view source) {
+  return make_error(ErrorCode::kResourceExhausted, std::string(source) + ": out of memory while reading");
+}
+
+// libigl's binary DMAT: after the `0 0` line, a `cols rows` line and the raw float64 payload.
+Result<Eigen::MatrixXd> parse_binary_dmat(TextReader& in, std::string_view text, std::string_view source) {
+  const auto cols = in.read<int>("a column count");
+  if (!cols.ok()) return cols.error();
+  const auto rows = in.read<int>("a row count");
+  if (!rows.ok()) return rows.error();
+  if (const std::string_view extra = in.next_token(); !extra.empty()) return in.error("end of line after `cols rows`", extra);
+  if (*cols < 0 || *rows < 0) return in.error("non-negative `cols rows`", std::to_string(*cols) + " " + std::to_string(*rows));
+  const std::string_view payload = in.rest_after_line();
+  const size_t offset = text.size() - payload.size();
+  const uint64_t count = static_cast<uint64_t>(*rows) * static_cast<uint64_t>(*cols);
+  if (count > payload.size() / sizeof(double) || count * sizeof(double) != payload.size()) {
+    return make_error(ErrorCode::kDataLoss, std::string(source) + ": byte " + std::to_string(offset) + ": " +
+                                                std::to_string(*rows) + " × " + std::to_string(*cols) +
+                                                " float64 values need " + std::to_string(count) + " × 8 bytes, got " +
+                                                std::to_string(payload.size()));
+  }
+  Eigen::MatrixXd matrix(*rows, *cols);
+  // An empty matrix has no storage (data() is null), and memcpy may not be handed null.
+  if (count > 0) std::memcpy(matrix.data(), payload.data(), payload.size());  // both column-major
+  ANIMSPACE_RETURN_IF_ERROR(check_finite(matrix, source, "entry"));
+  return matrix;
+}
+
+}  // namespace
+
+Result<TgfSkeleton> parse_tgf(std::string_view text, std::string_view source) try {
   enum class Section { kJoints, kBones, kIgnored };
   Section section = Section::kJoints;
   std::vector<double> joints;  // x y z per joint
@@ -106,31 +134,11 @@ Result<TgfSkeleton> parse_tgf(std::string_view text, std::string_view source) {
   skeleton.bones = Eigen::Map<const Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor>>(
       bones.data(), static_cast<Eigen::Index>(bones.size() / 2), 2);
   return skeleton;
+} catch (const std::bad_alloc&) {
+  return out_of_memory(source);
 }
 
-// libigl's binary DMAT: after the `0 0` line, a `cols rows` line and the raw float64 payload.
-Result<Eigen::MatrixXd> parse_binary_dmat(TextReader& in, std::string_view text, std::string_view source) {
-  const auto cols = in.read<int>("a column count");
-  if (!cols.ok()) return cols.error();
-  const auto rows = in.read<int>("a row count");
-  if (!rows.ok()) return rows.error();
-  if (*cols < 0 || *rows < 0) return in.error("non-negative `cols rows`", std::to_string(*cols) + " " + std::to_string(*rows));
-  const std::string_view payload = in.rest_after_line();
-  const size_t offset = text.size() - payload.size();
-  const uint64_t count = static_cast<uint64_t>(*rows) * static_cast<uint64_t>(*cols);
-  if (count > payload.size() / sizeof(double) || count * sizeof(double) != payload.size()) {
-    return make_error(ErrorCode::kDataLoss, std::string(source) + ": byte " + std::to_string(offset) + ": " +
-                                                std::to_string(*rows) + " × " + std::to_string(*cols) +
-                                                " float64 values need " + std::to_string(count) + " × 8 bytes, got " +
-                                                std::to_string(payload.size()));
-  }
-  Eigen::MatrixXd matrix(*rows, *cols);
-  std::memcpy(matrix.data(), payload.data(), payload.size());  // both column-major
-  ANIMSPACE_RETURN_IF_ERROR(check_finite(matrix, source, "entry"));
-  return matrix;
-}
-
-Result<Eigen::MatrixXd> parse_dmat(std::string_view text, std::string_view source) {
+Result<Eigen::MatrixXd> parse_dmat(std::string_view text, std::string_view source) try {
   TextReader in(text, source);
   if (!in.next_line()) return make_error(ErrorCode::kInvalidArgument, std::string(source) + ": empty file, expected `cols rows`");
   const auto cols = in.read<int>("a column count");
@@ -153,26 +161,27 @@ Result<Eigen::MatrixXd> parse_dmat(std::string_view text, std::string_view sourc
                     std::to_string(*cols) + " " + std::to_string(*rows));
   }
   Eigen::MatrixXd matrix(*rows, *cols);
-  for (Eigen::Index j = 0; j < matrix.cols(); ++j) {
-    for (Eigen::Index i = 0; i < matrix.rows(); ++i) {
-      const std::string_view token = in.next_token_any_line();
-      if (token.empty()) {
-        return in.error("expected " + std::to_string(count) + " values (" + std::to_string(*rows) + " rows × " +
-                        std::to_string(*cols) + " columns, column-major), got end of file after " +
-                        std::to_string(j * matrix.rows() + i));
-      }
-      const auto value = in.parse<double>(token, "a number");
-      if (!value.ok()) return value.error();
-      matrix(i, j) = *value;
+  // Value k in file order is entry k of the column-major storage. Counting values, not columns,
+  // keeps an empty matrix of 2^31 - 1 columns from costing 2^31 loop turns (found by fuzzing).
+  for (int64_t k = 0; k < count; ++k) {
+    const std::string_view token = in.next_token_any_line();
+    if (token.empty()) {
+      return in.error("expected " + std::to_string(count) + " values (" + std::to_string(*rows) + " rows × " +
+                      std::to_string(*cols) + " columns, column-major), got end of file after " + std::to_string(k));
     }
+    const auto value = in.parse<double>(token, "a number");
+    if (!value.ok()) return value.error();
+    matrix.data()[k] = *value;
   }
   if (const std::string_view extra = in.next_token_any_line(); !extra.empty()) {
     return in.error("end of file after " + std::to_string(count) + " values", extra);
   }
   return matrix;
+} catch (const std::bad_alloc&) {
+  return out_of_memory(source);
 }
 
-Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view text, std::string_view source) {
+Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view text, std::string_view source) try {
   std::vector<double> values;  // 3 per row
   TextReader in(text, source);
   while (in.next_line()) {
@@ -195,9 +204,9 @@ Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view tex
     transforms[bone] = Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>>(values.data() + 12 * bone);
   }
   return transforms;
+} catch (const std::bad_alloc&) {
+  return out_of_memory(source);
 }
-
-}  // namespace
 
 Result<TgfSkeleton> read_tgf(const std::filesystem::path& path) { return parse_file<TgfSkeleton>(path, parse_tgf); }
 

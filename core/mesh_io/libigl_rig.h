@@ -18,6 +18,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -50,5 +51,12 @@ Status write_dmat(const std::filesystem::path& path, const Eigen::MatrixXd& matr
 Result<std::vector<Eigen::Matrix<double, 4, 3>>> read_tmat(const std::filesystem::path& path);
 // Errors: kInvalidArgument for no transforms or a non-finite value; kIo.
 Status write_tmat(const std::filesystem::path& path, const std::vector<Eigen::Matrix<double, 4, 3>>& transforms);
+
+// Parsers of file contents: read_tgf, read_dmat and read_tmat are the file read plus these.
+// `source` (usually the file name) prefixes every error. Errors: those of the read_* functions
+// other than kNotFound / kIo, and kResourceExhausted when memory runs out.
+Result<TgfSkeleton> parse_tgf(std::string_view text, std::string_view source);
+Result<Eigen::MatrixXd> parse_dmat(std::string_view bytes, std::string_view source);  // text or binary
+Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view text, std::string_view source);
 
 }  // namespace animspace::mesh_io

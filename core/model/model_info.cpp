@@ -140,7 +140,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     if (!frames) return frames.error();
     if (frames->cols() != static_cast<long>(info.point_count) * info.channel_count) {
       return shape_error(source, sections::kSequenceFrames,
-                         "F×" + std::to_string(info.point_count * info.channel_count),
+                         "F×" + std::to_string(static_cast<long>(info.point_count) * info.channel_count),
                          frames->rows(), frames->cols());
     }
     info.frame_count = static_cast<int>(frames->rows());
@@ -168,7 +168,8 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     auto mean = model.float_matrix("pmsc.mean");
     if (!mean) return mean.error();
     if (mean->cols() != static_cast<long>(info.point_count) * info.channel_count) {
-      return shape_error(source, "pmsc.mean", "1×" + std::to_string(info.point_count * info.channel_count),
+      return shape_error(source, "pmsc.mean",
+                         "1×" + std::to_string(static_cast<long>(info.point_count) * info.channel_count),
                          mean->rows(), mean->cols());
     }
     auto basis = model.float_matrix("pmsc.basis");
@@ -177,6 +178,8 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     if (!keys) return keys.error();
     auto epsilon = model.double_matrix("pmsc.epsilon", 2);
     if (!epsilon) return epsilon.error();
+    // Read below as (ε_min, ε_max): any other row count is refused before that read.
+    if (epsilon->rows() != 1) return shape_error(source, "pmsc.epsilon", "1×2", epsilon->rows(), epsilon->cols());
     info.basis_size = static_cast<int>(basis->cols());
     info.key_point_count = static_cast<int>(keys->rows());
     info.epsilon_min = static_cast<float>((*epsilon)(0, 0));

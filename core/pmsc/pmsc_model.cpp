@@ -94,6 +94,14 @@ Status prepare_projection(PmscModel& m) {
   if (!m.mean.allFinite() || !m.basis.allFinite() || !m.key_mean.allFinite() || !m.key_basis.allFinite()) {
     return make_error(ErrorCode::kInvalidArgument, "pmsc model: mean or basis holds NaN or Inf");
   }
+  // The key rows are kept in double for the projection's accuracy, but they come from float32
+  // frames, so training never puts a value beyond float range there; a stored one (found by
+  // fuzzing: key_mean 2e307) would overflow e_key to Inf on the first pose served.
+  constexpr double kFloatMax = std::numeric_limits<float>::max();
+  if (m.key_mean.cwiseAbs().maxCoeff() > kFloatMax || m.key_basis.cwiseAbs().maxCoeff() > kFloatMax) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "pmsc model: key_mean or key_basis holds a value beyond float32 range");
+  }
   ANIMSPACE_RETURN_IF_ERROR(validate(m.epsilon));
   if (m.region_count > 0) {
     if (static_cast<long>(m.point_regions.size()) != m.point_count ||
