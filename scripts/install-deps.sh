@@ -17,6 +17,8 @@ packages=(
   libegl-dev libgles-dev libegl1 libgles2 libegl-mesa0 libgl1-mesa-dri libpng-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev openssl
+  # fuzz/: libFuzzer targets (clang with its runtime: fuzzer, ASan, UBSan)
+  clang libclang-rt-14-dev
   # Python client (always run with /usr/bin/python3)
   python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-matplotlib
   # ... and its offline install from pyproject.toml (tested: pip --no-build-isolation)

@@ -1,0 +1,9 @@
+// Fuzz target: mesh_io::parse_ply (PLY, ASCII and binary of either byte order); the checks are in
+// fuzz/mesh_invariants.h.
+#include "fuzz/mesh_invariants.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace animspace;
+  fuzz::fuzz_mesh_parser(fuzz::as_bytes(data, size), mesh_io::parse_ply, mesh_io::serialize_ply, "fuzz.ply");
+  return 0;
+}
