@@ -5,7 +5,13 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 LISTEN ?= 127.0.0.1:50051
 METRICS ?= 127.0.0.1:9464
 
-.PHONY: all deps configure build run test bench asan clean
+# ccache keyed on paths relative to the checkout, so that CI's fresh clone in another folder
+# reuses what a session compiled (the sanitizer builds are the long part of .ci/run).
+export CCACHE_BASEDIR := $(CURDIR)
+export CCACHE_NOHASHDIR := true
+export CCACHE_MAXSIZE ?= 15G
+
+.PHONY: all deps configure build run test bench check-asan check-tsan asan fuzz-smoke clean
 
 all: build
 
@@ -33,12 +39,45 @@ bench: build
 	$(BUILD_DIR)/bin/animspace-bench skinning --data ../shared/data --json $(BUILD_DIR)/bench-skinning.json
 	$(BUILD_DIR)/bin/animspace-bench lod --data ../shared/data --json $(BUILD_DIR)/bench-lod.json
 	$(BUILD_DIR)/bin/animspace-bench serve --data ../shared/data --json $(BUILD_DIR)/bench-serve.json
+	$(BUILD_DIR)/bin/animspace-bench loadtest --data ../shared/data --json $(BUILD_DIR)/bench-loadtest.json
 
-# The whole suite under AddressSanitizer + UndefinedBehaviorSanitizer.
-asan: deps
+# The whole suite (ctest and pytest) under AddressSanitizer + UndefinedBehaviorSanitizer. Every
+# report goes to a file under build-asan/reports (a daemon a test started reports there too) and
+# fails the target; ASan aborts the process that made it.
+ASAN_REPORTS := $(CURDIR)/build-asan/reports
+ASAN_ENV := ASAN_OPTIONS=abort_on_error=1:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:log_path=$(ASAN_REPORTS)/asan \
+  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
+  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(ASAN_REPORTS)/ubsan
+check-asan: deps
 	cmake --preset asan >/dev/null
 	cmake --build --preset asan -j $(JOBS)
-	ctest --preset asan -j $(JOBS) --timeout 600
+	rm -rf $(ASAN_REPORTS)
+	$(ASAN_ENV) scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) ctest --preset asan -j $(JOBS) --timeout 900
+	$(ASAN_ENV) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=build-asan scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) \
+	  /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python
+asan: check-asan
+
+# ThreadSanitizer where the threads are: the server's units (work pool, admission, registry) built
+# with TSan, and the integration suite (the release build's test drivers, CLI and load tester)
+# against a TSan-built animspaced ($$ANIMSPACED). Races are reported to build-tsan/reports and
+# fail the target after the run.
+TSAN_REPORTS := $(CURDIR)/build-tsan/reports
+TSAN_ENV := TSAN_OPTIONS=halt_on_error=0:second_deadlock_stack=1:history_size=4:suppressions=$(CURDIR)/tests/tsan.supp:log_path=$(TSAN_REPORTS)/tsan
+check-tsan: build
+	cmake --preset tsan >/dev/null
+	cmake --build --preset tsan -j $(JOBS) --target animspaced server_tests
+	rm -rf $(TSAN_REPORTS)
+	$(TSAN_ENV) scripts/with-sanitizer-reports.sh $(TSAN_REPORTS) ctest --preset tsan -j $(JOBS) --timeout 900 -L server
+	$(TSAN_ENV) ANIMSPACED=$(CURDIR)/build-tsan/bin/animspaced scripts/with-sanitizer-reports.sh $(TSAN_REPORTS) \
+	  ctest --preset release -j $(JOBS) --timeout 900 -L integration
+
+# libFuzzer targets (clang, build-fuzz/): replay fuzz/corpus and fuzz/regressions, then fuzz
+# each target for $(FUZZ_SECONDS) s; fails naming the target and the crash input.
+FUZZ_SECONDS ?= 20
+fuzz-smoke: deps
+	cmake --preset fuzz >/dev/null
+	cmake --build --preset fuzz -j $(JOBS)
+	FUZZ_SECONDS=$(FUZZ_SECONDS) bash scripts/fuzz-smoke.sh
 
 clean:
-	rm -rf build build-debug build-asan
+	rm -rf build build-debug build-asan build-tsan build-fuzz
