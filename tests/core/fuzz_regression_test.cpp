@@ -26,10 +26,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// fuzz/regressions/ of this source tree (the test binary is built from it).
-fs::path regressions_dir() {
-  return fs::path(__FILE__).parent_path().parent_path().parent_path() / "fuzz" / "regressions";
-}
+// fuzz/regressions/ of this source tree (the test binary is built from it);
+// tests/CMakeLists.txt defines it as an absolute path: __FILE__ is relative to the build
+// directory when ccache rewrites paths (Makefile: CCACHE_BASEDIR).
+fs::path regressions_dir() { return ANIMSPACE_FUZZ_REGRESSIONS; }
 
 std::string read_bytes(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);

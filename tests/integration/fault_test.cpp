@@ -962,7 +962,11 @@ TEST_F(FaultTest, PathNamesAndOversizedRequestsAreRefusedWithoutTouchingAnything
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the sender's connection closes
   const ProcessUsage usage_after = usage_of(daemon->pid());
   const int64_t kept_kb = usage_after.rss_kb - usage_before.rss_kb;
-  EXPECT_LT(kept_kb, kOversized / 2 * static_cast<int64_t>(kOversize / 1024)) << "refused requests pile up in memory";
+  // Under `make check-asan` the daemon is ASan-built and freed memory sits in ASan's quarantine
+  // (256 MiB): RSS then says nothing about what the daemon keeps.
+  if (std::getenv("ASAN_OPTIONS") == nullptr) {
+    EXPECT_LT(kept_kb, kOversized / 2 * static_cast<int64_t>(kOversize / 1024)) << "refused requests pile up in memory";
+  }
   std::printf("[fault] oversized requests: %d × %zu MiB against --max-message-bytes %lld, each refused "
               "RESOURCE_EXHAUSTED in at most %.0f ms\n",
               kOversized, kOversize >> 20, static_cast<long long>(kMaxMessage), slowest_ms);
