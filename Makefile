@@ -67,7 +67,7 @@ asan: check-asan
 # against a TSan-built animspaced ($$ANIMSPACED). Races are reported to build-tsan/reports and
 # fail the target after the run.
 TSAN_REPORTS := $(CURDIR)/build-tsan/reports
-TSAN_ENV := TSAN_OPTIONS=halt_on_error=0:second_deadlock_stack=1:history_size=4:suppressions=$(CURDIR)/tests/tsan.supp:log_path=$(TSAN_REPORTS)/tsan
+TSAN_ENV := TSAN_OPTIONS=halt_on_error=0:ignore_noninstrumented_modules=1:second_deadlock_stack=1:history_size=4:suppressions=$(CURDIR)/tests/tsan.supp:log_path=$(TSAN_REPORTS)/tsan
 check-tsan: build
 	cmake --preset tsan >/dev/null
 	cmake --build --preset tsan -j $(JOBS) --target animspaced server_tests
