@@ -92,14 +92,15 @@ void KeyPointStream::evaluate(Slot* slot, v1::KeyPointFrame frame, std::shared_p
   }
   {
     std::lock_guard lock(mutex_);
-    --evaluating_;
     slot->ready = true;
     if (!status.ok()) {
       slot->error = status;
       stopping_ = true;
     }
   }
-  pump();
+  // The evaluation stops counting inside pump's critical section: counted until then, it keeps
+  // the stream from finishing (and OnDone from deleting it) while this thread still uses it.
+  pump(/*finished_evaluations=*/1);
 }
 
 void KeyPointStream::OnWriteDone(bool ok) {
@@ -125,15 +126,39 @@ void KeyPointStream::OnCancel() {
   pump();
 }
 
-void KeyPointStream::OnDone() { delete this; }
+// gRPC calls OnDone after the last reaction, but a pool thread may still be inside pump(): it
+// started a write or read, or called Finish, and has not returned yet. The last one out deletes.
+void KeyPointStream::OnDone() {
+  {
+    std::lock_guard lock(mutex_);
+    done_ = true;
+    if (pumping_ > 0) return;
+  }
+  delete this;
+}
 
-void KeyPointStream::pump() {
+void KeyPointStream::pump(int finished_evaluations) {
+  {
+    std::lock_guard lock(mutex_);
+    ++pumping_;
+  }
+  start_next(finished_evaluations);
+  bool last_out = false;
+  {
+    std::lock_guard lock(mutex_);
+    last_out = --pumping_ == 0 && done_;
+  }
+  if (last_out) delete this;
+}
+
+void KeyPointStream::start_next(int finished_evaluations) {
   const v1::PoseResult* write = nullptr;
   bool read = false;
   bool finish = false;
   grpc::Status final_status;
   {
     std::lock_guard lock(mutex_);
+    evaluating_ -= finished_evaluations;
     if (finished_) return;
     // Finishing waits for every evaluation on the pool: they point into this reactor.
     if (cancelled_) {

@@ -46,8 +46,12 @@ class KeyPointStream final : public grpc::ServerBidiReactor<v1::KeyPointFrame, v
   KeyPointStream(ServiceEnvironment& env, grpc::CallbackServerContext* context);
   // Evaluates one frame on the request pool.
   void evaluate(Slot* slot, v1::KeyPointFrame frame, std::shared_ptr<const LoadedModel> model);
+  // Starts what can start next (start_next), counted in pumping_ so that OnDone, which may run
+  // as soon as Finish is called, leaves the deletion to the last pump still running.
+  // `finished_evaluations`: evaluations that end here (see evaluate).
+  void pump(int finished_evaluations = 0);
   // Decides, under the lock, what to start next (write, read, finish) and starts it outside it.
-  void pump();
+  void start_next(int finished_evaluations);
 
   ServiceEnvironment& env_;
   grpc::CallbackServerContext* context_;
@@ -67,6 +71,8 @@ class KeyPointStream final : public grpc::ServerBidiReactor<v1::KeyPointFrame, v
   bool stopping_ = false;  // an error is queued or the call was cancelled: read no more
   bool cancelled_ = false;
   bool finished_ = false;
+  int pumping_ = 0;    // pump() calls in progress
+  bool done_ = false;  // OnDone has run: the last pump out deletes the reactor
 };
 
 }  // namespace animspace::server
