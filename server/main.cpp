@@ -45,6 +45,11 @@ int main(int argc, char** argv) {
   app.add_option("--max-message-bytes", options.max_message_bytes, "Largest request or response message")
       ->check(CLI::Range(int64_t{1024}, int64_t{2000000000}))
       ->capture_default_str();
+  app.add_option("--grpc-memory-bytes", options.grpc_memory_bytes,
+                 "Memory gRPC may hold for requests being received, all connections together; past it calls "
+                 "are reset RESOURCE_EXHAUSTED (0: unbounded; else at least twice --max-message-bytes)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
+      ->capture_default_str();
   app.add_option("--max-batch-poses", options.max_batch_poses, "Largest batch in one evaluation request")
       ->check(CLI::Range(1u, 1000000u))
       ->capture_default_str();

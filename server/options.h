@@ -17,6 +17,12 @@ struct ServerOptions {
   int worker_threads = 8;
   // Largest request and response message, bytes.
   int64_t max_message_bytes = 64LL << 20;
+  // Memory gRPC's transport may hold across all connections (a grpc::ResourceQuota), mostly
+  // requests still arriving: gRPC 1.51 receives a message whole before it compares it with
+  // max_message_bytes, so without this bound one oversized request costs its full size. Past it,
+  // the transport resets calls with RESOURCE_EXHAUSTED. 0 = unbounded; otherwise at least twice
+  // max_message_bytes, so that a request of the largest size fits while it arrives.
+  int64_t grpc_memory_bytes = 256LL << 20;
   // Largest batch in one evaluation request, poses.
   uint32_t max_batch_poses = 1024;
   // Largest thumbnail edge, pixels.

@@ -305,6 +305,31 @@ TEST(DaemonStartup, RefusesAMissingRepositoryWithAMessage) {
   }
 }
 
+TEST(DaemonStartup, RefusesAGrpcMemoryBoundTooSmallForTheLargestMessage) {
+  TempDir work;
+  // 1.5 MiB cannot hold a 1 MiB request while it arrives: the rule is twice --max-message-bytes.
+  EXPECT_THROW(
+      {
+        try {
+          DaemonProcess daemon({"--max-message-bytes", "1048576", "--grpc-memory-bytes", "1572864"}, work.path(),
+                               std::chrono::seconds(10));
+        } catch (const std::runtime_error& e) {
+          EXPECT_NE(std::string(e.what()).find("--grpc-memory-bytes: expected 0 (unbounded) or at least twice "
+                                               "--max-message-bytes (2097152), got 1572864"),
+                    std::string::npos)
+              << e.what();
+          throw;
+        }
+      },
+      std::runtime_error);
+  // Exactly twice, and 0, are accepted.
+  for (const char* bytes : {"2097152", "0"}) {
+    DaemonProcess daemon({"--max-message-bytes", "1048576", "--grpc-memory-bytes", bytes}, work.path());
+    Client client(daemon.address());
+    wait_until_serving(client);
+  }
+}
+
 TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   TempDir work;
   DaemonProcess daemon({}, work.path());
