@@ -41,11 +41,10 @@ bench: build
 	$(BUILD_DIR)/bin/animspace-bench serve --data ../shared/data --json $(BUILD_DIR)/bench-serve.json
 	$(BUILD_DIR)/bin/animspace-bench loadtest --data ../shared/data --json $(BUILD_DIR)/bench-loadtest.json
 
-# The C++ suite (every ctest: core, server, loadtest, integration against the ASan-built daemon)
-# under AddressSanitizer + UndefinedBehaviorSanitizer. Every report goes to a file under
-# build-asan/reports (a daemon a test started reports there too) and fails the target; ASan aborts
-# the process that made it. pytest is not run here: its daemons stop gracefully with the renderer
-# on, which trips the Mesa leak below, and its deploy checks read the release binaries' libraries.
+# Every test under AddressSanitizer + UndefinedBehaviorSanitizer, leak checks included: each ctest
+# (core, server, loadtest, integration against the ASan-built daemon), then pytest against the
+# ASan-built daemon and CLI. Every report goes to a file under build-asan/reports (a daemon a test
+# started reports there too) and fails the target; ASan aborts the process that made it.
 ASAN_REPORTS := $(CURDIR)/build-asan/reports
 ASAN_OPTIONS_BASE := abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:log_path=$(ASAN_REPORTS)/asan
 ASAN_ENV := ASAN_OPTIONS=$(ASAN_OPTIONS_BASE):detect_leaks=1 \
@@ -55,11 +54,10 @@ check-asan: deps
 	cmake --preset asan >/dev/null
 	cmake --build --preset asan -j $(JOBS)
 	rm -rf $(ASAN_REPORTS)
-	$(ASAN_ENV) scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) ctest --preset asan -j $(JOBS) --timeout 900 -E '^Render(Platform)?Test\.'
-	# Mesa's llvmpipe leaks 112 bytes inside eglTerminate, in a driver it has unloaded by the time
-	# LeakSanitizer looks (no module to suppress by): the renderer's own tests (RenderTest, RenderPlatformTest) run without leak checks.
-	$(ASAN_ENV) ASAN_OPTIONS=$(ASAN_OPTIONS_BASE):detect_leaks=0 scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) \
-	  ctest --preset asan -j $(JOBS) --timeout 900 -R '^Render(Platform)?Test\.'
+	$(ASAN_ENV) scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) ctest --preset asan -j $(JOBS) --timeout 900
+	# The Python suite against ASan-built daemons and CLI (the interpreter itself is not instrumented).
+	$(ASAN_ENV) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=$(CURDIR)/build-asan scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) \
+	  /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python
 asan: check-asan
 
 # ThreadSanitizer where the threads are: the server's units (work pool, admission, registry) built

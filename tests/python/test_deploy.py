@@ -697,6 +697,8 @@ def test_runtime_stage_installs_the_package_of_every_linked_library():
     for program in PROGRAMS:
         out = subprocess.run([ldd, str(binary(program))], capture_output=True, text=True, timeout=30).stdout
         libraries |= {os.path.realpath(m) for m in re.findall(r"=> (/\S+)", out)}
+    if any(re.search(r"/lib[at]san\.so", library) for library in libraries):
+        pytest.skip("this build is sanitized (make check-asan); the image ships the release build")
     result = subprocess.run([dpkg, "-S", *sorted(libraries)], capture_output=True, text=True, timeout=30)
     packages = {line.split(":")[0] for line in result.stdout.splitlines() if ": " in line}
     if not packages:
