@@ -51,29 +51,38 @@ Result<T> parse_file(const std::filesystem::path& path, Parse parse) {
   return parse(std::string_view(*text), std::string_view(source));
 }
 
-// What a parser returns when an allocation fails (no exception leaves a public function).
-Error out_of_memory(std::string_view source) {
-  return make_error(ErrorCode::kResourceExhausted, std::string(source) + ": out of memory while reading");
-}
+// A DMAT `cols rows` line (the reader is on it): both non-negative, nothing after them.
+struct DmatShape {
+  int cols = 0;
+  int rows = 0;
+};
 
-// libigl's binary DMAT: after the `0 0` line, a `cols rows` line and the raw float64 payload.
-Result<Eigen::MatrixXd> parse_binary_dmat(TextReader& in, std::string_view text, std::string_view source) {
+Result<DmatShape> read_dmat_shape(TextReader& in) {
   const auto cols = in.read<int>("a column count");
   if (!cols.ok()) return cols.error();
   const auto rows = in.read<int>("a row count");
   if (!rows.ok()) return rows.error();
   if (const std::string_view extra = in.next_token(); !extra.empty()) return in.error("end of line after `cols rows`", extra);
   if (*cols < 0 || *rows < 0) return in.error("non-negative `cols rows`", std::to_string(*cols) + " " + std::to_string(*rows));
+  return DmatShape{*cols, *rows};
+}
+
+// libigl's binary DMAT: after the `0 0` line, a `cols rows` line and the raw float64 payload.
+Result<Eigen::MatrixXd> parse_binary_dmat(TextReader& in, std::string_view text, std::string_view source) {
+  const auto shape = read_dmat_shape(in);
+  if (!shape.ok()) return shape.error();
+  const int cols = shape->cols;
+  const int rows = shape->rows;
   const std::string_view payload = in.rest_after_line();
   const size_t offset = text.size() - payload.size();
-  const uint64_t count = static_cast<uint64_t>(*rows) * static_cast<uint64_t>(*cols);
+  const uint64_t count = static_cast<uint64_t>(rows) * static_cast<uint64_t>(cols);
   if (count > payload.size() / sizeof(double) || count * sizeof(double) != payload.size()) {
     return make_error(ErrorCode::kDataLoss, std::string(source) + ": byte " + std::to_string(offset) + ": " +
-                                                std::to_string(*rows) + " × " + std::to_string(*cols) +
+                                                std::to_string(rows) + " × " + std::to_string(cols) +
                                                 " float64 values need " + std::to_string(count) + " × 8 bytes, got " +
                                                 std::to_string(payload.size()));
   }
-  Eigen::MatrixXd matrix(*rows, *cols);
+  Eigen::MatrixXd matrix(rows, cols);
   // An empty matrix has no storage (data() is null), and memcpy may not be handed null.
   if (count > 0) std::memcpy(matrix.data(), payload.data(), payload.size());  // both column-major
   ANIMSPACE_RETURN_IF_ERROR(check_finite(matrix, source, "entry"));
@@ -135,19 +144,17 @@ Result<TgfSkeleton> parse_tgf(std::string_view text, std::string_view source) tr
       bones.data(), static_cast<Eigen::Index>(bones.size() / 2), 2);
   return skeleton;
 } catch (const std::bad_alloc&) {
-  return out_of_memory(source);
+  return out_of_memory_reading(source);
 }
 
 Result<Eigen::MatrixXd> parse_dmat(std::string_view text, std::string_view source) try {
   TextReader in(text, source);
   if (!in.next_line()) return make_error(ErrorCode::kInvalidArgument, std::string(source) + ": empty file, expected `cols rows`");
-  const auto cols = in.read<int>("a column count");
-  if (!cols.ok()) return cols.error();
-  const auto rows = in.read<int>("a row count");
-  if (!rows.ok()) return rows.error();
-  if (const std::string_view extra = in.next_token(); !extra.empty()) return in.error("end of line after `cols rows`", extra);
-  if (*cols < 0 || *rows < 0) return in.error("non-negative `cols rows`", std::to_string(*cols) + " " + std::to_string(*rows));
-  if (*cols == 0 && *rows == 0) {
+  const auto shape = read_dmat_shape(in);
+  if (!shape.ok()) return shape.error();
+  const int cols = shape->cols;
+  const int rows = shape->rows;
+  if (cols == 0 && rows == 0) {
     // libigl writes an empty matrix as a lone `0 0` and a binary one as `0 0` + binary header.
     if (in.rest_after_line().find_first_not_of(" \t\r\n") == std::string_view::npos) return Eigen::MatrixXd();
     in.next_line();
@@ -155,19 +162,19 @@ Result<Eigen::MatrixXd> parse_dmat(std::string_view text, std::string_view sourc
   }
   // Every value takes at least one character and a separator: refuse a header claiming more
   // values than the file could hold before allocating for them.
-  const int64_t count = int64_t{*rows} * *cols;
+  const int64_t count = int64_t{rows} * cols;
   if (count > static_cast<int64_t>(text.size())) {
     return in.error("at most " + std::to_string(text.size()) + " values for a file of that size",
-                    std::to_string(*cols) + " " + std::to_string(*rows));
+                    std::to_string(cols) + " " + std::to_string(rows));
   }
-  Eigen::MatrixXd matrix(*rows, *cols);
+  Eigen::MatrixXd matrix(rows, cols);
   // Value k in file order is entry k of the column-major storage. Counting values, not columns,
   // keeps an empty matrix of 2^31 - 1 columns from costing 2^31 loop turns (found by fuzzing).
   for (int64_t k = 0; k < count; ++k) {
     const std::string_view token = in.next_token_any_line();
     if (token.empty()) {
-      return in.error("expected " + std::to_string(count) + " values (" + std::to_string(*rows) + " rows × " +
-                      std::to_string(*cols) + " columns, column-major), got end of file after " + std::to_string(k));
+      return in.error("expected " + std::to_string(count) + " values (" + std::to_string(rows) + " rows × " +
+                      std::to_string(cols) + " columns, column-major), got end of file after " + std::to_string(k));
     }
     const auto value = in.parse<double>(token, "a number");
     if (!value.ok()) return value.error();
@@ -178,7 +185,7 @@ Result<Eigen::MatrixXd> parse_dmat(std::string_view text, std::string_view sourc
   }
   return matrix;
 } catch (const std::bad_alloc&) {
-  return out_of_memory(source);
+  return out_of_memory_reading(source);
 }
 
 Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view text, std::string_view source) try {
@@ -205,7 +212,7 @@ Result<std::vector<Eigen::Matrix<double, 4, 3>>> parse_tmat(std::string_view tex
   }
   return transforms;
 } catch (const std::bad_alloc&) {
-  return out_of_memory(source);
+  return out_of_memory_reading(source);
 }
 
 Result<TgfSkeleton> read_tgf(const std::filesystem::path& path) { return parse_file<TgfSkeleton>(path, parse_tgf); }

@@ -1,5 +1,6 @@
 // parse_obj: Wavefront OBJ (Advanced Visualizer manual, appendix B1), `v` and `f` only.
 #include <cstdint>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -49,7 +50,7 @@ Result<int32_t> parse_face_corner(const TextReader& in, std::string_view corner,
 
 }  // namespace
 
-Result<TriangleMesh> parse_obj(std::string_view text, std::string_view source) {
+Result<TriangleMesh> parse_obj(std::string_view text, std::string_view source) try {
   MeshBuilder mesh;
   std::vector<int32_t> polygon;  // the face being read
   TextReader in(text, source);
@@ -85,6 +86,8 @@ Result<TriangleMesh> parse_obj(std::string_view text, std::string_view source) {
     return make_error(ErrorCode::kInvalidArgument, std::string(source) + ": no vertices ('v' lines)");
   }
   return mesh.build();
+} catch (const std::bad_alloc&) {
+  return out_of_memory_reading(source);
 }
 
 }  // namespace animspace::mesh_io

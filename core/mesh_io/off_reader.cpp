@@ -1,5 +1,6 @@
 // parse_off: the Geomview OFF object file format, text form.
 #include <cstdint>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -40,7 +41,7 @@ Status skip_numbers(TextReader& in, std::string_view what) {
 
 }  // namespace
 
-Result<TriangleMesh> parse_off(std::string_view text, std::string_view source) {
+Result<TriangleMesh> parse_off(std::string_view text, std::string_view source) try {
   TextReader in(text, source);
   const std::string_view keyword = next_content_line(in);
   if (keyword.empty()) return in.error("expected 'OFF', got end of file");
@@ -100,6 +101,8 @@ Result<TriangleMesh> parse_off(std::string_view text, std::string_view source) {
   }
   if (*vertex_count == 0) return make_error(ErrorCode::kInvalidArgument, std::string(source) + ": no vertices");
   return mesh.build();
+} catch (const std::bad_alloc&) {
+  return out_of_memory_reading(source);
 }
 
 }  // namespace animspace::mesh_io

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -217,7 +218,7 @@ class BodyReader {
 
 }  // namespace
 
-Result<TriangleMesh> parse_ply(std::string_view bytes, std::string_view source) {
+Result<TriangleMesh> parse_ply(std::string_view bytes, std::string_view source) try {
   TextReader in(bytes, source);
   const auto header = parse_header(in);
   if (!header.ok()) return header.error();
@@ -295,6 +296,8 @@ Result<TriangleMesh> parse_ply(std::string_view bytes, std::string_view source) 
   ANIMSPACE_RETURN_IF_ERROR(body.expect_end());
   if (mesh.vertex_count() == 0) return make_error(ErrorCode::kInvalidArgument, std::string(source) + ": no vertices");
   return mesh.build();
+} catch (const std::bad_alloc&) {
+  return out_of_memory_reading(source);
 }
 
 }  // namespace animspace::mesh_io

@@ -123,4 +123,8 @@ void append_number(std::string& out, float value) { append_with_to_chars(out, va
 void append_number(std::string& out, double value) { append_with_to_chars(out, value); }
 void append_number(std::string& out, int value) { append_with_to_chars(out, value); }
 
+Error out_of_memory_reading(std::string_view source) {
+  return make_error(ErrorCode::kResourceExhausted, std::string(source) + ": out of memory while reading");
+}
+
 }  // namespace animspace::mesh_io

@@ -54,6 +54,10 @@ class TextReader {
   int line_number_ = 0;
 };
 
+// What a parser returns when an allocation fails: kResourceExhausted naming `source` (no
+// exception leaves a public parse function).
+Error out_of_memory_reading(std::string_view source);
+
 // Appends the shortest decimal text that reads back to exactly `value` (std::to_chars), so text
 // files written here round-trip float32 and float64 values bit for bit.
 void append_number(std::string& out, float value);

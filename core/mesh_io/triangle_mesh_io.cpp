@@ -100,14 +100,10 @@ Result<TriangleMesh> read_triangle_mesh(const std::filesystem::path& path) {
   if (!format.ok()) return format.error();
   const auto bytes = read_whole_file(path);
   if (!bytes.ok()) return bytes.error();
-  try {
-    switch (*format) {
-      case MeshFormat::kObj: return parse_obj(*bytes, path.string());
-      case MeshFormat::kPly: return parse_ply(*bytes, path.string());
-      case MeshFormat::kOff: return parse_off(*bytes, path.string());
-    }
-  } catch (const std::bad_alloc&) {
-    return make_error(ErrorCode::kResourceExhausted, path.string() + ": out of memory while reading");
+  switch (*format) {
+    case MeshFormat::kObj: return parse_obj(*bytes, path.string());
+    case MeshFormat::kPly: return parse_ply(*bytes, path.string());
+    case MeshFormat::kOff: return parse_off(*bytes, path.string());
   }
   return make_error(ErrorCode::kInternal, path.string() + ": unhandled mesh format");
 }
