@@ -19,22 +19,13 @@
 #include <Eigen/LU>
 #include <tiny_gltf.h>
 
+#include "core/common/format.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 
 namespace animspace::animation_space {
 namespace {
 
 Error invalid(std::string message) { return make_error(ErrorCode::kInvalidArgument, std::move(message)); }
-
-// The shortest decimal (up to 17 significant digits) that reads back as `value`: "0.5", "1e-06".
-std::string format_number(double value) {
-  char text[32];
-  for (int digits = 1; digits <= 17; ++digits) {
-    std::snprintf(text, sizeof text, "%.*g", digits, value);
-    if (std::strtod(text, nullptr) == value) break;
-  }
-  return text;
-}
 
 // One vertex's influences as a file gives them: bones in our numbering, any order, possibly
 // repeated (glTF slots), possibly zero.

@@ -6,6 +6,7 @@
 #include <system_error>
 
 #include "core/animspace/animspace_io.h"
+#include "core/common/format.h"
 #include "core/model/model_info.h"
 
 namespace animspace::pmsc {
@@ -47,15 +48,6 @@ constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
 
 std::string option_key(const char* name) { return std::string(kOptionsPrefix) + name; }
-
-// Shortest decimal that parses back to the same double (std::to_chars guarantees the round trip;
-// std::to_string's fixed six decimals would turn a 1e-7 bound into 0).
-std::string format_double(double value) {
-  char buffer[64];
-  const auto [end, error] = std::to_chars(buffer, buffer + sizeof buffer, value);
-  assert(error == std::errc());
-  return std::string(buffer, end);
-}
 
 // Whole-string parses: no leading '+' or spaces, no trailing characters.
 template <typename T>
@@ -165,10 +157,10 @@ container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMa
 
 void store_training_report(const TrainingReport& report, container::ModelContainer& out) {
   out.metadata()["pmsc.training_frames"] = std::to_string(report.frames);
-  out.metadata()["pmsc.max_training_error"] = format_double(report.max_training_error);
-  out.metadata()["pmsc.condition_number"] = format_double(report.condition_number);
-  out.metadata()["pmsc.error_ratio"] = format_double(report.error_ratio);
-  out.metadata()["pmsc.training_seconds"] = format_double(report.seconds);
+  out.metadata()["pmsc.max_training_error"] = format_number(report.max_training_error);
+  out.metadata()["pmsc.condition_number"] = format_number(report.condition_number);
+  out.metadata()["pmsc.error_ratio"] = format_number(report.error_ratio);
+  out.metadata()["pmsc.training_seconds"] = format_number(report.seconds);
 }
 
 void store_training_options(const TrainingOptions& options, container::ModelContainer& out) {
@@ -177,7 +169,7 @@ void store_training_options(const TrainingOptions& options, container::ModelCont
     metadata[option_key(option.name)] = std::to_string(options.*option.member);
   }
   for (const DoubleOption& option : kDoubleOptions) {
-    metadata[option_key(option.name)] = format_double(options.*option.member);
+    metadata[option_key(option.name)] = format_number(options.*option.member);
   }
   std::string fiducials;
   for (size_t k = 0; k < options.fiducial_points.size(); ++k) {

@@ -7,7 +7,7 @@
 
 #include <Eigen/Geometry>
 
-#include "core/render/format.h"
+#include "core/common/format.h"
 
 namespace animspace::render {
 

@@ -23,7 +23,7 @@
 #include <Eigen/Geometry>
 
 #include "core/render/camera.h"
-#include "core/render/format.h"
+#include "core/common/format.h"
 #include "core/render/renderer.h"
 
 namespace animspace::render {
