@@ -1,7 +1,6 @@
 // Fuzz target: the model container parser, and everything the daemon runs on a container it
-// loads (server/model_registry.cpp, load_version): container::parse → model::describe →
-// pmsc::load and/or animation_space::load → lod::load_levels → lod::model_bounding_sphere, then
-// the first things serving does with the result (one evaluation, the geomorphs).
+// loads (server/model_registry.cpp, load_version): container::parse → model::load_servable,
+// then the first things serving does with the result (one evaluation, the geomorphs).
 //
 // Header, section and file CRCs stop almost every mutated input at the first checksum, so each
 // input is tried twice: as it is (the checksum paths), and "resealed" — every CRC recomputed and
@@ -13,14 +12,12 @@
 #include <cstring>
 #include <string>
 
-#include "core/animspace/animspace_io.h"
+#include "core/animspace/model.h"
 #include "core/container/crc32.h"
 #include "core/container/model_container.h"
 #include "core/lod/levels.h"
-#include "core/lod/lod_io.h"
-#include "core/lod/selection.h"
-#include "core/model/model_info.h"
-#include "core/pmsc/pmsc_io.h"
+#include "core/model/servable.h"
+#include "core/pmsc/pmsc_model.h"
 #include "fuzz/fuzz_support.h"
 
 namespace animspace::fuzz {
@@ -130,28 +127,22 @@ void use_pmsc(const pmsc::PmscModel& m, const model::ModelInfo& info) {
   FUZZ_CHECK(pose.points.size() == m.mean.size());
 }
 
-void use_animation_space(const container::ModelContainer& c, const animation_space::AnimationSpaceModel& m,
+void use_animation_space(const animation_space::AnimationSpaceModel& m, const lod::LodLevels& levels,
                          const model::ModelInfo& info) {
   // load() promises a validated model, describe() the same counts.
   FUZZ_CHECK(animation_space::validate(m).ok());
   FUZZ_CHECK(m.vertex_count() == info.point_count && m.bone_count() == info.bone_count);
-  const std::string source(kSource);
-  const auto levels = lod::load_levels(c, m, source);
-  if (!levels) return;
-  const auto sphere = lod::model_bounding_sphere(c, m, source);
-  if (!sphere) return;
-
-  FUZZ_CHECK(levels->count() >= 1 && levels->levels[0].model.vertex_count() == m.vertex_count());
+  FUZZ_CHECK(levels.count() >= 1 && levels.levels[0].model.vertex_count() == m.vertex_count());
   const animation_space::TransformList rest = animation_space::rest_pose(m.skeleton);
   PointMatrix points;
-  for (int l = 0; l < levels->count(); ++l) {
-    const lod::LodLevel& level = levels->levels[static_cast<size_t>(l)];
+  for (int l = 0; l < levels.count(); ++l) {
+    const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
     FUZZ_CHECK(animation_space::validate(level.model).ok());
     animation_space::evaluate(level.model, rest, points);
     FUZZ_CHECK(points.rows() == level.model.vertex_count());
     if (level.model.has_tangents()) animation_space::evaluate_normals(level.model, rest, points);
-    if (l + 1 < levels->count()) {
-      const lod::Geomorph morph = lod::geomorph(*levels, l);
+    if (l + 1 < levels.count()) {
+      const lod::Geomorph morph = lod::geomorph(levels, l);
       FUZZ_CHECK(morph.aligned.vertex_count() == level.model.vertex_count());
     }
   }
@@ -165,19 +156,10 @@ void load_like_the_registry(std::string_view bytes) {
   }
   check_container(*parsed);
 
-  const std::string source(kSource);
-  const auto info = model::describe(*parsed, source);
-  if (!info) return;
-  if (info->kind == model::ModelKind::kPmsc || info->kind == model::ModelKind::kCrossPmsc) {
-    const auto runtime = pmsc::load(*parsed, source);
-    if (!runtime) return;
-    use_pmsc(*runtime, *info);
-  }
-  if (info->kind == model::ModelKind::kAnimationSpace || info->fail_through == model::FailThrough::kServer) {
-    const auto runtime = animation_space::load(*parsed, source);
-    if (!runtime) return;
-    use_animation_space(*parsed, *runtime, *info);
-  }
+  const auto servable = model::load_servable(*parsed, std::string(kSource));
+  if (!servable) return;
+  if (servable->pmsc) use_pmsc(*servable->pmsc, servable->info);
+  if (servable->animation_space) use_animation_space(*servable->animation_space, *servable->lod_levels, servable->info);
 }
 
 }  // namespace

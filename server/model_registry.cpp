@@ -8,11 +8,8 @@
 
 #include <spdlog/spdlog.h>
 
-#include "core/animspace/animspace_io.h"
-#include "core/lod/lod_io.h"
-#include "core/lod/selection.h"
 #include "core/model/repository.h"
-#include "core/pmsc/pmsc_io.h"
+#include "core/model/servable.h"
 
 namespace animspace::server {
 namespace {
@@ -44,40 +41,18 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
     entry.error = container.error().message;
     return entry;
   }
-  auto info = model::describe(*container, path.string());
-  if (!info) {
-    entry.error = info.error().message;
+  auto servable = model::load_servable(*container, path.string());
+  if (!servable) {
+    entry.error = servable.error().message;
     return entry;
   }
   auto loaded = std::make_shared<LoadedModel>();
-  if (info->kind == model::ModelKind::kPmsc || info->kind == model::ModelKind::kCrossPmsc) {
-    auto runtime = pmsc::load(*container, path.string());
-    if (!runtime) {
-      entry.error = runtime.error().message;
-      return entry;
-    }
-    loaded->pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
-  }
-  // An animation-space model, or a PMSC model's posing engine (FAIL_THROUGH_SERVER).
-  if (info->kind == model::ModelKind::kAnimationSpace || info->fail_through == model::FailThrough::kServer) {
-    auto runtime = animation_space::load(*container, path.string());
-    if (!runtime) {
-      entry.error = runtime.error().message;
-      return entry;
-    }
-    auto levels = lod::load_levels(*container, *runtime, path.string());
-    if (!levels) {
-      entry.error = levels.error().message;
-      return entry;
-    }
-    auto sphere = lod::model_bounding_sphere(*container, *runtime, path.string());
-    if (!sphere) {
-      entry.error = sphere.error().message;
-      return entry;
-    }
-    loaded->bounding_sphere = *sphere;
-    loaded->animation_space = std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*runtime));
-    loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*levels));
+  if (servable->pmsc) loaded->pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*servable->pmsc));
+  if (servable->animation_space) {
+    loaded->animation_space =
+        std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*servable->animation_space));
+    loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*servable->lod_levels));
+    loaded->bounding_sphere = servable->bounding_sphere;
   }
   loaded->name = name;
   loaded->version = version;
@@ -86,7 +61,7 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
   loaded->file_size_bytes = std::filesystem::file_size(path, ec);
   loaded->loaded_at_unix_s = unix_now_s();
   loaded->container = std::move(*container);
-  loaded->info = std::move(*info);
+  loaded->info = std::move(servable->info);
   entry.model = std::move(loaded);
   return entry;
 }

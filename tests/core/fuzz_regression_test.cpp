@@ -14,11 +14,11 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
 #include "core/container/model_container.h"
-#include "core/lod/lod_io.h"
 #include "core/mesh_io/libigl_rig.h"
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/model/model_info.h"
+#include "core/model/servable.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace {
@@ -46,17 +46,7 @@ bool returned(const Result<T>&) {
 bool load_like_the_registry(std::string_view bytes) {
   const std::string source = "regression.anim";
   const auto container = container::parse(bytes, source);
-  if (!container) return true;
-  const auto info = model::describe(*container, source);
-  if (!info) return true;
-  if (info->kind == model::ModelKind::kPmsc || info->kind == model::ModelKind::kCrossPmsc) {
-    if (!pmsc::load(*container, source)) return true;
-  }
-  if (info->kind == model::ModelKind::kAnimationSpace || info->fail_through == model::FailThrough::kServer) {
-    const auto engine = animation_space::load(*container, source);
-    if (engine) return returned(lod::load_levels(*container, *engine, source));
-  }
-  return true;
+  return !container || returned(model::load_servable(*container, source));
 }
 
 // Each fuzz target's parser, for the replay of its directory.

@@ -1,0 +1,36 @@
+#include "core/model/servable.h"
+
+#include <utility>
+
+#include "core/animspace/animspace_io.h"
+#include "core/lod/lod_io.h"
+#include "core/lod/selection.h"
+#include "core/pmsc/pmsc_io.h"
+
+namespace animspace::model {
+
+Result<Servable> load_servable(const container::ModelContainer& container, const std::string& source) {
+  auto info = describe(container, source);
+  if (!info) return info.error();
+  Servable servable;
+  if (info->kind == ModelKind::kPmsc || info->kind == ModelKind::kCrossPmsc) {
+    auto runtime = pmsc::load(container, source);
+    if (!runtime) return runtime.error();
+    servable.pmsc = std::move(*runtime);
+  }
+  if (info->kind == ModelKind::kAnimationSpace || info->fail_through == FailThrough::kServer) {
+    auto runtime = animation_space::load(container, source);
+    if (!runtime) return runtime.error();
+    auto levels = lod::load_levels(container, *runtime, source);
+    if (!levels) return levels.error();
+    auto sphere = lod::model_bounding_sphere(container, *runtime, source);
+    if (!sphere) return sphere.error();
+    servable.animation_space = std::move(*runtime);
+    servable.lod_levels = std::move(*levels);
+    servable.bounding_sphere = *sphere;
+  }
+  servable.info = std::move(*info);
+  return servable;
+}
+
+}  // namespace animspace::model
