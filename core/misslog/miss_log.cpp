@@ -204,6 +204,77 @@ Result<HeaderState> check_file_header(const std::filesystem::path& path, std::st
 
 // --- Records -----------------------------------------------------------------------------------
 
+MissRecord decode_payload(std::string_view payload) {
+  MissRecord record;
+  record.sequence = load<uint64_t>(payload, kSequenceAt);
+  record.model_version = load<uint64_t>(payload, kModelVersionAt);
+  record.unix_time_us = load<int64_t>(payload, kUnixTimeAt);
+  record.key_point_error = load<double>(payload, kKeyPointErrorAt);
+  record.blend_weight = load<double>(payload, kBlendWeightAt);
+  record.channels = load<uint32_t>(payload, kChannelsAt);
+  record.status = load<uint8_t>(payload, kStatusAt);
+  const auto key_count = load<uint32_t>(payload, kKeyCountAt);
+  const auto full_count = load<uint32_t>(payload, kFullCountAt);
+  record.key_values.resize(key_count);
+  record.full_values.resize(full_count);
+  const char* floats = payload.data() + kFixedPayloadSize;
+  if (key_count > 0) std::memcpy(record.key_values.data(), floats, 4 * size_t{key_count});
+  if (full_count > 0) {
+    std::memcpy(record.full_values.data(), floats + 4 * size_t{key_count}, 4 * size_t{full_count});
+  }
+  return record;
+}
+
+// Refuses what the format cannot hold or what would poison retraining (STYLE.md §5: no silent
+// clamping). Returns the payload length.
+Result<uint64_t> check_record(const MissRecord& record) {
+  if (record.status != kStatusBlend && record.status != kStatusMiss) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record status " + std::to_string(record.status) + ", expected " +
+                          std::to_string(kStatusBlend) + " (blend) or " +
+                          std::to_string(kStatusMiss) + " (miss)");
+  }
+  if (record.channels == 0) {
+    return make_error(ErrorCode::kInvalidArgument, "miss record channels is 0, expected ≥ 1");
+  }
+  if (record.key_values.size() % record.channels != 0 ||
+      record.full_values.size() % record.channels != 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record key_values (" + std::to_string(record.key_values.size()) +
+                          ") and full_values (" + std::to_string(record.full_values.size()) +
+                          ") must be multiples of channels (" + std::to_string(record.channels) +
+                          ")");
+  }
+  const uint64_t length = kFixedPayloadSize + 4 * (uint64_t{record.key_values.size()} +
+                                                   uint64_t{record.full_values.size()});
+  if (length > kMaxPayloadBytes) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record of " + std::to_string(record.key_values.size()) + " key and " +
+                          std::to_string(record.full_values.size()) +
+                          " full values needs a payload of " + std::to_string(length) +
+                          " bytes, more than the format's " + std::to_string(kMaxPayloadBytes));
+  }
+  if (!std::isfinite(record.key_point_error) || !std::isfinite(record.blend_weight)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record key_point_error and blend_weight must be finite");
+  }
+  const auto first_non_finite = [](const std::vector<float>& values) {
+    for (size_t i = 0; i < values.size(); ++i) {
+      if (!std::isfinite(values[i])) return static_cast<int64_t>(i);
+    }
+    return int64_t{-1};
+  };
+  if (const int64_t i = first_non_finite(record.key_values); i >= 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record key_values[" + std::to_string(i) + "] is not finite");
+  }
+  if (const int64_t i = first_non_finite(record.full_values); i >= 0) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "miss record full_values[" + std::to_string(i) + "] is not finite");
+  }
+  return length;
+}
+
 // Checks a payload whose CRC matched; returns an empty string or what is wrong.
 std::string check_payload(std::string_view payload, uint64_t previous_sequence) {
   const auto sequence = load<uint64_t>(payload, kSequenceAt);
@@ -226,28 +297,10 @@ std::string check_payload(std::string_view payload, uint64_t previous_sequence) 
     return "sequence " + std::to_string(sequence) + " does not follow " +
            std::to_string(previous_sequence);
   }
+  // What append refuses to write is refused when read, too: a status that is neither blend nor
+  // miss, or a non-finite value, would otherwise reach retraining.
+  if (const auto valid = check_record(decode_payload(payload)); !valid.ok()) return valid.error().message;
   return {};
-}
-
-MissRecord decode_payload(std::string_view payload) {
-  MissRecord record;
-  record.sequence = load<uint64_t>(payload, kSequenceAt);
-  record.model_version = load<uint64_t>(payload, kModelVersionAt);
-  record.unix_time_us = load<int64_t>(payload, kUnixTimeAt);
-  record.key_point_error = load<double>(payload, kKeyPointErrorAt);
-  record.blend_weight = load<double>(payload, kBlendWeightAt);
-  record.channels = load<uint32_t>(payload, kChannelsAt);
-  record.status = load<uint8_t>(payload, kStatusAt);
-  const auto key_count = load<uint32_t>(payload, kKeyCountAt);
-  const auto full_count = load<uint32_t>(payload, kFullCountAt);
-  record.key_values.resize(key_count);
-  record.full_values.resize(full_count);
-  const char* floats = payload.data() + kFixedPayloadSize;
-  if (key_count > 0) std::memcpy(record.key_values.data(), floats, 4 * size_t{key_count});
-  if (full_count > 0) {
-    std::memcpy(record.full_values.data(), floats + 4 * size_t{key_count}, 4 * size_t{full_count});
-  }
-  return record;
 }
 
 struct ScanResult {
@@ -323,56 +376,6 @@ Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesyste
     scan.end_offset = at + kRecordHeaderSize + length;
   }
   return scan;
-}
-
-// Refuses what the format cannot hold or what would poison retraining (STYLE.md §5: no silent
-// clamping). Returns the payload length.
-Result<uint64_t> check_record(const MissRecord& record) {
-  if (record.status != kStatusBlend && record.status != kStatusMiss) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "miss record status " + std::to_string(record.status) + ", expected " +
-                          std::to_string(kStatusBlend) + " (blend) or " +
-                          std::to_string(kStatusMiss) + " (miss)");
-  }
-  if (record.channels == 0) {
-    return make_error(ErrorCode::kInvalidArgument, "miss record channels is 0, expected ≥ 1");
-  }
-  if (record.key_values.size() % record.channels != 0 ||
-      record.full_values.size() % record.channels != 0) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "miss record key_values (" + std::to_string(record.key_values.size()) +
-                          ") and full_values (" + std::to_string(record.full_values.size()) +
-                          ") must be multiples of channels (" + std::to_string(record.channels) +
-                          ")");
-  }
-  const uint64_t length = kFixedPayloadSize + 4 * (uint64_t{record.key_values.size()} +
-                                                   uint64_t{record.full_values.size()});
-  if (length > kMaxPayloadBytes) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "miss record of " + std::to_string(record.key_values.size()) + " key and " +
-                          std::to_string(record.full_values.size()) +
-                          " full values needs a payload of " + std::to_string(length) +
-                          " bytes, more than the format's " + std::to_string(kMaxPayloadBytes));
-  }
-  if (!std::isfinite(record.key_point_error) || !std::isfinite(record.blend_weight)) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "miss record key_point_error and blend_weight must be finite");
-  }
-  const auto first_non_finite = [](const std::vector<float>& values) {
-    for (size_t i = 0; i < values.size(); ++i) {
-      if (!std::isfinite(values[i])) return static_cast<int64_t>(i);
-    }
-    return int64_t{-1};
-  };
-  if (const int64_t i = first_non_finite(record.key_values); i >= 0) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "miss record key_values[" + std::to_string(i) + "] is not finite");
-  }
-  if (const int64_t i = first_non_finite(record.full_values); i >= 0) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "miss record full_values[" + std::to_string(i) + "] is not finite");
-  }
-  return length;
 }
 
 // The framed record (header + payload) with the sequence field and CRC left to fill in.

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <limits>
 #include <random>
@@ -504,6 +505,37 @@ TEST(MissLogRecovery, NonIncreasingSequenceIsCorruption) {
   EXPECT_EQ(read_or_die(path, 0, &report).size(), 2U);
   EXPECT_NE(report.reason.find("sequence 1 does not follow 2"), std::string::npos)
       << report.reason;
+}
+
+// A record whose CRC matches but whose content append would have refused — a status that is
+// neither blend nor miss, a NaN key value — is corruption too: it never reaches retraining.
+TEST(MissLogRecovery, ValidChecksumDoesNotPassWhatAppendWouldRefuse) {
+  const auto reads_one_record_then = [](const std::function<void(std::string&, size_t)>& spoil) {
+    TempDir dir;
+    const fs::path path = dir / "m.misses";
+    {
+      auto log = open_or_die(path);
+      EXPECT_NE(log, nullptr);
+      for (uint64_t i = 1; i <= 2; ++i) {
+        MissRecord record = make_record(i, 3, 0);
+        EXPECT_TRUE(log->append(record).ok());
+      }
+    }
+    std::string bytes = read_bytes(path);
+    const size_t r = kFileHeaderSize + record_size(3, 0);  // the second record
+    const size_t p = r + kRecordHeaderSize;
+    spoil(bytes, p);
+    put<uint32_t>(bytes, r + 8, container::crc32(std::string_view(bytes).substr(p, record_size(3, 0) - kRecordHeaderSize)));
+    write_bytes(path, bytes);
+    ReadReport report;
+    EXPECT_EQ(read_or_die(path, 0, &report).size(), 1U);
+    return report.reason;
+  };
+  const std::string status = reads_one_record_then([](std::string& bytes, size_t p) { put<uint8_t>(bytes, p + 44, 7); });
+  EXPECT_NE(status.find("miss record status 7, expected"), std::string::npos) << status;
+  const std::string nan = reads_one_record_then(
+      [](std::string& bytes, size_t p) { put<float>(bytes, p + 56 + 4, std::numeric_limits<float>::quiet_NaN()); });
+  EXPECT_NE(nan.find("miss record key_values[1] is not finite"), std::string::npos) << nan;
 }
 
 TEST(MissLogHeader, BadFileHeaderIsDataLossAndLeavesTheFileAlone) {
