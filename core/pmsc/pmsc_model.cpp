@@ -10,6 +10,8 @@
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
+#include "core/common/format.h"
+
 namespace animspace::pmsc {
 namespace {
 
@@ -123,6 +125,16 @@ Status prepare_projection(PmscModel& m) {
     for (long k = 0; k < K; ++k) m.key_range_translation += m.key_range.middleRows(3 * k, 3).transpose();
   }
   if (!m.projection.allFinite()) return make_error(ErrorCode::kFailedPrecondition, "pmsc model: key basis is degenerate");
+  // f̂ = mean + A·P·(keys − key_mean): ‖A‖_F·‖P‖_F bounds how far key values are amplified. The
+  // regularisation caps ‖P‖₂ at κ_max / (2σ_max(A_key)), so a trained model stays many orders
+  // below the bound; a stored key_basis tiny against the basis it indexes (1e-200, found by
+  // fuzzing) would turn an ordinary pose into Inf points that the soft cache calls a hit.
+  const double amplification = static_cast<double>(m.basis.stableNorm()) * m.projection.norm();
+  if (!(amplification <= kMaxAmplification)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "pmsc model: key_basis is out of scale with basis: key values would be amplified up to " +
+                          format_number(amplification) + " times, the limit is " + format_number(kMaxAmplification));
+  }
   return Status::Ok();
 }
 
@@ -291,6 +303,8 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
   out.full_evaluation_needed = false;
   if (decision.status == CacheStatus::kHit || m.cross) {
     out.points = std::move(estimate.points);
+  } else if (full_values != nullptr && decision.status == CacheStatus::kMiss) {
+    out.points = *full_values;  // eq. 9: f itself, not 1·f + 0·f̂ (which an overflowed f̂ would spoil)
   } else if (full_values != nullptr) {
     out.points.resize(estimate.points.size());
     blend(estimate.points, *full_values, decision.alpha, out.points);

@@ -62,6 +62,8 @@ struct PmscModel {
 
 // Largest condition number of A_key accepted without regularisation.
 inline constexpr double kMaxConditionNumber = 1e6;
+// Refusal bound on ‖A‖_F·‖P‖_F, the amplification from key values to points (prepare_projection).
+inline constexpr double kMaxAmplification = 1e20;
 
 // Least-squares projection P (M × K·D) for key rows `key_basis` (K·D × M) through the SVD, with
 // Tikhonov regularisation λ = (σ_max/max_condition)² when σ_max/σ_min > max_condition; also the

@@ -29,7 +29,9 @@ Status validate(const SoftCacheThresholds& t) {
 }
 
 SoftCacheDecision decide(double key_point_error, const SoftCacheThresholds& t) {
-  assert(std::isfinite(key_point_error) && key_point_error >= 0);
+  assert(!(key_point_error < 0));
+  // An error that is not a number cannot vouch for the estimate: the full calculation decides.
+  if (std::isnan(key_point_error)) return {CacheStatus::kMiss, 1.0};
   if (key_point_error <= t.epsilon_min) return {CacheStatus::kHit, 0.0};
   if (key_point_error >= t.epsilon_max) return {CacheStatus::kMiss, 1.0};
   return {CacheStatus::kBlend, (key_point_error - t.epsilon_min) / (t.epsilon_max - t.epsilon_min)};

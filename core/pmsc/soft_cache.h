@@ -33,7 +33,7 @@ struct SoftCacheDecision {
 };
 
 // Applies eqs. 9–11. When ε_min == ε_max the zone is empty: a hit up to and including ε_min, a
-// miss above. `key_point_error` must be finite and ≥ 0 (asserted).
+// miss above. `key_point_error` must not be negative (asserted); NaN or +Inf is a miss.
 SoftCacheDecision decide(double key_point_error, const SoftCacheThresholds& thresholds);
 
 // out = α·full + (1 − α)·estimate, element-wise (eq. 11). Sizes must match (asserted).

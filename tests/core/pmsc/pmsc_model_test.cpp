@@ -115,6 +115,23 @@ TEST(PmscModel, IllConditionedKeysAreRegularisedNeverNaN) {
   EXPECT_LT(estimate.coordinates.cwiseAbs().maxCoeff(), 1e7);
 }
 
+// A key basis out of scale with the basis it indexes (a corrupt file: found by fuzzing) would
+// amplify ordinary key values into Inf points; it is refused at load, naming the member.
+TEST(PmscModel, AKeyBasisOutOfScaleWithTheBasisIsRefused) {
+  PmscModel m = three_point_model({0, 1});
+  m.key_basis *= 1e-200;
+  // σ(A_key) = 1e-200·√5/3, the only singular value, so ‖P‖ = 3e200/√5; with ‖A‖_F = 1 the
+  // amplification is about 1.34e200.
+  const Status status = prepare_projection(m);
+  ASSERT_FALSE(status.ok());
+  EXPECT_EQ(status.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(status.error().message.find("key_basis is out of scale with basis"), std::string::npos)
+      << status.error().message;
+  // The same model at a sane scale (amplification 3/√5 ≈ 1.34) loads.
+  PmscModel sane = three_point_model({0, 1});
+  EXPECT_TRUE(prepare_projection(sane).ok());
+}
+
 TEST(PmscModel, BadShapesNameTheMember) {
   PmscModel m = three_point_model({0, 1});
   m.key_mean.resize(5);
@@ -172,6 +189,17 @@ TEST(PmscModel, CachedEvaluationBlendsWithFullValuesOnlyOutsideTheHitZone) {
   // α f + (1 − α) f̂ at point 0: α·1 + (1 − α)·0.6.
   EXPECT_NEAR(with_full.points(0), alpha + (1 - alpha) * 0.6, 1e-6);
   EXPECT_NEAR(with_full.key_point_error, std::sqrt(0.1), 1e-7);
+
+  // A miss takes the full values themselves (eq. 9): keys (10, −10) give p = −6 and
+  // e_key = √90 ≈ 9.5 ≥ ε_max.
+  Eigen::VectorXf far(2);
+  far << 10, -10;
+  Eigen::VectorXf exact(3);
+  exact << 0.25f, -1e30f, 7.0f;
+  CachedPose missed;
+  evaluate_cached(m, far, &exact, missed);
+  EXPECT_EQ(missed.status, CacheStatus::kMiss);
+  EXPECT_EQ(missed.points, exact);
 
   // A cross-PMSC model never asks for a full calculation.
   m.cross = true;

@@ -1,6 +1,7 @@
 #include "core/pmsc/soft_cache.h"
 
 #include <cmath>
+#include <limits>
 
 #include <gtest/gtest.h>
 
@@ -32,6 +33,14 @@ TEST(SoftCache, AlphaIsContinuousAcrossBothEnds) {
     const double a = decide(0.2 + 0.01 * i, eps).alpha;
     EXPECT_NEAR(a - previous, 0.02, 1e-9);
     previous = a;
+  }
+}
+
+TEST(SoftCache, AnErrorThatIsNotANumberIsAMiss) {
+  const SoftCacheThresholds eps{0.1, 0.15};
+  for (double e : {std::nan(""), std::numeric_limits<double>::infinity()}) {
+    EXPECT_EQ(decide(e, eps).status, CacheStatus::kMiss) << e;
+    EXPECT_EQ(decide(e, eps).alpha, 1.0) << e;
   }
 }
 
