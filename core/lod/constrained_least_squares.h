@@ -36,8 +36,8 @@ Result<DiagonalisedQuadric> diagonalise(const Eigen::MatrixXd& P);
 // removed bones); errors as below for A.
 Result<Eigen::MatrixXd> constrained_least_squares_operator(const DiagonalisedQuadric& quadric, const Eigen::MatrixXd& A);
 
-// K (n × m) with x = K b for every b. Eigenvalues of P at or below 1e-12 · λ_max count as zero
-// (rounding on the null space).
+// K (n × m) with x = K b for every b, refined so that A K = I to rounding. Eigenvalues of P at or
+// below 1e-12 · λ_max count as zero (rounding on the null space).
 // Errors: kInvalidArgument when P is not square, A's column count differs from P's size, m = 0 or
 // m > n, an entry is not finite, P is not symmetric (1e-9 relative) or not non-negative definite
 // (an eigenvalue below −1e-9 λ_max), or A is rank deficient (1e-12 relative).
