@@ -12,6 +12,7 @@
 #include <cstring>
 #include <string>
 
+#include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
 #include "core/container/crc32.h"
 #include "core/container/model_container.h"
