@@ -1,25 +1,11 @@
 #include "bench/crane_split.h"
 
-#include <stdlib.h>
-
 #include <cstdio>
-#include <stdexcept>
 
 #include "core/container/model_container.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::bench {
-
-ScratchDirectory::ScratchDirectory(const std::string& suite) {
-  std::string pattern = (std::filesystem::temp_directory_path() / ("animspace-bench-" + suite + "-XXXXXX")).string();
-  if (::mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + pattern);
-  path_ = pattern;
-}
-
-ScratchDirectory::~ScratchDirectory() {
-  std::error_code ignored;
-  std::filesystem::remove_all(path_, ignored);
-}
 
 std::optional<CraneSplit> train_crane_even(const SuiteOptions& options, const std::string& suite) {
   if (!options.data) {

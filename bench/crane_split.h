@@ -9,25 +9,12 @@
 #include <vector>
 
 #include "bench/bench_support.h"
+#include "bench/scratch_directory.h"
 #include "core/common/types.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/pmsc/train.h"
 
 namespace animspace::bench {
-
-// A temporary directory (`animspace-bench-<suite>-XXXXXX` under the system's temp folder), removed
-// with everything in it on destruction. Throws std::runtime_error when it cannot be made.
-class ScratchDirectory {
- public:
-  explicit ScratchDirectory(const std::string& suite);
-  ~ScratchDirectory();
-  ScratchDirectory(const ScratchDirectory&) = delete;
-  ScratchDirectory& operator=(const ScratchDirectory&) = delete;
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
 
 inline constexpr const char* kCraneModelName = "crane";
 

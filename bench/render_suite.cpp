@@ -28,6 +28,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench/scratch_directory.h"
 #include "bench/suites.h"
 #include "animspace/v1/skinning.grpc.pb.h"
 #include "clients/cpp/client.h"
@@ -288,9 +289,8 @@ nlohmann::json run_render_suite(const SuiteOptions& options) {
     std::printf("render: needs --data (cow-rig, horse-gallop, crane); skipped\n");
     return results;
   }
-  char pattern[] = "/tmp/animspace-bench-render-XXXXXX";
-  if (mkdtemp(pattern) == nullptr) return results;
-  const std::filesystem::path scratch = pattern;
+  const ScratchDirectory scratch_directory("render");
+  const std::filesystem::path& scratch = scratch_directory.path();
   const auto repository = scratch / "repository";
   std::filesystem::create_directories(repository);
 
@@ -336,9 +336,7 @@ nlohmann::json run_render_suite(const SuiteOptions& options) {
   results["lod_streaming"] = nlohmann::json::array();
   if (!meshes.empty() && meshes.front().name == "cow") lod_streaming(client, results["lod_streaming"]);
 
-  daemon.reset();
-  std::error_code ec;
-  std::filesystem::remove_all(scratch, ec);
+  daemon.reset();  // before the scratch directory it runs in goes
   return results;
 }
 

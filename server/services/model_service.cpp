@@ -89,6 +89,7 @@ grpc::ServerUnaryReactor* ModelServiceImpl::GetServerInfo(grpc::CallbackServerCo
                                                            env_.started_at.time_since_epoch())
                                                            .count());
                        response->set_max_message_bytes(static_cast<uint64_t>(env_.options.max_message_bytes));
+                       response->set_grpc_memory_bytes(static_cast<uint64_t>(env_.options.grpc_memory_bytes));
                        response->set_max_batch_poses(env_.options.max_batch_poses);
                        response->set_max_thumbnail_px(env_.options.max_thumbnail_px);
                        response->set_max_concurrent_calls(env_.options.max_concurrent_calls);

@@ -281,13 +281,14 @@ TEST_F(DaemonTest, PrometheusMetricsCountCalls) {
 }
 
 TEST_F(DaemonTest, ServerInfoReportsLimitsFromFlags) {
-  auto daemon = start({"--max-batch-poses", "77", "--max-message-bytes", "1048576"});
+  auto daemon = start({"--max-batch-poses", "77", "--max-message-bytes", "1048576", "--grpc-memory-bytes", "4194304"});
   Client client(daemon->address());
   wait_until_serving(client);
   const auto info = client.server_info();
   EXPECT_EQ(info.api(), "animspace.v1");
   EXPECT_EQ(info.max_batch_poses(), 77u);
   EXPECT_EQ(info.max_message_bytes(), 1048576u);
+  EXPECT_EQ(info.grpc_memory_bytes(), 4194304u);
   bool lists_describe = false;
   for (const auto& rpc : info.implemented_rpcs()) lists_describe |= rpc == "animspace.v1.ModelService/DescribeModel";
   EXPECT_TRUE(lists_describe);

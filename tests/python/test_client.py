@@ -50,6 +50,7 @@ def test_health_models_and_server_info(client):
     info = client.server_info()
     assert info.api == "animspace.v1" and info.server_version
     assert info.max_batch_poses > 0 and info.max_message_bytes > 0 and info.max_thumbnail_px > 0
+    assert info.grpc_memory_bytes == 256 << 20  # animspaced --help's default
     # Every RPC the client wraps is one the server says it implements.
     wrapped = {"ModelService/ListModels", "ModelService/DescribeModel", "ModelService/LoadModel",
                "ModelService/UnloadModel", "ModelService/GetServerInfo", "StatsService/GetStats",

@@ -143,9 +143,14 @@ int run_server_info(const Globals& g) {
   }
   std::printf("animspaced %s (%s), renderer %s\n", info.server_version().c_str(), info.api().c_str(),
               info.renderer().c_str());
-  std::printf("limits: message %llu bytes, batch %u poses, thumbnail %u px, %u concurrent calls\n",
+  std::printf("limits: message %llu bytes, batch %u poses, thumbnail %u px, %u concurrent calls, ",
               static_cast<unsigned long long>(info.max_message_bytes()), info.max_batch_poses(),
               info.max_thumbnail_px(), info.max_concurrent_calls());
+  if (info.grpc_memory_bytes() == 0) {
+    std::printf("requests arriving unbounded\n");
+  } else {
+    std::printf("requests arriving %llu bytes\n", static_cast<unsigned long long>(info.grpc_memory_bytes()));
+  }
   std::printf("implemented:\n");
   for (const auto& rpc : info.implemented_rpcs()) std::printf("  %s\n", rpc.c_str());
   return 0;

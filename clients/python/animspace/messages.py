@@ -181,13 +181,15 @@ class ServerInfo:
     max_concurrent_calls: int
     renderer: str
     implemented_rpcs: Tuple[str, ...]
+    grpc_memory_bytes: int  # memory for requests still arriving, all connections; 0 = unbounded
 
     @classmethod
     def from_proto(cls, m: models_pb2.GetServerInfoResponse) -> "ServerInfo":
         return cls(server_version=m.server_version, api=m.api, started_at_unix_s=m.started_at_unix_s,
                    max_message_bytes=m.max_message_bytes, max_batch_poses=m.max_batch_poses,
                    max_thumbnail_px=m.max_thumbnail_px, max_concurrent_calls=m.max_concurrent_calls,
-                   renderer=m.renderer, implemented_rpcs=tuple(m.implemented_rpcs))
+                   renderer=m.renderer, implemented_rpcs=tuple(m.implemented_rpcs),
+                   grpc_memory_bytes=m.grpc_memory_bytes)
 
 
 @dataclass(frozen=True, eq=False)
