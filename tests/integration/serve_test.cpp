@@ -4,8 +4,11 @@
 // here from the demo rig and the papers' formulas, never read back from the daemon.
 #include <signal.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <thread>
@@ -794,20 +797,45 @@ TEST_F(ServeTest, ACallWhoseDeadlinePassedInTheQueueIsNeverStarted) {
   std::filesystem::create_directories(repo_ / "arm-pmsc" / "2");
   std::filesystem::copy_file(repo_ / "arm-pmsc" / "1" / "model.anim", repo_ / "arm-pmsc" / "2" / "model.anim");
 
-  // Occupy the admin thread with retrains (dry runs: nothing published), then queue a LoadModel
-  // with a deadline far shorter than the work ahead of it.
+  // Occupy the admin thread with eight retrains (dry runs: nothing published), wait until the
+  // server holds most of them, then queue a LoadModel whose deadline, twice one retrain (timed
+  // first), is far shorter than the work ahead of it yet long enough to reach the server: a fixed
+  // 5 ms expired on the way under ThreadSanitizer, before the service ever saw the call.
+  const auto timed = std::chrono::steady_clock::now();
+  {
+    grpc::Status status;
+    retrain(*training, "bend", true, &status);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  const auto one_retrain = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - timed);
+  const auto deadline = std::clamp(2 * one_retrain, std::chrono::milliseconds(20), std::chrono::milliseconds(10000));
+  httplib::Client http("127.0.0.1", metrics_port);
+  const auto calls_in_flight = [&http] {
+    const auto scraped = http.Get("/metrics");
+    if (!scraped) return -1;
+    const std::string key = "\nanimspace_calls_in_flight ";
+    const size_t at = scraped->body.find(key);
+    return at == std::string::npos ? -1 : std::atoi(scraped->body.c_str() + at + key.size());
+  };
+  constexpr int kRetrains = 8;
   std::vector<std::thread> retrains;
-  for (const char* model : {"bend", "arm-pmsc-engine", "bend", "arm-pmsc-engine"}) {
-    retrains.emplace_back([&, model] {
+  for (int r = 0; r < kRetrains; ++r) {
+    retrains.emplace_back([&, model = r % 2 == 0 ? "bend" : "arm-pmsc-engine"] {
       grpc::Status status;
       retrain(*training, model, true, &status);
       EXPECT_TRUE(status.ok()) << status.error_message();
     });
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  // Six of eight in flight: at least four retrains wait behind the running one, twice the deadline.
+  bool queued = false;
+  for (int attempt = 0; attempt < 6000 && !queued; ++attempt) {
+    queued = calls_in_flight() >= kRetrains - 2;
+    if (!queued) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(queued) << "the retrains never reached the server";
   auto models = v1::ModelService::NewStub(ch);
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(5));
+  context.set_deadline(std::chrono::system_clock::now() + deadline);
   v1::LoadModelRequest load;
   load.mutable_model()->set_name("arm-pmsc");
   load.mutable_model()->set_version(2);
@@ -822,7 +850,6 @@ TEST_F(ServeTest, ACallWhoseDeadlinePassedInTheQueueIsNeverStarted) {
   EXPECT_EQ(arm.default_version(), 1u);
   EXPECT_EQ(arm.versions_size(), 1);
   // The dropped call is counted when the admin thread reaches it, just after the retrains.
-  httplib::Client http("127.0.0.1", metrics_port);
   bool dropped = false;
   std::string body;
   // Up to 60 s: under a sanitizer the four retrains ahead of it take many seconds.
