@@ -126,9 +126,10 @@ Status prepare_projection(PmscModel& m) {
   }
   if (!m.projection.allFinite()) return make_error(ErrorCode::kFailedPrecondition, "pmsc model: key basis is degenerate");
   // f̂ = mean + A·P·(keys − key_mean): ‖A‖_F·‖P‖_F bounds how far key values are amplified. The
-  // regularisation caps ‖P‖₂ at κ_max / (2σ_max(A_key)), so a trained model stays many orders
-  // below the bound; a stored key_basis tiny against the basis it indexes (1e-200, found by
-  // fuzzing) would turn an ordinary pose into Inf points that the soft cache calls a hit.
+  // regularisation caps ‖P‖₂ at κ_max / (2σ_max(A_key)); with A's M ≤ 200 orthonormal columns
+  // that is √M·√M·1e6 / (2σ_max(A_key)), below 1e20 unless the key rows carry almost none of the
+  // basis (σ_max < 1e-11). A stored key_basis tiny against the basis it indexes (1e-200: a
+  // corrupt or hand-made file) would turn an ordinary pose into Inf points the cache calls hits.
   const double amplification = static_cast<double>(m.basis.stableNorm()) * m.projection.norm();
   if (!(amplification <= kMaxAmplification)) {
     return make_error(ErrorCode::kInvalidArgument,

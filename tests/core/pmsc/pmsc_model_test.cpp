@@ -115,7 +115,7 @@ TEST(PmscModel, IllConditionedKeysAreRegularisedNeverNaN) {
   EXPECT_LT(estimate.coordinates.cwiseAbs().maxCoeff(), 1e7);
 }
 
-// A key basis out of scale with the basis it indexes (a corrupt file: found by fuzzing) would
+// A key basis out of scale with the basis it indexes (a corrupt or hand-made file) would
 // amplify ordinary key values into Inf points; it is refused at load, naming the member.
 TEST(PmscModel, AKeyBasisOutOfScaleWithTheBasisIsRefused) {
   PmscModel m = three_point_model({0, 1});
