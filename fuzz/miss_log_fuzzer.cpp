@@ -13,6 +13,7 @@
 #include <fstream>
 #include <string>
 
+#include "core/common/bytes.h"
 #include "core/container/crc32.h"
 #include "core/misslog/miss_log.h"
 #include "fuzz/fuzz_support.h"
@@ -27,22 +28,16 @@ constexpr size_t kPayloadLengthAt = 4;
 constexpr size_t kPayloadCrcAt = 8;
 constexpr size_t kFixedPayloadSize = 56;
 
-uint32_t load_u32(std::string_view bytes, size_t at) {
-  uint32_t value = 0;
-  std::memcpy(&value, bytes.data() + at, sizeof value);
-  return value;
-}
-
 // Recomputes the CRC of every record whose payload lies inside the file, walking the records
 // as the reader does (by their length fields).
 std::string reseal(std::string_view bytes) {
   std::string out(bytes);
   size_t at = kFileHeaderSize;
   while (at <= out.size() && out.size() - at >= kRecordHeaderSize) {
-    const size_t length = load_u32(out, at + kPayloadLengthAt);
+    const size_t length = load_le<uint32_t>(out, at + kPayloadLengthAt);
     if (length > out.size() - at - kRecordHeaderSize) break;
-    const uint32_t crc = container::crc32(std::string_view(out).substr(at + kRecordHeaderSize, length));
-    std::memcpy(out.data() + at + kPayloadCrcAt, &crc, sizeof crc);
+    store_le<uint32_t>(out, at + kPayloadCrcAt,
+                       container::crc32(std::string_view(out).substr(at + kRecordHeaderSize, length)));
     at += kRecordHeaderSize + length;
   }
   return out;

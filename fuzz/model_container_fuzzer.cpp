@@ -14,6 +14,7 @@
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
+#include "core/common/bytes.h"
 #include "core/container/crc32.h"
 #include "core/container/model_container.h"
 #include "core/lod/levels.h"
@@ -38,36 +39,24 @@ constexpr size_t kEntryCrcAt = 60;
 constexpr size_t kEntryOffsetAt = 64;
 constexpr size_t kEntrySizeAt = 72;
 
-template <typename T>
-T load(std::string_view bytes, size_t at) {
-  T value{};
-  std::memcpy(&value, bytes.data() + at, sizeof value);
-  return value;
-}
-
-template <typename T>
-void store(std::string& bytes, size_t at, T value) {
-  std::memcpy(bytes.data() + at, &value, sizeof value);
-}
-
 // The input with its redundancy made consistent: the file size field, the CRC of every payload
 // that lies inside the input, the header CRC and the footer CRC (in that order: each covers the
 // fields written before it). `bytes` must hold a header and a footer.
 std::string reseal(std::string_view bytes) {
   std::string out(bytes);
-  store<uint64_t>(out, kFileSizeAt, out.size());
+  store_le<uint64_t>(out, kFileSizeAt, out.size());
   const size_t table_capacity = (out.size() - kHeaderSize - kFooterSize) / kEntrySize;
-  const size_t count = std::min<size_t>(load<uint32_t>(out, kSectionCountAt), table_capacity);
+  const size_t count = std::min<size_t>(load_le<uint32_t>(out, kSectionCountAt), table_capacity);
   for (size_t i = 0; i < count; ++i) {
     const size_t entry = kHeaderSize + kEntrySize * i;
-    const uint64_t offset = load<uint64_t>(out, entry + kEntryOffsetAt);
-    const uint64_t size = load<uint64_t>(out, entry + kEntrySizeAt);
+    const uint64_t offset = load_le<uint64_t>(out, entry + kEntryOffsetAt);
+    const uint64_t size = load_le<uint64_t>(out, entry + kEntrySizeAt);
     if (offset > out.size() || size > out.size() - offset) continue;
-    store<uint32_t>(out, entry + kEntryCrcAt, container::crc32(std::string_view(out).substr(offset, size)));
+    store_le<uint32_t>(out, entry + kEntryCrcAt, container::crc32(std::string_view(out).substr(offset, size)));
   }
-  store<uint32_t>(out, kHeaderCrcAt, container::crc32(std::string_view(out).substr(0, kHeaderCrcAt)));
+  store_le<uint32_t>(out, kHeaderCrcAt, container::crc32(std::string_view(out).substr(0, kHeaderCrcAt)));
   const size_t footer = out.size() - kFooterSize;
-  store<uint32_t>(out, footer, container::crc32(std::string_view(out).substr(0, footer)));
+  store_le<uint32_t>(out, footer, container::crc32(std::string_view(out).substr(0, footer)));
   return out;
 }
 

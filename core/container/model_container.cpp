@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/common/atomic_file.h"
+#include "core/common/bytes.h"
 #include "core/container/crc32.h"
 
 namespace animspace::container {
@@ -86,32 +87,6 @@ constexpr bool kVerifyChecksums = false;
 #else
 constexpr bool kVerifyChecksums = true;
 #endif
-
-// --- Little-endian fields ----------------------------------------------------------------------
-
-uint32_t load_u32(std::string_view bytes, size_t at) {
-  assert(at <= bytes.size() && bytes.size() - at >= 4);
-  uint32_t value = 0;
-  std::memcpy(&value, bytes.data() + at, sizeof value);
-  return value;
-}
-
-uint64_t load_u64(std::string_view bytes, size_t at) {
-  assert(at <= bytes.size() && bytes.size() - at >= 8);
-  uint64_t value = 0;
-  std::memcpy(&value, bytes.data() + at, sizeof value);
-  return value;
-}
-
-void store_u32(std::string& out, size_t at, uint32_t value) {
-  assert(at + sizeof value <= out.size());
-  std::memcpy(out.data() + at, &value, sizeof value);
-}
-
-void store_u64(std::string& out, size_t at, uint64_t value) {
-  assert(at + sizeof value <= out.size());
-  std::memcpy(out.data() + at, &value, sizeof value);
-}
 
 uint64_t align_up(uint64_t n) { return (n + kAlignment - 1) / kAlignment * kAlignment; }
 
@@ -321,10 +296,10 @@ class Parser {
                                           std::to_string(kHeaderSize));
     }
     // Checked before the version so that a corrupt version field reads as corruption.
-    ANIMSPACE_RETURN_IF_ERROR(check_checksum(kHeaderCrcAt, "header", load_u32(bytes_, kHeaderCrcAt),
+    ANIMSPACE_RETURN_IF_ERROR(check_checksum(kHeaderCrcAt, "header", load_le<uint32_t>(bytes_, kHeaderCrcAt),
                                              crc32(bytes_.substr(0, kHeaderCrcAt))));
 
-    const uint32_t version = load_u32(bytes_, kVersionAt);
+    const uint32_t version = load_le<uint32_t>(bytes_, kVersionAt);
     if (version > kFormatVersion) {
       return make_error(ErrorCode::kFailedPrecondition,
                         std::string(source_) + ": format version " + std::to_string(version) +
@@ -333,11 +308,11 @@ class Parser {
     }
     if (version == 0) return data_loss(kVersionAt, "format version 0 does not exist");
 
-    if (const uint32_t size = load_u32(bytes_, kHeaderSizeAt); size != kHeaderSize) {
+    if (const uint32_t size = load_le<uint32_t>(bytes_, kHeaderSizeAt); size != kHeaderSize) {
       return data_loss(kHeaderSizeAt, "header size is " + std::to_string(size) + ", expected " +
                                           std::to_string(kHeaderSize));
     }
-    if (const uint32_t size = load_u32(bytes_, kEntrySizeAt); size != kEntrySize) {
+    if (const uint32_t size = load_le<uint32_t>(bytes_, kEntrySizeAt); size != kEntrySize) {
       return data_loss(kEntrySizeAt, "section entry size is " + std::to_string(size) +
                                          ", expected " + std::to_string(kEntrySize));
     }
@@ -345,14 +320,14 @@ class Parser {
       if (bytes_[at] != '\0') return data_loss(at, "reserved header byte is not zero");
     }
 
-    section_count_ = load_u32(bytes_, kSectionCountAt);
+    section_count_ = load_le<uint32_t>(bytes_, kSectionCountAt);
     if (section_count_ > kMaxSections) {
       return data_loss(kSectionCountAt, "section count " + std::to_string(section_count_) +
                                             " exceeds the limit of " +
                                             std::to_string(kMaxSections));
     }
 
-    file_size_ = load_u64(bytes_, kFileSizeAt);
+    file_size_ = load_le<uint64_t>(bytes_, kFileSizeAt);
     if (file_size_ > bytes_.size()) {
       return data_loss(bytes_.size(), "truncated: the header says the file is " +
                                           std::to_string(file_size_) + " bytes, got " +
@@ -382,7 +357,7 @@ class Parser {
       return data_loss(payload_end_ + 4, "footer marker is " + hex_bytes(marker) + ", expected " +
                                              hex_bytes(kFooterMarker));
     }
-    return check_checksum(payload_end_, "file", load_u32(bytes_, payload_end_),
+    return check_checksum(payload_end_, "file", load_le<uint32_t>(bytes_, payload_end_),
                           crc32(bytes_.substr(0, payload_end_)));
   }
 
@@ -412,16 +387,16 @@ class Parser {
     entry.name = field.substr(0, length);
     const std::string where = label + " '" + std::string(entry.name) + "'";
 
-    const uint32_t type = load_u32(raw, kTypeAt);
+    const uint32_t type = load_le<uint32_t>(raw, kTypeAt);
     if (type > kLargestSectionType) {
       return data_loss(entry.table_at + kTypeAt, where + " has unknown type " + std::to_string(type));
     }
     entry.section.type = static_cast<SectionType>(type);
-    entry.section.rows = load_u32(raw, kRowsAt);
-    entry.section.cols = load_u32(raw, kColsAt);
-    entry.crc = load_u32(raw, kPayloadCrcAt);
-    entry.offset = load_u64(raw, kOffsetAt);
-    entry.size = load_u64(raw, kSizeAt);
+    entry.section.rows = load_le<uint32_t>(raw, kRowsAt);
+    entry.section.cols = load_le<uint32_t>(raw, kColsAt);
+    entry.crc = load_le<uint32_t>(raw, kPayloadCrcAt);
+    entry.offset = load_le<uint64_t>(raw, kOffsetAt);
+    entry.size = load_le<uint64_t>(raw, kSizeAt);
 
     if (entry.name == kMetadataSectionName && entry.section.type != SectionType::kText) {
       return data_loss(entry.table_at + kTypeAt,
@@ -701,12 +676,12 @@ std::string serialize(const ModelContainer& container) {
     // min() keeps a release build (asserts off) from writing past the name field.
     std::memcpy(out.data() + entry_at + kNameAt, p.name.data(),
                 std::min(p.name.size(), kMaxSectionNameLength));
-    store_u32(out, entry_at + kTypeAt, static_cast<uint32_t>(p.type));
-    store_u32(out, entry_at + kRowsAt, p.rows);
-    store_u32(out, entry_at + kColsAt, p.cols);
-    store_u32(out, entry_at + kPayloadCrcAt, crc32(p.payload));
-    store_u64(out, entry_at + kOffsetAt, p.offset);
-    store_u64(out, entry_at + kSizeAt, p.payload.size());
+    store_le<uint32_t>(out, entry_at + kTypeAt, static_cast<uint32_t>(p.type));
+    store_le<uint32_t>(out, entry_at + kRowsAt, p.rows);
+    store_le<uint32_t>(out, entry_at + kColsAt, p.cols);
+    store_le<uint32_t>(out, entry_at + kPayloadCrcAt, crc32(p.payload));
+    store_le<uint64_t>(out, entry_at + kOffsetAt, p.offset);
+    store_le<uint64_t>(out, entry_at + kSizeAt, p.payload.size());
     if (!p.payload.empty()) {
       std::memcpy(out.data() + p.offset, p.payload.data(), p.payload.size());
     }
@@ -714,15 +689,15 @@ std::string serialize(const ModelContainer& container) {
 
   // Header, then its checksum over bytes [0, 60).
   std::memcpy(out.data() + kMagicAt, kMagic.data(), kMagic.size());
-  store_u32(out, kVersionAt, kFormatVersion);
-  store_u32(out, kHeaderSizeAt, static_cast<uint32_t>(kHeaderSize));
-  store_u64(out, kFileSizeAt, file_size);
-  store_u32(out, kSectionCountAt, static_cast<uint32_t>(planned.size()));
-  store_u32(out, kEntrySizeAt, static_cast<uint32_t>(kEntrySize));
-  store_u32(out, kHeaderCrcAt, crc32(std::string_view(out).substr(0, kHeaderCrcAt)));
+  store_le<uint32_t>(out, kVersionAt, kFormatVersion);
+  store_le<uint32_t>(out, kHeaderSizeAt, static_cast<uint32_t>(kHeaderSize));
+  store_le<uint64_t>(out, kFileSizeAt, file_size);
+  store_le<uint32_t>(out, kSectionCountAt, static_cast<uint32_t>(planned.size()));
+  store_le<uint32_t>(out, kEntrySizeAt, static_cast<uint32_t>(kEntrySize));
+  store_le<uint32_t>(out, kHeaderCrcAt, crc32(std::string_view(out).substr(0, kHeaderCrcAt)));
 
   // Footer: CRC of everything before it, then the end marker.
-  store_u32(out, payload_end, crc32(std::string_view(out).substr(0, payload_end)));
+  store_le<uint32_t>(out, payload_end, crc32(std::string_view(out).substr(0, payload_end)));
   std::memcpy(out.data() + payload_end + 4, kFooterMarker.data(), kFooterMarker.size());
   return out;
 }

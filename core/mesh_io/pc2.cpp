@@ -8,6 +8,7 @@
 #include <new>
 
 #include "core/common/atomic_file.h"
+#include "core/common/bytes.h"
 
 namespace animspace::mesh_io {
 namespace {
@@ -22,13 +23,6 @@ constexpr size_t kNumPointsOffset = 16;
 constexpr size_t kStartFrameOffset = 20;
 constexpr size_t kSampleRateOffset = 24;
 constexpr size_t kNumSamplesOffset = 28;
-
-template <typename T>
-T load(std::string_view bytes, size_t offset) {
-  T value;
-  std::memcpy(&value, bytes.data() + offset, sizeof(T));
-  return value;
-}
 
 template <typename T>
 void store(std::string& bytes, T value) {
@@ -89,15 +83,15 @@ Result<PointCache> parse_pc2(std::string_view bytes, std::string_view source) {
   if (bytes.substr(0, kMagic.size()) != kMagic) {
     return at_byte(ErrorCode::kInvalidArgument, source, 0, "expected the magic \"POINTCACHE2\\0\", not a PC2 file");
   }
-  if (const auto version = load<int32_t>(bytes, kVersionOffset); version != 1) {
+  if (const auto version = load_le<int32_t>(bytes, kVersionOffset); version != 1) {
     return at_byte(ErrorCode::kFailedPrecondition, source, kVersionOffset,
                    "unsupported version " + std::to_string(version) + ", expected 1");
   }
   PointCache cache;
-  cache.num_points = load<int32_t>(bytes, kNumPointsOffset);
-  cache.start_frame = load<float>(bytes, kStartFrameOffset);
-  cache.sample_rate = load<float>(bytes, kSampleRateOffset);
-  const int32_t num_samples = load<int32_t>(bytes, kNumSamplesOffset);
+  cache.num_points = load_le<int32_t>(bytes, kNumPointsOffset);
+  cache.start_frame = load_le<float>(bytes, kStartFrameOffset);
+  cache.sample_rate = load_le<float>(bytes, kSampleRateOffset);
+  const int32_t num_samples = load_le<int32_t>(bytes, kNumSamplesOffset);
   if (cache.num_points <= 0) {
     return at_byte(ErrorCode::kInvalidArgument, source, kNumPointsOffset,
                    "expected numPoints > 0, got " + std::to_string(cache.num_points));

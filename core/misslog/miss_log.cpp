@@ -22,6 +22,7 @@
 #include <new>
 #include <utility>
 
+#include "core/common/bytes.h"
 #include "core/container/crc32.h"
 
 namespace animspace::misslog {
@@ -72,27 +73,11 @@ constexpr bool kVerifyChecksums = false;
 constexpr bool kVerifyChecksums = true;
 #endif
 
-// --- Little-endian fields ----------------------------------------------------------------------
-
-template <typename T>
-T load(std::string_view bytes, size_t at) {
-  assert(at <= bytes.size() && bytes.size() - at >= sizeof(T));
-  T value{};
-  std::memcpy(&value, bytes.data() + at, sizeof value);
-  return value;
-}
-
-template <typename T>
-void store(std::string& out, size_t at, T value) {
-  assert(at <= out.size() && out.size() - at >= sizeof(T));
-  std::memcpy(out.data() + at, &value, sizeof value);
-}
-
 std::string expected_file_header() {
   std::string header(kFileHeaderSize, '\0');
   header.replace(0, kFileMagic.size(), kFileMagic);
-  store<uint32_t>(header, kVersionAt, kFormatVersion);
-  store<uint32_t>(header, kReservedAt, 0);
+  store_le<uint32_t>(header, kVersionAt, kFormatVersion);
+  store_le<uint32_t>(header, kReservedAt, 0);
   return header;
 }
 
@@ -186,14 +171,14 @@ Result<HeaderState> check_file_header(const std::filesystem::path& path, std::st
                                                 hex_bytes(magic) + ", expected " +
                                                 hex_bytes(kFileMagic) + ")");
   }
-  const auto version = load<uint32_t>(bytes, kVersionAt);
+  const auto version = load_le<uint32_t>(bytes, kVersionAt);
   if (version != kFormatVersion) {
     return make_error(ErrorCode::kDataLoss,
                       path.string() + ": byte " + std::to_string(kVersionAt) +
                           ": miss log format version " + std::to_string(version) +
                           ", this build reads only version " + std::to_string(kFormatVersion));
   }
-  const auto reserved = load<uint32_t>(bytes, kReservedAt);
+  const auto reserved = load_le<uint32_t>(bytes, kReservedAt);
   if (reserved != 0) {
     return make_error(ErrorCode::kDataLoss, path.string() + ": byte " +
                                                 std::to_string(kReservedAt) + ": reserved field " +
@@ -206,15 +191,15 @@ Result<HeaderState> check_file_header(const std::filesystem::path& path, std::st
 
 MissRecord decode_payload(std::string_view payload) {
   MissRecord record;
-  record.sequence = load<uint64_t>(payload, kSequenceAt);
-  record.model_version = load<uint64_t>(payload, kModelVersionAt);
-  record.unix_time_us = load<int64_t>(payload, kUnixTimeAt);
-  record.key_point_error = load<double>(payload, kKeyPointErrorAt);
-  record.blend_weight = load<double>(payload, kBlendWeightAt);
-  record.channels = load<uint32_t>(payload, kChannelsAt);
-  record.status = load<uint8_t>(payload, kStatusAt);
-  const auto key_count = load<uint32_t>(payload, kKeyCountAt);
-  const auto full_count = load<uint32_t>(payload, kFullCountAt);
+  record.sequence = load_le<uint64_t>(payload, kSequenceAt);
+  record.model_version = load_le<uint64_t>(payload, kModelVersionAt);
+  record.unix_time_us = load_le<int64_t>(payload, kUnixTimeAt);
+  record.key_point_error = load_le<double>(payload, kKeyPointErrorAt);
+  record.blend_weight = load_le<double>(payload, kBlendWeightAt);
+  record.channels = load_le<uint32_t>(payload, kChannelsAt);
+  record.status = load_le<uint8_t>(payload, kStatusAt);
+  const auto key_count = load_le<uint32_t>(payload, kKeyCountAt);
+  const auto full_count = load_le<uint32_t>(payload, kFullCountAt);
   record.key_values.resize(key_count);
   record.full_values.resize(full_count);
   const char* floats = payload.data() + kFixedPayloadSize;
@@ -277,10 +262,10 @@ Result<uint64_t> check_record(const MissRecord& record) {
 
 // Checks a payload whose CRC matched; returns an empty string or what is wrong.
 std::string check_payload(std::string_view payload, uint64_t previous_sequence) {
-  const auto sequence = load<uint64_t>(payload, kSequenceAt);
-  const auto channels = load<uint32_t>(payload, kChannelsAt);
-  const auto key_count = load<uint32_t>(payload, kKeyCountAt);
-  const auto full_count = load<uint32_t>(payload, kFullCountAt);
+  const auto sequence = load_le<uint64_t>(payload, kSequenceAt);
+  const auto channels = load_le<uint32_t>(payload, kChannelsAt);
+  const auto key_count = load_le<uint32_t>(payload, kKeyCountAt);
+  const auto full_count = load_le<uint32_t>(payload, kFullCountAt);
   const uint64_t expected_length =
       kFixedPayloadSize + 4 * (uint64_t{key_count} + uint64_t{full_count});
   if (expected_length != payload.size()) {
@@ -333,9 +318,9 @@ Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesyste
       scan.reason = "torn record" + where + "the file ended inside the record header";
       break;
     }
-    const auto magic = load<uint32_t>(header, kRecordMagicAt);
-    const auto length = uint64_t{load<uint32_t>(header, kPayloadLengthAt)};
-    const auto stored_crc = load<uint32_t>(header, kPayloadCrcAt);
+    const auto magic = load_le<uint32_t>(header, kRecordMagicAt);
+    const auto length = uint64_t{load_le<uint32_t>(header, kPayloadLengthAt)};
+    const auto stored_crc = load_le<uint32_t>(header, kPayloadCrcAt);
     if (magic != kRecordMagic) {
       scan.reason = "corrupt record" + where + "record magic " + hex32(magic) + ", expected " +
                     hex32(kRecordMagic);
@@ -371,7 +356,7 @@ Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesyste
       break;
     }
     on_record(payload);
-    scan.last_sequence = load<uint64_t>(payload, kSequenceAt);
+    scan.last_sequence = load_le<uint64_t>(payload, kSequenceAt);
     scan.records += 1;
     scan.end_offset = at + kRecordHeaderSize + length;
   }
@@ -381,17 +366,17 @@ Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesyste
 // The framed record (header + payload) with the sequence field and CRC left to fill in.
 std::string encode_unsealed(const MissRecord& record, uint64_t payload_length) {
   std::string framed(kRecordHeaderSize + payload_length, '\0');
-  store<uint32_t>(framed, kRecordMagicAt, kRecordMagic);
-  store<uint32_t>(framed, kPayloadLengthAt, static_cast<uint32_t>(payload_length));
+  store_le<uint32_t>(framed, kRecordMagicAt, kRecordMagic);
+  store_le<uint32_t>(framed, kPayloadLengthAt, static_cast<uint32_t>(payload_length));
   const size_t p = kRecordHeaderSize;
-  store<uint64_t>(framed, p + kModelVersionAt, record.model_version);
-  store<int64_t>(framed, p + kUnixTimeAt, record.unix_time_us);
-  store<double>(framed, p + kKeyPointErrorAt, record.key_point_error);
-  store<double>(framed, p + kBlendWeightAt, record.blend_weight);
-  store<uint32_t>(framed, p + kChannelsAt, record.channels);
-  store<uint8_t>(framed, p + kStatusAt, record.status);
-  store<uint32_t>(framed, p + kKeyCountAt, static_cast<uint32_t>(record.key_values.size()));
-  store<uint32_t>(framed, p + kFullCountAt, static_cast<uint32_t>(record.full_values.size()));
+  store_le<uint64_t>(framed, p + kModelVersionAt, record.model_version);
+  store_le<int64_t>(framed, p + kUnixTimeAt, record.unix_time_us);
+  store_le<double>(framed, p + kKeyPointErrorAt, record.key_point_error);
+  store_le<double>(framed, p + kBlendWeightAt, record.blend_weight);
+  store_le<uint32_t>(framed, p + kChannelsAt, record.channels);
+  store_le<uint8_t>(framed, p + kStatusAt, record.status);
+  store_le<uint32_t>(framed, p + kKeyCountAt, static_cast<uint32_t>(record.key_values.size()));
+  store_le<uint32_t>(framed, p + kFullCountAt, static_cast<uint32_t>(record.full_values.size()));
   char* floats = framed.data() + p + kFixedPayloadSize;
   if (!record.key_values.empty()) {
     std::memcpy(floats, record.key_values.data(), 4 * record.key_values.size());
@@ -404,9 +389,9 @@ std::string encode_unsealed(const MissRecord& record, uint64_t payload_length) {
 }
 
 void seal(std::string& framed, uint64_t sequence) {
-  store<uint64_t>(framed, kRecordHeaderSize + kSequenceAt, sequence);
+  store_le<uint64_t>(framed, kRecordHeaderSize + kSequenceAt, sequence);
   const std::string_view payload = std::string_view(framed).substr(kRecordHeaderSize);
-  store<uint32_t>(framed, kPayloadCrcAt, container::crc32(payload));
+  store_le<uint32_t>(framed, kPayloadCrcAt, container::crc32(payload));
 }
 
 Result<uint64_t> file_size_of(int fd, const std::filesystem::path& path) {
@@ -633,7 +618,7 @@ Result<std::vector<MissRecord>> read_records(const std::filesystem::path& path,
   } else {
     try {
       auto scanned = scan_records(file.get(), *size, path, [&](std::string_view payload) {
-        if (load<uint64_t>(payload, kSequenceAt) > after_sequence) {
+        if (load_le<uint64_t>(payload, kSequenceAt) > after_sequence) {
           records.push_back(decode_payload(payload));
         }
       });

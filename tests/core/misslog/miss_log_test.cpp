@@ -21,6 +21,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/common/bytes.h"
 #include "core/container/crc32.h"
 #include "tests/support/test_support.h"
 
@@ -51,18 +52,6 @@ void write_bytes(const fs::path& path, const std::string& bytes) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   ASSERT_TRUE(out.good());
-}
-
-template <typename T>
-T get(const std::string& bytes, size_t at) {
-  T value{};
-  std::memcpy(&value, bytes.data() + at, sizeof value);
-  return value;
-}
-
-template <typename T>
-void put(std::string& bytes, size_t at, T value) {
-  std::memcpy(bytes.data() + at, &value, sizeof value);
 }
 
 // Deterministic values from a tag, so a record read back can be checked against a recomputation.
@@ -106,6 +95,16 @@ std::vector<MissRecord> read_or_die(const fs::path& path, uint64_t after = 0,
   auto records = read_records(path, after, report);
   EXPECT_TRUE(records.ok()) << (records.ok() ? "" : records.error().message);
   return records.ok() ? std::move(*records) : std::vector<MissRecord>{};
+}
+
+// Appends records 1..count of make_record(i, key_count, full_count) to a new log at `path`.
+void write_records(const fs::path& path, uint64_t count, size_t key_count, size_t full_count) {
+  auto log = open_or_die(path);
+  ASSERT_NE(log, nullptr);
+  for (uint64_t i = 1; i <= count; ++i) {
+    MissRecord record = make_record(i, key_count, full_count);
+    ASSERT_TRUE(log->append(record).ok());
+  }
 }
 
 TEST(MissLogFsyncPolicy, ParsesTheThreeNamesAndRejectsOthers) {
@@ -179,42 +178,35 @@ TEST(MissLog, WritesTheDocumentedByteLayout) {
   const std::string bytes = read_bytes(path);
   ASSERT_EQ(bytes.size(), kFileHeaderSize + record_size(3, 6));
   EXPECT_EQ(std::memcmp(bytes.data(), kFileMagic, 8), 0);
-  EXPECT_EQ(get<uint32_t>(bytes, 8), 1U);   // format version
-  EXPECT_EQ(get<uint32_t>(bytes, 12), 0U);  // reserved
+  EXPECT_EQ(load_le<uint32_t>(bytes, 8), 1U);   // format version
+  EXPECT_EQ(load_le<uint32_t>(bytes, 12), 0U);  // reserved
 
   const size_t r = kFileHeaderSize;
   EXPECT_EQ(bytes.substr(r, 4), "MREC");
-  const uint32_t length = get<uint32_t>(bytes, r + 4);
+  const uint32_t length = load_le<uint32_t>(bytes, r + 4);
   EXPECT_EQ(length, kFixedPayloadSize + 4 * 9);
   const size_t p = r + kRecordHeaderSize;
-  EXPECT_EQ(get<uint32_t>(bytes, r + 8), container::crc32(std::string_view(bytes).substr(p)));
-  EXPECT_EQ(get<uint64_t>(bytes, p + 0), 1U);  // sequence
-  EXPECT_EQ(get<uint64_t>(bytes, p + 8), 7U);  // model version
-  EXPECT_EQ(get<int64_t>(bytes, p + 16), 1'700'000'000'000'007);
-  EXPECT_EQ(get<double>(bytes, p + 24), 0.125 * 7 + 0.001);
-  EXPECT_EQ(get<double>(bytes, p + 32), 1.0 / 9.0);
-  EXPECT_EQ(get<uint32_t>(bytes, p + 40), 3U);  // channels
-  EXPECT_EQ(get<uint8_t>(bytes, p + 44), kStatusMiss);
+  EXPECT_EQ(load_le<uint32_t>(bytes, r + 8), container::crc32(std::string_view(bytes).substr(p)));
+  EXPECT_EQ(load_le<uint64_t>(bytes, p + 0), 1U);  // sequence
+  EXPECT_EQ(load_le<uint64_t>(bytes, p + 8), 7U);  // model version
+  EXPECT_EQ(load_le<int64_t>(bytes, p + 16), 1'700'000'000'000'007);
+  EXPECT_EQ(load_le<double>(bytes, p + 24), 0.125 * 7 + 0.001);
+  EXPECT_EQ(load_le<double>(bytes, p + 32), 1.0 / 9.0);
+  EXPECT_EQ(load_le<uint32_t>(bytes, p + 40), 3U);  // channels
+  EXPECT_EQ(load_le<uint8_t>(bytes, p + 44), kStatusMiss);
   EXPECT_EQ(bytes.substr(p + 45, 3), std::string(3, '\0'));
-  EXPECT_EQ(get<uint32_t>(bytes, p + 48), 3U);  // key value count
-  EXPECT_EQ(get<uint32_t>(bytes, p + 52), 6U);  // full value count
-  for (size_t i = 0; i < 3; ++i) EXPECT_EQ(get<float>(bytes, p + 56 + 4 * i), value_of(7, i));
+  EXPECT_EQ(load_le<uint32_t>(bytes, p + 48), 3U);  // key value count
+  EXPECT_EQ(load_le<uint32_t>(bytes, p + 52), 6U);  // full value count
+  for (size_t i = 0; i < 3; ++i) EXPECT_EQ(load_le<float>(bytes, p + 56 + 4 * i), value_of(7, i));
   for (size_t i = 0; i < 6; ++i) {
-    EXPECT_EQ(get<float>(bytes, p + 56 + 12 + 4 * i), -value_of(7, i));
+    EXPECT_EQ(load_le<float>(bytes, p + 56 + 12 + 4 * i), -value_of(7, i));
   }
 }
 
 TEST(MissLog, ReopenContinuesSequencesAndCounts) {
   TempDir dir;
   const fs::path path = dir / "m.misses";
-  {
-    auto log = open_or_die(path);
-    ASSERT_NE(log, nullptr);
-    for (uint64_t i = 1; i <= 3; ++i) {
-      MissRecord record = make_record(i, 3, 3);
-      ASSERT_TRUE(log->append(record).ok());
-    }
-  }
+  write_records(path, 3, 3, 3);
   {
     auto log = open_or_die(path, FsyncPolicy::kInterval);
     ASSERT_NE(log, nullptr);
@@ -319,14 +311,7 @@ TEST(MissLogRecovery, TornLastRecordAtEveryByteOffset) {
 TEST(MissLogRecovery, ReaderReportsATornTailWithoutTouchingTheFile) {
   TempDir dir;
   const fs::path path = dir / "m.misses";
-  {
-    auto log = open_or_die(path);
-    ASSERT_NE(log, nullptr);
-    for (uint64_t i = 1; i <= 2; ++i) {
-      MissRecord record = make_record(i, 3, 3);
-      ASSERT_TRUE(log->append(record).ok());
-    }
-  }
+  write_records(path, 2, 3, 3);
   std::string bytes = read_bytes(path);
   bytes.resize(bytes.size() - 5);
   write_bytes(path, bytes);
@@ -346,14 +331,7 @@ TEST(MissLogRecovery, ReaderReportsATornTailWithoutTouchingTheFile) {
 void expect_tail_recovered(const std::string& tail, const std::string& reason_part) {
   TempDir dir;
   const fs::path path = dir / "m.misses";
-  {
-    auto log = open_or_die(path);
-    ASSERT_NE(log, nullptr);
-    for (uint64_t i = 1; i <= 3; ++i) {
-      MissRecord record = make_record(i, 3, 6);
-      ASSERT_TRUE(log->append(record).ok());
-    }
-  }
+  write_records(path, 3, 3, 6);
   const size_t good_end = kFileHeaderSize + 3 * record_size(3, 6);
   write_bytes(path, read_bytes(path) + tail);
   auto log = open_or_die(path);
@@ -370,9 +348,9 @@ void expect_tail_recovered(const std::string& tail, const std::string& reason_pa
 
 std::string record_header(uint32_t magic, uint32_t length, uint32_t crc) {
   std::string header(kRecordHeaderSize, '\0');
-  put(header, 0, magic);
-  put(header, 4, length);
-  put(header, 8, crc);
+  store_le(header, 0, magic);
+  store_le(header, 4, length);
+  store_le(header, 8, crc);
   return header;
 }
 
@@ -428,14 +406,7 @@ TEST(MissLogRecovery, LengthOverTheBoundIsNotAllocatedEvenWhenTheFileIsThatLarge
 TEST(MissLogRecovery, FlippedByteInTheLastRecordIsCaughtByTheCrc) {
   TempDir dir;
   const fs::path path = dir / "m.misses";
-  {
-    auto log = open_or_die(path);
-    ASSERT_NE(log, nullptr);
-    for (uint64_t i = 1; i <= 3; ++i) {
-      MissRecord record = make_record(i, 3, 6);
-      ASSERT_TRUE(log->append(record).ok());
-    }
-  }
+  write_records(path, 3, 3, 6);
   const size_t last_at = kFileHeaderSize + 2 * record_size(3, 6);
   std::string bytes = read_bytes(path);
   bytes[last_at + kRecordHeaderSize + 60] ^= 0x10;  // inside the first key value
@@ -461,14 +432,7 @@ TEST(MissLogRecovery, FlippedByteInTheLastRecordIsCaughtByTheCrc) {
 TEST(MissLogRecovery, CorruptRecordInTheMiddleCutsEverythingFromIt) {
   TempDir dir;
   const fs::path path = dir / "m.misses";
-  {
-    auto log = open_or_die(path);
-    ASSERT_NE(log, nullptr);
-    for (uint64_t i = 1; i <= 5; ++i) {
-      MissRecord record = make_record(i, 3, 3);
-      ASSERT_TRUE(log->append(record).ok());
-    }
-  }
+  write_records(path, 5, 3, 3);
   const size_t second_at = kFileHeaderSize + record_size(3, 3);
   std::string bytes = read_bytes(path);
   bytes[second_at + kRecordHeaderSize + 8] ^= 0x01;  // model version of record 2
@@ -489,14 +453,7 @@ TEST(MissLogRecovery, CorruptRecordInTheMiddleCutsEverythingFromIt) {
 TEST(MissLogRecovery, NonIncreasingSequenceIsCorruption) {
   TempDir dir;
   const fs::path path = dir / "m.misses";
-  {
-    auto log = open_or_die(path);
-    ASSERT_NE(log, nullptr);
-    for (uint64_t i = 1; i <= 2; ++i) {
-      MissRecord record = make_record(i, 3, 0);
-      ASSERT_TRUE(log->append(record).ok());
-    }
-  }
+  write_records(path, 2, 3, 0);
   // Duplicate record 1 (a valid, CRC-checked record) after record 2.
   std::string bytes = read_bytes(path);
   bytes += bytes.substr(kFileHeaderSize, record_size(3, 0));
@@ -513,28 +470,23 @@ TEST(MissLogRecovery, ValidChecksumDoesNotPassWhatAppendWouldRefuse) {
   const auto reads_one_record_then = [](const std::function<void(std::string&, size_t)>& spoil) {
     TempDir dir;
     const fs::path path = dir / "m.misses";
-    {
-      auto log = open_or_die(path);
-      EXPECT_NE(log, nullptr);
-      for (uint64_t i = 1; i <= 2; ++i) {
-        MissRecord record = make_record(i, 3, 0);
-        EXPECT_TRUE(log->append(record).ok());
-      }
-    }
+    write_records(path, 2, 3, 0);
     std::string bytes = read_bytes(path);
     const size_t r = kFileHeaderSize + record_size(3, 0);  // the second record
     const size_t p = r + kRecordHeaderSize;
     spoil(bytes, p);
-    put<uint32_t>(bytes, r + 8, container::crc32(std::string_view(bytes).substr(p, record_size(3, 0) - kRecordHeaderSize)));
+    const std::string_view payload = std::string_view(bytes).substr(p, record_size(3, 0) - kRecordHeaderSize);
+    store_le<uint32_t>(bytes, r + 8, container::crc32(payload));
     write_bytes(path, bytes);
     ReadReport report;
     EXPECT_EQ(read_or_die(path, 0, &report).size(), 1U);
     return report.reason;
   };
-  const std::string status = reads_one_record_then([](std::string& bytes, size_t p) { put<uint8_t>(bytes, p + 44, 7); });
+  const std::string status =
+      reads_one_record_then([](std::string& bytes, size_t p) { store_le<uint8_t>(bytes, p + 44, 7); });
   EXPECT_NE(status.find("miss record status 7, expected"), std::string::npos) << status;
   const std::string nan = reads_one_record_then(
-      [](std::string& bytes, size_t p) { put<float>(bytes, p + 56 + 4, std::numeric_limits<float>::quiet_NaN()); });
+      [](std::string& bytes, size_t p) { store_le<float>(bytes, p + 56 + 4, std::numeric_limits<float>::quiet_NaN()); });
   EXPECT_NE(nan.find("miss record key_values[1] is not finite"), std::string::npos) << nan;
 }
 
@@ -557,11 +509,11 @@ TEST(MissLogHeader, BadFileHeaderIsDataLossAndLeavesTheFileAlone) {
   cases.push_back({"magic", 0, good});
   cases.back().bytes[3] = 'X';
   cases.push_back({"version 2", 8, good});
-  put<uint32_t>(cases.back().bytes, 8, 2);
+  store_le<uint32_t>(cases.back().bytes, 8, 2);
   cases.push_back({"version 0", 8, good});
-  put<uint32_t>(cases.back().bytes, 8, 0);
+  store_le<uint32_t>(cases.back().bytes, 8, 0);
   cases.push_back({"reserved", 12, good});
-  put<uint32_t>(cases.back().bytes, 12, 1);
+  store_le<uint32_t>(cases.back().bytes, 12, 1);
   cases.push_back({"short, not a prefix", 2, good.substr(0, 2) + "Z"});
   cases.push_back({"text file", 0, std::string("hello, this is not a miss log\n")});
   for (const Case& c : cases) {
