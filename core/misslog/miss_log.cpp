@@ -210,9 +210,57 @@ MissRecord decode_payload(std::string_view payload) {
   return record;
 }
 
+// What check_record looks at, from a record to append or from a payload as stored (the values
+// as raw float32 bytes), so that reading checks a payload without decoding it first.
+struct RecordView {
+  uint8_t status = 0;
+  uint32_t channels = 0;
+  double key_point_error = 0;
+  double blend_weight = 0;
+  uint64_t key_count = 0;
+  uint64_t full_count = 0;
+  const char* key_bytes = nullptr;   // key_count float32
+  const char* full_bytes = nullptr;  // full_count float32
+};
+
+RecordView view_of(const MissRecord& record) {
+  return {record.status,
+          record.channels,
+          record.key_point_error,
+          record.blend_weight,
+          record.key_values.size(),
+          record.full_values.size(),
+          reinterpret_cast<const char*>(record.key_values.data()),
+          reinterpret_cast<const char*>(record.full_values.data())};
+}
+
+// `payload` is as long as its counts say (check_payload has checked).
+RecordView view_of_payload(std::string_view payload) {
+  const uint64_t key_count = load_le<uint32_t>(payload, kKeyCountAt);
+  const char* floats = payload.data() + kFixedPayloadSize;
+  return {load_le<uint8_t>(payload, kStatusAt),
+          load_le<uint32_t>(payload, kChannelsAt),
+          load_le<double>(payload, kKeyPointErrorAt),
+          load_le<double>(payload, kBlendWeightAt),
+          key_count,
+          load_le<uint32_t>(payload, kFullCountAt),
+          floats,
+          floats + 4 * key_count};
+}
+
+// The index of the first non-finite of `count` float32 stored from `bytes` on, or -1.
+int64_t first_non_finite(const char* bytes, uint64_t count) {
+  for (uint64_t i = 0; i < count; ++i) {
+    float value = 0;
+    std::memcpy(&value, bytes + 4 * i, sizeof value);
+    if (!std::isfinite(value)) return static_cast<int64_t>(i);
+  }
+  return -1;
+}
+
 // Refuses what the format cannot hold or what would poison retraining (STYLE.md §5: no silent
 // clamping). Returns the payload length.
-Result<uint64_t> check_record(const MissRecord& record) {
+Result<uint64_t> check_record(const RecordView& record) {
   if (record.status != kStatusBlend && record.status != kStatusMiss) {
     return make_error(ErrorCode::kInvalidArgument,
                       "miss record status " + std::to_string(record.status) + ", expected " +
@@ -222,20 +270,18 @@ Result<uint64_t> check_record(const MissRecord& record) {
   if (record.channels == 0) {
     return make_error(ErrorCode::kInvalidArgument, "miss record channels is 0, expected ≥ 1");
   }
-  if (record.key_values.size() % record.channels != 0 ||
-      record.full_values.size() % record.channels != 0) {
+  if (record.key_count % record.channels != 0 || record.full_count % record.channels != 0) {
     return make_error(ErrorCode::kInvalidArgument,
-                      "miss record key_values (" + std::to_string(record.key_values.size()) +
-                          ") and full_values (" + std::to_string(record.full_values.size()) +
+                      "miss record key_values (" + std::to_string(record.key_count) +
+                          ") and full_values (" + std::to_string(record.full_count) +
                           ") must be multiples of channels (" + std::to_string(record.channels) +
                           ")");
   }
-  const uint64_t length = kFixedPayloadSize + 4 * (uint64_t{record.key_values.size()} +
-                                                   uint64_t{record.full_values.size()});
+  const uint64_t length = kFixedPayloadSize + 4 * (record.key_count + record.full_count);
   if (length > kMaxPayloadBytes) {
     return make_error(ErrorCode::kInvalidArgument,
-                      "miss record of " + std::to_string(record.key_values.size()) + " key and " +
-                          std::to_string(record.full_values.size()) +
+                      "miss record of " + std::to_string(record.key_count) + " key and " +
+                          std::to_string(record.full_count) +
                           " full values needs a payload of " + std::to_string(length) +
                           " bytes, more than the format's " + std::to_string(kMaxPayloadBytes));
   }
@@ -243,17 +289,11 @@ Result<uint64_t> check_record(const MissRecord& record) {
     return make_error(ErrorCode::kInvalidArgument,
                       "miss record key_point_error and blend_weight must be finite");
   }
-  const auto first_non_finite = [](const std::vector<float>& values) {
-    for (size_t i = 0; i < values.size(); ++i) {
-      if (!std::isfinite(values[i])) return static_cast<int64_t>(i);
-    }
-    return int64_t{-1};
-  };
-  if (const int64_t i = first_non_finite(record.key_values); i >= 0) {
+  if (const int64_t i = first_non_finite(record.key_bytes, record.key_count); i >= 0) {
     return make_error(ErrorCode::kInvalidArgument,
                       "miss record key_values[" + std::to_string(i) + "] is not finite");
   }
-  if (const int64_t i = first_non_finite(record.full_values); i >= 0) {
+  if (const int64_t i = first_non_finite(record.full_bytes, record.full_count); i >= 0) {
     return make_error(ErrorCode::kInvalidArgument,
                       "miss record full_values[" + std::to_string(i) + "] is not finite");
   }
@@ -284,7 +324,7 @@ std::string check_payload(std::string_view payload, uint64_t previous_sequence) 
   }
   // What append refuses to write is refused when read, too: a status that is neither blend nor
   // miss, or a non-finite value, would otherwise reach retraining.
-  if (const auto valid = check_record(decode_payload(payload)); !valid.ok()) return valid.error().message;
+  if (const auto valid = check_record(view_of_payload(payload)); !valid.ok()) return valid.error().message;
   return {};
 }
 
@@ -522,7 +562,7 @@ Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path
 }
 
 Result<uint64_t> MissLog::append(MissRecord& record) {
-  auto length = check_record(record);
+  auto length = check_record(view_of(record));
   if (!length.ok()) return length.error();
   std::string framed;
   try {
