@@ -35,7 +35,7 @@
 #include "core/animspace/animspace_io.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "core/render/png.h"
 #include "core/render/renderer.h"
 #include "tests/support/daemon_process.h"
@@ -77,11 +77,11 @@ std::optional<Mesh> write_sequence_model(const std::filesystem::path& data, cons
     return std::nullopt;
   }
   container::ModelContainer model;
-  model.metadata()["kind"] = model::kind_name(model::ModelKind::kMeshSequence);
+  model.metadata()["kind"] = container::kind_name(container::ModelKind::kMeshSequence);
   model.metadata()["description"] = dataset + " (animspace-bench render)";
-  model.set_points(model::sections::kRestPoints, sequence->reference.V);
-  model.set_faces(model::sections::kFaces, sequence->reference.F);
-  model.set_matrix(model::sections::kSequenceFrames, FrameMatrix(sequence->frames.samples));
+  model.set_points(container::sections::kRestPoints, sequence->reference.V);
+  model.set_faces(container::sections::kFaces, sequence->reference.F);
+  model.set_matrix(container::sections::kSequenceFrames, FrameMatrix(sequence->frames.samples));
   const auto dir = repository / name / "1";
   std::filesystem::create_directories(dir);
   if (auto written = container::write_file(dir / "model.anim", model); !written.ok()) {

@@ -21,6 +21,7 @@
 #include "animspace/v1/skinning.pb.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/tangents.h"
+#include "core/geometry/normals.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/lod/levels.h"
@@ -98,7 +99,7 @@ container::ModelContainer animation_space_container(animation_space::AnimationSp
   testing::LodCase arm = testing::arm_lod_case(kRings, kSegments, kFrames);
   const auto rest = animation_space::rest_positions(arm.model);
   const auto planes = need(animation_space::tangent_planes_from_normals(
-                               arm.model, animation_space::area_weighted_normals(rest, arm.model.faces)),
+                               arm.model, geometry::area_weighted_normals(rest, arm.model.faces)),
                            "tangent planes");
   arm.model.tangent_s = planes.s;
   arm.model.tangent_t = planes.t;
@@ -140,13 +141,13 @@ std::string miss_log_bytes(const fs::path& scratch) {
     auto log = need(misslog::MissLog::open(scratch, misslog::FsyncPolicy::kNever, std::chrono::milliseconds(0)),
                     "miss log");
     misslog::MissRecord blend;
-    blend.status = misslog::kStatusBlend;
+    blend.status = pmsc::CacheStatus::kBlend;
     blend.key_point_error = 0.5;
     blend.blend_weight = 0.25;
     blend.key_values = {1, 2, 3, 4, 5, 6};
     need(log->append(blend), "miss record");
     misslog::MissRecord miss = blend;
-    miss.status = misslog::kStatusMiss;
+    miss.status = pmsc::CacheStatus::kMiss;
     miss.full_values = {1, 2, 3, 4, 5, 6, 7, 8, 9};
     need(log->append(miss), "miss record");
   }

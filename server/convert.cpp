@@ -2,12 +2,12 @@
 
 namespace animspace::server {
 
-v1::ModelKind to_proto(model::ModelKind kind) {
+v1::ModelKind to_proto(container::ModelKind kind) {
   switch (kind) {
-    case model::ModelKind::kMeshSequence: return v1::MODEL_KIND_MESH_SEQUENCE;
-    case model::ModelKind::kPmsc: return v1::MODEL_KIND_PMSC;
-    case model::ModelKind::kCrossPmsc: return v1::MODEL_KIND_CROSS_PMSC;
-    case model::ModelKind::kAnimationSpace: return v1::MODEL_KIND_ANIMATION_SPACE;
+    case container::ModelKind::kMeshSequence: return v1::MODEL_KIND_MESH_SEQUENCE;
+    case container::ModelKind::kPmsc: return v1::MODEL_KIND_PMSC;
+    case container::ModelKind::kCrossPmsc: return v1::MODEL_KIND_CROSS_PMSC;
+    case container::ModelKind::kAnimationSpace: return v1::MODEL_KIND_ANIMATION_SPACE;
   }
   return v1::MODEL_KIND_UNSPECIFIED;
 }
@@ -55,6 +55,24 @@ void to_proto(const ModelEntry& entry, v1::ModelSummary* out) {
   out->set_name(entry.name);
   out->set_default_version(entry.default_version());
   for (const auto& [version, v] : entry.versions) to_proto(v, out->add_versions());
+}
+
+v1::CacheStatus to_proto(pmsc::CacheStatus status) {
+  switch (status) {
+    case pmsc::CacheStatus::kHit: return v1::CACHE_STATUS_HIT;
+    case pmsc::CacheStatus::kBlend: return v1::CACHE_STATUS_BLEND;
+    case pmsc::CacheStatus::kMiss: return v1::CACHE_STATUS_MISS;
+  }
+  return v1::CACHE_STATUS_UNSPECIFIED;
+}
+
+lod::PixelTolerance from_proto(const v1::PixelTolerance& view) {
+  lod::PixelTolerance out;
+  out.tolerance_px = view.tolerance_px();
+  out.viewport_width_px = view.viewport_width_px();
+  out.horizontal_fov_rad = view.horizontal_fov_rad();
+  out.distance = view.distance();
+  return out;
 }
 
 }  // namespace animspace::server

@@ -92,14 +92,14 @@ void Metrics::record_call(std::string_view rpc, std::string_view model, int code
   }
 }
 
-void Metrics::record_pose(std::string_view model, CacheOutcome outcome, double key_point_error) {
+void Metrics::record_pose(std::string_view model, pmsc::CacheStatus status, double key_point_error) {
   std::lock_guard lock(mutex_);
   auto& stats = models_[std::string(model)];
   ++stats.poses;
-  switch (outcome) {
-    case CacheOutcome::kHit: ++stats.hits; break;
-    case CacheOutcome::kBlend: ++stats.blends; break;
-    case CacheOutcome::kMiss: ++stats.misses; break;
+  switch (status) {
+    case pmsc::CacheStatus::kHit: ++stats.hits; break;
+    case pmsc::CacheStatus::kBlend: ++stats.blends; break;
+    case pmsc::CacheStatus::kMiss: ++stats.misses; break;
   }
   stats.key_point_error.observe(key_point_error);
 }

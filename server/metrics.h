@@ -13,6 +13,8 @@
 #include <string_view>
 #include <vector>
 
+#include "core/pmsc/soft_cache.h"
+
 namespace animspace::server {
 
 // Fixed-bound histogram (Prometheus semantics: bucket i counts values ≤ bounds[i]; one more
@@ -42,8 +44,6 @@ std::vector<double> latency_bounds_seconds();
 // Key-point error buckets, model units: 1e-6 … 10, decades with 1-2.5-5 steps.
 std::vector<double> key_point_error_bounds();
 
-enum class CacheOutcome { kHit, kBlend, kMiss };
-
 struct ModelStatistics {
   uint64_t requests = 0;
   uint64_t errors = 0;
@@ -62,7 +62,7 @@ class Metrics {
   // One finished call. `model` is empty for calls that name none. `code` is the gRPC code.
   void record_call(std::string_view rpc, std::string_view model, int code, double seconds);
   // One pose through the soft cache.
-  void record_pose(std::string_view model, CacheOutcome outcome, double key_point_error);
+  void record_pose(std::string_view model, pmsc::CacheStatus status, double key_point_error);
   void set_models_loaded(int count);
   // Versions serving now, per model, and the default of each (animspace_model_versions).
   struct ServedVersion {

@@ -17,7 +17,7 @@ grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, 
 
 grpc::Status unsupported_by_kind(const LoadedModel& model, std::string_view reason) {
   return {grpc::StatusCode::FAILED_PRECONDITION, "model '" + model.name + "' version " + std::to_string(model.version) +
-                                                     " is of kind " + model::kind_name(model.info.kind) + ": " +
+                                                     " is of kind " + container::kind_name(model.info.kind) + ": " +
                                                      std::string(reason)};
 }
 

@@ -152,7 +152,7 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
     entry = load_version(name, entry.version, repository_ / name / std::to_string(entry.version));
     if (entry.model) {
       spdlog::info("model {} version {} loaded: {} ({} points, {} faces, {} frames, {} bytes)", name,
-                   entry.version, model::kind_name(entry.model->info.kind), entry.model->info.point_count,
+                   entry.version, container::kind_name(entry.model->info.kind), entry.model->info.point_count,
                    entry.model->info.face_count, entry.model->info.frame_count,
                    entry.model->file_size_bytes);
     } else {

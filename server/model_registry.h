@@ -48,7 +48,7 @@ struct LoadedModel {
   // Its validated LOD levels (Merry 2007 §7.3); level 0 is the model itself (null for other kinds).
   std::shared_ptr<const lod::LodLevels> lod_levels;
   // The sphere eq. 7.2 measures depth to (lod::model_bounding_sphere), when lod_levels is set.
-  animation_space::BoundingSphere bounding_sphere;
+  geometry::BoundingSphere bounding_sphere;
 };
 
 struct VersionEntry {

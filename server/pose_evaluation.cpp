@@ -6,29 +6,12 @@
 
 #include "core/animspace/model.h"
 #include "core/pmsc/pmsc_model.h"
+#include "server/convert.h"
 #include "server/model_lookup.h"
 #include "server/validation.h"
 
 namespace animspace::server {
 namespace {
-
-v1::CacheStatus to_proto(pmsc::CacheStatus status) {
-  switch (status) {
-    case pmsc::CacheStatus::kHit: return v1::CACHE_STATUS_HIT;
-    case pmsc::CacheStatus::kBlend: return v1::CACHE_STATUS_BLEND;
-    case pmsc::CacheStatus::kMiss: return v1::CACHE_STATUS_MISS;
-  }
-  return v1::CACHE_STATUS_UNSPECIFIED;
-}
-
-CacheOutcome to_outcome(pmsc::CacheStatus status) {
-  switch (status) {
-    case pmsc::CacheStatus::kHit: return CacheOutcome::kHit;
-    case pmsc::CacheStatus::kBlend: return CacheOutcome::kBlend;
-    case pmsc::CacheStatus::kMiss: return CacheOutcome::kMiss;
-  }
-  return CacheOutcome::kMiss;
-}
 
 int64_t unix_now_us() {
   return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
@@ -73,19 +56,18 @@ bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const Pose
   const pmsc::PmscModel& m = *model.pmsc;
   pmsc::CachedPose cached;
   const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
-  pmsc::evaluate_cached(m, input.key_values, client_full, cached);
-
-  // Server fail-through: the posing engine computes f, and the blend happens here (2007 §2.4).
-  Eigen::VectorXf engine_full;
-  if (cached.full_evaluation_needed && input.has_skeleton) {
-    PointMatrix posed;
-    animation_space::evaluate(*model.animation_space, input.globals, posed);
-    engine_full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
-    Eigen::VectorXf blended(cached.points.size());
-    pmsc::blend(cached.points, engine_full, cached.alpha, blended);
-    cached.points.swap(blended);
-    cached.full_evaluation_needed = false;
+  // Server fail-through: the posing engine, posed at the request's skeleton, is the full
+  // calculation (decode_pose accepted a skeleton only for a model that has one).
+  pmsc::FullCalculation engine;
+  if (input.has_skeleton) {
+    engine = [&](Eigen::VectorXf& full) {
+      PointMatrix posed;
+      animation_space::evaluate(*model.animation_space, input.globals, posed);
+      full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+      return true;
+    };
   }
+  pmsc::evaluate_cached(m, input.key_values, client_full, engine, cached);
 
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
@@ -105,19 +87,21 @@ bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const Pose
     }
   }
   if (options.count_in_statistics) {
-    env.metrics.record_pose(model.name, to_outcome(cached.status), cached.key_point_error);
+    env.metrics.record_pose(model.name, cached.status, cached.key_point_error);
   }
   if (cached.status == pmsc::CacheStatus::kHit) return false;
 
   misslog::MissRecord record;
   record.model_version = model.version;
   record.unix_time_us = unix_now_us();
-  record.status = static_cast<uint8_t>(to_proto(cached.status));
+  record.status = cached.status;
   record.key_point_error = cached.key_point_error;
   record.blend_weight = cached.alpha;
   record.channels = static_cast<uint32_t>(m.channels);
   record.key_values.assign(input.key_values.data(), input.key_values.data() + input.key_values.size());
-  const Eigen::VectorXf* full = client_full != nullptr ? client_full : (engine_full.size() > 0 ? &engine_full : nullptr);
+  const Eigen::VectorXf* full =
+      client_full != nullptr ? client_full
+                             : (cached.computed_full_values.size() > 0 ? &cached.computed_full_values : nullptr);
   if (full != nullptr) record.full_values.assign(full->data(), full->data() + full->size());
   auto appended = env.miss_logs.append(model.name, record);
   if (!appended) {

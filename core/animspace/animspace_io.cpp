@@ -1,6 +1,6 @@
 #include "core/animspace/animspace_io.h"
 
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 
 namespace animspace::animation_space {
 namespace {
@@ -8,12 +8,6 @@ namespace {
 using container::Float64Matrix;
 
 Error with_source(const Error& e, const std::string& source) { return make_error(e.code, source + ": " + e.message); }
-
-Error shape_error(const std::string& source, const char* section, const std::string& expected, Eigen::Index rows,
-                  Eigen::Index cols) {
-  return make_error(ErrorCode::kInvalidArgument, source + ": section '" + section + "' should be " + expected +
-                                                     ", got " + std::to_string(rows) + "×" + std::to_string(cols));
-}
 
 }  // namespace
 
@@ -53,7 +47,7 @@ Result<StoredMetrics> load_metrics(const container::ModelContainer& in, int bone
   auto P = in.double_matrix(sections::kExpectation, 4 * bone_count);
   if (!P) return P.error();
   if (P->rows() != 4L * bone_count) {
-    return shape_error(source, sections::kExpectation, std::to_string(4 * bone_count) + "×" + std::to_string(4 * bone_count),
+    return container::section_shape_error(source, sections::kExpectation, std::to_string(4 * bone_count) + "×" + std::to_string(4 * bone_count),
                        P->rows(), P->cols());
   }
   auto joints = in.double_matrix(sections::kExpectedJoints, 16);
@@ -63,10 +57,10 @@ Result<StoredMetrics> load_metrics(const container::ModelContainer& in, int bone
   auto sphere = in.double_matrix(sections::kBoundingSphere, 4);
   if (!sphere) return sphere.error();
   if (joints->rows() != bone_count) {
-    return shape_error(source, sections::kExpectedJoints, std::to_string(bone_count) + "×16", joints->rows(), joints->cols());
+    return container::section_shape_error(source, sections::kExpectedJoints, std::to_string(bone_count) + "×16", joints->rows(), joints->cols());
   }
   if (bounds->rows() != bone_count) {
-    return shape_error(source, sections::kJointBounds, std::to_string(bone_count) + "×5", bounds->rows(), bounds->cols());
+    return container::section_shape_error(source, sections::kJointBounds, std::to_string(bone_count) + "×5", bounds->rows(), bounds->cols());
   }
   if (sphere->rows() != 1 || !sphere->allFinite() || (*sphere)(0, 3) < 0) {
     return make_error(ErrorCode::kInvalidArgument,
@@ -111,19 +105,19 @@ TransformList pose_from_row(const Float64Matrix& rows, Eigen::Index row, int bon
 }
 
 void store_skeleton(const Skeleton& skeleton, container::ModelContainer& out) {
-  out.set_matrix(model::sections::kSkeletonParents, container::as_column(skeleton.parents));
+  out.set_matrix(container::sections::kSkeletonParents, container::as_column(skeleton.parents));
   Float64Matrix rest(skeleton.bone_count(), 16);
   for (int j = 0; j < skeleton.bone_count(); ++j) rest.row(j) = pose_row({skeleton.rest[static_cast<size_t>(j)]});
-  out.set_matrix(model::sections::kSkeletonRest, rest);
+  out.set_matrix(container::sections::kSkeletonRest, rest);
 }
 
 Result<Skeleton> load_skeleton(const container::ModelContainer& in, const std::string& source) {
-  auto parents = in.int_matrix(model::sections::kSkeletonParents, 1);
+  auto parents = in.int_matrix(container::sections::kSkeletonParents, 1);
   if (!parents) return parents.error();
-  auto rest = in.double_matrix(model::sections::kSkeletonRest, 16);
+  auto rest = in.double_matrix(container::sections::kSkeletonRest, 16);
   if (!rest) return rest.error();
   if (rest->rows() != parents->rows()) {
-    return shape_error(source, model::sections::kSkeletonRest, std::to_string(parents->rows()) + "×16", rest->rows(),
+    return container::section_shape_error(source, container::sections::kSkeletonRest, std::to_string(parents->rows()) + "×16", rest->rows(),
                        rest->cols());
   }
   Skeleton skeleton;
@@ -159,7 +153,7 @@ Status load_influences(const container::ModelContainer& in, const std::string& p
   auto positions = in.double_matrix(positions_name, 4);
   if (!positions) return positions.error();
   if (positions->rows() != bones->rows()) {
-    return shape_error(source, positions_name.c_str(), std::to_string(bones->rows()) + "×4", positions->rows(),
+    return container::section_shape_error(source, positions_name.c_str(), std::to_string(bones->rows()) + "×4", positions->rows(),
                        positions->cols());
   }
   model.influences.offsets.assign(offsets->data(), offsets->data() + offsets->size());
@@ -169,7 +163,7 @@ Status load_influences(const container::ModelContainer& in, const std::string& p
     auto tangents = in.double_matrix(tangents_name, 8);
     if (!tangents) return tangents.error();
     if (tangents->rows() != bones->rows()) {
-      return shape_error(source, tangents_name.c_str(), std::to_string(bones->rows()) + "×8", tangents->rows(),
+      return container::section_shape_error(source, tangents_name.c_str(), std::to_string(bones->rows()) + "×8", tangents->rows(),
                          tangents->cols());
     }
     model.tangent_s = tangents->leftCols<4>().transpose();
@@ -180,13 +174,13 @@ Status load_influences(const container::ModelContainer& in, const std::string& p
 
 void store(const AnimationSpaceModel& model, container::ModelContainer& out) {
   assert(validate(model).ok());
-  out.metadata()["kind"] = model::kind_name(model::ModelKind::kAnimationSpace);
+  out.metadata()["kind"] = container::kind_name(container::ModelKind::kAnimationSpace);
   store_skeleton(model.skeleton, out);
   store_influences(model, sections::kModelPrefix, out);
   PointMatrix rest_points;
   evaluate(model, rest_pose(model.skeleton), rest_points);
-  out.set_points(model::sections::kRestPoints, rest_points);
-  if (model.faces.rows() > 0) out.set_faces(model::sections::kFaces, model.faces);
+  out.set_points(container::sections::kRestPoints, rest_points);
+  if (model.faces.rows() > 0) out.set_faces(container::sections::kFaces, model.faces);
 }
 
 Result<AnimationSpaceModel> load(const container::ModelContainer& in, const std::string& source) {
@@ -196,8 +190,8 @@ Result<AnimationSpaceModel> load(const container::ModelContainer& in, const std:
   model.skeleton = std::move(*skeleton);
 
   ANIMSPACE_RETURN_IF_ERROR(load_influences(in, sections::kModelPrefix, source, model));
-  if (in.has_section(model::sections::kFaces)) {
-    auto faces = in.faces(model::sections::kFaces);
+  if (in.has_section(container::sections::kFaces)) {
+    auto faces = in.faces(container::sections::kFaces);
     if (!faces) return faces.error();
     model.faces = *faces;
   }

@@ -39,7 +39,7 @@ inline constexpr const char* kBoundingSphere = "animspace.bounding_sphere";
 // A model's metrics and the bounding sphere they give, as stored beside it.
 struct StoredMetrics {
   AnimationSpaceMetrics metrics;
-  BoundingSphere bounding_sphere;
+  geometry::BoundingSphere bounding_sphere;
 };
 
 // Writes the skeleton and model sections and mesh.rest_points / mesh.faces; sets metadata

@@ -29,6 +29,7 @@
 
 #include "core/common/parallel.h"
 #include "core/common/timing.h"
+#include "core/geometry/edges.h"
 
 namespace animspace::animation_space {
 namespace {
@@ -260,7 +261,7 @@ void build_problem(const FitExamples& examples, const InfluenceSets& influences,
 Result<std::vector<Edge>> make_edges(const FaceMatrix& faces, double delta, Problem& P) {
   std::vector<Edge> edges;
   if (delta == 0) return edges;
-  for (const auto& [a, b] : unique_edges(faces)) {
+  for (const auto& [a, b] : geometry::unique_edges(faces)) {
     double length = 0;
     for (int k = 0; k < P.n; ++k) length += (P.points.block<3, 1>(3L * a, k) - P.points.block<3, 1>(3L * b, k)).norm();
     length /= P.n;
@@ -634,20 +635,6 @@ Result<LinearBlendModel> fit_linear_blend(const Skeleton& skeleton, const PointM
   return model;
 }
 
-std::vector<std::pair<int32_t, int32_t>> unique_edges(const FaceMatrix& faces) {
-  std::vector<std::pair<int32_t, int32_t>> edges;
-  edges.reserve(static_cast<size_t>(faces.rows()) * 3);
-  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-    for (int c = 0; c < 3; ++c) {
-      const int32_t a = faces(f, c), b = faces(f, (c + 1) % 3);
-      if (a != b) edges.emplace_back(std::min(a, b), std::max(a, b));
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-  return edges;
-}
-
 Result<InfluenceSets> grow_influence_sets(const Skeleton& skeleton, const std::vector<int32_t>& owning_bone,
                                           const FaceMatrix& faces, const InfluenceGrowthOptions& options) {
   const int b = skeleton.bone_count();
@@ -670,7 +657,7 @@ Result<InfluenceSets> grow_influence_sets(const Skeleton& skeleton, const std::v
     }
   }
   // Vertex adjacency as compressed rows.
-  const auto edges = unique_edges(faces);
+  const auto edges = geometry::unique_edges(faces);
   std::vector<int32_t> adjacency_offsets(static_cast<size_t>(V) + 1, 0), adjacency(2 * edges.size());
   for (const auto& [u, w] : edges) {
     ++adjacency_offsets[static_cast<size_t>(u) + 1];

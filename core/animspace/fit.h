@@ -143,7 +143,5 @@ struct InfluenceGrowthOptions {
 Result<InfluenceSets> grow_influence_sets(const Skeleton& skeleton, const std::vector<int32_t>& owning_bone,
                                           const FaceMatrix& faces, const InfluenceGrowthOptions& options = {});
 
-// The unique undirected edges of `faces` (#F × 3), each (a, b) with a < b, sorted.
-std::vector<std::pair<int32_t, int32_t>> unique_edges(const FaceMatrix& faces);
 
 }  // namespace animspace::animation_space

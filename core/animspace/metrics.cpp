@@ -631,7 +631,7 @@ Result<double> l2inf_norm(const Skeleton& skeleton, const AnimationSpaceMetrics&
 // Bounding sphere (§7.2)
 // -------------------------------------------------------------------------------------------
 
-Result<BoundingSphere> pose_bounding_sphere(const AnimationSpaceModel& model, const AnimationSpaceMetrics& metrics) {
+Result<geometry::BoundingSphere> pose_bounding_sphere(const AnimationSpaceModel& model, const AnimationSpaceMetrics& metrics) {
   ANIMSPACE_RETURN_IF_ERROR(validate(model));
   ANIMSPACE_RETURN_IF_ERROR(check_bone_count(metrics, model.bone_count()));
   const int V = model.vertex_count();
@@ -655,7 +655,7 @@ Result<BoundingSphere> pose_bounding_sphere(const AnimationSpaceModel& model, co
     expected_global[j] = expected_global[static_cast<size_t>(model.skeleton.parents[j])] * expected_joint;
     centre += expected_global[j] * centroid[j];
   }
-  BoundingSphere sphere;
+  geometry::BoundingSphere sphere;
   sphere.centre = centre.head<3>() / static_cast<double>(V);
 
   // Radius: max ‖p_i − c‖₂,∞ with c = (centre, 1) on bone 0, so p_i − c has weight 0.

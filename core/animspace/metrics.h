@@ -31,6 +31,7 @@
 #include "core/animspace/model.h"
 #include "core/animspace/skeleton.h"
 #include "core/common/result.h"
+#include "core/geometry/bounding_sphere.h"
 
 namespace animspace::animation_space {
 
@@ -192,18 +193,13 @@ Result<double> l2inf_norm(const Skeleton& skeleton, const AnimationSpaceMetrics&
 // Bounding sphere for culling (§7.2)
 // ---------------------------------------------------------------------------------------------
 
-struct BoundingSphere {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // model space
-  double radius = 0;                                 // model units
-};
-
 // A sphere containing every vertex of `model` in every pose allowed by metrics.joint_bounds.
 // Centre: the expected model-space position of the vertex centroid under uniform rotations with
 // rest translations (whatever distribution the metrics came from — §7.2 avoids its bias), a point
 // only the root moves; radius: the largest ‖p_i − c‖₂,∞ with c placed on bone 0 with weight 1.
 // Cost O(V · depth).
 // Errors: kInvalidArgument for an invalid model, no vertices, or metrics of another bone count.
-Result<BoundingSphere> pose_bounding_sphere(const AnimationSpaceModel& model, const AnimationSpaceMetrics& metrics);
+Result<geometry::BoundingSphere> pose_bounding_sphere(const AnimationSpaceModel& model, const AnimationSpaceMetrics& metrics);
 
 // ---------------------------------------------------------------------------------------------
 // Transforming a model with its metrics (§3.4)

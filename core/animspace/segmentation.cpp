@@ -29,7 +29,8 @@
 #include <Eigen/Eigenvalues>
 
 #include "core/common/parallel.h"
-#include "core/pmsc/rigid_alignment.h"
+#include "core/geometry/edges.h"
+#include "core/geometry/rigid_fit.h"
 
 namespace animspace::animation_space {
 namespace {
@@ -43,16 +44,6 @@ using Eigen::Vector3d;
 using Motions = Eigen::MatrixXd;
 constexpr Index kMotionStride = 12;
 
-// Undirected mesh edges, compressed: the neighbours of i are
-// neighbours[offsets[i] … offsets[i+1]-1], ascending, without repeats or i itself.
-struct Adjacency {
-  std::vector<int32_t> offsets;
-  std::vector<int32_t> neighbours;
-
-  int32_t begin(int32_t i) const { return offsets[static_cast<size_t>(i)]; }
-  int32_t end(int32_t i) const { return offsets[static_cast<size_t>(i) + 1]; }
-  int32_t at(int32_t k) const { return neighbours[static_cast<size_t>(k)]; }
-};
 
 // The sequence in the layout the fitting wants.
 struct Sequence {
@@ -63,7 +54,7 @@ struct Sequence {
   Eigen::MatrixXd positions;     // 3V × F: column k is frame k (x y z per vertex)
   Vector3d rest_centroid;
   Eigen::VectorXd frame_centroids;  // 3F: centroid of frame k at 3k … 3k+2
-  Adjacency adjacency;
+  geometry::Adjacency adjacency;
 };
 
 std::string shape(Index rows, Index cols) { return std::to_string(rows) + " × " + std::to_string(cols); }
@@ -126,29 +117,6 @@ Status validate_inputs(const PointMatrix& rest, const FaceMatrix& faces, const F
   return Status::Ok();
 }
 
-Adjacency mesh_adjacency(int V, const FaceMatrix& faces) {
-  std::vector<std::pair<int32_t, int32_t>> edges;
-  edges.reserve(static_cast<size_t>(faces.rows()) * 6);
-  for (Index f = 0; f < faces.rows(); ++f) {
-    for (Index c = 0; c < 3; ++c) {
-      const int32_t a = faces(f, c), b = faces(f, (c + 1) % 3);
-      if (a == b) continue;  // a degenerate face has no such edge
-      edges.emplace_back(a, b);
-      edges.emplace_back(b, a);
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-  Adjacency adjacency;
-  adjacency.offsets.assign(static_cast<size_t>(V) + 1, 0);
-  adjacency.neighbours.reserve(edges.size());
-  for (const auto& [a, b] : edges) {
-    ++adjacency.offsets[static_cast<size_t>(a) + 1];
-    adjacency.neighbours.push_back(b);
-  }
-  std::partial_sum(adjacency.offsets.begin(), adjacency.offsets.end(), adjacency.offsets.begin());
-  return adjacency;
-}
 
 Sequence make_sequence(const PointMatrix& rest, const FaceMatrix& faces, const FrameMatrix& frames) {
   Sequence s;
@@ -166,7 +134,7 @@ Sequence make_sequence(const PointMatrix& rest, const FaceMatrix& faces, const F
   }
   s.rest_centroid = s.rest.rowwise().mean();
   s.frame_centroids = s.trajectories.rowwise().mean();
-  s.adjacency = mesh_adjacency(s.vertex_count, faces);
+  s.adjacency = geometry::vertex_adjacency(s.vertex_count, faces);
   return s;
 }
 
@@ -203,7 +171,7 @@ std::vector<std::vector<int32_t>> part_members(const std::vector<int32_t>& label
 }
 
 // SSDR §4.1 transformation update with hard labels: per part and frame, the least-squares rigid
-// motion of the part's vertices from the rest pose (Kabsch via pmsc::fit_rigid, which keeps a
+// motion of the part's vertices from the rest pose (Kabsch via geometry::fit_rigid, which keeps a
 // proper rotation for the degenerate parts: a single vertex, collinear vertices).
 Motions fit_motions(const Sequence& s, const std::vector<int32_t>& labels, int part_count) {
   const std::vector<std::vector<int32_t>> members = part_members(labels, part_count);
@@ -222,7 +190,7 @@ Motions fit_motions(const Sequence& s, const std::vector<int32_t>& labels, int p
         for (size_t n = 0; n < members[p].size(); ++n) {
           to.col(static_cast<Index>(n)) = s.positions.col(k).segment<3>(3 * Index{members[p][n]});
         }
-        const pmsc::RigidTransform fit = pmsc::fit_rigid(from[p], to);
+        const geometry::RigidTransform fit = geometry::fit_rigid(from[p], to);
         double* motion = motions.col(static_cast<Index>(p)).data() + kMotionStride * k;
         Eigen::Map<Matrix3d> rotation(motion);
         Eigen::Map<Vector3d> translation(motion + 9);
@@ -300,7 +268,7 @@ struct Offer {
 std::vector<int32_t> assign_parts(const Sequence& s, const Motions& motions, const std::vector<int32_t>& current,
                                   int part_count) {
   const size_t V = static_cast<size_t>(s.vertex_count);
-  const Adjacency& adjacency = s.adjacency;
+  const geometry::Adjacency& adjacency = s.adjacency;
   const std::vector<int32_t> best = best_parts(s, motions, current, part_count);
 
   // Connected pieces of each part; the largest (first found on a tie) is kept.
@@ -572,7 +540,7 @@ std::vector<int32_t> merge_cheapest_pair(const Sequence& s, const std::vector<in
         for (size_t m = 0; m < both.size(); ++m) {
           to.col(static_cast<Index>(m)) = s.positions.col(k).segment<3>(3 * Index{both[m]});
         }
-        const pmsc::RigidTransform fit = pmsc::fit_rigid(from, to);
+        const geometry::RigidTransform fit = geometry::fit_rigid(from, to);
         joint.block<9, 1>(kMotionStride * k, 0) = fit.rotation.reshaped();
         joint.block<3, 1>(kMotionStride * k + 9, 0) = fit.translation;
       }
@@ -597,7 +565,7 @@ struct Hierarchy {
 // that parts joined by a wide boundary — a limb and the body it hangs from — are parent and
 // child rather than parts that merely touch at a corner. Each tree is rooted at its median part
 // (least Σ size · hops), and bones are numbered breadth-first from the roots.
-Hierarchy build_hierarchy(const Adjacency& adjacency, const std::vector<int32_t>& labels, int part_count) {
+Hierarchy build_hierarchy(const geometry::Adjacency& adjacency, const std::vector<int32_t>& labels, int part_count) {
   const size_t P = static_cast<size_t>(part_count);
   std::vector<int> size(P, 0);
   for (int32_t label : labels) ++size[static_cast<size_t>(label)];

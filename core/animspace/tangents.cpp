@@ -101,21 +101,6 @@ void remove_weight(Eigen::VectorXd& x, int k) {
 
 }  // namespace
 
-Eigen::MatrixX3d area_weighted_normals(const Eigen::MatrixX3d& V, const FaceMatrix& F) {
-  Eigen::MatrixX3d normals = Eigen::MatrixX3d::Zero(V.rows(), 3);
-  for (Eigen::Index f = 0; f < F.rows(); ++f) {
-    for (int c = 0; c < 3; ++c) assert(F(f, c) >= 0 && F(f, c) < V.rows());
-    const Eigen::Vector3d v0 = V.row(F(f, 0)), v1 = V.row(F(f, 1)), v2 = V.row(F(f, 2));
-    const Eigen::RowVector3d n = (v1 - v0).cross(v2 - v0).transpose();
-    for (int c = 0; c < 3; ++c) normals.row(F(f, c)) += n;
-  }
-  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
-    const double length = normals.row(i).norm();
-    if (length > 0) normals.row(i) /= length;
-  }
-  return normals;
-}
-
 Eigen::MatrixX3d rest_positions(const AnimationSpaceModel& model) {
   Eigen::MatrixX3d rest(model.vertex_count(), 3);
   for (int i = 0; i < model.vertex_count(); ++i) {

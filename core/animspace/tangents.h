@@ -38,17 +38,12 @@ struct TangentPlanes {
   int64_t degenerate_vertices = 0;
 };
 
-// Area-weighted vertex normals: normalise(Σ over incident faces of (v1 − v0) × (v2 − v0)), the
-// faces counter-clockwise seen from outside. V is #V by 3, F is #F by 3 with indices in [0, #V)
-// (asserted). Vertices in no non-degenerate face get a zero row.
-Eigen::MatrixX3d area_weighted_normals(const Eigen::MatrixX3d& V, const FaceMatrix& F);
-
 // The rest pose of a model, v̂ = Σ_j Ĝ_j p_j per vertex (#V by 3, double precision).
 Eigen::MatrixX3d rest_positions(const AnimationSpaceModel& model);
 
 // Merry 2007 §4.3.2, eq. 4.8, with w_j = p̲_j (the weight of influence j, which is the SSD weight
 // for a model from from_linear_blend). `rest_normals` is #V by 3 (any length; a zero row marks a
-// vertex without a normal, counted in degenerate_vertices); e.g. area_weighted_normals of
+// vertex without a normal, counted in degenerate_vertices); e.g. geometry::area_weighted_normals of
 // rest_positions, or the file's normals. ŝ is the unit vector n̂ × e for the coordinate axis e
 // least aligned with n̂, and t̂ = n̂ × ŝ.
 // Errors (kInvalidArgument): an invalid model (validate), a row count other than #V, a

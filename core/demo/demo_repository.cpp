@@ -5,7 +5,7 @@
 #include "core/animspace/tangents.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/simplify.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
 
@@ -212,8 +212,8 @@ Result<container::ModelContainer> make_demo_animation_space_container(int frames
   out.metadata()["units"] = "arbitrary (arm length 2)";
   out.metadata()["up_axis"] = "y";
   out.metadata()["animspace.edge_regularisation"] = "0.02";
-  out.set_matrix(model::sections::kSequenceFrames, examples.meshes);
-  out.set_matrix(model::sections::kSequenceBoneTransforms, bone_rows);
+  out.set_matrix(container::sections::kSequenceFrames, examples.meshes);
+  out.set_matrix(container::sections::kSequenceBoneTransforms, bone_rows);
   return out;
 }
 
@@ -228,11 +228,11 @@ Result<container::ModelContainer> make_demo_pmsc_engine_container(
   const std::string source(kDemoAnimationSpaceModelName);
   auto engine = animation_space::load(animation_space_demo, source);
   if (!engine) return engine.error();
-  auto bone_rows = animation_space_demo.double_matrix(model::sections::kSequenceBoneTransforms,
+  auto bone_rows = animation_space_demo.double_matrix(container::sections::kSequenceBoneTransforms,
                                                        16 * engine->bone_count());
   if (!bone_rows) return bone_rows.error();
   TriangleMesh rest;
-  auto rest_points = animation_space_demo.points(model::sections::kRestPoints);
+  auto rest_points = animation_space_demo.points(container::sections::kRestPoints);
   if (!rest_points) return rest_points.error();
   rest.V = std::move(*rest_points);
   rest.F = engine->faces;
@@ -256,7 +256,7 @@ Result<container::ModelContainer> make_demo_pmsc_engine_container(
       "engine: on a blend or miss the server poses the engine itself, so fail-through is exact.");
   pmsc::store_training_options(options, container);
   ANIMSPACE_RETURN_IF_ERROR(pmsc::attach_posing_engine(*engine, container));
-  container.set_matrix(model::sections::kSequenceBoneTransforms, *bone_rows);
+  container.set_matrix(container::sections::kSequenceBoneTransforms, *bone_rows);
   container.metadata()["generator"] = "animspace demo bending arm";
   container.metadata()["units"] = "arbitrary (arm length 2)";
   container.metadata()["up_axis"] = "y";

@@ -6,6 +6,8 @@
 #include <numbers>
 #include <string>
 
+#include "core/common/format.h"
+
 namespace animspace::lod {
 
 namespace as = animation_space;
@@ -27,7 +29,7 @@ int32_t representative(std::vector<int32_t>& parent, int32_t v) {
 LodLevel cut_level(const MeshState& state, const as::Skeleton& skeleton, double error, int64_t steps) {
   LodLevel level;
   level.model = state.to_model(skeleton, &level.vertex_ids);
-  level.error = error;
+  level.epsilon = error;
   level.step_count = steps;
   return level;
 }
@@ -129,26 +131,33 @@ as::AnimationSpaceModel geomorphed_model(const LodLevels& lods, int level, doubl
   return model;
 }
 
-Result<double> tolerated_error(const LodView& view) {
+Status validate(const PixelTolerance& view) {
   const auto bad = [](const char* field, const std::string& expected, double got) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      std::string(field) + ": expected " + expected + ", got " + std::to_string(got));
+    return Status(make_error(ErrorCode::kInvalidArgument,
+                             std::string(field) + ": expected " + expected + ", got " + format_number(got)));
   };
-  if (!std::isfinite(view.tolerance_pixels) || view.tolerance_pixels <= 0) {
-    return bad("tolerance_pixels", "a finite value > 0", view.tolerance_pixels);
+  if (!std::isfinite(view.tolerance_px) || view.tolerance_px <= 0) {
+    return bad("tolerance_px", "a finite value > 0", view.tolerance_px);
   }
-  if (!std::isfinite(view.viewport_width_pixels) || view.viewport_width_pixels <= 0) {
-    return bad("viewport_width_pixels", "a finite value > 0", view.viewport_width_pixels);
+  if (!std::isfinite(view.viewport_width_px) || view.viewport_width_px <= 0) {
+    return bad("viewport_width_px", "a finite value > 0", view.viewport_width_px);
   }
-  if (!std::isfinite(view.horizontal_fov_radians) || view.horizontal_fov_radians <= 0 ||
-      view.horizontal_fov_radians >= std::numbers::pi) {
-    return bad("horizontal_fov_radians", "a value in (0, π)", view.horizontal_fov_radians);
+  if (!std::isfinite(view.horizontal_fov_rad) || view.horizontal_fov_rad <= 0 ||
+      view.horizontal_fov_rad >= std::numbers::pi) {
+    return bad("horizontal_fov_rad", "a value in (0, π)", view.horizontal_fov_rad);
   }
-  if (!std::isfinite(view.nearest_depth) || view.nearest_depth <= 0) {
-    return bad("nearest_depth", "a finite value > 0", view.nearest_depth);
+  if (!std::isfinite(view.distance) || view.distance <= 0) {
+    return bad("distance", "a finite value > 0", view.distance);
   }
-  const double theta = view.horizontal_fov_radians / 2;
-  return 2 * view.tolerance_pixels * view.nearest_depth * std::sin(theta) / view.viewport_width_pixels;  // eq. 7.2
+  return Status::Ok();
+}
+
+Result<double> tolerated_error(const PixelTolerance& view, double bounding_radius) {
+  ANIMSPACE_RETURN_IF_ERROR(validate(view));
+  const double depth = view.distance - bounding_radius;
+  if (!(depth > 0)) return 0.0;
+  const double theta = view.horizontal_fov_rad / 2;
+  return 2 * view.tolerance_px * depth * std::sin(theta) / view.viewport_width_px;  // eq. 7.2
 }
 
 double select_level(const LodLevels& lods, double tolerated) {
@@ -156,11 +165,11 @@ double select_level(const LodLevels& lods, double tolerated) {
   const int last = lods.count() - 1;
   int k = 0;
   for (int l = 1; l <= last; ++l) {
-    if (lods.levels[static_cast<size_t>(l)].error <= tolerated) k = l;
+    if (lods.levels[static_cast<size_t>(l)].epsilon <= tolerated) k = l;
   }
   if (k == last) return last;
-  const double lo = lods.levels[static_cast<size_t>(k)].error;
-  const double hi = lods.levels[static_cast<size_t>(k) + 1].error;
+  const double lo = lods.levels[static_cast<size_t>(k)].epsilon;
+  const double hi = lods.levels[static_cast<size_t>(k) + 1].epsilon;
   return k + (tolerated - lo) / (hi - lo);
 }
 

@@ -33,7 +33,7 @@ struct Geomorph {
 struct LodLevel {
   animation_space::AnimationSpaceModel model;  // compact, vertices in input order
   std::vector<int32_t> vertex_ids;             // input vertex of each vertex of this level
-  double error = 0;                            // ε^l (0 for level 0)
+  double epsilon = 0;                          // ε^l (0 for level 0)
   int64_t step_count = 0;                      // steps of the sequence applied
   // For each vertex of this level, the vertex of level l+1 it ends up in (empty for the last).
   std::vector<int32_t> coarser_vertex;
@@ -62,17 +62,24 @@ Geomorph geomorph(const LodLevels& lods, int level);
 // (eq. 7.1): p = p^l + t Δp, on the finer level's connectivity.
 animation_space::AnimationSpaceModel geomorphed_model(const LodLevels& lods, int level, double t);
 
-// A view for eq. 7.2.
-struct LodView {
-  double tolerance_pixels = 1;             // p > 0
-  double viewport_width_pixels = 1024;     // w > 0
-  double horizontal_fov_radians = 0.8;     // 2θ in (0, π)
-  double nearest_depth = 1;                // d > 0: least depth of any point of the bounding sphere
+// A viewer for eq. 7.2, named as the API names it (lod.proto, PixelTolerance): the screen-space
+// error it tolerates and how far its camera is from the model.
+struct PixelTolerance {
+  double tolerance_px = 1;          // p, finite, > 0
+  double viewport_width_px = 1024;  // w, finite, > 0
+  double horizontal_fov_rad = 0.8;  // 2θ, in (0, π)
+  double distance = 1;              // camera to the bounding sphere's centre, model units, finite, > 0
 };
 
-// ε = 2pd sinθ / w (eq. 7.2). Errors: kInvalidArgument naming the field that is not finite or
-// out of range.
-Result<double> tolerated_error(const LodView& view);
+// The one check of a view (the daemon, the CLI and thumbnails all reach it through
+// tolerated_error). Errors: kInvalidArgument "<field>: expected …, got …" for the first field out
+// of range, the field named as above.
+Status validate(const PixelTolerance& view);
+
+// ε = 2pd sinθ / w (eq. 7.2), d = distance − bounding_radius the least depth of any point of the
+// bounding sphere; 0 when the camera is inside or on the sphere (it sees full detail).
+// Errors: validate's, also when the camera is inside.
+Result<double> tolerated_error(const PixelTolerance& view, double bounding_radius);
 
 // The real-valued level for a tolerated error ε ≥ 0: the largest l with interpolated ε^l ≤ ε
 // (0 when ε < ε^1, the last level when ε ≥ its ε^l). Levels with equal ε^l: the coarser wins.

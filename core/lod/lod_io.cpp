@@ -36,7 +36,7 @@ void store_levels(const LodLevels& lods, container::ModelContainer& out) {
   Float64Matrix errors(lods.count(), 1);
   for (int l = 0; l < lods.count(); ++l) {
     const LodLevel& level = lods.levels[static_cast<size_t>(l)];
-    errors(l, 0) = level.error;
+    errors(l, 0) = level.epsilon;
     if (l > 0) {
       as::store_influences(level.model, prefix(l), out);
       out.set_faces(prefix(l) + "faces", level.model.faces);
@@ -74,7 +74,7 @@ Result<LodLevels> load_levels(const container::ModelContainer& in, const as::Ani
   }
   for (int l = 1; l < L; ++l) {
     LodLevel level;
-    level.error = (*errors)(l, 0);
+    level.epsilon = (*errors)(l, 0);
     level.model.skeleton = model.skeleton;
     ANIMSPACE_RETURN_IF_ERROR(as::load_influences(in, prefix(l), source, level.model));
     auto faces = in.faces(prefix(l) + "faces");

@@ -17,23 +17,15 @@
 
 namespace animspace::lod {
 
-// A viewer described the way a person describes one: how far the camera is from the model.
-struct ViewAtDistance {
-  double tolerance_pixels = 1;          // p > 0
-  double viewport_width_pixels = 1920;  // w > 0
-  double horizontal_fov_radians = 0.8;  // 2θ in (0, π)
-  double distance = 1;                  // camera to the bounding sphere's centre, > 0
-};
-
 struct LevelChoice {
   int level = 0;
   // ε of eq. 7.2 for this view (0 when the camera is inside the bounding sphere).
   double tolerated_error = 0;
 };
 
-// Eq. 7.2 with d the least depth of the bounding sphere, distance − radius; a camera inside or on
-// the sphere sees full detail. Errors: kInvalidArgument naming the LodView field out of range.
-Result<LevelChoice> level_for_view(const LodLevels& lods, const ViewAtDistance& view, double bounding_radius);
+// ⌊l⌋ for the ε that tolerated_error gives `view` (levels.h, eq. 7.2); a camera inside or on the
+// sphere of `bounding_radius` sees full detail. Errors: validate(view)'s.
+Result<LevelChoice> level_for_view(const LodLevels& lods, const PixelTolerance& view, double bounding_radius);
 
 // The finest level with at most `max_vertices` vertices.
 // Errors: kOutOfRange when even the coarsest level is larger, giving its vertex count.
@@ -43,7 +35,7 @@ Result<int> level_for_vertex_budget(const LodLevels& lods, int64_t max_vertices)
 // metrics (§7.2) when it has them, otherwise the sphere around its rest pose (centre of the
 // bounding box, radius to the farthest vertex) — exact for the rest pose only.
 // Errors: those of reading the stored metrics, other than their absence.
-Result<animation_space::BoundingSphere> model_bounding_sphere(const container::ModelContainer& in,
+Result<geometry::BoundingSphere> model_bounding_sphere(const container::ModelContainer& in,
                                                               const animation_space::AnimationSpaceModel& model,
                                                               const std::string& source);
 

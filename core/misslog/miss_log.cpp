@@ -20,6 +20,7 @@
 #include <cstring>
 #include <functional>
 #include <new>
+#include <optional>
 #include <utility>
 
 #include "core/common/bytes.h"
@@ -73,12 +74,30 @@ constexpr bool kVerifyChecksums = false;
 constexpr bool kVerifyChecksums = true;
 #endif
 
-std::string expected_file_header() {
+std::string expected_file_header(uint32_t version = kFormatVersion) {
   std::string header(kFileHeaderSize, '\0');
   header.replace(0, kFileMagic.size(), kFileMagic);
-  store_le<uint32_t>(header, kVersionAt, kFormatVersion);
+  store_le<uint32_t>(header, kVersionAt, version);
   store_le<uint32_t>(header, kReservedAt, 0);
   return header;
+}
+
+// The status byte of each format version (miss_log.h): version 1 froze the API's numbering of
+// the time, version 2 has the log's own codes.
+uint8_t status_code(pmsc::CacheStatus status, uint32_t version) {
+  switch (status) {
+    case pmsc::CacheStatus::kBlend: return version == 1 ? 2 : 1;
+    case pmsc::CacheStatus::kMiss: return version == 1 ? 3 : 2;
+    case pmsc::CacheStatus::kHit: break;
+  }
+  return 0;  // never stored: check_record refuses a hit before encoding
+}
+
+std::optional<pmsc::CacheStatus> status_of_code(uint8_t code, uint32_t version) {
+  for (const pmsc::CacheStatus status : {pmsc::CacheStatus::kBlend, pmsc::CacheStatus::kMiss}) {
+    if (status_code(status, version) == code) return status;
+  }
+  return std::nullopt;
 }
 
 // --- System calls ------------------------------------------------------------------------------
@@ -147,23 +166,28 @@ Status fsync_directory(const std::filesystem::path& path) {
 // --- File header -------------------------------------------------------------------------------
 
 enum class HeaderState { kComplete, kIncomplete };
+struct FileHeader {
+  HeaderState state = HeaderState::kIncomplete;
+  uint32_t version = kFormatVersion;  // of a complete header
+};
 
 // Checks the first min(size, 16) bytes. A file shorter than the header whose bytes are a prefix
 // of it is a creation that never finished (kIncomplete); anything else that differs is kDataLoss
 // naming the offset.
-Result<HeaderState> check_file_header(const std::filesystem::path& path, std::string_view bytes) {
-  const std::string expected = expected_file_header();
+Result<FileHeader> check_file_header(const std::filesystem::path& path, std::string_view bytes) {
   if (bytes.size() < kFileHeaderSize) {
-    for (size_t i = 0; i < bytes.size(); ++i) {
-      if (bytes[i] != expected[i]) {
-        return make_error(ErrorCode::kDataLoss,
-                          path.string() + ": byte " + std::to_string(i) + ": not a miss log (" +
-                              std::to_string(bytes.size()) + "-byte file starting " +
-                              hex_bytes(bytes) + ", expected a prefix of " + hex_bytes(expected) +
-                              ")");
-      }
+    // A prefix of the header of any version this build reads (the bytes present say nothing
+    // about records, so the creation is completed in kFormatVersion).
+    for (uint32_t version = kOldestFormatVersion; version <= kFormatVersion; ++version) {
+      if (expected_file_header(version).starts_with(bytes)) return FileHeader{HeaderState::kIncomplete, kFormatVersion};
     }
-    return HeaderState::kIncomplete;
+    const std::string expected = expected_file_header();
+    size_t i = 0;
+    while (i < bytes.size() && bytes[i] == expected[i]) ++i;
+    return make_error(ErrorCode::kDataLoss, path.string() + ": byte " + std::to_string(i) + ": not a miss log (" +
+                                                std::to_string(bytes.size()) + "-byte file starting " +
+                                                hex_bytes(bytes) + ", expected a prefix of " +
+                                                hex_bytes(expected) + ")");
   }
   const std::string_view magic = bytes.substr(0, kFileMagic.size());
   if (magic != kFileMagic) {
@@ -172,11 +196,11 @@ Result<HeaderState> check_file_header(const std::filesystem::path& path, std::st
                                                 hex_bytes(kFileMagic) + ")");
   }
   const auto version = load_le<uint32_t>(bytes, kVersionAt);
-  if (version != kFormatVersion) {
+  if (version < kOldestFormatVersion || version > kFormatVersion) {
     return make_error(ErrorCode::kDataLoss,
-                      path.string() + ": byte " + std::to_string(kVersionAt) +
-                          ": miss log format version " + std::to_string(version) +
-                          ", this build reads only version " + std::to_string(kFormatVersion));
+                      path.string() + ": byte " + std::to_string(kVersionAt) + ": miss log format version " +
+                          std::to_string(version) + ", this build reads versions " +
+                          std::to_string(kOldestFormatVersion) + " to " + std::to_string(kFormatVersion));
   }
   const auto reserved = load_le<uint32_t>(bytes, kReservedAt);
   if (reserved != 0) {
@@ -184,12 +208,13 @@ Result<HeaderState> check_file_header(const std::filesystem::path& path, std::st
                                                 std::to_string(kReservedAt) + ": reserved field " +
                                                 hex32(reserved) + ", expected 0");
   }
-  return HeaderState::kComplete;
+  return FileHeader{HeaderState::kComplete, version};
 }
 
 // --- Records -----------------------------------------------------------------------------------
 
-MissRecord decode_payload(std::string_view payload) {
+// `payload` passed check_payload in the file's `version`.
+MissRecord decode_payload(std::string_view payload, uint32_t version) {
   MissRecord record;
   record.sequence = load_le<uint64_t>(payload, kSequenceAt);
   record.model_version = load_le<uint64_t>(payload, kModelVersionAt);
@@ -197,7 +222,7 @@ MissRecord decode_payload(std::string_view payload) {
   record.key_point_error = load_le<double>(payload, kKeyPointErrorAt);
   record.blend_weight = load_le<double>(payload, kBlendWeightAt);
   record.channels = load_le<uint32_t>(payload, kChannelsAt);
-  record.status = load_le<uint8_t>(payload, kStatusAt);
+  record.status = *status_of_code(load_le<uint8_t>(payload, kStatusAt), version);
   const auto key_count = load_le<uint32_t>(payload, kKeyCountAt);
   const auto full_count = load_le<uint32_t>(payload, kFullCountAt);
   record.key_values.resize(key_count);
@@ -213,7 +238,8 @@ MissRecord decode_payload(std::string_view payload) {
 // What check_record looks at, from a record to append or from a payload as stored (the values
 // as raw float32 bytes), so that reading checks a payload without decoding it first.
 struct RecordView {
-  uint8_t status = 0;
+  std::optional<pmsc::CacheStatus> status;  // nullopt: a byte no status has in the file's version
+  unsigned status_code = 0;                 // as stored, for messages
   uint32_t channels = 0;
   double key_point_error = 0;
   double blend_weight = 0;
@@ -223,8 +249,9 @@ struct RecordView {
   const char* full_bytes = nullptr;  // full_count float32
 };
 
-RecordView view_of(const MissRecord& record) {
+RecordView view_of(const MissRecord& record, uint32_t version) {
   return {record.status,
+          status_code(record.status, version),
           record.channels,
           record.key_point_error,
           record.blend_weight,
@@ -235,10 +262,12 @@ RecordView view_of(const MissRecord& record) {
 }
 
 // `payload` is as long as its counts say (check_payload has checked).
-RecordView view_of_payload(std::string_view payload) {
+RecordView view_of_payload(std::string_view payload, uint32_t version) {
   const uint64_t key_count = load_le<uint32_t>(payload, kKeyCountAt);
   const char* floats = payload.data() + kFixedPayloadSize;
-  return {load_le<uint8_t>(payload, kStatusAt),
+  const uint8_t code = load_le<uint8_t>(payload, kStatusAt);
+  return {status_of_code(code, version),
+          code,
           load_le<uint32_t>(payload, kChannelsAt),
           load_le<double>(payload, kKeyPointErrorAt),
           load_le<double>(payload, kBlendWeightAt),
@@ -261,11 +290,12 @@ int64_t first_non_finite(const char* bytes, uint64_t count) {
 // Refuses what the format cannot hold or what would poison retraining (STYLE.md §5: no silent
 // clamping). Returns the payload length.
 Result<uint64_t> check_record(const RecordView& record) {
-  if (record.status != kStatusBlend && record.status != kStatusMiss) {
+  if (!record.status || *record.status == pmsc::CacheStatus::kHit) {
     return make_error(ErrorCode::kInvalidArgument,
-                      "miss record status " + std::to_string(record.status) + ", expected " +
-                          std::to_string(kStatusBlend) + " (blend) or " +
-                          std::to_string(kStatusMiss) + " (miss)");
+                      "miss record status " +
+                          (record.status ? std::string(pmsc::cache_status_name(*record.status))
+                                         : "code " + std::to_string(record.status_code)) +
+                          ", expected blend or miss");
   }
   if (record.channels == 0) {
     return make_error(ErrorCode::kInvalidArgument, "miss record channels is 0, expected ≥ 1");
@@ -301,7 +331,7 @@ Result<uint64_t> check_record(const RecordView& record) {
 }
 
 // Checks a payload whose CRC matched; returns an empty string or what is wrong.
-std::string check_payload(std::string_view payload, uint64_t previous_sequence) {
+std::string check_payload(std::string_view payload, uint64_t previous_sequence, uint32_t version) {
   const auto sequence = load_le<uint64_t>(payload, kSequenceAt);
   const auto channels = load_le<uint32_t>(payload, kChannelsAt);
   const auto key_count = load_le<uint32_t>(payload, kKeyCountAt);
@@ -324,7 +354,7 @@ std::string check_payload(std::string_view payload, uint64_t previous_sequence) 
   }
   // What append refuses to write is refused when read, too: a status that is neither blend nor
   // miss, or a non-finite value, would otherwise reach retraining.
-  if (const auto valid = check_record(view_of_payload(payload)); !valid.ok()) return valid.error().message;
+  if (const auto valid = check_record(view_of_payload(payload, version)); !valid.ok()) return valid.error().message;
   return {};
 }
 
@@ -338,7 +368,7 @@ struct ScanResult {
 // Walks the records from the file header to `file_size`, calling `on_record` with each valid
 // payload, and stops at the first incomplete or invalid one (the recovery policy in
 // miss_log.h). Allocates at most one payload, never more than the bytes left in the file.
-Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesystem::path& path,
+Result<ScanResult> scan_records(int fd, uint64_t file_size, uint32_t version, const std::filesystem::path& path,
                                 const std::function<void(std::string_view)>& on_record) {
   ScanResult scan;
   std::string header(kRecordHeaderSize, '\0');
@@ -391,7 +421,7 @@ Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesyste
                     ", stored " + hex32(stored_crc);
       break;
     }
-    if (std::string problem = check_payload(payload, scan.last_sequence); !problem.empty()) {
+    if (std::string problem = check_payload(payload, scan.last_sequence, version); !problem.empty()) {
       scan.reason = "corrupt record" + where + problem;
       break;
     }
@@ -404,7 +434,7 @@ Result<ScanResult> scan_records(int fd, uint64_t file_size, const std::filesyste
 }
 
 // The framed record (header + payload) with the sequence field and CRC left to fill in.
-std::string encode_unsealed(const MissRecord& record, uint64_t payload_length) {
+std::string encode_unsealed(const MissRecord& record, uint64_t payload_length, uint32_t version) {
   std::string framed(kRecordHeaderSize + payload_length, '\0');
   store_le<uint32_t>(framed, kRecordMagicAt, kRecordMagic);
   store_le<uint32_t>(framed, kPayloadLengthAt, static_cast<uint32_t>(payload_length));
@@ -414,7 +444,7 @@ std::string encode_unsealed(const MissRecord& record, uint64_t payload_length) {
   store_le<double>(framed, p + kKeyPointErrorAt, record.key_point_error);
   store_le<double>(framed, p + kBlendWeightAt, record.blend_weight);
   store_le<uint32_t>(framed, p + kChannelsAt, record.channels);
-  store_le<uint8_t>(framed, p + kStatusAt, record.status);
+  store_le<uint8_t>(framed, p + kStatusAt, status_code(record.status, version));
   store_le<uint32_t>(framed, p + kKeyCountAt, static_cast<uint32_t>(record.key_values.size()));
   store_le<uint32_t>(framed, p + kFullCountAt, static_cast<uint32_t>(record.full_values.size()));
   char* floats = framed.data() + p + kFixedPayloadSize;
@@ -463,10 +493,11 @@ Result<FsyncPolicy> parse_fsync_policy(std::string_view text) {
                                                      "\", expected always, interval or never");
 }
 
-MissLog::MissLog(std::filesystem::path path, int fd, FsyncPolicy policy,
+MissLog::MissLog(std::filesystem::path path, int fd, uint32_t format_version, FsyncPolicy policy,
                  std::chrono::milliseconds fsync_interval)
     : path_(std::move(path)),
       fd_(fd),
+      format_version_(format_version),
       policy_(policy),
       fsync_interval_(fsync_interval),
       last_sync_(std::chrono::steady_clock::now()) {}
@@ -514,7 +545,7 @@ Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path
   RecoveryReport recovery;
   uint64_t end_offset = kFileHeaderSize;
   uint64_t last_sequence = 0;
-  if (*state == HeaderState::kIncomplete) {
+  if (state->state == HeaderState::kIncomplete) {
     // New, or a creation cut short: the bytes present are a prefix of the header; complete it.
     if (!header->empty()) {
       recovery.reason = "incomplete file header (" + std::to_string(header->size()) + " of " +
@@ -529,7 +560,7 @@ Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path
   } else {
     ScanResult scan;
     try {
-      auto scanned = scan_records(file.get(), *size, path, [](std::string_view) {});
+      auto scanned = scan_records(file.get(), *size, state->version, path, [](std::string_view) {});
       if (!scanned.ok()) return scanned.error();
       scan = std::move(*scanned);
     } catch (const std::bad_alloc&) {
@@ -553,7 +584,7 @@ Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path
   }
   if (created) ANIMSPACE_RETURN_IF_ERROR(fsync_directory(path));
 
-  std::unique_ptr<MissLog> log(new MissLog(path, file.release(), policy, fsync_interval));
+  std::unique_ptr<MissLog> log(new MissLog(path, file.release(), state->version, policy, fsync_interval));
   log->recovery_ = std::move(recovery);
   log->end_offset_ = end_offset;
   log->record_count_ = log->recovery_.records;
@@ -562,11 +593,11 @@ Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path
 }
 
 Result<uint64_t> MissLog::append(MissRecord& record) {
-  auto length = check_record(view_of(record));
+  auto length = check_record(view_of(record, format_version_));
   if (!length.ok()) return length.error();
   std::string framed;
   try {
-    framed = encode_unsealed(record, *length);
+    framed = encode_unsealed(record, *length, format_version_);
   } catch (const std::bad_alloc&) {
     return io_error(path_, "cannot encode miss record", ENOMEM);
   }
@@ -648,7 +679,7 @@ Result<std::vector<MissRecord>> read_records(const std::filesystem::path& path,
 
   ReadReport local;
   std::vector<MissRecord> records;
-  if (*state == HeaderState::kIncomplete) {
+  if (state->state == HeaderState::kIncomplete) {
     // A writer is creating the file right now (or crashed doing so): no records yet.
     local.ignored_tail_bytes = header->size();
     if (!header->empty()) {
@@ -657,9 +688,9 @@ Result<std::vector<MissRecord>> read_records(const std::filesystem::path& path,
     }
   } else {
     try {
-      auto scanned = scan_records(file.get(), *size, path, [&](std::string_view payload) {
+      auto scanned = scan_records(file.get(), *size, state->version, path, [&](std::string_view payload) {
         if (load_le<uint64_t>(payload, kSequenceAt) > after_sequence) {
-          records.push_back(decode_payload(payload));
+          records.push_back(decode_payload(payload, state->version));
         }
       });
       if (!scanned.ok()) return scanned.error();

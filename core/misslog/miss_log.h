@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "core/common/result.h"
+#include "core/pmsc/soft_cache.h"
 
 namespace animspace::misslog {
 
@@ -49,13 +50,15 @@ enum class FsyncPolicy {
 // and the accepted values.
 Result<FsyncPolicy> parse_fsync_policy(std::string_view text);
 
-// Values of MissRecord::status (animspace.v1.CacheStatus numbering).
-inline constexpr uint8_t kStatusBlend = 2;
-inline constexpr uint8_t kStatusMiss = 3;
+// Format versions (docs/FORMATS.md). New logs are written in kFormatVersion; a log of an older
+// version is read, and appended to, in its own version. They differ only in the status byte:
+// version 1 stored the API's CacheStatus numbers of the time (blend 2, miss 3); from version 2
+// the log owns its codes (blend 1, miss 2), so the file format depends on no wire enum.
+inline constexpr uint32_t kFormatVersion = 2;
+inline constexpr uint32_t kOldestFormatVersion = 1;
 
-// Format limits (docs/FORMATS.md). A record payload is at most kMaxPayloadBytes, so that a
-// corrupt length field can never ask for a giant allocation.
-inline constexpr uint32_t kFormatVersion = 1;
+// Format limits. A record payload is at most kMaxPayloadBytes, so that a corrupt length field
+// can never ask for a giant allocation.
 inline constexpr uint64_t kMaxPayloadBytes = uint64_t{1} << 30;  // 1 GiB
 
 // One logged pose. K key points, N points, D channels; values are point-major
@@ -64,7 +67,7 @@ struct MissRecord {
   uint64_t sequence = 0;       // assigned by MissLog::append: 1, 2, 3 … over the file's life
   uint64_t model_version = 0;  // the model version that produced the estimate
   int64_t unix_time_us = 0;    // set by the caller: when the pose was served
-  uint8_t status = 0;          // kStatusBlend or kStatusMiss
+  pmsc::CacheStatus status = pmsc::CacheStatus::kMiss;  // kBlend or kMiss (a hit is never logged)
   double key_point_error = 0;  // e_key, RMS key-point error of the estimate (model units)
   double blend_weight = 0;     // α of the soft-cache blend, in [0, 1]
   uint32_t channels = 3;       // D ≥ 1
@@ -103,7 +106,7 @@ class MissLog {
   // good record so that later appends stay readable.
   // Errors: kInvalidArgument naming the field for a record the format cannot hold or that would
   // poison retraining (channels 0, value counts not multiples of channels, a payload over
-  // kMaxPayloadBytes, status other than blend/miss, non-finite numbers); kIo naming the path
+  // kMaxPayloadBytes, status hit, non-finite numbers); kIo naming the path
   // (disk full, file size limit, fsync failure).
   Result<uint64_t> append(MissRecord& record);
 
@@ -115,14 +118,18 @@ class MissLog {
   uint64_t last_sequence() const;  // 0 for a log without records
   const RecoveryReport& recovery() const { return recovery_; }
   const std::filesystem::path& path() const { return path_; }
+  // The file's format version: kFormatVersion for a log this build created, else the version
+  // the file was created in (records are appended in it).
+  uint32_t format_version() const { return format_version_; }
 
  private:
-  MissLog(std::filesystem::path path, int fd, FsyncPolicy policy,
+  MissLog(std::filesystem::path path, int fd, uint32_t format_version, FsyncPolicy policy,
           std::chrono::milliseconds fsync_interval);
   Status sync_locked();
 
   const std::filesystem::path path_;
   const int fd_;
+  const uint32_t format_version_;
   const FsyncPolicy policy_;
   const std::chrono::milliseconds fsync_interval_;
   RecoveryReport recovery_;

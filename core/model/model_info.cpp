@@ -1,27 +1,13 @@
 #include "core/model/model_info.h"
 
-#include <array>
-#include <utility>
-
 #include "core/animspace/animspace_io.h"
 #include "core/lod/lod_io.h"
 
 namespace animspace::model {
 namespace {
 
-constexpr std::array<std::pair<ModelKind, const char*>, 4> kKindNames{{
-    {ModelKind::kMeshSequence, "mesh_sequence"},
-    {ModelKind::kPmsc, "pmsc"},
-    {ModelKind::kCrossPmsc, "cross_pmsc"},
-    {ModelKind::kAnimationSpace, "animation_space"},
-}};
-
-Error shape_error(const std::string& source, const char* section, const std::string& expected,
-                  long actual_rows, long actual_cols) {
-  return make_error(ErrorCode::kInvalidArgument,
-                    source + ": section '" + section + "' should be " + expected + ", got " +
-                        std::to_string(actual_rows) + "×" + std::to_string(actual_cols));
-}
+namespace sections = container::sections;
+using container::section_shape_error;
 
 // Shapes only of the skeleton-and-influences sections of an animation-space model over
 // `point_count` points (an animation_space model, or a PMSC model's posing engine);
@@ -34,7 +20,7 @@ Status check_animation_space_shapes(const container::ModelContainer& model, int 
   auto offsets = model.int_matrix(animation_space::sections::kInfluenceOffsets, 1);
   if (!offsets) return offsets.error();
   if (offsets->rows() != point_count + 1L) {
-    return shape_error(source, animation_space::sections::kInfluenceOffsets, std::to_string(point_count + 1) + "×1",
+    return section_shape_error(source, animation_space::sections::kInfluenceOffsets, std::to_string(point_count + 1) + "×1",
                        offsets->rows(), offsets->cols());
   }
   auto bones = model.int_matrix(animation_space::sections::kInfluenceBones, 1);
@@ -42,7 +28,7 @@ Status check_animation_space_shapes(const container::ModelContainer& model, int 
   auto positions = model.double_matrix(animation_space::sections::kPositions, 4);
   if (!positions) return positions.error();
   if (positions->rows() != bones->rows()) {
-    return shape_error(source, animation_space::sections::kPositions, std::to_string(bones->rows()) + "×4",
+    return section_shape_error(source, animation_space::sections::kPositions, std::to_string(bones->rows()) + "×4",
                        positions->rows(), positions->cols());
   }
   return Status::Ok();
@@ -50,29 +36,13 @@ Status check_animation_space_shapes(const container::ModelContainer& model, int 
 
 }  // namespace
 
-const char* kind_name(ModelKind kind) {
-  for (const auto& [k, name] : kKindNames) {
-    if (k == kind) return name;
-  }
-  return "unknown";
-}
-
-Result<ModelKind> parse_kind(const std::string& name) {
-  for (const auto& [kind, kind_string] : kKindNames) {
-    if (name == kind_string) return kind;
-  }
-  return make_error(ErrorCode::kInvalidArgument,
-                    "unknown model kind '" + name +
-                        "' (expected mesh_sequence, pmsc, cross_pmsc or animation_space)");
-}
-
 Result<ModelInfo> describe(const container::ModelContainer& model, const std::string& source) {
   ModelInfo info;
   const std::string kind = model.metadata_value("kind");
   if (kind.empty()) {
     return make_error(ErrorCode::kInvalidArgument, source + ": metadata has no 'kind'");
   }
-  auto parsed_kind = parse_kind(kind);
+  auto parsed_kind = container::parse_kind(kind);
   if (!parsed_kind) return make_error(ErrorCode::kInvalidArgument, source + ": " + parsed_kind.error().message);
   info.kind = *parsed_kind;
   info.description = model.metadata_value("description");
@@ -120,7 +90,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     auto rest_transforms = model.double_matrix(sections::kSkeletonRest, 16);
     if (!rest_transforms) return rest_transforms.error();
     if (rest_transforms->rows() != info.bone_count) {
-      return shape_error(source, sections::kSkeletonRest, std::to_string(info.bone_count) + "×16",
+      return section_shape_error(source, sections::kSkeletonRest, std::to_string(info.bone_count) + "×16",
                          rest_transforms->rows(), rest_transforms->cols());
     }
   }
@@ -129,7 +99,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     auto weights = model.float_matrix(sections::kSkinningWeights);
     if (!weights) return weights.error();
     if (weights->rows() != info.point_count || weights->cols() != info.bone_count) {
-      return shape_error(source, sections::kSkinningWeights,
+      return section_shape_error(source, sections::kSkinningWeights,
                          std::to_string(info.point_count) + "×" + std::to_string(info.bone_count),
                          weights->rows(), weights->cols());
     }
@@ -139,7 +109,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     auto frames = model.float_matrix(sections::kSequenceFrames);
     if (!frames) return frames.error();
     if (frames->cols() != static_cast<long>(info.point_count) * info.channel_count) {
-      return shape_error(source, sections::kSequenceFrames,
+      return section_shape_error(source, sections::kSequenceFrames,
                          "F×" + std::to_string(static_cast<long>(info.point_count) * info.channel_count),
                          frames->rows(), frames->cols());
     }
@@ -148,7 +118,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
       auto bones = model.double_matrix(sections::kSequenceBoneTransforms);
       if (!bones) return bones.error();
       if (bones->rows() != info.frame_count || bones->cols() != 16L * info.bone_count) {
-        return shape_error(source, sections::kSequenceBoneTransforms,
+        return section_shape_error(source, sections::kSequenceBoneTransforms,
                            std::to_string(info.frame_count) + "×" + std::to_string(16 * info.bone_count),
                            bones->rows(), bones->cols());
       }
@@ -168,7 +138,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     auto mean = model.float_matrix("pmsc.mean");
     if (!mean) return mean.error();
     if (mean->cols() != static_cast<long>(info.point_count) * info.channel_count) {
-      return shape_error(source, "pmsc.mean",
+      return section_shape_error(source, "pmsc.mean",
                          "1×" + std::to_string(static_cast<long>(info.point_count) * info.channel_count),
                          mean->rows(), mean->cols());
     }
@@ -179,7 +149,7 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
     auto epsilon = model.double_matrix("pmsc.epsilon", 2);
     if (!epsilon) return epsilon.error();
     // Read below as (ε_min, ε_max): any other row count is refused before that read.
-    if (epsilon->rows() != 1) return shape_error(source, "pmsc.epsilon", "1×2", epsilon->rows(), epsilon->cols());
+    if (epsilon->rows() != 1) return section_shape_error(source, "pmsc.epsilon", "1×2", epsilon->rows(), epsilon->cols());
     info.basis_size = static_cast<int>(basis->cols());
     info.key_point_count = static_cast<int>(keys->rows());
     info.epsilon_min = static_cast<float>((*epsilon)(0, 0));

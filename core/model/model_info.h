@@ -9,28 +9,14 @@
 
 #include "core/common/result.h"
 #include "core/container/model_container.h"
+#include "core/container/sections.h"
 
 namespace animspace::model {
 
-enum class ModelKind { kMeshSequence, kPmsc, kCrossPmsc, kAnimationSpace };
+using container::ModelKind;
 
 // How a blend or miss obtains the full values (SPEC "Fail-through").
 enum class FailThrough { kNone, kServer, kClient, kImpossible };
-
-// Metadata value of "kind" for each ModelKind ("mesh_sequence", "pmsc", …).
-const char* kind_name(ModelKind kind);
-Result<ModelKind> parse_kind(const std::string& name);
-
-// Section names shared by the writers (demo, training, fitting) and the readers.
-namespace sections {
-inline constexpr const char* kRestPoints = "mesh.rest_points";            // N×3 float32
-inline constexpr const char* kFaces = "mesh.faces";                       // F×3 int32
-inline constexpr const char* kSkeletonParents = "skeleton.parents";       // B×1 int32, -1 = root
-inline constexpr const char* kSkeletonRest = "skeleton.rest_transforms";  // B×16 float64 (Ĝ_j)
-inline constexpr const char* kSkinningWeights = "skinning.weights";       // N×B float32
-inline constexpr const char* kSequenceFrames = "sequence.frames";         // F×(N·D) float32
-inline constexpr const char* kSequenceBoneTransforms = "sequence.bone_transforms";  // F×(B·16) f64
-}  // namespace sections
 
 struct ModelInfo {
   ModelKind kind = ModelKind::kMeshSequence;

@@ -24,7 +24,7 @@ struct Servable {
   // is the model itself) and the sphere eq. 7.2 measures depth to.
   std::optional<animation_space::AnimationSpaceModel> animation_space;
   std::optional<lod::LodLevels> lod_levels;
-  animation_space::BoundingSphere bounding_sphere;
+  geometry::BoundingSphere bounding_sphere;
 };
 
 // describe → pmsc::load and/or animation_space::load → lod::load_levels →

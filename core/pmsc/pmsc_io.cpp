@@ -7,7 +7,7 @@
 
 #include "core/animspace/animspace_io.h"
 #include "core/common/format.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -249,13 +249,13 @@ Result<TrainingOptions> load_training_options(const container::ModelContainer& i
 }
 
 bool has_posing_engine(const container::ModelContainer& in) {
-  return in.has_section(model::sections::kSkeletonParents) &&
+  return in.has_section(container::sections::kSkeletonParents) &&
          in.has_section(animation_space::sections::kInfluenceOffsets);
 }
 
 Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, container::ModelContainer& out) {
   const std::string kind = out.metadata_value("kind");
-  if (kind != model::kind_name(model::ModelKind::kPmsc) || out.metadata_value("pmsc.cross") == "1") {
+  if (kind != container::kind_name(container::ModelKind::kPmsc) || out.metadata_value("pmsc.cross") == "1") {
     const std::string why = kind == "cross_pmsc" ? " (cross-PMSC outputs have no full calculation)" : "";
     return make_error(ErrorCode::kFailedPrecondition,
                       "a posing engine computes the full values of a pmsc model's own points; this container has "
@@ -270,15 +270,15 @@ Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, 
   if (const Status valid = animation_space::validate(engine); !valid.ok()) {
     return make_error(ErrorCode::kInvalidArgument, "posing engine: " + valid.error().message);
   }
-  auto rest = out.points(model::sections::kRestPoints);
+  auto rest = out.points(container::sections::kRestPoints);
   if (!rest) return rest.error();
   if (engine.vertex_count() != rest->rows()) {
     return make_error(ErrorCode::kInvalidArgument,
                       "posing engine has " + std::to_string(engine.vertex_count()) + " vertices, expected the PMSC "
                       "model's N = " + std::to_string(rest->rows()) + " points");
   }
-  if (out.has_section(model::sections::kSequenceBoneTransforms)) {
-    auto bones = out.double_matrix(model::sections::kSequenceBoneTransforms);
+  if (out.has_section(container::sections::kSequenceBoneTransforms)) {
+    auto bones = out.double_matrix(container::sections::kSequenceBoneTransforms);
     if (!bones) return bones.error();
     if (bones->cols() != 16L * engine.bone_count()) {
       return make_error(ErrorCode::kInvalidArgument,
@@ -298,8 +298,8 @@ Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, 
   }
   animation_space::store_skeleton(engine.skeleton, out);
   animation_space::store_influences(engine, animation_space::sections::kModelPrefix, out);
-  if (!out.has_section(model::sections::kFaces) && engine.faces.rows() > 0) {
-    out.set_faces(model::sections::kFaces, engine.faces);
+  if (!out.has_section(container::sections::kFaces) && engine.faces.rows() > 0) {
+    out.set_faces(container::sections::kFaces, engine.faces);
   }
   return Status::Ok();
 }

@@ -158,9 +158,9 @@ Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
 // where GᵀG and Gᵀb are sums over keys of 3×3 blocks and UᵀG costs O(K·r): each step is a few
 // passes over the key rows and a 6×6 solve. `transform` maps the aligned frame to the world.
 Eigen::VectorXd project_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
-                             Eigen::VectorXd& p, RigidTransform& transform) {
+                             Eigen::VectorXd& p, geometry::RigidTransform& transform) {
   Eigen::VectorXd keys = key_values.cast<double>();
-  transform = RigidTransform();
+  transform = geometry::RigidTransform();
   if (!m.aligned) {
     p.noalias() = m.projection * (keys - m.key_mean);
     return keys - m.key_mean - m.key_basis * p;
@@ -175,11 +175,11 @@ Eigen::VectorXd project_keys(const PmscModel& m, const Eigen::Ref<const Eigen::V
   const Strided U_z(m.key_range.data() + 2, K, r, Eigen::Stride<Eigen::Dynamic, 3>(3 * K, 3));
   const double scale = std::max(1.0, m.key_mean.cwiseAbs().maxCoeff());
 
-  transform = fit_rigid(as_points(m.key_mean), observed);
+  transform = geometry::fit_rigid(as_points(m.key_mean), observed);
   Eigen::VectorXd b;
   Eigen::MatrixXd UG(r, 6);
   for (int iteration = 0; iteration < kMaxAlignmentIterations; ++iteration) {
-    const RigidTransform to_aligned = transform.inverse();
+    const geometry::RigidTransform to_aligned = transform.inverse();
     aligned = (to_aligned.rotation * observed).colwise() + to_aligned.translation;
     b = keys - m.key_mean;
     const Eigen::Map<const Eigen::Matrix3Xd> b_points(b.data(), 3, K);
@@ -210,13 +210,13 @@ Eigen::VectorXd project_keys(const PmscModel& m, const Eigen::Ref<const Eigen::V
     const double angle = omega.norm();
     const Eigen::Matrix3d step =
         angle > 0 ? Eigen::AngleAxisd(-angle, omega / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
-    RigidTransform updated;
+    geometry::RigidTransform updated;
     updated.rotation = step * to_aligned.rotation;
     updated.translation = step * to_aligned.translation - delta.tail<3>();
     transform = updated.inverse();
     if (angle < kAlignmentTolerance && delta.tail<3>().norm() < kAlignmentTolerance * scale) break;
   }
-  const RigidTransform to_aligned = transform.inverse();
+  const geometry::RigidTransform to_aligned = transform.inverse();
   aligned = (to_aligned.rotation * observed).colwise() + to_aligned.translation;
   b = keys - m.key_mean;
   p.noalias() = m.projection * b;
@@ -228,7 +228,7 @@ double rms(const Eigen::VectorXd& residual) {
 }
 
 // Moves the N points of `frame` (3N values) from the aligned frame to the world.
-void to_world(const RigidTransform& t, int point_count, float* frame) {
+void to_world(const geometry::RigidTransform& t, int point_count, float* frame) {
   Eigen::Map<Eigen::Matrix3Xf> points(frame, 3, point_count);
   points = (t.rotation.cast<float>() * points).colwise() + t.translation.cast<float>();
 }
@@ -268,7 +268,7 @@ void evaluate_batch(const PmscModel& m, const Eigen::Ref<const Eigen::MatrixXf>&
   const long B = key_values.cols();
   key_point_errors.resize(B);
   Eigen::MatrixXd coordinates(m.basis.cols(), B);
-  std::vector<RigidTransform> transforms;
+  std::vector<geometry::RigidTransform> transforms;
   if (m.aligned) {
     // The rigid fit is per pose; the reconstruction below is still one matrix product.
     transforms.resize(static_cast<size_t>(B));
@@ -293,6 +293,12 @@ void evaluate_batch(const PmscModel& m, const Eigen::Ref<const Eigen::MatrixXf>&
 
 void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                      const Eigen::VectorXf* full_values, CachedPose& out) {
+  evaluate_cached(m, key_values, full_values, FullCalculation(), out);
+}
+
+void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                     const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
+                     CachedPose& out) {
   assert(full_values == nullptr || full_values->size() == m.mean.size());
   PoseEstimate estimate;
   evaluate(m, key_values, estimate);
@@ -302,9 +308,17 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
   out.key_point_error = estimate.key_point_error;
   out.region_errors = std::move(estimate.region_errors);
   out.full_evaluation_needed = false;
+  out.computed_full_values.resize(0);
   if (decision.status == CacheStatus::kHit || m.cross) {
     out.points = std::move(estimate.points);
-  } else if (full_values != nullptr && decision.status == CacheStatus::kMiss) {
+    return;
+  }
+  // Step 5: the full calculation, when the caller brought none and holds an engine.
+  if (full_values == nullptr && full_calculation && full_calculation(out.computed_full_values)) {
+    assert(out.computed_full_values.size() == m.mean.size());
+    full_values = &out.computed_full_values;
+  }
+  if (full_values != nullptr && decision.status == CacheStatus::kMiss) {
     out.points = *full_values;  // eq. 9: f itself, not 1·f + 0·f̂ (which an overflowed f̂ would spoil)
   } else if (full_values != nullptr) {
     out.points.resize(estimate.points.size());

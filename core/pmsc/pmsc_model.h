@@ -19,12 +19,13 @@
 // estimate is moved back.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "core/common/result.h"
-#include "core/pmsc/rigid_alignment.h"
+#include "core/geometry/rigid_fit.h"
 #include "core/pmsc/soft_cache.h"
 
 namespace animspace::pmsc {
@@ -83,7 +84,7 @@ struct PoseEstimate {
   Eigen::VectorXd coordinates;       // M, subspace coordinates p
   double key_point_error = 0;        // e_key = rms(f_key − f̂_key), eq. 8
   std::vector<double> region_errors; // per region RMS key error (empty without regions)
-  RigidTransform alignment;          // aligned frame → world (identity unless aligned)
+  geometry::RigidTransform alignment;          // aligned frame → world (identity unless aligned)
 };
 
 // One pose. `key_values` holds K·D values in key order. The model must be prepared. Values are
@@ -106,12 +107,30 @@ struct CachedPose {
   // supply f (or accept f̂). Never set for cross-PMSC models, where no full calculation exists.
   bool full_evaluation_needed = false;
   std::vector<double> region_errors;
+  // f as the full calculation computed it for this pose (fail-through), else empty: the
+  // example a miss log keeps for retraining (2007 §2.4).
+  Eigen::VectorXf computed_full_values;
 };
 
 // Evaluates one pose through the soft cache. `full_values` (N·D, optional) is the expensive
 // calculation for this pose when the caller has it; it is only read on a blend or miss.
 void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                      const Eigen::VectorXf* full_values, CachedPose& out);
+
+// The full calculation of one pose — a posing engine the caller holds (SPEC "Fail-through":
+// the server's animation-space model, posed at the request's skeleton). Writes f (N·D values,
+// the model's point-major layout) and returns true, or returns false when it cannot compute this
+// pose. Called at most once, and only when the soft cache cannot answer alone.
+using FullCalculation = std::function<bool(Eigen::VectorXf& full_values)>;
+
+// Fail-through (Meyer & Anderson 2007 §2.4, runtime steps 4–5): evaluate_cached, and when the
+// verdict is a blend or a miss and the caller sent no full values, run `full_calculation` (may
+// be empty: none) and blend with its f exactly as with values the caller sent (eqs. 9–11);
+// out.computed_full_values keeps that f. Without f the result is evaluate_cached's
+// (full_evaluation_needed set). Never calls it for a hit or a cross-PMSC model.
+void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                     const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
+                     CachedPose& out);
 
 // Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
 Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);

@@ -4,8 +4,7 @@
 #include <charconv>
 #include <system_error>
 
-#include "core/misslog/miss_log.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::pmsc {
@@ -38,49 +37,25 @@ void advance_misses_through_log(container::ModelContainer& out, const std::strin
   out.metadata()[kMissesThroughLogPrefix + log] = std::to_string(std::max(sequence, misses_through_log(out, log)));
 }
 
-Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence, long width) {
-  MissFrames out;
-  out.last_sequence = after_sequence;
-  out.frames.resize(0, width);
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return out;
-  misslog::ReadReport report;
-  auto records = misslog::read_records(path, after_sequence, &report);
-  if (!records) return records.error();
-  long usable = 0;
-  for (const auto& record : *records) usable += static_cast<long>(record.full_values.size()) == width ? 1 : 0;
-  out.frames.resize(usable, width);
-  long row = 0;
-  for (const auto& record : *records) {
-    out.last_sequence = std::max(out.last_sequence, record.sequence);
-    if (static_cast<long>(record.full_values.size()) != width) {
-      ++out.skipped;
-      continue;
-    }
-    out.frames.row(row++) = Eigen::Map<const Eigen::RowVectorXf>(record.full_values.data(), width);
-  }
-  return out;
-}
-
 Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t current_version,
                               const FrameMatrix& miss_frames, uint64_t last_miss_sequence,
                               const RetrainOptions& options, const std::string& source) {
   // What can be retrained: a PMSC model whose outputs have a full calculation, its training
   // frames and the options it was trained with.
   const std::string kind = current.metadata_value("kind");
-  if (kind == model::kind_name(model::ModelKind::kCrossPmsc) || current.metadata_value("pmsc.cross") == "1") {
+  if (kind == container::kind_name(container::ModelKind::kCrossPmsc) || current.metadata_value("pmsc.cross") == "1") {
     return make_error(ErrorCode::kFailedPrecondition,
                       source + ": cross-PMSC models have no full values to learn from");
   }
-  if (kind != model::kind_name(model::ModelKind::kPmsc)) {
+  if (kind != container::kind_name(container::ModelKind::kPmsc)) {
     return make_error(ErrorCode::kFailedPrecondition,
                       source + ": only pmsc models can be retrained, this one has kind '" + kind + "'");
   }
-  if (!current.has_section(model::sections::kSequenceFrames)) {
+  if (!current.has_section(container::sections::kSequenceFrames)) {
     return make_error(ErrorCode::kFailedPrecondition,
                       source + ": the model keeps no training frames (section 'sequence.frames') to retrain from");
   }
-  auto old_frames = current.float_matrix(model::sections::kSequenceFrames);
+  auto old_frames = current.float_matrix(container::sections::kSequenceFrames);
   if (!old_frames) return make_error(old_frames.error().code, source + ": " + old_frames.error().message);
   auto training_options = load_training_options(current, source);
   if (!training_options) return training_options.error();
@@ -134,12 +109,12 @@ Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t
   copy_sections(
       current,
       [&](const std::string& name) {
-        if (starts_with_pmsc(name) || name == model::sections::kSequenceFrames) return false;
+        if (starts_with_pmsc(name) || name == container::sections::kSequenceFrames) return false;
         // Other sequence.* sections have one row per old training frame.
         return R == 0 || name.rfind("sequence.", 0) != 0;
       },
       out);
-  out.set_matrix(model::sections::kSequenceFrames, frames);
+  out.set_matrix(container::sections::kSequenceFrames, frames);
 
   result.training_frames = static_cast<int>(frames.rows());
   result.misses_used = static_cast<int>(R);

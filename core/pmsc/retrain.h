@@ -53,17 +53,6 @@ uint64_t misses_through_log(const container::ModelContainer& in, const std::stri
 // Sets the log's watermark to `sequence` unless it is already past it (never backwards).
 void advance_misses_through_log(container::ModelContainer& out, const std::string& log, uint64_t sequence);
 
-// The full frames of a miss log's records after `after_sequence`, for retrain(): records without
-// full values (misses nobody completed) have nothing to teach and are skipped, counted in
-// `skipped`. A missing file is no misses. `last_sequence` is the newest record read (at least
-// `after_sequence`). Errors: the log reader's (kDataLoss naming the path and byte offset, kIo).
-struct MissFrames {
-  FrameMatrix frames;  // rows × width
-  uint64_t last_sequence = 0;
-  uint64_t skipped = 0;
-};
-Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence, long width);
-
 // Retrains the model of `current` (a pmsc container with sequence.frames and pmsc.options.*; the
 // version `current_version` of its model) on its training frames plus `miss_frames` (R × N·D
 // full values from the miss log, R ≥ 0; a 0-row matrix of any width means no misses).

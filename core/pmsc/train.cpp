@@ -9,7 +9,7 @@
 #include "core/pmsc/key_points.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/regions.h"
-#include "core/pmsc/rigid_alignment.h"
+#include "core/geometry/rigid_fit.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -26,17 +26,17 @@ Eigen::Map<const Eigen::Matrix3Xd> points_of(const Eigen::VectorXd& frame, long 
 
 // Generalised Procrustes on the control points: align every frame to the first, then twice to
 // the mean of the aligned frames. Returns per-frame transforms aligned → world.
-std::vector<RigidTransform> rigid_motion_per_frame(const Eigen::MatrixXd& T, long control_points) {
+std::vector<geometry::RigidTransform> rigid_motion_per_frame(const Eigen::MatrixXd& T, long control_points) {
   const long F = T.cols();
-  std::vector<RigidTransform> transforms(static_cast<size_t>(F));
+  std::vector<geometry::RigidTransform> transforms(static_cast<size_t>(F));
   Eigen::Matrix3Xd reference = points_of(T.col(0), 0, control_points);
   for (int pass = 0; pass < 3; ++pass) {
     Eigen::Matrix3Xd sum = Eigen::Matrix3Xd::Zero(3, control_points);
     for (long f = 0; f < F; ++f) {
       const Eigen::VectorXd frame = T.col(f);
       const auto world = points_of(frame, 0, control_points);
-      transforms[static_cast<size_t>(f)] = fit_rigid(reference, world);
-      const RigidTransform inverse = transforms[static_cast<size_t>(f)].inverse();
+      transforms[static_cast<size_t>(f)] = geometry::fit_rigid(reference, world);
+      const geometry::RigidTransform inverse = transforms[static_cast<size_t>(f)].inverse();
       sum += (inverse.rotation * world).colwise() + inverse.translation;
     }
     reference = sum / static_cast<double>(F);
@@ -44,8 +44,8 @@ std::vector<RigidTransform> rigid_motion_per_frame(const Eigen::MatrixXd& T, lon
   return transforms;
 }
 
-void apply_inverse(const RigidTransform& to_world, Eigen::Ref<Eigen::VectorXd> frame) {
-  const RigidTransform inverse = to_world.inverse();
+void apply_inverse(const geometry::RigidTransform& to_world, Eigen::Ref<Eigen::VectorXd> frame) {
+  const geometry::RigidTransform inverse = to_world.inverse();
   Eigen::Map<Eigen::Matrix3Xd> points(frame.data(), 3, frame.size() / 3);
   points = (inverse.rotation * points).colwise() + inverse.translation;
 }

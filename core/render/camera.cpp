@@ -51,7 +51,7 @@ Eigen::Matrix4d view_matrix(const Camera& camera) {
 }
 
 Eigen::Matrix4d projection_matrix(const Camera& camera, double aspect, double near_distance, double far_distance) {
-  const double focal = 1.0 / std::tan(camera.vertical_fov_radians / 2);
+  const double focal = 1.0 / std::tan(camera.vertical_fov_rad / 2);
   Eigen::Matrix4d projection = Eigen::Matrix4d::Zero();
   projection(0, 0) = focal / aspect;
   projection(1, 1) = focal;
@@ -64,7 +64,7 @@ Eigen::Matrix4d projection_matrix(const Camera& camera, double aspect, double ne
 Projected project_to_pixel(const Camera& camera, int width, int height, const Eigen::Vector3d& point) {
   const Basis b = basis(camera);
   const Eigen::Vector3d d = point - camera.eye;
-  const double focal = 1.0 / std::tan(camera.vertical_fov_radians / 2);
+  const double focal = 1.0 / std::tan(camera.vertical_fov_rad / 2);
   const double aspect = static_cast<double>(width) / height;
   Projected projected;
   projected.depth = d.dot(b.f);
@@ -77,20 +77,10 @@ Projected project_to_pixel(const Camera& camera, int width, int height, const Ei
 }
 
 double horizontal_fov(const Camera& camera, double aspect) {
-  return 2 * std::atan(aspect * std::tan(camera.vertical_fov_radians / 2));
+  return 2 * std::atan(aspect * std::tan(camera.vertical_fov_rad / 2));
 }
 
-BoundingSphere bounding_sphere(const PointMatrix& points) {
-  const Eigen::Vector3d lo = points.colwise().minCoeff().cast<double>().transpose();
-  const Eigen::Vector3d hi = points.colwise().maxCoeff().cast<double>().transpose();
-  BoundingSphere sphere;
-  sphere.centre = (lo + hi) / 2;
-  const Eigen::RowVector3d centre = sphere.centre.transpose();
-  sphere.radius = std::sqrt((points.cast<double>().rowwise() - centre).rowwise().squaredNorm().maxCoeff());
-  return sphere;
-}
-
-ClipRange clip_range(const Camera& camera, const BoundingSphere& sphere) {
+ClipRange clip_range(const Camera& camera, const geometry::BoundingSphere& sphere) {
   const Eigen::Vector3d to_centre = sphere.centre - camera.eye;
   const double depth = to_centre.dot((camera.target - camera.eye).normalized());
   double scale = std::max(sphere.radius, to_centre.norm());
@@ -110,15 +100,15 @@ Result<Camera> frame_bounding_box(const PointMatrix& points, double aspect) {
   if (!std::isfinite(aspect) || aspect <= 0) {
     return make_error(ErrorCode::kInvalidArgument, "aspect: expected > 0, got " + format_number(aspect));
   }
-  const BoundingSphere sphere = bounding_sphere(points);
+  const geometry::BoundingSphere sphere = geometry::bounding_sphere(points);
   // A single point (or all points equal) has no size: frame a unit sphere around it.
   const double radius = sphere.radius > 0 ? sphere.radius : 1.0;
   Camera camera;
   camera.target = sphere.centre;
   camera.up = Eigen::Vector3d::UnitY();
-  camera.vertical_fov_radians = 0.8;
+  camera.vertical_fov_rad = 0.8;
   // The sphere fits a cone of half-angle fov/2 when distance · sin(fov/2) ≥ radius.
-  const double fov = std::min(camera.vertical_fov_radians, horizontal_fov(camera, aspect));
+  const double fov = std::min(camera.vertical_fov_rad, horizontal_fov(camera, aspect));
   camera.eye = sphere.centre + Eigen::Vector3d(0, 0, radius * kFramingMargin / std::sin(fov / 2));
   return camera;
 }
@@ -138,7 +128,7 @@ Status validate_camera(const Camera& camera, const std::string& field) {
   if (view.stableNormalized().cross(camera.up.stableNormalized()).norm() <= kParallelSine) {
     return invalid("up", "parallel to the view direction (target − eye)");
   }
-  const double fov = camera.vertical_fov_radians;
+  const double fov = camera.vertical_fov_rad;
   if (!(fov > 0 && fov < std::numbers::pi)) {
     return invalid("vertical_fov_rad", "expected in (0, π), got " + format_number(fov));
   }

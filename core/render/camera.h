@@ -6,6 +6,7 @@
 
 #include "core/common/result.h"
 #include "core/common/types.h"
+#include "core/geometry/bounding_sphere.h"
 #include "core/render/scene.h"
 
 namespace animspace::render {
@@ -28,18 +29,10 @@ Projected project_to_pixel(const Camera& camera, int width, int height, const Ei
 double horizontal_fov(const Camera& camera, double aspect);
 
 // A camera that sees the whole of `points`: it looks at the centre of their bounding sphere
-// (centre of the bounding box, radius to the farthest point) from the front (+z, up +y), far
+// (geometry::bounding_sphere) from the front (+z, up +y), far
 // enough that the sphere fits the narrower field of view with a small margin.
 // Errors: kInvalidArgument for no points or non-finite points.
 Result<Camera> frame_bounding_box(const PointMatrix& points, double aspect);
-
-// The sphere frame_bounding_box frames: centre of the bounding box, radius to the farthest point
-// (0 for a single point). Expects at least one point, all finite.
-struct BoundingSphere {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  double radius = 0;
-};
-BoundingSphere bounding_sphere(const PointMatrix& points);
 
 // Near and far clip distances for drawing `sphere` from `camera`: tight around the sphere so the
 // 24-bit depth buffer keeps its precision, with a floor on `near` for an eye inside the sphere.
@@ -47,7 +40,7 @@ struct ClipRange {
   double near_distance = 0;
   double far_distance = 0;
 };
-ClipRange clip_range(const Camera& camera, const BoundingSphere& sphere);
+ClipRange clip_range(const Camera& camera, const geometry::BoundingSphere& sphere);
 
 // Checks a camera given by a caller: finite, eye ≠ target, up not parallel to the view direction,
 // field of view in (0, π). Errors: kInvalidArgument naming `field` (e.g. "camera.up") and what

@@ -24,6 +24,9 @@
 
 #include "core/render/camera.h"
 #include "core/common/format.h"
+#include "core/geometry/bounding_sphere.h"
+#include "core/geometry/edges.h"
+#include "core/geometry/normals.h"
 #include "core/render/renderer.h"
 
 namespace animspace::render {
@@ -117,45 +120,16 @@ Status validate_scene(const Scene& scene) {
 // ---------------------------------------------------------------------------------------------
 // Geometry prepared on the CPU.
 
-// Area-weighted vertex normals, for scenes that bring none (like the core, which derives normals
-// rather than keeping a file's, Merry 2007 §3.5): the unnormalised cross product of a face is
-// twice its area along its normal, so summing them weights each face by its area.
-PointMatrix area_weighted_normals(const PointMatrix& points, const FaceMatrix& faces) {
-  PointMatrix normals = PointMatrix::Zero(points.rows(), 3);
-  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-    const Eigen::Vector3f p0 = points.row(faces(f, 0)).transpose();
-    const Eigen::Vector3f p1 = points.row(faces(f, 1)).transpose();
-    const Eigen::Vector3f p2 = points.row(faces(f, 2)).transpose();
-    const Eigen::RowVector3f n = (p1 - p0).cross(p2 - p0).transpose();
-    for (int k = 0; k < 3; ++k) normals.row(faces(f, k)) += n;
+// Each undirected edge once (geometry::unique_edges), flattened into index pairs for GL_LINES.
+std::vector<int32_t> line_indices(const FaceMatrix& faces) {
+  const std::vector<std::pair<int32_t, int32_t>> edges = geometry::unique_edges(faces);
+  std::vector<int32_t> indices;
+  indices.reserve(2 * edges.size());
+  for (const auto& [a, b] : edges) {
+    indices.push_back(a);
+    indices.push_back(b);
   }
-  for (Eigen::Index i = 0; i < normals.rows(); ++i) {
-    const float length = normals.row(i).norm();
-    if (length > 0) normals.row(i) /= length;  // isolated vertices keep 0: the shader lights them head-on
-  }
-  return normals;
-}
-
-// Each undirected edge once, as index pairs for GL_LINES.
-std::vector<int32_t> unique_edges(const FaceMatrix& faces) {
-  std::vector<uint64_t> keys;
-  keys.reserve(3 * static_cast<size_t>(faces.rows()));
-  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const auto a = static_cast<uint32_t>(faces(f, k));
-      const auto b = static_cast<uint32_t>(faces(f, (k + 1) % 3));
-      if (a != b) keys.push_back(uint64_t{std::min(a, b)} << 32 | std::max(a, b));
-    }
-  }
-  std::sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-  std::vector<int32_t> edges;
-  edges.reserve(2 * keys.size());
-  for (const uint64_t key : keys) {
-    edges.push_back(static_cast<int32_t>(key >> 32));
-    edges.push_back(static_cast<int32_t>(key & 0xffffffffu));
-  }
-  return edges;
+  return indices;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -737,13 +711,13 @@ Status EglRenderer::ensure_targets(int width, int height, int samples) {
 
 Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
   const double aspect = static_cast<double>(scene.width) / scene.height;
-  const ClipRange clip = clip_range(camera, bounding_sphere(scene.points));
+  const ClipRange clip = clip_range(camera, geometry::bounding_sphere(scene.points));
   const Eigen::Matrix4f mvp =
       (projection_matrix(camera, aspect, clip.near_distance, clip.far_distance) * view_matrix(camera)).cast<float>();
 
   // Element buffer: triangles, then edges, then key points. Indices are validated ≥ 0, so int32
   // data reads the same as GL_UNSIGNED_INT.
-  const std::vector<int32_t> edges = scene.wireframe ? unique_edges(scene.faces) : std::vector<int32_t>();
+  const std::vector<int32_t> edges = scene.wireframe ? line_indices(scene.faces) : std::vector<int32_t>();
   const auto face_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * static_cast<size_t>(scene.faces.size()));
   const auto edge_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * edges.size());
   const auto key_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * scene.key_points.size());
@@ -761,7 +735,7 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
   // Row-major #V × 3 matrices are already the interleaved x y z layout GL expects.
   upload(kPositions, scene.points.data(), static_cast<size_t>(scene.points.size()));
   const PointMatrix computed_normals =
-      scene.normals.rows() == 0 ? area_weighted_normals(scene.points, scene.faces) : PointMatrix();
+      scene.normals.rows() == 0 ? geometry::area_weighted_normals(scene.points, scene.faces) : PointMatrix();
   const PointMatrix& normals = scene.normals.rows() == 0 ? computed_normals : scene.normals;
   upload(kNormals, normals.data(), static_cast<size_t>(normals.size()));
   const bool use_heat = scene.heat.size() != 0;

@@ -20,7 +20,7 @@ struct Camera {
   Eigen::Vector3d eye = Eigen::Vector3d(0, 0, 3);
   Eigen::Vector3d target = Eigen::Vector3d::Zero();
   Eigen::Vector3d up = Eigen::Vector3d::UnitY();
-  double vertical_fov_radians = 0.8;  // in (0, π)
+  double vertical_fov_rad = 0.8;  // in (0, π)
 };
 
 enum class Shading { kLambert, kBlinnPhong };

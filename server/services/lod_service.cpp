@@ -207,7 +207,7 @@ void LodStream::fill_header(v1::LodHeader* header) const {
   header->set_model_version(model_->version);
   header->set_level(static_cast<uint32_t>(choice_.level));
   header->set_level_count(static_cast<uint32_t>(model_->lod_levels->count()));
-  header->set_epsilon(static_cast<float>(choice_.lod->error));
+  header->set_epsilon(static_cast<float>(choice_.lod->epsilon));
   header->set_vertex_count(static_cast<uint32_t>(level.vertex_count()));
   header->set_face_count(static_cast<uint32_t>(level.faces.rows()));
   header->set_bone_count(static_cast<uint32_t>(level.bone_count()));

@@ -8,6 +8,7 @@
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
+#include "core/geometry/bounding_sphere.h"
 #include "core/lod/selection.h"
 #include "core/render/camera.h"
 #include "core/render/png.h"
@@ -85,7 +86,7 @@ grpc::Status read_view(const Request& request, const ServerOptions& options, ren
       }
       *out = Eigen::Vector3d((*values)[0], (*values)[1], (*values)[2]);
     }
-    camera.vertical_fov_radians = c.vertical_fov_rad();
+    camera.vertical_fov_rad = c.vertical_fov_rad();
     if (Status valid = render::validate_camera(camera, "camera"); !valid.ok()) return to_grpc_status(valid.error());
     scene.camera = camera;
   }
@@ -100,11 +101,11 @@ PointMatrix points_of(const v1::PointArray& array) {
 }
 
 grpc::Status stored_faces(const LoadedModel& model, render::Scene& scene) {
-  if (!model.container.has_section(model::sections::kFaces)) {
-    return unsupported_by_kind(model, "it stores no faces (section " + std::string(model::sections::kFaces) +
+  if (!model.container.has_section(container::sections::kFaces)) {
+    return unsupported_by_kind(model, "it stores no faces (section " + std::string(container::sections::kFaces) +
                                           "), so there is no surface to draw");
   }
-  auto faces = model.container.faces(model::sections::kFaces);
+  auto faces = model.container.faces(container::sections::kFaces);
   if (!faces) return to_grpc_status(faces.error());
   scene.faces = std::move(*faces);
   return grpc::Status::OK;
@@ -125,16 +126,13 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
       scene.camera = *framed;
     }
     // Eq. 7.2 needs the depth of the nearest point of a sphere around the posed mesh.
-    const Eigen::Vector3f lo = scene.points.colwise().minCoeff();
-    const Eigen::Vector3f hi = scene.points.colwise().maxCoeff();
-    const Eigen::Vector3f centre = (lo + hi) / 2;
-    const double radius = (scene.points.rowwise() - centre.transpose()).rowwise().norm().maxCoeff();
-    lod::ViewAtDistance view;
-    view.tolerance_pixels = request.pixel_tolerance();
-    view.viewport_width_pixels = scene.width;
-    view.horizontal_fov_radians = render::horizontal_fov(*scene.camera, aspect);
-    view.distance = (scene.camera->eye - centre.cast<double>()).norm();
-    auto choice = lod::level_for_view(*lods, view, radius);
+    const geometry::BoundingSphere sphere = geometry::bounding_sphere(scene.points);
+    lod::PixelTolerance view;
+    view.tolerance_px = request.pixel_tolerance();
+    view.viewport_width_px = scene.width;
+    view.horizontal_fov_rad = render::horizontal_fov(*scene.camera, aspect);
+    view.distance = (scene.camera->eye - sphere.centre).norm();
+    auto choice = lod::level_for_view(*lods, view, sphere.radius);
     if (!choice) return to_grpc_status(choice.error());
     if (choice->level > 0) {
       skinned = &lods->levels[static_cast<size_t>(choice->level)].model;
@@ -209,10 +207,10 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
       break;
     }
     case Request::kSequenceFrame: {
-      if (!model.container.has_section(model::sections::kSequenceFrames) || model.info.channel_count != 3) {
+      if (!model.container.has_section(container::sections::kSequenceFrames) || model.info.channel_count != 3) {
         return unsupported_by_kind(model, "sequence_frame: it stores no sequence of 3-D frames");
       }
-      auto row = model.container.float_matrix_row(model::sections::kSequenceFrames, request.sequence_frame());
+      auto row = model.container.float_matrix_row(container::sections::kSequenceFrames, request.sequence_frame());
       if (!row) {
         return invalid_argument("sequence_frame: expected 0.." + std::to_string(model.info.frame_count - 1) +
                                 " (the model stores " + std::to_string(model.info.frame_count) + " frames), got " +
@@ -223,12 +221,12 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
       break;
     }
     case Request::SOURCE_NOT_SET: {
-      if (model.animation_space && model.info.kind == model::ModelKind::kAnimationSpace) {
+      if (model.animation_space && model.info.kind == container::ModelKind::kAnimationSpace) {
         const auto rest = animation_space::rest_pose(model.animation_space->skeleton);
         if (grpc::Status s = pose_skinned(model, rest, request, false, scene, level); !s.ok()) return s;
         break;
       }
-      auto rest = model.container.points(model::sections::kRestPoints);
+      auto rest = model.container.points(container::sections::kRestPoints);
       if (!rest) return unsupported_by_kind(model, "it stores no rest pose to draw");
       scene.points = std::move(*rest);
       if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;

@@ -19,7 +19,7 @@ grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::Callba
         if (!model->animation_space) {
           return grpc::Status{grpc::StatusCode::FAILED_PRECONDITION,
                               "model '" + model->name + "' version " + std::to_string(model->version) + " is of kind " +
-                                  model::kind_name(model->info.kind) +
+                                  container::kind_name(model->info.kind) +
                                   " and has no skeleton: it cannot evaluate skeleton poses"};
         }
         const lod::LodLevel* level = nullptr;

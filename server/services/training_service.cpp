@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/misslog/miss_frames.h"
 #include "core/pmsc/retrain.h"
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
@@ -44,7 +45,7 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         FrameMatrix misses(0, width);
         uint64_t last_sequence = pmsc::misses_through(model->container);
         if (!request->exclude_misses()) {
-          auto read = pmsc::read_miss_frames(env_.miss_logs.path_of(model->name), last_sequence, width);
+          auto read = misslog::read_miss_frames(env_.miss_logs.path_of(model->name), last_sequence, width);
           if (!read) return to_grpc_status(read.error());
           misses = std::move(read->frames);
           last_sequence = read->last_sequence;

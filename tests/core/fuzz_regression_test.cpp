@@ -122,7 +122,7 @@ TEST(FuzzRegression, PmscKeyMeanBeyondFloatRangeIsRefusedAtLoad) {
   ASSERT_TRUE(container.ok()) << container.error().message;
   const auto info = model::describe(*container, "saved.anim");
   ASSERT_TRUE(info.ok()) << info.error().message;
-  ASSERT_EQ(info->kind, model::ModelKind::kPmsc);
+  ASSERT_EQ(info->kind, container::ModelKind::kPmsc);
   const auto loaded = pmsc::load(*container, "saved.anim");
   ASSERT_FALSE(loaded.ok());
   EXPECT_EQ(loaded.error().code, ErrorCode::kInvalidArgument);

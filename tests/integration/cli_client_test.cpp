@@ -18,7 +18,7 @@
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/mesh_io/pc2.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "tests/support/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
@@ -141,7 +141,7 @@ TEST_F(CliClientTest, EvaluateReportsEveryFramesVerdictAndTheErrorAgainstTheFram
   // Each frame again through the client library, and the returned points against the frame.
   auto stored = container::read_file(arm_frames());
   ASSERT_TRUE(stored.ok());
-  auto frames = stored->float_matrix(model::sections::kSequenceFrames);
+  auto frames = stored->float_matrix(container::sections::kSequenceFrames);
   ASSERT_TRUE(frames.ok());
   const KeyPoints keys = client_->describe_key_points("arm-pmsc");
   auto returned = mesh_io::read_pc2(pc2);
@@ -181,7 +181,7 @@ TEST_F(CliClientTest, PoseWritesTheSkinnedSequenceAsAPointCache) {
   ASSERT_TRUE(file.ok());
   auto model = as::load(*file, "arm-animspace");
   ASSERT_TRUE(model.ok());
-  auto rows = file->double_matrix(model::sections::kSequenceBoneTransforms, 16 * model->bone_count());
+  auto rows = file->double_matrix(container::sections::kSequenceBoneTransforms, 16 * model->bone_count());
   ASSERT_TRUE(rows.ok());
   // Two poses in one file: the stored training frames 4 and 9, as global transforms.
   std::ostringstream text;

@@ -15,7 +15,7 @@
 #include "core/animspace/model.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/soft_cache.h"
@@ -48,7 +48,7 @@ class ClientTest : public ::testing::Test {
     // The expensive rig's frames (demo `arm`) and the PMSC model trained on them, read here.
     auto arm = container::read_file(repo_->path() / "arm" / "1" / "model.anim");
     ASSERT_TRUE(arm.ok());
-    auto frames = arm->float_matrix(model::sections::kSequenceFrames);
+    auto frames = arm->float_matrix(container::sections::kSequenceFrames);
     ASSERT_TRUE(frames.ok());
     frames_ = new FrameMatrix(std::move(*frames));
     auto pmsc_file = container::read_file(repo_->path() / kPmsc / "1" / "model.anim");
@@ -265,7 +265,7 @@ TEST_F(ClientTest, SkeletonPosesEvaluateLikeTheCoreModel) {
   ASSERT_TRUE(file.ok());
   auto model = as::load(*file, kAnimationSpace);
   ASSERT_TRUE(model.ok()) << model.error().message;
-  auto rows = file->double_matrix(model::sections::kSequenceBoneTransforms, 16 * model->bone_count());
+  auto rows = file->double_matrix(container::sections::kSequenceBoneTransforms, 16 * model->bone_count());
   ASSERT_TRUE(rows.ok());
   std::vector<SkeletonPose> poses;
   std::vector<as::TransformList> globals;

@@ -33,7 +33,7 @@
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
 #include "core/mesh_io/triangle_mesh_io.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "tests/support/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/lod_fixtures.h"
@@ -213,7 +213,7 @@ class LodServiceTest : public ::testing::Test {
 
   // A stored training pose of the model (sequence.bone_transforms), float-rounded.
   static as::TransformList stored_pose(int frame) {
-    auto rows = container_->double_matrix(model::sections::kSequenceBoneTransforms, 16 * model_->bone_count());
+    auto rows = container_->double_matrix(container::sections::kSequenceBoneTransforms, 16 * model_->bone_count());
     EXPECT_TRUE(rows.ok());
     return float_rounded(as::pose_from_row(*rows, frame, model_->bone_count()));
   }
@@ -256,7 +256,7 @@ TEST_F(LodServiceTest, AnimationSpaceFormByteEqualsTheCoresLevel) {
     EXPECT_EQ(h.model_version(), 1u);
     EXPECT_EQ(h.level(), static_cast<uint32_t>(l));
     EXPECT_EQ(h.level_count(), static_cast<uint32_t>(levels_->count()));
-    EXPECT_EQ(h.epsilon(), static_cast<float>(core.error));
+    EXPECT_EQ(h.epsilon(), static_cast<float>(core.epsilon));
     EXPECT_EQ(h.vertex_count(), static_cast<uint32_t>(core.model.vertex_count()));
     EXPECT_EQ(h.face_count(), static_cast<uint32_t>(core.model.faces.rows()));
     EXPECT_EQ(h.bone_count(), static_cast<uint32_t>(core.model.bone_count()));
@@ -483,16 +483,16 @@ TEST_F(LodServiceTest, PixelToleranceChoosesTheLevelEq72Chooses) {
   for (double factor : {0.5, 1.5, 4.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 1e4}) {
     const auto distance = static_cast<float>(factor * radius_);
     SCOPED_TRACE("distance " + std::to_string(distance));
-    lod::ViewAtDistance view;
-    view.tolerance_pixels = tolerance;
-    view.viewport_width_pixels = 1920;
-    view.horizontal_fov_radians = fov;
+    lod::PixelTolerance view;
+    view.tolerance_px = tolerance;
+    view.viewport_width_px = 1920;
+    view.horizontal_fov_rad = fov;
     view.distance = distance;
     auto choice = lod::level_for_view(*levels_, view, radius_);
     ASSERT_TRUE(choice.ok());
     const LodMesh mesh = client_->get_lod(view_request(tolerance, distance, fov));
     EXPECT_EQ(mesh.header.level(), static_cast<uint32_t>(choice->level));
-    EXPECT_EQ(mesh.header.epsilon(), static_cast<float>(level(choice->level).error));
+    EXPECT_EQ(mesh.header.epsilon(), static_cast<float>(level(choice->level).epsilon));
     EXPECT_EQ(mesh.header.tolerated_error(), static_cast<float>(choice->tolerated_error));
     EXPECT_LE(mesh.header.epsilon(), mesh.header.tolerated_error());
     EXPECT_EQ(mesh.header.vertex_count(), static_cast<uint32_t>(level(choice->level).model.vertex_count()));
@@ -572,7 +572,7 @@ TEST_F(LodServiceTest, BadRequestsGetTheExactStatusAndNameTheField) {
        "pixel_tolerance.tolerance_px: expected a finite value > 0, got nan",
        [&](auto& r) { view(r).set_tolerance_px(nan); }},
       {"zero viewport", grpc::StatusCode::INVALID_ARGUMENT,
-       "pixel_tolerance.viewport_width_px: expected a value > 0, got 0",
+       "pixel_tolerance.viewport_width_px: expected a finite value > 0, got 0",
        [&](auto& r) { view(r).set_viewport_width_px(0); }},
       {"zero field of view", grpc::StatusCode::INVALID_ARGUMENT,
        "pixel_tolerance.horizontal_fov_rad: expected a value in (0, π), got 0",
@@ -705,10 +705,10 @@ TEST_F(LodServiceTest, CancelledStreamStops) {
 TEST_F(LodServiceTest, CliWritesAGlbThatTinygltfLoads) {
   TempDir out;
   // A distance that makes eq. 7.2 choose a coarse level, computed here.
-  lod::ViewAtDistance view;
-  view.tolerance_pixels = 1.5f;
-  view.viewport_width_pixels = 1920;
-  view.horizontal_fov_radians = static_cast<float>(45 * 3.14159265358979323846 / 180);
+  lod::PixelTolerance view;
+  view.tolerance_px = 1.5f;
+  view.viewport_width_px = 1920;
+  view.horizontal_fov_rad = static_cast<float>(45 * 3.14159265358979323846 / 180);
   int chosen = 0;
   double distance = 0;
   for (double factor : {10.0, 30.0, 100.0, 300.0, 1000.0}) {
@@ -734,7 +734,7 @@ TEST_F(LodServiceTest, CliWritesAGlbThatTinygltfLoads) {
   EXPECT_EQ(summary["level"].get<int>(), chosen);
   EXPECT_EQ(summary["vertices"].get<int>(), core.model.vertex_count());
   EXPECT_EQ(summary["faces"].get<int64_t>(), core.model.faces.rows());
-  EXPECT_FLOAT_EQ(summary["epsilon"].get<float>(), static_cast<float>(core.error));
+  EXPECT_FLOAT_EQ(summary["epsilon"].get<float>(), static_cast<float>(core.epsilon));
   EXPECT_GT(summary["tolerated_error"].get<double>(), 0);
   EXPECT_GE(summary["chunks"].get<int>(), 3);
   EXPECT_GT(summary["bytes_received"].get<int64_t>(), 12 * core.model.vertex_count());

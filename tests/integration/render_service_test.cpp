@@ -20,7 +20,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "core/render/camera.h"
 #include "core/render/png.h"
 #include "tests/support/daemon_process.h"
@@ -150,7 +150,7 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
   Client client(daemon->address());
   auto stored = container::read_file(repo_->path() / "arm" / "1" / "model.anim");
   ASSERT_TRUE(stored.ok());
-  auto frames = stored->float_matrix(model::sections::kSequenceFrames);
+  auto frames = stored->float_matrix(container::sections::kSequenceFrames);
   ASSERT_TRUE(frames.ok());
 
   const std::string model = std::string(demo::kDemoPmscModelName);
@@ -171,7 +171,7 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
   const Eigen::Vector3f hi = estimate.colwise().maxCoeff();
   camera.target = ((lo + hi) / 2).cast<double>();
   camera.eye = camera.target + Eigen::Vector3d(0, 0, 3.0 * (hi - lo).norm());
-  camera.vertical_fov_radians = 0.6;
+  camera.vertical_fov_rad = 0.6;
 
   auto r = request(model, 320, 240);
   *r.mutable_key_points()->mutable_key_values() = key_array;
@@ -182,7 +182,7 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
     r.mutable_camera()->add_target(static_cast<float>(v));
   }
   for (float v : {0.0f, 1.0f, 0.0f}) r.mutable_camera()->add_up(v);
-  r.mutable_camera()->set_vertical_fov_rad(static_cast<float>(camera.vertical_fov_radians));
+  r.mutable_camera()->set_vertical_fov_rad(static_cast<float>(camera.vertical_fov_rad));
   const auto response = client.render_thumbnail(r);
   ASSERT_TRUE(response.pose.has_value());
   EXPECT_EQ(response.pose->status, evaluated.status);
@@ -234,10 +234,10 @@ TEST_F(RenderServiceTest, PixelToleranceDrawsTheLevelEquation72Allows) {
     SCOPED_TRACE(tolerance);
     int expected = 0;
     if (tolerance > 0) {
-      lod::ViewAtDistance view;
-      view.tolerance_pixels = tolerance;
-      view.viewport_width_pixels = width;
-      view.horizontal_fov_radians = render::horizontal_fov(*camera, aspect);
+      lod::PixelTolerance view;
+      view.tolerance_px = tolerance;
+      view.viewport_width_px = width;
+      view.horizontal_fov_rad = render::horizontal_fov(*camera, aspect);
       view.distance = (camera->eye - centre.cast<double>()).norm();
       auto choice = lod::level_for_view(*levels, view, radius);
       ASSERT_TRUE(choice.ok());

@@ -18,7 +18,7 @@
 #include "clients/cpp/client.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 #include "core/pmsc/retrain.h"
 #include "tests/support/daemon_process.h"
 #include "tests/support/integration_support.h"
@@ -69,11 +69,11 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
   ASSERT_TRUE(demo::write_demo_repository(repo.path()).ok());
   auto original = container::read_file(repo.path() / kModel / "1" / "model.anim");
   ASSERT_TRUE(original.ok());
-  auto trained_frames = original->float_matrix(model::sections::kSequenceFrames);
+  auto trained_frames = original->float_matrix(container::sections::kSequenceFrames);
   ASSERT_TRUE(trained_frames.ok());
   auto arm = container::read_file(repo.path() / "arm" / "1" / "model.anim");
   ASSERT_TRUE(arm.ok());
-  auto frames = arm->float_matrix(model::sections::kSequenceFrames);
+  auto frames = arm->float_matrix(container::sections::kSequenceFrames);
   ASSERT_TRUE(frames.ok());
 
   std::vector<Replica> replicas;

@@ -32,8 +32,8 @@ TEST(Metrics, CountsCallsPerModelAndRendersPrometheusText) {
   Metrics metrics;
   metrics.record_call("ModelService/DescribeModel", "arm", 0, 0.001);
   metrics.record_call("ModelService/DescribeModel", "arm", 5, 0.002);
-  metrics.record_pose("arm", CacheOutcome::kHit, 1e-4);
-  metrics.record_pose("arm", CacheOutcome::kMiss, 0.3);
+  metrics.record_pose("arm", pmsc::CacheStatus::kHit, 1e-4);
+  metrics.record_pose("arm", pmsc::CacheStatus::kMiss, 0.3);
   const auto stats = metrics.model_statistics();
   ASSERT_TRUE(stats.count("arm"));
   EXPECT_EQ(stats.at("arm").requests, 2u);

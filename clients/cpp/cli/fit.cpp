@@ -12,8 +12,9 @@
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
 #include "core/animspace/tangents.h"
+#include "core/geometry/normals.h"
 #include "core/mesh_io/sequence_io.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 
 namespace animspace::cli {
 namespace {
@@ -120,12 +121,12 @@ int run_fit(const FitArgs& a, bool json) {
   out.metadata()["animspace.edge_regularisation"] = std::to_string(a.edge_regularisation);
   out.metadata()["animspace.vertex_regularisation"] = std::to_string(a.vertex_regularisation);
   out.metadata()["animspace.fit_rms"] = std::to_string(rms);
-  out.set_matrix(model::sections::kSequenceFrames, frames);
+  out.set_matrix(container::sections::kSequenceFrames, frames);
   container::Float64Matrix bone_rows(frames.rows(), 16L * model->bone_count());
   for (Eigen::Index f = 0; f < frames.rows(); ++f) {
     bone_rows.row(f) = animation_space::pose_row(skeleton->training_poses[static_cast<size_t>(f)]);
   }
-  out.set_matrix(model::sections::kSequenceBoneTransforms, bone_rows);
+  out.set_matrix(container::sections::kSequenceBoneTransforms, bone_rows);
   progress->update(3);
   progress.reset();
   const auto path = model_output_path(a.output, a.model, a.version);
@@ -193,7 +194,7 @@ int run_import_rig(const ImportRigArgs& a, bool json) {
     normals = std::move(read->rest_normals);
   }
   animation_space::AnimationSpaceModel model = animation_space::from_linear_blend(rig.model);
-  if (normals.rows() == 0) normals = animation_space::area_weighted_normals(rig.model.rest_points.transpose(), model.faces);
+  if (normals.rows() == 0) normals = geometry::area_weighted_normals(rig.model.rest_points.transpose(), model.faces);
   auto planes = animation_space::tangent_planes_from_normals(model, normals);
   if (!planes) return fail("import-rig", planes.error().message);
   model.tangent_s = std::move(planes->s);

@@ -4,7 +4,7 @@
 
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 
 namespace animspace::cli {
 
@@ -12,7 +12,7 @@ Result<FrameMatrix> load_sequence_frames(const std::string& sequence, const std:
   if (std::filesystem::path(sequence).extension() == ".anim") {
     auto container = container::read_file(sequence);
     if (!container) return container.error();
-    return container->float_matrix(model::sections::kSequenceFrames);
+    return container->float_matrix(container::sections::kSequenceFrames);
   }
   auto loaded = mesh_io::load_sequence(sequence, pc2);
   if (!loaded) return loaded.error();

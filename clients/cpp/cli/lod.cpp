@@ -13,11 +13,11 @@
 #include "clients/cpp/cli/pose_file.h"
 #include "core/animspace/animspace_io.h"
 #include "core/common/atomic_file.h"
-#include "core/lod/export.h"
+#include "core/mesh_io/posed_mesh.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
 #include "core/lod/simplify.h"
-#include "core/model/model_info.h"
+#include "core/container/sections.h"
 
 namespace animspace::cli {
 
@@ -100,7 +100,7 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
                       {"vertices", level.model.vertex_count()},
                       {"faces", level.model.faces.rows()},
                       {"influences", level.model.influences.influence_count()},
-                      {"error", level.error}});
+                      {"epsilon", level.epsilon}});
     }
     print_json({{"output", path.string()}, {"seconds", seconds}, {"steps", pm->steps.size()}, {"levels", rows}});
   } else {
@@ -109,7 +109,7 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
     for (int l = 0; l < levels.count(); ++l) {
       const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
       std::printf("%6d %9d %9d %11d %12.4g\n", l, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
-                  level.model.influences.influence_count(), level.error);
+                  level.model.influences.influence_count(), level.epsilon);
     }
     std::printf("wrote %s\n", path.c_str());
   }
@@ -125,14 +125,14 @@ CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
       ->required()
       ->check(CLI::ExistingFile);
   auto* level = cmd->add_option("--level", a.level, "Level to write (0 = full detail)")->check(CLI::NonNegativeNumber);
-  auto* tolerance = cmd->add_option("--tolerance-px", a.tolerance_pixels, "Pixel error tolerance p (eq. 7.2)")
+  auto* tolerance = cmd->add_option("--tolerance-px", a.tolerance_px, "Pixel error tolerance p (eq. 7.2)")
                         ->check(CLI::PositiveNumber);
   cmd->add_option("--distance", a.distance, "Camera distance to the model's bounding-sphere centre, model units")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--fov", a.fov_degrees, "Horizontal field of view 2θ, degrees")
       ->check(CLI::Range(1.0, 179.0))
       ->capture_default_str();
-  cmd->add_option("--width", a.viewport_width, "Viewport width w, pixels")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--width", a.viewport_width_px, "Viewport width w, pixels")->check(CLI::PositiveNumber)->capture_default_str();
   cmd->add_option("--frame", a.frame, "Pose: the model's stored training frame K (default: the rest pose)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("-o,--output", a.output, "Output mesh: .obj, .ply, .glb or .gltf")->required();
@@ -156,14 +156,14 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
                                     std::to_string(a.level));
     }
     chosen = a.level;
-  } else if (a.tolerance_pixels > 0) {
+  } else if (a.tolerance_px > 0) {
     if (a.distance <= 0) return fail("export-lod", "--tolerance-px needs --distance (camera to the model)");
     auto sphere = lod::model_bounding_sphere(*in, *model, a.input);
     if (!sphere) return fail("export-lod", sphere.error().message);
-    lod::ViewAtDistance view;
-    view.tolerance_pixels = a.tolerance_pixels;
-    view.viewport_width_pixels = a.viewport_width;
-    view.horizontal_fov_radians = a.fov_degrees * std::numbers::pi / 180;
+    lod::PixelTolerance view;
+    view.tolerance_px = a.tolerance_px;
+    view.viewport_width_px = a.viewport_width_px;
+    view.horizontal_fov_rad = a.fov_degrees * std::numbers::pi / 180;
     view.distance = a.distance;
     auto choice = lod::level_for_view(*levels, view, sphere->radius);
     if (!choice) return fail("export-lod", choice.error().message);
@@ -174,7 +174,7 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
 
   as::TransformList pose = model->skeleton.rest;
   if (a.frame >= 0) {
-    auto rows = in->double_matrix(model::sections::kSequenceBoneTransforms, 16 * model->bone_count());
+    auto rows = in->double_matrix(container::sections::kSequenceBoneTransforms, 16 * model->bone_count());
     if (!rows) return fail("export-lod", rows.error().message);
     if (a.frame >= rows->rows()) {
       return fail("export-lod", "--frame: expected 0 … " + std::to_string(rows->rows() - 1) + ", got " +
@@ -182,23 +182,23 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
     }
     pose = as::pose_from_row(*rows, a.frame, model->bone_count());
   }
-  lod::PosedMesh mesh;
+  mesh_io::PosedMesh mesh;
   as::evaluate(level.model, pose, mesh.points);
   mesh.faces = level.model.faces;
   if (level.model.has_tangents()) as::evaluate_normals(level.model, pose, mesh.normals);
-  if (auto written = lod::write_posed_mesh(a.output, mesh); !written.ok()) {
+  if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("export-lod", written.error().message);
   }
   if (json) {
     print_json({{"output", a.output},
                 {"level", chosen},
-                {"error", level.error},
+                {"epsilon", level.epsilon},
                 {"tolerated_error", tolerated},
                 {"vertices", level.model.vertex_count()},
                 {"faces", level.model.faces.rows()}});
   } else {
-    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.error,
-                a.tolerance_pixels > 0 ? (", tolerated " + std::to_string(tolerated)).c_str() : "",
+    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.epsilon,
+                a.tolerance_px > 0 ? (", tolerated " + std::to_string(tolerated)).c_str() : "",
                 level.model.vertex_count(), static_cast<int>(level.model.faces.rows()), a.output.c_str());
   }
   return 0;
@@ -218,7 +218,7 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
   cmd->add_option("--version", a.version, "Model version (default: the served one)");
   auto* selection = cmd->add_option_group("selection", "Which level (exactly one)");
   selection->add_option("--level", a.level, "Level (0 = full detail)")->check(CLI::NonNegativeNumber);
-  auto* tolerance = selection->add_option("--tolerance-px", a.tolerance_pixels, "Pixel error tolerance p (eq. 7.2)")
+  auto* tolerance = selection->add_option("--tolerance-px", a.tolerance_px, "Pixel error tolerance p (eq. 7.2)")
                         ->check(CLI::PositiveNumber);
   selection->add_option("--max-vertices", a.max_vertices, "Vertex budget: the finest level within it")
       ->check(CLI::PositiveNumber);
@@ -229,7 +229,7 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
   cmd->add_option("--fov", a.fov_degrees, "Horizontal field of view 2θ, degrees")
       ->check(CLI::Range(1.0, 179.0))
       ->capture_default_str();
-  cmd->add_option("--width", a.viewport_width, "Viewport width w, pixels")
+  cmd->add_option("--width", a.viewport_width_px, "Viewport width w, pixels")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   tolerance->needs(distance);
@@ -260,10 +260,10 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
     request.mutable_budget()->set_max_vertices(a.max_vertices);
   } else {
     auto* view = request.mutable_pixel_tolerance();
-    view->set_tolerance_px(static_cast<float>(a.tolerance_pixels));
+    view->set_tolerance_px(static_cast<float>(a.tolerance_px));
     view->set_distance(static_cast<float>(a.distance));
     view->set_horizontal_fov_rad(static_cast<float>(a.fov_degrees * std::numbers::pi / 180));
-    view->set_viewport_width_px(a.viewport_width);
+    view->set_viewport_width_px(a.viewport_width_px);
   }
   if (!a.pose_file.empty()) {
     auto poses = read_pose_file(a.pose_file, pose_space(a.pose_space));
@@ -282,12 +282,12 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
   const v1::LodHeader& h = received.header;
   const auto vertices = static_cast<Eigen::Index>(h.vertex_count());
   const auto faces = static_cast<Eigen::Index>(h.face_count());
-  lod::PosedMesh mesh;
+  mesh_io::PosedMesh mesh;
   mesh.points = Eigen::Map<const PointMatrix>(received.positions.data(), vertices, 3);
   mesh.faces = Eigen::Map<const Eigen::Matrix<uint32_t, Eigen::Dynamic, 3, Eigen::RowMajor>>(
                    received.indices.data(), faces, 3)
                    .cast<int32_t>();
-  if (auto written = lod::write_posed_mesh(a.output, mesh); !written.ok()) {
+  if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("lod", written.error().message);
   }
   if (json) {

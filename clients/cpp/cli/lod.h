@@ -31,10 +31,10 @@ struct BuildLodArgs {
 struct ExportLodArgs {
   std::string input;
   int level = -1;                // explicit level, or chosen from the view below
-  double tolerance_pixels = 0;   // eq. 7.2: p
+  double tolerance_px = 0;   // eq. 7.2: p
   double distance = 0;           // camera to bounding-sphere centre, model units
   double fov_degrees = 45;       // horizontal field of view 2θ
-  double viewport_width = 1920;  // w, pixels
+  double viewport_width_px = 1920;  // w
   int frame = -1;                // a stored training pose (sequence.bone_transforms); default rest
   std::string output;
 };
@@ -49,10 +49,10 @@ struct LodArgs {
   std::string model;
   uint64_t version = 0;
   int64_t level = -1;            // explicit level, or one of the two choices below
-  double tolerance_pixels = 0;   // eq. 7.2: p, with distance, fov and width
+  double tolerance_px = 0;   // eq. 7.2: p, with distance, fov and width
   double distance = 0;           // camera to bounding-sphere centre, model units
   double fov_degrees = 45;       // horizontal field of view 2θ
-  uint32_t viewport_width = 1920;  // w, pixels
+  uint32_t viewport_width_px = 1920;  // w
   uint32_t max_vertices = 0;     // the finest level with at most this many vertices
   // Pose: a text file of B × 12 numbers, each bone's top three matrix rows, row-major (the
   // SkeletonPose.transforms layout); '#' starts a comment. Default: the rest pose.
@@ -63,7 +63,7 @@ struct LodArgs {
   std::string output;
 };
 
-// Online: LodService.GetLod in FORM_POSED, written with lod::write_posed_mesh.
+// Online: LodService.GetLod in FORM_POSED, written with mesh_io::write_posed_mesh.
 CLI::App* add_lod(CLI::App& app, LodArgs& args);
 int run_lod(const LodArgs& args, Client& client, bool json);
 

@@ -8,7 +8,7 @@
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
 #include "clients/cpp/cli/pose_file.h"
-#include "core/lod/export.h"
+#include "core/mesh_io/posed_mesh.h"
 #include "core/mesh_io/pc2.h"
 
 namespace animspace::cli {
@@ -80,13 +80,13 @@ int run_pose(const PoseArgs& a, Client& client, bool json) {
     request.set_level(a.lod_level);
     request.set_form(v1::GetLodRequest::FORM_POSED);
     const LodMesh faces = client.get_lod(request);
-    lod::PosedMesh mesh;
+    mesh_io::PosedMesh mesh;
     mesh.points = as_matrix(result.poses.front().points);
     mesh.faces = Eigen::Map<const Eigen::Matrix<uint32_t, Eigen::Dynamic, 3, Eigen::RowMajor>>(
                      faces.indices.data(), faces.header.face_count(), 3)
                      .cast<int32_t>();
     if (a.normals) mesh.normals = as_matrix(result.poses.front().normals);
-    if (auto written = lod::write_posed_mesh(a.output, mesh); !written.ok()) {
+    if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
       return fail("pose", written.error().message);
     }
   }

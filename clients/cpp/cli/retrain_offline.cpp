@@ -9,6 +9,7 @@
 #include "core/container/model_container.h"
 #include "core/model/repository.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/misslog/miss_frames.h"
 #include "core/pmsc/retrain.h"
 
 namespace animspace::cli {
@@ -52,12 +53,12 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
 
   // Every replica's log of this model, each read after its own watermark.
   const std::string log_name = a.model + ".misses";
-  std::map<std::string, pmsc::MissFrames> logs;  // by path relative to the root: stable across runs
+  std::map<std::string, misslog::MissFrames> logs;  // by path relative to the root: stable across runs
   std::error_code ec;
   for (std::filesystem::recursive_directory_iterator it(a.miss_logs, ec), end; !ec && it != end; it.increment(ec)) {
     if (!it->is_regular_file(ec) || it->path().filename() != log_name) continue;
     const std::string relative = std::filesystem::relative(it->path(), a.miss_logs).generic_string();
-    auto read = pmsc::read_miss_frames(it->path(), pmsc::misses_through_log(*current, relative), width);
+    auto read = misslog::read_miss_frames(it->path(), pmsc::misses_through_log(*current, relative), width);
     if (!read) return fail(command, read.error().message);
     logs.emplace(relative, std::move(*read));
   }

@@ -25,7 +25,7 @@ TEST(AnimationSpaceIoTest, RoundTripThroughBytesIsExact) {
   ASSERT_TRUE(parsed.ok()) << parsed.error().message;
   auto info = model::describe(*parsed, "memory");
   ASSERT_TRUE(info.ok()) << info.error().message;
-  EXPECT_EQ(info->kind, model::ModelKind::kAnimationSpace);
+  EXPECT_EQ(info->kind, container::ModelKind::kAnimationSpace);
   EXPECT_EQ(info->point_count, 40);
   EXPECT_EQ(info->bone_count, 5);
   auto loaded = load(*parsed, "memory");
@@ -43,7 +43,7 @@ TEST(AnimationSpaceIoTest, RestPointsAreTheRestPoseEvaluation) {
   const AnimationSpaceModel model = small_model();
   container::ModelContainer out;
   store(model, out);
-  auto rest = out.points(model::sections::kRestPoints);
+  auto rest = out.points(container::sections::kRestPoints);
   ASSERT_TRUE(rest.ok());
   for (int i = 0; i < model.vertex_count(); ++i) {
     Eigen::Vector4d v = Eigen::Vector4d::Zero();

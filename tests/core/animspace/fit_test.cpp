@@ -1,4 +1,5 @@
 #include "core/animspace/fit.h"
+#include "core/geometry/edges.h"
 
 #include <algorithm>
 #include <cmath>
@@ -74,7 +75,7 @@ InfluenceSets uniform_sets(int vertices, const std::vector<int32_t>& bones) {
 // the 1/ℓ weights), from dense positions computed independently of the fit.
 double edge_roughness(const AnimationSpaceModel& model) {
   double sum = 0;
-  for (const auto& [a, b] : unique_edges(model.faces)) sum += (dense_position(model, a) - dense_position(model, b)).squaredNorm();
+  for (const auto& [a, b] : geometry::unique_edges(model.faces)) sum += (dense_position(model, a) - dense_position(model, b)).squaredNorm();
   return sum;
 }
 
@@ -334,7 +335,7 @@ TEST(FitTest, CoupledFitMinimisesEquation44SubjectToUnitWeight) {
     }
   }
   H += lambda * Eigen::MatrixXd::Identity(4 * I, 4 * I);
-  for (const auto& [a, b] : unique_edges(faces)) {
+  for (const auto& [a, b] : geometry::unique_edges(faces)) {
     double length = 0;
     for (int k = 0; k < n; ++k) {
       length += (examples.meshes.block<1, 3>(k, 3L * a) - examples.meshes.block<1, 3>(k, 3L * b)).cast<double>().norm();

@@ -13,6 +13,7 @@
 
 #include "core/animspace/import.h"
 #include "core/animspace/tangents.h"
+#include "core/geometry/normals.h"
 #include "core/mesh_io/libigl_rig.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "tests/support/test_support.h"
@@ -151,7 +152,7 @@ TEST_F(AnimationSpaceSharedData, CowNormals) {
   auto rig = read_rig();
   ASSERT_TRUE(rig.ok()) << rig.error().message;
   AnimationSpaceModel model = from_linear_blend(rig->model);
-  const Eigen::MatrixX3d rest_normals = area_weighted_normals(rest_positions(model), model.faces);
+  const Eigen::MatrixX3d rest_normals = geometry::area_weighted_normals(rest_positions(model), model.faces);
   auto ssd_planes = tangent_planes_from_normals(model, rest_normals);
   ASSERT_TRUE(ssd_planes.ok()) << ssd_planes.error().message;
   auto fitted_planes = fit_tangent_planes(model);
@@ -178,7 +179,7 @@ TEST_F(AnimationSpaceSharedData, CowNormals) {
     PointMatrix fitted_normals;
     evaluate_normals(model, *pose, fitted_normals);
 
-    const Eigen::MatrixX3d geometric = area_weighted_normals(posed_mesh->V.cast<double>(), posed_mesh->F);
+    const Eigen::MatrixX3d geometric = geometry::area_weighted_normals(posed_mesh->V.cast<double>(), posed_mesh->F);
     double ssd_worst = 0;
     std::vector<double> fitted_angles;
     for (int i = 0; i < model.vertex_count(); ++i) {

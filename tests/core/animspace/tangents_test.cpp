@@ -1,4 +1,5 @@
 #include "core/animspace/tangents.h"
+#include "core/geometry/normals.h"
 
 #include <algorithm>
 #include <cmath>
@@ -107,20 +108,6 @@ AnimationSpaceModel with_tangents(AnimationSpaceModel model, const TangentPlanes
   return model;
 }
 
-TEST(TangentNormalsTest, AreaWeightedNormalsOfAFold) {
-  // Two triangles sharing edge (0, 1): area 0.5 with normal +z, area 1 with normal −y.
-  Eigen::MatrixX3d V(4, 3);
-  V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, -2;
-  FaceMatrix F(2, 3);
-  F << 0, 1, 2, 1, 0, 3;
-  const Eigen::MatrixX3d N = area_weighted_normals(V, F);
-  const Eigen::Vector3d shared = Eigen::Vector3d(0, -2, 1).normalized();  // 2 · Σ area · normal
-  EXPECT_TRUE(N.row(0).transpose().isApprox(shared, 1e-12));
-  EXPECT_TRUE(N.row(1).transpose().isApprox(shared, 1e-12));
-  EXPECT_TRUE(N.row(2).transpose().isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
-  EXPECT_TRUE(N.row(3).transpose().isApprox(-Eigen::Vector3d::UnitY(), 1e-12));
-}
-
 // §4.3.2: the eq. 4.8 tangent plane reproduces SSD's normal transform n ∝ M⁻ᵀ n̂ (eq. 3.35,
 // M the blended linear part), oriented by det M, in every pose.
 TEST(TangentNormalsTest, SsdTangentPlanesReproduceInverseTransposeNormals) {
@@ -170,7 +157,7 @@ TEST(TangentNormalsTest, SsdTangentPlanesReproduceInverseTransposeNormals) {
 
 TEST(TangentNormalsTest, ZeroNormalIsDegenerateAndBadInputIsNamed) {
   const AnimationSpaceModel model = from_linear_blend(skinned_tube());
-  Eigen::MatrixX3d rest_normals = area_weighted_normals(rest_positions(model), model.faces);
+  Eigen::MatrixX3d rest_normals = geometry::area_weighted_normals(rest_positions(model), model.faces);
   rest_normals.row(12).setZero();
   auto planes = tangent_planes_from_normals(model, rest_normals);
   ASSERT_TRUE(planes.ok());

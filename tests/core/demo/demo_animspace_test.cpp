@@ -19,7 +19,7 @@ TEST(DemoAnimationSpaceTest, BeatsLinearBlendSkinningOnUnseenFrames) {
   ASSERT_TRUE(container.ok()) << container.error().message;
   auto info = model::describe(*container, "demo");
   ASSERT_TRUE(info.ok()) << info.error().message;
-  EXPECT_EQ(info->kind, model::ModelKind::kAnimationSpace);
+  EXPECT_EQ(info->kind, container::ModelKind::kAnimationSpace);
   EXPECT_EQ(info->bone_count, 3);
   auto model = animation_space::load(*container, "demo");
   ASSERT_TRUE(model.ok()) << model.error().message;

@@ -27,7 +27,7 @@ TEST(DemoPmscEngine, FramesAreTheEnginesOutputAtTheStoredPoses) {
   ASSERT_TRUE(container.ok()) << container.error().message;
   auto info = model::describe(*container, "arm-pmsc-engine");
   ASSERT_TRUE(info.ok()) << info.error().message;
-  EXPECT_EQ(info->kind, model::ModelKind::kPmsc);
+  EXPECT_EQ(info->kind, container::ModelKind::kPmsc);
   EXPECT_EQ(info->fail_through, model::FailThrough::kServer);
   EXPECT_EQ(info->bone_count, 3);
   EXPECT_EQ(info->frame_count, kDemoFrames / 2);
@@ -42,9 +42,9 @@ TEST(DemoPmscEngine, FramesAreTheEnginesOutputAtTheStoredPoses) {
   ASSERT_TRUE(levels.ok()) << levels.error().message;
   EXPECT_EQ(levels->count(), 1);
 
-  auto frames = container->float_matrix(model::sections::kSequenceFrames);
+  auto frames = container->float_matrix(container::sections::kSequenceFrames);
   ASSERT_TRUE(frames.ok());
-  auto bones = container->double_matrix(model::sections::kSequenceBoneTransforms, 48);
+  auto bones = container->double_matrix(container::sections::kSequenceBoneTransforms, 48);
   ASSERT_TRUE(bones.ok()) << bones.error().message;
   ASSERT_EQ(bones->rows(), frames->rows());
 

@@ -36,11 +36,11 @@ TEST(LodLevels, HalveTheInfluencesWithNonDecreasingError) {
   // Level 0 is the input itself.
   EXPECT_EQ(lods.levels[0].model.positions, c.model.positions);
   EXPECT_EQ(lods.levels[0].model.faces, c.model.faces);
-  EXPECT_EQ(lods.levels[0].error, 0);
+  EXPECT_EQ(lods.levels[0].epsilon, 0);
   for (int l = 1; l < lods.count(); ++l) {
     const LodLevel& fine = lods.levels[static_cast<size_t>(l - 1)];
     const LodLevel& level = lods.levels[static_cast<size_t>(l)];
-    EXPECT_GE(level.error, fine.error) << "level " << l;
+    EXPECT_GE(level.epsilon, fine.epsilon) << "level " << l;
     EXPECT_GT(level.step_count, fine.step_count);
     if (l + 1 < lods.count()) {  // the last level is the base mesh, wherever it falls
       EXPECT_LE(level.model.influences.influence_count(), fine.model.influences.influence_count() / 2) << l;
@@ -79,19 +79,19 @@ TEST(LodLevels, GeomorphRunsFromOneLevelToTheNext) {
 
 TEST(LodSelection, ToleratedErrorIsEquation72ByHand) {
   // p = 1.5 px, w = 1000 px, 2θ = 60° (sin θ = 1/2), d = 10: ε = 2·1.5·10·0.5/1000 = 0.015.
-  LodView view;
-  view.tolerance_pixels = 1.5;
-  view.viewport_width_pixels = 1000;
-  view.horizontal_fov_radians = std::numbers::pi / 3;
-  view.nearest_depth = 10;
-  auto e = tolerated_error(view);
+  PixelTolerance view;
+  view.tolerance_px = 1.5;
+  view.viewport_width_px = 1000;
+  view.horizontal_fov_rad = std::numbers::pi / 3;
+  view.distance = 12;  // a sphere of radius 2: d = 10
+  auto e = tolerated_error(view, 2);
   ASSERT_TRUE(e.ok());
   EXPECT_NEAR(*e, 0.015, 1e-15);
 
   LodLevels lods;
   for (const double error : {0.0, 0.01, 0.02, 0.04}) {
     LodLevel level;
-    level.error = error;
+    level.epsilon = error;
     lods.levels.push_back(level);
   }
   EXPECT_DOUBLE_EQ(select_level(lods, *e), 1.5);  // halfway between ε¹ = 0.01 and ε² = 0.02
@@ -99,19 +99,29 @@ TEST(LodSelection, ToleratedErrorIsEquation72ByHand) {
   EXPECT_DOUBLE_EQ(select_level(lods, 0.005), 0.5);
   EXPECT_DOUBLE_EQ(select_level(lods, 0.04), 3);
   EXPECT_DOUBLE_EQ(select_level(lods, 7), 3);
-  lods.levels[2].error = 0.01;  // equal errors: the coarser level wins
+  lods.levels[2].epsilon = 0.01;  // equal errors: the coarser level wins
   EXPECT_DOUBLE_EQ(select_level(lods, 0.01), 2);
 
-  for (const auto& [field, broken] : std::vector<std::pair<std::string, LodView>>{
-           {"tolerance_pixels", [&] { LodView v = view; v.tolerance_pixels = 0; return v; }()},
-           {"viewport_width_pixels", [&] { LodView v = view; v.viewport_width_pixels = -4; return v; }()},
-           {"horizontal_fov_radians", [&] { LodView v = view; v.horizontal_fov_radians = std::numbers::pi; return v; }()},
-           {"nearest_depth", [&] { LodView v = view; v.nearest_depth = std::nan(""); return v; }()}}) {
-    auto r = tolerated_error(broken);
-    ASSERT_FALSE(r.ok()) << field;
+  // Each field is checked, and named as the API names it, with the value as given.
+  for (const auto& [message, broken] : std::vector<std::pair<std::string, PixelTolerance>>{
+           {"tolerance_px: expected a finite value > 0, got 0", [&] { PixelTolerance v = view; v.tolerance_px = 0; return v; }()},
+           {"viewport_width_px: expected a finite value > 0, got -4",
+            [&] { PixelTolerance v = view; v.viewport_width_px = -4; return v; }()},
+           {"horizontal_fov_rad: expected a value in (0, π), got 4",
+            [&] { PixelTolerance v = view; v.horizontal_fov_rad = 4; return v; }()},
+           {"distance: expected a finite value > 0, got nan",
+            [&] { PixelTolerance v = view; v.distance = std::nan(""); return v; }()}}) {
+    auto r = tolerated_error(broken, 2);
+    ASSERT_FALSE(r.ok()) << message;
     EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
-    EXPECT_EQ(r.error().message.rfind(field, 0), 0u) << r.error().message;
+    EXPECT_EQ(r.error().message, message);
+    EXPECT_EQ(validate(broken).error().message, message);
   }
+  // Inside the sphere: nothing tolerated, but a bad view is refused all the same.
+  view.distance = 1.5;
+  EXPECT_EQ(*tolerated_error(view, 2), 0.0);
+  view.tolerance_px = -1;
+  EXPECT_FALSE(tolerated_error(view, 2).ok());
 }
 
 TEST(LodIo, LevelsRoundTripThroughTheContainer) {
@@ -130,7 +140,7 @@ TEST(LodIo, LevelsRoundTripThroughTheContainer) {
   for (int l = 0; l < lods.count(); ++l) {
     const LodLevel& a = lods.levels[static_cast<size_t>(l)];
     const LodLevel& b = loaded->levels[static_cast<size_t>(l)];
-    EXPECT_EQ(a.error, b.error);
+    EXPECT_EQ(a.epsilon, b.epsilon);
     EXPECT_EQ(a.vertex_ids, b.vertex_ids);
     EXPECT_EQ(a.coarser_vertex, b.coarser_vertex);
     EXPECT_EQ(a.model.positions, b.model.positions);

@@ -19,20 +19,20 @@ LodLevels fake_levels() {
   LodLevels lods;
   for (const double error : {0.0, 0.01, 0.02, 0.04}) {
     LodLevel level;
-    level.error = error;
+    level.epsilon = error;
     lods.levels.push_back(level);
   }
   return lods;
 }
 
-TEST(LodSelection, ViewAtDistanceIsEquation72AtTheSpheresNearestDepth) {
+TEST(LodSelection, PixelToleranceIsEquation72AtTheSpheresNearestDepth) {
   const LodLevels lods = fake_levels();
   // p = 1.5 px, w = 1000 px, 2θ = 60°, sphere radius 2 at distance 12: d = 10, so
   // ε = 2·1.5·10·sin 30° / 1000 = 0.015, between ε¹ and ε²: the finer one, level 1.
-  ViewAtDistance view;
-  view.tolerance_pixels = 1.5;
-  view.viewport_width_pixels = 1000;
-  view.horizontal_fov_radians = std::numbers::pi / 3;
+  PixelTolerance view;
+  view.tolerance_px = 1.5;
+  view.viewport_width_px = 1000;
+  view.horizontal_fov_rad = std::numbers::pi / 3;
   view.distance = 12;
   auto choice = level_for_view(lods, view, 2);
   ASSERT_TRUE(choice.ok());
@@ -53,11 +53,11 @@ TEST(LodSelection, ViewAtDistanceIsEquation72AtTheSpheresNearestDepth) {
   EXPECT_EQ(choice->tolerated_error, 0);
 
   // A bad view is refused even when the camera is inside the sphere.
-  view.tolerance_pixels = -1;
+  view.tolerance_px = -1;
   auto refused = level_for_view(lods, view, 2);
   ASSERT_FALSE(refused.ok());
-  EXPECT_EQ(refused.error().message.rfind("tolerance_pixels", 0), 0u) << refused.error().message;
-  view.tolerance_pixels = 1;
+  EXPECT_EQ(refused.error().message.rfind("tolerance_px: expected", 0), 0u) << refused.error().message;
+  view.tolerance_px = 1;
   view.distance = -3;
   refused = level_for_view(lods, view, 2);
   ASSERT_FALSE(refused.ok());

@@ -63,7 +63,7 @@ MissRecord make_record(uint64_t tag, size_t key_count, size_t full_count, uint32
   MissRecord record;
   record.model_version = tag;
   record.unix_time_us = 1'700'000'000'000'000 + static_cast<int64_t>(tag);
-  record.status = tag % 2 == 0 ? kStatusBlend : kStatusMiss;
+  record.status = tag % 2 == 0 ? pmsc::CacheStatus::kBlend : pmsc::CacheStatus::kMiss;
   record.key_point_error = 0.125 * static_cast<double>(tag) + 0.001;
   record.blend_weight = 1.0 / static_cast<double>(tag + 2);
   record.channels = channels;
@@ -178,7 +178,7 @@ TEST(MissLog, WritesTheDocumentedByteLayout) {
   const std::string bytes = read_bytes(path);
   ASSERT_EQ(bytes.size(), kFileHeaderSize + record_size(3, 6));
   EXPECT_EQ(std::memcmp(bytes.data(), kFileMagic, 8), 0);
-  EXPECT_EQ(load_le<uint32_t>(bytes, 8), 1U);   // format version
+  EXPECT_EQ(load_le<uint32_t>(bytes, 8), 2U);   // format version
   EXPECT_EQ(load_le<uint32_t>(bytes, 12), 0U);  // reserved
 
   const size_t r = kFileHeaderSize;
@@ -193,7 +193,7 @@ TEST(MissLog, WritesTheDocumentedByteLayout) {
   EXPECT_EQ(load_le<double>(bytes, p + 24), 0.125 * 7 + 0.001);
   EXPECT_EQ(load_le<double>(bytes, p + 32), 1.0 / 9.0);
   EXPECT_EQ(load_le<uint32_t>(bytes, p + 40), 3U);  // channels
-  EXPECT_EQ(load_le<uint8_t>(bytes, p + 44), kStatusMiss);
+  EXPECT_EQ(load_le<uint8_t>(bytes, p + 44), 2U);  // status: version 2's code for a miss
   EXPECT_EQ(bytes.substr(p + 45, 3), std::string(3, '\0'));
   EXPECT_EQ(load_le<uint32_t>(bytes, p + 48), 3U);  // key value count
   EXPECT_EQ(load_le<uint32_t>(bytes, p + 52), 6U);  // full value count
@@ -245,7 +245,7 @@ TEST(MissLog, InvalidRecordsAreRefusedWithoutUsingASequence) {
   auto log = open_or_die(path);
   ASSERT_NE(log, nullptr);
   std::vector<MissRecord> bad(6, make_record(1, 6, 6));
-  bad[0].status = 1;  // a hit is never logged
+  bad[0].status = pmsc::CacheStatus::kHit;  // a hit is never logged
   bad[1].channels = 0;
   bad[2].key_values.pop_back();  // 5 values, 3 channels
   bad[3].full_values.pop_back();
@@ -484,7 +484,7 @@ TEST(MissLogRecovery, ValidChecksumDoesNotPassWhatAppendWouldRefuse) {
   };
   const std::string status =
       reads_one_record_then([](std::string& bytes, size_t p) { store_le<uint8_t>(bytes, p + 44, 7); });
-  EXPECT_NE(status.find("miss record status 7, expected"), std::string::npos) << status;
+  EXPECT_NE(status.find("miss record status code 7, expected blend or miss"), std::string::npos) << status;
   const std::string nan = reads_one_record_then(
       [](std::string& bytes, size_t p) { store_le<float>(bytes, p + 56 + 4, std::numeric_limits<float>::quiet_NaN()); });
   EXPECT_NE(nan.find("miss record key_values[1] is not finite"), std::string::npos) << nan;
@@ -508,8 +508,8 @@ TEST(MissLogHeader, BadFileHeaderIsDataLossAndLeavesTheFileAlone) {
   std::vector<Case> cases;
   cases.push_back({"magic", 0, good});
   cases.back().bytes[3] = 'X';
-  cases.push_back({"version 2", 8, good});
-  store_le<uint32_t>(cases.back().bytes, 8, 2);
+  cases.push_back({"version 3", 8, good});
+  store_le<uint32_t>(cases.back().bytes, 8, 3);
   cases.push_back({"version 0", 8, good});
   store_le<uint32_t>(cases.back().bytes, 8, 0);
   cases.push_back({"reserved", 12, good});
@@ -553,6 +553,86 @@ TEST(MissLogHeader, IncompleteHeaderFromAnInterruptedCreation) {
   MissRecord record = make_record(1, 3, 0);
   EXPECT_EQ(*log->append(record), 1U);
   EXPECT_EQ(read_or_die(path).size(), 1U);
+}
+
+// Version 1 logs (written by releases before the log owned its status codes) keep loading: a
+// file built here byte by byte from docs/FORMATS.md's version-1 layout — status byte 2 for a
+// blend, 3 for a miss — reads back with those statuses, and appends stay in version 1.
+std::string version1_record(uint64_t sequence, uint8_t status_code, const std::vector<float>& key_values) {
+  std::string payload(kFixedPayloadSize + 4 * key_values.size(), '\0');
+  store_le<uint64_t>(payload, 0, sequence);
+  store_le<uint64_t>(payload, 8, 40 + sequence);  // model version
+  store_le<int64_t>(payload, 16, 1'600'000'000'000'000);
+  store_le<double>(payload, 24, 0.5);   // e_key
+  store_le<double>(payload, 32, 0.25);  // α
+  store_le<uint32_t>(payload, 40, 3);   // channels
+  store_le<uint8_t>(payload, 44, status_code);
+  store_le<uint32_t>(payload, 48, static_cast<uint32_t>(key_values.size()));
+  store_le<uint32_t>(payload, 52, 0);  // no full values
+  for (size_t i = 0; i < key_values.size(); ++i) store_le<float>(payload, 56 + 4 * i, key_values[i]);
+  std::string framed(kRecordHeaderSize, '\0');
+  framed.replace(0, 4, "MREC");
+  store_le<uint32_t>(framed, 4, static_cast<uint32_t>(payload.size()));
+  store_le<uint32_t>(framed, 8, container::crc32(payload));
+  return framed + payload;
+}
+
+TEST(MissLogCompatibility, Version1LogsReadWithTheirOwnStatusCodesAndStayVersion1) {
+  TempDir dir;
+  const fs::path path = dir / "v1.misses";
+  std::string bytes(reinterpret_cast<const char*>(kFileMagic), 8);
+  bytes += std::string(8, '\0');
+  store_le<uint32_t>(bytes, 8, 1);
+  bytes += version1_record(1, 2, {1, 2, 3});  // blend
+  bytes += version1_record(2, 3, {4, 5, 6});  // miss
+  write_bytes(path, bytes);
+
+  const std::vector<MissRecord> records = read_or_die(path);
+  ASSERT_EQ(records.size(), 2U);
+  EXPECT_EQ(records[0].status, pmsc::CacheStatus::kBlend);
+  EXPECT_EQ(records[1].status, pmsc::CacheStatus::kMiss);
+  EXPECT_EQ(records[1].model_version, 42U);
+  EXPECT_EQ(records[1].key_values, (std::vector<float>{4, 5, 6}));
+
+  {
+    auto log = open_or_die(path);
+    ASSERT_NE(log, nullptr);
+    EXPECT_EQ(log->format_version(), 1U);
+    EXPECT_EQ(log->recovery().records, 2U);
+    MissRecord blend = make_record(2, 3, 0);  // tag 2: a blend
+    ASSERT_EQ(*log->append(blend), 3U);
+  }
+  const std::string after = read_bytes(path);
+  EXPECT_EQ(load_le<uint32_t>(after, 8), 1U);  // still version 1
+  EXPECT_EQ(after.substr(0, bytes.size()), bytes);
+  EXPECT_EQ(load_le<uint8_t>(after, bytes.size() + kRecordHeaderSize + 44), 2U);  // version 1's blend
+  const std::vector<MissRecord> again = read_or_die(path);
+  ASSERT_EQ(again.size(), 3U);
+  EXPECT_EQ(again[2].status, pmsc::CacheStatus::kBlend);
+}
+
+TEST(MissLogCompatibility, StatusCodesMeanWhatTheirVersionSays) {
+  // Code 1 is a blend in version 2 but no status at all in version 1; code 3 the reverse.
+  for (const uint32_t version : {1U, 2U}) {
+    for (const uint8_t code : {uint8_t{1}, uint8_t{2}, uint8_t{3}}) {
+      SCOPED_TRACE("version " + std::to_string(version) + ", code " + std::to_string(code));
+      TempDir dir;
+      const fs::path path = dir / "m.misses";
+      std::string bytes(reinterpret_cast<const char*>(kFileMagic), 8);
+      bytes += std::string(8, '\0');
+      store_le<uint32_t>(bytes, 8, version);
+      bytes += version1_record(1, code, {1, 2, 3});  // the record layout is the same in both
+      write_bytes(path, bytes);
+      ReadReport report;
+      const std::vector<MissRecord> records = read_or_die(path, 0, &report);
+      const bool valid = version == 1 ? code >= 2 : code <= 2;
+      ASSERT_EQ(records.size(), valid ? 1U : 0U) << report.reason;
+      if (!valid) continue;
+      const pmsc::CacheStatus expected =
+          (version == 1 ? code == 2 : code == 1) ? pmsc::CacheStatus::kBlend : pmsc::CacheStatus::kMiss;
+      EXPECT_EQ(records[0].status, expected);
+    }
+  }
 }
 
 TEST(MissLogHeader, MissingAndEmptyFiles) {

@@ -209,5 +209,62 @@ TEST(PmscModel, CachedEvaluationBlendsWithFullValuesOnlyOutsideTheHitZone) {
   EXPECT_FALSE(cross.full_evaluation_needed);
 }
 
+// Fail-through (2007 §2.4 step 5): the engine runs only for a blend or a miss without full values
+// from the caller, and its f is used exactly as values the caller sent would be.
+TEST(PmscModel, FailThroughRunsTheFullCalculationOnlyWhenTheSoftCacheCannotAnswer) {
+  PmscModel m = three_point_model({0, 1});
+  m.epsilon = {0.2, 0.4};
+  ASSERT_TRUE(prepare_projection(m).ok());
+  Eigen::VectorXf full(3);
+  full << 1, 1, 1;
+  int calls = 0;
+  const FullCalculation engine = [&](Eigen::VectorXf& f) {
+    ++calls;
+    f = full;
+    return true;
+  };
+
+  Eigen::VectorXf blend_keys(2);
+  blend_keys << 1, 1;  // a blend (see the test above)
+  CachedPose from_engine, from_caller;
+  evaluate_cached(m, blend_keys, nullptr, engine, from_engine);
+  evaluate_cached(m, blend_keys, &full, from_caller);
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(from_engine.status, CacheStatus::kBlend);
+  EXPECT_FALSE(from_engine.full_evaluation_needed);
+  EXPECT_EQ(from_engine.points, from_caller.points);
+  EXPECT_EQ(from_engine.computed_full_values, full);
+
+  // Values the caller sent win: the engine is not run.
+  CachedPose caller_wins;
+  evaluate_cached(m, blend_keys, &full, engine, caller_wins);
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(caller_wins.computed_full_values.size(), 0);
+
+  // A miss returns f itself (eq. 9).
+  Eigen::VectorXf far(2);
+  far << 10, -10;
+  CachedPose missed;
+  evaluate_cached(m, far, nullptr, engine, missed);
+  EXPECT_EQ(calls, 2);
+  EXPECT_EQ(missed.status, CacheStatus::kMiss);
+  EXPECT_EQ(missed.points, full);
+
+  // A hit never runs it: keys on the subspace, p = 3 · (1/3, 2/3) = (1, 2), have e_key 0.
+  Eigen::VectorXf on_subspace(2);
+  on_subspace << 1, 2;
+  CachedPose hit;
+  evaluate_cached(m, on_subspace, nullptr, engine, hit);
+  EXPECT_EQ(hit.status, CacheStatus::kHit);
+  EXPECT_EQ(calls, 2);
+
+  // An engine that cannot pose this pose leaves the estimate and asks for f.
+  const FullCalculation refuses = [](Eigen::VectorXf&) { return false; };
+  CachedPose unanswered;
+  evaluate_cached(m, blend_keys, nullptr, refuses, unanswered);
+  EXPECT_TRUE(unanswered.full_evaluation_needed);
+  EXPECT_NEAR(unanswered.points(0), 0.6, 1e-6);
+}
+
 }  // namespace
 }  // namespace animspace::pmsc

@@ -242,7 +242,7 @@ TEST(PmscRetrain, WithoutMissesItIsTrainOnTheSameFramesAndOptions) {
   EXPECT_EQ(*stored, frames);
   auto info = model::describe(retrained->container, "retrained");
   ASSERT_TRUE(info.ok()) << info.error().message;
-  EXPECT_EQ(info->kind, model::ModelKind::kPmsc);
+  EXPECT_EQ(info->kind, container::ModelKind::kPmsc);
   EXPECT_EQ(info->fail_through, model::FailThrough::kClient);
   EXPECT_EQ(info->frame_count, frames.rows());
 }
@@ -428,7 +428,7 @@ TEST(PmscPosingEngine, MakesFailThroughServerSideAndSurvivesRetraining) {
   c = round_trip(c);
   auto info = model::describe(c, "sheet");
   ASSERT_TRUE(info.ok()) << info.error().message;
-  EXPECT_EQ(info->kind, model::ModelKind::kPmsc);
+  EXPECT_EQ(info->kind, container::ModelKind::kPmsc);
   EXPECT_EQ(info->fail_through, model::FailThrough::kServer);
   EXPECT_EQ(info->bone_count, 1);
   EXPECT_EQ(info->point_count, kPoints);

@@ -107,7 +107,7 @@ TEST(CameraTest, FrameBoundingBoxKeepsEveryPointInsideTheImage) {
     EXPECT_NEAR((camera->eye - camera->target).normalized().z(), 1, 1e-12);
     EXPECT_TRUE(camera->up.isApprox(Eigen::Vector3d::UnitY()));
     EXPECT_TRUE(validate_camera(*camera, "camera").ok());
-    const testing::Pinhole pinhole(camera->eye, camera->target, camera->up, camera->vertical_fov_radians, width,
+    const testing::Pinhole pinhole(camera->eye, camera->target, camera->up, camera->vertical_fov_rad, width,
                                    height);
     double margin = std::numeric_limits<double>::infinity();
     for (Eigen::Index i = 0; i < points.rows(); ++i) {
@@ -139,12 +139,12 @@ TEST(CameraTest, FrameBoundingBoxRefusesNoPointsAndNonFinitePoints) {
 
 TEST(CameraTest, ClipRangeEnclosesTheSphere) {
   const Camera camera = make_camera({0, 0, 10}, {0, 0, 0}, {0, 1, 0}, 0.8);
-  const ClipRange range = clip_range(camera, BoundingSphere{Eigen::Vector3d(0, 0, 1), 2});
+  const ClipRange range = clip_range(camera, geometry::BoundingSphere{Eigen::Vector3d(0, 0, 1), 2});
   EXPECT_GT(range.near_distance, 0);
   EXPECT_LT(range.near_distance, 10 - 1 - 2);
   EXPECT_GT(range.far_distance, 10 - 1 + 2);
   // Eye inside the sphere: a small positive near plane, not zero or negative.
-  const ClipRange inside = clip_range(camera, BoundingSphere{Eigen::Vector3d(0, 0, 9), 3});
+  const ClipRange inside = clip_range(camera, geometry::BoundingSphere{Eigen::Vector3d(0, 0, 9), 3});
   EXPECT_GT(inside.near_distance, 0);
   EXPECT_GT(inside.far_distance, 1 + 3);
 }
@@ -164,11 +164,11 @@ TEST(CameraTest, ValidateCameraNamesTheField) {
   camera.up = Eigen::Vector3d(0, 0, -2);
   EXPECT_EQ(message(camera), "camera.up: parallel to the view direction (target − eye)");
   camera = good;
-  camera.vertical_fov_radians = 3.5;
+  camera.vertical_fov_rad = 3.5;
   EXPECT_EQ(message(camera), "camera.vertical_fov_rad: expected in (0, π), got 3.5");
-  camera.vertical_fov_radians = 0;
+  camera.vertical_fov_rad = 0;
   EXPECT_EQ(message(camera).rfind("camera.vertical_fov_rad:", 0), 0u);
-  camera.vertical_fov_radians = std::numbers::pi;
+  camera.vertical_fov_rad = std::numbers::pi;
   EXPECT_EQ(message(camera).rfind("camera.vertical_fov_rad:", 0), 0u);
   camera = good;
   camera.target = camera.eye;

@@ -63,7 +63,7 @@ bool colour_near(const Image& image, int x, int y, const Rgb& colour) {
 
 Pinhole pinhole(const Scene& scene) {
   const Camera& c = *scene.camera;
-  return Pinhole(c.eye, c.target, c.up, c.vertical_fov_radians, scene.width, scene.height);
+  return Pinhole(c.eye, c.target, c.up, c.vertical_fov_rad, scene.width, scene.height);
 }
 
 // A unit icosphere (20 480 triangles) seen head-on from (0, 0, 4) on a black background.

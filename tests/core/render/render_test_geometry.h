@@ -129,7 +129,7 @@ inline Camera make_camera(const Eigen::Vector3d& eye, const Eigen::Vector3d& tar
   camera.eye = eye;
   camera.target = target;
   camera.up = up;
-  camera.vertical_fov_radians = fov;
+  camera.vertical_fov_rad = fov;
   return camera;
 }
 

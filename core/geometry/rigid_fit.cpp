@@ -1,6 +1,6 @@
 // Weighted Kabsch / Umeyama (no scale): R from the SVD of the cross-covariance of the centred
 // point sets with Umeyama's (1991, eq. 39–40) sign correction, t from the centroids.
-#include "core/pmsc/rigid_alignment.h"
+#include "core/geometry/rigid_fit.h"
 
 #include <cassert>
 #include <cmath>
@@ -8,7 +8,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
-namespace animspace::pmsc {
+namespace animspace::geometry {
 namespace {
 
 using Eigen::Index;
@@ -119,4 +119,4 @@ Eigen::VectorXd transform_frame(const RigidTransform& transform, const Eigen::Ve
   return transformed;
 }
 
-}  // namespace animspace::pmsc
+}  // namespace animspace::geometry

@@ -1,4 +1,4 @@
-#include "core/lod/export.h"
+#include "core/mesh_io/posed_mesh.h"
 
 #include <cassert>
 #include <cstdint>
@@ -19,7 +19,7 @@
 #include "core/mesh_io/text_io.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 
-namespace animspace::lod {
+namespace animspace::mesh_io {
 namespace {
 
 enum class ExportFormat { kObj, kPly, kGlb, kGltf };
@@ -239,4 +239,4 @@ Status write_posed_mesh(const std::filesystem::path& path, const PosedMesh& mesh
   return make_error(ErrorCode::kInternal, path.string() + ": unhandled posed mesh format");
 }
 
-}  // namespace animspace::lod
+}  // namespace animspace::mesh_io

@@ -1,7 +1,7 @@
 // Tests of the least-squares rigid fit. Known motions are built from quaternions and explicit
 // axis rotations (never through the SVD under test); optimality in the reflection case is
 // checked against many random rotations.
-#include "core/pmsc/rigid_alignment.h"
+#include "core/geometry/rigid_fit.h"
 
 #include <cmath>
 #include <cstdint>
@@ -13,7 +13,7 @@
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
-namespace animspace::pmsc {
+namespace animspace::geometry {
 namespace {
 
 using Eigen::Index;
@@ -224,4 +224,4 @@ TEST(RigidTransform, FrameAndInPlaceApplicationMatchPointByPoint) {
 }
 
 }  // namespace
-}  // namespace animspace::pmsc
+}  // namespace animspace::geometry

@@ -1,4 +1,4 @@
-#include "core/lod/export.h"
+#include "core/mesh_io/posed_mesh.h"
 
 #include <algorithm>
 #include <array>
@@ -31,7 +31,7 @@
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "tests/support/test_support.h"
 
-namespace animspace::lod {
+namespace animspace::mesh_io {
 namespace {
 
 using animspace::testing::TempDir;
@@ -416,4 +416,4 @@ TEST(ExportPosedMeshTest, UnknownExtensionAndUnwritablePath) {
 }
 
 }  // namespace
-}  // namespace animspace::lod
+}  // namespace animspace::mesh_io

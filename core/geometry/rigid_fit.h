@@ -1,16 +1,19 @@
 // Least-squares rigid motion between corresponding point sets (Kabsch 1976; Umeyama 1991
 // without the scale), and its application to frames stored as point-major columns.
 //
-// A training frame whose character also moves as a whole carries that rigid motion in every
-// point; expressing frames in a common rigid frame before the subspace analysis (Meyer &
-// Anderson 2006 §3) keeps the basis for the deformation.
+// Users: PMSC's frame alignment (a training frame whose character also moves as a whole carries
+// that rigid motion in every point; expressing frames in a common rigid frame before the subspace
+// analysis, Meyer & Anderson 2006 §3, keeps the basis for the deformation) and the segmentation
+// of animation-space fitting (the rigid motion of each candidate part, Merry 2007 §4.1.4).
+// Skeleton fitting keeps §4.1.4's own recipe (affine fit, then polar decomposition;
+// animspace/skeleton_fit.h), which the thesis specifies and which is not a Kabsch fit.
 //
-// Precision: double. Alignment runs at training time, where accuracy matters more than speed.
+// Precision: double. These run at training time, where accuracy matters more than speed.
 #pragma once
 
 #include <Eigen/Core>
 
-namespace animspace::pmsc {
+namespace animspace::geometry {
 
 // x_to = rotation · x_from + translation; rotation is proper (RᵀR = I, det R = +1).
 struct RigidTransform {
@@ -52,4 +55,4 @@ void apply_rigid(const RigidTransform& transform, Eigen::Ref<Eigen::Matrix3Xd> p
 // point-major layout of pca.h with 3 channels), transformed point by point; returns 3N values.
 Eigen::VectorXd transform_frame(const RigidTransform& transform, const Eigen::VectorXd& frame_3n);
 
-}  // namespace animspace::pmsc
+}  // namespace animspace::geometry

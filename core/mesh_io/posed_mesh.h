@@ -11,7 +11,7 @@
 #include "core/common/result.h"
 #include "core/common/types.h"
 
-namespace animspace::lod {
+namespace animspace::mesh_io {
 
 // A posed mesh, optionally with unit normals (#V × 3, or empty).
 struct PosedMesh {
@@ -37,4 +37,4 @@ Result<std::string> serialize_gltf(const PosedMesh& mesh);
 // Errors: kInvalidArgument for an unknown extension or a bad mesh (as above); kIo on failure.
 Status write_posed_mesh(const std::filesystem::path& path, const PosedMesh& mesh);
 
-}  // namespace animspace::lod
+}  // namespace animspace::mesh_io
