@@ -1,10 +1,11 @@
 #include "server/lod_selection.h"
 
+#include <cassert>
 #include <string>
 
 #include "core/lod/selection.h"
-#include "core/container/sections.h"
 #include "server/convert.h"
+#include "server/model_lookup.h"
 #include "server/status_mapping.h"
 
 namespace animspace::server {
@@ -18,12 +19,12 @@ grpc::Status in_field(const char* field, const Error& error) {
 }  // namespace
 
 grpc::Status find_lod_levels(const LoadedModel& model, const lod::LodLevels** out) {
-  if (!model.animation_space || !model.lod_levels) {
-    return {grpc::StatusCode::FAILED_PRECONDITION,
-            "model '" + model.name + "' version " + std::to_string(model.version) + " is of kind " +
-                container::kind_name(model.info.kind) +
-                " and has no skeleton: levels of detail are cut from an animation-space model (Merry 2007 §7.3)"};
+  if (grpc::Status s = require_skeleton(model, "levels of detail are cut from an animation-space model (Merry 2007 §7.3)");
+      !s.ok()) {
+    return s;
   }
+  // The registry builds levels for every model with a skeleton (model::load_servable).
+  assert(model.lod_levels);
   *out = model.lod_levels.get();
   return grpc::Status::OK;
 }

@@ -21,4 +21,11 @@ grpc::Status unsupported_by_kind(const LoadedModel& model, std::string_view reas
                                                      std::string(reason)};
 }
 
+grpc::Status require_skeleton(const LoadedModel& model, std::string_view reason) {
+  if (model.animation_space) return grpc::Status::OK;
+  return {grpc::StatusCode::FAILED_PRECONDITION, "model '" + model.name + "' version " + std::to_string(model.version) +
+                                                     " is of kind " + container::kind_name(model.info.kind) +
+                                                     " and has no skeleton: " + std::string(reason)};
+}
+
 }  // namespace animspace::server

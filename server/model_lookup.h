@@ -22,4 +22,9 @@ grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, 
 // "model 'arm' version 2 is of kind animation_space: <reason>".
 grpc::Status unsupported_by_kind(const LoadedModel& model, std::string_view reason);
 
+// OK when `model` has a skeleton (an animation-space model, or a PMSC model with an
+// animation-space posing engine), else the one refusal every skeleton-needing call gives:
+// FAILED_PRECONDITION "model 'arm-pmsc' version 1 is of kind pmsc and has no skeleton: <reason>".
+grpc::Status require_skeleton(const LoadedModel& model, std::string_view reason);
+
 }  // namespace animspace::server

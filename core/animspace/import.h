@@ -17,8 +17,8 @@
 //   Tmat poses. A TGF bone (parent joint → child joint) becomes a bone whose frame sits at its
 //   parent joint with the model's axes (Ĝ a pure translation); its parent is the bone that
 //   ends at its parent joint, or the super-root when none does.
-// - glTF 2.0 (Khronos, "glTF 2.0 Specification" §3.7.3 Skins), .gltf or .glb, read with
-//   tinygltf: a node's mesh (all triangle primitives, concatenated) and skin. Skin joint j
+// - glTF 2.0 (Khronos, "glTF 2.0 Specification" §3.7.3 Skins), .gltf or .glb, read by
+//   mesh_io/gltf_skin.h: a node's mesh (all triangle primitives, concatenated) and skin. Skin joint j
 //   has bind transform Ĝ_j = inverseBindMatrices[j]⁻¹ and posed transform G_j = the joint
 //   node's global transform, so that G_j Ĝ_j⁻¹ is the spec's joint matrix; its parent is the
 //   nearest ancestor node that is also a joint of the skin, else the super-root.

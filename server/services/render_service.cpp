@@ -191,9 +191,7 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
       break;
     }
     case Request::kSkeletonPose: {
-      if (!model.animation_space) {
-        return unsupported_by_kind(model, "skeleton_pose: it has no skeleton to pose");
-      }
+      if (grpc::Status s = require_skeleton(model, "skeleton_pose: there is nothing to pose"); !s.ok()) return s;
       animation_space::TransformList globals;
       if (grpc::Status s = decode_skeleton_pose(request.skeleton_pose(), "skeleton_pose",
                                                 model.animation_space->skeleton, globals);

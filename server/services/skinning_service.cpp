@@ -16,12 +16,7 @@ grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::Callba
       env_.request_pool, [this, request, response](const CallControl& call) {
         std::shared_ptr<const LoadedModel> model;
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
-        if (!model->animation_space) {
-          return grpc::Status{grpc::StatusCode::FAILED_PRECONDITION,
-                              "model '" + model->name + "' version " + std::to_string(model->version) + " is of kind " +
-                                  container::kind_name(model->info.kind) +
-                                  " and has no skeleton: it cannot evaluate skeleton poses"};
-        }
+        if (grpc::Status s = require_skeleton(*model, "it cannot evaluate skeleton poses"); !s.ok()) return s;
         const lod::LodLevel* level = nullptr;
         if (grpc::Status s = find_lod_level(*model, request->lod_level(), "lod_level", &level); !s.ok()) return s;
         const animation_space::AnimationSpaceModel* skinned = &level->model;
