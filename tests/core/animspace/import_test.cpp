@@ -1,4 +1,5 @@
 #include "core/animspace/import.h"
+#include "core/mesh_io/gltf_skin.h"
 
 #include <algorithm>
 #include <array>
@@ -602,6 +603,37 @@ TEST_P(ImportGltfTest, PoseThroughAnimationSpaceEqualsGltfSkinning) {
   ASSERT_EQ(gltf->rest_normals.rows(), box.vertex_count());
   for (int v = 0; v < box.vertex_count(); ++v) {
     for (int c = 0; c < 3; ++c) EXPECT_EQ(gltf->rest_normals(v, c), box.normals[3 * static_cast<size_t>(v) + static_cast<size_t>(c)]);
+  }
+}
+
+// mesh_io::read_gltf_skin gives the file as it stands: the skin's own joint order and hierarchy,
+// and each vertex's four JOINTS_0 / WEIGHTS_0 slots as stored (normalised integers divided by
+// their maximum), before any rig convention.
+TEST_P(ImportGltfTest, SkinReaderGivesTheStoredSlotsInTheSkinsOrder) {
+  const BoxEncoding& encoding = GetParam();
+  TempDir dir;
+  const BentBox box = bent_box();
+  box_document(box, encoding).write(dir / encoding.file, encoding.layout);
+  auto skin = mesh_io::read_gltf_skin(dir / encoding.file);
+  ASSERT_TRUE(skin.ok()) << skin.error().message;
+  // Skin order: ankle, hip, knee — ankle's parent is knee (2), knee's is hip (1), hip is a root.
+  EXPECT_EQ(skin->joint_parents, (std::vector<int32_t>{2, -1, 1}));
+  EXPECT_EQ(skin->joint_names[2], "knee");
+  ASSERT_EQ(skin->points.rows(), box.vertex_count());
+  ASSERT_EQ(skin->slot_offsets.size(), static_cast<size_t>(box.vertex_count()) + 1);
+  const std::vector<double> stored = stored_weights(box, encoding.weight_type);
+  const double max = encoding.weight_type == kFloat ? 1.0 : encoding.weight_type == kUnsignedByte ? 255.0 : 65535.0;
+  for (int v = 0; v < box.vertex_count(); ++v) {
+    const auto first = static_cast<size_t>(skin->slot_offsets[static_cast<size_t>(v)]);
+    ASSERT_EQ(skin->slot_offsets[static_cast<size_t>(v) + 1] - skin->slot_offsets[static_cast<size_t>(v)], 4);
+    for (size_t s = 0; s < 4; ++s) {
+      EXPECT_EQ(skin->slot_joints[first + s], box.joints[static_cast<size_t>(v)][s]);
+      EXPECT_NEAR(skin->slot_weights[first + s], stored[4 * static_cast<size_t>(v) + s] / max, 1e-7);  // float32 as stored
+    }
+  }
+  const auto bind = box.globals(true);
+  for (size_t j = 0; j < 3; ++j) {
+    EXPECT_TRUE(skin->inverse_bind_matrices[j].isApprox(bind[j].inverse(), 1e-6)) << "joint " << j;
   }
 }
 
