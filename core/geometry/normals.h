@@ -9,6 +9,7 @@
 #include <cassert>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>  // cross
 
 #include "core/common/types.h"
 

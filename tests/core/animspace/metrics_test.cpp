@@ -455,7 +455,7 @@ TEST(MetricsBoundingSphereTest, ContainsEveryPoseAndCentresOnExpectedCentroid) {
   const Result<AnimationSpaceMetrics> metrics = metrics_from_joint_distributions(skeleton, distributions);
   ASSERT_TRUE(metrics.ok());
   const AnimationSpaceModel model = random_model(skeleton, 150, 30);
-  const Result<BoundingSphere> sphere = pose_bounding_sphere(model, *metrics);
+  const Result<geometry::BoundingSphere> sphere = pose_bounding_sphere(model, *metrics);
   ASSERT_TRUE(sphere.ok()) << sphere.error().message;
 
   Eigen::MatrixXd points(4 * 8, model.vertex_count());  // animation-space positions as columns
@@ -485,7 +485,7 @@ TEST(MetricsBoundingSphereTest, ContainsEveryPoseOfSampledScalingJoints) {
   const Result<AnimationSpaceMetrics> metrics = metrics_from_joint_distributions(rig.skeleton, rig.distributions);
   ASSERT_TRUE(metrics.ok());
   const AnimationSpaceModel model = random_model(rig.skeleton, 100, 33);
-  const Result<BoundingSphere> sphere = pose_bounding_sphere(model, *metrics);
+  const Result<geometry::BoundingSphere> sphere = pose_bounding_sphere(model, *metrics);
   ASSERT_TRUE(sphere.ok()) << sphere.error().message;
   Eigen::MatrixXd points(4 * 7, model.vertex_count());
   for (int i = 0; i < model.vertex_count(); ++i) points.col(i) = dense_position(model, i);
