@@ -31,7 +31,7 @@ using Request = v1::RenderThumbnailRequest;
 
 const std::string kArm(demo::kDemoModelName);
 
-class RenderServiceTest : public ::testing::Test {
+class RenderServiceInProcessTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     repository_ = new TempDir();
@@ -70,7 +70,7 @@ class RenderServiceTest : public ::testing::Test {
   std::unique_ptr<v1::RenderService::Stub> stub_;
 };
 
-TEST_F(RenderServiceTest, TheRequestsViewReachesTheRendererAndItsImageComesBack) {
+TEST_F(RenderServiceInProcessTest, TheRequestsViewReachesTheRendererAndItsImageComesBack) {
   Request r = request(kArm, 96, 64);
   r.set_samples(2);
   r.set_shading(Request::SHADING_LAMBERT);
@@ -122,7 +122,7 @@ TEST_F(RenderServiceTest, TheRequestsViewReachesTheRendererAndItsImageComesBack)
   }
 }
 
-TEST_F(RenderServiceTest, WithoutACameraTheRendererFramesTheMeshItself) {
+TEST_F(RenderServiceInProcessTest, WithoutACameraTheRendererFramesTheMeshItself) {
   ASSERT_TRUE(render(request(kArm, 32, 32)).ok());
   const auto scenes = server_->renders().scenes();
   ASSERT_EQ(scenes.size(), 1u);
@@ -130,7 +130,7 @@ TEST_F(RenderServiceTest, WithoutACameraTheRendererFramesTheMeshItself) {
   EXPECT_EQ(scenes[0].samples, 4) << "samples 0 means 4";
 }
 
-TEST_F(RenderServiceTest, BadFieldsAreRefusedBeforeTheRendererIsCalled) {
+TEST_F(RenderServiceInProcessTest, BadFieldsAreRefusedBeforeTheRendererIsCalled) {
   using Code = grpc::StatusCode;
   struct Case {
     std::string name;
@@ -174,7 +174,7 @@ TEST_F(RenderServiceTest, BadFieldsAreRefusedBeforeTheRendererIsCalled) {
   EXPECT_TRUE(server_->renders().scenes().empty());
 }
 
-TEST_F(RenderServiceTest, ServerInfoNamesTheRendererAndListsThumbnails) {
+TEST_F(RenderServiceInProcessTest, ServerInfoNamesTheRendererAndListsThumbnails) {
   auto models = v1::ModelService::NewStub(server_->channel());
   grpc::ClientContext context;
   v1::GetServerInfoResponse info;
