@@ -120,8 +120,7 @@ grpc::ServerUnaryReactor* serve_unary_deferred(ServiceEnvironment& env, UnaryByt
     return reactor;
   }
   std::shared_ptr<Admission::Ticket> ticket;
-  if (grpc::Status refused = admit(env, context, rpc, access_for(access, messages->request), &ticket);
-      !refused.ok()) {
+  if (grpc::Status refused = admit(env, context, rpc, access_for(access, messages->request), &ticket); !refused.ok()) {
     reactor->Finish(scope->finish(refused));
     return reactor;
   }

@@ -7,9 +7,9 @@
 namespace animspace::server {
 
 // Every method raw: requests arrive as bytes (server/raw_messages.h).
-using RawModelService = v1::ModelService::WithRawCallbackMethod_ListModels<
-    v1::ModelService::WithRawCallbackMethod_DescribeModel<v1::ModelService::WithRawCallbackMethod_LoadModel<
-        v1::ModelService::WithRawCallbackMethod_UnloadModel<
+using RawModelService =
+    v1::ModelService::WithRawCallbackMethod_ListModels<v1::ModelService::WithRawCallbackMethod_DescribeModel<
+        v1::ModelService::WithRawCallbackMethod_LoadModel<v1::ModelService::WithRawCallbackMethod_UnloadModel<
             v1::ModelService::WithRawCallbackMethod_GetServerInfo<v1::ModelService::Service>>>>>;
 
 class ModelServiceImpl final : public RawModelService {

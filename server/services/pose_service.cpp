@@ -21,22 +21,22 @@ grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServe
                                                              grpc::ByteBuffer* response_bytes) {
   return serve_unary<v1::DescribeKeyPointsRequest, v1::DescribeKeyPointsResponse>(
       env_, {context, request_bytes, response_bytes}, "PoseService/DescribeKeyPoints", Access::kUser, env_.request_pool,
-                     [this](const CallControl& call, const v1::DescribeKeyPointsRequest* request,
-                            v1::DescribeKeyPointsResponse* response) {
-                       std::shared_ptr<const LoadedModel> model;
-                       if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) {
-                         return s;
-                       }
-                       if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
-                       const pmsc::PmscModel& m = *model->pmsc;
-                       response->set_model_version(model->version);
-                       for (int k : m.key_points) response->add_key_point_indices(static_cast<uint32_t>(k));
-                       response->set_channel_count(static_cast<uint32_t>(m.channels));
-                       response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
-                       for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
-                       response->set_fail_through(fail_through_of(*model));
-                       return grpc::Status::OK;
-                     });
+      [this](const CallControl& call, const v1::DescribeKeyPointsRequest* request,
+             v1::DescribeKeyPointsResponse* response) {
+        std::shared_ptr<const LoadedModel> model;
+        if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) {
+          return s;
+        }
+        if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
+        const pmsc::PmscModel& m = *model->pmsc;
+        response->set_model_version(model->version);
+        for (int k : m.key_points) response->add_key_point_indices(static_cast<uint32_t>(k));
+        response->set_channel_count(static_cast<uint32_t>(m.channels));
+        response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
+        for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
+        response->set_fail_through(fail_through_of(*model));
+        return grpc::Status::OK;
+      });
 }
 
 grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServerContext* context,

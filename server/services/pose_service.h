@@ -15,9 +15,11 @@ class PoseServiceImpl final : public RawPoseService {
  public:
   explicit PoseServiceImpl(ServiceEnvironment& env) : env_(env) {}
 
-  grpc::ServerUnaryReactor* DescribeKeyPoints(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+  grpc::ServerUnaryReactor* DescribeKeyPoints(grpc::CallbackServerContext* context,
+                                              const grpc::ByteBuffer* request_bytes,
                                               grpc::ByteBuffer* response_bytes) override;
-  grpc::ServerUnaryReactor* EvaluateKeyPoints(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+  grpc::ServerUnaryReactor* EvaluateKeyPoints(grpc::CallbackServerContext* context,
+                                              const grpc::ByteBuffer* request_bytes,
                                               grpc::ByteBuffer* response_bytes) override;
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* StreamKeyPoints(
       grpc::CallbackServerContext* context) override;

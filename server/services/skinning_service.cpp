@@ -12,7 +12,8 @@ grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::Callba
                                                                     const grpc::ByteBuffer* request_bytes,
                                                                     grpc::ByteBuffer* response_bytes) {
   return serve_unary<v1::EvaluateSkeletonPoseRequest, v1::EvaluateSkeletonPoseResponse>(
-      env_, {context, request_bytes, response_bytes}, "SkinningService/EvaluateSkeletonPose", Access::kUser, env_.request_pool,
+      env_, {context, request_bytes, response_bytes}, "SkinningService/EvaluateSkeletonPose", Access::kUser,
+      env_.request_pool,
       [this](const CallControl& call, const v1::EvaluateSkeletonPoseRequest* request,
              v1::EvaluateSkeletonPoseResponse* response) {
         std::shared_ptr<const LoadedModel> model;

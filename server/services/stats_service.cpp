@@ -32,7 +32,8 @@ void to_proto(const std::string& name, const ModelStatistics& s, v1::ModelStats*
 }  // namespace
 
 grpc::ServerUnaryReactor* StatsServiceImpl::GetStats(grpc::CallbackServerContext* context,
-                                                     const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response_bytes) {
+                                                     const grpc::ByteBuffer* request_bytes,
+                                                     grpc::ByteBuffer* response_bytes) {
   // Reading is for everyone; zeroing the counters is an operator's decision.
   const auto access = [](const v1::GetStatsRequest& r) { return r.reset() ? Access::kAdmin : Access::kUser; };
   return serve_unary<v1::GetStatsRequest, v1::GetStatsResponse>(

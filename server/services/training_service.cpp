@@ -10,7 +10,8 @@
 
 namespace animspace::server {
 grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerContext* context,
-                                                       const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response_bytes) {
+                                                       const grpc::ByteBuffer* request_bytes,
+                                                       grpc::ByteBuffer* response_bytes) {
   return serve_unary<v1::RetrainRequest, v1::RetrainResponse>(
       env_, {context, request_bytes, response_bytes}, "TrainingService/Retrain", Access::kAdmin, env_.admin_pool,
       [this](const CallControl& call, const v1::RetrainRequest* request, v1::RetrainResponse* response) {

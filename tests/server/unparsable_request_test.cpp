@@ -143,8 +143,8 @@ TEST_F(UnparsableRequestTest, EveryRpcAnswersInvalidArgumentNamingItsRequestMess
   }
   // The server is unharmed: a well-formed call still answers.
   v1::ListModelsRequest list;
-  const grpc::Status status = call_with(stub, {"/animspace.v1.ModelService/ListModels", "", false},
-                                        list.SerializeAsString());
+  const grpc::Status status =
+      call_with(stub, {"/animspace.v1.ModelService/ListModels", "", false}, list.SerializeAsString());
   EXPECT_TRUE(status.ok()) << status.error_message();
 }
 

@@ -106,7 +106,8 @@ TEST_F(PoseAndModelServiceTest, BadKeyPointRequestsAreRefusedNamingTheField) {
       {"unknown version",
        request_with(kPmsc, 1, [](v1::EvaluateKeyPointsRequest& r) { r.mutable_model()->set_version(99); }),
        Code::NOT_FOUND, "model 'arm-pmsc' has no servable version 99 (available: 1)"},
-      {"empty batch", request_with(kPmsc, 0, none), Code::INVALID_ARGUMENT, "poses: empty batch, expected 1..4 entries"},
+      {"empty batch", request_with(kPmsc, 0, none), Code::INVALID_ARGUMENT,
+       "poses: empty batch, expected 1..4 entries"},
       {"oversize batch", request_with(kPmsc, 5, none), Code::RESOURCE_EXHAUSTED,
        "poses: 5 entries, the limit is 4 (--max-batch-poses)"},
       {"wrong key point count",
@@ -114,8 +115,8 @@ TEST_F(PoseAndModelServiceTest, BadKeyPointRequestsAreRefusedNamingTheField) {
                     [&](v1::EvaluateKeyPointsRequest& r) {
                       *r.mutable_poses(1)->mutable_key_values() = point_array(good, K - 1, 3);
                     }),
-       Code::INVALID_ARGUMENT, "poses[1].key_values.point_count: expected " + k + " key points, got " +
-                                   std::to_string(K - 1)},
+       Code::INVALID_ARGUMENT,
+       "poses[1].key_values.point_count: expected " + k + " key points, got " + std::to_string(K - 1)},
       {"NaN", request_with(kPmsc, 2, with_bad_value(1, 2 * 3 + 1, std::numeric_limits<float>::quiet_NaN())),
        Code::INVALID_ARGUMENT, "poses[1].key_values.data: value of point 2, channel 1 is NaN"},
       {"infinity", request_with(kPmsc, 1, with_bad_value(0, 0, std::numeric_limits<float>::infinity())),
@@ -179,7 +180,8 @@ TEST_F(PoseAndModelServiceTest, UnloadedModelsAreRefusedAndListedNoMore) {
   ASSERT_TRUE(models->ListModels(&list_context, v1::ListModelsRequest(), &list).ok());
   for (const auto& model : list.models()) {
     if (model.name() != kPmsc) continue;
-    for (const auto& version : model.versions()) EXPECT_NE(version.state(), v1::VERSION_STATE_AVAILABLE) << "still serving";
+    for (const auto& version : model.versions())
+      EXPECT_NE(version.state(), v1::VERSION_STATE_AVAILABLE) << "still serving";
   }
 }
 

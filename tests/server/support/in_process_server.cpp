@@ -65,9 +65,10 @@ InProcessServer::InProcessServer(const std::filesystem::path& repository, server
   options.repository = repository;
   options.listen_address = "127.0.0.1:0";
   auto renders = renders_;
-  daemon_ = std::make_unique<server::Daemon>(std::move(options), [renders]() -> Result<std::unique_ptr<render::Renderer>> {
-    return std::unique_ptr<render::Renderer>(std::make_unique<FakeRenderer>(renders));
-  });
+  daemon_ =
+      std::make_unique<server::Daemon>(std::move(options), [renders]() -> Result<std::unique_ptr<render::Renderer>> {
+        return std::unique_ptr<render::Renderer>(std::make_unique<FakeRenderer>(renders));
+      });
   const Status started = daemon_->start();
   EXPECT_TRUE(started.ok()) << started.error().message;
   if (!started.ok()) return;
