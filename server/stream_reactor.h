@@ -14,8 +14,9 @@
 // once), and a task that outlives OnDone still runs against a live reactor, finds the call over
 // and drops its result. After OnDone gRPC frees the context and the request, so work reads neither:
 // stop_status() answers from the reactor's own state, and services copy what they need on arrival.
-// (Before this rule each stream kept itself alive with its own flags and counters; StreamKeyPoints
-// deleted itself under a pool thread still inside it — commit 8510907.)
+// (Before this rule each stream kept itself alive with flags and counters of its own, and
+// StreamKeyPoints was once deleted under a pool thread still inside it: the use-after-free fixed
+// in commit 8510907.)
 //
 // Cancellation. OnCancel (the client went away, or the deadline passed) and a failed write stop
 // all scheduling; the call finishes with CANCELLED once the write in flight is done. Finish is
