@@ -45,8 +45,11 @@ Result<std::pair<std::string, int>> split_host_port(const std::string& address, 
 
 }  // namespace
 
-Daemon::Daemon(ServerOptions options)
-    : options_(std::move(options)), registry_(options_.repository), admission_(options_.max_concurrent_calls) {}
+Daemon::Daemon(ServerOptions options, MakeRenderer make_renderer)
+    : options_(std::move(options)),
+      make_renderer_(std::move(make_renderer)),
+      registry_(options_.repository),
+      admission_(options_.max_concurrent_calls) {}
 
 Daemon::~Daemon() { shutdown(); }
 
@@ -152,9 +155,10 @@ Status Daemon::start_renderer() {
   }
   auto platform = render::parse_egl_platform(options_.renderer);
   if (!platform) return make_error(ErrorCode::kInvalidArgument, "--renderer: " + platform.error().message);
-  auto thread = RenderThread::start(*platform, options_.render_queue_depth);
+  auto thread = make_renderer_ ? RenderThread::start(make_renderer_, options_.render_queue_depth)
+                               : RenderThread::start(*platform, options_.render_queue_depth);
   if (!thread) {
-    if (*platform != render::EglPlatform::kAuto) {
+    if (*platform != render::EglPlatform::kAuto || make_renderer_) {
       return make_error(thread.error().code, "--renderer " + options_.renderer + ": " + thread.error().message);
     }
     env_->renderer_unavailable = "no EGL platform could be opened: " + thread.error().message;
@@ -165,6 +169,10 @@ Status Daemon::start_renderer() {
   env_->renderer = render_thread_.get();
   spdlog::info("renderer: {} (queue depth {})", render_thread_->description(), options_.render_queue_depth);
   return Status::Ok();
+}
+
+std::shared_ptr<grpc::Channel> Daemon::in_process_channel(const grpc::ChannelArguments& arguments) const {
+  return server_->InProcessChannel(arguments);
 }
 
 Status Daemon::start_metrics_endpoint() {

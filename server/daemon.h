@@ -20,8 +20,10 @@
 #include "server/work_pool.h"
 
 namespace grpc {
+class Channel;
+class ChannelArguments;
 class Server;
-}
+}  // namespace grpc
 namespace httplib {
 class Server;
 }
@@ -38,7 +40,9 @@ class TrainingServiceImpl;
 
 class Daemon {
  public:
-  explicit Daemon(ServerOptions options);
+  // `make_renderer`, when set, replaces the EGL renderer --renderer names (in-process tests draw
+  // with a fake); "--renderer none" still means no renderer.
+  explicit Daemon(ServerOptions options, MakeRenderer make_renderer = {});
   ~Daemon();
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;
@@ -51,6 +55,12 @@ class Daemon {
 
   // The bound gRPC port (after start()).
   int port() const { return port_; }
+
+  // A channel to this server inside the process, without the network (after start()).
+  std::shared_ptr<grpc::Channel> in_process_channel(const grpc::ChannelArguments& arguments) const;
+
+  // What the services share (after start()): in-process tests reach the pools and metrics.
+  ServiceEnvironment& environment() const { return *env_; }
 
   // Graceful stop: NOT_SERVING, stop accepting, in-flight calls get `options.shutdown_grace`
   // to finish, then the rest are cancelled. Idempotent.
@@ -66,6 +76,7 @@ class Daemon {
   void housekeeping();
 
   ServerOptions options_;
+  MakeRenderer make_renderer_;
   ModelRegistry registry_;
   Metrics metrics_;
   Admission admission_;

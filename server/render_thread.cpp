@@ -5,9 +5,13 @@
 namespace animspace::server {
 
 Result<std::unique_ptr<RenderThread>> RenderThread::start(render::EglPlatform platform, size_t queue_depth) {
+  return start([platform] { return render::make_egl_renderer(platform); }, queue_depth);
+}
+
+Result<std::unique_ptr<RenderThread>> RenderThread::start(MakeRenderer make_renderer, size_t queue_depth) {
   std::unique_ptr<RenderThread> self(new RenderThread(queue_depth));
   RenderThread* raw = self.get();
-  self->thread_ = std::thread([raw, platform] { raw->run(platform); });
+  self->thread_ = std::thread([raw, make_renderer = std::move(make_renderer)] { raw->run(make_renderer); });
   std::unique_lock lock(self->mutex_);
   self->wake_.wait(lock, [raw] { return raw->started_; });
   if (!self->start_status_.ok()) {
@@ -44,9 +48,9 @@ size_t RenderThread::waiting() const {
   return queue_.size();
 }
 
-void RenderThread::run(render::EglPlatform platform) {
+void RenderThread::run(const MakeRenderer& make_renderer) {
   // The context is created here and stays current on this thread for its whole life.
-  auto renderer = render::make_egl_renderer(platform);
+  auto renderer = make_renderer();
   {
     std::lock_guard lock(mutex_);
     started_ = true;

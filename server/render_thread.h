@@ -20,6 +20,9 @@
 
 namespace animspace::server {
 
+// Creates the renderer; called once, on the render thread, which then owns it.
+using MakeRenderer = std::function<Result<std::unique_ptr<render::Renderer>>()>;
+
 class RenderThread {
  public:
   struct Job {
@@ -35,6 +38,8 @@ class RenderThread {
   // Starts the thread and creates the renderer on it; returns once it is ready.
   // Errors: the renderer's (kFailedPrecondition naming the EGL platform and error).
   static Result<std::unique_ptr<RenderThread>> start(render::EglPlatform platform, size_t queue_depth);
+  // The same with any renderer (tests inject one that records what it is asked to draw).
+  static Result<std::unique_ptr<RenderThread>> start(MakeRenderer make_renderer, size_t queue_depth);
 
   // Drops queued jobs (their `done` gets an error), finishes the one drawing, joins.
   ~RenderThread();
@@ -51,7 +56,7 @@ class RenderThread {
 
  private:
   explicit RenderThread(size_t queue_depth) : queue_depth_(queue_depth) {}
-  void run(render::EglPlatform platform);
+  void run(const MakeRenderer& make_renderer);
 
   const size_t queue_depth_;
   std::string description_;

@@ -30,4 +30,9 @@ grpc::Status unimplemented(const std::string& rpc, const std::string& why) {
   return {grpc::StatusCode::UNIMPLEMENTED, rpc + " is not implemented in this build: " + why};
 }
 
+grpc::Status unparsable(std::string_view what, std::string_view message_type) {
+  return {grpc::StatusCode::INVALID_ARGUMENT,
+          std::string(what) + " could not be parsed as " + std::string(message_type)};
+}
+
 }  // namespace animspace::server

@@ -2,6 +2,9 @@
 // gRPC in exactly one mapping function).
 #pragma once
 
+#include <string>
+#include <string_view>
+
 #include <grpcpp/support/status.h>
 
 #include "core/common/result.h"
@@ -15,5 +18,7 @@ grpc::Status to_grpc_status(const Error& error);
 grpc::Status invalid_argument(const std::string& message);
 grpc::Status not_found(const std::string& message);
 grpc::Status unimplemented(const std::string& rpc, const std::string& why);
+// Bytes that are not the method's message: "<what> could not be parsed as animspace.v1.<Type>".
+grpc::Status unparsable(std::string_view what, std::string_view message_type);
 
 }  // namespace animspace::server

@@ -4,19 +4,17 @@
 #include <bit>
 #include <cstring>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 
 #include "core/animspace/model.h"
 #include "core/common/types.h"
 #include "core/lod/levels.h"
-#include "server/admission.h"
-#include "server/call_scope.h"
 #include "server/lod_selection.h"
 #include "server/model_lookup.h"
+#include "server/raw_messages.h"
 #include "server/status_mapping.h"
-#include "server/unary_call.h"
+#include "server/stream_reactor.h"
 #include "server/validation.h"
 
 namespace animspace::server {
@@ -59,26 +57,33 @@ std::string pack_vectors(const as::InfluenceVectors& vectors, int begin, int end
   return out;
 }
 
-class LodStream final : public grpc::ServerWriteReactor<v1::LodChunk> {
+// Built one chunk at a time (server/stream_reactor.h owns the order, the lifetime and
+// cancellation): each build reads and advances the phase below, so builds never overlap.
+class LodStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::ByteBuffer>, grpc::ByteBuffer> {
  public:
-  // Authenticates and admits the call, then streams; the reactor deletes itself when done.
-  static LodStream* start(ServiceEnvironment& env, grpc::CallbackServerContext* context, const Request* request);
-
-  void OnWriteDone(bool ok) override;
-  void OnCancel() override;
-  void OnDone() override { delete this; }
+  // Parses the request, authenticates and admits the call, then streams; the reactor deletes
+  // itself when done.
+  static LodStream* start(ServiceEnvironment& env, grpc::CallbackServerContext* context,
+                          const grpc::ByteBuffer* request);
 
  private:
   enum class Phase { kHeader, kVertices, kFaces, kSkeleton, kEnd };
 
-  LodStream(ServiceEnvironment& env, grpc::CallbackServerContext* context, const Request* request)
-      : env_(env), context_(context), request_(request), scope_(env.metrics, kRpc) {}
+  LodStream(ServiceEnvironment& env, grpc::CallbackServerContext* context)
+      : StreamReactor(context, env.request_pool, env.metrics, kRpc), env_(env) {}
+
+  // One chunk built ahead of the one on the wire, no more (back-pressure reaches the builder), and
+  // one build at a time.
+  bool want_more(size_t unwritten, size_t producing) const override { return producing == 0 && unwritten < 2; }
+  void request_more() override {
+    submit([this] { return build_next(); });
+  }
 
   // Validates the request, resolves the model and the level, and precomputes what the blocks are
   // cut from. Runs on the request pool, once, before the header.
   grpc::Status prepare();
-  // Builds the next chunk on the request pool (prepare() first), then starts what follows.
-  void build_next();
+  // The next chunk on the request pool (prepare() first), or the end of the stream.
+  Outcome build_next();
   // The next chunk in stream order, or false when the stream is complete.
   bool next_chunk(v1::LodChunk* chunk, grpc::Status* status);
   void fill_header(v1::LodHeader* header) const;
@@ -88,25 +93,12 @@ class LodStream final : public grpc::ServerWriteReactor<v1::LodChunk> {
   void fill_vertices(uint32_t first, uint32_t count, v1::VertexBlock* block) const;
   void fill_faces(uint32_t first, uint32_t count, v1::FaceBlock* block) const;
   void fill_skeleton(v1::Skeleton* skeleton) const;
-  // What to start next, decided under the lock and started outside it.
-  struct Actions {
-    const v1::LodChunk* write = nullptr;
-    bool build = false;
-    bool finish = false;
-    grpc::Status status;
-  };
-  Actions decide();  // mutex_ held
-  void act(Actions actions);
-  void pump();
 
   ServiceEnvironment& env_;
-  grpc::CallbackServerContext* context_;
-  const Request* request_;  // owned by gRPC, valid until OnDone
-  CallScope scope_;
-  std::shared_ptr<Admission::Ticket> ticket_;
+  Request request_;  // a copy: builds may run after gRPC has freed its own
 
-  // What is sent: set by prepare(), then read by one build at a time (building_), each build
-  // ordered after the previous one by the mutex around decide().
+  // What is sent: set by prepare(), then read by one build at a time, each build ordered after
+  // the previous one by the reactor's lock (want_more).
   std::shared_ptr<const LoadedModel> model_;  // keeps the level alive across a hot swap
   LodChoice choice_;
   Request::Form form_ = Request::FORM_UNSPECIFIED;
@@ -123,30 +115,21 @@ class LodStream final : public grpc::ServerWriteReactor<v1::LodChunk> {
   Phase phase_ = Phase::kHeader;
   uint32_t next_vertex_ = 0;
   uint32_t next_face_ = 0;
-
-  std::mutex mutex_;
-  std::unique_ptr<v1::LodChunk> ready_;    // built, waiting for the write in flight to finish
-  std::unique_ptr<v1::LodChunk> writing_;  // on the wire
-  grpc::Status error_;                     // not OK: finish with it once nothing is in flight
-  bool building_ = false;
-  bool exhausted_ = false;  // every chunk has been built
-  bool cancelled_ = false;
-  bool finished_ = false;
 };
 
-LodStream* LodStream::start(ServiceEnvironment& env, grpc::CallbackServerContext* context, const Request* request) {
-  auto* stream = new LodStream(env, context, request);
-  if (grpc::Status refused = admit(env, context, kRpc, Access::kUser, &stream->ticket_); !refused.ok()) {
-    stream->finished_ = true;
-    stream->Finish(stream->scope_.finish(refused));
+LodStream* LodStream::start(ServiceEnvironment& env, grpc::CallbackServerContext* context,
+                            const grpc::ByteBuffer* request) {
+  auto* stream = new LodStream(env, context);
+  if (grpc::Status unread = parse_message(*request, "the request", stream->request_); !unread.ok()) {
+    stream->finish_early(std::move(unread));
     return stream;
   }
-  stream->pump();
+  if (stream->admit(env, Access::kUser)) stream->pump();  // starts the first build
   return stream;
 }
 
 grpc::Status LodStream::prepare() {
-  const Request& r = *request_;
+  const Request& r = request_;
   // The request's own fields first: they need no model.
   if (r.form() != Request::FORM_ANIMATION_SPACE && r.form() != Request::FORM_POSED) {
     const std::string got =
@@ -168,8 +151,8 @@ grpc::Status LodStream::prepare() {
                             ") or 1.." + std::to_string(kMaxVerticesPerChunk) + ", got " +
                             std::to_string(r.vertices_per_chunk()));
   }
-  const CallControl call(context_, &scope_);
-  if (grpc::Status s = find_model(env_.registry, r.model(), "model", model_, &call); !s.ok()) return s;
+  if (grpc::Status s = find_model(env_.registry, r.model(), "model", model_); !s.ok()) return s;
+  set_model(model_->name);
   if (grpc::Status s = select_lod_level(*model_, r, &choice_); !s.ok()) return s;
   const as::AnimationSpaceModel& level = choice_.lod->model;
 
@@ -337,120 +320,24 @@ bool LodStream::next_chunk(v1::LodChunk* chunk, grpc::Status* status) {
   return true;
 }
 
-void LodStream::build_next() {
-  auto chunk = std::make_unique<v1::LodChunk>();
-  bool produced = false;
-  // A call cancelled or past its deadline stops here, at the next chunk.
-  grpc::Status status = CallControl(context_, nullptr).stop_status();
-  if (status.ok() && !prepared_) {
-    status = prepare();
+LodStream::Outcome LodStream::build_next() {
+  if (!prepared_) {
     prepared_ = true;
+    if (grpc::Status s = prepare(); !s.ok()) return Outcome::end(std::move(s));
   }
-  if (status.ok()) produced = next_chunk(chunk.get(), &status);
-  // Clearing building_ and deciding what next happen under one lock: once building_ is false the
-  // call may finish on another thread and the reactor be deleted, so this thread must not touch
-  // it again unless the decision gave it a write or a build to start (which keeps it alive).
-  Actions next;
-  {
-    std::lock_guard lock(mutex_);
-    building_ = false;
-    if (!status.ok()) {
-      error_ = std::move(status);
-    } else if (produced) {
-      ready_ = std::move(chunk);
-    } else {
-      exhausted_ = true;
-    }
-    next = decide();
-  }
-  act(std::move(next));
-}
-
-void LodStream::OnWriteDone(bool ok) {
-  {
-    std::lock_guard lock(mutex_);
-    writing_.reset();
-    // Not ok: the client is gone (or cancelled); nothing more can be delivered.
-    if (!ok) cancelled_ = true;
-  }
-  pump();
-}
-
-void LodStream::OnCancel() {
-  {
-    std::lock_guard lock(mutex_);
-    cancelled_ = true;
-  }
-  pump();
-}
-
-LodStream::Actions LodStream::decide() {
-  Actions next;
-  if (finished_) return next;
-  // Finishing waits for the build on the pool (it points into this reactor) and the write.
-  const bool idle = !building_ && !writing_;
-  if (cancelled_) {
-    if (idle) {
-      next.finish = true;
-      next.status = {grpc::StatusCode::CANCELLED, "the client cancelled the stream"};
-    }
-  } else if (!error_.ok()) {
-    if (idle) {
-      next.finish = true;
-      next.status = error_;
-    }
-  } else {
-    if (!writing_ && ready_) {
-      writing_ = std::move(ready_);
-      next.write = writing_.get();
-    }
-    // One chunk ahead of the one on the wire, no more: back-pressure reaches the builder.
-    if (!building_ && !ready_ && !exhausted_) {
-      building_ = true;
-      next.build = true;
-    }
-    if (exhausted_ && !building_ && !writing_ && !ready_) {
-      next.finish = true;
-      next.status = grpc::Status::OK;
-    }
-  }
-  if (next.finish) finished_ = true;
-  return next;
-}
-
-void LodStream::act(Actions actions) {
-  if (actions.finish) {
-    ticket_->release();
-    Finish(scope_.finish(std::move(actions.status)));
-    return;  // OnDone may already have deleted this reactor
-  }
-  if (actions.write != nullptr) StartWrite(actions.write);
-  // A pending build (building_) keeps the call from finishing, so `this` is still valid here.
-  if (actions.build && !env_.request_pool.submit([this] { build_next(); })) {
-    Actions next;
-    {
-      std::lock_guard lock(mutex_);
-      building_ = false;
-      error_ = {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"};
-      next = decide();
-    }
-    act(std::move(next));
-  }
-}
-
-void LodStream::pump() {
-  Actions next;
-  {
-    std::lock_guard lock(mutex_);
-    next = decide();
-  }
-  act(std::move(next));
+  v1::LodChunk chunk;
+  grpc::Status status;
+  if (!next_chunk(&chunk, &status)) return Outcome::end(grpc::Status::OK);
+  if (!status.ok()) return Outcome::end(std::move(status));
+  grpc::ByteBuffer bytes;
+  if (grpc::Status s = serialize_message(chunk, bytes); !s.ok()) return Outcome::end(std::move(s));
+  return Outcome::write(std::move(bytes));
 }
 
 }  // namespace
 
-grpc::ServerWriteReactor<v1::LodChunk>* LodServiceImpl::GetLod(grpc::CallbackServerContext* context,
-                                                               const v1::GetLodRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* LodServiceImpl::GetLod(grpc::CallbackServerContext* context,
+                                                                   const grpc::ByteBuffer* request) {
   return LodStream::start(env_, context, request);
 }
 

@@ -15,11 +15,12 @@
 
 namespace animspace::server {
 
-class LodServiceImpl final : public v1::LodService::CallbackService {
+// Every method raw: requests arrive as bytes (server/raw_messages.h).
+class LodServiceImpl final : public v1::LodService::WithRawCallbackMethod_GetLod<v1::LodService::Service> {
  public:
   explicit LodServiceImpl(ServiceEnvironment& env) : env_(env) {}
-  grpc::ServerWriteReactor<v1::LodChunk>* GetLod(grpc::CallbackServerContext* context,
-                                                 const v1::GetLodRequest* request) override;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* GetLod(grpc::CallbackServerContext* context,
+                                                     const grpc::ByteBuffer* request) override;
 
  private:
   ServiceEnvironment& env_;

@@ -17,32 +17,35 @@ v1::FailThrough fail_through_of(const LoadedModel& model) {
 }  // namespace
 
 grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServerContext* context,
-                                                             const v1::DescribeKeyPointsRequest* request,
-                                                             v1::DescribeKeyPointsResponse* response) {
-  return serve_unary(env_, context, "PoseService/DescribeKeyPoints", Access::kUser,
-                     env_.request_pool, [this, request, response](const CallControl& call) {
-                       std::shared_ptr<const LoadedModel> model;
-                       if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) {
-                         return s;
-                       }
-                       if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
-                       const pmsc::PmscModel& m = *model->pmsc;
-                       response->set_model_version(model->version);
-                       for (int k : m.key_points) response->add_key_point_indices(static_cast<uint32_t>(k));
-                       response->set_channel_count(static_cast<uint32_t>(m.channels));
-                       response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
-                       for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
-                       response->set_fail_through(fail_through_of(*model));
-                       return grpc::Status::OK;
-                     });
+                                                             const grpc::ByteBuffer* request_bytes,
+                                                             grpc::ByteBuffer* response_bytes) {
+  return serve_unary<v1::DescribeKeyPointsRequest, v1::DescribeKeyPointsResponse>(
+      env_, {context, request_bytes, response_bytes}, "PoseService/DescribeKeyPoints", Access::kUser, env_.request_pool,
+      [this](const CallControl& call, const v1::DescribeKeyPointsRequest* request,
+             v1::DescribeKeyPointsResponse* response) {
+        std::shared_ptr<const LoadedModel> model;
+        if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) {
+          return s;
+        }
+        if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
+        const pmsc::PmscModel& m = *model->pmsc;
+        response->set_model_version(model->version);
+        for (int k : m.key_points) response->add_key_point_indices(static_cast<uint32_t>(k));
+        response->set_channel_count(static_cast<uint32_t>(m.channels));
+        response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
+        for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
+        response->set_fail_through(fail_through_of(*model));
+        return grpc::Status::OK;
+      });
 }
 
 grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServerContext* context,
-                                                             const v1::EvaluateKeyPointsRequest* request,
-                                                             v1::EvaluateKeyPointsResponse* response) {
-  return serve_unary(
-      env_, context, "PoseService/EvaluateKeyPoints", Access::kUser, env_.request_pool,
-      [this, request, response](const CallControl& call) {
+                                                             const grpc::ByteBuffer* request_bytes,
+                                                             grpc::ByteBuffer* response_bytes) {
+  return serve_unary<v1::EvaluateKeyPointsRequest, v1::EvaluateKeyPointsResponse>(
+      env_, {context, request_bytes, response_bytes}, "PoseService/EvaluateKeyPoints", Access::kUser, env_.request_pool,
+      [this](const CallControl& call, const v1::EvaluateKeyPointsRequest* request,
+             v1::EvaluateKeyPointsResponse* response) {
         std::shared_ptr<const LoadedModel> model;
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
         if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
@@ -78,11 +81,11 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
 }
 
 grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerContext* context,
-                                                        const v1::CompleteMissRequest* request,
-                                                        v1::CompleteMissResponse* response) {
-  return serve_unary(
-      env_, context, "PoseService/CompleteMiss", Access::kUser, env_.request_pool,
-      [this, request, response](const CallControl& call) {
+                                                        const grpc::ByteBuffer* request_bytes,
+                                                        grpc::ByteBuffer* response_bytes) {
+  return serve_unary<v1::CompleteMissRequest, v1::CompleteMissResponse>(
+      env_, {context, request_bytes, response_bytes}, "PoseService/CompleteMiss", Access::kUser, env_.request_pool,
+      [this](const CallControl& call, const v1::CompleteMissRequest* request, v1::CompleteMissResponse* response) {
         std::shared_ptr<const LoadedModel> model;
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
         if (grpc::Status s = require_pmsc(*model); !s.ok()) return s;
@@ -112,7 +115,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
       });
 }
 
-grpc::ServerBidiReactor<v1::KeyPointFrame, v1::PoseResult>* PoseServiceImpl::StreamKeyPoints(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* PoseServiceImpl::StreamKeyPoints(
     grpc::CallbackServerContext* context) {
   return KeyPointStream::start(env_, context);
 }

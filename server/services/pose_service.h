@@ -6,21 +6,25 @@
 
 namespace animspace::server {
 
-class PoseServiceImpl final : public v1::PoseService::CallbackService {
+// Every method raw: requests arrive as bytes (server/raw_messages.h).
+using RawPoseService = v1::PoseService::WithRawCallbackMethod_DescribeKeyPoints<
+    v1::PoseService::WithRawCallbackMethod_EvaluateKeyPoints<v1::PoseService::WithRawCallbackMethod_StreamKeyPoints<
+        v1::PoseService::WithRawCallbackMethod_CompleteMiss<v1::PoseService::Service>>>>;
+
+class PoseServiceImpl final : public RawPoseService {
  public:
   explicit PoseServiceImpl(ServiceEnvironment& env) : env_(env) {}
 
   grpc::ServerUnaryReactor* DescribeKeyPoints(grpc::CallbackServerContext* context,
-                                              const v1::DescribeKeyPointsRequest* request,
-                                              v1::DescribeKeyPointsResponse* response) override;
+                                              const grpc::ByteBuffer* request_bytes,
+                                              grpc::ByteBuffer* response_bytes) override;
   grpc::ServerUnaryReactor* EvaluateKeyPoints(grpc::CallbackServerContext* context,
-                                              const v1::EvaluateKeyPointsRequest* request,
-                                              v1::EvaluateKeyPointsResponse* response) override;
-  grpc::ServerBidiReactor<v1::KeyPointFrame, v1::PoseResult>* StreamKeyPoints(
+                                              const grpc::ByteBuffer* request_bytes,
+                                              grpc::ByteBuffer* response_bytes) override;
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* StreamKeyPoints(
       grpc::CallbackServerContext* context) override;
-  grpc::ServerUnaryReactor* CompleteMiss(grpc::CallbackServerContext* context,
-                                         const v1::CompleteMissRequest* request,
-                                         v1::CompleteMissResponse* response) override;
+  grpc::ServerUnaryReactor* CompleteMiss(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+                                         grpc::ByteBuffer* response_bytes) override;
 
  private:
   ServiceEnvironment& env_;

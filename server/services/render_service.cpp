@@ -261,11 +261,12 @@ void encode_and_finish(render::Image image, Clock::time_point drawn_from, int64_
 }  // namespace
 
 grpc::ServerUnaryReactor* RenderServiceImpl::RenderThumbnail(grpc::CallbackServerContext* context,
-                                                             const Request* request,
-                                                             v1::RenderThumbnailResponse* response) {
-  return serve_unary_deferred(
-      env_, context, "RenderService/RenderThumbnail", Access::kUser, env_.request_pool,
-      [this, request, response](const CallControl& call, const CallFinisher& finish) {
+                                                             const grpc::ByteBuffer* request_bytes,
+                                                             grpc::ByteBuffer* response_bytes) {
+  return serve_unary_deferred<Request, v1::RenderThumbnailResponse>(
+      env_, {context, request_bytes, response_bytes}, "RenderService/RenderThumbnail", Access::kUser, env_.request_pool,
+      [this](const CallControl& call, const Request* request, v1::RenderThumbnailResponse* response,
+             const CallFinisher& finish) {
         if (env_.renderer == nullptr) {
           finish({grpc::StatusCode::UNAVAILABLE, "this server draws no thumbnails: " + env_.renderer_unavailable});
           return;

@@ -6,12 +6,13 @@
 
 namespace animspace::server {
 
-class RenderServiceImpl final : public v1::RenderService::CallbackService {
+// Every method raw: requests arrive as bytes (server/raw_messages.h).
+class RenderServiceImpl final
+    : public v1::RenderService::WithRawCallbackMethod_RenderThumbnail<v1::RenderService::Service> {
  public:
   explicit RenderServiceImpl(ServiceEnvironment& env) : env_(env) {}
-  grpc::ServerUnaryReactor* RenderThumbnail(grpc::CallbackServerContext* context,
-                                            const v1::RenderThumbnailRequest* request,
-                                            v1::RenderThumbnailResponse* response) override;
+  grpc::ServerUnaryReactor* RenderThumbnail(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+                                            grpc::ByteBuffer* response_bytes) override;
 
  private:
   ServiceEnvironment& env_;

@@ -9,11 +9,13 @@
 namespace animspace::server {
 
 grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::CallbackServerContext* context,
-                                                                    const v1::EvaluateSkeletonPoseRequest* request,
-                                                                    v1::EvaluateSkeletonPoseResponse* response) {
-  return serve_unary(
-      env_, context, "SkinningService/EvaluateSkeletonPose", Access::kUser,
-      env_.request_pool, [this, request, response](const CallControl& call) {
+                                                                    const grpc::ByteBuffer* request_bytes,
+                                                                    grpc::ByteBuffer* response_bytes) {
+  return serve_unary<v1::EvaluateSkeletonPoseRequest, v1::EvaluateSkeletonPoseResponse>(
+      env_, {context, request_bytes, response_bytes}, "SkinningService/EvaluateSkeletonPose", Access::kUser,
+      env_.request_pool,
+      [this](const CallControl& call, const v1::EvaluateSkeletonPoseRequest* request,
+             v1::EvaluateSkeletonPoseResponse* response) {
         std::shared_ptr<const LoadedModel> model;
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
         if (grpc::Status s = require_skeleton(*model, "it cannot evaluate skeleton poses"); !s.ok()) return s;

@@ -7,13 +7,15 @@
 
 namespace animspace::server {
 
-class SkinningServiceImpl final : public v1::SkinningService::CallbackService {
+// Every method raw: requests arrive as bytes (server/raw_messages.h).
+class SkinningServiceImpl final
+    : public v1::SkinningService::WithRawCallbackMethod_EvaluateSkeletonPose<v1::SkinningService::Service> {
  public:
   explicit SkinningServiceImpl(ServiceEnvironment& env) : env_(env) {}
 
   grpc::ServerUnaryReactor* EvaluateSkeletonPose(grpc::CallbackServerContext* context,
-                                                 const v1::EvaluateSkeletonPoseRequest* request,
-                                                 v1::EvaluateSkeletonPoseResponse* response) override;
+                                                 const grpc::ByteBuffer* request_bytes,
+                                                 grpc::ByteBuffer* response_bytes) override;
 
  private:
   ServiceEnvironment& env_;

@@ -32,13 +32,13 @@ void to_proto(const std::string& name, const ModelStatistics& s, v1::ModelStats*
 }  // namespace
 
 grpc::ServerUnaryReactor* StatsServiceImpl::GetStats(grpc::CallbackServerContext* context,
-                                                     const v1::GetStatsRequest* request,
-                                                     v1::GetStatsResponse* response) {
+                                                     const grpc::ByteBuffer* request_bytes,
+                                                     grpc::ByteBuffer* response_bytes) {
   // Reading is for everyone; zeroing the counters is an operator's decision.
-  const Access access = request->reset() ? Access::kAdmin : Access::kUser;
-  return serve_unary(
-      env_, context, "StatsService/GetStats", access, env_.request_pool,
-      [this, request, response](const CallControl& call) {
+  const auto access = [](const v1::GetStatsRequest& r) { return r.reset() ? Access::kAdmin : Access::kUser; };
+  return serve_unary<v1::GetStatsRequest, v1::GetStatsResponse>(
+      env_, {context, request_bytes, response_bytes}, "StatsService/GetStats", access, env_.request_pool,
+      [this](const CallControl& call, const v1::GetStatsRequest* request, v1::GetStatsResponse* response) {
         const std::string& name = request->model();
         // Statistics exist for every model that is loaded, including ones never called yet.
         std::map<std::string, ModelStatistics> stats = env_.metrics.model_statistics();

@@ -6,11 +6,12 @@
 
 namespace animspace::server {
 
-class StatsServiceImpl final : public v1::StatsService::CallbackService {
+// Every method raw: requests arrive as bytes (server/raw_messages.h).
+class StatsServiceImpl final : public v1::StatsService::WithRawCallbackMethod_GetStats<v1::StatsService::Service> {
  public:
   explicit StatsServiceImpl(ServiceEnvironment& env) : env_(env) {}
-  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context, const v1::GetStatsRequest* request,
-                                     v1::GetStatsResponse* response) override;
+  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+                                     grpc::ByteBuffer* response_bytes) override;
 
  private:
   ServiceEnvironment& env_;

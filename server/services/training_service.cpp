@@ -11,11 +11,11 @@
 
 namespace animspace::server {
 grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerContext* context,
-                                                       const v1::RetrainRequest* request,
-                                                       v1::RetrainResponse* response) {
-  return serve_unary(
-      env_, context, "TrainingService/Retrain", Access::kAdmin, env_.admin_pool,
-      [this, request, response](const CallControl& call) {
+                                                       const grpc::ByteBuffer* request_bytes,
+                                                       grpc::ByteBuffer* response_bytes) {
+  return serve_unary<v1::RetrainRequest, v1::RetrainResponse>(
+      env_, {context, request_bytes, response_bytes}, "TrainingService/Retrain", Access::kAdmin, env_.admin_pool,
+      [this](const CallControl& call, const v1::RetrainRequest* request, v1::RetrainResponse* response) {
         std::shared_ptr<const LoadedModel> model;
         if (grpc::Status s = find_model(env_.registry, request->model(), "model", model, &call); !s.ok()) return s;
         if (grpc::Status s = require_pmsc(*model, "only PMSC subspaces are retrained from logged misses"); !s.ok()) {

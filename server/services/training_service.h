@@ -12,12 +12,14 @@
 
 namespace animspace::server {
 
-class TrainingServiceImpl final : public v1::TrainingService::CallbackService {
+// Every method raw: requests arrive as bytes (server/raw_messages.h).
+class TrainingServiceImpl final
+    : public v1::TrainingService::WithRawCallbackMethod_Retrain<v1::TrainingService::Service> {
  public:
   explicit TrainingServiceImpl(ServiceEnvironment& env) : env_(env) {}
 
-  grpc::ServerUnaryReactor* Retrain(grpc::CallbackServerContext* context, const v1::RetrainRequest* request,
-                                    v1::RetrainResponse* response) override;
+  grpc::ServerUnaryReactor* Retrain(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+                                    grpc::ByteBuffer* response_bytes) override;
 
  private:
   ServiceEnvironment& env_;

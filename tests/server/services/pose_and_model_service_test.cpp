@@ -1,0 +1,189 @@
+// PoseService and the admin side of ModelService/StatsService in process (tests/server/support):
+// the refusals a client gets for a bad EvaluateKeyPoints request, each naming the field, and the
+// access an RPC needs decided from its request (GetStats with reset is an admin call) — checks
+// the integration suite also makes against a daemon process (tests/integration/serve_test.cpp,
+// security_test.cpp), here without one.
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "animspace/v1/models.grpc.pb.h"
+#include "animspace/v1/poses.grpc.pb.h"
+#include "animspace/v1/stats.grpc.pb.h"
+#include "core/demo/demo_repository.h"
+#include "tests/server/support/in_process_server.h"
+#include "tests/support/test_support.h"
+
+namespace animspace {
+namespace {
+
+using testing::InProcessServer;
+using testing::TempDir;
+using Code = grpc::StatusCode;
+
+const std::string kPmsc(demo::kDemoPmscModelName);
+
+class PoseAndModelServiceTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    repository_ = new TempDir();
+    testing::write_small_repository(repository_->path());
+  }
+  static void TearDownTestSuite() {
+    delete repository_;
+    repository_ = nullptr;
+  }
+
+  void serve(server::ServerOptions options = {}) {
+    options.miss_log_dir = work_.path();
+    server_ = std::make_unique<InProcessServer>(repository_->path(), options);
+    poses_ = v1::PoseService::NewStub(server_->channel());
+  }
+
+  static inline TempDir* repository_ = nullptr;
+  TempDir work_;
+  std::unique_ptr<InProcessServer> server_;
+  std::unique_ptr<v1::PoseService::Stub> poses_;
+};
+
+v1::PointArray point_array(const std::vector<float>& values, uint32_t count, uint32_t channels) {
+  v1::PointArray a;
+  a.set_point_count(count);
+  a.set_channel_count(channels);
+  a.set_data(values.data(), values.size() * sizeof(float));
+  return a;
+}
+
+TEST_F(PoseAndModelServiceTest, BadKeyPointRequestsAreRefusedNamingTheField) {
+  server::ServerOptions options;
+  options.max_batch_poses = 4;
+  serve(options);
+  v1::DescribeKeyPointsResponse keys;
+  {
+    grpc::ClientContext context;
+    v1::DescribeKeyPointsRequest request;
+    request.mutable_model()->set_name(kPmsc);
+    ASSERT_TRUE(poses_->DescribeKeyPoints(&context, request, &keys).ok());
+  }
+  const auto K = static_cast<uint32_t>(keys.key_point_indices_size());
+  ASSERT_GT(K, 3u);
+  const std::vector<float> good(size_t{K} * 3, 0.5f);
+  const std::string k = std::to_string(K);
+
+  const auto request_with = [&](const std::string& model, int poses,
+                                const std::function<void(v1::EvaluateKeyPointsRequest&)>& edit) {
+    v1::EvaluateKeyPointsRequest r;
+    r.mutable_model()->set_name(model);
+    for (int i = 0; i < poses; ++i) *r.add_poses()->mutable_key_values() = point_array(good, K, 3);
+    edit(r);
+    return r;
+  };
+  const auto none = [](v1::EvaluateKeyPointsRequest&) {};
+  const auto with_bad_value = [&](int pose, size_t at, float value) {
+    return [&good, K, pose, at, value](v1::EvaluateKeyPointsRequest& r) {
+      std::vector<float> bad = good;
+      bad[at] = value;
+      *r.mutable_poses(pose)->mutable_key_values() = point_array(bad, K, 3);
+    };
+  };
+  struct Case {
+    std::string name;
+    v1::EvaluateKeyPointsRequest request;
+    Code code;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      {"empty model name", request_with("", 1, none), Code::INVALID_ARGUMENT, "model.name is empty"},
+      {"path traversal", request_with("../arm-pmsc", 1, none), Code::INVALID_ARGUMENT,
+       "model.name '../arm-pmsc' starts with '.'"},
+      {"unknown model", request_with("nosuch", 1, none), Code::NOT_FOUND, "model 'nosuch' is not loaded"},
+      {"unknown version",
+       request_with(kPmsc, 1, [](v1::EvaluateKeyPointsRequest& r) { r.mutable_model()->set_version(99); }),
+       Code::NOT_FOUND, "model 'arm-pmsc' has no servable version 99 (available: 1)"},
+      {"empty batch", request_with(kPmsc, 0, none), Code::INVALID_ARGUMENT,
+       "poses: empty batch, expected 1..4 entries"},
+      {"oversize batch", request_with(kPmsc, 5, none), Code::RESOURCE_EXHAUSTED,
+       "poses: 5 entries, the limit is 4 (--max-batch-poses)"},
+      {"wrong key point count",
+       request_with(kPmsc, 2,
+                    [&](v1::EvaluateKeyPointsRequest& r) {
+                      *r.mutable_poses(1)->mutable_key_values() = point_array(good, K - 1, 3);
+                    }),
+       Code::INVALID_ARGUMENT,
+       "poses[1].key_values.point_count: expected " + k + " key points, got " + std::to_string(K - 1)},
+      {"NaN", request_with(kPmsc, 2, with_bad_value(1, 2 * 3 + 1, std::numeric_limits<float>::quiet_NaN())),
+       Code::INVALID_ARGUMENT, "poses[1].key_values.data: value of point 2, channel 1 is NaN"},
+      {"infinity", request_with(kPmsc, 1, with_bad_value(0, 0, std::numeric_limits<float>::infinity())),
+       Code::INVALID_ARGUMENT, "poses[0].key_values.data: value of point 0, channel 0 is infinite"},
+      {"mesh sequence", request_with(std::string(demo::kDemoModelName), 1, none), Code::FAILED_PRECONDITION,
+       "model 'arm' version 1 is of kind mesh_sequence: it has no key points to evaluate"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    grpc::ClientContext context;
+    v1::EvaluateKeyPointsResponse response;
+    const grpc::Status status = poses_->EvaluateKeyPoints(&context, c.request, &response);
+    EXPECT_EQ(status.error_code(), c.code) << status.error_message();
+    EXPECT_NE(status.error_message().find(c.message), std::string::npos) << status.error_message();
+  }
+  // A bad batch counts no poses (every pose is checked before any is evaluated).
+  const auto stats = server_->environment().metrics.model_statistics();
+  const auto it = stats.find(kPmsc);
+  EXPECT_TRUE(it == stats.end() || it->second.poses == 0);
+}
+
+TEST_F(PoseAndModelServiceTest, ResettingStatisticsNeedsAnAdminTokenReadingThemDoesNot) {
+  testing::write_text_file(work_ / "user-tokens", "user-secret\n");
+  testing::write_text_file(work_ / "admin-tokens", "admin-secret\n");
+  server::ServerOptions options;
+  options.auth_token_file = work_ / "user-tokens";
+  options.admin_token_file = work_ / "admin-tokens";
+  serve(options);
+  auto stats = v1::StatsService::NewStub(server_->channel());
+  const auto get_stats = [&](const std::string& token, bool reset) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", "Bearer " + token);
+    v1::GetStatsRequest request;
+    request.set_reset(reset);
+    v1::GetStatsResponse response;
+    return stats->GetStats(&context, request, &response).error_code();
+  };
+  EXPECT_EQ(get_stats("user-secret", false), Code::OK);
+  EXPECT_EQ(get_stats("user-secret", true), Code::PERMISSION_DENIED);
+  EXPECT_EQ(get_stats("admin-secret", true), Code::OK);
+  EXPECT_EQ(get_stats("wrong", false), Code::UNAUTHENTICATED);
+}
+
+TEST_F(PoseAndModelServiceTest, UnloadedModelsAreRefusedAndListedNoMore) {
+  serve();
+  auto models = v1::ModelService::NewStub(server_->channel());
+  {
+    grpc::ClientContext context;
+    v1::UnloadModelRequest request;
+    request.mutable_model()->set_name(kPmsc);
+    v1::UnloadModelResponse response;
+    ASSERT_TRUE(models->UnloadModel(&context, request, &response).ok());
+  }
+  grpc::ClientContext context;
+  v1::DescribeKeyPointsRequest request;
+  request.mutable_model()->set_name(kPmsc);
+  v1::DescribeKeyPointsResponse keys;
+  EXPECT_EQ(poses_->DescribeKeyPoints(&context, request, &keys).error_code(), Code::NOT_FOUND);
+  grpc::ClientContext list_context;
+  v1::ListModelsResponse list;
+  ASSERT_TRUE(models->ListModels(&list_context, v1::ListModelsRequest(), &list).ok());
+  for (const auto& model : list.models()) {
+    if (model.name() != kPmsc) continue;
+    for (const auto& version : model.versions())
+      EXPECT_NE(version.state(), v1::VERSION_STATE_AVAILABLE) << "still serving";
+  }
+}
+
+}  // namespace
+}  // namespace animspace
