@@ -97,12 +97,12 @@ TEST_F(RenderServiceInProcessTest, TheRequestsViewReachesTheRendererAndItsImageC
   EXPECT_EQ(scene.camera->eye, Eigen::Vector3d(1, 2, 9));
   EXPECT_EQ(scene.camera->target, Eigen::Vector3d(0.5, 0, -1));
   EXPECT_EQ(scene.camera->up, Eigen::Vector3d(0, 1, 0));
-  EXPECT_DOUBLE_EQ(scene.camera->vertical_fov_radians, 0.5f);
+  EXPECT_DOUBLE_EQ(scene.camera->vertical_fov_rad, 0.5f);
   // The source is the rest pose: the stored one, with the stored faces.
   auto stored = container::read_file(repository_->path() / kArm / "1" / "model.anim");
   ASSERT_TRUE(stored.ok());
-  auto rest = stored->points(model::sections::kRestPoints);
-  auto faces = stored->faces(model::sections::kFaces);
+  auto rest = stored->points(container::sections::kRestPoints);
+  auto faces = stored->faces(container::sections::kFaces);
   ASSERT_TRUE(rest.ok() && faces.ok());
   EXPECT_EQ(scene.points, *rest);
   EXPECT_EQ(scene.faces, *faces);
