@@ -29,24 +29,14 @@ using Code = grpc::StatusCode;
 
 const std::string kPmsc(demo::kDemoPmscModelName);
 
-class PoseAndModelServiceTest : public ::testing::Test {
+class PoseAndModelServiceTest : public testing::SmallRepositoryTest {
  protected:
-  static void SetUpTestSuite() {
-    repository_ = new TempDir();
-    testing::write_small_repository(repository_->path());
-  }
-  static void TearDownTestSuite() {
-    delete repository_;
-    repository_ = nullptr;
-  }
-
   void serve(server::ServerOptions options = {}) {
     options.miss_log_dir = work_.path();
-    server_ = std::make_unique<InProcessServer>(repository_->path(), options);
+    server_ = std::make_unique<InProcessServer>(repository(), options);
     poses_ = v1::PoseService::NewStub(server_->channel());
   }
 
-  static inline TempDir* repository_ = nullptr;
   TempDir work_;
   std::unique_ptr<InProcessServer> server_;
   std::unique_ptr<v1::PoseService::Stub> poses_;

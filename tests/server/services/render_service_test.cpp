@@ -31,22 +31,13 @@ using Request = v1::RenderThumbnailRequest;
 
 const std::string kArm(demo::kDemoModelName);
 
-class RenderServiceInProcessTest : public ::testing::Test {
+class RenderServiceInProcessTest : public testing::SmallRepositoryTest {
  protected:
-  static void SetUpTestSuite() {
-    repository_ = new TempDir();
-    testing::write_small_repository(repository_->path());
-  }
-  static void TearDownTestSuite() {
-    delete repository_;
-    repository_ = nullptr;
-  }
-
   void SetUp() override {
     server::ServerOptions options;
     options.miss_log_dir = work_.path();
     options.max_thumbnail_px = 512;
-    server_ = std::make_unique<InProcessServer>(repository_->path(), options);
+    server_ = std::make_unique<InProcessServer>(repository(), options);
     stub_ = v1::RenderService::NewStub(server_->channel());
   }
 
@@ -64,7 +55,6 @@ class RenderServiceInProcessTest : public ::testing::Test {
     return stub_->RenderThumbnail(&context, r, response != nullptr ? response : &ignored);
   }
 
-  static inline TempDir* repository_ = nullptr;
   TempDir work_;
   std::unique_ptr<InProcessServer> server_;
   std::unique_ptr<v1::RenderService::Stub> stub_;
@@ -99,7 +89,7 @@ TEST_F(RenderServiceInProcessTest, TheRequestsViewReachesTheRendererAndItsImageC
   EXPECT_EQ(scene.camera->up, Eigen::Vector3d(0, 1, 0));
   EXPECT_DOUBLE_EQ(scene.camera->vertical_fov_rad, 0.5f);
   // The source is the rest pose: the stored one, with the stored faces.
-  auto stored = container::read_file(repository_->path() / kArm / "1" / "model.anim");
+  auto stored = container::read_file(repository() / kArm / "1" / "model.anim");
   ASSERT_TRUE(stored.ok());
   auto rest = stored->points(container::sections::kRestPoints);
   auto faces = stored->faces(container::sections::kFaces);

@@ -30,20 +30,11 @@ using testing::TempDir;
 const std::string kPmsc(demo::kDemoPmscModelName);
 const std::string kAnimationSpace(demo::kDemoAnimationSpaceModelName);
 
-class StreamServicesTest : public ::testing::Test {
+class StreamServicesTest : public testing::SmallRepositoryTest {
  protected:
-  static void SetUpTestSuite() {
-    repository_ = new TempDir();
-    testing::write_small_repository(repository_->path());
-  }
-  static void TearDownTestSuite() {
-    delete repository_;
-    repository_ = nullptr;
-  }
-
   void serve(server::ServerOptions options = {}) {
     options.miss_log_dir = work_.path();
-    server_ = std::make_unique<InProcessServer>(repository_->path(), options);
+    server_ = std::make_unique<InProcessServer>(repository(), options);
     poses_ = v1::PoseService::NewStub(server_->channel());
     lod_ = v1::LodService::NewStub(server_->channel());
     v1::DescribeKeyPointsRequest request;
@@ -87,7 +78,6 @@ class StreamServicesTest : public ::testing::Test {
   }
 
   static constexpr uint64_t kFirstSequence = 100;
-  static inline TempDir* repository_ = nullptr;
   TempDir work_;
   std::unique_ptr<InProcessServer> server_;
   std::unique_ptr<v1::PoseService::Stub> poses_;

@@ -17,10 +17,12 @@
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
 
 #include "core/render/renderer.h"
 #include "server/daemon.h"
 #include "server/options.h"
+#include "tests/support/test_support.h"
 
 namespace animspace::testing {
 
@@ -54,6 +56,23 @@ class FakeRenderer final : public render::Renderer {
 // a test process builds its repository in moments (names as in core/demo/demo_repository.h):
 // "arm" (mesh sequence), "arm-pmsc" (PMSC) and "arm-animspace" (animation space with LOD levels).
 void write_small_repository(const std::filesystem::path& repository);
+
+// A suite of tests over one small repository, written once per suite (it takes seconds).
+class SmallRepositoryTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    repository_ = new TempDir();
+    write_small_repository(repository_->path());
+  }
+  static void TearDownTestSuite() {
+    delete repository_;
+    repository_ = nullptr;
+  }
+  static const std::filesystem::path& repository() { return repository_->path(); }
+
+ private:
+  static inline TempDir* repository_ = nullptr;
+};
 
 class InProcessServer {
  public:
