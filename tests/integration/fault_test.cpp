@@ -35,7 +35,7 @@
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
 #include "core/misslog/miss_log.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -44,8 +44,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+using harness::DaemonProcess;
 using testing::code_of;
-using testing::DaemonProcess;
 using testing::TempDir;
 
 double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }

@@ -20,14 +20,14 @@
 #include "core/demo/demo_repository.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/retrain.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 
 const std::string kModel(demo::kDemoPmscModelName);

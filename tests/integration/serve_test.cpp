@@ -28,7 +28,7 @@
 #include "core/lod/lod_io.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -38,7 +38,7 @@
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 using testing::narrow_arm_model;
 using testing::write_model;
