@@ -2,6 +2,7 @@
 // answers are checked against the core library evaluating the same model files in-process — an
 // independent path that never touches the client or the wire — and the stream session against
 // unary evaluation of the same frames.
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <span>
@@ -154,19 +155,26 @@ TEST_F(ClientTest, TheStreamSessionAnswersInOrderWithinItsWindow) {
   options.window = 3;
   auto stream = client_->open_stream(kPmsc, options);
   size_t worst_in_flight = 0;
+  std::atomic<bool> written{false};
   std::thread writer([&] {
     for (int f = 0; f < count; ++f) {
       const std::vector<float> v = keys.gather(frame(f));
       // Sequence numbers need not be contiguous: the client's own frame numbers come back.
-      ASSERT_TRUE(stream->write({v, keys.channels}, 1000 + 7 * static_cast<uint64_t>(f)));
+      EXPECT_TRUE(stream->write({v, keys.channels}, 1000 + 7 * static_cast<uint64_t>(f)));
       worst_in_flight = std::max(worst_in_flight, stream->in_flight());
     }
     stream->writes_done();
+    written.store(true);
   });
   std::vector<PoseResult> results;
-  while (auto result = stream->read()) {
-    // Slower than the server: without back-pressure the writer would run ahead by the whole sequence.
-    if (results.size() % 10 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  for (;;) {
+    // The reader lags on purpose: before each read it lets the writer fill the window, so the
+    // writer meets a full window on every frame — without back-pressure it would run ahead by
+    // the whole sequence.
+    EXPECT_TRUE(testing::wait_until([&] { return stream->in_flight() >= options.window || written.load(); },
+                                    std::chrono::seconds(30), std::chrono::milliseconds(1)));
+    auto result = stream->read();
+    if (!result) break;
     results.push_back(std::move(*result));
   }
   writer.join();
