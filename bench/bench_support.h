@@ -1,17 +1,20 @@
 // Shared helpers for animspace-bench suites: timing and where the reference data lives.
 #pragma once
 
-#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <functional>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
+
+#include "clients/cpp/tools/quantile.h"
 
 namespace animspace::bench {
 
-// Median wall time of `repetitions` runs of `work`, seconds.
+// Median wall time of `repetitions` ≥ 1 runs of `work`, seconds: the nearest-rank p50 of
+// clients/cpp/tools/quantile.h, as every quantile the bench prints (for an odd count, the middle run).
 inline double median_seconds(int repetitions, const std::function<void()>& work) {
   std::vector<double> times;
   for (int i = 0; i < repetitions; ++i) {
@@ -19,8 +22,7 @@ inline double median_seconds(int repetitions, const std::function<void()>& work)
     work();
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
-  std::sort(times.begin(), times.end());
-  return times[times.size() / 2];
+  return tools::quantile(std::move(times), 0.5);
 }
 
 // Keeps the optimiser from discarding a computed value.

@@ -32,7 +32,7 @@
 #include "bench/suites.h"
 #include "clients/cpp/client.h"
 #include "core/pmsc/pmsc_model.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 
 extern char** environ;
 
@@ -125,9 +125,9 @@ nlohmann::json run_loadtest_suite(const SuiteOptions& options) {
   if (!write_crane_repository(*split, repository, "loadtest")) return results;
   const auto daemon_dir = scratch.path() / "daemon";
   std::filesystem::create_directories(daemon_dir);
-  std::unique_ptr<testing::DaemonProcess> daemon;
+  std::unique_ptr<harness::DaemonProcess> daemon;
   try {
-    daemon = std::make_unique<testing::DaemonProcess>(
+    daemon = std::make_unique<harness::DaemonProcess>(
         std::vector<std::string>{"--model-repository", repository.string(), "--miss-log-dir", daemon_dir.string(),
                                  "--log-level", "warn", "--miss-log-fsync", "never", "--renderer", "none"},
         daemon_dir);

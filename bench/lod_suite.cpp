@@ -20,6 +20,7 @@
 // pose, the distance from each original posed vertex to the posed simplified surface (one
 // routine, lod/surface_distance.h, for every method), RMS and max over vertices and poses, over
 // the rest pose's bounding-box diagonal.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>

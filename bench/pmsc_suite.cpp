@@ -2,6 +2,7 @@
 // alignment setting: train on the training frames, then pose every test frame from its key
 // points alone and compare with the captured frame. Timings are set against a plain Eigen float
 // matrix–vector product of the same basis size, measured in the same run.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -10,6 +11,8 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/suites.h"
+#include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/quantile.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/train.h"
@@ -31,26 +34,11 @@ std::vector<Split> splits_for(int frames) {
   return {interleaved, contiguous};
 }
 
-FrameMatrix rows_of(const FrameMatrix& frames, const std::vector<int>& rows) {
-  FrameMatrix out(static_cast<long>(rows.size()), frames.cols());
-  for (size_t i = 0; i < rows.size(); ++i) out.row(static_cast<long>(i)) = frames.row(rows[i]);
-  return out;
-}
-
-double quantile(std::vector<double> values, double q) {
-  if (values.empty()) return 0;
-  std::sort(values.begin(), values.end());
-  const double position = q * static_cast<double>(values.size() - 1);
-  const auto lo = static_cast<size_t>(std::floor(position));
-  const auto hi = std::min(values.size() - 1, lo + 1);
-  return values[lo] + (values[hi] - values[lo]) * (position - static_cast<double>(lo));
-}
-
 nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence& sequence, const Split& split,
                        bool aligned, const SuiteOptions& suite) {
   const int repetitions = suite.repetitions;
   const FrameMatrix& all = sequence.frames.samples;
-  const FrameMatrix train_frames = rows_of(all, split.train);
+  const FrameMatrix train_frames = tools::select_rows(all, split.train);
   const Eigen::VectorXf reference =
       Eigen::Map<const Eigen::VectorXf>(sequence.reference.V.data(), sequence.reference.V.size());
   const double diagonal = pmsc::bounding_box_diagonal(reference);
@@ -145,8 +133,8 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
       }
     }) / 16);
   }
-  const double reconstruct_seconds = quantile(reconstruct_times, 0.5);
-  const double gemv_seconds = quantile(gemv_times, 0.5);
+  const double reconstruct_seconds = tools::quantile(reconstruct_times, 0.5);
+  const double gemv_seconds = tools::quantile(gemv_times, 0.5);
   Eigen::MatrixXf batch_keys(model->key_mean.size(), 64);
   for (long b = 0; b < 64; ++b) batch_keys.col(b) = test_keys[static_cast<size_t>(b) % test_keys.size()];
   Eigen::MatrixXf batch_points;
@@ -165,8 +153,8 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
       {"train_seconds", report.seconds},
       {"train_frames", split.train.size()},
       {"test_frames", split.test.size()},
-      {"max_error_over_diag_p50", quantile(max_error_over_diag, 0.50)},
-      {"max_error_over_diag_p95", quantile(max_error_over_diag, 0.95)},
+      {"max_error_over_diag_p50", tools::quantile(max_error_over_diag, 0.50)},
+      {"max_error_over_diag_p95", tools::quantile(max_error_over_diag, 0.95)},
       {"frac_frames_max_error_under_1pct", under_1pct / test_count},
       {"projection_floor_frac_under_1pct", floor_under_1pct / test_count},
       {"miss_recall_at_1pct", bad > 0 ? nlohmann::json(static_cast<double>(bad_flagged) / bad) : nlohmann::json()},
@@ -187,8 +175,8 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
   };
   std::printf("%-13s %-11s %-7s %5d %5d %7.2f %5zu %9.4f %9.4f %7.3f %7.3f %7s %6.3f %9.1f %9.1f %10.0f %6.3f %6.3f\n",
               dataset.c_str(), split.name.c_str(), aligned ? "yes" : "no", model->basis_size(),
-              model->key_point_count(), report.seconds, split.test.size(), 100 * quantile(max_error_over_diag, 0.5),
-              100 * quantile(max_error_over_diag, 0.95), under_1pct / test_count, floor_under_1pct / test_count,
+              model->key_point_count(), report.seconds, split.test.size(), 100 * tools::quantile(max_error_over_diag, 0.5),
+              100 * tools::quantile(max_error_over_diag, 0.95), under_1pct / test_count, floor_under_1pct / test_count,
               bad > 0 ? std::to_string(static_cast<double>(bad_flagged) / bad).substr(0, 5).c_str() : "n/a",
               hits / test_count, 1e6 * reconstruct_seconds, 1e6 * gemv_seconds, 64.0 / batch_seconds,
               local_full_points / point_total, global_full_points / point_total);

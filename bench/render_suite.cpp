@@ -28,17 +28,18 @@
 
 #include <nlohmann/json.hpp>
 
+#include "animspace/v1/skinning.grpc.pb.h"
 #include "bench/scratch_directory.h"
 #include "bench/suites.h"
-#include "animspace/v1/skinning.grpc.pb.h"
 #include "clients/cpp/client.h"
+#include "clients/cpp/tools/quantile.h"
 #include "core/animspace/animspace_io.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/container/sections.h"
 #include "core/render/png.h"
 #include "core/render/renderer.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 
 namespace animspace::bench {
 namespace {
@@ -58,13 +59,6 @@ struct Mesh {
   FaceMatrix faces;
   PointMatrix normals;
 };
-
-double percentile(std::vector<double> values, double q) {
-  if (values.empty()) return 0;
-  std::sort(values.begin(), values.end());
-  const auto index = static_cast<size_t>(std::min<double>(double(values.size()) - 1, q * double(values.size())));
-  return values[index];
-}
 
 double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
@@ -181,16 +175,16 @@ void thumbnails(Client& client, render::Renderer* renderer, const std::vector<Me
                          {"vertices", mesh.points.rows()},
                          {"faces", mesh.faces.rows()},
                          {"count", wall.size()},
-                         {"p50_ms", percentile(wall, 0.5)},
-                         {"p99_ms", percentile(wall, 0.99)},
-                         {"server_render_p50_ms", percentile(server, 0.5)},
-                         {"in_process_p50_ms", percentile(baseline, 0.5)},
-                         {"in_process_p99_ms", percentile(baseline, 0.99)},
+                         {"p50_ms", tools::quantile(wall, 0.5)},
+                         {"p99_ms", tools::quantile(wall, 0.99)},
+                         {"server_render_p50_ms", tools::quantile(server, 0.5)},
+                         {"in_process_p50_ms", tools::quantile(baseline, 0.5)},
+                         {"in_process_p99_ms", tools::quantile(baseline, 0.99)},
                          {"png_bytes", png_bytes}};
       if (!error.empty()) row["error"] = error;
       std::printf("%-6s %6d %9.1f %9.1f %11.1f %12.1f %12.1f %9.1f%s\n", mesh.name.c_str(), size,
-                  percentile(wall, 0.5), percentile(wall, 0.99), percentile(server, 0.5), percentile(baseline, 0.5),
-                  percentile(baseline, 0.99), double(png_bytes) / 1024, error.empty() ? "" : (" ERROR " + error).c_str());
+                  tools::quantile(wall, 0.5), tools::quantile(wall, 0.99), tools::quantile(server, 0.5), tools::quantile(baseline, 0.5),
+                  tools::quantile(baseline, 0.99), double(png_bytes) / 1024, error.empty() ? "" : (" ERROR " + error).c_str());
       std::fflush(stdout);
       out.push_back(row);
     }
@@ -234,11 +228,11 @@ void lod_streaming(Client& client, nlohmann::json& out) {
     if (i >= kWarmup) unary_ms.push_back(ms_since(t0));
     unary_bytes = response.poses(0).points().data().size();
   }
-  const double unary_rate = double(unary_bytes) / 1e6 / (percentile(unary_ms, 0.5) / 1000);
+  const double unary_rate = double(unary_bytes) / 1e6 / (tools::quantile(unary_ms, 0.5) / 1000);
   std::printf("%-34s %10.2f %9.1f %9.1f %9s\n", "baseline: EvaluateSkeletonPose", double(unary_bytes) / 1e6,
-              percentile(unary_ms, 0.5), unary_rate, "1.00");
+              tools::quantile(unary_ms, 0.5), unary_rate, "1.00");
   out.push_back({{"mode", "unary_evaluate_skeleton_pose"}, {"bytes", unary_bytes},
-                 {"p50_ms", percentile(unary_ms, 0.5)}, {"mb_per_s", unary_rate}});
+                 {"p50_ms", tools::quantile(unary_ms, 0.5)}, {"mb_per_s", unary_rate}});
 
   struct Variant {
     const char* label;
@@ -268,14 +262,14 @@ void lod_streaming(Client& client, nlohmann::json& out) {
         error = e.what();
       }
     }
-    const double rate = times.empty() ? 0 : double(bytes) / 1e6 / (percentile(times, 0.5) / 1000);
+    const double rate = times.empty() ? 0 : double(bytes) / 1e6 / (tools::quantile(times, 0.5) / 1000);
     nlohmann::json row{{"mode", std::string("get_lod ") + v.label},
                        {"bytes", bytes},
-                       {"p50_ms", percentile(times, 0.5)},
+                       {"p50_ms", tools::quantile(times, 0.5)},
                        {"mb_per_s", rate},
                        {"ratio_to_unary", unary_rate > 0 ? rate / unary_rate : 0}};
     if (!error.empty()) row["error"] = error;
-    std::printf("%-34s %10.2f %9.1f %9.1f %9.2f%s\n", v.label, double(bytes) / 1e6, percentile(times, 0.5), rate,
+    std::printf("%-34s %10.2f %9.1f %9.1f %9.2f%s\n", v.label, double(bytes) / 1e6, tools::quantile(times, 0.5), rate,
                 unary_rate > 0 ? rate / unary_rate : 0.0, error.empty() ? "" : (" ERROR " + error).c_str());
     out.push_back(row);
   }
@@ -303,9 +297,9 @@ nlohmann::json run_render_suite(const SuiteOptions& options) {
     meshes.push_back(std::move(*crane));
   }
 
-  std::unique_ptr<testing::DaemonProcess> daemon;
+  std::unique_ptr<harness::DaemonProcess> daemon;
   try {
-    daemon = std::make_unique<testing::DaemonProcess>(
+    daemon = std::make_unique<harness::DaemonProcess>(
         std::vector<std::string>{"--model-repository", repository.string(), "--log-level", "warn", "--miss-log-dir",
                                  scratch.string()},
         scratch);

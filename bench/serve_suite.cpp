@@ -62,12 +62,13 @@
 #include "animspace/v1/poses.grpc.pb.h"
 #include "bench/crane_split.h"
 #include "bench/suites.h"
+#include "clients/cpp/tools/quantile.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
 #include "grpc/health/v1/health.grpc.pb.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 
 namespace animspace::bench {
 namespace {
@@ -86,18 +87,6 @@ constexpr int kBatchPoses = 8;
 constexpr auto kIdleGap = std::chrono::milliseconds(1);
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-// q-quantile of sorted samples (nearest rank below; samples are thousands, so interpolation
-// would not change a printed digit).
-double quantile_sorted(const std::vector<double>& sorted, double q) {
-  if (sorted.empty()) return 0;
-  return sorted[static_cast<size_t>(q * static_cast<double>(sorted.size() - 1))];
-}
-
-double median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return quantile_sorted(values, 0.5);
-}
 
 double load_average_1m() {
   std::ifstream in("/proc/loadavg");
@@ -610,10 +599,8 @@ void print_header() {
 }
 
 void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>& out) {
-  std::vector<double> sorted = row.latency_us;
-  std::sort(sorted.begin(), sorted.end());
   const double pps = row.seconds > 0 ? static_cast<double>(row.poses) / row.seconds : 0;
-  const double p50 = quantile_sorted(sorted, 0.50), p99 = quantile_sorted(sorted, 0.99);
+  const double p50 = tools::quantile(row.latency_us, 0.50), p99 = tools::quantile(row.latency_us, 0.99);
   const double baseline = row.baseline_us.value_or(run_baseline_us);
   nlohmann::json json = {
       {"mode", row.mode},
@@ -669,12 +656,12 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
 }
 
 // Starts a daemon on `repository`, waits until it serves the model and checks its answers.
-std::unique_ptr<testing::DaemonProcess> start_daemon(const ScratchDirectory& scratch,
+std::unique_ptr<harness::DaemonProcess> start_daemon(const ScratchDirectory& scratch,
                                                      const std::filesystem::path& repository, int work_threads,
                                                      const pmsc::PmscModel& model, const Workload& work) {
-  std::unique_ptr<testing::DaemonProcess> daemon;
+  std::unique_ptr<harness::DaemonProcess> daemon;
   try {
-    daemon = std::make_unique<testing::DaemonProcess>(
+    daemon = std::make_unique<harness::DaemonProcess>(
         std::vector<std::string>{"--model-repository", repository.string(), "--log-level", "warn", "--miss-log-fsync",
                                  "never", "--work-threads", std::to_string(work_threads)},
         scratch.path());
@@ -741,7 +728,7 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
   // Baselines, before any daemon exists.
   const int passes = std::max(3, options.repetitions);
   Row in_process = measure_in_process(model, work, passes, Gap::kNone);
-  const double run_baseline_us = median(in_process.latency_us);
+  const double run_baseline_us = tools::quantile(in_process.latency_us, 0.5);
   auto measured = [&](Row row) {
     row.load_average = load_average_1m();
     report(row, run_baseline_us, results);
@@ -762,7 +749,7 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
     Row row = measure();
     const std::vector<double> after = evaluate_poses(model, work, 1);
     around.insert(around.end(), after.begin(), after.end());
-    row.baseline_us = median(around);
+    row.baseline_us = tools::quantile(around, 0.5);
     row.work_threads = work_threads;
     measured(std::move(row));
   };

@@ -1,19 +1,23 @@
 // Writes the binary seed inputs of fuzz/corpus/ (the text ones are written by hand): tiny model
 // containers of every kind the registry loads, a binary PLY, a PC2 cache, a binary DMAT, a miss
-// log and the two validated request messages. Run once and commit the output; rerun when a
+// log, the two validated request messages and a skinned glTF strip (.glb, and .gltf with base64
+// data URI buffers). Run once and commit the output; rerun when a
 // format changes:
 //   build-fuzz/bin/make_seed_corpus fuzz/corpus
 //
 // Everything is built from the demo's bending arm at its smallest (3 rings × 3 segments: 11
 // vertices, 3 bones), so that each container stays a few kilobytes: the fuzzer mutates every
 // byte of a seed, and small seeds are mutated more.
+#include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <numbers>
 #include <string>
 #include <utility>
 
@@ -33,7 +37,8 @@
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
 #include "fuzz/request_fixture.h"
-#include "tests/support/lod_fixtures.h"
+#include "harness/gltf_builder.h"
+#include "harness/lod_fixtures.h"
 
 namespace animspace::fuzz {
 namespace {
@@ -209,6 +214,96 @@ void write_requests(const fs::path& dir) {
   write(dir / "skeleton_pose.bin", with_selector(request_fixture::kSkeletonPoseRequest, skinning));
 }
 
+// A strip of 4 triangles along x (6 vertices, x = 0, 1, 2) skinned to a chain of two joints
+// (root at x = 0, child at x = 1, bent in the file's pose), the smallest rig that still has a
+// parent, an inverse bind matrix other than identity and blended weights. The encodings vary
+// across seeds so that each accessor path of the importer has a seed that reaches it.
+struct StripEncoding {
+  int joint_type;     // 5121 UNSIGNED_BYTE or 5123 UNSIGNED_SHORT
+  int weight_type;    // 5126 FLOAT, or 5121 / 5123 normalised
+  int index_type;     // 5121, 5123, 5125, or 0 for no indices (consecutive triangles; 12 vertices)
+  bool normals;       // a NORMAL attribute
+  bool matrix_nodes;  // node transforms as "matrix" instead of TRS
+};
+
+std::string skinned_strip(const StripEncoding& e, testing::GltfBuilder::Layout layout) {
+  constexpr int kByte = 5121, kShort = 5123, kInt = 5125, kFloat = 5126;
+  std::vector<std::array<float, 3>> corners;
+  for (int x = 0; x <= 2; ++x) {
+    for (int y = 0; y <= 1; ++y) corners.push_back({static_cast<float>(x), static_cast<float>(y), 0.0f});
+  }
+  const std::vector<uint32_t> triangles{0, 2, 1, 1, 2, 3, 2, 4, 3, 3, 4, 5};
+  // Without indices the triangles' corners are listed one after another.
+  std::vector<std::array<float, 3>> vertices = corners;
+  if (e.index_type == 0) {
+    vertices.clear();
+    for (const uint32_t corner : triangles) vertices.push_back(corners[corner]);
+  }
+  const size_t n = vertices.size();
+  std::vector<float> positions, normals, weights;
+  std::vector<uint16_t> joints;
+  for (const auto& v : vertices) {
+    positions.insert(positions.end(), v.begin(), v.end());
+    normals.insert(normals.end(), {0.0f, 0.0f, 1.0f});
+    const float t = v[0] / 2;  // the child's share grows along the strip
+    joints.insert(joints.end(), {0, 1, 0, 0});
+    weights.insert(weights.end(), {1 - t, t, 0.0f, 0.0f});
+  }
+  testing::GltfBuilder b;
+  nlohmann::json attributes = {{"POSITION", b.add(positions, kFloat, "VEC3", n)}};
+  if (e.normals) attributes["NORMAL"] = b.add(normals, kFloat, "VEC3", n);
+  attributes["JOINTS_0"] = e.joint_type == kByte
+                               ? b.add(std::vector<uint8_t>(joints.begin(), joints.end()), kByte, "VEC4", n)
+                               : b.add(joints, kShort, "VEC4", n);
+  if (e.weight_type == kFloat) {
+    attributes["WEIGHTS_0"] = b.add(weights, kFloat, "VEC4", n);
+  } else {
+    // Normalised integers, the rounding remainder on the first slot so that each vertex sums to max.
+    const double max = e.weight_type == kByte ? 255.0 : 65535.0;
+    std::vector<uint16_t> quantised;
+    for (size_t v = 0; v < n; ++v) {
+      const auto child = static_cast<uint16_t>(std::lround(weights[4 * v + 1] * max));
+      quantised.insert(quantised.end(), {static_cast<uint16_t>(max - child), child, 0, 0});
+    }
+    attributes["WEIGHTS_0"] =
+        e.weight_type == kByte ? b.add(std::vector<uint8_t>(quantised.begin(), quantised.end()), kByte, "VEC4", n, true)
+                               : b.add(quantised, kShort, "VEC4", n, true);
+  }
+  nlohmann::json primitive = {{"attributes", attributes}, {"mode", 4}};
+  const size_t corner_count = triangles.size();
+  if (e.index_type == kByte) {
+    const std::vector<uint8_t> narrow(triangles.begin(), triangles.end());
+    primitive["indices"] = b.add(narrow, kByte, "SCALAR", corner_count);
+  } else if (e.index_type == kShort) {
+    const std::vector<uint16_t> narrow(triangles.begin(), triangles.end());
+    primitive["indices"] = b.add(narrow, kShort, "SCALAR", corner_count);
+  } else if (e.index_type == kInt) {
+    primitive["indices"] = b.add(triangles, kInt, "SCALAR", corner_count);
+  }
+  // Bind pose: root at the origin, child at x = 1, so inverse binds are I and a −1 x translation
+  // (column-major).
+  std::vector<float> inverse_binds{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1,
+                                   1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 1};
+  const int ibm = b.add(inverse_binds, kFloat, "MAT4", 2);
+  b.doc["meshes"] = {{{"primitives", {primitive}}}};
+  // The child turned 30° about z: (x y z w) = (0 0 sin 15° cos 15°).
+  const double s = std::sin(std::numbers::pi / 12), c = std::cos(std::numbers::pi / 12);
+  nlohmann::json root = {{"name", "root"}, {"children", {1}}};
+  nlohmann::json child = {{"name", "child"}};
+  if (e.matrix_nodes) {
+    const double cos30 = c * c - s * s, sin30 = 2 * s * c;
+    child["matrix"] = {cos30, sin30, 0, 0, -sin30, cos30, 0, 0, 0, 0, 1, 0, 1, 0, 0, 1};
+  } else {
+    child["translation"] = {1.0, 0.0, 0.0};
+    child["rotation"] = {0.0, 0.0, s, c};
+  }
+  b.doc["nodes"] = {root, child, {{"mesh", 0}, {"skin", 0}}};
+  b.doc["skins"] = {{{"joints", {0, 1}}, {"inverseBindMatrices", ibm}}};
+  b.doc["scenes"] = {{{"nodes", {0, 2}}}};
+  b.doc["scene"] = 0;
+  return b.serialize(layout);
+}
+
 }  // namespace
 }  // namespace animspace::fuzz
 
@@ -258,5 +353,15 @@ int main(int argc, char** argv) {
   write(corpus / "miss_log" / "two_records.misses",
         miss_log_bytes(fs::temp_directory_path() / "make_seed_corpus.misses"));
   write_requests(corpus / "request_validation");
+
+  // gltf: the framings (GLB chunks, JSON with a data URI) and the accessor encodings.
+  using Layout = testing::GltfBuilder::Layout;
+  write(corpus / "gltf" / "skinned_strip.glb", skinned_strip({5121, 5126, 5123, true, false}, Layout::kGlb));
+  write(corpus / "gltf" / "skinned_strip_embedded.gltf",
+        skinned_strip({5123, 5121, 5125, true, false}, Layout::kDataUri));
+  write(corpus / "gltf" / "skinned_strip_matrices_no_indices.gltf",
+        skinned_strip({5121, 5123, 0, false, true}, Layout::kDataUri));
+  write(corpus / "gltf" / "skinned_strip_byte_indices.glb",
+        skinned_strip({5123, 5126, 5121, false, false}, Layout::kGlb));
   return 0;
 }

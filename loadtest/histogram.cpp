@@ -2,7 +2,8 @@
 
 #include <algorithm>
 #include <bit>
-#include <cmath>
+
+#include "clients/cpp/tools/quantile.h"
 
 namespace animspace::loadtest {
 namespace {
@@ -56,8 +57,7 @@ void LatencyHistogram::merge(const LatencyHistogram& other) {
 
 int64_t LatencyHistogram::quantile(double q) const {
   if (count_ == 0) return 0;
-  const double clamped = std::clamp(q, 0.0, 1.0);
-  const auto rank = std::max<uint64_t>(1, static_cast<uint64_t>(std::ceil(clamped * static_cast<double>(count_))));
+  const uint64_t rank = tools::nearest_rank(q, count_);
   uint64_t seen = 0;
   for (int b = 0; b < kBuckets; ++b) {
     seen += counts_[static_cast<size_t>(b)];

@@ -23,8 +23,10 @@ class LatencyHistogram {
   int64_t min() const { return count_ ? min_ : 0; }
   int64_t max() const { return max_; }
   double mean() const { return count_ ? sum_ / static_cast<double>(count_) : 0.0; }
-  // The value at quantile q ∈ [0, 1]: the smallest bucket bound with at least ⌈q·count⌉ samples at
-  // or below it, reported as the bucket's midpoint (clamped to [min, max]); 0 when empty.
+  // The value at quantile q ∈ [0, 1], by nearest rank (clients/cpp/tools/quantile.h, the definition
+  // animspace-bench uses on its sorted samples): the bucket holding the k-th smallest sample,
+  // k = max(1, ⌈q·count⌉), reported as its midpoint (clamped to [min, max]) — so within the bucket
+  // width (< 0.8%) of the exact order statistic tools::quantile would return. 0 when empty.
   int64_t quantile(double q) const;
 
   // Bucket of a value, and the half-open value range [lower, upper) a bucket covers (exposed for

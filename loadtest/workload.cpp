@@ -1,8 +1,8 @@
 #include "loadtest/workload.h"
 
-#include "clients/cpp/cli/key_frames.h"
-#include "clients/cpp/cli/offline_common.h"
-#include "clients/cpp/cli/pose_file.h"
+#include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/pose_file.h"
+#include "clients/cpp/tools/sequence_frames.h"
 
 namespace animspace::loadtest {
 namespace {
@@ -47,7 +47,7 @@ Result<Workload> make_workload(Client& client, const WorkloadArgs& a) {
       }
     }
     if (bones == 0) return invalid("model '" + a.model + "' has no skeleton: --rpc skinning needs one");
-    auto poses = cli::read_pose_file(a.pose_file, cli::pose_space(a.pose_space), bones);
+    auto poses = tools::read_pose_file(a.pose_file, tools::pose_space(a.pose_space), bones);
     if (!poses) return poses.error();
     w.skeleton_poses = std::move(*poses);
     for (size_t i = 0; i < w.skeleton_poses.size(); ++i) w.frame_numbers.push_back(static_cast<int>(i));
@@ -55,10 +55,10 @@ Result<Workload> make_workload(Client& client, const WorkloadArgs& a) {
   }
 
   if (a.sequence.empty()) return invalid("--rpc " + std::string(rpc_name(a.rpc)) + " replays a sequence: give --sequence");
-  auto frames = cli::load_sequence_frames(a.sequence, a.pc2);
+  auto frames = tools::load_sequence_frames(a.sequence, a.pc2);
   if (!frames) return frames.error();
   std::string error;
-  const std::vector<int> selected = cli::parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
+  const std::vector<int> selected = tools::parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
   if (selected.empty()) return invalid(error);
   const KeyPoints keys = client.describe_key_points(a.model, a.version);
   if (frames->cols() != static_cast<long>(keys.control_point_count) * keys.channels) {

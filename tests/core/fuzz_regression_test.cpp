@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "core/animspace/animspace_io.h"
+#include "core/animspace/import.h"
 #include "core/animspace/model.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/libigl_rig.h"
@@ -20,6 +21,7 @@
 #include "core/model/model_info.h"
 #include "core/model/servable.h"
 #include "core/pmsc/pmsc_io.h"
+#include "tests/support/test_support.h"
 
 namespace animspace {
 namespace {
@@ -49,6 +51,15 @@ bool load_like_the_registry(std::string_view bytes) {
   return !container || returned(model::load_servable(*container, source));
 }
 
+// What gltf_fuzzer runs: read_gltf_rig takes a path (tinygltf resolves buffer URIs next to the
+// file), so the bytes go to a file of their own first.
+bool import_gltf(std::string_view bytes) {
+  const testing::TempDir dir;
+  const fs::path path = dir / "regression.gltf";
+  std::ofstream(path, std::ios::binary) << bytes;
+  return returned(animation_space::read_gltf_rig(path));
+}
+
 // Each fuzz target's parser, for the replay of its directory.
 const std::map<std::string, std::function<bool(std::string_view)>>& parsers() {
   static const std::map<std::string, std::function<bool(std::string_view)>> table = {
@@ -60,6 +71,7 @@ const std::map<std::string, std::function<bool(std::string_view)>>& parsers() {
       {"dmat", [](std::string_view b) { return returned(mesh_io::parse_dmat(b, "regression.dmat")); }},
       {"tmat", [](std::string_view b) { return returned(mesh_io::parse_tmat(b, "regression.tmat")); }},
       {"model_container", [](std::string_view b) { return load_like_the_registry(b); }},
+      {"gltf", [](std::string_view b) { return import_gltf(b); }},
   };
   return table;
 }

@@ -19,7 +19,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/mesh_io/pc2.h"
 #include "core/container/sections.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -27,7 +27,7 @@ namespace animspace {
 namespace {
 
 namespace as = animation_space;
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 
 struct CliRun {

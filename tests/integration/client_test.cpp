@@ -2,6 +2,7 @@
 // answers are checked against the core library evaluating the same model files in-process — an
 // independent path that never touches the client or the wire — and the stream session against
 // unary evaluation of the same frames.
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <span>
@@ -19,7 +20,7 @@
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/soft_cache.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -27,7 +28,7 @@ namespace animspace {
 namespace {
 
 namespace as = animation_space;
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 
 const std::string kPmsc(demo::kDemoPmscModelName);
@@ -154,25 +155,33 @@ TEST_F(ClientTest, TheStreamSessionAnswersInOrderWithinItsWindow) {
   options.window = 3;
   auto stream = client_->open_stream(kPmsc, options);
   size_t worst_in_flight = 0;
+  std::atomic<bool> written{false};
   std::thread writer([&] {
     for (int f = 0; f < count; ++f) {
       const std::vector<float> v = keys.gather(frame(f));
       // Sequence numbers need not be contiguous: the client's own frame numbers come back.
-      ASSERT_TRUE(stream->write({v, keys.channels}, 1000 + 7 * static_cast<uint64_t>(f)));
+      EXPECT_TRUE(stream->write({v, keys.channels}, 1000 + 7 * static_cast<uint64_t>(f)));
       worst_in_flight = std::max(worst_in_flight, stream->in_flight());
     }
     stream->writes_done();
+    written.store(true);
   });
   std::vector<PoseResult> results;
-  while (auto result = stream->read()) {
-    // Slower than the server: without back-pressure the writer would run ahead by the whole sequence.
-    if (results.size() % 10 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  for (;;) {
+    // The reader lags on purpose: before each read it lets the writer fill the window, so the
+    // writer meets a full window on every frame — without back-pressure it would run ahead by
+    // the whole sequence.
+    EXPECT_TRUE(testing::wait_until([&] { return stream->in_flight() >= options.window || written.load(); },
+                                    std::chrono::seconds(30), std::chrono::milliseconds(1)));
+    auto result = stream->read();
+    if (!result) break;
     results.push_back(std::move(*result));
   }
   writer.join();
   stream->finish();
   ASSERT_EQ(results.size(), static_cast<size_t>(count));
-  EXPECT_LE(worst_in_flight, 3u) << "the writer ran past the window";
+  // The reader let the window fill before every read: the writer met it full and went no further.
+  EXPECT_EQ(worst_in_flight, 3u) << "the writer ran past the window, or never reached it";
   for (int f = 0; f < count; ++f) {
     EXPECT_EQ(results[static_cast<size_t>(f)].sequence, 1000 + 7 * static_cast<uint64_t>(f));
     expect_matches_core(results[static_cast<size_t>(f)], f);

@@ -11,7 +11,7 @@
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -22,7 +22,7 @@ namespace animspace {
 namespace {
 
 using grpc::health::v1::HealthCheckResponse;
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 using testing::write_model;
 

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -35,8 +36,9 @@
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
 #include "core/misslog/miss_log.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
+#include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -44,21 +46,12 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+using harness::DaemonProcess;
 using testing::code_of;
-using testing::DaemonProcess;
 using testing::TempDir;
+using testing::wait_until;
 
 double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-// Polls `done` every 10 ms; false when `timeout` passes first.
-bool wait_for(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
-  const auto deadline = Clock::now() + timeout;
-  while (!done()) {
-    if (Clock::now() > deadline) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  return true;
-}
 
 // ---------------------------------------------------------------------------------------------
 // What the daemon uses, read from /proc: it exports no RSS or descriptor metric.
@@ -237,10 +230,21 @@ class CodeCounts {
 class LoadThreads {
  public:
   ~LoadThreads() { stop(); }
+  // Every thread is added before the first is waited on (rounds_ must not grow under readers).
   void add(std::function<void()> body) {
-    threads_.emplace_back([this, body = std::move(body)] {
-      while (!stop_.load()) body();
+    rounds_.push_back(std::make_unique<std::atomic<int64_t>>(0));
+    threads_.emplace_back([this, body = std::move(body), rounds = rounds_.back().get()] {
+      while (!stop_.load()) {
+        body();
+        rounds->fetch_add(1);
+      }
     });
+  }
+  // Rounds completed by the thread that has completed fewest.
+  int64_t min_rounds() const {
+    int64_t fewest = std::numeric_limits<int64_t>::max();
+    for (const auto& rounds : rounds_) fewest = std::min(fewest, rounds->load());
+    return fewest;
   }
   void stop() {
     stop_.store(true);
@@ -251,6 +255,7 @@ class LoadThreads {
 
  private:
   std::atomic<bool> stop_{false};
+  std::vector<std::unique_ptr<std::atomic<int64_t>>> rounds_;
   std::vector<std::thread> threads_;
 };
 
@@ -309,7 +314,10 @@ TEST_F(FaultTest, BadVersionsArrivingByPollAreRefusedWhileTheGoodOneKeepsServing
 
   std::atomic<int> answered{0}, wrong{0}, failed{0}, health_checks{0}, not_serving{0};
   LoadThreads load;
-  load.add([&, evaluator = std::make_shared<Client>(daemon->address())] {
+  // Each batch is followed by a health check on a connection of its own: the probe keeps pace
+  // with the traffic (it sees the server between any two batches) without a clock of its own.
+  load.add([&, evaluator = std::make_shared<Client>(daemon->address()),
+            probe = std::make_shared<Client>(daemon->address())] {
     try {
       const auto got = evaluator->evaluate_key_points_batch("arm-pmsc", poses);
       bool same = got.size() == reference.size();
@@ -318,8 +326,6 @@ TEST_F(FaultTest, BadVersionsArrivingByPollAreRefusedWhileTheGoodOneKeepsServing
     } catch (const RpcError&) {
       failed.fetch_add(1);
     }
-  });
-  load.add([&, probe = std::make_shared<Client>(daemon->address())] {
     bool serving = false;
     try {
       serving = probe->health() == grpc::health::v1::HealthCheckResponse::SERVING;
@@ -327,7 +333,6 @@ TEST_F(FaultTest, BadVersionsArrivingByPollAreRefusedWhileTheGoodOneKeepsServing
     }
     health_checks.fetch_add(1);
     if (!serving) not_serving.fetch_add(1);
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   });
 
   const std::string good = read_bytes(repo / "arm-pmsc" / "1" / "model.anim");
@@ -350,7 +355,7 @@ TEST_F(FaultTest, BadVersionsArrivingByPollAreRefusedWhileTheGoodOneKeepsServing
     publish_file(repo, "arm-pmsc", bad.version, bad.bytes);
     // The poll records the version as refused, visible to clients.
     v1::ModelSummary described;
-    ASSERT_TRUE(wait_for(
+    ASSERT_TRUE(wait_until(
         [&] {
           try {
             described = client.describe_model("arm-pmsc", bad.version);
@@ -366,18 +371,7 @@ TEST_F(FaultTest, BadVersionsArrivingByPollAreRefusedWhileTheGoodOneKeepsServing
     EXPECT_NE(described.versions(0).error().find(bad.reason), std::string::npos) << described.versions(0).error();
     EXPECT_EQ(described.default_version(), 1u);
   }
-  // Ten more polls: a refused version is not retried, so each is logged exactly once.
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  const std::string log = daemon->log();
-  for (const auto& bad : bad_files) {
-    const std::string refused = "model arm-pmsc version " + std::to_string(bad.version) + " refused: ";
-    const size_t at = log.find(refused);
-    ASSERT_NE(at, std::string::npos) << log;
-    EXPECT_NE(log.substr(at, log.find('\n', at) - at).find(bad.reason), std::string::npos) << log.substr(at, 400);
-    EXPECT_EQ(log.find(refused, at + 1), std::string::npos) << "version " << bad.version << " refused twice";
-  }
-  load.stop();
-
+  load.stop();  // the load covered the three refusals; good versions come next
   EXPECT_GT(answered.load(), 0);
   EXPECT_EQ(wrong.load(), 0) << "answers that differ from version 1's";
   EXPECT_EQ(failed.load(), 0);
@@ -387,13 +381,29 @@ TEST_F(FaultTest, BadVersionsArrivingByPollAreRefusedWhileTheGoodOneKeepsServing
               "%d health checks, %d not SERVING\n",
               answered.load(), poses.size(), wrong.load(), failed.load(), health_checks.load(), not_serving.load());
 
-  // The poll still takes a good version after refusing three: the same bytes, the same answers.
-  publish_file(repo, "arm-pmsc", 5, good);
-  ASSERT_TRUE(wait_for([&] { return client.describe_model("arm-pmsc").default_version() == 5; }, std::chrono::seconds(10)));
+  // The poll still takes good versions after refusing three, and does not retry the refused ones.
+  // Two good versions published one after the other prove that whole polls ran after the last
+  // refusal: a poll lists a model's versions once, so the one that refused version 4 cannot also
+  // load 5, and the one that loads 6 began after 5 was served. Each refusal is then logged once.
+  for (const uint64_t version : {5u, 6u}) {
+    publish_file(repo, "arm-pmsc", version, good);
+    ASSERT_TRUE(wait_until([&] { return client.describe_model("arm-pmsc").default_version() == version; },
+                           std::chrono::seconds(30)))
+        << "version " << version << " was never served";
+  }
+  const std::string log = daemon->log();
+  for (const auto& bad : bad_files) {
+    const std::string refused = "model arm-pmsc version " + std::to_string(bad.version) + " refused: ";
+    const size_t at = log.find(refused);
+    ASSERT_NE(at, std::string::npos) << log;
+    EXPECT_NE(log.substr(at, log.find('\n', at) - at).find(bad.reason), std::string::npos) << log.substr(at, 400);
+    EXPECT_EQ(log.find(refused, at + 1), std::string::npos) << "version " << bad.version << " refused twice";
+  }
+  // The same bytes as version 1, the same answers.
   const auto again = client.evaluate_key_points_batch("arm-pmsc", poses);
   ASSERT_EQ(again.size(), reference.size());
   for (size_t i = 0; i < again.size(); ++i) {
-    EXPECT_EQ(again[i].model_version, 5u);
+    EXPECT_EQ(again[i].model_version, 6u);
     EXPECT_TRUE(same_answer(again[i], reference[i])) << "pose " << i;
   }
 }
@@ -432,7 +442,8 @@ TEST_F(FaultTest, KillNineDuringRetrainLeavesNoPartialVersionAndLosesNoMiss) {
       const auto completed = client.complete_miss("bend", keys.model_version, {key, 3, nullptr}, full_values);
       ASSERT_TRUE(completed.logged) << "pose " << i << ": " << cache_status_name(completed.result.status);
     }
-    // How long a retrain takes here: a dry run does all of it but the publish.
+    // A dry run does all of a retrain but the publish: it must use every logged miss (its time is
+    // printed for the record; the kills below wait for states, not for a share of it).
     retrain.set_dry_run(true);
     const auto started = Clock::now();
     const auto dry = client.retrain(retrain, std::chrono::seconds(120));
@@ -443,14 +454,56 @@ TEST_F(FaultTest, KillNineDuringRetrainLeavesNoPartialVersionAndLosesNoMiss) {
   std::printf("[fault] retrain of a %d-point model, %d misses: %.0f ms (dry run)\n",
               static_cast<int>(rig.rest.V.rows()), kMisses, 1000 * retrain_s);
 
-  // Kill points from "before the request lands" to "after the publish"; around 1.0 the kill may
-  // fall inside the publish itself (the printed lines say which of these each one hit).
-  for (double fraction : {0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0}) {
-    auto daemon = start(repo, flags);
+  // Kill points: states of the retrain the test can observe, not fractions of a timed run (a
+  // retrain's length varies tenfold between a quiet machine and a sanitizer build). From "the
+  // request may not have landed" to "answered"; the publish itself (a hidden .publish-N folder
+  // being written) lasts milliseconds and may be passed before it is seen — the printed lines say
+  // which state each kill met.
+  struct Observed {
+    VersionDirs before, now;  // repo/bend when the call was made, and at this poll
+    int metrics_port;
+    bool returned;            // the caller has its answer
+  };
+  struct KillPoint {
+    const char* name;
+    std::function<bool(const Observed&)> reached;
+  };
+  const auto calls_in_flight = [](int metrics_port) {
+    const auto page = testing::scrape_metrics(metrics_port);
+    return page ? testing::metric_value(*page, "animspace_calls_in_flight").value_or(0) : 0;
+  };
+  const auto new_versions = [](const Observed& o) { return o.now.versions.size() > o.before.versions.size(); };
+  const std::vector<KillPoint> kill_points = {
+      {"at once", [](const Observed&) { return true; }},
+      {"the server holds the call", [&](const Observed& o) { return calls_in_flight(o.metrics_port) >= 1; }},
+      {"publishing", [&](const Observed& o) { return o.now.hidden.size() > o.before.hidden.size() || new_versions(o); }},
+      {"published", [&](const Observed& o) { return new_versions(o); }},
+      {"answered", [](const Observed& o) { return o.returned; }},
+  };
+  for (const KillPoint& point : kill_points) {
+    const int metrics_port = testing::free_tcp_port();
+    std::vector<std::string> with_metrics = flags;
+    with_metrics.insert(with_metrics.end(), {"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
+    auto daemon = start(repo, with_metrics);
     Client client(daemon->address());
+    const VersionDirs before = version_dirs(repo / "bend");
+    std::atomic<bool> returned{false};
     grpc::StatusCode answer = grpc::StatusCode::UNKNOWN;
-    std::thread caller([&] { answer = code_of([&] { client.retrain(retrain, std::chrono::seconds(120)); }); });
-    std::this_thread::sleep_for(std::chrono::duration<double>(fraction * retrain_s));
+    std::thread caller([&] {
+      answer = code_of([&] { client.retrain(retrain, std::chrono::seconds(120)); });
+      returned.store(true);
+    });
+    // A state passed too quickly to be seen ends the wait when the call returns.
+    bool reached = false;
+    EXPECT_TRUE(wait_until(
+        [&] {
+          const bool done = returned.load();
+          reached = point.reached({before, version_dirs(repo / "bend"), metrics_port, done});
+          return reached || done;
+        },
+        std::chrono::seconds(120), std::chrono::milliseconds(1)))
+        << "the retrain neither reached \"" << point.name << "\" nor returned";
+    const bool answered_first = !reached;
     daemon->send_signal(SIGKILL);
     EXPECT_NE(daemon->wait_for_exit(std::chrono::seconds(10)), -1);
     caller.join();
@@ -465,11 +518,11 @@ TEST_F(FaultTest, KillNineDuringRetrainLeavesNoPartialVersionAndLosesNoMiss) {
       for (const auto& entry : fs::directory_iterator(dir)) files.push_back(entry.path().filename().string());
       EXPECT_EQ(files, std::vector<std::string>{"model.anim"}) << dir;
       const auto file = container::read_file(dir / "model.anim");
-      EXPECT_TRUE(file.ok()) << "after a kill at " << fraction << " of a retrain: " << file.error().message;
+      EXPECT_TRUE(file.ok()) << "after a kill (" << point.name << "): " << file.error().message;
     }
-    std::printf("[fault] kill -9 at %.0f ms (%.1f of a retrain): retrain answered %s; versions on disk %s; "
-                "hidden dirs left %zu\n",
-                1000 * fraction * retrain_s, fraction, status_code_name(answer), listed.c_str(), dirs.hidden.size());
+    std::printf("[fault] kill -9 when %s%s: retrain answered %s; versions on disk %s; hidden dirs left %zu\n",
+                point.name, answered_first ? " (answered before that was seen)" : "", status_code_name(answer),
+                listed.c_str(), dirs.hidden.size());
   }
 
   // Restarted on the same repository and miss log.
@@ -562,15 +615,15 @@ TEST_F(FaultTest, HotReloadAndUnloadUnderLoadFailNoCallOnTheKeptModel) {
     stream("b", *client, after ? b_after_unload : b_before_unload);
   });
 
-  ASSERT_TRUE(wait_for([&] { return a_codes.total() >= 40 && b_before_unload.total() >= 10; }, std::chrono::seconds(30)));
+  ASSERT_TRUE(wait_until([&] { return a_codes.total() >= 40 && b_before_unload.total() >= 10; }, std::chrono::seconds(30)));
   // Hot reload: version 2 of A (the same bytes) published as a file, then loaded.
   publish_file(repo, "a", 2, read_bytes(repo / "a" / "1" / "model.anim"));
   EXPECT_EQ(admin.load_model("a").default_version(), 2u);
-  ASSERT_TRUE(wait_for([&] { return a_on_v2.load() >= 40; }, std::chrono::seconds(30)));
+  ASSERT_TRUE(wait_until([&] { return a_on_v2.load() >= 40; }, std::chrono::seconds(30)));
   admin.unload_model("b");
   unloaded.store(true);
   const int a_at_unload = a_codes.total();
-  ASSERT_TRUE(wait_for([&] { return b_after_unload.total() >= 20 && a_codes.total() >= a_at_unload + 40; },
+  ASSERT_TRUE(wait_until([&] { return b_after_unload.total() >= 20 && a_codes.total() >= a_at_unload + 40; },
                        std::chrono::seconds(30)));
   load.stop();
 
@@ -634,7 +687,7 @@ TEST_F(FaultTest, OverloadIsRefusedAtOnceAndMemoryStaysBounded) {
       Client client(daemon->address());
       client.health();  // connected before the start: latencies below are the calls'
       ready.fetch_add(1);
-      while (!go.load()) std::this_thread::yield();
+      go.wait(false);
       for (int i = 0; i < kCallsEach; ++i) {
         const auto started = Clock::now();
         const grpc::StatusCode code = heavy_call(client);
@@ -642,8 +695,9 @@ TEST_F(FaultTest, OverloadIsRefusedAtOnceAndMemoryStaysBounded) {
       }
     });
   }
-  ASSERT_TRUE(wait_for([&] { return ready.load() == kCallers; }, std::chrono::seconds(30)));
+  ASSERT_TRUE(wait_until([&] { return ready.load() == kCallers; }, std::chrono::seconds(30)));
   go.store(true);
+  go.notify_all();
   for (auto& caller : callers) caller.join();
   const ProcessUsage loaded = usage_of(daemon->pid());
 
@@ -667,9 +721,9 @@ TEST_F(FaultTest, OverloadIsRefusedAtOnceAndMemoryStaysBounded) {
   EXPECT_GT(served, 0);
   ASSERT_GT(refused, 0) << "64 callers never exceeded a limit of 4";
   EXPECT_EQ(other, 0) << "codes other than OK and RESOURCE_EXHAUSTED";
-  // A refusal must not wait for a slot: generous against scheduling on a loaded 2-core machine,
-  // far below the time the calls ahead of it take.
-  EXPECT_LT(refused_ms.back(), 1000.0);
+  // That a refusal does not wait for a slot is shown without a clock by
+  // ServeTest.CallsBeyondTheConcurrencyLimitAreRefusedAtOnce (refused while the slot is still
+  // held); the latencies here are printed for the record, not asserted (STYLE.md §8).
   const double growth_mib = mib(loaded.peak_rss_kb - warmed.rss_kb);
   EXPECT_LT(growth_mib, 256.0) << "peak RSS under overload grew past the warmed-up RSS by that much";
   std::printf("[fault] overload, %d callers × %d calls of %zu poses, --max-concurrent-calls %d: %d served, %d refused, "
@@ -682,7 +736,7 @@ TEST_F(FaultTest, OverloadIsRefusedAtOnceAndMemoryStaysBounded) {
               mib(warmed.rss_kb), mib(loaded.peak_rss_kb), growth_mib);
 
   // Load gone: every call is served again (once the last refused calls' slots are released).
-  ASSERT_TRUE(wait_for([&] { return heavy_call(probe) == grpc::StatusCode::OK; }, std::chrono::seconds(5)));
+  ASSERT_TRUE(wait_until([&] { return heavy_call(probe) == grpc::StatusCode::OK; }, std::chrono::seconds(30)));
   for (int i = 0; i < 10; ++i) EXPECT_EQ(heavy_call(probe), grpc::StatusCode::OK) << "call " << i;
 }
 
@@ -739,7 +793,15 @@ TEST_F(FaultTest, SoakKeepsDescriptorsAndMemoryFlat) {
     ProcessUsage usage;
     int64_t calls;
   };
-  std::this_thread::sleep_for(std::chrono::seconds(3));  // warm-up: pools, arenas, connections
+  // Warm-up — pools, arenas, connections — is over once every kind of load has gone round a few
+  // times (each stream round is 50 frames).
+  constexpr int64_t kWarmUpRounds = 5;
+  ASSERT_TRUE(wait_until([&] { return load.min_rounds() >= kWarmUpRounds; }, std::chrono::seconds(60)))
+      << "the load never warmed up";
+  const int64_t warm_up_calls = calls.load();
+  // The soak itself is sized in time (ANIMSPACE_SOAK_S) and sampled once a second: a measurement
+  // schedule, the one clock in these tests, not a wait for a state. Nothing asserted depends on
+  // how many calls fit in a second: the bounds are on descriptors and on RSS growth.
   std::vector<Sample> samples;
   const auto started = Clock::now();
   for (int s = 0; s <= soak_s; ++s) {
@@ -757,7 +819,7 @@ TEST_F(FaultTest, SoakKeepsDescriptorsAndMemoryFlat) {
   EXPECT_LE(std::abs(samples.back().usage.open_fds - samples.front().usage.open_fds), 4);
   EXPECT_LE(fds_max - samples.front().usage.open_fds, 8);
   int fds_after = 0;
-  EXPECT_TRUE(wait_for([&] { return (fds_after = usage_of(pid).open_fds) <= at_rest.open_fds + 2; }, std::chrono::seconds(5)))
+  EXPECT_TRUE(wait_until([&] { return (fds_after = usage_of(pid).open_fds) <= at_rest.open_fds + 2; }, std::chrono::seconds(30)))
       << fds_after << " descriptors open after the load, " << at_rest.open_fds << " before it";
 
   // Memory over the second half: a leak of L bytes per call shows as calls × L.
@@ -775,9 +837,9 @@ TEST_F(FaultTest, SoakKeepsDescriptorsAndMemoryFlat) {
   EXPECT_GT(second_half_calls, 0);
   EXPECT_LT(growth_kb, kGrowthBoundKb) << "RSS grew over the second half of the soak";
   const int64_t soak_calls = last.calls - samples[0].calls;
-  std::printf("[fault] soak %d s after 3 s warm-up: %lld calls (%.0f/s), %lld failed (warm-up included)\n", soak_s,
-              static_cast<long long>(soak_calls), static_cast<double>(soak_calls) / last.t_s,
-              static_cast<long long>(failures.load()));
+  std::printf("[fault] soak %d s after a warm-up of %lld calls: %lld calls (%.0f/s), %lld failed (warm-up included)\n",
+              soak_s, static_cast<long long>(warm_up_calls), static_cast<long long>(soak_calls),
+              static_cast<double>(soak_calls) / last.t_s, static_cast<long long>(failures.load()));
   std::printf("[fault] soak RSS MiB: at rest %.1f, first %.1f, mid %.1f, last %.1f, min %.1f, max %.1f; "
               "second-half growth %+.2f MiB over %lld calls (a leak of >= %.0f B/call would fail the %lld MiB bound)\n",
               mib(at_rest.rss_kb), mib(samples[0].usage.rss_kb), mib(mid.usage.rss_kb), mib(last.usage.rss_kb),
@@ -988,11 +1050,14 @@ TEST_F(FaultTest, OversizedRequestsAreRefusedAndTheMemoryTheyTakeIsBounded) {
     slowest_ms = std::max(slowest_ms, 1000 * seconds_since(started));
     EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  const ProcessUsage after_8 = usage_of(daemon->pid());
+  // The transport frees a refused request's buffers after the answer has gone out, so wait for the
+  // memory to come back rather than read it at once; a pile-up never comes back and times out.
+  const int64_t kept_bound_kb = kOversized / 2 * static_cast<int64_t>(kOversize / 1024);
+  ProcessUsage after_8 = usage_of(daemon->pid());
   if (!daemon_is_sanitized()) {
-    EXPECT_LT(after_8.rss_kb - before_8.rss_kb, kOversized / 2 * static_cast<int64_t>(kOversize / 1024))
-        << "refused requests pile up in memory";
+    EXPECT_TRUE(wait_until([&] { return (after_8 = usage_of(daemon->pid())).rss_kb - before_8.rss_kb < kept_bound_kb; },
+                           std::chrono::seconds(30)))
+        << "refused requests pile up in memory: RSS " << mib(before_8.rss_kb) << " -> " << mib(after_8.rss_kb) << " MiB";
   }
 
   // One request of 256 MiB, far past the quota: the transport resets it once the quota is

@@ -15,14 +15,14 @@
 
 #include "clients/cpp/client.h"
 #include "core/demo/demo_repository.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 
 class LoadtestTest : public ::testing::Test {

@@ -34,9 +34,9 @@
 #include "core/lod/selection.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/container/sections.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
-#include "tests/support/lod_fixtures.h"
+#include "harness/lod_fixtures.h"
 #include "tests/support/test_support.h"
 
 // tinygltf is compiled once, in animspace_core (core/animspace/tiny_gltf_impl.cpp), with these
@@ -50,7 +50,7 @@ namespace animspace {
 namespace {
 
 namespace as = animation_space;
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 using Form = v1::GetLodRequest::Form;
 

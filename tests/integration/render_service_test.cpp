@@ -23,14 +23,14 @@
 #include "core/container/sections.h"
 #include "core/render/camera.h"
 #include "core/render/png.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 
 // A flat background no shaded pixel of the arm can have.

@@ -20,14 +20,14 @@
 #include "core/demo/demo_repository.h"
 #include "core/container/sections.h"
 #include "core/pmsc/retrain.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 
 const std::string kModel(demo::kDemoPmscModelName);
@@ -56,12 +56,8 @@ nlohmann::json retrain_offline(const std::filesystem::path& repo, const std::fil
 }
 
 bool wait_for_default_version(Client& client, uint64_t version) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (client.describe_model(kModel).default_version() == version) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  return false;
+  return testing::wait_until([&] { return client.describe_model(kModel).default_version() == version; },
+                             std::chrono::seconds(30), std::chrono::milliseconds(20));
 }
 
 TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {

@@ -5,16 +5,16 @@
 #include <gtest/gtest.h>
 
 #include "clients/cpp/client.h"
-#include "tests/support/daemon_process.h"
+#include "core/demo/demo_repository.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 #include "tests/support/tls_fixtures.h"
-#include "core/demo/demo_repository.h"
 
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 using testing::code_of;
 using testing::wait_until_serving;

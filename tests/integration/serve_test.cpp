@@ -28,19 +28,18 @@
 #include "core/lod/lod_io.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
+#include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
-
-// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
-#include <httplib.h>
 
 namespace animspace {
 namespace {
 
-using testing::DaemonProcess;
+using harness::DaemonProcess;
 using testing::TempDir;
 using testing::narrow_arm_model;
+using testing::wait_until;
 using testing::write_model;
 
 constexpr double kDegree = 3.14159265358979323846 / 180.0;
@@ -470,14 +469,13 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
   EXPECT_EQ(stats.models(0).misses(), 2u);
   EXPECT_EQ(stats.models(0).hits(), 1u);
   EXPECT_DOUBLE_EQ(stats.models(0).hit_rate(), 1.0 / 3.0);
-  httplib::Client http("127.0.0.1", metrics_port);
-  auto scraped = http.Get("/metrics");
+  const auto scraped = testing::scrape_metrics(metrics_port);
   ASSERT_TRUE(scraped);
-  EXPECT_NE(scraped->body.find("animspace_cache_misses_total{model=\"bend\"} 2\n"), std::string::npos);
-  EXPECT_NE(scraped->body.find("animspace_cache_hits_total{model=\"bend\"} 1\n"), std::string::npos);
-  EXPECT_NE(scraped->body.find("animspace_model_version_serving{model=\"bend\",version=\"2\",default=\"1\"} 1\n"),
+  EXPECT_NE(scraped->find("animspace_cache_misses_total{model=\"bend\"} 2\n"), std::string::npos);
+  EXPECT_NE(scraped->find("animspace_cache_hits_total{model=\"bend\"} 1\n"), std::string::npos);
+  EXPECT_NE(scraped->find("animspace_model_version_serving{model=\"bend\",version=\"2\",default=\"1\"} 1\n"),
             std::string::npos);
-  EXPECT_NE(scraped->body.find("animspace_requests_total{rpc=\"TrainingService/Retrain\",model=\"bend\",code=\"OK\"} 1\n"),
+  EXPECT_NE(scraped->find("animspace_requests_total{rpc=\"TrainingService/Retrain\",model=\"bend\",code=\"OK\"} 1\n"),
             std::string::npos);
 
   // A second retrain finds only the version-1 miss just logged (without full values: nothing to
@@ -515,7 +513,7 @@ TEST_F(ServeTest, HotSwapWhileStreamingAThousandPosesFailsNothing) {
   std::thread writer([&] {
     for (int s = 0; s < kFrames; ++s) {
       // The second half goes out only after the new version is serving.
-      while (s == kFrames / 2 && !swapped.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      if (s == kFrames / 2) swapped.wait(false);
       v1::KeyPointFrame frame;
       if (s == 0) frame.mutable_model()->set_name("arm-pmsc");
       frame.set_sequence(static_cast<uint64_t>(s));
@@ -533,11 +531,13 @@ TEST_F(ServeTest, HotSwapWhileStreamingAThousandPosesFailsNothing) {
       received.fetch_add(1);
     }
   });
-  while (received.load() < 100) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  // Not ASSERT: the writer and reader threads must be released and joined whatever happens.
+  EXPECT_TRUE(wait_until([&] { return received.load() >= 100; })) << "the stream never got going";
   grpc::Status retrain_status;
   const auto retrained = retrain(*training, "arm-pmsc", false, &retrain_status);
   const int received_at_swap = received.load();
   swapped.store(true);
+  swapped.notify_all();
   writer.join();
   reader.join();
   const grpc::Status status = stream->Finish();
@@ -587,7 +587,7 @@ TEST_F(ServeTest, KillNineMidAppendKeepsEveryCompleteMissRecord) {
         }
       });
     }
-    while (acknowledged.load() < 30) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_TRUE(wait_until([&] { return acknowledged.load() >= 30; })) << "misses were never acknowledged";
     daemon->send_signal(SIGKILL);
     EXPECT_NE(daemon->wait_for_exit(std::chrono::seconds(10)), -1);
     stop.store(true);
@@ -647,13 +647,11 @@ TEST_F(ServeTest, CallsBeyondTheConcurrencyLimitAreRefusedAtOnce) {
     v1::DescribeKeyPointsResponse response;
     return poses->DescribeKeyPoints(&context, request, &response);
   };
-  // The stream is admitted when the server sees it; wait until a probe is refused.
+  // The stream is admitted when the server sees it; wait until a probe is refused. The refusal
+  // comes while the stream still holds the slot, so it did not wait for one.
   grpc::Status refused;
-  for (int attempt = 0; attempt < 200; ++attempt) {
-    refused = keys_probe();
-    if (refused.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
+  wait_until([&] { return (refused = keys_probe()).error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED; },
+             std::chrono::seconds(30), std::chrono::milliseconds(5));
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_NE(refused.error_message().find("server busy: 1 calls are already in progress (--max-concurrent-calls)"),
             std::string::npos)
@@ -663,11 +661,7 @@ TEST_F(ServeTest, CallsBeyondTheConcurrencyLimitAreRefusedAtOnce) {
   EXPECT_TRUE(stream->Finish().ok());
   // Load gone: served again.
   grpc::Status served;
-  for (int attempt = 0; attempt < 200; ++attempt) {
-    served = keys_probe();
-    if (served.ok()) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
+  wait_until([&] { return (served = keys_probe()).ok(); }, std::chrono::seconds(30), std::chrono::milliseconds(5));
   EXPECT_TRUE(served.ok()) << served.error_message();
 }
 
@@ -756,19 +750,26 @@ TEST_F(ServeTest, PollingLoadsNewVersionsAndRespectsUnloads) {
   Client client(daemon->address());
   EXPECT_EQ(client.describe_model("arm-pmsc").default_version(), 1u);
 
-  // Publish version 2 the way a nightly job should: write it aside, rename it into place.
-  std::filesystem::create_directories(repo_ / "arm-pmsc" / ".staging");
-  std::filesystem::copy_file(repo_ / "arm-pmsc" / "1" / "model.anim", repo_ / "arm-pmsc" / ".staging" / "model.anim");
-  std::filesystem::rename(repo_ / "arm-pmsc" / ".staging", repo_ / "arm-pmsc" / "2");
-  uint64_t served = 0;
-  for (int attempt = 0; attempt < 300 && served != 2; ++attempt) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    served = client.describe_model("arm-pmsc").default_version();
-  }
-  EXPECT_EQ(served, 2u);
+  // Publish a version the way a nightly job should: write it aside, rename it into place; the
+  // poll serves it.
+  const auto publish = [&](uint64_t version) {
+    const auto staging = repo_ / "arm-pmsc" / ".staging";
+    std::filesystem::create_directories(staging);
+    std::filesystem::copy_file(repo_ / "arm-pmsc" / "1" / "model.anim", staging / "model.anim");
+    std::filesystem::rename(staging, repo_ / "arm-pmsc" / std::to_string(version));
+    uint64_t served = 0;
+    EXPECT_TRUE(wait_until([&] { return (served = client.describe_model("arm-pmsc").default_version()) == version; },
+                           std::chrono::seconds(30)))
+        << "version " << version << " never served; default " << served;
+  };
+  publish(2);
 
+  // After the unload, two more versions served one after the other prove that a whole poll ran
+  // after it: the poll that serves version 4 began after version 3 was served. A poll that
+  // brought the unloaded model back would have done so by then.
   client.unload_model("arm-cross-pmsc");
-  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // four polls
+  publish(3);
+  publish(4);
   try {
     client.describe_model("arm-cross-pmsc");
     ADD_FAILURE() << "the poll brought back a model unloaded on purpose";
@@ -809,13 +810,9 @@ TEST_F(ServeTest, ACallWhoseDeadlinePassedInTheQueueIsNeverStarted) {
   }
   const auto one_retrain = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - timed);
   const auto deadline = std::clamp(2 * one_retrain, std::chrono::milliseconds(20), std::chrono::milliseconds(10000));
-  httplib::Client http("127.0.0.1", metrics_port);
-  const auto calls_in_flight = [&http] {
-    const auto scraped = http.Get("/metrics");
-    if (!scraped) return -1;
-    const std::string key = "\nanimspace_calls_in_flight ";
-    const size_t at = scraped->body.find(key);
-    return at == std::string::npos ? -1 : std::atoi(scraped->body.c_str() + at + key.size());
+  const auto calls_in_flight = [metrics_port] {
+    const auto page = testing::scrape_metrics(metrics_port);
+    return page ? testing::metric_value(*page, "animspace_calls_in_flight").value_or(-1) : -1;
   };
   constexpr int kRetrains = 8;
   std::vector<std::thread> retrains;
@@ -827,12 +824,10 @@ TEST_F(ServeTest, ACallWhoseDeadlinePassedInTheQueueIsNeverStarted) {
     });
   }
   // Six of eight in flight: at least four retrains wait behind the running one, twice the deadline.
-  bool queued = false;
-  for (int attempt = 0; attempt < 6000 && !queued; ++attempt) {
-    queued = calls_in_flight() >= kRetrains - 2;
-    if (!queued) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  ASSERT_TRUE(queued) << "the retrains never reached the server";
+  const bool queued = wait_until([&] { return calls_in_flight() >= kRetrains - 2; }, std::chrono::seconds(60),
+                                  std::chrono::milliseconds(10));
+  // Not ASSERT: the retrain threads must be joined either way.
+  EXPECT_TRUE(queued) << "the retrains never reached the server";
   auto models = v1::ModelService::NewStub(ch);
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + deadline);
@@ -850,18 +845,19 @@ TEST_F(ServeTest, ACallWhoseDeadlinePassedInTheQueueIsNeverStarted) {
   EXPECT_EQ(arm.default_version(), 1u);
   EXPECT_EQ(arm.versions_size(), 1);
   // The dropped call is counted when the admin thread reaches it, just after the retrains.
-  bool dropped = false;
   std::string body;
-  // Up to 60 s: under a sanitizer the four retrains ahead of it take many seconds.
-  for (int attempt = 0; attempt < 6000 && !dropped; ++attempt) {
-    auto scraped = http.Get("/metrics");
-    ASSERT_TRUE(scraped);
-    body = scraped->body;
-    dropped = body.find("rpc=\"ModelService/LoadModel\",model=\"\",code=\"DEADLINE_EXCEEDED\"} 1") !=
-                  std::string::npos ||
-              body.find("rpc=\"ModelService/LoadModel\",model=\"\",code=\"CANCELLED\"} 1") != std::string::npos;
-    if (!dropped) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  const auto load_model_calls = [&body](const char* code) {
+    return testing::metric_value(body, std::string("animspace_requests_total{rpc=\"ModelService/LoadModel\",model=\"\",code=\"") +
+                                           code + "\"}")
+        .value_or(0);
+  };
+  // A generous deadline: under a sanitizer the four retrains ahead of it take many seconds.
+  const bool dropped = wait_until(
+      [&] {
+        body = testing::scrape_metrics(metrics_port).value_or("");
+        return load_model_calls("DEADLINE_EXCEEDED") + load_model_calls("CANCELLED") == 1;
+      },
+      std::chrono::seconds(60), std::chrono::milliseconds(10));
   EXPECT_EQ(client.describe_model("arm-pmsc").versions_size(), 1);
   EXPECT_TRUE(dropped) << body.substr(0, 4000);
 }

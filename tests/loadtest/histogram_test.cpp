@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "clients/cpp/tools/quantile.h"
 #include "loadtest/runner.h"
 
 namespace animspace::loadtest {
@@ -57,6 +58,26 @@ TEST(LatencyHistogram, QuantilesMatchTheSortedSamplesWithinOnePercent) {
   for (double q : {0.0, 0.01, 0.5, 0.9, 0.99, 0.999, 0.9999, 1.0}) {
     const double exact = static_cast<double>(exact_quantile(samples, q));
     EXPECT_NEAR(static_cast<double>(h.quantile(q)), exact, 0.01 * exact) << "q = " << q;
+  }
+}
+
+// Below 128 ns every bucket holds one value, so the histogram's quantile is exact there and must
+// be the very sample the bench's sorted-sample quantile picks: one definition, not two.
+TEST(LatencyHistogram, QuantilesAreTheBenchsNearestRankWhereBucketsAreExact) {
+  std::mt19937_64 rng(7);
+  std::uniform_int_distribution<int64_t> value(0, 127);
+  for (int n : {1, 2, 3, 10, 70, 100, 1000}) {
+    LatencyHistogram h;
+    std::vector<double> samples;
+    for (int i = 0; i < n; ++i) {
+      const int64_t v = value(rng);
+      h.record(v);
+      samples.push_back(static_cast<double>(v));
+    }
+    for (int percent = 0; percent <= 100; ++percent) {
+      const double q = percent / 100.0;
+      EXPECT_EQ(static_cast<double>(h.quantile(q)), tools::quantile(samples, q)) << "n = " << n << ", q = " << q;
+    }
   }
 }
 

@@ -21,7 +21,7 @@ def tree(tmp_path):
     """A copy of what the checker reads: the document, every tree's sources and build files."""
     copy = tmp_path / "tree"
     ignore = shutil.ignore_patterns("build*", "corpus", "regressions", "*.png", "*.json", "__pycache__")
-    for name in ("docs", "core", "server", "clients", "loadtest", "bench", "fuzz", "tests"):
+    for name in ("docs", "core", "server", "clients", "loadtest", "harness", "bench", "fuzz", "tests"):
         if (ROOT / name).is_dir():
             shutil.copytree(ROOT / name, copy / name, ignore=ignore)
     return copy

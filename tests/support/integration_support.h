@@ -1,5 +1,5 @@
 // What the integration tests share: writing a model version into a repository, and waiting for
-// a daemon to report SERVING through the client library.
+// a daemon (or a client) to reach a state.
 #pragma once
 
 #include <chrono>
@@ -26,17 +26,32 @@ inline void write_model(const std::filesystem::path& repo, const std::string& na
   ASSERT_TRUE(container::write_file(dir / "model.anim", model).ok());
 }
 
+// How the tests wait (STYLE.md §8): for a state they can observe — a version served, a counter
+// reached, a file present — polled every `poll` until `timeout`, never for a fixed time. The
+// timeout is a generous bound for a loaded or sanitizer-built machine, not an expected duration:
+// a state that comes at all comes long before it. True when `condition` held, false on timeout.
+inline bool wait_until(const std::function<bool()>& condition,
+                       std::chrono::milliseconds timeout = std::chrono::seconds(60),
+                       std::chrono::milliseconds poll = std::chrono::milliseconds(2)) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (!condition()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(poll);
+  }
+  return true;
+}
+
 // Polls health until SERVING (it is NOT_SERVING while the repository loads); false after 30 s.
 inline bool wait_until_serving(Client& client) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < deadline) {
-    try {
-      if (client.health() == grpc::health::v1::HealthCheckResponse::SERVING) return true;
-    } catch (const RpcError&) {
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return false;
+  return wait_until(
+      [&client] {
+        try {
+          return client.health() == grpc::health::v1::HealthCheckResponse::SERVING;
+        } catch (const RpcError&) {
+          return false;
+        }
+      },
+      std::chrono::seconds(30), std::chrono::milliseconds(20));
 }
 
 // The status code `call` ends with: OK, or the code of the RpcError it throws.

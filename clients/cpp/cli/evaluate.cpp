@@ -4,9 +4,10 @@
 #include <cmath>
 #include <cstdio>
 
-#include "clients/cpp/cli/key_frames.h"
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/sequence_frames.h"
 #include "core/mesh_io/pc2.h"
 
 namespace animspace::cli {
@@ -35,10 +36,10 @@ CLI::App* add_evaluate(CLI::App& app, EvaluateArgs& a) {
 }
 
 int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
-  auto frames = load_sequence_frames(a.sequence, a.pc2);
+  auto frames = tools::load_sequence_frames(a.sequence, a.pc2);
   if (!frames) return fail("evaluate", frames.error().message);
   std::string error;
-  const auto selected = parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
+  const auto selected = tools::parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
   if (selected.empty()) return fail("evaluate", error);
   const KeyPoints keys = client.describe_key_points(a.model, a.version);
   if (frames->cols() != static_cast<long>(keys.control_point_count) * keys.channels) {

@@ -8,6 +8,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/frame_selection.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
@@ -69,9 +70,9 @@ int run_fit(const FitArgs& a, bool json) {
   auto sequence = mesh_io::load_sequence(a.sequence, a.pc2);
   if (!sequence) return fail("fit", sequence.error().message);
   std::string error;
-  const auto selected = parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
+  const auto selected = tools::parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
   if (selected.empty()) return fail("fit", error);
-  const FrameMatrix frames = select_rows(sequence->frames.samples, selected);
+  const FrameMatrix frames = tools::select_rows(sequence->frames.samples, selected);
 
   animation_space::SequenceFitOptions options;
   options.segmentation.bone_count = a.bones;

@@ -10,7 +10,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
-#include "clients/cpp/cli/pose_file.h"
+#include "clients/cpp/tools/pose_file.h"
 #include "core/animspace/animspace_io.h"
 #include "core/common/atomic_file.h"
 #include "core/mesh_io/posed_mesh.h"
@@ -266,7 +266,7 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
     view->set_viewport_width_px(a.viewport_width_px);
   }
   if (!a.pose_file.empty()) {
-    auto poses = read_pose_file(a.pose_file, pose_space(a.pose_space));
+    auto poses = tools::read_pose_file(a.pose_file, tools::pose_space(a.pose_space));
     if (!poses) return fail("lod", "--pose-file: " + poses.error().message);
     *request.mutable_pose() = encode_skeleton_pose(poses->front());
   }

@@ -4,9 +4,10 @@
 #include <cstdio>
 #include <thread>
 
-#include "clients/cpp/cli/key_frames.h"
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/sequence_frames.h"
 
 namespace animspace::cli {
 
@@ -29,10 +30,10 @@ CLI::App* add_play(CLI::App& app, PlayArgs& a) {
 }
 
 int run_play(const PlayArgs& a, Client& client, bool json) {
-  auto frames = load_sequence_frames(a.sequence, a.pc2);
+  auto frames = tools::load_sequence_frames(a.sequence, a.pc2);
   if (!frames) return fail("play", frames.error().message);
   std::string error;
-  const auto selected = parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
+  const auto selected = tools::parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
   if (selected.empty()) return fail("play", error);
 
   const KeyPoints keys = client.describe_key_points(a.model, a.version);

@@ -7,7 +7,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
-#include "clients/cpp/cli/pose_file.h"
+#include "clients/cpp/tools/pose_file.h"
 #include "core/mesh_io/posed_mesh.h"
 #include "core/mesh_io/pc2.h"
 
@@ -48,7 +48,7 @@ int run_pose(const PoseArgs& a, Client& client, bool json) {
     if (a.version == 0 ? v.version() == model.default_version() : v.version() == a.version) bones = v.bone_count();
   }
   if (bones == 0) return fail("pose", "model '" + a.model + "' has no skeleton to pose");
-  auto poses = read_pose_file(a.pose_file, pose_space(a.pose_space), bones);
+  auto poses = tools::read_pose_file(a.pose_file, tools::pose_space(a.pose_space), bones);
   if (!poses) return fail("pose", "--pose-file: " + poses.error().message);
 
   SkinningOptions options;

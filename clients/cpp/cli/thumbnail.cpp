@@ -3,9 +3,9 @@
 #include <cstdio>
 #include <numbers>
 
-#include "clients/cpp/cli/key_frames.h"
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/sequence_frames.h"
 #include "core/common/atomic_file.h"
 
 namespace animspace::cli {
@@ -74,7 +74,7 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
   }
   if (a.frame >= 0) request.set_sequence_frame(static_cast<uint32_t>(a.frame));
   if (!a.sequence.empty()) {
-    auto frames = load_sequence_frames(a.sequence, a.pc2);
+    auto frames = tools::load_sequence_frames(a.sequence, a.pc2);
     if (!frames) return fail("thumbnail", frames.error().message);
     if (a.sequence_frame >= frames->rows()) {
       return fail("thumbnail", "--sequence-frame: expected 0.." + std::to_string(frames->rows() - 1) + ", got " +

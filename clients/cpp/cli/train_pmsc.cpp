@@ -6,6 +6,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/frame_selection.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/pmsc/pmsc_io.h"
@@ -58,11 +59,11 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
     return fail("train-pmsc", sequence.error().message);
   }
   std::string error;
-  const auto selected = parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
+  const auto selected = tools::parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
   if (selected.empty()) {
     return fail("train-pmsc", error);
   }
-  const FrameMatrix frames = select_rows(sequence->frames.samples, selected);
+  const FrameMatrix frames = tools::select_rows(sequence->frames.samples, selected);
 
   std::optional<mesh_io::LoadedSequence> control;
   FrameMatrix control_frames;
@@ -76,7 +77,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                    loaded->frames.num_frames(), sequence->frames.num_frames());
       return 2;
     }
-    control_frames = select_rows(loaded->frames.samples, selected);
+    control_frames = tools::select_rows(loaded->frames.samples, selected);
     control = std::move(*loaded);
   }
 

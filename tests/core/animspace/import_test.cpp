@@ -17,6 +17,7 @@
 #include "core/mesh_io/libigl_rig.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "tests/support/animspace_fixtures.h"
+#include "harness/gltf_builder.h"
 #include "tests/support/test_support.h"
 
 namespace animspace::animation_space {
@@ -309,82 +310,7 @@ TEST(ImportLibiglTest, DropBelowCountsAndRenormalises) {
 // glTF 2.0 skins
 
 using nlohmann::json;
-
-std::string base64(const std::string& bytes) {
-  static const char* const kAlphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  size_t i = 0;
-  for (; i + 2 < bytes.size(); i += 3) {
-    const uint32_t n = (static_cast<uint8_t>(bytes[i]) << 16) | (static_cast<uint8_t>(bytes[i + 1]) << 8) |
-                       static_cast<uint8_t>(bytes[i + 2]);
-    for (int s = 18; s >= 0; s -= 6) out += kAlphabet[(n >> s) & 63];
-  }
-  if (i < bytes.size()) {
-    uint32_t n = static_cast<uint8_t>(bytes[i]) << 16;
-    if (i + 1 < bytes.size()) n |= static_cast<uint8_t>(bytes[i + 1]) << 8;
-    out += kAlphabet[(n >> 18) & 63];
-    out += kAlphabet[(n >> 12) & 63];
-    out += i + 1 < bytes.size() ? kAlphabet[(n >> 6) & 63] : '=';
-    out += '=';
-  }
-  return out;
-}
-
-// Assembles a glTF document: one buffer, one buffer view per accessor.
-struct GltfBuilder {
-  json doc = {{"asset", {{"version", "2.0"}}}, {"bufferViews", json::array()}, {"accessors", json::array()}};
-  std::string bin;
-
-  template <typename T>
-  int add(const std::vector<T>& values, int component_type, const std::string& type, size_t count,
-          bool normalized = false) {
-    while (bin.size() % 4 != 0) bin += '\0';
-    const size_t offset = bin.size();
-    bin.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T));
-    doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", values.size() * sizeof(T)}});
-    json accessor = {{"bufferView", doc["bufferViews"].size() - 1},
-                     {"componentType", component_type},
-                     {"count", count},
-                     {"type", type}};
-    if (normalized) accessor["normalized"] = true;
-    doc["accessors"].push_back(accessor);
-    return static_cast<int>(doc["accessors"].size()) - 1;
-  }
-
-  enum class Layout { kExternalBin, kDataUri, kGlb };
-
-  void write(const std::filesystem::path& path, Layout layout) {
-    json out = doc;
-    while (bin.size() % 4 != 0) bin += '\0';
-    if (layout == Layout::kExternalBin) {
-      const std::string name = path.stem().string() + ".bin";
-      testing::write_text_file(path.parent_path() / name, bin);
-      out["buffers"] = {{{"byteLength", bin.size()}, {"uri", name}}};
-    } else if (layout == Layout::kDataUri) {
-      out["buffers"] = {{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + base64(bin)}}};
-    } else {
-      out["buffers"] = {{{"byteLength", bin.size()}}};
-    }
-    std::string text = out.dump();
-    if (layout != Layout::kGlb) {
-      testing::write_text_file(path, text);
-      return;
-    }
-    while (text.size() % 4 != 0) text += ' ';
-    std::string glb;
-    const auto u32 = [&glb](uint32_t value) { glb.append(reinterpret_cast<const char*>(&value), 4); };
-    glb += "glTF";
-    u32(2);
-    u32(static_cast<uint32_t>(12 + 8 + text.size() + 8 + bin.size()));
-    u32(static_cast<uint32_t>(text.size()));
-    u32(0x4E4F534A);  // JSON
-    glb += text;
-    u32(static_cast<uint32_t>(bin.size()));
-    u32(0x004E4942);  // BIN
-    glb += bin;
-    testing::write_text_file(path, glb);
-  }
-};
+using testing::GltfBuilder;
 
 constexpr int kUnsignedByte = 5121, kUnsignedShort = 5123, kUnsignedInt = 5125, kFloat = 5126;
 

@@ -10,7 +10,7 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/tangents.h"
 #include "core/lod/simplify.h"
-#include "tests/support/lod_fixtures.h"
+#include "harness/lod_fixtures.h"
 
 namespace animspace::lod {
 namespace {

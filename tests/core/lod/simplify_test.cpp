@@ -16,7 +16,7 @@
 #include <Eigen/Geometry>
 
 #include "core/animspace/skeleton.h"
-#include "tests/support/lod_fixtures.h"
+#include "harness/lod_fixtures.h"
 
 namespace animspace::lod {
 namespace {

@@ -1,4 +1,4 @@
-#include "clients/cpp/cli/key_frames.h"
+#include "clients/cpp/tools/sequence_frames.h"
 
 #include <filesystem>
 
@@ -6,7 +6,7 @@
 #include "core/mesh_io/sequence_io.h"
 #include "core/container/sections.h"
 
-namespace animspace::cli {
+namespace animspace::tools {
 
 Result<FrameMatrix> load_sequence_frames(const std::string& sequence, const std::string& pc2) {
   if (std::filesystem::path(sequence).extension() == ".anim") {
@@ -19,4 +19,4 @@ Result<FrameMatrix> load_sequence_frames(const std::string& sequence, const std:
   return FrameMatrix(loaded->frames.samples);
 }
 
-}  // namespace animspace::cli
+}  // namespace animspace::tools

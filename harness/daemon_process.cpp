@@ -1,4 +1,4 @@
-#include "tests/support/daemon_process.h"
+#include "harness/daemon_process.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -11,7 +11,7 @@
 #include <stdexcept>
 #include <thread>
 
-namespace animspace::testing {
+namespace animspace::harness {
 
 std::filesystem::path daemon_binary() {
   if (const char* env = std::getenv("ANIMSPACED")) return env;
@@ -95,4 +95,4 @@ int DaemonProcess::wait_for_exit(std::chrono::milliseconds timeout) {
   return -1;
 }
 
-}  // namespace animspace::testing
+}  // namespace animspace::harness

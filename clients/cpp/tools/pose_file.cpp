@@ -1,4 +1,4 @@
-#include "clients/cpp/cli/pose_file.h"
+#include "clients/cpp/tools/pose_file.h"
 
 #include <cmath>
 #include <cstdlib>
@@ -6,7 +6,7 @@
 
 #include "core/common/atomic_file.h"
 
-namespace animspace::cli {
+namespace animspace::tools {
 
 v1::SkeletonPose::Space pose_space(const std::string& name) {
   return name == "local" ? v1::SkeletonPose::SPACE_LOCAL : v1::SkeletonPose::SPACE_GLOBAL;
@@ -49,4 +49,4 @@ Result<std::vector<SkeletonPose>> read_pose_file(const std::string& path, v1::Sk
   return poses;
 }
 
-}  // namespace animspace::cli
+}  // namespace animspace::tools

@@ -1,4 +1,6 @@
-// Runs the real animspaced binary as a child process for integration tests.
+// Runs the real animspaced binary as a child process and waits until it listens: the integration
+// tests and animspace-bench's serving suites both drive the daemon from the outside, through the
+// protocol, so neither may carry its own copy of the launcher.
 #pragma once
 
 #include <sys/types.h>
@@ -8,13 +10,13 @@
 #include <string>
 #include <vector>
 
-namespace animspace::testing {
+namespace animspace::harness {
 
 class DaemonProcess {
  public:
   // Starts `animspaced --listen 127.0.0.1:0 --port-file … <extra_args>` with stdout/stderr
   // going to `log_path`, and waits until it has written its port. Throws std::runtime_error
-  // (failing the test) when it does not come up within `timeout`.
+  // (failing the test, ending the bench) when it does not come up within `timeout`.
   DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,
                 std::chrono::milliseconds timeout = std::chrono::seconds(90));
   // Kills the process if it is still running.
@@ -38,7 +40,7 @@ class DaemonProcess {
   std::filesystem::path log_path_;
 };
 
-// Path of the animspaced binary under test: $ANIMSPACED, else the one the build compiled in.
+// Path of the animspaced binary to run: $ANIMSPACED, else the one the build compiled in.
 std::filesystem::path daemon_binary();
 
-}  // namespace animspace::testing
+}  // namespace animspace::harness
