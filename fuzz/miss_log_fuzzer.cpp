@@ -76,9 +76,9 @@ void read_as_miss_log(std::string_view bytes) {
   for (const misslog::MissRecord& record : *records) {
     FUZZ_CHECK(record.sequence > previous_sequence);
     previous_sequence = record.sequence;
-    FUZZ_CHECK(record.channels >= 1);
-    FUZZ_CHECK(record.key_values.size() % record.channels == 0);
-    FUZZ_CHECK(record.full_values.size() % record.channels == 0);
+    FUZZ_CHECK(record.channel_count >= 1);
+    FUZZ_CHECK(record.key_values.size() % record.channel_count == 0);
+    FUZZ_CHECK(record.full_values.size() % record.channel_count == 0);
     accounted += kRecordHeaderSize + kFixedPayloadSize + 4 * (record.key_values.size() + record.full_values.size());
   }
   FUZZ_CHECK(accounted + report.ignored_tail_bytes == bytes.size());

@@ -107,11 +107,11 @@ void check_container(const container::ModelContainer& c) {
 // --- The registry's load, then the first use of what it loaded --------------------------------
 
 void use_pmsc(const pmsc::PmscModel& m, const model::ModelInfo& info) {
-  FUZZ_CHECK(m.point_count == info.point_count && m.channels == info.channel_count);
+  FUZZ_CHECK(m.point_count == info.point_count && m.channel_count == info.channel_count);
   FUZZ_CHECK(m.key_point_count() == info.key_point_count && m.basis_size() == info.basis_size);
-  FUZZ_CHECK(m.mean.size() == int64_t{m.point_count} * m.channels);
+  FUZZ_CHECK(m.mean.size() == int64_t{m.point_count} * m.channel_count);
   // A pose of all-zero key values (finite, which is all the request validation guarantees).
-  const Eigen::VectorXf key_values = Eigen::VectorXf::Zero(int64_t{m.key_point_count()} * m.channels);
+  const Eigen::VectorXf key_values = Eigen::VectorXf::Zero(int64_t{m.key_point_count()} * m.channel_count);
   pmsc::CachedPose pose;
   pmsc::evaluate_cached(m, key_values, nullptr, pose);
   FUZZ_CHECK(pose.points.size() == m.mean.size());

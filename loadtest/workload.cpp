@@ -61,12 +61,12 @@ Result<Workload> make_workload(Client& client, const WorkloadArgs& a) {
   const std::vector<int> selected = tools::parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
   if (selected.empty()) return invalid(error);
   const KeyPoints keys = client.describe_key_points(a.model, a.version);
-  if (frames->cols() != static_cast<long>(keys.control_point_count) * keys.channels) {
-    return invalid(a.sequence + ": " + std::to_string(frames->cols() / std::max(1u, keys.channels)) +
+  if (frames->cols() != static_cast<long>(keys.control_point_count) * keys.channel_count) {
+    return invalid(a.sequence + ": " + std::to_string(frames->cols() / std::max(1u, keys.channel_count)) +
                    " points per frame, model '" + a.model + "' expects " + std::to_string(keys.control_point_count));
   }
   w.version = keys.model_version;
-  w.channels = keys.channels;
+  w.channel_count = keys.channel_count;
   for (int f : selected) {
     w.key_frames.push_back(keys.gather({frames->row(f).data(), static_cast<size_t>(frames->cols())}));
     w.frame_numbers.push_back(f);

@@ -41,7 +41,7 @@ struct Workload {
   Rpc rpc = Rpc::kEvaluate;
   uint32_t batch = 1;
   bool omit_points = true;
-  uint32_t channels = 3;
+  uint32_t channel_count = 3;
   std::vector<std::vector<float>> key_frames;  // kEvaluate, kStream: K·D values per frame
   std::vector<SkeletonPose> skeleton_poses;    // kSkinning
   std::vector<int> frame_numbers;              // the sequence frame each entry came from

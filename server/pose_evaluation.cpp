@@ -34,7 +34,7 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
                          PoseInput& out) {
   const pmsc::PmscModel& m = *model.pmsc;
   if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
-                                     static_cast<uint32_t>(m.key_point_count()), static_cast<uint32_t>(m.channels),
+                                     static_cast<uint32_t>(m.key_point_count()), static_cast<uint32_t>(m.channel_count),
                                      "key points", out.key_values);
       !s.ok()) {
     return s;
@@ -75,7 +75,7 @@ bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const Pose
   out->set_model_version(model.version);
   out->set_full_evaluation_needed(cached.full_evaluation_needed);
   if (!options.omit_points) {
-    encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channels),
+    encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channel_count),
                   out->mutable_points());
   }
   if (options.include_region_errors) {
@@ -97,7 +97,7 @@ bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const Pose
   record.status = cached.status;
   record.key_point_error = cached.key_point_error;
   record.blend_weight = cached.alpha;
-  record.channels = static_cast<uint32_t>(m.channels);
+  record.channel_count = static_cast<uint32_t>(m.channel_count);
   record.key_values.assign(input.key_values.data(), input.key_values.data() + input.key_values.size());
   const Eigen::VectorXf* full =
       client_full != nullptr ? client_full

@@ -154,7 +154,7 @@ KeyPoints Client::describe_key_points(const std::string& model, uint64_t version
   KeyPoints out;
   out.model_version = response.model_version();
   out.indices.assign(response.key_point_indices().begin(), response.key_point_indices().end());
-  out.channels = response.channel_count();
+  out.channel_count = response.channel_count();
   out.control_point_count = response.control_point_count();
   out.regions.assign(response.key_point_regions().begin(), response.key_point_regions().end());
   out.fail_through = response.fail_through();
@@ -208,7 +208,7 @@ CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, 
   request.mutable_model()->set_version(version);
   v1::KeyPointPose encoded = encode_key_point_pose(pose);
   *request.mutable_key_values() = std::move(*encoded.mutable_key_values());
-  const uint32_t channels = pose.channels;
+  const uint32_t channels = pose.channel_count;
   if (full_values.size() % channels != 0) {
     throw std::invalid_argument("complete_miss: full_values holds " + std::to_string(full_values.size()) +
                                 " floats, not a whole number of " + std::to_string(channels) + "-channel points");

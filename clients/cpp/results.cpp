@@ -19,17 +19,17 @@ const char* cache_status_name(v1::CacheStatus status) {
 }
 
 std::vector<float> KeyPoints::gather(std::span<const float> frame) const {
-  const size_t needed = size_t{control_point_count} * channels;
+  const size_t needed = size_t{control_point_count} * channel_count;
   if (frame.size() != needed) {
     throw std::invalid_argument("KeyPoints::gather: the frame holds " + std::to_string(frame.size()) +
                                 " values, expected " + std::to_string(control_point_count) + " points × " +
-                                std::to_string(channels) + " channels");
+                                std::to_string(channel_count) + " channels");
   }
   std::vector<float> out;
-  out.reserve(indices.size() * channels);
+  out.reserve(indices.size() * channel_count);
   for (uint32_t index : indices) {
-    const float* point = frame.data() + size_t{index} * channels;
-    out.insert(out.end(), point, point + channels);
+    const float* point = frame.data() + size_t{index} * channel_count;
+    out.insert(out.end(), point, point + channel_count);
   }
   return out;
 }
@@ -37,15 +37,15 @@ std::vector<float> KeyPoints::gather(std::span<const float> frame) const {
 Points decode_points(const v1::PointArray& array) {
   Points out;
   out.count = array.point_count();
-  out.channels = array.channel_count();
-  const size_t expected = size_t{out.count} * out.channels * sizeof(float);
+  out.channel_count = array.channel_count();
+  const size_t expected = size_t{out.count} * out.channel_count * sizeof(float);
   if (array.data().size() != expected) {
     // The server checks its own answers; a mismatch means a broken peer, not a user error.
     throw std::runtime_error("malformed PointArray from the server: " + std::to_string(out.count) + " points × " +
-                             std::to_string(out.channels) + " channels need " + std::to_string(expected) +
+                             std::to_string(out.channel_count) + " channels need " + std::to_string(expected) +
                              " bytes, got " + std::to_string(array.data().size()));
   }
-  out.values.resize(size_t{out.count} * out.channels);
+  out.values.resize(size_t{out.count} * out.channel_count);
   if (expected > 0) std::memcpy(out.values.data(), array.data().data(), expected);
   return out;
 }
@@ -79,13 +79,13 @@ v1::SkeletonPose encode_skeleton_pose(const SkeletonPose& pose) {
 }
 
 v1::KeyPointPose encode_key_point_pose(const KeyPointPose& pose) {
-  if (pose.channels == 0 || pose.key_values.size() % pose.channels != 0) {
+  if (pose.channel_count == 0 || pose.key_values.size() % pose.channel_count != 0) {
     throw std::invalid_argument("KeyPointPose.key_values holds " + std::to_string(pose.key_values.size()) +
-                                " floats, not a whole number of " + std::to_string(pose.channels) + "-channel points");
+                                " floats, not a whole number of " + std::to_string(pose.channel_count) + "-channel points");
   }
   v1::KeyPointPose out;
   *out.mutable_key_values() = make_point_array(
-      pose.key_values.data(), static_cast<uint32_t>(pose.key_values.size() / pose.channels), pose.channels);
+      pose.key_values.data(), static_cast<uint32_t>(pose.key_values.size() / pose.channel_count), pose.channel_count);
   if (pose.skeleton_pose != nullptr) *out.mutable_skeleton_pose() = encode_skeleton_pose(*pose.skeleton_pose);
   return out;
 }

@@ -21,13 +21,13 @@ namespace animspace {
 // N points × D channels, point-major.
 struct Points {
   uint32_t count = 0;     // N
-  uint32_t channels = 0;  // D
+  uint32_t channel_count = 0;  // D
   std::vector<float> values;  // N·D
 
   bool empty() const { return count == 0; }
   // The D channels of point i.
   std::span<const float> point(uint32_t i) const {
-    return {values.data() + size_t{i} * channels, channels};
+    return {values.data() + size_t{i} * channel_count, channel_count};
   }
 };
 
@@ -37,7 +37,7 @@ struct KeyPoints {
   // Zero-based indices into the full (or, for cross-PMSC, control) point set, in the order key
   // values must be sent.
   std::vector<uint32_t> indices;
-  uint32_t channels = 0;
+  uint32_t channel_count = 0;
   uint32_t control_point_count = 0;
   // Region of each key point for models with regions (local fail-through), else empty.
   std::vector<uint32_t> regions;
@@ -58,7 +58,7 @@ struct SkeletonPose {
 // skeleton pose it came from so that a server posing engine can complete a blend or miss.
 struct KeyPointPose {
   std::span<const float> key_values;
-  uint32_t channels = 3;
+  uint32_t channel_count = 3;
   const SkeletonPose* skeleton_pose = nullptr;
 };
 

@@ -221,7 +221,7 @@ MissRecord decode_payload(std::string_view payload, uint32_t version) {
   record.unix_time_us = load_le<int64_t>(payload, kUnixTimeAt);
   record.key_point_error = load_le<double>(payload, kKeyPointErrorAt);
   record.blend_weight = load_le<double>(payload, kBlendWeightAt);
-  record.channels = load_le<uint32_t>(payload, kChannelsAt);
+  record.channel_count = load_le<uint32_t>(payload, kChannelsAt);
   record.status = *status_of_code(load_le<uint8_t>(payload, kStatusAt), version);
   const auto key_count = load_le<uint32_t>(payload, kKeyCountAt);
   const auto full_count = load_le<uint32_t>(payload, kFullCountAt);
@@ -240,7 +240,7 @@ MissRecord decode_payload(std::string_view payload, uint32_t version) {
 struct RecordView {
   std::optional<pmsc::CacheStatus> status;  // nullopt: a byte no status has in the file's version
   unsigned status_code = 0;                 // as stored, for messages
-  uint32_t channels = 0;
+  uint32_t channel_count = 0;
   double key_point_error = 0;
   double blend_weight = 0;
   uint64_t key_count = 0;
@@ -252,7 +252,7 @@ struct RecordView {
 RecordView view_of(const MissRecord& record, uint32_t version) {
   return {record.status,
           status_code(record.status, version),
-          record.channels,
+          record.channel_count,
           record.key_point_error,
           record.blend_weight,
           record.key_values.size(),
@@ -297,14 +297,14 @@ Result<uint64_t> check_record(const RecordView& record) {
                                          : "code " + std::to_string(record.status_code)) +
                           ", expected blend or miss");
   }
-  if (record.channels == 0) {
-    return make_error(ErrorCode::kInvalidArgument, "miss record channels is 0, expected ≥ 1");
+  if (record.channel_count == 0) {
+    return make_error(ErrorCode::kInvalidArgument, "miss record channel_count is 0, expected ≥ 1");
   }
-  if (record.key_count % record.channels != 0 || record.full_count % record.channels != 0) {
+  if (record.key_count % record.channel_count != 0 || record.full_count % record.channel_count != 0) {
     return make_error(ErrorCode::kInvalidArgument,
                       "miss record key_values (" + std::to_string(record.key_count) +
                           ") and full_values (" + std::to_string(record.full_count) +
-                          ") must be multiples of channels (" + std::to_string(record.channels) +
+                          ") must be multiples of channel_count (" + std::to_string(record.channel_count) +
                           ")");
   }
   const uint64_t length = kFixedPayloadSize + 4 * (record.key_count + record.full_count);
@@ -443,7 +443,7 @@ std::string encode_unsealed(const MissRecord& record, uint64_t payload_length, u
   store_le<int64_t>(framed, p + kUnixTimeAt, record.unix_time_us);
   store_le<double>(framed, p + kKeyPointErrorAt, record.key_point_error);
   store_le<double>(framed, p + kBlendWeightAt, record.blend_weight);
-  store_le<uint32_t>(framed, p + kChannelsAt, record.channels);
+  store_le<uint32_t>(framed, p + kChannelsAt, record.channel_count);
   store_le<uint8_t>(framed, p + kStatusAt, status_code(record.status, version));
   store_le<uint32_t>(framed, p + kKeyCountAt, static_cast<uint32_t>(record.key_values.size()));
   store_le<uint32_t>(framed, p + kFullCountAt, static_cast<uint32_t>(record.full_values.size()));

@@ -70,7 +70,7 @@ struct MissRecord {
   pmsc::CacheStatus status = pmsc::CacheStatus::kMiss;  // kBlend or kMiss (a hit is never logged)
   double key_point_error = 0;  // e_key, RMS key-point error of the estimate (model units)
   double blend_weight = 0;     // α of the soft-cache blend, in [0, 1]
-  uint32_t channels = 3;       // D ≥ 1
+  uint32_t channel_count = 3;       // D ≥ 1
   std::vector<float> key_values;   // K·D
   std::vector<float> full_values;  // N·D, or empty when the full values are not known
 };

@@ -64,7 +64,7 @@ int choose_from_vector(const Eigen::VectorXd& v, int channels, int candidate_cou
 
 Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eigen::MatrixXd& basis,
                                             const KeyPointOptions& o) {
-  const int D = o.channels;
+  const int D = o.channel_count;
   if (D < 1 || T.rows() % D != 0) {
     return make_error(ErrorCode::kInvalidArgument, "channels: " + std::to_string(D) + " does not divide the " +
                                                        std::to_string(T.rows()) + " rows of the training matrix");

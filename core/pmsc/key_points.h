@@ -24,7 +24,7 @@
 namespace animspace::pmsc {
 
 struct KeyPointOptions {
-  int channels = 3;  // D
+  int channel_count = 3;  // D
   // Basis vectors per block, 10–20 in the papers.
   int block_size = 12;
   // Stop when every point of every training frame is reconstructed within this distance

@@ -29,7 +29,7 @@ struct DoubleOption {
   double TrainingOptions::*member;
 };
 constexpr IntOption kIntOptions[] = {
-    {"channels", &TrainingOptions::channels},
+    {"channels", &TrainingOptions::channel_count},  // metadata pmsc.options.channels, as written since release 0.1
     {"basis_size", &TrainingOptions::basis_size},
     {"max_basis", &TrainingOptions::max_basis},
     {"block_size", &TrainingOptions::block_size},
@@ -68,7 +68,7 @@ Error unparsable(const std::string& source, const std::string& key, const std::s
 
 void store(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()["kind"] = m.cross ? "cross_pmsc" : "pmsc";
-  out.metadata()["pmsc.channels"] = std::to_string(m.channels);
+  out.metadata()["pmsc.channels"] = std::to_string(m.channel_count);
   out.metadata()["pmsc.cross"] = m.cross ? "1" : "0";
   out.metadata()["pmsc.aligned"] = m.aligned ? "1" : "0";
   out.metadata()["pmsc.control_point_count"] = std::to_string(m.control_point_count);
@@ -95,22 +95,22 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
   if (!control) return with_source(control.error(), source);
   auto regions = in.metadata_int("pmsc.region_count");
   if (!regions) return with_source(regions.error(), source);
-  m.channels = *channels;
+  m.channel_count = *channels;
   m.control_point_count = *control;
   m.region_count = *regions;
   m.cross = in.metadata_value("pmsc.cross") == "1";
   m.aligned = in.metadata_value("pmsc.aligned") == "1";
-  if (m.channels < 1) return make_error(ErrorCode::kInvalidArgument, source + ": pmsc.channels must be ≥ 1");
+  if (m.channel_count < 1) return make_error(ErrorCode::kInvalidArgument, source + ": pmsc.channels must be ≥ 1");
 
   auto mean = in.float_matrix("pmsc.mean");
   if (!mean) return mean.error();
-  if (mean->rows() != 1 || mean->cols() % m.channels != 0) {
+  if (mean->rows() != 1 || mean->cols() % m.channel_count != 0) {
     return make_error(ErrorCode::kInvalidArgument, source + ": section 'pmsc.mean' should be 1 × N·" +
-                                                       std::to_string(m.channels) + ", got " +
+                                                       std::to_string(m.channel_count) + ", got " +
                                                        std::to_string(mean->rows()) + "×" + std::to_string(mean->cols()));
   }
   m.mean = mean->row(0).transpose();
-  m.point_count = static_cast<int>(mean->cols() / m.channels);
+  m.point_count = static_cast<int>(mean->cols() / m.channel_count);
   auto basis = in.float_matrix("pmsc.basis");
   if (!basis) return basis.error();
   m.basis = *basis;

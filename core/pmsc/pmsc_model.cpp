@@ -60,13 +60,13 @@ Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, doubl
 }
 
 Status prepare_projection(PmscModel& m) {
-  const long D = m.channels;
+  const long D = m.channel_count;
   const long M = m.basis.cols();
   const long K = static_cast<long>(m.key_points.size());
-  if (m.channels < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: channels must be ≥ 1");
-  if (m.aligned && m.channels != 3) {
+  if (m.channel_count < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: channels must be ≥ 1");
+  if (m.aligned && m.channel_count != 3) {
     return make_error(ErrorCode::kInvalidArgument, "pmsc model: rigid alignment needs 3 channels, got " +
-                                                       std::to_string(m.channels));
+                                                       std::to_string(m.channel_count));
   }
   if (m.point_count < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: point_count must be ≥ 1");
   if (m.mean.size() != m.point_count * D) {
@@ -250,7 +250,7 @@ void evaluate(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_v
   out.region_errors.assign(static_cast<size_t>(m.region_count), 0.0);
   if (m.region_count > 0) {
     std::vector<long> counts(static_cast<size_t>(m.region_count), 0);
-    const long D = m.channels;
+    const long D = m.channel_count;
     for (size_t k = 0; k < m.key_regions.size(); ++k) {
       const auto r = static_cast<size_t>(m.key_regions[k]);
       out.region_errors[r] += key_residual.segment(static_cast<long>(k) * D, D).squaredNorm();
@@ -330,7 +330,7 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
 }
 
 Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
-  const long D = m.channels;
+  const long D = m.channel_count;
   assert(control_frame.size() == m.control_point_count * D);
   Eigen::VectorXf keys(static_cast<long>(m.key_points.size()) * D);
   for (size_t k = 0; k < m.key_points.size(); ++k) {

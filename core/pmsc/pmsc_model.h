@@ -31,7 +31,7 @@
 namespace animspace::pmsc {
 
 struct PmscModel {
-  int channels = 3;             // D
+  int channel_count = 3;             // D
   int point_count = 0;          // N, output points
   int control_point_count = 0;  // points key indices refer to (== N unless cross)
   bool cross = false;

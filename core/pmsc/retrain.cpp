@@ -62,9 +62,9 @@ Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t
   TrainingOptions o = std::move(*training_options);
   auto channels = current.metadata_int("pmsc.channels");
   if (!channels) return make_error(channels.error().code, source + ": " + channels.error().message);
-  if (*channels != o.channels) {
+  if (*channels != o.channel_count) {
     return make_error(ErrorCode::kInvalidArgument,
-                      source + ": metadata 'pmsc.options.channels' is " + std::to_string(o.channels) +
+                      source + ": metadata 'pmsc.options.channels' is " + std::to_string(o.channel_count) +
                           " but the model has pmsc.channels = " + std::to_string(*channels));
   }
 

@@ -95,7 +95,7 @@ Subspace fit_subspace(const Eigen::MatrixXd& T_world_or_aligned, int M) {
 
 // Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
 Status assemble(const Subspace& s, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
-  const long D = m.channels;
+  const long D = m.channel_count;
   const long output_first = cross ? control_rows : 0;
   const long output_rows = s.mean.size() - output_first;
   m.mean = s.mean.segment(output_first, output_rows).cast<float>();
@@ -113,7 +113,7 @@ Status assemble(const Subspace& s, long control_rows, bool cross, const std::vec
 Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
                               const TrainingOptions& o, TrainingReport* report) {
   const auto start = std::chrono::steady_clock::now();
-  const int D = o.channels;
+  const int D = o.channel_count;
   const long F = control_frames.rows();
   // Validation: every rule names the option or the data.
   if (D < 1) return invalid("channels must be ≥ 1, got " + std::to_string(D));
@@ -154,7 +154,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   if (cross) T.bottomRows(rows - control_rows) = output_frames->transpose().cast<double>();
 
   PmscModel model;
-  model.channels = D;
+  model.channel_count = D;
   model.cross = cross;
   model.control_point_count = static_cast<int>(control_points);
   model.point_count = static_cast<int>((rows - (cross ? control_rows : 0)) / D);
@@ -177,7 +177,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
 
   // Key points (2007 §2.2), seeded with fiducials and the optional sparse grid.
   KeyPointOptions key_options;
-  key_options.channels = D;
+  key_options.channel_count = D;
   key_options.block_size = o.block_size;
   key_options.error_bound = o.error_bound;
   key_options.max_key_points = o.max_key_points;

@@ -12,7 +12,7 @@
 namespace animspace::pmsc {
 
 struct TrainingOptions {
-  int channels = 3;  // D
+  int channel_count = 3;  // D
   // Largest per-point training error (Euclidean over D channels, model units) that the key
   // selection iterates towards; the basis is chosen to project the training set within half of it.
   double error_bound = 0;

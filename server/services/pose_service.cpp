@@ -31,7 +31,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServe
         const pmsc::PmscModel& m = *model->pmsc;
         response->set_model_version(model->version);
         for (int k : m.key_points) response->add_key_point_indices(static_cast<uint32_t>(k));
-        response->set_channel_count(static_cast<uint32_t>(m.channels));
+        response->set_channel_count(static_cast<uint32_t>(m.channel_count));
         response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
         for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
         response->set_fail_through(fail_through_of(*model));
@@ -54,7 +54,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         }
         const uint64_t bytes_per_pose =
             request->omit_points() ? 0 : uint64_t{4} * static_cast<uint64_t>(model->pmsc->point_count) *
-                                             static_cast<uint64_t>(model->pmsc->channels);
+                                             static_cast<uint64_t>(model->pmsc->channel_count);
         if (grpc::Status s = check_response_size(request->poses_size(), bytes_per_pose, env_.options.max_message_bytes,
                                                  "poses");
             !s.ok()) {
@@ -99,12 +99,12 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         PoseInput input;
         if (grpc::Status s = decode_points(request->key_values(), "key_values",
                                            static_cast<uint32_t>(m.key_point_count()),
-                                           static_cast<uint32_t>(m.channels), "key points", input.key_values);
+                                           static_cast<uint32_t>(m.channel_count), "key points", input.key_values);
             !s.ok()) {
           return s;
         }
         if (grpc::Status s = decode_points(request->full_values(), "full_values", static_cast<uint32_t>(m.point_count),
-                                           static_cast<uint32_t>(m.channels), "points", input.full_values);
+                                           static_cast<uint32_t>(m.channel_count), "points", input.full_values);
             !s.ok()) {
           return s;
         }

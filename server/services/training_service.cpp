@@ -41,7 +41,7 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
           }
         } release{this, model->name};
 
-        const long width = static_cast<long>(model->pmsc->point_count) * model->pmsc->channels;
+        const long width = static_cast<long>(model->pmsc->point_count) * model->pmsc->channel_count;
         FrameMatrix misses(0, width);
         uint64_t last_sequence = pmsc::misses_through(model->container);
         if (!request->exclude_misses()) {

@@ -81,7 +81,7 @@ class ClientTest : public ::testing::Test {
 
   static void expect_matches_core(const PoseResult& result, int f) {
     const pmsc::PoseEstimate expected = expected_estimate(f);
-    ASSERT_EQ(result.points.channels, 3u);
+    ASSERT_EQ(result.points.channel_count, 3u);
     ASSERT_EQ(result.points.values.size(), static_cast<size_t>(expected.points.size()));
     const float scale = frames_->row(f).cwiseAbs().maxCoeff();
     for (Eigen::Index i = 0; i < expected.points.size(); ++i) {
@@ -116,7 +116,7 @@ TEST_F(ClientTest, DescribeKeyPointsGivesTheModelsKeysAndGathersThem) {
   const KeyPoints keys = client_->describe_key_points(kPmsc);
   ASSERT_EQ(keys.indices.size(), pmsc_->key_points.size());
   for (size_t k = 0; k < keys.indices.size(); ++k) EXPECT_EQ(keys.indices[k], static_cast<uint32_t>(pmsc_->key_points[k]));
-  EXPECT_EQ(keys.channels, 3u);
+  EXPECT_EQ(keys.channel_count, 3u);
   EXPECT_EQ(keys.control_point_count, static_cast<uint32_t>(pmsc_->control_point_count));
   EXPECT_EQ(keys.fail_through, v1::FAIL_THROUGH_CLIENT);
   const std::vector<float> gathered = keys.gather(frame(5));
@@ -132,7 +132,7 @@ TEST_F(ClientTest, UnaryAndBatchEvaluationMatchTheCoreInProcess) {
   std::vector<std::vector<float>> values;
   for (int f = 1; f < 40; f += 3) values.push_back(keys.gather(frame(f)));
   std::vector<KeyPointPose> poses;
-  for (const auto& v : values) poses.push_back({v, keys.channels});
+  for (const auto& v : values) poses.push_back({v, keys.channel_count});
   const std::vector<PoseResult> batch = client_->evaluate_key_points_batch(kPmsc, poses);
   ASSERT_EQ(batch.size(), poses.size());
   for (size_t i = 0; i < batch.size(); ++i) {
@@ -160,7 +160,7 @@ TEST_F(ClientTest, TheStreamSessionAnswersInOrderWithinItsWindow) {
     for (int f = 0; f < count; ++f) {
       const std::vector<float> v = keys.gather(frame(f));
       // Sequence numbers need not be contiguous: the client's own frame numbers come back.
-      EXPECT_TRUE(stream->write({v, keys.channels}, 1000 + 7 * static_cast<uint64_t>(f)));
+      EXPECT_TRUE(stream->write({v, keys.channel_count}, 1000 + 7 * static_cast<uint64_t>(f)));
       worst_in_flight = std::max(worst_in_flight, stream->in_flight());
     }
     stream->writes_done();
@@ -198,7 +198,7 @@ TEST_F(ClientTest, OneThreadCanAlternateWritesAndReads) {
   for (uint64_t f = 0; f < 20; ++f) {
     if (stream->in_flight() == stream->window()) answered.push_back(stream->read()->sequence);
     const std::vector<float> v = keys.gather(frame(static_cast<int>(f)));
-    ASSERT_TRUE(stream->write({v, keys.channels}, f));
+    ASSERT_TRUE(stream->write({v, keys.channel_count}, f));
   }
   stream->writes_done();
   while (auto result = stream->read()) {

@@ -159,10 +159,10 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
   const std::vector<float> key_values =
       keys.gather(std::span<const float>(frames->row(frame).data(), static_cast<size_t>(frames->cols())));
   const auto key_array =
-      make_point_array(key_values.data(), static_cast<uint32_t>(keys.indices.size()), keys.channels);
+      make_point_array(key_values.data(), static_cast<uint32_t>(keys.indices.size()), keys.channel_count);
 
   // What the soft cache returns for these key points, evaluated separately.
-  const PoseResult evaluated = client.evaluate_key_points(model, {key_values, keys.channels});
+  const PoseResult evaluated = client.evaluate_key_points(model, {key_values, keys.channel_count});
   const PointMatrix estimate = Eigen::Map<const PointMatrix>(evaluated.points.values.data(), evaluated.points.count, 3);
 
   // A known camera looking at the arm from the front.

@@ -42,8 +42,8 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
   const auto selected = tools::parse_frame_selection(a.select, static_cast<int>(frames->rows()), &error);
   if (selected.empty()) return fail("evaluate", error);
   const KeyPoints keys = client.describe_key_points(a.model, a.version);
-  if (frames->cols() != static_cast<long>(keys.control_point_count) * keys.channels) {
-    return fail("evaluate", "the sequence has " + std::to_string(frames->cols() / std::max(1u, keys.channels)) +
+  if (frames->cols() != static_cast<long>(keys.control_point_count) * keys.channel_count) {
+    return fail("evaluate", "the sequence has " + std::to_string(frames->cols() / std::max(1u, keys.channel_count)) +
                                 " points per frame, model '" + a.model + "' expects " +
                                 std::to_string(keys.control_point_count));
   }
@@ -65,7 +65,7 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
     std::vector<std::vector<float>> values;
     std::vector<KeyPointPose> poses;
     for (size_t i = 0; i < count; ++i) values.push_back(keys.gather(frame_values(selected[first + i])));
-    for (const auto& v : values) poses.push_back({v, keys.channels});
+    for (const auto& v : values) poses.push_back({v, keys.channel_count});
     const std::vector<PoseResult> results = client.evaluate_key_points_batch(a.model, poses, options);
     for (size_t i = 0; i < count; ++i) {
       const PoseResult& r = results[i];
@@ -78,8 +78,8 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
       double max_distance = 0;
       for (uint32_t p = 0; comparable && p < r.points.count; ++p) {
         double squared = 0;
-        for (uint32_t c = 0; c < r.points.channels; ++c) {
-          const double d = r.points.point(p)[c] - truth[size_t{p} * keys.channels + c];
+        for (uint32_t c = 0; c < r.points.channel_count; ++c) {
+          const double d = r.points.point(p)[c] - truth[size_t{p} * keys.channel_count + c];
           squared += d * d;
         }
         max_distance = std::max(max_distance, std::sqrt(squared));

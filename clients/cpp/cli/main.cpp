@@ -184,13 +184,13 @@ int run_keys(const Globals& g, const std::string& model, uint64_t version) {
                                 {"model_version", keys.model_version},
                                 {"key_point_indices", keys.indices},
                                 {"key_point_regions", keys.regions},
-                                {"channel_count", keys.channels},
+                                {"channel_count", keys.channel_count},
                                 {"control_point_count", keys.control_point_count},
                                 {"fail_through", fail_through}});
     return 0;
   }
   std::printf("%s version %llu: %zu key points × %u channels out of %u control points, fail-through %s\n",
-              model.c_str(), static_cast<unsigned long long>(keys.model_version), keys.indices.size(), keys.channels,
+              model.c_str(), static_cast<unsigned long long>(keys.model_version), keys.indices.size(), keys.channel_count,
               keys.control_point_count, fail_through.c_str());
   for (size_t k = 0; k < keys.indices.size(); ++k) {
     std::printf("%s%u", k == 0 ? "  " : (k % 16 == 0 ? "\n  " : " "), keys.indices[k]);

@@ -37,7 +37,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   if (selected.empty()) return fail("play", error);
 
   const KeyPoints keys = client.describe_key_points(a.model, a.version);
-  const long D = keys.channels;
+  const long D = keys.channel_count;
   if (frames->cols() != static_cast<long>(keys.control_point_count) * D) {
     return fail("play", "the sequence has " + std::to_string(frames->cols() / std::max(1L, D)) +
                             " points per frame, model '" + a.model + "' expects " +
@@ -57,7 +57,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   std::thread writer([&] {
     for (int frame : selected) {
       const std::vector<float> values = keys.gather(frame_values(frame));
-      if (!stream->write({values, keys.channels}, static_cast<uint64_t>(frame))) break;
+      if (!stream->write({values, keys.channel_count}, static_cast<uint64_t>(frame))) break;
     }
     stream->writes_done();
   });
@@ -94,7 +94,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
     for (uint64_t frame : to_complete) {
       const auto row = frame_values(static_cast<int>(frame));
       const std::vector<float> values = keys.gather(row);
-      completed += client.complete_miss(a.model, keys.model_version, {values, keys.channels}, row).logged ? 1 : 0;
+      completed += client.complete_miss(a.model, keys.model_version, {values, keys.channel_count}, row).logged ? 1 : 0;
       completing.update(completed);
     }
   }

@@ -49,7 +49,7 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
   if (!current) return fail(command, current.error().message);
   auto loaded = pmsc::load(*current, path.string());
   if (!loaded) return fail(command, loaded.error().message);
-  const long width = static_cast<long>(loaded->point_count) * loaded->channels;
+  const long width = static_cast<long>(loaded->point_count) * loaded->channel_count;
 
   // Every replica's log of this model, each read after its own watermark.
   const std::string log_name = a.model + ".misses";

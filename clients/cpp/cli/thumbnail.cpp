@@ -81,7 +81,7 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
                                    std::to_string(a.sequence_frame));
     }
     const KeyPoints keys = client.describe_key_points(a.model, a.version);
-    const auto D = keys.channels;
+    const auto D = keys.channel_count;
     if (frames->cols() != static_cast<long>(keys.control_point_count) * D) {
       return fail("thumbnail", "the sequence has " + std::to_string(frames->cols() / std::max<long>(1, D)) +
                                    " points per frame, model '" + a.model + "' expects " +

@@ -20,9 +20,9 @@ int main(int argc, char** argv) try {
   // The key points arm-pmsc needs, in order, and one pose made of them. A real posing engine
   // computes only these points; here they are a rest-like pose of zeros moved along x.
   const animspace::KeyPoints keys = client.describe_key_points("arm-pmsc");
-  std::vector<float> values(keys.indices.size() * keys.channels, 0.0f);
-  for (size_t k = 0; k < keys.indices.size(); ++k) values[k * keys.channels] = 0.1f * static_cast<float>(k);
-  const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", {values, keys.channels});
+  std::vector<float> values(keys.indices.size() * keys.channel_count, 0.0f);
+  for (size_t k = 0; k < keys.indices.size(); ++k) values[k * keys.channel_count] = 0.1f * static_cast<float>(k);
+  const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", {values, keys.channel_count});
   std::printf("%s e_key %.4g alpha %.3f: %u points\n", animspace::cache_status_name(result.status),
               result.key_point_error, result.blend_weight, result.points.count);
   // result.points.values is N×3 row-major float32, e.g.
@@ -32,7 +32,7 @@ int main(int argc, char** argv) try {
   // On a blend or miss the client's own engine supplies the full pose (client fail-through).
   if (result.full_evaluation_needed) {
     const std::vector<float> full(result.points.values.size(), 0.0f);  // your engine's full pose
-    const auto completed = client.complete_miss("arm-pmsc", result.model_version, {values, keys.channels}, full);
+    const auto completed = client.complete_miss("arm-pmsc", result.model_version, {values, keys.channel_count}, full);
     std::printf("completed: %s, logged for retraining: %s\n", animspace::cache_status_name(completed.result.status),
                 completed.logged ? "yes" : "no");
   }
@@ -45,7 +45,7 @@ int main(int argc, char** argv) try {
   auto stream = client.open_stream("arm-pmsc", stream_options);
   std::thread writer([&] {
     for (uint64_t frame = 0; frame < 100; ++frame) {
-      if (!stream->write({values, keys.channels}, frame)) break;
+      if (!stream->write({values, keys.channel_count}, frame)) break;
     }
     stream->writes_done();
   });

@@ -66,7 +66,7 @@ MissRecord make_record(uint64_t tag, size_t key_count, size_t full_count, uint32
   record.status = tag % 2 == 0 ? pmsc::CacheStatus::kBlend : pmsc::CacheStatus::kMiss;
   record.key_point_error = 0.125 * static_cast<double>(tag) + 0.001;
   record.blend_weight = 1.0 / static_cast<double>(tag + 2);
-  record.channels = channels;
+  record.channel_count = channels;
   for (size_t i = 0; i < key_count; ++i) record.key_values.push_back(value_of(tag, i));
   for (size_t i = 0; i < full_count; ++i) record.full_values.push_back(-value_of(tag, i));
   return record;
@@ -78,7 +78,7 @@ void expect_same_content(const MissRecord& expected, const MissRecord& actual) {
   EXPECT_EQ(expected.status, actual.status);
   EXPECT_EQ(expected.key_point_error, actual.key_point_error);
   EXPECT_EQ(expected.blend_weight, actual.blend_weight);
-  EXPECT_EQ(expected.channels, actual.channels);
+  EXPECT_EQ(expected.channel_count, actual.channel_count);
   EXPECT_EQ(expected.key_values, actual.key_values);
   EXPECT_EQ(expected.full_values, actual.full_values);
 }
@@ -246,7 +246,7 @@ TEST(MissLog, InvalidRecordsAreRefusedWithoutUsingASequence) {
   ASSERT_NE(log, nullptr);
   std::vector<MissRecord> bad(6, make_record(1, 6, 6));
   bad[0].status = pmsc::CacheStatus::kHit;  // a hit is never logged
-  bad[1].channels = 0;
+  bad[1].channel_count = 0;
   bad[2].key_values.pop_back();  // 5 values, 3 channels
   bad[3].full_values.pop_back();
   bad[4].full_values[4] = std::numeric_limits<float>::quiet_NaN();

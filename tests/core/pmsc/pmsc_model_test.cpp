@@ -11,7 +11,7 @@ namespace {
 // work by hand.
 PmscModel three_point_model(std::vector<int> keys) {
   PmscModel m;
-  m.channels = 1;
+  m.channel_count = 1;
   m.point_count = 3;
   m.control_point_count = 3;
   m.mean = Eigen::VectorXf::Zero(3);
@@ -90,7 +90,7 @@ TEST(PmscModel, TooFewKeyEquationsAreRefused) {
 TEST(PmscModel, IllConditionedKeysAreRegularisedNeverNaN) {
   // Two nearly parallel basis directions seen through two keys: σ_min/σ_max ≈ 1e-9.
   PmscModel m;
-  m.channels = 1;
+  m.channel_count = 1;
   m.point_count = 2;
   m.control_point_count = 2;
   m.mean = Eigen::VectorXf::Zero(2);

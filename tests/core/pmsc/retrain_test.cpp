@@ -118,7 +118,7 @@ container::ModelContainer round_trip(const container::ModelContainer& in) {
 
 TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   TrainingOptions o;
-  o.channels = 2;
+  o.channel_count = 2;
   o.error_bound = 0.1 + 0.2;  // 0.30000000000000004: needs all 17 digits
   o.basis_size = 7;
   o.max_basis = 99;
@@ -138,7 +138,7 @@ TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   store_training_options(o, c);
   auto loaded = load_training_options(round_trip(c), "m");
   ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-  EXPECT_EQ(loaded->channels, 2);
+  EXPECT_EQ(loaded->channel_count, 2);
   EXPECT_EQ(loaded->error_bound, 0.1 + 0.2);
   EXPECT_EQ(loaded->basis_size, 7);
   EXPECT_EQ(loaded->max_basis, 99);

@@ -142,10 +142,10 @@ TEST(PmscTrain, ColourChannelsWork) {
       frames.row(f) = (B * Eigen::VectorXd::NullaryExpr(rank, [&] { return normal(rng); })).cast<float>().transpose();
     }
     auto o = options_for(1.0);
-    o.channels = D;
+    o.channel_count = D;
     auto model = train(frames, o, nullptr);
     ASSERT_TRUE(model.ok()) << model.error().message;
-    EXPECT_EQ(model->channels, D);
+    EXPECT_EQ(model->channel_count, D);
     EXPECT_EQ(model->point_count, N);
     EXPECT_GE(model->key_point_count() * D, rank);
   }
