@@ -808,7 +808,10 @@ TEST(MissLogCrash, KilledWriterLeavesContiguousIntactRecords) {
     char byte = 0;
     ASSERT_EQ(::read(ready[0], &byte, 1), 1);
     ::close(ready[0]);
-    std::this_thread::sleep_for(milliseconds(3 + 4 * round));
+    // Kill at a point that moves on each round, read from the file rather than a clock: once it
+    // holds more than 2 + round records (the kill may then land inside the next write, or not).
+    const uint64_t past = kFileHeaderSize + (2 + static_cast<uint64_t>(round)) * record_size(3, kFull);
+    while (fs::file_size(path) <= past) std::this_thread::yield();
     ASSERT_EQ(::kill(child, SIGKILL), 0);
     int status = 0;
     ASSERT_EQ(::waitpid(child, &status, 0), child);
