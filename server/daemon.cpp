@@ -246,11 +246,13 @@ void Daemon::shutdown() {
   }
   housekeeping_wake_.notify_all();
   if (housekeeping_thread_.joinable()) housekeeping_thread_.join();
-  // The gRPC server has finished every call, so nothing queues work any more.
-  if (env_) env_->renderer = nullptr;
-  render_thread_.reset();
+  // The gRPC server has finished every call, so nothing queues work any more; joining the pools
+  // also waits for a handler body still running after its call was answered (it may read
+  // env_->renderer, found by TSan), and only then does the renderer go.
   if (request_pool_) request_pool_->stop();
   if (admin_pool_) admin_pool_->stop();
+  if (env_) env_->renderer = nullptr;
+  render_thread_.reset();
   if (miss_logs_) miss_logs_->sync_all();
   if (metrics_http_) {
     metrics_http_->stop();
