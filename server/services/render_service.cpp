@@ -296,7 +296,7 @@ grpc::ServerUnaryReactor* RenderServiceImpl::RenderThumbnail(grpc::CallbackServe
         RenderThread::Job job;
         job.scene = std::move(scene);
         job.abandoned = [ctx] { return !CallControl(ctx, nullptr).stop_status().ok(); };
-        job.done = [ctx, started, max_bytes, response, finish, &pool](Result<render::Image> image) {
+        job.done = [started, max_bytes, response, finish, &pool](Result<render::Image> image) {
           if (!image) {
             finish(to_grpc_status(image.error()));
             return;
