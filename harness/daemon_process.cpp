@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -27,8 +28,10 @@ DaemonProcess::DaemonProcess(const std::vector<std::string>& extra_args, const s
     : log_path_(work_dir / "animspaced.log") {
   const auto port_file = work_dir / "animspaced.port";
   std::filesystem::remove(port_file);
-  std::vector<std::string> args{daemon_binary().string(), "--listen", "127.0.0.1:0", "--port-file",
-                                port_file.string()};
+  std::vector<std::string> args{daemon_binary().string(), "--port-file", port_file.string()};
+  if (std::find(extra_args.begin(), extra_args.end(), "--listen") == extra_args.end()) {
+    args.insert(args.end(), {"--listen", "127.0.0.1:0"});
+  }
   args.insert(args.end(), extra_args.begin(), extra_args.end());
 
   pid_ = ::fork();

@@ -14,7 +14,8 @@ namespace animspace::harness {
 
 class DaemonProcess {
  public:
-  // Starts `animspaced --listen 127.0.0.1:0 --port-file … <extra_args>` with stdout/stderr
+  // Starts `animspaced --port-file … --listen 127.0.0.1:0 <extra_args>` (no --listen of its own
+  // when extra_args has one) with stdout/stderr
   // going to `log_path`, and waits until it has written its port. Throws std::runtime_error
   // (failing the test, ending the bench) when it does not come up within `timeout`.
   DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,

@@ -1,6 +1,7 @@
 #include "server/daemon.h"
 
 #include <grpc/grpc.h>
+#include <sys/socket.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -8,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/common/atomic_file.h"
+#include "server/port_owner.h"
 #include "server/services/lod_service.h"
 #include "server/services/model_service.h"
 #include "server/services/pose_service.h"
@@ -18,6 +20,12 @@
 
 namespace animspace::server {
 namespace {
+
+// Who holds `address`'s port when a bind failed, if anyone does.
+std::optional<std::string> busy_address_owner(const std::string& address) {
+  const auto port = port_of_address(address);
+  return port ? describe_tcp_listener(*port) : std::nullopt;
+}
 
 // Splits "host:port" (or "[v6]:port"). Errors: kInvalidArgument naming the flag.
 Result<std::pair<std::string, int>> split_host_port(const std::string& address, const char* flag) {
@@ -100,6 +108,9 @@ Status Daemon::start() {
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   builder.AddListeningPort(options_.listen_address, *credentials, &port_);
+  // gRPC sets SO_REUSEPORT by default: a second daemon would bind a busy address and take a random
+  // share of its connections. One address, one daemon (issue #21).
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options_.max_message_bytes));
   builder.SetMaxSendMessageSize(static_cast<int>(options_.max_message_bytes));
   grpc::ResourceQuota quota("animspaced");
@@ -121,6 +132,10 @@ Status Daemon::start() {
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {
     server_.reset();
+    if (auto owner = busy_address_owner(options_.listen_address)) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        "--listen: '" + options_.listen_address + "' is already in use by " + *owner);
+    }
     return make_error(ErrorCode::kInvalidArgument,
                       "--listen: cannot bind '" + options_.listen_address + "' (in use or not a local address?" +
                           (tls_enabled(options_) ? " Or --tls-cert and --tls-key do not belong together?)" : ")"));
@@ -180,6 +195,12 @@ Status Daemon::start_metrics_endpoint() {
   auto host_port = split_host_port(options_.metrics_address, "--metrics-listen");
   if (!host_port) return host_port.error();
   metrics_http_ = std::make_unique<httplib::Server>();
+  // cpp-httplib sets SO_REUSEPORT by default, which would let two daemons share the metrics port
+  // and each scrape read one of them at random; SO_REUSEADDR alone only reuses TIME_WAIT ports.
+  metrics_http_->set_socket_options([](socket_t socket) {
+    int yes = 1;
+    ::setsockopt(socket, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
   metrics_http_->Get("/metrics", [this](const httplib::Request&, httplib::Response& response) {
     response.set_content(metrics_.prometheus_text(), "text/plain; version=0.0.4");
   });
@@ -191,6 +212,10 @@ Status Daemon::start_metrics_endpoint() {
     bound = -1;
   }
   if (bound <= 0) {
+    if (auto owner = busy_address_owner(options_.metrics_address)) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        "--metrics-listen: '" + options_.metrics_address + "' is already in use by " + *owner);
+    }
     return make_error(ErrorCode::kInvalidArgument,
                       "--metrics-listen: cannot bind '" + options_.metrics_address + "'");
   }

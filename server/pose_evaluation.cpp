@@ -51,6 +51,22 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
                               out.globals);
 }
 
+grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
+                                const Eigen::VectorXf& key_values, Eigen::VectorXf& out) {
+  const pmsc::PmscModel& m = *model.pmsc;
+  if (grpc::Status s = decode_points(values, field, static_cast<uint32_t>(m.point_count),
+                                     static_cast<uint32_t>(m.channel_count), "points", out);
+      !s.ok()) {
+    return s;
+  }
+  // A cross model's key points are another point set: nothing in the output repeats them.
+  if (m.cross) return grpc::Status::OK;
+  if (auto consistent = pmsc::check_full_values_at_keys(m, key_values, out); !consistent.ok()) {
+    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
+  }
+  return grpc::Status::OK;
+}
+
 bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
                    const PoseOptions& options, v1::PoseResult* out) {
   const pmsc::PmscModel& m = *model.pmsc;

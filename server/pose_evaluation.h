@@ -34,6 +34,12 @@ grpc::Status require_pmsc(const LoadedModel& model, std::string_view why = {});
 grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
                          PoseInput& out);
 
+// Decodes the full values `field` of a pose whose key values are decoded (CompleteMiss, the
+// heat-map thumbnail) and checks that they are that pose: INVALID_ARGUMENT naming the field and
+// the first key point where they differ (pmsc::check_full_values_at_keys). Not for cross-PMSC.
+grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
+                                const Eigen::VectorXf& key_values, Eigen::VectorXf& out);
+
 struct PoseOptions {
   bool include_region_errors = false;
   bool omit_points = false;

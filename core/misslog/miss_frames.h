@@ -8,19 +8,25 @@
 
 #include "core/common/result.h"
 #include "core/common/types.h"
+#include "core/pmsc/pmsc_model.h"
 
 namespace animspace::misslog {
 
-// The full frames of a miss log's records after `after_sequence`, for pmsc::retrain(): records without
-// full values (misses nobody completed) have nothing to teach and are skipped, counted in
-// `skipped`. A missing file is no misses. `last_sequence` is the newest record read (at least
+// The full frames of a miss log's records after `after_sequence`, for pmsc::retrain() of
+// `model` (served as `model_version`): records without full values (misses nobody completed)
+// have nothing to teach and are skipped, counted in `skipped`; records of `model_version` whose
+// full values do not repeat their key values (pmsc::check_full_values_at_keys — logs written
+// before the server checked CompleteMiss may hold such a "full pose") are left out, counted in
+// `inconsistent`. Records of other versions were logged against another key set and are taken as
+// they are. A missing file is no misses. `last_sequence` is the newest record read (at least
 // `after_sequence`). Errors: the log reader's (kDataLoss naming the path and byte offset, kIo).
 struct MissFrames {
-  FrameMatrix frames;  // rows × width
+  FrameMatrix frames;  // rows × point_count·D
   uint64_t last_sequence = 0;
   uint64_t skipped = 0;
+  uint64_t inconsistent = 0;
 };
-Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence, long width);
-
+Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence,
+                                    const pmsc::PmscModel& model, uint64_t model_version);
 
 }  // namespace animspace::misslog

@@ -1,6 +1,8 @@
 #include "core/pmsc/pmsc_model.h"
 
+#include <algorithm>
 #include <cassert>
+#include <charconv>
 #include <cmath>
 #include <string>
 
@@ -337,6 +339,57 @@ Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eig
     keys.segment(static_cast<long>(k) * D, D) = control_frame.segment(static_cast<long>(m.key_points[k]) * D, D);
   }
   return keys;
+}
+
+double hit_rate(const PmscModel& m, const FrameMatrix& control_frames) {
+  if (control_frames.rows() == 0) return 0;
+  long hits = 0;
+  PoseEstimate estimate;
+  for (Eigen::Index f = 0; f < control_frames.rows(); ++f) {
+    const Eigen::VectorXf frame = control_frames.row(f).transpose();
+    evaluate(m, gather_key_values(m, frame), estimate);
+    hits += decide(estimate.key_point_error, m.epsilon).status == CacheStatus::kHit ? 1 : 0;
+  }
+  return static_cast<double>(hits) / static_cast<double>(control_frames.rows());
+}
+
+namespace {
+
+// Shortest text of each float as a float ("4.00016", not its double expansion).
+std::string format_values(const float* values, long count) {
+  std::string text = "(";
+  for (long c = 0; c < count; ++c) {
+    char buffer[32];
+    const auto written = std::to_chars(buffer, buffer + sizeof buffer, values[c]);
+    text += (c ? ", " : "") + std::string(buffer, written.ptr);
+  }
+  return text + ")";
+}
+
+}  // namespace
+
+Status check_full_values_at_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                                 const Eigen::Ref<const Eigen::VectorXf>& full_values) {
+  const long D = m.channel_count;
+  assert(!m.cross);
+  assert(key_values.size() == m.key_point_count() * D && full_values.size() == m.control_point_count * D);
+  const double absolute = kKeyConsistencyAbsolute * m.epsilon.epsilon_min;
+  for (long k = 0; k < m.key_point_count(); ++k) {
+    const long point = m.key_points[static_cast<size_t>(k)];
+    for (long c = 0; c < D; ++c) {
+      const double key = key_values[k * D + c];
+      const double full = full_values[point * D + c];
+      const double allowed = kKeyConsistencyRelative * std::max(std::abs(key), std::abs(full)) + absolute;
+      if (!(std::abs(full - key) <= allowed)) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          "key point " + std::to_string(k) + " (point " + std::to_string(point) +
+                              "): the full values hold " + format_values(full_values.data() + point * D, D) +
+                              " but the key values hold " + format_values(key_values.data() + k * D, D) +
+                              "; full values must be the pose the key values were read from");
+      }
+    }
+  }
+  return Status::Ok();
 }
 
 }  // namespace animspace::pmsc

@@ -25,6 +25,7 @@
 #include <Eigen/Core>
 
 #include "core/common/result.h"
+#include "core/common/types.h"
 #include "core/geometry/rigid_fit.h"
 #include "core/pmsc/soft_cache.h"
 
@@ -132,7 +133,28 @@ void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::Vecto
                      const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
                      CachedPose& out);
 
+// Full values belong to the pose their key values came from: at each key point the full frame
+// must repeat the key values (a client that sends an unrelated "full pose" — zeros, the previous
+// frame — would otherwise teach the next retrain a wrong example; issue #21). Rounding and
+// posing engines that are not bit-reproducible are allowed a difference of
+//   |f − f_key| ≤ kKeyConsistencyRelative · max(|f|, |f_key|) + kKeyConsistencyAbsolute · ε_min
+// per value: a relative part for float arithmetic, an absolute part far below what the soft cache
+// can notice (e_key is compared with ε_min).
+inline constexpr double kKeyConsistencyRelative = 1e-5;
+inline constexpr double kKeyConsistencyAbsolute = 1e-3;
+
+// Checks that `full_values` (control_point_count·D, not cross-PMSC) repeat `key_values` (K·D) at
+// the key points. Error: kInvalidArgument naming the first key point that differs, its point
+// index, and both values.
+Status check_full_values_at_keys(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                                 const Eigen::Ref<const Eigen::VectorXf>& full_values);
+
 // Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
 Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);
+
+// The fraction of `control_frames` (F × control_point_count·D, one frame per row) whose key
+// values the soft cache answers as a HIT (0 for F = 0): what an operator sees change when ε
+// is recalibrated.
+double hit_rate(const PmscModel& model, const FrameMatrix& control_frames);
 
 }  // namespace animspace::pmsc

@@ -57,6 +57,8 @@ Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t
   }
   auto old_frames = current.float_matrix(container::sections::kSequenceFrames);
   if (!old_frames) return make_error(old_frames.error().code, source + ": " + old_frames.error().message);
+  auto previous = load(current, source);
+  if (!previous) return previous.error();
   auto training_options = load_training_options(current, source);
   if (!training_options) return training_options.error();
   TrainingOptions o = std::move(*training_options);
@@ -118,6 +120,10 @@ Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t
 
   result.training_frames = static_cast<int>(frames.rows());
   result.misses_used = static_cast<int>(R);
+  result.epsilon = model->epsilon;
+  result.hit_rate = hit_rate(*model, frames);
+  result.previous_epsilon = previous->epsilon;
+  result.previous_hit_rate = hit_rate(*previous, frames);
   return result;
 }
 

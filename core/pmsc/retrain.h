@@ -41,6 +41,12 @@ struct RetrainResult {
   TrainingReport report;
   int training_frames = 0;  // rows of the new training set (old frames + misses)
   int misses_used = 0;      // rows of miss_frames
+  // What changed for the soft cache, so that an operator can see why the hit rate moved
+  // (issue #21): both versions' thresholds, and the hit rate of each on the new training set.
+  SoftCacheThresholds previous_epsilon;
+  SoftCacheThresholds epsilon;
+  double previous_hit_rate = 0;
+  double hit_rate = 0;
 };
 
 // The miss-log sequence number through which misses are already in the container's training

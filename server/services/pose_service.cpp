@@ -103,8 +103,9 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
             !s.ok()) {
           return s;
         }
-        if (grpc::Status s = decode_points(request->full_values(), "full_values", static_cast<uint32_t>(m.point_count),
-                                           static_cast<uint32_t>(m.channel_count), "points", input.full_values);
+        // Nothing inconsistent reaches the miss log: it is tomorrow's training data.
+        if (grpc::Status s = decode_full_values(*model, request->full_values(), "full_values", input.key_values,
+                                                input.full_values);
             !s.ok()) {
           return s;
         }

@@ -170,17 +170,22 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
       }
       PoseInput input;
       if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
+      // Checked before the pose is evaluated, so that a refused request leaves no trace in the
+      // statistics or the miss log.
+      Eigen::VectorXf full;
+      if (request.has_full_values()) {
+        if (grpc::Status s = decode_full_values(model, request.full_values(), "full_values", input.key_values, full);
+            !s.ok()) {
+          return s;
+        }
+      }
       v1::PoseResult* result = response->mutable_pose();
       evaluate_pose(env, model, input, PoseOptions{}, result);
       scene.points = points_of(result->points());
       result->clear_points();  // the client asked for a picture; it has the points API for points
       if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
       if (request.has_full_values()) {
-        Eigen::VectorXf full;
         const auto n = static_cast<uint32_t>(model.info.point_count);
-        if (grpc::Status s = decode_points(request.full_values(), "full_values", n, 3, "points", full); !s.ok()) {
-          return s;
-        }
         // Thesis Fig. 8.6 style: per point, how far what the cache returned is from the truth.
         const auto truth = Eigen::Map<const PointMatrix>(full.data(), n, 3);
         scene.heat = (truth - scene.points).rowwise().norm();

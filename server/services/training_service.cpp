@@ -45,10 +45,16 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         FrameMatrix misses(0, width);
         uint64_t last_sequence = pmsc::misses_through(model->container);
         if (!request->exclude_misses()) {
-          auto read = misslog::read_miss_frames(env_.miss_logs.path_of(model->name), last_sequence, width);
+          auto read = misslog::read_miss_frames(env_.miss_logs.path_of(model->name), last_sequence, *model->pmsc,
+                                                model->version);
           if (!read) return to_grpc_status(read.error());
           misses = std::move(read->frames);
           last_sequence = read->last_sequence;
+          response->set_misses_inconsistent(static_cast<uint32_t>(read->inconsistent));
+          if (read->inconsistent > 0) {
+            spdlog::warn("model {}: {} logged miss(es) left out of the retrain: their full values do not repeat "
+                         "their key values", model->name, read->inconsistent);
+          }
         }
         if (grpc::Status stop = call.stop_status(); !stop.ok()) return stop;
 
@@ -65,6 +71,12 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         response->set_max_training_error(static_cast<float>(result->report.max_training_error));
         response->set_condition_number(result->report.condition_number);
         response->set_training_seconds(result->report.seconds);
+        response->set_previous_epsilon_min(static_cast<float>(result->previous_epsilon.epsilon_min));
+        response->set_previous_epsilon_max(static_cast<float>(result->previous_epsilon.epsilon_max));
+        response->set_epsilon_min(static_cast<float>(result->epsilon.epsilon_min));
+        response->set_epsilon_max(static_cast<float>(result->epsilon.epsilon_max));
+        response->set_previous_hit_rate(result->previous_hit_rate);
+        response->set_hit_rate(result->hit_rate);
         if (request->dry_run()) return grpc::Status::OK;
         // Past this point the work is kept even if the client has gone: a published version is
         // the point of the call, and cancelling half-way would only waste the training.
@@ -72,9 +84,13 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         if (!version) return to_grpc_status(version.error());
         refresh_model_gauges(env_);
         response->set_new_version(*version);
-        spdlog::info("model {} retrained from version {}: version {} ({} frames, {} misses, M = {}, K = {}, {:.2f} s)",
+        spdlog::info("model {} retrained from version {}: version {} ({} frames, {} misses, M = {}, K = {}, {:.2f} s); "
+                     "ε_min {:.4g} → {:.4g}, ε_max {:.4g} → {:.4g}; hit rate on the training frames {:.1f}% → {:.1f}%",
                      model->name, model->version, *version, result->training_frames, result->misses_used,
-                     result->report.basis_size, result->report.key_points, result->report.seconds);
+                     result->report.basis_size, result->report.key_points, result->report.seconds,
+                     result->previous_epsilon.epsilon_min, result->epsilon.epsilon_min,
+                     result->previous_epsilon.epsilon_max, result->epsilon.epsilon_max,
+                     100 * result->previous_hit_rate, 100 * result->hit_rate);
         return grpc::Status::OK;
       });
 }

@@ -16,6 +16,7 @@
 #include "core/animspace/model.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
+#include "core/misslog/miss_log.h"
 #include "core/container/sections.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
@@ -269,6 +270,58 @@ TEST_F(ClientTest, CompleteMissBlendsTheCallersFullValuesByAlpha) {
                std::invalid_argument);
 }
 
+// Issue #21: the tour sent an all-zero "full pose" and the server logged it as tomorrow's
+// training example. Full values must repeat the key values at the key points.
+TEST_F(ClientTest, CompleteMissRefusesFullValuesThatAreNotTheKeyPoseAndNeverLogsThem) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  std::vector<float> full(frame(5).begin(), frame(5).end());
+  for (size_t i = 0; i < full.size(); i += 3) full[i + 1] += 0.05f * static_cast<float>(i % 7);
+  const std::vector<float> v = keys.gather(full);
+  const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3});
+  ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
+  const auto log_path = work_->path() / (kPmsc + ".misses");
+  auto logged_records = [&] {
+    auto records = misslog::read_records(log_path, 0, nullptr);
+    return records.ok() ? records->size() : size_t{0};
+  };
+  const size_t before = logged_records();
+
+  auto refusal = [&](const std::vector<float>& wrong) {
+    try {
+      client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, wrong);
+    } catch (const RpcError& e) {
+      EXPECT_EQ(e.code(), grpc::StatusCode::INVALID_ARGUMENT) << e.what();
+      return e.server_message();
+    }
+    ADD_FAILURE() << "an inconsistent full pose was accepted";
+    return std::string();
+  };
+  // All zeros: the first key point already differs.
+  const std::string zeros = refusal(std::vector<float>(full.size(), 0.0f));
+  const std::string point0 = std::to_string(keys.indices[0]);
+  EXPECT_NE(zeros.find("full_values: key point 0 (point " + point0 + "): the full values hold (0, 0, 0)"),
+            std::string::npos)
+      << zeros;
+  // One channel of the fourth key point off by 1e-3 (the model is about 3 units long).
+  std::vector<float> moved = full;
+  moved[3 * keys.indices[3] + 2] += 1e-3f;
+  const std::string one = refusal(moved);
+  EXPECT_NE(one.find("full_values: key point 3 (point " + std::to_string(keys.indices[3]) + ")"), std::string::npos)
+      << one;
+  EXPECT_EQ(logged_records(), before) << "a refused completion must not reach the miss log";
+
+  // Rounding is not a mismatch: every key value one float step away is accepted, and logged.
+  std::vector<float> rounded = full;
+  for (uint32_t index : keys.indices) {
+    for (int c = 0; c < 3; ++c) {
+      float& value = rounded[3 * index + c];
+      value = std::nextafter(value, value + 1.0f);
+    }
+  }
+  EXPECT_TRUE(client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, rounded).logged);
+  EXPECT_EQ(logged_records(), before + 1);
+}
+
 TEST_F(ClientTest, SkeletonPosesEvaluateLikeTheCoreModel) {
   auto file = container::read_file(repo_->path() / kAnimationSpace / "1" / "model.anim");
   ASSERT_TRUE(file.ok());
@@ -368,6 +421,28 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   EXPECT_NE(output.find("LOD level "), std::string::npos) << output;
   EXPECT_NE(output.find("no thumbnail: "), std::string::npos) << "this daemon runs without a renderer: " << output;
   EXPECT_GT(lod_levels, 1u);
+  // The unseen pose misses and is completed with the rig's real full pose, which the server accepts
+  // (it refuses full values that do not repeat the key values) and logs.
+  EXPECT_NE(output.find("completed: MISS, logged for retraining: yes"), std::string::npos) << output;
+}
+
+// Issue #21: `--help` was resolved as a host name. Every program answers it.
+TEST_F(ClientTest, TheTourAnswersHelpAndRefusesUnknownOptions) {
+  auto run = [](const std::string& arguments, int* status) {
+    FILE* pipe = popen((std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + arguments + " 2>&1").c_str(), "r");
+    std::string output;
+    char buffer[512];
+    while (pipe != nullptr && fgets(buffer, sizeof buffer, pipe) != nullptr) output += buffer;
+    *status = pipe != nullptr ? pclose(pipe) : -1;
+    return output;
+  };
+  int status = -1;
+  const std::string help = run("--help", &status);
+  EXPECT_EQ(status, 0) << help;
+  EXPECT_EQ(help.rfind("usage: animspace-client-tour [SERVER [PNG]]", 0), 0u) << help;
+  const std::string unknown = run("--frobnicate", &status);
+  EXPECT_NE(status, 0) << unknown;
+  EXPECT_NE(unknown.find("unknown option '--frobnicate'"), std::string::npos) << unknown;
 }
 
 }  // namespace

@@ -335,6 +335,52 @@ TEST(DaemonStartup, RefusesAGrpcMemoryBoundTooSmallForTheLargestMessage) {
   }
 }
 
+// Issue #21: gRPC's default SO_REUSEPORT let a second daemon bind a busy address and answer a
+// random share of the calls. The second one must fail to start, naming the address and the first.
+TEST(DaemonStartup, RefusesAnAddressAnotherDaemonListensOn) {
+  TempDir first_dir;
+  TempDir second_dir;
+  DaemonProcess first({"--model-repository", first_dir.path().string(), "--metrics-listen", "127.0.0.1:0"},
+                      first_dir.path());
+  const std::string busy = first.address();
+  const std::string first_pid = "pid " + std::to_string(first.pid());
+  auto refusal = [&](const std::vector<std::string>& args) {
+    try {
+      DaemonProcess second(args, second_dir.path(), std::chrono::seconds(30));
+      // It may write its port before a later step fails; then it must exit non-zero.
+      EXPECT_NE(second.wait_for_exit(std::chrono::seconds(30)), 0);
+      return second.log();
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+  };
+
+  const std::string grpc_refusal = refusal({"--model-repository", second_dir.path().string(), "--listen", busy});
+  EXPECT_NE(grpc_refusal.find("--listen: '" + busy + "' is already in use by " + first_pid), std::string::npos)
+      << grpc_refusal;
+
+  // The metrics endpoint is an address too (cpp-httplib also defaults to SO_REUSEPORT).
+  std::string metrics_address;
+  const std::string marker = "metrics on http://";
+  ASSERT_TRUE(testing::wait_until([&] {
+    const std::string log = first.log();
+    const auto at = log.find(marker);
+    if (at == std::string::npos) return false;
+    const auto end = log.find("/metrics", at + marker.size());
+    metrics_address = log.substr(at + marker.size(), end - at - marker.size());
+    return end != std::string::npos;
+  })) << first.log();
+  const std::string metrics_refusal =
+      refusal({"--model-repository", second_dir.path().string(), "--metrics-listen", metrics_address});
+  EXPECT_NE(metrics_refusal.find("--metrics-listen: '" + metrics_address + "' is already in use by " + first_pid),
+            std::string::npos)
+      << metrics_refusal;
+
+  // The first daemon still answers.
+  Client client(busy);
+  wait_until_serving(client);
+}
+
 TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   TempDir work;
   DaemonProcess daemon({}, work.path());

@@ -86,13 +86,15 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
   }
 
   // Completed misses: frames bent off what was trained, their full values sent back.
-  const KeyPoints keys = replicas[0].client->describe_key_points(kModel);
   int completed = 0;
-  auto complete_one = [&](Replica& replica, int frame, float push) {
+  // `axis`: the coordinate pushed, so that a later miss can be unlike what the earlier taught.
+  auto complete_one = [&](Replica& replica, int frame, float push, size_t axis = 1) {
+    // The key points of the version served now (a retrain may choose others), pinned to it.
+    const KeyPoints keys = replica.client->describe_key_points(kModel);
     std::vector<float> full(frames->row(frame).data(), frames->row(frame).data() + frames->cols());
-    for (size_t i = 0; i < full.size(); i += 3) full[i + 1] += push * static_cast<float>(i % 7);
+    for (size_t i = 0; i < full.size(); i += 3) full[i + axis] += push * static_cast<float>(i % 7);
     const std::vector<float> values = keys.gather(full);
-    const PoseResult r = replica.client->evaluate_key_points(kModel, {values, 3});
+    const PoseResult r = replica.client->evaluate_key_points(kModel, {values, 3}, {.version = keys.model_version});
     ASSERT_NE(r.status, v1::CACHE_STATUS_HIT);
     ASSERT_TRUE(replica.client->complete_miss(kModel, r.model_version, {values, 3}, full).logged);
     ++completed;
@@ -124,7 +126,7 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
   EXPECT_FALSE(std::filesystem::exists(repo.path() / kModel / "3"));
 
   // One more miss on replica b (against version 2 now): folded in once, on top of version 2.
-  complete_one(replicas[1], 21, 0.07f);
+  complete_one(replicas[1], 21, 0.07f, 2);
   nlohmann::json third = retrain_offline(repo.path(), logs.path(), scratch.path());
   EXPECT_EQ(third["misses"].get<int>(), 1);
   EXPECT_EQ(third["from_version"].get<int>(), 2);

@@ -23,10 +23,12 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
 #include "core/container/model_container.h"
+#include "core/container/sections.h"
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/train.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
@@ -435,6 +437,35 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
   EXPECT_EQ(retrained.misses_used(), 1u);
   EXPECT_EQ(retrained.training_frames(), 34u);  // 11 elbow angles × 3 shoulder angles + the miss
   EXPECT_TRUE(std::filesystem::exists(repo_ / "bend" / "2" / "model.anim"));
+  {
+    // The response says what changed for the soft cache (issue #21): both versions' ε as their
+    // files hold them, and each version's hit rate on the new training frames, counted here.
+    auto old_file = container::read_file(repo_ / "bend" / "1" / "model.anim");
+    auto new_file = container::read_file(repo_ / "bend" / "2" / "model.anim");
+    ASSERT_TRUE(old_file.ok() && new_file.ok());
+    auto old_model = pmsc::load(*old_file, "bend/1");
+    auto new_model = pmsc::load(*new_file, "bend/2");
+    ASSERT_TRUE(old_model.ok() && new_model.ok());
+    EXPECT_FLOAT_EQ(retrained.previous_epsilon_min(), static_cast<float>(old_model->epsilon.epsilon_min));
+    EXPECT_FLOAT_EQ(retrained.previous_epsilon_max(), static_cast<float>(old_model->epsilon.epsilon_max));
+    EXPECT_FLOAT_EQ(retrained.epsilon_min(), static_cast<float>(new_model->epsilon.epsilon_min));
+    EXPECT_FLOAT_EQ(retrained.epsilon_max(), static_cast<float>(new_model->epsilon.epsilon_max));
+    auto frames = new_file->float_matrix(container::sections::kSequenceFrames);
+    ASSERT_TRUE(frames.ok());
+    auto hits_of = [&](const pmsc::PmscModel& model) {
+      int hits = 0;
+      pmsc::CachedPose cached;
+      for (Eigen::Index f = 0; f < frames->rows(); ++f) {
+        const Eigen::VectorXf frame = frames->row(f).transpose();
+        pmsc::evaluate_cached(model, pmsc::gather_key_values(model, frame), nullptr, cached);
+        hits += cached.status == pmsc::CacheStatus::kHit ? 1 : 0;
+      }
+      return static_cast<double>(hits) / static_cast<double>(frames->rows());
+    };
+    EXPECT_DOUBLE_EQ(retrained.previous_hit_rate(), hits_of(*old_model));
+    EXPECT_DOUBLE_EQ(retrained.hit_rate(), hits_of(*new_model));
+    EXPECT_EQ(retrained.misses_inconsistent(), 0u);
+  }
 
   // Version 2 is now the default; its key points may differ, so the client asks again.
   keys = describe_keys(*poses, "bend");

@@ -58,16 +58,18 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
   for (std::filesystem::recursive_directory_iterator it(a.miss_logs, ec), end; !ec && it != end; it.increment(ec)) {
     if (!it->is_regular_file(ec) || it->path().filename() != log_name) continue;
     const std::string relative = std::filesystem::relative(it->path(), a.miss_logs).generic_string();
-    auto read = misslog::read_miss_frames(it->path(), pmsc::misses_through_log(*current, relative), width);
+    auto read = misslog::read_miss_frames(it->path(), pmsc::misses_through_log(*current, relative), *loaded, start);
     if (!read) return fail(command, read.error().message);
     logs.emplace(relative, std::move(*read));
   }
   if (ec) return fail(command, "cannot search " + a.miss_logs + ": " + ec.message());
   long rows = 0;
   uint64_t skipped = 0;
+  uint64_t inconsistent = 0;
   for (const auto& [name, log] : logs) {
     rows += log.frames.rows();
     skipped += log.skipped;
+    inconsistent += log.inconsistent;
   }
   FrameMatrix misses(rows, width);
   long row = 0;
@@ -81,6 +83,7 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
                            {"logs", logs.size()},
                            {"misses", rows},
                            {"skipped_without_full_values", skipped},
+                           {"skipped_inconsistent", inconsistent},
                            {"published_version", nullptr}};
   if (static_cast<uint64_t>(rows) < a.min_misses) {
     if (json) {
@@ -106,6 +109,12 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
   report["key_points"] = result->report.key_points;
   report["max_training_error"] = result->report.max_training_error;
   report["seconds"] = result->report.seconds;
+  report["previous_epsilon_min"] = result->previous_epsilon.epsilon_min;
+  report["previous_epsilon_max"] = result->previous_epsilon.epsilon_max;
+  report["epsilon_min"] = result->epsilon.epsilon_min;
+  report["epsilon_max"] = result->epsilon.epsilon_max;
+  report["previous_hit_rate"] = result->previous_hit_rate;
+  report["hit_rate"] = result->hit_rate;
   if (!a.dry_run) {
     auto published = model::publish_version(a.repository, a.model, result->container);
     if (!published) return fail(command, published.error().message);
@@ -120,6 +129,16 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
               a.model.c_str(), static_cast<unsigned long long>(start), rows, logs.size(), result->training_frames,
               result->report.basis_size, result->report.key_points, result->report.max_training_error,
               result->report.seconds);
+  std::printf("  soft cache: ε_min %.4g → %.4g, ε_max %.4g → %.4g (recalibrated on held-out training frames)\n",
+              result->previous_epsilon.epsilon_min, result->epsilon.epsilon_min, result->previous_epsilon.epsilon_max,
+              result->epsilon.epsilon_max);
+  std::printf("  hit rate on these %d training frames: %.1f%% with version %llu, %.1f%% with the new one\n",
+              result->training_frames, 100 * result->previous_hit_rate, static_cast<unsigned long long>(start),
+              100 * result->hit_rate);
+  if (inconsistent > 0) {
+    std::printf("  %llu logged misses left out: their full values do not repeat their key values\n",
+                static_cast<unsigned long long>(inconsistent));
+  }
   if (a.dry_run) {
     std::printf("dry run: nothing published\n");
   } else {

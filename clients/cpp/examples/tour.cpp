@@ -1,27 +1,68 @@
 // The README's "Query it from C++", compiled and run by the tests against a real daemon so that
-// the snippet a newcomer pastes keeps working: key points in and the whole pose out, a sequence
-// streamed with back-pressure, a miss completed, a skeleton pose, a LOD mesh and a thumbnail.
+// the snippet a newcomer pastes keeps working: key points in and the whole pose out, a miss
+// completed with the real full pose, a sequence streamed with back-pressure, a skeleton pose, a LOD
+// mesh and a thumbnail. "Your posing engine" is the demo's expensive arm rig (core/demo), the one
+// the demo's arm-pmsc model was trained on.
 //
-//   build/bin/animspace-client-tour [SERVER [PNG]]   (default 127.0.0.1:50051, /tmp/arm-animspace.png)
+//   build/bin/animspace-client-tour [SERVER [PNG]]   (default server 127.0.0.1:50051; the
+//                                                     thumbnail is saved only when PNG is given)
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
 #include "clients/cpp/client.h"
+#include "core/demo/bending_arm.h"
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: animspace-client-tour [SERVER [PNG]]\n"
+    "  Runs the README's C++ tour against a daemon serving the demo repository (make run).\n"
+    "  SERVER  host:port of animspaced (default 127.0.0.1:50051)\n"
+    "  PNG     where to save the thumbnail; without it nothing is written\n";
+
+// Your posing engine's full pose, N×3 row-major float32: here the demo's expensive rig.
+std::vector<float> full_pose(const animspace::demo::ArmRig& rig, const animspace::demo::ArmPose& pose) {
+  const animspace::PointMatrix points = animspace::demo::pose_expensive(pose, rig);
+  return {points.data(), points.data() + points.size()};
+}
+
+}  // namespace
 
 int main(int argc, char** argv) try {
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view arg = argv[i];
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    }
+    if (arg.size() > 1 && arg[0] == '-') {
+      std::fprintf(stderr, "animspace-client-tour: unknown option '%s'\n%s", argv[i], kUsage);
+      return 2;
+    }
+  }
+  if (argc > 3) {
+    std::fprintf(stderr, "animspace-client-tour: expected at most 2 arguments, got %d\n%s", argc - 1, kUsage);
+    return 2;
+  }
   const std::string server = argc > 1 ? argv[1] : "127.0.0.1:50051";
-  const std::string png_path = argc > 2 ? argv[2] : "/tmp/arm-animspace.png";
+  const std::string png_path = argc > 2 ? argv[2] : "";
   animspace::ClientOptions options;  // deadline (10 s), token, TLS
   animspace::Client client(server, options);
 
-  // The key points arm-pmsc needs, in order, and one pose made of them. A real posing engine
-  // computes only these points; here they are a rest-like pose of zeros moved along x.
+  // The key points arm-pmsc needs, in order, and a pose your engine is asked for: the shoulder
+  // swung three times further than the animation the model was trained on.
   const animspace::KeyPoints keys = client.describe_key_points("arm-pmsc");
-  std::vector<float> values(keys.indices.size() * keys.channel_count, 0.0f);
-  for (size_t k = 0; k < keys.indices.size(); ++k) values[k * keys.channel_count] = 0.1f * static_cast<float>(k);
+  const animspace::demo::ArmRig rig = animspace::demo::make_arm_rig();
+  animspace::demo::ArmPose unseen;
+  unseen.elbow_angle_rad = 1.0;
+  unseen.shoulder_angle_rad = 3 * animspace::demo::kDemoShoulderSwingRad;
+  const std::vector<float> full = full_pose(rig, unseen);
+  // A real engine computes only the key points; the demo rig computes all and picks them.
+  const std::vector<float> values = keys.gather(full);
   const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", {values, keys.channel_count});
   std::printf("%s e_key %.4g alpha %.3f: %u points\n", animspace::cache_status_name(result.status),
               result.key_point_error, result.blend_weight, result.points.count);
@@ -29,9 +70,9 @@ int main(int argc, char** argv) try {
   //   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
   //       result.points.values.data(), result.points.count, 3);
 
-  // On a blend or miss the client's own engine supplies the full pose (client fail-through).
+  // On a blend or miss the client's own engine supplies the full pose (client fail-through); the
+  // server checks it repeats the key values, answers with it and logs it for retraining.
   if (result.full_evaluation_needed) {
-    const std::vector<float> full(result.points.values.size(), 0.0f);  // your engine's full pose
     const auto completed = client.complete_miss("arm-pmsc", result.model_version, {values, keys.channel_count}, full);
     std::printf("completed: %s, logged for retraining: %s\n", animspace::cache_status_name(completed.result.status),
                 completed.logged ? "yes" : "no");
@@ -45,7 +86,8 @@ int main(int argc, char** argv) try {
   auto stream = client.open_stream("arm-pmsc", stream_options);
   std::thread writer([&] {
     for (uint64_t frame = 0; frame < 100; ++frame) {
-      if (!stream->write({values, keys.channel_count}, frame)) break;
+      const auto posed = full_pose(rig, animspace::demo::demo_pose(static_cast<double>(frame) / 100));
+      if (!stream->write({keys.gather(posed), keys.channel_count}, frame)) break;
     }
     stream->writes_done();
   });
@@ -86,8 +128,12 @@ int main(int argc, char** argv) try {
   thumbnail.set_height_px(256);
   try {
     const animspace::Thumbnail png = client.render_thumbnail(thumbnail);
-    std::ofstream(png_path, std::ios::binary) << png.png;
-    std::printf("thumbnail %u×%u, %zu bytes\n", png.width, png.height, png.png.size());
+    std::printf("thumbnail %u×%u, %zu bytes", png.width, png.height, png.png.size());
+    if (!png_path.empty()) {
+      std::ofstream(png_path, std::ios::binary) << png.png;
+      std::printf(", written to %s", png_path.c_str());
+    }
+    std::printf("\n");
   } catch (const animspace::RpcError& error) {
     if (error.code() != grpc::StatusCode::UNAVAILABLE) throw;
     std::printf("no thumbnail: %s\n", error.server_message().c_str());

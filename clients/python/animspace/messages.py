@@ -400,7 +400,11 @@ class Thumbnail:
 
 @dataclass(frozen=True)
 class RetrainResult:
-    """What a retrain built: ``new_version`` is 0 for a dry run."""
+    """What a retrain built: ``new_version`` is 0 for a dry run.
+
+    ε is recalibrated on every retrain, so the ``previous_*`` thresholds and hit rate (the version
+    retrained from, on the same new training frames) show why the hit rate moved.
+    """
 
     new_version: int
     training_frames: int
@@ -410,11 +414,21 @@ class RetrainResult:
     max_training_error: float
     condition_number: float
     training_seconds: float
+    previous_epsilon_min: float = 0.0
+    previous_epsilon_max: float = 0.0
+    epsilon_min: float = 0.0
+    epsilon_max: float = 0.0
+    previous_hit_rate: float = 0.0
+    hit_rate: float = 0.0
+    misses_inconsistent: int = 0
 
     @classmethod
     def from_proto(cls, m: training_pb2.RetrainResponse) -> "RetrainResult":
         return cls(new_version=m.new_version, training_frames=m.training_frames, misses_used=m.misses_used,
                    basis_size=m.basis_size, key_point_count=m.key_point_count,
                    max_training_error=m.max_training_error, condition_number=m.condition_number,
-                   training_seconds=m.training_seconds)
+                   training_seconds=m.training_seconds, previous_epsilon_min=m.previous_epsilon_min,
+                   previous_epsilon_max=m.previous_epsilon_max, epsilon_min=m.epsilon_min,
+                   epsilon_max=m.epsilon_max, previous_hit_rate=m.previous_hit_rate, hit_rate=m.hit_rate,
+                   misses_inconsistent=m.misses_inconsistent)
 

@@ -266,5 +266,47 @@ TEST(PmscModel, FailThroughRunsTheFullCalculationOnlyWhenTheSoftCacheCannotAnswe
   EXPECT_NEAR(unanswered.points(0), 0.6, 1e-6);
 }
 
+TEST(PmscModel, FullValuesMustRepeatTheKeyValuesUpToTheStatedTolerance) {
+  PmscModel m = three_point_model({2, 0});  // ε_min = 0.1: an absolute allowance of 1e-4
+  Eigen::VectorXf keys(2);
+  keys << 4, -1;
+  Eigen::VectorXf full(3);
+  full << -1, 7, 4;
+  EXPECT_TRUE(check_full_values_at_keys(m, keys, full).ok());
+  // Within 1e-5·4 + 1e-4 = 1.4e-4 of key 0 (point 2): accepted; beyond: refused, named.
+  full(2) = 4 + 1.3e-4f;
+  EXPECT_TRUE(check_full_values_at_keys(m, keys, full).ok());
+  full(2) = 4 + 1.6e-4f;
+  auto refused = check_full_values_at_keys(m, keys, full);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(refused.error().message.find("key point 0 (point 2): the full values hold (4.00016) but the key values "
+                                         "hold (4)"),
+            std::string::npos)
+      << refused.error().message;
+  // The second key (point 0) differs by 1: the first mismatch in key order is the one named.
+  full << 0, 7, 4;
+  refused = check_full_values_at_keys(m, keys, full);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("key point 1 (point 0)"), std::string::npos) << refused.error().message;
+  // NaN never passes.
+  full << std::nanf(""), 7, 4;
+  EXPECT_FALSE(check_full_values_at_keys(m, keys, full).ok());
+}
+
+TEST(PmscModel, HitRateCountsTheFramesTheSoftCacheAnswersAlone) {
+  PmscModel m = three_point_model({0, 1});
+  ASSERT_TRUE(prepare_projection(m).ok());
+  // Frames in the subspace (e_key = 0: hits) and one whose keys (1, 1) leave it: e_key = √0.1 ≈
+  // 0.32 > ε_max = 0.2 (the hand-worked example above), a miss.
+  FrameMatrix frames(4, 3);
+  frames << 1, 2, 2,  //
+      0.5f, 1, 1,     //
+      1, 1, 0,        //
+      -3, -6, -6;
+  EXPECT_DOUBLE_EQ(hit_rate(m, frames), 0.75);
+  EXPECT_DOUBLE_EQ(hit_rate(m, FrameMatrix(0, 3)), 0.0);
+}
+
 }  // namespace
 }  // namespace animspace::pmsc

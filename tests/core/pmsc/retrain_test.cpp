@@ -297,6 +297,27 @@ TEST(PmscRetrain, AMissFoldedInBecomesAHit) {
   ASSERT_EQ(stored->rows(), frames.rows() + 1);
   EXPECT_EQ(FrameMatrix(stored->topRows(frames.rows())), frames);
   EXPECT_EQ(FrameMatrix(stored->bottomRows(1)), misses);
+
+  // What changed for the soft cache (issue #21): both versions' ε, and the share of the new
+  // training set each answers as a hit, counted here frame by frame through evaluate_cached.
+  EXPECT_EQ(retrained->previous_epsilon.epsilon_min, before->epsilon.epsilon_min);
+  EXPECT_EQ(retrained->previous_epsilon.epsilon_max, before->epsilon.epsilon_max);
+  EXPECT_EQ(retrained->epsilon.epsilon_min, after->epsilon.epsilon_min);
+  EXPECT_EQ(retrained->epsilon.epsilon_max, after->epsilon.epsilon_max);
+  auto hits_of = [&](const PmscModel& model) {
+    int hits = 0;
+    for (Eigen::Index f = 0; f < stored->rows(); ++f) {
+      const Eigen::VectorXf frame = stored->row(f).transpose();
+      evaluate_cached(model, gather_key_values(model, frame), nullptr, cached);
+      hits += cached.status == CacheStatus::kHit ? 1 : 0;
+    }
+    return hits;
+  };
+  const double rows = static_cast<double>(stored->rows());
+  EXPECT_DOUBLE_EQ(retrained->previous_hit_rate, hits_of(*before) / rows);
+  EXPECT_DOUBLE_EQ(retrained->hit_rate, hits_of(*after) / rows);
+  EXPECT_LT(retrained->previous_hit_rate, 1.0) << "the old version misses the twisted frame";
+  EXPECT_DOUBLE_EQ(retrained->hit_rate, 1.0);
 }
 
 TEST(PmscRetrain, KeepsMetadataAndRecordsWhereTheMissLogWasRead) {
