@@ -70,9 +70,9 @@ grpc::Status read_view(const Request& request, const ServerOptions& options, ren
       return invalid_argument("shading: unknown value " + std::to_string(static_cast<int>(request.shading())));
   }
 
-  if (!std::isfinite(request.pixel_tolerance()) || request.pixel_tolerance() < 0) {
-    return invalid_argument("pixel_tolerance: expected a finite value ≥ 0 (0 = full detail), got " +
-                            std::to_string(request.pixel_tolerance()));
+  if (!std::isfinite(request.tolerance_px()) || request.tolerance_px() < 0) {
+    return invalid_argument("tolerance_px: expected a finite value ≥ 0 (0 = full detail), got " +
+                            std::to_string(request.tolerance_px()));
   }
 
   if (request.has_camera()) {
@@ -118,7 +118,7 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
   const animation_space::AnimationSpaceModel* skinned = model.animation_space.get();
   animation_space::evaluate(*skinned, globals, scene.points);
   const auto& lods = model.lod_levels;
-  if (request.pixel_tolerance() > 0 && lods && lods->count() > 1 && !level_zero_only) {
+  if (request.tolerance_px() > 0 && lods && lods->count() > 1 && !level_zero_only) {
     const double aspect = static_cast<double>(scene.width) / scene.height;
     if (!scene.camera) {
       auto framed = render::frame_bounding_box(scene.points, aspect);
@@ -128,7 +128,7 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
     // Eq. 7.2 needs the depth of the nearest point of a sphere around the posed mesh.
     const geometry::BoundingSphere sphere = geometry::bounding_sphere(scene.points);
     lod::PixelTolerance view;
-    view.tolerance_px = request.pixel_tolerance();
+    view.tolerance_px = request.tolerance_px();
     view.viewport_width_px = scene.width;
     view.horizontal_fov_rad = render::horizontal_fov(*scene.camera, aspect);
     view.distance = (scene.camera->eye - sphere.centre).norm();

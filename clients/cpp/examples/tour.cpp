@@ -24,10 +24,10 @@ int main(int argc, char** argv) try {
   for (size_t k = 0; k < keys.indices.size(); ++k) values[k * keys.channel_count] = 0.1f * static_cast<float>(k);
   const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", {values, keys.channel_count});
   std::printf("%s e_key %.4g alpha %.3f: %u points\n", animspace::cache_status_name(result.status),
-              result.key_point_error, result.blend_weight, result.points.count);
+              result.key_point_error, result.blend_weight, result.points.point_count);
   // result.points.values is N×3 row-major float32, e.g.
   //   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
-  //       result.points.values.data(), result.points.count, 3);
+  //       result.points.values.data(), result.points.point_count, 3);
 
   // On a blend or miss the client's own engine supplies the full pose (client fail-through).
   if (result.full_evaluation_needed) {
@@ -68,7 +68,7 @@ int main(int argc, char** argv) try {
   animspace::SkinningOptions skinning;
   skinning.include_normals = true;
   const auto skinned = client.evaluate_skeleton_pose("arm-animspace", std::span(&pose, 1), skinning);
-  std::printf("skinned %u vertices with normals\n", skinned.poses[0].points.count);
+  std::printf("skinned %u vertices with normals\n", skinned.poses[0].points.point_count);
 
   // A level of detail under a vertex budget, streamed and reassembled into flat arrays.
   animspace::v1::GetLodRequest lod;
@@ -87,7 +87,7 @@ int main(int argc, char** argv) try {
   try {
     const animspace::Thumbnail png = client.render_thumbnail(thumbnail);
     std::ofstream(png_path, std::ios::binary) << png.png;
-    std::printf("thumbnail %u×%u, %zu bytes\n", png.width, png.height, png.png.size());
+    std::printf("thumbnail %u×%u, %zu bytes\n", png.width_px, png.height_px, png.png.size());
   } catch (const animspace::RpcError& error) {
     if (error.code() != grpc::StatusCode::UNAVAILABLE) throw;
     std::printf("no thumbnail: %s\n", error.server_message().c_str());

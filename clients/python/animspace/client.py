@@ -608,8 +608,7 @@ class Client:
             show_key_points, show_wireframe: overlays.
             full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red ε_max).
             tolerance_px: draw the coarsest level whose error stays under this many pixels
-                (eq. 7.2, in this ``width_px``-wide view); 0 draws full detail. The request's field
-                is ``pixel_tolerance`` (render.proto); the name here is get_lod's.
+                (eq. 7.2, in this ``width_px``-wide view); 0 draws full detail.
 
         Raises:
             InvalidArgument: a size outside 1..max_thumbnail_px (naming ``width_px``) or a bad camera.
@@ -622,7 +621,7 @@ class Client:
                                                     height_px=wire.as_uint("height_px", height_px),
                                                     samples=wire.as_uint("samples", samples),
                                                     show_key_points=show_key_points, show_wireframe=show_wireframe,
-                                                    pixel_tolerance=wire.as_float("tolerance_px", tolerance_px))
+                                                    tolerance_px=wire.as_float("tolerance_px", tolerance_px))
         if key_values is not None:
             request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
             if skeleton_pose is not None:
