@@ -255,15 +255,15 @@ v1::RetrainResponse Client::retrain(const v1::RetrainRequest& request, std::chro
   return response;
 }
 
-Thumbnail Client::render_thumbnail(const v1::RenderThumbnailRequest& request) {
+Thumbnail Client::render_thumbnail(const v1::RenderThumbnailRequest& request, std::chrono::milliseconds deadline) {
   grpc::ClientContext context;
-  prepare(&context);
+  prepare(&context, deadline.count() > 0 ? deadline : options_.deadline);
   v1::RenderThumbnailResponse response;
   check("RenderThumbnail", render_->RenderThumbnail(&context, request, &response));
   Thumbnail out;
   out.png = std::move(*response.mutable_png());
-  out.width = response.width_px();
-  out.height = response.height_px();
+  out.width_px = response.width_px();
+  out.height_px = response.height_px();
   out.model_version = response.model_version();
   out.lod_level = response.lod_level();
   if (response.has_pose()) out.pose = decode_pose_result(response.pose());

@@ -57,11 +57,11 @@ struct LodMesh {
   uint64_t bytes_received = 0;
 };
 
-// RenderService.RenderThumbnail's answer.
+// RenderService.RenderThumbnail's answer (the reply's field names).
 struct Thumbnail {
   std::string png;  // 8-bit RGBA PNG
-  uint32_t width = 0;
-  uint32_t height = 0;
+  uint32_t width_px = 0;
+  uint32_t height_px = 0;
   uint64_t model_version = 0;
   uint32_t lod_level = 0;
   std::optional<PoseResult> pose;  // the soft cache's verdict when drawn from key points (no points)
@@ -121,7 +121,8 @@ class Client {
   // Streams one level and reassembles it, checking that the blocks arrive in order and add up to
   // the header's counts (std::runtime_error otherwise). `deadline` 0 = the client's default.
   LodMesh get_lod(const v1::GetLodRequest& request, std::chrono::milliseconds deadline = {});
-  Thumbnail render_thumbnail(const v1::RenderThumbnailRequest& request);
+  // A render waits behind others on the daemon's render thread: `deadline` 0 = the client's default.
+  Thumbnail render_thumbnail(const v1::RenderThumbnailRequest& request, std::chrono::milliseconds deadline = {});
 
   const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
   // Adds the bearer token (if any) to a context, for calls made on channel() directly, such as

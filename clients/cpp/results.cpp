@@ -36,16 +36,16 @@ std::vector<float> KeyPoints::gather(std::span<const float> frame) const {
 
 Points decode_points(const v1::PointArray& array) {
   Points out;
-  out.count = array.point_count();
+  out.point_count = array.point_count();
   out.channel_count = array.channel_count();
-  const size_t expected = size_t{out.count} * out.channel_count * sizeof(float);
+  const size_t expected = size_t{out.point_count} * out.channel_count * sizeof(float);
   if (array.data().size() != expected) {
     // The server checks its own answers; a mismatch means a broken peer, not a user error.
-    throw std::runtime_error("malformed PointArray from the server: " + std::to_string(out.count) + " points × " +
+    throw std::runtime_error("malformed PointArray from the server: " + std::to_string(out.point_count) + " points × " +
                              std::to_string(out.channel_count) + " channels need " + std::to_string(expected) +
                              " bytes, got " + std::to_string(array.data().size()));
   }
-  out.values.resize(size_t{out.count} * out.channel_count);
+  out.values.resize(size_t{out.point_count} * out.channel_count);
   if (expected > 0) std::memcpy(out.values.data(), array.data().data(), expected);
   return out;
 }

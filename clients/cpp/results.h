@@ -3,7 +3,7 @@
 //
 // Every point array is N×D float32, point-major (row-major), ready for Eigen without a copy:
 //   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
-//       result.points.values.data(), result.points.count, 3);
+//       result.points.values.data(), result.points.point_count, 3);
 // The client library itself does not depend on Eigen (it links only the generated stubs).
 #pragma once
 
@@ -18,13 +18,13 @@
 
 namespace animspace {
 
-// N points × D channels, point-major.
+// N points × D channels, point-major (PointArray's field names).
 struct Points {
-  uint32_t count = 0;     // N
+  uint32_t point_count = 0;    // N
   uint32_t channel_count = 0;  // D
-  std::vector<float> values;  // N·D
+  std::vector<float> values;   // N·D
 
-  bool empty() const { return count == 0; }
+  bool empty() const { return point_count == 0; }
   // The D channels of point i.
   std::span<const float> point(uint32_t i) const {
     return {values.data() + size_t{i} * channel_count, channel_count};

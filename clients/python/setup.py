@@ -4,9 +4,12 @@ The ``animspace.v1`` messages and stubs are not checked in: they are generated a
 from the same .proto files the server is built from, so the client can never drift from the API.
 ``build_py`` runs protoc with ``--python_out`` and ``--grpc_python_out`` into the build tree:
 Debian's ``protoc`` with ``grpc_python_plugin`` (protobuf-compiler-grpc) when both are on PATH,
-else ``grpc_tools.protoc`` from grpcio-tools. Works offline:
+else ``grpc_tools.protoc`` from grpcio-tools. Works offline, into a virtual environment that sees
+Debian's grpcio, protobuf, numpy and setuptools (Debian 12's /usr/bin/python3 itself is externally
+managed; README.md):
 
-    /usr/bin/python3 -m pip install --no-build-isolation --no-deps clients/python
+    /usr/bin/python3 -m venv --system-site-packages ~/.venvs/animspace
+    ~/.venvs/animspace/bin/python -m pip install --no-build-isolation --no-deps clients/python
 
 The .proto files are found, in order, at ``$ANIMSPACE_PROTO_DIR``, ``./proto`` (an sdist: ``sdist``
 copies them in) and ``../../proto`` (the repository). ``$PROTOC`` and ``$GRPC_PYTHON_PLUGIN``

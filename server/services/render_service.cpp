@@ -8,6 +8,7 @@
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
+#include "core/common/format.h"
 #include "core/geometry/bounding_sphere.h"
 #include "core/lod/selection.h"
 #include "core/render/camera.h"
@@ -70,9 +71,18 @@ grpc::Status read_view(const Request& request, const ServerOptions& options, ren
       return invalid_argument("shading: unknown value " + std::to_string(static_cast<int>(request.shading())));
   }
 
-  if (!std::isfinite(request.pixel_tolerance()) || request.pixel_tolerance() < 0) {
-    return invalid_argument("pixel_tolerance: expected a finite value ≥ 0 (0 = full detail), got " +
-                            std::to_string(request.pixel_tolerance()));
+  for (const auto& [field, value] : {std::pair{"tolerance_px", request.tolerance_px()},
+                                     std::pair{"pixel_tolerance", request.pixel_tolerance()}}) {
+    if (!std::isfinite(value) || value < 0) {
+      return invalid_argument(std::string(field) + ": expected a finite value ≥ 0 (0 = full detail), got " +
+                              std::to_string(value));
+    }
+  }
+  if (request.tolerance_px() != 0 && request.pixel_tolerance() != 0 &&
+      request.tolerance_px() != request.pixel_tolerance()) {
+    return invalid_argument("tolerance_px: " + format_number(request.tolerance_px()) +
+                            " disagrees with pixel_tolerance (its deprecated name), " +
+                            format_number(request.pixel_tolerance()) + "; send tolerance_px only");
   }
 
   if (request.has_camera()) {
@@ -111,6 +121,12 @@ grpc::Status stored_faces(const LoadedModel& model, render::Scene& scene) {
   return grpc::Status::OK;
 }
 
+// tolerance_px, or the deprecated pixel_tolerance an older client sends (read_view checked
+// that they agree when both are set).
+float thumbnail_tolerance_px(const Request& request) {
+  return request.tolerance_px() != 0 ? request.tolerance_px() : request.pixel_tolerance();
+}
+
 // Poses the animation-space model (or a PMSC model's engine) at `globals`, at the level the
 // thumbnail's pixel tolerance allows (eq. 7.2 with the thumbnail's own camera and width).
 grpc::Status pose_skinned(const LoadedModel& model, const animation_space::TransformList& globals,
@@ -118,7 +134,8 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
   const animation_space::AnimationSpaceModel* skinned = model.animation_space.get();
   animation_space::evaluate(*skinned, globals, scene.points);
   const auto& lods = model.lod_levels;
-  if (request.pixel_tolerance() > 0 && lods && lods->count() > 1 && !level_zero_only) {
+  const float tolerance_px = thumbnail_tolerance_px(request);
+  if (tolerance_px > 0 && lods && lods->count() > 1 && !level_zero_only) {
     const double aspect = static_cast<double>(scene.width) / scene.height;
     if (!scene.camera) {
       auto framed = render::frame_bounding_box(scene.points, aspect);
@@ -128,7 +145,7 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
     // Eq. 7.2 needs the depth of the nearest point of a sphere around the posed mesh.
     const geometry::BoundingSphere sphere = geometry::bounding_sphere(scene.points);
     lod::PixelTolerance view;
-    view.tolerance_px = request.pixel_tolerance();
+    view.tolerance_px = tolerance_px;
     view.viewport_width_px = scene.width;
     view.horizontal_fov_rad = render::horizontal_fov(*scene.camera, aspect);
     view.distance = (scene.camera->eye - sphere.centre).norm();

@@ -246,7 +246,7 @@ TEST_F(ClientTest, AnAbandonedStreamIsCancelledAndTheServerCarriesOn) {
   }  // destroyed unfinished: cancelled
   EXPECT_EQ(client_->health(), grpc::health::v1::HealthCheckResponse::SERVING);
   const std::vector<float> v = keys.gather(frame(0));
-  EXPECT_EQ(client_->evaluate_key_points(kPmsc, {v, 3}).points.count, keys.control_point_count);
+  EXPECT_EQ(client_->evaluate_key_points(kPmsc, {v, 3}).points.point_count, keys.control_point_count);
 }
 
 TEST_F(ClientTest, CompleteMissBlendsTheCallersFullValuesByAlpha) {
@@ -346,7 +346,7 @@ TEST_F(ClientTest, SkeletonPosesEvaluateLikeTheCoreModel) {
     PointMatrix expected;
     as::evaluate(*model, rounded, expected);
     const SkinnedPose& got = result.poses[p];
-    ASSERT_EQ(got.points.count, static_cast<uint32_t>(expected.rows()));
+    ASSERT_EQ(got.points.point_count, static_cast<uint32_t>(expected.rows()));
     for (Eigen::Index v = 0; v < expected.rows(); ++v) {
       for (int c = 0; c < 3; ++c) {
         ASSERT_NEAR(got.points.point(static_cast<uint32_t>(v))[static_cast<size_t>(c)], expected(v, c), 1e-4f)
@@ -360,7 +360,7 @@ TEST_F(ClientTest, SkeletonPosesEvaluateLikeTheCoreModel) {
   coarse.lod_level = 3;
   const SkinningResult level = client_->evaluate_skeleton_pose(kAnimationSpace, std::span(poses).first(1), coarse);
   const v1::ModelSummary summary = client_->describe_model(kAnimationSpace);
-  EXPECT_LT(level.poses[0].points.count, result.poses[0].points.count) << "level 3 is coarser than level 0";
+  EXPECT_LT(level.poses[0].points.point_count, result.poses[0].points.point_count) << "level 3 is coarser than level 0";
   EXPECT_TRUE(level.poses[0].normals.empty());
   EXPECT_GT(summary.versions(0).lod_level_count(), 3u);
 }

@@ -108,8 +108,8 @@ TEST_F(RenderServiceTest, DrawsTheRestPoseAtTheRequestedSizeOnTheRequestedBackgr
   for (const char* model : {"arm", "arm-animspace", "arm-pmsc"}) {
     SCOPED_TRACE(model);
     const auto response = client.render_thumbnail(request(model, 160, 96));
-    EXPECT_EQ(response.width, 160u);
-    EXPECT_EQ(response.height, 96u);
+    EXPECT_EQ(response.width_px, 160u);
+    EXPECT_EQ(response.height_px, 96u);
     EXPECT_GT(response.model_version, 0u);
     EXPECT_GT(response.render_ms, 0.0);
     const render::Image image = decode(response);
@@ -163,7 +163,7 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
 
   // What the soft cache returns for these key points, evaluated separately.
   const PoseResult evaluated = client.evaluate_key_points(model, {key_values, keys.channel_count});
-  const PointMatrix estimate = Eigen::Map<const PointMatrix>(evaluated.points.values.data(), evaluated.points.count, 3);
+  const PointMatrix estimate = Eigen::Map<const PointMatrix>(evaluated.points.values.data(), evaluated.points.point_count, 3);
 
   // A known camera looking at the arm from the front.
   render::Camera camera;
@@ -244,9 +244,13 @@ TEST_F(RenderServiceTest, PixelToleranceDrawsTheLevelEquation72Allows) {
       expected = choice->level;
     }
     auto r = request(model, width, height);
-    r.set_pixel_tolerance(tolerance);
+    r.set_tolerance_px(tolerance);
     const auto response = client.render_thumbnail(r);
     EXPECT_EQ(static_cast<int>(response.lod_level), expected);
+    // A client of 0.1 sends the same quantity as field 14, pixel_tolerance: still honoured.
+    auto old_client = request(model, width, height);
+    old_client.set_pixel_tolerance(tolerance);
+    EXPECT_EQ(static_cast<int>(client.render_thumbnail(old_client).lod_level), expected);
     coarsest_seen = std::max(coarsest_seen, expected);
     const render::Image image = decode(response);
     EXPECT_FALSE(is_background(image, width / 2, height / 2));
@@ -311,8 +315,12 @@ TEST_F(RenderServiceTest, BadRequestsAreRefusedPreciselyAndTheRenderThreadCarrie
   }
   {
     auto r = request("arm-animspace", 64, 64);
-    r.set_pixel_tolerance(-1);
-    expect_refused(render(r), Code::INVALID_ARGUMENT, "pixel_tolerance");
+    r.set_tolerance_px(-1);
+    expect_refused(render(r), Code::INVALID_ARGUMENT, "tolerance_px: expected a finite value");
+    r.set_tolerance_px(2);
+    r.set_pixel_tolerance(3);
+    expect_refused(render(r), Code::INVALID_ARGUMENT,
+                   "tolerance_px: 2 disagrees with pixel_tolerance (its deprecated name), 3");
   }
 
   // The render thread is still there and still draws what it drew before.

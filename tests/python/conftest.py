@@ -67,7 +67,7 @@ def client(daemon):
     import animspace
 
     with animspace.Client(daemon) as client:
-        client.wait_until_serving(timeout_s=30)
+        client.wait_until_serving(deadline_s=30)
         yield client
 
 

@@ -484,7 +484,7 @@ def test_thumbnails_are_pngs_of_the_requested_size(client, tmp_path):
     camera = animspace.Camera(eye=(1, 1, 6), target=(1, 0, 0), up=(0, 1, 0), vertical_fov_rad=0.7)
     framed = client.render_thumbnail("arm", 33, 17, sequence_frame=30, camera=camera, show_wireframe=True)
     assert png_size(framed.png) == (33, 17)
-    coarse = client.render_thumbnail("arm-animspace", 32, 32, pixel_tolerance=4)
+    coarse = client.render_thumbnail("arm-animspace", 32, 32, tolerance_px=4)
     assert coarse.lod_level > 0
 
 
@@ -509,19 +509,19 @@ def test_stats_count_the_poses_and_verdicts_seen(client, demo_arm_transforms):
 # The client itself: deadlines, context manager
 
 
-def test_the_default_deadline_applies_and_timeout_overrides_it(daemon):
+def test_the_default_deadline_applies_and_deadline_s_overrides_it(daemon):
     # A TCP listener that never speaks HTTP/2: every call waits for its deadline, so how long
     # it waited shows which deadline applied (lower bounds only: a deadline never fires early).
     with socket.socket() as silent:
         silent.bind(("127.0.0.1", 0))
         silent.listen()
         with animspace.Client("127.0.0.1:%d" % silent.getsockname()[1], deadline_s=0.2) as stuck:
-            for timeout, rpc, call in ((None, "ListModels", lambda t: stuck.list_models(timeout=t)),
-                                       (0.8, "GetServerInfo", lambda t: stuck.server_info(timeout=t))):
+            for deadline_s, rpc, call in ((None, "ListModels", lambda t: stuck.list_models(deadline_s=t)),
+                                          (0.8, "GetServerInfo", lambda t: stuck.server_info(deadline_s=t))):
                 started = time.monotonic()
                 with pytest.raises(animspace.DeadlineExceeded) as error:
-                    call(timeout)
-                assert time.monotonic() - started >= (timeout or 0.2)
+                    call(deadline_s)
+                assert time.monotonic() - started >= (deadline_s or 0.2)
                 assert error.value.code == grpc.StatusCode.DEADLINE_EXCEEDED and error.value.rpc == rpc
 
     # On the real daemon a stream's deadline bounds the whole stream.
@@ -535,7 +535,7 @@ def test_the_default_deadline_applies_and_timeout_overrides_it(daemon):
         with pytest.raises(animspace.DeadlineExceeded) as error:
             list(client.stream_key_points("arm-pmsc", slow(frames)))
         assert error.value.rpc == "StreamKeyPoints"
-        assert len(list(client.stream_key_points("arm-pmsc", slow(frames), timeout=30))) == 3
+        assert len(list(client.stream_key_points("arm-pmsc", slow(frames), deadline_s=30))) == 3
 
 
 def test_the_context_manager_closes_the_channel_it_made(daemon):
@@ -561,4 +561,4 @@ def test_an_unreachable_server_is_unavailable():
             client.list_models()
         assert error.value.code == grpc.StatusCode.UNAVAILABLE
         with pytest.raises(animspace.DeadlineExceeded, match="not SERVING"):
-            client.wait_until_serving(timeout_s=0.3)
+            client.wait_until_serving(deadline_s=0.3)

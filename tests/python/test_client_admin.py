@@ -22,7 +22,7 @@ def test_unload_load_and_retrain_with_a_logged_miss(spawn_daemon, arm_transforms
             client.load_model("no-such-model")
 
         keys = client.describe_key_points("arm-pmsc")
-        dry = client.retrain("arm-pmsc", dry_run=True, timeout=120)
+        dry = client.retrain("arm-pmsc", dry_run=True, deadline_s=120)
         assert dry.new_version == 0 and dry.misses_used == 0
         assert dry.training_frames == client.describe_model("arm-pmsc").default.frame_count
         assert dry.basis_size >= 1 and dry.key_point_count >= 1 and dry.condition_number >= 1
@@ -32,7 +32,7 @@ def test_unload_load_and_retrain_with_a_logged_miss(spawn_daemon, arm_transforms
         verdict = client.evaluate_key_points("arm-pmsc", full[keys.indices])
         assert verdict.full_evaluation_needed
         assert client.complete_miss("arm-pmsc", full[keys.indices], full, version=verdict.model_version).logged
-        retrained = client.retrain("arm-pmsc", timeout=120)
+        retrained = client.retrain("arm-pmsc", deadline_s=120)
         assert retrained.new_version == 2 and retrained.misses_used >= 1
 
         assert client.describe_model("arm-pmsc").default_version == 2

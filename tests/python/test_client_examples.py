@@ -139,8 +139,9 @@ def test_save_thumbnail_writes_a_png_of_the_requested_size(daemon, tmp_path):
     assert "arm v1: 256×256" in text
 
 
-def test_the_readmes_query_it_from_python_snippet_runs(daemon, tmp_path):
-    readme = (EXAMPLES.parent / "README.md").read_text()
+@pytest.mark.parametrize("readme", ["clients/python/README.md", "README.md"])
+def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path):
+    readme = (EXAMPLES.parents[2] / readme).read_text()
     section = readme[readme.index("## Query it from Python"):]
     start = section.index("```python\n") + len("```python\n")
     snippet = section[start:section.index("\n```", start)]

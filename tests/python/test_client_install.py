@@ -2,6 +2,7 @@
 import importlib.util
 import os
 import pathlib
+import re
 import shutil
 import subprocess
 import sys
@@ -53,3 +54,67 @@ def test_pip_installs_the_package_with_generated_stubs(tmp_path):
     file, message, names = check.stdout.split("\n")[:3]
     assert pathlib.Path(file).resolve().is_relative_to(target.resolve())
     assert message == "animspace.v1.PoseResult" and names == "Client RpcError"
+
+
+def readme_install_commands(readme: pathlib.Path):
+    """The shell lines that README tells a user to run to install the package: the fenced ```sh
+    block holding its `pip install`, else (a README that gives it inline) every `…pip install…`
+    code span. Comments stay, as bash reads them."""
+    text = readme.read_text()
+    blocks = re.findall(r"^```sh\n(.*?)^```", text, flags=re.S | re.M)
+    for block in blocks:
+        if "pip install" in block:
+            return [line for line in block.splitlines() if line.strip()]
+    return re.findall(r"`([^`\n]*pip install[^`\n]*)`", text)
+
+
+def _interpreter_of(commands):
+    """The Python the README's `… -m pip install` line installs into (its first word)."""
+    line = next(line for line in commands if "-m pip install" in line)
+    return line.split()[0]
+
+
+def _missing_venv():
+    if importlib.util.find_spec("ensurepip") is None:
+        return "the venv module cannot install pip (Debian: python3-venv)"
+    return _missing_tools()
+
+
+@pytest.mark.skipif(_missing_venv() is not None, reason=str(_missing_venv()))
+@pytest.mark.parametrize("readme", ["README.md", "clients/python/README.md"])
+def test_the_readmes_install_commands_work_as_written(readme, daemon, tmp_path):
+    # Debian 12 marks /usr/bin/python3 externally managed (PEP 668): pip refuses to install into
+    # it, so what a README gives must work there. The lines run as written, with bash, from a copy
+    # of the repository's two folders the build reads; HOME is a temporary folder (a README
+    # installing under ~ installs there) and pip may not reach an index (PIP_NO_INDEX), as on a
+    # machine without network.
+    commands = readme_install_commands(REPOSITORY / readme)
+    assert commands, f"{readme}: no install command found"
+    source = tmp_path / "src"
+    shutil.copytree(REPOSITORY / "clients" / "python", source / "clients" / "python",
+                    ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__", "dist"))
+    shutil.copytree(REPOSITORY / "proto", source / "proto")
+    home = tmp_path / "home"
+    home.mkdir()
+    environment = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PIP_TARGET")}
+    environment.update(HOME=str(home), PIP_NO_INDEX="1", PIP_DISABLE_PIP_VERSION_CHECK="1")
+    install = subprocess.run(["bash", "-euo", "pipefail", "-c", "\n".join(commands)], cwd=source,
+                             capture_output=True, text=True, timeout=300, env=environment)
+    assert install.returncode == 0, "\n".join(commands) + "\n" + install.stdout + install.stderr
+
+    # The interpreter it installed into imports the installed package (not the build tree's) and
+    # talks to a daemon.
+    python = os.path.expanduser(_interpreter_of(commands).replace("~", str(home), 1))
+    check = subprocess.run(
+        [python, "-c",
+         "import sys, animspace\n"
+         "print(animspace.__file__)\n"
+         "with animspace.Client(sys.argv[1]) as client:\n"
+         "    client.wait_until_serving()\n"
+         "    print(client.health(), client.describe_key_points('arm-pmsc').count)\n", daemon],
+        cwd=tmp_path, capture_output=True, text=True, timeout=60, env=environment)
+    assert check.returncode == 0, check.stderr
+    file, answer = check.stdout.splitlines()[:2]
+    assert pathlib.Path(file).resolve().is_relative_to(home.resolve())
+    assert not pathlib.Path(file).resolve().is_relative_to(source.resolve())
+    assert answer.startswith("SERVING ") and int(answer.split()[1]) > 0

@@ -76,7 +76,7 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
           keys.fail_through != v1::FAIL_THROUGH_IMPOSSIBLE && r.points.values.size() == truth.size();
       comparable_all = comparable_all && comparable;
       double max_distance = 0;
-      for (uint32_t p = 0; comparable && p < r.points.count; ++p) {
+      for (uint32_t p = 0; comparable && p < r.points.point_count; ++p) {
         double squared = 0;
         for (uint32_t c = 0; c < r.points.channel_count; ++c) {
           const double d = r.points.point(p)[c] - truth[size_t{p} * keys.channel_count + c];
@@ -114,7 +114,7 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
       if (!a.output.empty()) {
         const auto width = static_cast<Eigen::Index>(r.points.values.size());
         if (returned.samples.size() == 0) {
-          returned.num_points = static_cast<int>(r.points.count);
+          returned.num_points = static_cast<int>(r.points.point_count);
           returned.samples.resize(static_cast<Eigen::Index>(selected.size()), width);
         }
         returned.samples.row(static_cast<Eigen::Index>(first + i)) =

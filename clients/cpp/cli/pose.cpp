@@ -15,7 +15,7 @@ namespace animspace::cli {
 namespace {
 
 PointMatrix as_matrix(const Points& points) {
-  return Eigen::Map<const PointMatrix>(points.values.data(), points.count, 3);
+  return Eigen::Map<const PointMatrix>(points.values.data(), points.point_count, 3);
 }
 
 }  // namespace
@@ -56,7 +56,7 @@ int run_pose(const PoseArgs& a, Client& client, bool json) {
   options.include_normals = a.normals;
   options.lod_level = a.lod_level;
   const SkinningResult result = client.evaluate_skeleton_pose(a.model, *poses, options);
-  const uint32_t points = result.poses.front().points.count;
+  const uint32_t points = result.poses.front().points.point_count;
 
   const std::string extension = std::filesystem::path(a.output).extension().string();
   if (extension == ".pc2") {

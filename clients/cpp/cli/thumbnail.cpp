@@ -61,7 +61,7 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
                                 : v1::RenderThumbnailRequest::SHADING_BLINN_PHONG);
   request.set_show_key_points(a.key_points);
   request.set_show_wireframe(a.wireframe);
-  request.set_pixel_tolerance(a.tolerance_px);
+  request.set_tolerance_px(a.tolerance_px);
   for (float c : a.background) request.add_background_rgba(c);
   if (!a.eye.empty()) {
     auto* camera = request.mutable_camera();
@@ -101,8 +101,8 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
   }
   if (json) {
     nlohmann::json out = {{"output", a.output},
-                          {"width", thumbnail.width},
-                          {"height", thumbnail.height},
+                          {"width", thumbnail.width_px},
+                          {"height", thumbnail.height_px},
                           {"bytes", thumbnail.png.size()},
                           {"model_version", thumbnail.model_version},
                           {"lod_level", thumbnail.lod_level},
@@ -120,8 +120,8 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
               std::to_string(thumbnail.pose->key_point_error);
   }
   std::printf("%s version %llu: %u×%u, level of detail %u, drawn and encoded in %.1f ms%s\nwrote %s (%zu bytes)\n",
-              a.model.c_str(), static_cast<unsigned long long>(thumbnail.model_version), thumbnail.width,
-              thumbnail.height, thumbnail.lod_level, thumbnail.render_ms, verdict.c_str(), a.output.c_str(),
+              a.model.c_str(), static_cast<unsigned long long>(thumbnail.model_version), thumbnail.width_px,
+              thumbnail.height_px, thumbnail.lod_level, thumbnail.render_ms, verdict.c_str(), a.output.c_str(),
               thumbnail.png.size());
   return 0;
 }

@@ -65,10 +65,10 @@ int main(int argc, char** argv) try {
   const std::vector<float> values = keys.gather(full);
   const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", {values, keys.channel_count});
   std::printf("%s e_key %.4g alpha %.3f: %u points\n", animspace::cache_status_name(result.status),
-              result.key_point_error, result.blend_weight, result.points.count);
+              result.key_point_error, result.blend_weight, result.points.point_count);
   // result.points.values is N×3 row-major float32, e.g.
   //   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
-  //       result.points.values.data(), result.points.count, 3);
+  //       result.points.values.data(), result.points.point_count, 3);
 
   // On a blend or miss the client's own engine supplies the full pose (client fail-through); the
   // server checks it repeats the key values, answers with it and logs it for retraining.
@@ -110,7 +110,7 @@ int main(int argc, char** argv) try {
   animspace::SkinningOptions skinning;
   skinning.include_normals = true;
   const auto skinned = client.evaluate_skeleton_pose("arm-animspace", std::span(&pose, 1), skinning);
-  std::printf("skinned %u vertices with normals\n", skinned.poses[0].points.count);
+  std::printf("skinned %u vertices with normals\n", skinned.poses[0].points.point_count);
 
   // A level of detail under a vertex budget, streamed and reassembled into flat arrays.
   animspace::v1::GetLodRequest lod;
@@ -128,7 +128,7 @@ int main(int argc, char** argv) try {
   thumbnail.set_height_px(256);
   try {
     const animspace::Thumbnail png = client.render_thumbnail(thumbnail);
-    std::printf("thumbnail %u×%u, %zu bytes", png.width, png.height, png.png.size());
+    std::printf("thumbnail %u×%u, %zu bytes", png.width_px, png.height_px, png.png.size());
     if (!png_path.empty()) {
       std::ofstream(png_path, std::ios::binary) << png.png;
       std::printf(", written to %s", png_path.c_str());

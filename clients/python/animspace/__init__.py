@@ -16,6 +16,28 @@ animation-space skinning with levels of detail (Merry 2007), plus PNG thumbnails
 The generated messages and stubs are importable as ``animspace.v1`` (``from animspace.v1 import
 poses_pb2``) for anything the client does not wrap.
 """
+import sys as _sys
+
+try:
+    import google.protobuf  # noqa: F401
+    import grpc  # noqa: F401
+    import numpy  # noqa: F401
+except ImportError as _error:
+    # One line that says what to do: the bare "No module named 'grpc'" names neither the
+    # interpreter that lacks it nor the package that provides it.
+    raise ImportError(
+        f"animspace needs grpcio and protobuf (and numpy), and {_sys.executable} cannot import "
+        f"{_error.name or _error}: on Debian use /usr/bin/python3 with python3-grpcio python3-protobuf "
+        "python3-numpy (apt install python3-grpcio python3-protobuf python3-numpy), or a virtual environment "
+        "made with `/usr/bin/python3 -m venv --system-site-packages` (clients/python/README.md)") from _error
+try:
+    import animspace.v1.common_pb2  # noqa: F401
+except ImportError as _error:
+    raise ImportError(
+        f"animspace.v1, the messages generated from proto/, is missing ({_error}): from a build tree use "
+        "PYTHONPATH=build/python (after `make build`), or install the package, which generates them "
+        "(clients/python/README.md)") from _error
+
 from animspace.client import DEFAULT_DEADLINE_S, DEFAULT_MAX_RECEIVE_MESSAGE_BYTES, Client
 from animspace.errors import (Aborted, AlreadyExists, Cancelled, DataLoss, DeadlineExceeded, Error, FailedPrecondition,
                               Internal, InvalidArgument, NotFound, OutOfRange, PermissionDenied, ProtocolError,

@@ -16,8 +16,10 @@ What the calls are for (Meyer & Anderson 2006, 2007; Merry 2007):
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import time
+import warnings
 from typing import Any, Callable, Iterable, Iterator, List, Optional, Sequence, Tuple, TypeVar, Union
 
 import grpc
@@ -42,12 +44,34 @@ DEFAULT_DEADLINE_S = 10.0
 DEFAULT_MAX_RECEIVE_MESSAGE_BYTES = 64 << 20
 
 _Response = TypeVar("_Response")
+_Function = TypeVar("_Function", bound=Callable[..., Any])
 Pem = Union[bytes, str]
 
 _SHADING = {
     "blinn_phong": render_pb2.RenderThumbnailRequest.SHADING_BLINN_PHONG,
     "lambert": render_pb2.RenderThumbnailRequest.SHADING_LAMBERT,
 }
+
+
+def _renamed_keywords(**renamed: str) -> Callable[[_Function], _Function]:
+    """Keeps the keyword names of an earlier release working for one more, with a
+    DeprecationWarning: ``old="new"`` passes ``old=`` on as ``new=`` (same meaning, same units)."""
+
+    def decorate(function: _Function) -> _Function:
+        @functools.wraps(function)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            for old, new in renamed.items():
+                if old in kwargs:
+                    if new in kwargs:
+                        raise TypeError(f"{function.__name__}: give {new}, not both {new} and {old}")
+                    warnings.warn(f"{function.__name__}: {old} is deprecated; use {new} (same meaning and units)",
+                                  DeprecationWarning, stacklevel=2)
+                    kwargs[new] = kwargs.pop(old)
+            return function(*args, **kwargs)
+
+        return call  # type: ignore[return-value]
+
+    return decorate
 
 
 def _pem(value: Optional[Pem]) -> Optional[bytes]:
@@ -57,9 +81,7 @@ def _pem(value: Optional[Pem]) -> Optional[bytes]:
 def _model_ref(name: str, version: int) -> common_pb2.ModelRef:
     if not isinstance(name, str) or not name:
         raise ValueError(f"model: expected a model name, got {name!r}")
-    if version < 0:
-        raise ValueError(f"version: expected 0 (the default version) or a positive version, got {version}")
-    return common_pb2.ModelRef(name=name, version=version)
+    return common_pb2.ModelRef(name=name, version=wire.as_uint("version", version, 64))
 
 
 @contextlib.contextmanager
@@ -91,7 +113,7 @@ class Client:
             the caller). The client does not close a channel it did not create.
         token: bearer token, sent as ``authorization: Bearer <token>`` metadata on every call
             (the daemon's ``--auth-token-file``; admin RPCs may need an admin token).
-        deadline_s: deadline of every call, seconds; each method's ``timeout`` overrides it for
+        deadline_s: deadline of every call, seconds; each method's ``deadline_s`` overrides it for
             that call. None: no deadline. For a stream it bounds the whole stream.
         max_receive_message_bytes: largest reply accepted, bytes.
         tls: use TLS. Implied by any of the TLS arguments below.
@@ -193,17 +215,20 @@ class Client:
     # Plumbing: every call goes through _unary or _stream_call, and every failure through
     # errors.error_from_grpc.
 
-    def _timeout(self, timeout: Optional[float]) -> Optional[float]:
+    def _deadline(self, deadline_s: Optional[float]) -> Optional[float]:
+        """The deadline of one call, seconds: ``deadline_s``, or the client's when it is None
+        (grpcio calls it ``timeout``)."""
         if self._closed:
             raise ValueError("the animspace.Client is closed")
-        if timeout is None:
+        if deadline_s is None:
             return self._deadline_s
-        if not timeout > 0:
-            raise ValueError(f"timeout: expected seconds > 0, got {timeout}")
-        return timeout
+        if not deadline_s > 0:
+            raise ValueError(f"deadline_s: expected seconds > 0, got {deadline_s}")
+        return deadline_s
 
-    def _unary(self, rpc: str, method: Callable[..., _Response], request: Any, timeout: Optional[float]) -> _Response:
-        deadline = self._timeout(timeout)
+    def _unary(self, rpc: str, method: Callable[..., _Response], request: Any,
+               deadline_s: Optional[float]) -> _Response:
+        deadline = self._deadline(deadline_s)
         try:
             return method(request, timeout=deadline, metadata=self._metadata)
         except grpc.RpcError as error:
@@ -212,7 +237,8 @@ class Client:
     # ------------------------------------------------------------------------------------------
     # Health and the registry (models.proto)
 
-    def health(self, service: str = "", *, timeout: Optional[float] = None) -> str:
+    @_renamed_keywords(timeout="deadline_s")
+    def health(self, service: str = "", *, deadline_s: Optional[float] = None) -> str:
         """grpc.health.v1 status of ``service`` ("" = the whole server): "SERVING", or
         "NOT_SERVING" while the repository loads and while the daemon shuts down.
 
@@ -220,43 +246,49 @@ class Client:
             NotFound: for a service name the server does not know.
         """
         response = self._unary("Health/Check", self._health_check,
-                               health_messages.HealthCheckRequest(service=service), timeout)
+                               health_messages.HealthCheckRequest(service=service), deadline_s)
         return health_messages.serving_status_name(response.status)
 
-    def wait_until_serving(self, timeout_s: float = 30.0, *, poll_s: float = 0.05) -> None:
+    @_renamed_keywords(timeout_s="deadline_s")
+    def wait_until_serving(self, deadline_s: float = 30.0, *, poll_s: float = 0.05) -> None:
         """Waits until health is SERVING (the daemon reports NOT_SERVING while it loads its
         repository, and the channel may not be connected yet).
 
         Raises:
-            DeadlineExceeded: when the server is not serving within ``timeout_s``; the last
+            DeadlineExceeded: when the server is not serving within ``deadline_s``; the last
                 status or error is in the message.
         """
-        give_up = time.monotonic() + timeout_s
+        if not deadline_s > 0:
+            raise ValueError(f"deadline_s: expected seconds > 0, got {deadline_s}")
+        give_up = time.monotonic() + deadline_s
         last = "no answer"
         while True:
             left = give_up - time.monotonic()
             if left <= 0:
                 raise DeadlineExceeded("Health/Check", grpc.StatusCode.DEADLINE_EXCEEDED,
-                                       f"not SERVING after {timeout_s} s; last: {last}")
+                                       f"not SERVING after {deadline_s} s; last: {last}")
             try:
-                last = self.health(timeout=min(left, max(poll_s, 1.0)))
+                last = self.health(deadline_s=min(left, max(poll_s, 1.0)))
                 if last == "SERVING":
                     return
             except (Unavailable, DeadlineExceeded) as error:  # not up yet, or busy starting
                 last = str(error)
             time.sleep(min(poll_s, max(0.0, give_up - time.monotonic())))
 
-    def list_models(self, *, timeout: Optional[float] = None) -> List[ModelSummary]:
+    @_renamed_keywords(timeout="deadline_s")
+    def list_models(self, *, deadline_s: Optional[float] = None) -> List[ModelSummary]:
         """Every model the server knows, sorted by name, with its versions (failed ones included)."""
-        response = self._unary("ListModels", self._models.ListModels, models_pb2.ListModelsRequest(), timeout)
+        response = self._unary("ListModels", self._models.ListModels, models_pb2.ListModelsRequest(), deadline_s)
         return [ModelSummary.from_proto(m) for m in response.models]
 
-    def describe_model(self, name: str, version: int = 0, *, timeout: Optional[float] = None) -> ModelSummary:
+    @_renamed_keywords(timeout="deadline_s")
+    def describe_model(self, name: str, version: int = 0, *, deadline_s: Optional[float] = None) -> ModelSummary:
         """One model in detail (version 0: every version). Raises NotFound for an unknown one."""
         request = models_pb2.DescribeModelRequest(model=_model_ref(name, version))
-        return ModelSummary.from_proto(self._unary("DescribeModel", self._models.DescribeModel, request, timeout).model)
+        return ModelSummary.from_proto(self._unary("DescribeModel", self._models.DescribeModel, request, deadline_s).model)
 
-    def load_model(self, name: str, version: int = 0, *, timeout: Optional[float] = None) -> ModelSummary:
+    @_renamed_keywords(timeout="deadline_s")
+    def load_model(self, name: str, version: int = 0, *, deadline_s: Optional[float] = None) -> ModelSummary:
         """Admin: (re)loads a model from the repository (version 0: every version found).
 
         Raises:
@@ -264,40 +296,46 @@ class Client:
             (the previously loaded version keeps serving). PermissionDenied: admin RPCs locked.
         """
         request = models_pb2.LoadModelRequest(model=_model_ref(name, version))
-        return ModelSummary.from_proto(self._unary("LoadModel", self._models.LoadModel, request, timeout).model)
+        return ModelSummary.from_proto(self._unary("LoadModel", self._models.LoadModel, request, deadline_s).model)
 
-    def unload_model(self, name: str, version: int = 0, *, timeout: Optional[float] = None) -> None:
+    @_renamed_keywords(timeout="deadline_s")
+    def unload_model(self, name: str, version: int = 0, *, deadline_s: Optional[float] = None) -> None:
         """Admin: stops serving a model (version 0: every version); calls in flight finish."""
         request = models_pb2.UnloadModelRequest(model=_model_ref(name, version))
-        self._unary("UnloadModel", self._models.UnloadModel, request, timeout)
+        self._unary("UnloadModel", self._models.UnloadModel, request, deadline_s)
 
-    def server_info(self, *, timeout: Optional[float] = None) -> ServerInfo:
+    @_renamed_keywords(timeout="deadline_s")
+    def server_info(self, *, deadline_s: Optional[float] = None) -> ServerInfo:
         """Server version, limits (max batch, message size, thumbnail size), renderer, RPCs."""
-        response = self._unary("GetServerInfo", self._models.GetServerInfo, models_pb2.GetServerInfoRequest(), timeout)
+        response = self._unary("GetServerInfo", self._models.GetServerInfo, models_pb2.GetServerInfoRequest(),
+                               deadline_s)
         return ServerInfo.from_proto(response)
 
-    def stats(self, model: str = "", *, reset: bool = False, timeout: Optional[float] = None) -> Stats:
+    @_renamed_keywords(timeout="deadline_s")
+    def stats(self, model: str = "", *, reset: bool = False, deadline_s: Optional[float] = None) -> Stats:
         """Per-model hits/blends/misses, hit rate, e_key and latency histograms ("" = every model).
         ``reset`` zeroes the counters after reading (admin)."""
         request = stats_pb2.GetStatsRequest(model=model, reset=reset)
-        return Stats.from_proto(self._unary("GetStats", self._stats.GetStats, request, timeout))
+        return Stats.from_proto(self._unary("GetStats", self._stats.GetStats, request, deadline_s))
 
     # ------------------------------------------------------------------------------------------
     # The soft cache (poses.proto; Meyer & Anderson 2006 §4–5, 2007 §2)
 
-    def describe_key_points(self, model: str, version: int = 0, *, timeout: Optional[float] = None) -> KeyPoints:
+    @_renamed_keywords(timeout="deadline_s")
+    def describe_key_points(self, model: str, version: int = 0, *, deadline_s: Optional[float] = None) -> KeyPoints:
         """The key points a posing engine must compute for a PMSC model, in request order.
 
         Raises:
             FailedPrecondition: for a model without key points (not PMSC).
         """
         request = poses_pb2.DescribeKeyPointsRequest(model=_model_ref(model, version))
-        return KeyPoints.from_proto(self._unary("DescribeKeyPoints", self._poses.DescribeKeyPoints, request, timeout))
+        return KeyPoints.from_proto(self._unary("DescribeKeyPoints", self._poses.DescribeKeyPoints, request, deadline_s))
 
+    @_renamed_keywords(timeout="deadline_s")
     def evaluate_key_points(self, model: str, key_values: npt.ArrayLike, *, version: int = 0,
                             skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
                             include_region_errors: bool = False, omit_points: bool = False,
-                            timeout: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
+                            deadline_s: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
         """Key points in, the whole pose out, through the soft cache.
 
         Args:
@@ -342,16 +380,17 @@ class Client:
             pose.key_values.CopyFrom(_point_array(poses[i]))
             if transforms is not None:
                 pose.skeleton_pose.CopyFrom(wire.skeleton_pose(f"skeleton_pose[{i}]", transforms[i], space))
-        response = self._unary("EvaluateKeyPoints", self._poses.EvaluateKeyPoints, request, timeout)
+        response = self._unary("EvaluateKeyPoints", self._poses.EvaluateKeyPoints, request, deadline_s)
         if len(response.results) != poses.shape[0]:
             raise ProtocolError("EvaluateKeyPoints", f"{len(response.results)} results for {poses.shape[0]} poses")
         with _decoding("EvaluateKeyPoints"):
             results = [PoseResult.from_proto(r, f"results[{i}].points") for i, r in enumerate(response.results)]
         return results if batch else results[0]
 
+    @_renamed_keywords(timeout="deadline_s")
     def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
                           version: int = 0, omit_points: bool = False, first_sequence: int = 0,
-                          timeout: Optional[float] = None) -> Iterator[PoseResult]:
+                          deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
         """Plays a sequence through the soft cache over one StreamKeyPoints call: one result per
         frame, yielded in frame order as they arrive.
 
@@ -362,7 +401,7 @@ class Client:
         under it); frame i is numbered ``first_sequence + i`` and every result's ``sequence`` is
         checked against it.
 
-        The call starts when iteration starts; ``timeout`` (or the client's deadline) bounds the
+        The call starts when iteration starts; ``deadline_s`` (or the client's deadline) bounds the
         whole stream — pass a generous one for a long sequence. Stopping the iteration early
         cancels the call.
 
@@ -374,12 +413,12 @@ class Client:
         """
         # Arguments are checked now; the call starts with the iteration.
         requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence)
-        self._timeout(timeout)
-        return self._stream_key_points(requests, first_sequence, timeout)
+        self._deadline(deadline_s)
+        return self._stream_key_points(requests, first_sequence, deadline_s)
 
     def _stream_key_points(self, requests: "_FrameRequests", first_sequence: int,
-                           timeout: Optional[float]) -> Iterator[PoseResult]:
-        call = self._poses.StreamKeyPoints(iter(requests), timeout=self._timeout(timeout), metadata=self._metadata)
+                           deadline_s: Optional[float]) -> Iterator[PoseResult]:
+        call = self._poses.StreamKeyPoints(iter(requests), timeout=self._deadline(deadline_s), metadata=self._metadata)
         expected = first_sequence
         try:
             try:
@@ -403,8 +442,9 @@ class Client:
             raise ProtocolError("StreamKeyPoints",
                                 f"the stream ended after {expected - first_sequence} results for {requests.sent} frames")
 
+    @_renamed_keywords(timeout="deadline_s")
     def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
-                      timeout: Optional[float] = None) -> MissCompletion:
+                      deadline_s: Optional[float] = None) -> MissCompletion:
         """Completes a blend or miss with the full pose from the client's posing engine
         (fail-through "CLIENT"), and logs it for retraining.
 
@@ -419,7 +459,7 @@ class Client:
         full = wire.as_points("full_values", full_values)
         request = poses_pb2.CompleteMissRequest(model=_model_ref(model, version), key_values=_point_array(keys),
                                                 full_values=_point_array(full))
-        response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, timeout)
+        response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, deadline_s)
         with _decoding("CompleteMiss"):
             return MissCompletion(result=PoseResult.from_proto(response.result, "result.points"),
                                   logged=response.logged)
@@ -427,9 +467,10 @@ class Client:
     # ------------------------------------------------------------------------------------------
     # Animation space (skinning.proto, lod.proto; Merry 2007)
 
+    @_renamed_keywords(timeout="deadline_s")
     def evaluate_skeleton_pose(self, model: str, transforms: npt.ArrayLike, *, version: int = 0,
                                space: str = "global", include_normals: bool = False, lod_level: int = 0,
-                               timeout: Optional[float] = None) -> Union[SkinnedPose, List[SkinnedPose]]:
+                               deadline_s: Optional[float] = None) -> Union[SkinnedPose, List[SkinnedPose]]:
         """Poses an animation-space model: v = Σ_j G_j p_j (Merry 2007 §3.1), normals from
         tangent planes (§3.5).
 
@@ -454,11 +495,12 @@ class Client:
             raise ValueError(f"space: expected 'global' or 'local', got {space!r}")
         poses = array if batch else array[np.newaxis]
         request = skinning_pb2.EvaluateSkeletonPoseRequest(model=_model_ref(model, version),
-                                                           include_normals=include_normals, lod_level=lod_level)
+                                                           include_normals=include_normals,
+                                                           lod_level=wire.as_uint("lod_level", lod_level))
         for pose in poses:
             request.poses.add(space=wire.SPACES[space], bone_count=pose.shape[0],
                               transforms=pose.astype(wire.WIRE_FLOAT, copy=False).tobytes())
-        response = self._unary("EvaluateSkeletonPose", self._skinning.EvaluateSkeletonPose, request, timeout)
+        response = self._unary("EvaluateSkeletonPose", self._skinning.EvaluateSkeletonPose, request, deadline_s)
         if len(response.poses) != poses.shape[0]:
             raise ProtocolError("EvaluateSkeletonPose", f"{len(response.poses)} results for {poses.shape[0]} poses")
         with _decoding("EvaluateSkeletonPose"):
@@ -469,12 +511,13 @@ class Client:
                        for i, p in enumerate(response.poses)]
         return results if batch else results[0]
 
+    @_renamed_keywords(timeout="deadline_s")
     def get_lod(self, model: str, *, version: int = 0, level: Optional[int] = None,
                 max_vertices: Optional[int] = None, tolerance_px: Optional[float] = None,
                 distance: Optional[float] = None, viewport_width_px: int = 1920,
                 horizontal_fov_rad: float = math.radians(45), form: str = "posed",
                 pose: Optional[npt.ArrayLike] = None, space: str = "global", include_geomorph: bool = False,
-                vertices_per_chunk: int = 0, timeout: Optional[float] = None) -> LodMesh:
+                vertices_per_chunk: int = 0, deadline_s: Optional[float] = None) -> LodMesh:
         """One level of detail, streamed in chunks and reassembled (Merry 2007 ch. 6, §7.3).
 
         Choose the level with exactly one of:
@@ -509,19 +552,21 @@ class Client:
         if form not in FORMS:
             raise ValueError(f"form: expected 'posed' or 'animation_space', got {form!r}")
         request = lod_pb2.GetLodRequest(model=_model_ref(model, version), form=FORMS[form],
-                                        include_geomorph=include_geomorph, vertices_per_chunk=vertices_per_chunk)
+                                        include_geomorph=include_geomorph,
+                                        vertices_per_chunk=wire.as_uint("vertices_per_chunk", vertices_per_chunk))
         if level is not None:
-            request.level = level
+            request.level = wire.as_uint("level", level)
         elif max_vertices is not None:
-            request.budget.max_vertices = max_vertices
+            request.budget.max_vertices = wire.as_uint("max_vertices", max_vertices)
         else:
-            request.pixel_tolerance.tolerance_px = float(tolerance_px)  # type: ignore[arg-type]
-            request.pixel_tolerance.distance = float(distance)  # type: ignore[arg-type]
-            request.pixel_tolerance.viewport_width_px = viewport_width_px
-            request.pixel_tolerance.horizontal_fov_rad = horizontal_fov_rad
+            view = request.pixel_tolerance  # lod.proto PixelTolerance, field for field
+            view.tolerance_px = wire.as_float("tolerance_px", tolerance_px)
+            view.distance = wire.as_float("distance", distance)
+            view.viewport_width_px = wire.as_uint("viewport_width_px", viewport_width_px)
+            view.horizontal_fov_rad = wire.as_float("horizontal_fov_rad", horizontal_fov_rad)
         if pose is not None:
             request.pose.CopyFrom(wire.skeleton_pose("pose", pose, space))
-        call = self._lod.GetLod(request, timeout=self._timeout(timeout), metadata=self._metadata)
+        call = self._lod.GetLod(request, timeout=self._deadline(deadline_s), metadata=self._metadata)
         assembler = LodAssembler()
         try:
             for chunk in call:
@@ -540,13 +585,14 @@ class Client:
     # ------------------------------------------------------------------------------------------
     # Thumbnails and retraining
 
+    @_renamed_keywords(timeout="deadline_s", pixel_tolerance="tolerance_px")
     def render_thumbnail(self, model: str, width_px: int, height_px: int, *, version: int = 0,
                          key_values: Optional[npt.ArrayLike] = None, skeleton_pose: Optional[npt.ArrayLike] = None,
                          space: str = "global", sequence_frame: Optional[int] = None, camera: Optional[Camera] = None,
                          background_rgba: Optional[Sequence[float]] = None, shading: Optional[str] = None,
                          samples: int = 0, show_key_points: bool = False, show_wireframe: bool = False,
-                         full_values: Optional[npt.ArrayLike] = None, pixel_tolerance: float = 0.0,
-                         timeout: Optional[float] = None) -> Thumbnail:
+                         full_values: Optional[npt.ArrayLike] = None, tolerance_px: float = 0.0,
+                         deadline_s: Optional[float] = None) -> Thumbnail:
         """A PNG of the model drawn headless by the daemon's render thread.
 
         What is drawn: the rest pose; or ``key_values`` (K×D) through the soft cache (PMSC; with
@@ -561,8 +607,8 @@ class Client:
             samples: multisampling 1, 2, 4 or 8 (0: the server's default, 4).
             show_key_points, show_wireframe: overlays.
             full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red ε_max).
-            pixel_tolerance: draw the coarsest level whose error stays under this many pixels
-                (eq. 7.2); 0 draws full detail.
+            tolerance_px: draw the coarsest level whose error stays under this many pixels
+                (eq. 7.2, in this ``width_px``-wide view); 0 draws full detail.
 
         Raises:
             InvalidArgument: a size outside 1..max_thumbnail_px (naming ``width_px``) or a bad camera.
@@ -570,10 +616,12 @@ class Client:
         """
         if sequence_frame is not None and (key_values is not None or skeleton_pose is not None):
             raise ValueError("sequence_frame: give it alone, not with key_values or skeleton_pose")
-        request = render_pb2.RenderThumbnailRequest(model=_model_ref(model, version), width_px=width_px,
-                                                    height_px=height_px, samples=samples,
+        request = render_pb2.RenderThumbnailRequest(model=_model_ref(model, version),
+                                                    width_px=wire.as_uint("width_px", width_px),
+                                                    height_px=wire.as_uint("height_px", height_px),
+                                                    samples=wire.as_uint("samples", samples),
                                                     show_key_points=show_key_points, show_wireframe=show_wireframe,
-                                                    pixel_tolerance=pixel_tolerance)
+                                                    tolerance_px=wire.as_float("tolerance_px", tolerance_px))
         if key_values is not None:
             request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
             if skeleton_pose is not None:
@@ -581,7 +629,7 @@ class Client:
         elif skeleton_pose is not None:
             request.skeleton_pose.CopyFrom(wire.skeleton_pose("skeleton_pose", skeleton_pose, space))
         elif sequence_frame is not None:
-            request.sequence_frame = sequence_frame
+            request.sequence_frame = wire.as_uint("sequence_frame", sequence_frame)
         if camera is not None:
             request.camera.CopyFrom(camera.to_proto())
         if background_rgba is not None:
@@ -595,17 +643,18 @@ class Client:
             request.shading = _SHADING[shading]
         if full_values is not None:
             request.full_values.CopyFrom(wire.point_array("full_values", full_values))
-        response = self._unary("RenderThumbnail", self._render.RenderThumbnail, request, timeout)
+        response = self._unary("RenderThumbnail", self._render.RenderThumbnail, request, deadline_s)
         with _decoding("RenderThumbnail"):
             return Thumbnail.from_proto(response)
 
+    @_renamed_keywords(timeout="deadline_s")
     def retrain(self, model: str, *, version: int = 0, exclude_misses: bool = False, error_bound: float = 0.0,
-                max_key_points: int = 0, dry_run: bool = False, timeout: Optional[float] = None) -> RetrainResult:
+                max_key_points: int = 0, dry_run: bool = False, deadline_s: Optional[float] = None) -> RetrainResult:
         """Admin: "train each night, better tomorrow" — rebuilds the subspace from the model's
         training frames plus the logged misses that carry full values, writes it as the next
         version and hot-swaps it in (calls in flight finish on the old one).
 
-        Retraining can take minutes on real data: pass a ``timeout`` to match.
+        Retraining can take minutes on real data: pass a ``deadline_s`` to match.
 
         Args:
             exclude_misses: train on the original frames only.
@@ -618,8 +667,10 @@ class Client:
             model is running. PermissionDenied: admin RPCs are locked.
         """
         request = training_pb2.RetrainRequest(model=_model_ref(model, version), exclude_misses=exclude_misses,
-                                              error_bound=error_bound, max_key_points=max_key_points, dry_run=dry_run)
-        return RetrainResult.from_proto(self._unary("Retrain", self._training.Retrain, request, timeout))
+                                              error_bound=wire.as_float("error_bound", error_bound),
+                                              max_key_points=wire.as_uint("max_key_points", max_key_points),
+                                              dry_run=dry_run)
+        return RetrainResult.from_proto(self._unary("Retrain", self._training.Retrain, request, deadline_s))
 
 
 class _FrameRequests:
@@ -633,8 +684,7 @@ class _FrameRequests:
 
     def __init__(self, model: common_pb2.ModelRef, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]],
                  omit_points: bool, first_sequence: int) -> None:
-        if first_sequence < 0:
-            raise ValueError(f"first_sequence: expected >= 0, got {first_sequence}")
+        first_sequence = wire.as_uint("first_sequence", first_sequence, 64)
         self._model = model
         self._frames = frames
         self._omit_points = omit_points

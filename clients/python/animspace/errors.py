@@ -85,7 +85,7 @@ class InvalidArgument(RpcError):
 
 
 class DeadlineExceeded(RpcError):
-    """DEADLINE_EXCEEDED: the call's deadline passed (see ``Client(deadline_s=…)``, ``timeout=``)."""
+    """DEADLINE_EXCEEDED: the call's deadline passed (see ``Client(deadline_s=…)`` and each call's ``deadline_s=``)."""
 
 
 class NotFound(RpcError):

@@ -13,13 +13,17 @@ than a mesh with holes.
 """
 from __future__ import annotations
 
+import io
+import os
+import pathlib
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
+from typing import List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 from animspace import wire
+from animspace.display import compact_repr
 from animspace.messages import enum_name
 from animspace.v1 import lod_pb2
 
@@ -72,6 +76,8 @@ class Skeleton:
     the top three rows of each 4×4); ``bone_names`` empty or one per bone.
     """
 
+    __repr__ = compact_repr
+
     parents: np.ndarray
     rest_transforms: np.ndarray
     bone_names: Tuple[str, ...]
@@ -123,6 +129,8 @@ class LodMesh:
         skeleton: animation-space form: the skeleton; None for the posed form.
         chunk_count, bytes_received: what the stream took (for transfer reports).
     """
+
+    __repr__ = compact_repr
 
     header: LodHeader
     positions: Optional[np.ndarray]
@@ -190,6 +198,36 @@ class LodMesh:
         for c in range(3):
             out[:, c] = np.bincount(vertex_of, weights=per_influence[:, c], minlength=self.header.vertex_count)
         return out
+
+    def to_obj(self, transforms: Optional[npt.ArrayLike] = None, *, space: str = "global",
+               geomorph: float = 0.0) -> str:
+        """The level as Wavefront OBJ text, posed by :meth:`pose` (same arguments; the rest pose
+        by default): a comment naming the level, ``v x y z`` per vertex (``%.9g``, which
+        round-trips float32) and ``f a b c`` per face, counting from 1 as OBJ does."""
+        h = self.header
+        out = io.StringIO()
+        out.write(f"# animspace LOD level {h.level} of {h.level_count}, model version {h.model_version}, "
+                  f"epsilon {h.epsilon:.9g}: {h.vertex_count} vertices, {h.face_count} faces\n")
+        np.savetxt(out, self.pose(transforms, space=space, geomorph=geomorph).astype(np.float64),
+                   fmt="v %.9g %.9g %.9g")
+        np.savetxt(out, self.indices.astype(np.int64) + 1, fmt="f %d %d %d")
+        return out.getvalue()
+
+    def save(self, path: Union[str, "os.PathLike[str]"], transforms: Optional[npt.ArrayLike] = None, *,
+             space: str = "global", geomorph: float = 0.0) -> None:
+        """Writes :meth:`to_obj` to ``path``, which must name a ``.obj`` file (like
+        ``Thumbnail.save`` writes its PNG).
+
+        Raises:
+            ValueError: for another extension (only OBJ is written; the C++ CLI's ``animspace
+                lod`` also writes PLY and glTF).
+        """
+        name = pathlib.Path(path).name
+        if not name.lower().endswith(".obj"):
+            raise ValueError(f"path: expected a .obj file, got {name!r}")
+        text = self.to_obj(transforms, space=space, geomorph=geomorph)
+        with open(path, "w") as out:
+            out.write(text)
 
 
 class LodAssembler:

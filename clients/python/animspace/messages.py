@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from animspace import wire
+from animspace.display import compact_repr
 from animspace.v1 import common_pb2, models_pb2, poses_pb2, render_pb2, stats_pb2, training_pb2
 
 __all__ = [
@@ -87,6 +88,8 @@ class KeyPointPose:
     (fail-through ``SERVER``) complete a blend or miss itself (Meyer & Anderson 2007 §2: the
     full calculation runs only when the cache cannot be trusted).
     """
+
+    __repr__ = compact_repr
 
     key_values: npt.ArrayLike
     skeleton_pose: Optional[npt.ArrayLike] = None
@@ -197,6 +200,8 @@ class HistogramData:
     """A Prometheus-style histogram: ``counts[i]`` counts observations ≤ ``upper_bounds[i]``;
     the last count (one beyond the bounds) is the +Inf bucket. Counts are not cumulative."""
 
+    __repr__ = compact_repr
+
     upper_bounds: np.ndarray  # (K,) float64
     counts: np.ndarray  # (K + 1,) uint64
     total_count: int
@@ -260,6 +265,8 @@ class KeyPoints:
     Pin ``model_version`` in later calls to keep using these indices across a retrain.
     """
 
+    __repr__ = compact_repr
+
     model_version: int
     indices: np.ndarray
     channel_count: int
@@ -322,6 +329,8 @@ class PoseResult:
         sequence: the frame's sequence number (streams only; 0 otherwise).
     """
 
+    __repr__ = compact_repr
+
     points: Optional[np.ndarray]
     status: str
     key_point_error: float
@@ -349,6 +358,8 @@ class MissCompletion:
     """``Client.complete_miss``'s answer: the blended/full result, and whether the miss was logged
     for retraining ("train each night, better tomorrow")."""
 
+    __repr__ = compact_repr
+
     result: PoseResult
     logged: bool
 
@@ -360,6 +371,8 @@ class SkinnedPose:
     ``points`` N×3 float32 in model units; ``normals`` N×3 unit normals from the tangent planes
     (§3.5) when requested, else None.
     """
+
+    __repr__ = compact_repr
 
     points: np.ndarray
     normals: Optional[np.ndarray]
@@ -377,6 +390,8 @@ class Thumbnail:
     ``pose`` is the soft cache's verdict when the source was key points, else None;
     ``lod_level`` the level drawn (0 = full detail).
     """
+
+    __repr__ = compact_repr
 
     png: bytes
     width_px: int

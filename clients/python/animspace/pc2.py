@@ -15,6 +15,8 @@ from typing import Union
 import numpy as np
 import numpy.typing as npt
 
+from animspace.display import compact_repr
+
 __all__ = ["PointCache", "read_pc2", "write_pc2"]
 
 MAGIC = b"POINTCACHE2\0"
@@ -31,6 +33,8 @@ class PointCache:
     PC2's sampleRate is the step between samples, in frames: sample f lies at frame
     ``start_frame + f · sample_rate``.
     """
+
+    __repr__ = compact_repr
 
     frames: np.ndarray
     start_frame: float = 0.0

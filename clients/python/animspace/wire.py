@@ -7,11 +7,13 @@ affine matrix, row-major (``SkeletonPose.transforms``).
 
 Every function here checks shapes before packing and raises ``ValueError`` naming the argument,
 the expected shape and the actual one: a wrong shape is a programming mistake best caught before
-a round trip. Values are not checked here (NaN, ±Inf): the server refuses them naming the field,
+a round trip. Scalars bound for unsigned fields are checked the same way (:func:`as_uint`,
+:func:`as_float`): protobuf's own refusal ("Value out of range: -5") names no field. Values are not checked here (NaN, ±Inf): the server refuses them naming the field,
 and checking twice would cost a pass over every array.
 """
 from __future__ import annotations
 
+import operator
 from typing import Optional, Sequence, Tuple
 
 import numpy as np
@@ -20,7 +22,9 @@ import numpy.typing as npt
 from animspace.v1 import common_pb2
 
 __all__ = [
+    "as_float",
     "as_float32",
+    "as_uint",
     "as_points",
     "as_transforms",
     "point_array",
@@ -50,6 +54,38 @@ AFFINE_ROW_TOLERANCE = 1e-6
 
 def _shape_text(shape: Sequence[object]) -> str:
     return "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def as_uint(name: str, value: object, bits: int = 32) -> int:
+    """``value`` as an integer for a ``uint32`` (or, with ``bits`` 64, ``uint64``) field.
+
+    Raises:
+        ValueError: naming ``name``, for a negative or too large integer, or a value that is not
+            an integer (1.5, "3"; numpy integers are accepted).
+    """
+    largest = (1 << bits) - 1
+    try:
+        number = operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(f"{name}: expected an integer in [0, {largest}], got {value!r}") from None
+    if not 0 <= number <= largest:
+        raise ValueError(f"{name}: expected an integer in [0, {largest}], got {number}")
+    return number
+
+
+def as_float(name: str, value: object) -> float:
+    """``value`` as a Python float for a ``float``/``double`` field (range checks are the server's,
+    which names the field too).
+
+    Raises:
+        ValueError: naming ``name``, for a value that is not a number.
+    """
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number, got {value!r}") from None
 
 
 def as_float32(name: str, values: npt.ArrayLike) -> np.ndarray:

@@ -17,7 +17,7 @@ import json
 import math
 import os
 import sys
-from typing import Optional, TextIO
+from typing import Optional
 
 import numpy as np
 
@@ -29,15 +29,6 @@ def read_token(path: Optional[str]) -> Optional[str]:
         with open(path) as file:
             return file.read().strip()
     return os.environ.get("ANIMSPACE_TOKEN") or None
-
-
-def write_obj(out: TextIO, vertices: np.ndarray, faces: np.ndarray, comment: str = "") -> None:
-    """V×3 vertices and F×3 zero-based faces as OBJ (which counts from 1)."""
-    for line in comment.splitlines():
-        out.write(f"# {line}\n")
-    # %.9g round-trips float32 exactly.
-    np.savetxt(out, vertices.astype(np.float64), fmt="v %.9g %.9g %.9g")
-    np.savetxt(out, faces.astype(np.int64) + 1, fmt="f %d %d %d")
 
 
 def main(argv: Optional[list] = None) -> int:
@@ -68,10 +59,7 @@ def main(argv: Optional[list] = None) -> int:
                               viewport_width_px=args.viewport_width, horizontal_fov_rad=math.radians(args.fov),
                               form="posed", pose=pose, space="local" if args.local else "global")
     h = mesh.header
-    with open(args.output, "w") as out:
-        write_obj(out, mesh.pose(), mesh.indices,
-                  f"{args.model} v{h.model_version}, level {h.level} of {h.level_count}, epsilon {h.epsilon:.9g}\n"
-                  "written by animspace examples/lod_to_obj.py")
+    mesh.save(args.output)  # OBJ, posed at the pose asked for (the server posed FORM_POSED)
     report = {"model": args.model, "version": h.model_version, "level": h.level, "level_count": h.level_count,
               "epsilon": h.epsilon, "tolerated_error": h.tolerated_error, "vertices": h.vertex_count,
               "faces": h.face_count, "chunks": mesh.chunk_count, "bytes": mesh.bytes_received, "output": args.output}

@@ -53,7 +53,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument("--server", default="127.0.0.1:50051", help="animspaced address (default %(default)s)")
     parser.add_argument("--token-file", help="bearer token file (default: $ANIMSPACE_TOKEN)")
     parser.add_argument("--select", type=parse_slice, default=slice(None), help="frames, as a Python slice: 1::2")
-    parser.add_argument("--timeout", type=float, default=600.0, help="deadline of the whole stream, s")
+    parser.add_argument("--deadline-s", "--timeout", dest="deadline_s", type=float, default=600.0,
+                        help="deadline of the whole stream, seconds (default 600; --timeout: the old name)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     parser.add_argument("-v", "--verbose", action="store_true", help="one line per frame")
     args = parser.parse_args(argv)
@@ -77,7 +78,7 @@ def main(argv: Optional[list] = None) -> int:
         needed = 0
         # Pin the version the key indices belong to; only the verdicts are needed here.
         for f, result in zip(frame_numbers, client.stream_key_points(
-                args.model, key_values(), version=keys.model_version, omit_points=True, timeout=args.timeout)):
+                args.model, key_values(), version=keys.model_version, omit_points=True, deadline_s=args.deadline_s)):
             counts[result.status] = counts.get(result.status, 0) + 1
             errors.append(result.key_point_error)
             needed += result.full_evaluation_needed

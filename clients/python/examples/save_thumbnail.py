@@ -39,15 +39,16 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument("--wireframe", action="store_true", help="overlay the triangle edges")
     parser.add_argument("--tolerance-px", type=float, default=0.0, help="LOD error allowed, pixels (0: full detail)")
     parser.add_argument("--shading", choices=["blinn_phong", "lambert"], help="default: the server's (Blinn-Phong)")
-    parser.add_argument("--timeout", type=float, default=60.0, help="deadline, s (a render queues behind others)")
+    parser.add_argument("--deadline-s", "--timeout", dest="deadline_s", type=float, default=60.0,
+                        help="deadline, seconds (a render queues behind others; --timeout: the old name)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     args = parser.parse_args(argv)
 
     with animspace.Client(args.server, token=read_token(args.token_file)) as client:
         thumbnail = client.render_thumbnail(args.model, args.width, args.height, version=args.version,
                                             sequence_frame=args.frame, show_wireframe=args.wireframe,
-                                            pixel_tolerance=args.tolerance_px, shading=args.shading,
-                                            timeout=args.timeout)
+                                            tolerance_px=args.tolerance_px, shading=args.shading,
+                                            deadline_s=args.deadline_s)
     thumbnail.save(args.output)
     report = {"model": args.model, "version": thumbnail.model_version, "width_px": thumbnail.width_px,
               "height_px": thumbnail.height_px, "lod_level": thumbnail.lod_level, "render_ms": thumbnail.render_ms,

@@ -144,7 +144,7 @@ TEST_F(RenderServiceInProcessTest, BadFieldsAreRefusedBeforeTheRendererIsCalled)
          r.mutable_camera()->set_vertical_fov_rad(0.7f);
        },
        Code::INVALID_ARGUMENT, "camera.up"},
-      {"tolerance", [](Request& r) { r.set_pixel_tolerance(-1); }, Code::INVALID_ARGUMENT, "pixel_tolerance"},
+      {"tolerance", [](Request& r) { r.set_tolerance_px(-1); }, Code::INVALID_ARGUMENT, "tolerance_px: expected"},
       {"frame", [](Request& r) { r.set_sequence_frame(100000); }, Code::INVALID_ARGUMENT,
        "sequence_frame: expected 0.."},
       {"unknown model", [](Request& r) { r.mutable_model()->set_name("no-such-model"); }, Code::NOT_FOUND,
