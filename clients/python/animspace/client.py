@@ -546,6 +546,7 @@ class Client:
                          background_rgba: Optional[Sequence[float]] = None, shading: Optional[str] = None,
                          samples: int = 0, show_key_points: bool = False, show_wireframe: bool = False,
                          full_values: Optional[npt.ArrayLike] = None, pixel_tolerance: float = 0.0,
+                         heat_max: float = 0.0, show_heat_legend: bool = False,
                          timeout: Optional[float] = None) -> Thumbnail:
         """A PNG of the model drawn headless by the daemon's render thread.
 
@@ -560,7 +561,12 @@ class Client:
             shading: "blinn_phong" or "lambert" (None: the server's default, Blinn-Phong).
             samples: multisampling 1, 2, 4 or 8 (0: the server's default, 4).
             show_key_points, show_wireframe: overlays.
-            full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red ε_max).
+            full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red at the
+                scale; ``Thumbnail.heat_max_error`` and ``heat_scale_max`` say the largest error
+                and the scale).
+            heat_max: the error drawn red, model units (needs full_values); 0: the model's error
+                tolerance when it stores one, else the pose's largest error.
+            show_heat_legend: draw the scale as a colour bar with its numbers (needs full_values).
             pixel_tolerance: draw the coarsest level whose error stays under this many pixels
                 (eq. 7.2); 0 draws full detail.
 
@@ -573,7 +579,8 @@ class Client:
         request = render_pb2.RenderThumbnailRequest(model=_model_ref(model, version), width_px=width_px,
                                                     height_px=height_px, samples=samples,
                                                     show_key_points=show_key_points, show_wireframe=show_wireframe,
-                                                    pixel_tolerance=pixel_tolerance)
+                                                    pixel_tolerance=pixel_tolerance, heat_max=heat_max,
+                                                    show_heat_legend=show_heat_legend)
         if key_values is not None:
             request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
             if skeleton_pose is not None:
