@@ -209,6 +209,10 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
         // model promises. ε_max itself bounds the RMS key-point error, a far smaller number than
         // a point's error, and turned a hit mostly red.
         const double largest = scene.heat.size() == 0 ? 0.0 : static_cast<double>(scene.heat.maxCoeff());
+        if (!std::isfinite(largest)) {
+          return invalid_argument("full_values: |full − estimate| overflows float32; expected values on the "
+                                  "model's scale");
+        }
         double scale = request.heat_max();
         if (scale == 0) scale = error_tolerance(model);
         if (scale == 0) scale = largest;

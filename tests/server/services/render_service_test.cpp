@@ -277,7 +277,13 @@ TEST_F(RenderServiceInProcessTest, TheHeatMapIsScaledToTheModelsToleranceAndItsL
               q.set_show_heat_legend(true);
             },
             "show_heat_legend"},
-           {[](Request& q) { q.set_heat_max(-1); }, "heat_max"}}) {
+           {[](Request& q) { q.set_heat_max(-1); }, "heat_max"},
+           {[&full, n](Request& q) {
+              Eigen::RowVectorXf huge = full;
+              huge.head<3>().setConstant(3e38f);  // finite, but its distance from the estimate is not
+              *q.mutable_full_values() = point_array(huge.data(), n);
+            },
+            "full_values: |full − estimate| overflows float32"}}) {
     Request bad = r;
     spoil(bad);
     const grpc::Status refused = render(bad);
