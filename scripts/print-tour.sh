@@ -12,7 +12,7 @@ In another terminal:
   build/bin/animspace --server ${listen} describe arm    # sizes, metadata, sections
   build/bin/animspace --server ${listen} describe arm-animspace   # skeleton model with LOD levels
   build/bin/animspace --server ${listen} server-info     # limits and implemented RPCs
-  build/bin/animspace --server ${listen} stats           # per-model requests, hit rates, latency
+  build/bin/animspace --server ${listen} stats           # per-model requests, poses, hit rates, latency (ms)
   curl -s http://${metrics}/metrics                      # Prometheus metrics
 
 Stop it with Ctrl-C (in-flight calls finish first).

@@ -104,6 +104,11 @@ void Metrics::record_pose(std::string_view model, pmsc::CacheStatus status, doub
   stats.key_point_error.observe(key_point_error);
 }
 
+void Metrics::record_skeleton_poses(std::string_view model, uint64_t count) {
+  std::lock_guard lock(mutex_);
+  models_[std::string(model)].poses += count;
+}
+
 void Metrics::set_models_loaded(int count) {
   std::lock_guard lock(mutex_);
   models_loaded_ = count;

@@ -47,7 +47,7 @@ std::vector<double> key_point_error_bounds();
 struct ModelStatistics {
   uint64_t requests = 0;
   uint64_t errors = 0;
-  uint64_t poses = 0;
+  uint64_t poses = 0;  // key-point poses through the soft cache and skeleton poses
   uint64_t hits = 0;
   uint64_t blends = 0;
   uint64_t misses = 0;
@@ -63,6 +63,8 @@ class Metrics {
   void record_call(std::string_view rpc, std::string_view model, int code, double seconds);
   // One pose through the soft cache.
   void record_pose(std::string_view model, pmsc::CacheStatus status, double key_point_error);
+  // Skeleton poses evaluated (SkinningService): counted as poses, with no verdict.
+  void record_skeleton_poses(std::string_view model, uint64_t count);
   void set_models_loaded(int count);
   // Versions serving now, per model, and the default of each (animspace_model_versions).
   struct ServedVersion {

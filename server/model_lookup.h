@@ -3,7 +3,9 @@
 #pragma once
 
 #include <memory>
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include <grpcpp/support/status.h>
 
@@ -14,9 +16,19 @@
 namespace animspace::server {
 
 // OK and `out` set (and the call labelled with the model), or INVALID_ARGUMENT naming
-// `field`.name / NOT_FOUND / FAILED_PRECONDITION.
+// `field`.name / NOT_FOUND (for an unknown name, unknown_model's message) / FAILED_PRECONDITION.
 grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
                         std::shared_ptr<const LoadedModel>& out, const CallControl* call = nullptr);
+
+// Up to three of `candidates` nearest to `name` by edit distance (optimal string alignment:
+// insertions, deletions, substitutions and swaps of neighbours, one each), nearest first, ties in
+// the candidates' order; only names within max(2, |name| / 3) edits — a typo, not another model.
+std::vector<std::string> nearest_names(std::string_view name, const std::vector<std::string>& candidates);
+
+// NOT_FOUND for a model name the registry does not serve, with the nearest names and what it
+// serves: "model 'crnae' is not loaded; did you mean 'crane'? models: arm, arm-pmsc, crane"
+// (at most 20 names listed, then how many more).
+grpc::Status unknown_model(const ModelRegistry& registry, std::string_view name);
 
 // FAILED_PRECONDITION for a call the model's kind cannot serve:
 // "model 'arm' version 2 is of kind animation_space: <reason>".

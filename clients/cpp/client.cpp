@@ -268,6 +268,9 @@ Thumbnail Client::render_thumbnail(const v1::RenderThumbnailRequest& request, st
   out.lod_level = response.lod_level();
   if (response.has_pose()) out.pose = decode_pose_result(response.pose());
   out.render_ms = response.render_ms();
+  out.heat_max_error = response.heat_max_error();
+  out.heat_scale_max = response.heat_scale_max();
+  out.heat_legend_drawn = response.heat_legend_drawn();
   return out;
 }
 

@@ -66,6 +66,11 @@ struct Thumbnail {
   uint32_t lod_level = 0;
   std::optional<PoseResult> pose;  // the soft cache's verdict when drawn from key points (no points)
   double render_ms = 0;
+  // With a heat map (full_values): the largest |full − estimate| and the error drawn red, model
+  // units; whether the asked-for legend fitted on the image.
+  double heat_max_error = 0;
+  double heat_scale_max = 0;
+  bool heat_legend_drawn = false;
 };
 
 struct ClientOptions {

@@ -1,5 +1,6 @@
 #include "core/mesh_io/posed_mesh.h"
 
+#include <bit>
 #include <cassert>
 #include <cstdint>
 #include <cstring>
@@ -8,6 +9,7 @@
 #include <new>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <meshoptimizer.h>
@@ -17,7 +19,6 @@
 
 #include "core/common/atomic_file.h"
 #include "core/mesh_io/text_io.h"
-#include "core/mesh_io/triangle_mesh_io.h"
 
 namespace animspace::mesh_io {
 namespace {
@@ -165,6 +166,58 @@ Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) 
   }
 }
 
+// OBJ with `vn` lines when the mesh has normals: each vertex's normal shares its index, so a
+// corner is written `v//vn` with the same number twice.
+std::string serialize_posed_obj(const PosedMesh& mesh) {
+  const bool has_normals = mesh.normals.rows() != 0;
+  std::string out;
+  const auto append_rows = [&out](const PointMatrix& rows, std::string_view prefix) {
+    for (Eigen::Index v = 0; v < rows.rows(); ++v) {
+      out += prefix;
+      for (int axis = 0; axis < 3; ++axis) {
+        append_number(out, rows(v, axis));
+        out += axis < 2 ? ' ' : '\n';
+      }
+    }
+  };
+  append_rows(mesh.points, "v ");
+  if (has_normals) append_rows(mesh.normals, "vn ");
+  for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
+    out += "f ";
+    for (int corner = 0; corner < 3; ++corner) {
+      append_number(out, mesh.faces(f, corner) + 1);
+      if (has_normals) {
+        out += "//";
+        append_number(out, mesh.faces(f, corner) + 1);
+      }
+      out += corner < 2 ? ' ' : '\n';
+    }
+  }
+  return out;
+}
+
+static_assert(std::endian::native == std::endian::little,
+              "binary PLY is written by copying little endian float32/int32 memory");
+
+// Binary little-endian PLY; with normals each vertex record is x y z nx ny nz (float32), the
+// property names most readers (Blender, MeshLab, Open3D) take as normals.
+std::string serialize_posed_ply(const PosedMesh& mesh) {
+  const bool has_normals = mesh.normals.rows() != 0;
+  std::string out = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(mesh.points.rows()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\n";
+  if (has_normals) out += "property float nx\nproperty float ny\nproperty float nz\n";
+  out += "element face " + std::to_string(mesh.faces.rows()) + "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (Eigen::Index v = 0; v < mesh.points.rows(); ++v) {
+    out.append(reinterpret_cast<const char*>(mesh.points.row(v).data()), 3 * sizeof(float));
+    if (has_normals) out.append(reinterpret_cast<const char*>(mesh.normals.row(v).data()), 3 * sizeof(float));
+  }
+  for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
+    out += static_cast<char>(3);
+    out.append(reinterpret_cast<const char*>(mesh.faces.row(f).data()), 3 * sizeof(int32_t));
+  }
+  return out;
+}
+
 }  // namespace
 
 PosedMesh optimise_for_rendering(const PosedMesh& mesh) {
@@ -217,11 +270,9 @@ Status write_posed_mesh(const std::filesystem::path& path, const PosedMesh& mesh
     const PosedMesh optimised = optimise_for_rendering(mesh);
     switch (*format) {
       case ExportFormat::kObj:
-      case ExportFormat::kPly: {
-        TriangleMesh triangles{optimised.points, optimised.faces};
-        return write_file_atomically(path, *format == ExportFormat::kObj ? mesh_io::serialize_obj(triangles)
-                                                                          : mesh_io::serialize_ply(triangles));
-      }
+      case ExportFormat::kPly:
+        return write_file_atomically(path, *format == ExportFormat::kObj ? serialize_posed_obj(optimised)
+                                                                          : serialize_posed_ply(optimised));
       case ExportFormat::kGlb:
       case ExportFormat::kGltf: {
         auto bytes = *format == ExportFormat::kGlb ? serialize_glb(optimised) : serialize_gltf(optimised);

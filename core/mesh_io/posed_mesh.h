@@ -33,7 +33,9 @@ Result<std::string> serialize_glb(const PosedMesh& mesh);
 Result<std::string> serialize_gltf(const PosedMesh& mesh);
 
 // Writes `mesh` after optimise_for_rendering, choosing the format by the extension of `path`
-// (.obj, .ply, .glb, .gltf, any case), atomically. OBJ/PLY carry positions and faces.
+// (.obj, .ply, .glb, .gltf, any case), atomically. Every format carries the normals when the mesh
+// has them: OBJ as `vn` lines (corners `v//vn`), binary PLY as float properties nx ny nz after
+// x y z, glTF as the NORMAL attribute.
 // Errors: kInvalidArgument for an unknown extension or a bad mesh (as above); kIo on failure.
 Status write_posed_mesh(const std::filesystem::path& path, const PosedMesh& mesh);
 

@@ -2,6 +2,7 @@
 
 #include "server/convert.h"
 #include "server/implemented_rpcs.h"
+#include "server/model_lookup.h"
 #include "server/status_mapping.h"
 #include "server/unary_call.h"
 #include "server/validation.h"
@@ -29,7 +30,8 @@ grpc::ServerUnaryReactor* ModelServiceImpl::DescribeModel(grpc::CallbackServerCo
         const auto& ref = request->model();
         if (grpc::Status s = check_model_ref(ref, "model"); !s.ok()) return s;
         auto entry = env_.registry.describe(ref.name());
-        if (!entry) return to_grpc_status(entry.error());
+        if (!entry) return entry.error().code == ErrorCode::kNotFound ? unknown_model(env_.registry, ref.name())
+                                                                     : to_grpc_status(entry.error());
         call.set_model(ref.name());
         if (ref.version() == 0) {
           to_proto(*entry, response->mutable_model());
@@ -73,9 +75,10 @@ grpc::ServerUnaryReactor* ModelServiceImpl::UnloadModel(grpc::CallbackServerCont
       [this](const CallControl& call, const v1::UnloadModelRequest* request, v1::UnloadModelResponse*) {
         const auto& ref = request->model();
         if (grpc::Status s = check_model_ref(ref, "model"); !s.ok()) return s;
+        const bool known = env_.registry.describe(ref.name()).ok();
         auto status = env_.registry.unload(ref.name(), ref.version());
         refresh_model_gauges(env_);
-        if (!status) return to_grpc_status(status.error());
+        if (!status) return known ? to_grpc_status(status.error()) : unknown_model(env_.registry, ref.name());
         call.set_model(ref.name());
         return grpc::Status::OK;
       });

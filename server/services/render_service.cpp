@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -11,7 +12,9 @@
 #include "core/common/format.h"
 #include "core/geometry/bounding_sphere.h"
 #include "core/lod/selection.h"
+#include "core/pmsc/pmsc_io.h"
 #include "core/render/camera.h"
+#include "core/render/heat_legend.h"
 #include "core/render/png.h"
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
@@ -162,6 +165,15 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
   return grpc::Status::OK;
 }
 
+// The per-point error a PMSC model's ε was calibrated to flag (training option error_tolerance,
+// model units), or 0 when the model stores none.
+double error_tolerance(const LoadedModel& model) {
+  auto options = pmsc::load_training_options(model.container, model.name);
+  return options.ok() && std::isfinite(options->error_tolerance) && options->error_tolerance > 0
+             ? options->error_tolerance
+             : 0.0;
+}
+
 // Fills the scene's geometry and overlays from the request's source (SPEC: a posed mesh from
 // PMSC key points, a skeleton pose, a stored sequence frame, or the rest pose).
 grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const Request& request,
@@ -169,6 +181,14 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
   uint32_t level = 0;
   if (request.show_key_points() && !model.pmsc) {
     return unsupported_by_kind(model, "show_key_points: it has no key points (only PMSC models do)");
+  }
+  if (!request.has_full_values() && (request.heat_max() != 0 || request.show_heat_legend())) {
+    return invalid_argument(std::string(request.heat_max() != 0 ? "heat_max" : "show_heat_legend") +
+                            ": the heat map needs full_values (and key_points as the source)");
+  }
+  if (!std::isfinite(request.heat_max()) || request.heat_max() < 0) {
+    return invalid_argument("heat_max: expected a finite value ≥ 0 (0 = the model's error tolerance), got " +
+                            std::to_string(request.heat_max()));
   }
   if (request.has_full_values() && request.source_case() != Request::kKeyPoints) {
     return invalid_argument(
@@ -206,9 +226,21 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
         // Thesis Fig. 8.6 style: per point, how far what the cache returned is from the truth.
         const auto truth = Eigen::Map<const PointMatrix>(full.data(), n, 3);
         scene.heat = (truth - scene.points).rowwise().norm();
-        // Red means an error as large as ε_max, the key-point error at which the soft cache
-        // gives up on its estimate (2007 §2.4): a hit stays blue, whatever its tiny errors.
-        scene.heat_max = model.info.epsilon_max;
+        // Red means the error asked for, else the per-point error the model's ε was calibrated
+        // to flag (its error tolerance): a hit's errors then read as a fraction of what the
+        // model promises. ε_max itself bounds the RMS key-point error, a far smaller number than
+        // a point's error, and turned a hit mostly red.
+        const double largest = scene.heat.size() == 0 ? 0.0 : static_cast<double>(scene.heat.maxCoeff());
+        if (!std::isfinite(largest)) {
+          return invalid_argument("full_values: |full − estimate| overflows float32; expected values on the "
+                                  "model's scale");
+        }
+        double scale = request.heat_max();
+        if (scale == 0) scale = error_tolerance(model);
+        if (scale == 0) scale = largest;
+        scene.heat_max = static_cast<float>(scale);
+        response->set_heat_max_error(largest);
+        response->set_heat_scale_max(scale);
       }
       break;
     }
@@ -259,9 +291,12 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
   return grpc::Status::OK;
 }
 
-// Runs on the request pool after the render thread has drawn: PNG, then the answer.
+// Runs on the request pool after the render thread has drawn: the heat legend (when asked for,
+// with the scale the scene used), PNG, then the answer.
 void encode_and_finish(render::Image image, Clock::time_point drawn_from, int64_t max_message_bytes,
-                       v1::RenderThumbnailResponse* response, const CallFinisher& finish) {
+                       std::optional<double> legend_max, v1::RenderThumbnailResponse* response,
+                       const CallFinisher& finish) {
+  if (legend_max) response->set_heat_legend_drawn(render::draw_heat_legend(image, *legend_max));
   auto png = render::encode_png(image);
   if (!png) {
     finish(to_grpc_status(png.error()));
@@ -315,16 +350,18 @@ grpc::ServerUnaryReactor* RenderServiceImpl::RenderThumbnail(grpc::CallbackServe
         grpc::CallbackServerContext* ctx = call.context();
         WorkPool& pool = env_.request_pool;
         const int64_t max_bytes = env_.options.max_message_bytes;
+        const std::optional<double> legend_max =
+            request->show_heat_legend() ? std::optional<double>(response->heat_scale_max()) : std::nullopt;
         RenderThread::Job job;
         job.scene = std::move(scene);
         job.abandoned = [ctx] { return !CallControl(ctx, nullptr).stop_status().ok(); };
-        job.done = [started, max_bytes, response, finish, &pool](Result<render::Image> image) {
+        job.done = [started, max_bytes, legend_max, response, finish, &pool](Result<render::Image> image) {
           if (!image) {
             finish(to_grpc_status(image.error()));
             return;
           }
-          auto encode = [image = std::move(*image), started, max_bytes, response, finish]() mutable {
-            encode_and_finish(std::move(image), started, max_bytes, response, finish);
+          auto encode = [image = std::move(*image), started, max_bytes, legend_max, response, finish]() mutable {
+            encode_and_finish(std::move(image), started, max_bytes, legend_max, response, finish);
           };
           // PNG encoding leaves the render thread free for the next draw.
           if (!pool.submit(encode)) encode();

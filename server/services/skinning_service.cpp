@@ -58,6 +58,7 @@ grpc::ServerUnaryReactor* SkinningServiceImpl::EvaluateSkeletonPose(grpc::Callba
             encode_points(points.data(), vertices, 3, out->mutable_normals());
           }
         }
+        env_.metrics.record_skeleton_poses(model->name, poses.size());
         return grpc::Status::OK;
       });
 }

@@ -1,7 +1,8 @@
 #include "server/services/stats_service.h"
 
-#include "server/unary_call.h"
+#include "server/model_lookup.h"
 #include "server/status_mapping.h"
+#include "server/unary_call.h"
 
 namespace animspace::server {
 namespace {
@@ -21,7 +22,9 @@ void to_proto(const std::string& name, const ModelStatistics& s, v1::ModelStats*
   out->set_blends(s.blends);
   out->set_misses(s.misses);
   out->set_errors(s.errors);
-  out->set_hit_rate(s.poses == 0 ? 0.0 : static_cast<double>(s.hits) / static_cast<double>(s.poses));
+  // Of the poses that had a verdict: skeleton poses never pass the soft cache.
+  const uint64_t verdicts = s.hits + s.blends + s.misses;
+  out->set_hit_rate(verdicts == 0 ? 0.0 : static_cast<double>(s.hits) / static_cast<double>(verdicts));
   to_proto(s.key_point_error, out->mutable_key_point_error());
   to_proto(s.latency_seconds, out->mutable_latency_seconds());
   out->set_latency_p50_s(s.latency_seconds.quantile(0.50));
@@ -46,7 +49,7 @@ grpc::ServerUnaryReactor* StatsServiceImpl::GetStats(grpc::CallbackServerContext
         if (!name.empty()) {
           if (auto valid = validate_model_name(name, "model"); !valid) return to_grpc_status(valid.error());
           auto it = stats.find(name);
-          if (it == stats.end()) return not_found("model: model '" + name + "' is not loaded");
+          if (it == stats.end()) return unknown_model(env_.registry, name);
           call.set_model(name);
           to_proto(it->first, it->second, response->add_models());
         } else {

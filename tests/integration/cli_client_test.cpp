@@ -5,7 +5,10 @@
 #include <sys/wait.h>
 
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -18,6 +21,7 @@
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/mesh_io/pc2.h"
+#include "core/mesh_io/triangle_mesh_io.h"
 #include "core/container/sections.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
@@ -218,6 +222,340 @@ TEST_F(CliClientTest, PoseWritesTheSkinnedSequenceAsAPointCache) {
   const CliRun bad = cli("pose arm-animspace --pose-file " + (work_->path() / "bad.txt").string());
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("bad.txt: expected a multiple of"), std::string::npos) << bad.err;
+}
+
+// The README's bent arm: rows 0–2 of G_j for the root, the upper arm and the forearm (60°).
+const char* kBentPose =
+    "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0\n0.5 -0.866 0 1 0.866 0.5 0 0 0 0 1 0\n";
+
+// Positions and normals of a written mesh, read here without the library's readers (which keep
+// no normals): OBJ `v`/`vn` lines, or a binary PLY's x y z nx ny nz float32 records.
+struct MeshWithNormals {
+  PointMatrix points, normals;
+  std::string header;  // PLY only
+};
+MeshWithNormals read_obj_normals(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::vector<float> v, n;
+  std::string tag;
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream words(line);
+    words >> tag;
+    float x = 0, y = 0, z = 0;
+    if (tag == "v" && words >> x >> y >> z) v.insert(v.end(), {x, y, z});
+    if (tag == "vn" && words >> x >> y >> z) n.insert(n.end(), {x, y, z});
+  }
+  MeshWithNormals out;
+  out.points = Eigen::Map<const PointMatrix>(v.data(), static_cast<Eigen::Index>(v.size() / 3), 3);
+  out.normals = Eigen::Map<const PointMatrix>(n.data(), static_cast<Eigen::Index>(n.size() / 3), 3);
+  return out;
+}
+MeshWithNormals read_ply_normals(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+  MeshWithNormals out;
+  const auto end = bytes.find("end_header\n");
+  if (end == std::string::npos) return out;
+  out.header = bytes.substr(0, end);
+  const auto count_at = out.header.find("element vertex ");
+  if (count_at == std::string::npos) return out;
+  const auto vertices = static_cast<Eigen::Index>(std::stol(out.header.substr(count_at + 15)));
+  const bool has_normals = out.header.find("property float nx\nproperty float ny\nproperty float nz\n") != std::string::npos;
+  const int stride = has_normals ? 6 : 3;
+  out.points.resize(vertices, 3);
+  out.normals.resize(has_normals ? vertices : 0, 3);
+  const char* records = bytes.data() + end + 11;
+  for (Eigen::Index i = 0; i < vertices; ++i) {
+    for (int c = 0; c < stride; ++c) {
+      float value = 0;
+      std::memcpy(&value, records + sizeof(float) * static_cast<size_t>(i * stride + c), sizeof value);
+      if (c < 3) {
+        out.points(i, c) = value;
+      } else {
+        out.normals(i, c - 3) = value;
+      }
+    }
+  }
+  return out;
+}
+
+// Every vertex of `got` (reordered for the vertex cache) has the normal the core computes for the
+// vertex at its position.
+void expect_normals_match(const MeshWithNormals& got, const PointMatrix& points, const PointMatrix& normals,
+                          const std::string& what) {
+  ASSERT_EQ(got.points.rows(), points.rows()) << what;
+  ASSERT_EQ(got.normals.rows(), points.rows()) << what << ": one normal per vertex";
+  int mismatched = 0;
+  for (Eigen::Index i = 0; i < got.points.rows(); ++i) {
+    Eigen::Index nearest = 0;
+    (points.rowwise() - got.points.row(i)).rowwise().squaredNorm().minCoeff(&nearest);
+    if ((points.row(nearest) - got.points.row(i)).norm() > 1e-4f ||
+        (normals.row(nearest) - got.normals.row(i)).norm() > 1e-4f) {
+      ++mismatched;
+    }
+  }
+  EXPECT_EQ(mismatched, 0) << what << ": vertices whose normal differs from the core's";
+}
+
+TEST_F(CliClientTest, PoseWritesNormalsToEveryMeshFormatAndRefusesThemForAPointCache) {
+  auto file = container::read_file(repo_->path() / "arm-animspace" / "1" / "model.anim");
+  ASSERT_TRUE(file.ok());
+  auto model = as::load(*file, "arm-animspace");
+  ASSERT_TRUE(model.ok());
+  const auto pose_file = work_->path() / "bent.txt";
+  std::ofstream(pose_file) << kBentPose;
+  as::TransformList G(3, Eigen::Matrix4d::Identity());
+  G[2].topLeftCorner<3, 4>() << 0.5, -0.866, 0, 1, 0.866, 0.5, 0, 0, 0, 0, 1, 0;
+  PointMatrix points, normals;
+  as::evaluate(*model, G, points);
+  as::evaluate_normals(*model, G, normals);
+
+  const auto obj = work_->path() / "bent.obj";
+  const CliRun obj_run = cli("pose arm-animspace --pose-file " + pose_file.string() + " --normals -o " + obj.string());
+  ASSERT_EQ(obj_run.exit_code, 0) << obj_run.err;
+  EXPECT_NE(obj_run.out.find("with normals"), std::string::npos) << obj_run.out;
+  expect_normals_match(read_obj_normals(obj), points, normals, "OBJ");
+
+  const auto ply = work_->path() / "bent.ply";
+  ASSERT_EQ(cli("pose arm-animspace --pose-file " + pose_file.string() + " --normals -o " + ply.string()).exit_code, 0);
+  expect_normals_match(read_ply_normals(ply), points, normals, "PLY");
+
+  // A point cache holds positions only: normals are refused before any call, nothing written.
+  const auto pc2 = work_->path() / "bent-normals.pc2";
+  const CliRun refused = cli("pose arm-animspace --pose-file " + pose_file.string() + " --normals -o " + pc2.string());
+  EXPECT_EQ(refused.exit_code, 2);
+  EXPECT_NE(refused.err.find("--normals"), std::string::npos) << refused.err;
+  EXPECT_NE(refused.err.find("positions only"), std::string::npos) << refused.err;
+  EXPECT_FALSE(std::filesystem::exists(pc2));
+}
+
+TEST_F(CliClientTest, AnOutputFileNamedForAFormatTheCommandDoesNotWriteIsRefusedBeforeAnyWork) {
+  struct Case {
+    std::string arguments;
+    std::string file;
+    std::string expected;  // what the refusal lists
+  };
+  const auto pose_file = work_->path() / "bent-ext.txt";
+  std::ofstream(pose_file) << kBentPose;
+  const std::vector<Case> cases = {
+      {"evaluate arm-pmsc " + arm_frames() + " --select 1:11:2 -o ", "returned.xyz", ".pc2"},
+      {"evaluate arm-pmsc " + arm_frames() + " --select 1:11:2 -o ", "returned", ".pc2"},
+      {"thumbnail arm -o ", "arm.jpg", ".png"},
+      {"pose arm-animspace --pose-file " + pose_file.string() + " -o ", "bent.stl", ".pc2, .obj, .ply, .glb, .gltf"},
+      {"lod arm-animspace --level 1 -o ", "arm.stl", ".obj, .ply, .glb, .gltf"},
+      {"export-lod " + (repo_->path() / "arm-animspace" / "1" / "model.anim").string() + " --level 1 -o ", "arm.fbx",
+       ".obj, .ply, .glb, .gltf"},
+  };
+  for (const Case& c : cases) {
+    const auto out = work_->path() / c.file;
+    const CliRun run = cli(c.arguments + out.string());
+    EXPECT_EQ(run.exit_code, 2) << c.arguments << c.file << "\n" << run.err;
+    EXPECT_NE(run.err.find("-o " + out.string() + ": "), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find(c.expected), std::string::npos) << run.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << c.file;
+  }
+  // Extensions are compared ignoring case.
+  const auto upper = work_->path() / "RETURNED.PC2";
+  EXPECT_EQ(cli("evaluate arm-pmsc " + arm_frames() + " --select 1:5:2 -q -o " + upper.string()).exit_code, 0);
+  EXPECT_TRUE(std::filesystem::exists(upper));
+}
+
+TEST_F(CliClientTest, EvaluatePrintsEveryFramesVerdictUnlessQuiet) {
+  auto stored = container::read_file(arm_frames());
+  ASSERT_TRUE(stored.ok());
+  auto frames = stored->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames.ok());
+  const KeyPoints keys = client_->describe_key_points("arm-pmsc");
+  const CliRun run = cli("evaluate arm-pmsc " + arm_frames() + " --select 1:11:2");
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  std::istringstream lines(run.out);
+  std::vector<std::string> frame_lines;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("frame ", 0) == 0) frame_lines.push_back(line);
+  }
+  ASSERT_EQ(frame_lines.size(), 5u) << run.out;
+  for (size_t i = 0; i < 5; ++i) {
+    const int f = 1 + 2 * static_cast<int>(i);
+    const std::span<const float> frame(frames->row(f).data(), static_cast<size_t>(frames->cols()));
+    const std::vector<float> values = keys.gather(frame);
+    const PoseResult result = client_->evaluate_key_points("arm-pmsc", {values, 3});
+    std::istringstream words(frame_lines[i]);
+    std::string word, status;
+    int number = -1;
+    words >> word >> number >> status;
+    EXPECT_EQ(number, f) << frame_lines[i];
+    EXPECT_EQ(status, cache_status_name(result.status)) << frame_lines[i];
+  }
+  const CliRun quiet = cli("evaluate arm-pmsc " + arm_frames() + " --select 1:11:2 -q");
+  ASSERT_EQ(quiet.exit_code, 0) << quiet.err;
+  EXPECT_EQ(quiet.out.find("frame "), std::string::npos) << quiet.out;
+  EXPECT_NE(quiet.out.find("5 frames: hits"), std::string::npos) << quiet.out;
+}
+
+TEST_F(CliClientTest, DescribeInTextSaysTheSoftCachesThresholdsAndFailThrough) {
+  for (const auto& [name, fail_through] : {std::pair<std::string, std::string>{"arm-pmsc", "CLIENT"},
+                                           {"arm-pmsc-engine", "SERVER"},
+                                           {"arm-cross-pmsc", "IMPOSSIBLE"}}) {
+    const v1::ModelSummary summary = client_->describe_model(name);
+    ASSERT_EQ(summary.versions_size(), 1);
+    const v1::ModelVersion& v = summary.versions(0);
+    const CliRun run = cli("describe " + name);
+    ASSERT_EQ(run.exit_code, 0) << run.err;
+    char expected[128];
+    std::snprintf(expected, sizeof expected, "ε_min %.6g, ε_max %.6g", static_cast<double>(v.epsilon_min()),
+                  static_cast<double>(v.epsilon_max()));
+    EXPECT_NE(run.out.find(expected), std::string::npos) << expected << "\n" << run.out;
+    EXPECT_NE(run.out.find("fail-through " + fail_through), std::string::npos) << run.out;
+  }
+  EXPECT_EQ(cli("describe arm").out.find("ε_min"), std::string::npos) << "a mesh sequence has no soft cache";
+}
+
+TEST_F(CliClientTest, LodJsonHasATolerableErrorOnlyForALevelChosenForAView) {
+  const auto obj = work_->path() / "arm-300.obj";
+  const nlohmann::json budget = json_of(cli("--json lod arm-animspace --max-vertices 300 -o " + obj.string()));
+  ASSERT_TRUE(budget.contains("tolerated_error"));
+  EXPECT_TRUE(budget["tolerated_error"].is_null()) << budget.dump();
+  const nlohmann::json exported = json_of(cli("--json export-lod " +
+                                              (repo_->path() / "arm-animspace" / "1" / "model.anim").string() +
+                                              " --level 1 -o " + obj.string()));
+  EXPECT_TRUE(exported["tolerated_error"].is_null()) << exported.dump();
+
+  // A view: the tolerated error of eq. 7.2, and --fov-deg is degrees (the API takes radians).
+  v1::GetLodRequest request;
+  request.mutable_model()->set_name("arm-animspace");
+  request.set_form(v1::GetLodRequest::FORM_POSED);
+  auto* view = request.mutable_pixel_tolerance();
+  view->set_tolerance_px(1.5f);
+  view->set_distance(40);
+  view->set_viewport_width_px(1920);
+  view->set_horizontal_fov_rad(static_cast<float>(10 * std::numbers::pi / 180));
+  const LodMesh expected = client_->get_lod(request);
+  for (const std::string flag : {"--fov-deg", "--fov"}) {
+    const nlohmann::json chosen = json_of(
+        cli("--json lod arm-animspace --tolerance-px 1.5 --distance 40 " + flag + " 10 -o " + obj.string()));
+    EXPECT_EQ(chosen["level"].get<uint32_t>(), expected.header.level()) << flag;
+    EXPECT_FLOAT_EQ(chosen["tolerated_error"].get<float>(), expected.header.tolerated_error()) << flag;
+  }
+  // The view without a tolerance would be ignored: refused.
+  const CliRun ignored = cli("lod arm-animspace --max-vertices 300 --fov-deg 10 -o " + obj.string());
+  EXPECT_NE(ignored.exit_code, 0);
+  EXPECT_NE(ignored.err.find("--tolerance-px"), std::string::npos) << ignored.err;
+  for (const std::string command : {"lod", "export-lod", "thumbnail"}) {
+    const CliRun help = cli(command + " --help");
+    EXPECT_NE(help.out.find("--fov-deg"), std::string::npos) << command << help.out;
+    EXPECT_NE(help.out.find("DEGREES"), std::string::npos) << command << help.out;
+  }
+}
+
+TEST_F(CliClientTest, StatsCountSkeletonPosesShowMissesAndNoHitRateWithoutVerdicts) {
+  const auto before = client_->stats("arm-animspace");
+  ASSERT_EQ(before.models_size(), 1);
+  std::vector<float> identity = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+  SkeletonPose pose{v1::SkeletonPose::SPACE_GLOBAL, {}};
+  for (int b = 0; b < 3; ++b) pose.transforms.insert(pose.transforms.end(), identity.begin(), identity.end());
+  const std::vector<SkeletonPose> poses(4, pose);
+  client_->evaluate_skeleton_pose("arm-animspace", poses);
+  const nlohmann::json after = json_of(cli("--json stats arm-animspace"));
+  ASSERT_EQ(after["models"].size(), 1u);
+  EXPECT_EQ(std::stoull(after["models"][0]["poses"].get<std::string>()), before.models(0).poses() + 4)
+      << "skeleton poses count as poses";
+
+  const CliRun text = cli("stats");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  std::istringstream lines(text.out);
+  std::string header;
+  std::getline(lines, header);
+  for (const char* column : {"misses", "hit%", "mean ms", "~p50 ms", "~p99 ms"}) {
+    EXPECT_NE(header.find(column), std::string::npos) << column << ": " << header;
+  }
+  EXPECT_NE(text.out.find("interpolated inside the latency histogram's bucket"), std::string::npos) << text.out;
+  bool saw_animspace = false;
+  for (std::string line; std::getline(lines, line);) {
+    std::istringstream words(line);
+    std::string model, hit_rate;
+    uint64_t requests = 0, errors = 0, posed = 0, hits = 0, blends = 0, misses = 0;
+    if (!(words >> model >> requests >> errors >> posed >> hits >> blends >> misses >> hit_rate)) continue;
+    if (hits + blends + misses == 0) {
+      EXPECT_EQ(hit_rate, "-") << line;
+    } else {
+      char expected[32];
+      std::snprintf(expected, sizeof expected, "%.1f%%", 100.0 * double(hits) / double(hits + blends + misses));
+      EXPECT_EQ(hit_rate, expected) << line;
+    }
+    if (model == "arm-animspace") {
+      saw_animspace = true;
+      EXPECT_GE(posed, 4u) << line;
+      EXPECT_EQ(hit_rate, "-") << line;
+    }
+  }
+  EXPECT_TRUE(saw_animspace) << text.out;
+}
+
+TEST_F(CliClientTest, UnknownOrMissingSubcommandsAreNamedAndTheSubcommandsListed) {
+  const CliRun unknown = cli("frobnicate");
+  EXPECT_EQ(unknown.exit_code, 2);
+  EXPECT_NE(unknown.err.find("unknown subcommand 'frobnicate'"), std::string::npos) << unknown.err;
+  const CliRun bare = cli("");
+  EXPECT_EQ(bare.exit_code, 2);
+  EXPECT_NE(bare.err.find("a subcommand is required"), std::string::npos) << bare.err;
+  for (const CliRun* run : {&unknown, &bare}) {
+    for (const char* command : {"  list", "  evaluate", "  thumbnail", "  train-pmsc", "  export-lod"}) {
+      EXPECT_NE(run->err.find(command), std::string::npos) << command << " not listed:\n" << run->err;
+    }
+  }
+  // A stray word after a subcommand, or an unknown global option, is refused too.
+  const CliRun extra = cli("list frobnicate");
+  EXPECT_NE(extra.exit_code, 0);
+  EXPECT_NE(extra.err.find("frobnicate"), std::string::npos) << extra.err;
+  const CliRun option = cli("--frobnicate list");
+  EXPECT_EQ(option.exit_code, 2);
+  EXPECT_NE(option.err.find("unexpected argument '--frobnicate'"), std::string::npos) << option.err;
+}
+
+TEST_F(CliClientTest, AMisspelledModelNameGetsTheNearestNames) {
+  const std::vector<std::string> commands = {"keys arm-pmcs", "describe arm-pmcs", "stats arm-pmcs",
+                                             "evaluate arm-pmcs " + arm_frames()};
+  for (const std::string& command : commands) {
+    const CliRun run = cli(command);
+    EXPECT_EQ(run.exit_code, 3) << command;
+    EXPECT_NE(run.err.find("NOT_FOUND"), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find("model 'arm-pmcs' is not loaded; did you mean 'arm-pmsc'"), std::string::npos)
+        << command << ": " << run.err;
+    EXPECT_NE(run.err.find("models: arm, arm-animspace, arm-cross-pmsc, arm-pmsc, arm-pmsc-engine"), std::string::npos)
+        << run.err;
+  }
+  const CliRun far = cli("keys zebra");
+  EXPECT_NE(far.err.find("model 'zebra' is not loaded; models: arm,"), std::string::npos) << far.err;
+  EXPECT_EQ(far.err.find("did you mean"), std::string::npos) << far.err;
+}
+
+TEST_F(CliClientTest, TrainingThatSpendsItsKeyBudgetSaysWhatToChange) {
+  // The demo arm as a sequence folder: reference.obj + frames.pc2.
+  auto stored = container::read_file(arm_frames());
+  ASSERT_TRUE(stored.ok());
+  auto rest = stored->points(container::sections::kRestPoints);
+  auto faces = stored->faces(container::sections::kFaces);
+  auto frames = stored->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(rest.ok() && faces.ok() && frames.ok());
+  const auto folder = work_->path() / "arm-sequence";
+  std::filesystem::create_directories(folder);
+  ASSERT_TRUE(mesh_io::write_triangle_mesh(folder / "reference.obj", {*rest, *faces}).ok());
+  mesh_io::PointCache cache;
+  cache.num_points = static_cast<int>(rest->rows());
+  cache.samples = *frames;
+  ASSERT_TRUE(mesh_io::write_pc2(folder / "frames.pc2", cache).ok());
+
+  const auto out = work_->path() / "starved.anim";
+  // Two key points (6 equations) for a 4-vector basis: far too few to bring every point within
+  // the default bound.
+  const CliRun run = cli("train-pmsc " + folder.string() + " --select ::8 --basis 4 --max-key-points 2 --regions 0 -o " +
+                         out.string());
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_TRUE(std::filesystem::exists(out)) << "the model is still written";
+  EXPECT_NE(run.err.find("warning: the key point budget (--max-key-points 2) was spent"), std::string::npos)
+      << run.err;
+  EXPECT_NE(run.err.find("raise --max-key-points"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("loosen --error-bound-diag"), std::string::npos) << run.err;
 }
 
 TEST_F(CliClientTest, RpcFailuresExitWithTheStatusAndTheServersMessage) {

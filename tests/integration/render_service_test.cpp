@@ -4,6 +4,8 @@
 // the key points (render::project_to_pixel of the points EvaluateKeyPoints returns), the level
 // eq. 7.2 allows for the thumbnail's camera, and exact statuses for bad requests.
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <functional>
 #include <future>
@@ -21,7 +23,9 @@
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
 #include "core/container/sections.h"
+#include "core/common/atomic_file.h"
 #include "core/render/camera.h"
+#include "core/render/heat_legend.h"
 #include "core/render/png.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
@@ -205,6 +209,71 @@ TEST_F(RenderServiceTest, KeyPointDotsLandWhereTheEstimateProjects) {
     EXPECT_NEAR(px[1], key_colour.y(), 2) << "key point " << k;
     EXPECT_NEAR(px[2], key_colour.z(), 2) << "key point " << k;
   }
+}
+
+// `animspace thumbnail --heat`: the CLI prints the largest error and the scale (the model's error
+// tolerance, read here from the file), and the PNG it writes carries the legend bar.
+TEST_F(RenderServiceTest, TheThumbnailCommandSaysTheHeatScaleAndDrawsItsLegend) {
+  auto daemon = start();
+  Client client(daemon->address());
+  const std::string model = std::string(demo::kDemoPmscModelName);
+  auto pmsc_file = container::read_file(repo_->path() / model / "1" / "model.anim");
+  ASSERT_TRUE(pmsc_file.ok());
+  const double tolerance = std::stod(pmsc_file->metadata_value("pmsc.options.error_tolerance"));
+  const auto sequence = repo_->path() / "arm" / "1" / "model.anim";
+  auto stored = container::read_file(sequence);
+  ASSERT_TRUE(stored.ok());
+  auto frames = stored->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames.ok());
+  const int frame = 7;
+  const auto keys = client.describe_key_points(model);
+  const std::span<const float> full(frames->row(frame).data(), static_cast<size_t>(frames->cols()));
+  const std::vector<float> key_values = keys.gather(full);
+  const PoseResult evaluated = client.evaluate_key_points(model, {key_values, keys.channel_count});
+  double largest = 0;
+  for (uint32_t p = 0; p < evaluated.points.count; ++p) {
+    double squared = 0;
+    for (uint32_t c = 0; c < 3; ++c) {
+      const double d = double(evaluated.points.point(p)[c]) - full[3 * p + c];
+      squared += d * d;
+    }
+    largest = std::max(largest, std::sqrt(squared));
+  }
+
+  const auto png = work_.path() / "heat.png";
+  const std::string command = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon->address() + " thumbnail " + model +
+                              " -o " + png.string() + " --sequence " + sequence.string() +
+                              " --sequence-frame 7 --heat --heat-legend --width 256 --height 256";
+  std::string out;
+  {
+    FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+    ASSERT_NE(pipe, nullptr);
+    char buffer[4096];
+    size_t n = 0;
+    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) out.append(buffer, n);
+    ASSERT_EQ(pclose(pipe), 0) << out;
+  }
+  // "heat map: largest |full − returned| 0.01234, red at 0.02 (…)": 4 significant digits each.
+  const std::string lead = "heat map: largest |full − returned| ";
+  const auto at = out.find(lead);
+  ASSERT_NE(at, std::string::npos) << out;
+  const auto red = out.find(", red at ", at);
+  ASSERT_NE(red, std::string::npos) << out;
+  EXPECT_NEAR(std::stod(out.substr(at + lead.size())), largest, 1e-3 * largest) << out;
+  EXPECT_NEAR(std::stod(out.substr(red + 9)), tolerance, 1e-3 * tolerance) << out;
+
+  const auto bytes = read_whole_file(png);
+  ASSERT_TRUE(bytes.ok());
+  auto image = render::decode_png(*bytes, "heat.png");
+  ASSERT_TRUE(image.ok()) << image.error().message;
+  const render::HeatLegendLayout legend =
+      render::heat_legend_layout(256, 256, tolerance);
+  ASSERT_TRUE(legend.fits);
+  const int x = (legend.bar_x0 + legend.bar_x1) / 2;
+  const uint8_t* top = image->pixel(x, legend.bar_y0);
+  const uint8_t* bottom = image->pixel(x, legend.bar_y1 - 1);
+  EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0})) << "red at the top of the scale";
+  EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255})) << "blue at 0";
 }
 
 TEST_F(RenderServiceTest, PixelToleranceDrawsTheLevelEquation72Allows) {

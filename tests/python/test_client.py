@@ -488,6 +488,25 @@ def test_thumbnails_are_pngs_of_the_requested_size(client, tmp_path):
     assert coarse.lod_level > 0
 
 
+def test_the_heat_map_reports_its_largest_error_and_its_scale(client, demo_arm_transforms):
+    # arm-pmsc-engine's soft cache was trained on arm-animspace's poses: one of them is a full frame.
+    full = posed_arm(client, demo_arm_transforms(0.37))
+    keys = client.describe_key_points("arm-pmsc-engine")
+    estimate = client.evaluate_key_points("arm-pmsc-engine", keys.select(full)).points
+    largest = float(np.max(np.linalg.norm(full.astype(np.float64) - estimate, axis=1)))
+    tolerance = float(client.describe_model("arm-pmsc-engine").default.metadata["pmsc.options.error_tolerance"])
+    heat = client.render_thumbnail("arm-pmsc-engine", 128, 128, key_values=keys.select(full), full_values=full,
+                                   show_heat_legend=True)
+    assert heat.heat_max_error == pytest.approx(largest, rel=1e-5, abs=1e-9)
+    assert heat.heat_scale_max == pytest.approx(tolerance, rel=1e-12), "red is the model's error tolerance"
+    assert heat.heat_legend_drawn
+    named = client.render_thumbnail("arm-pmsc-engine", 128, 128, key_values=keys.select(full), full_values=full,
+                                    heat_max=0.25)
+    assert named.heat_scale_max == pytest.approx(0.25) and not named.heat_legend_drawn
+    with pytest.raises(animspace.InvalidArgument, match="show_heat_legend"):
+        client.render_thumbnail("arm-pmsc-engine", 32, 32, key_values=keys.select(full), show_heat_legend=True)
+
+
 def test_stats_count_the_poses_and_verdicts_seen(client, demo_arm_transforms):
     keys = client.describe_key_points("arm-cross-pmsc")
     before = client.stats("arm-cross-pmsc").models["arm-cross-pmsc"]

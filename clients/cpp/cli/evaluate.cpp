@@ -30,12 +30,20 @@ CLI::App* add_evaluate(CLI::App& app, EvaluateArgs& a) {
       ->check(CLI::Range(1u, 1u << 20))
       ->capture_default_str();
   cmd->add_flag("--region-errors", a.region_errors, "Print per-region key-point errors (models with regions)");
-  cmd->add_flag("-v,--verbose", a.verbose, "One line per frame");
-  cmd->add_option("-o,--output", a.output, "Write the returned points of every frame as a point cache (.pc2)");
+  cmd->add_flag("-q,--quiet", a.quiet, "Print the summary only, not one line per frame");
+  cmd->add_flag("-v,--verbose", a.verbose, "One line per frame (the default; kept for older scripts)");
+  cmd->add_option("-o,--output", a.output,
+                  "Write the returned points of every frame as a point cache (.pc2; other extensions are refused)");
   return cmd;
 }
 
 int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
+  if (!a.output.empty()) {
+    if (const std::string bad = check_output_extension(a.output, {".pc2"}, "evaluate writes a point cache");
+        !bad.empty()) {
+      return fail("evaluate", bad);
+    }
+  }
   auto frames = tools::load_sequence_frames(a.sequence, a.pc2);
   if (!frames) return fail("evaluate", frames.error().message);
   std::string error;
@@ -100,10 +108,11 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
                                     {"status", cache_status_name(region.status)}});
         }
       }
-      if (a.verbose && !json) {
+      if (!a.quiet && !json) {
+        char error_text[32] = "n/a";
+        if (comparable) std::snprintf(error_text, sizeof error_text, "%.6g", max_distance);
         std::printf("frame %5d  %-5s  e_key %.6g  alpha %.3f  max point error %s%s\n", selected[first + i],
-                    cache_status_name(r.status), r.key_point_error, r.blend_weight,
-                    comparable ? std::to_string(max_distance).c_str() : "n/a",
+                    cache_status_name(r.status), r.key_point_error, r.blend_weight, error_text,
                     r.full_evaluation_needed ? "  (estimate: full values needed)" : "");
         for (const auto& region : r.region_errors) {
           std::printf("         region %u: %-5s e_key %.6g\n", region.region, cache_status_name(region.status),

@@ -20,8 +20,9 @@ struct EvaluateArgs {
   std::string select = "::";
   uint32_t batch = 32;
   bool region_errors = false;
-  bool verbose = false;
-  std::string output;  // .pc2 of the returned points, "" = none
+  bool verbose = false;  // accepted for scripts written when one line per frame needed -v
+  bool quiet = false;    // the summary only
+  std::string output;    // .pc2 of the returned points, "" = none
 };
 
 CLI::App* add_evaluate(CLI::App& app, EvaluateArgs& args);

@@ -127,12 +127,20 @@ CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
   auto* level = cmd->add_option("--level", a.level, "Level to write (0 = full detail)")->check(CLI::NonNegativeNumber);
   auto* tolerance = cmd->add_option("--tolerance-px", a.tolerance_px, "Pixel error tolerance p (eq. 7.2)")
                         ->check(CLI::PositiveNumber);
-  cmd->add_option("--distance", a.distance, "Camera distance to the model's bounding-sphere centre, model units")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--fov", a.fov_degrees, "Horizontal field of view 2θ, degrees")
+  cmd->add_option("--distance", a.distance,
+                  "With --tolerance-px: camera distance to the model's bounding-sphere centre, model units")
+      ->check(CLI::PositiveNumber)
+      ->needs(tolerance);
+  cmd->add_option("--fov-deg,--fov", a.fov_degrees,
+                  "With --tolerance-px: horizontal field of view 2θ in DEGREES (the API's horizontal_fov_rad is "
+                  "radians; the command line converts)")
       ->check(CLI::Range(1.0, 179.0))
-      ->capture_default_str();
-  cmd->add_option("--width", a.viewport_width_px, "Viewport width w, pixels")->check(CLI::PositiveNumber)->capture_default_str();
+      ->capture_default_str()
+      ->needs(tolerance);
+  cmd->add_option("--width", a.viewport_width_px, "With --tolerance-px: viewport width w, pixels")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str()
+      ->needs(tolerance);
   cmd->add_option("--frame", a.frame, "Pose: the model's stored training frame K (default: the rest pose)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("-o,--output", a.output, "Output mesh: .obj, .ply, .glb or .gltf")->required();
@@ -141,6 +149,10 @@ CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
 }
 
 int run_export_lod(const ExportLodArgs& a, bool json) {
+  if (const std::string bad = check_output_extension(a.output, {".obj", ".ply", ".glb", ".gltf"}, "export-lod writes a mesh");
+      !bad.empty()) {
+    return fail("export-lod", bad);
+  }
   auto in = container::read_file(a.input);
   if (!in) return fail("export-lod", in.error().message);
   auto model = as::load(*in, a.input);
@@ -193,12 +205,15 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
     print_json({{"output", a.output},
                 {"level", chosen},
                 {"epsilon", level.epsilon},
-                {"tolerated_error", tolerated},
+                // Only a level chosen for a view (eq. 7.2) has a tolerated error.
+                {"tolerated_error", a.tolerance_px > 0 ? nlohmann::json(tolerated) : nlohmann::json()},
                 {"vertices", level.model.vertex_count()},
                 {"faces", level.model.faces.rows()}});
   } else {
+    char tolerated_text[48] = "";
+    if (a.tolerance_px > 0) std::snprintf(tolerated_text, sizeof tolerated_text, ", tolerated %.4g", tolerated);
     std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.epsilon,
-                a.tolerance_px > 0 ? (", tolerated " + std::to_string(tolerated)).c_str() : "",
+                tolerated_text,
                 level.model.vertex_count(), static_cast<int>(level.model.faces.rows()), a.output.c_str());
   }
   return 0;
@@ -226,13 +241,17 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
   auto* distance =
       cmd->add_option("--distance", a.distance, "With --tolerance-px: camera distance to the bounding-sphere centre")
           ->check(CLI::PositiveNumber);
-  cmd->add_option("--fov", a.fov_degrees, "Horizontal field of view 2θ, degrees")
-      ->check(CLI::Range(1.0, 179.0))
-      ->capture_default_str();
-  cmd->add_option("--width", a.viewport_width_px, "Viewport width w, pixels")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  auto* fov = cmd->add_option("--fov-deg,--fov", a.fov_degrees,
+                              "With --tolerance-px: horizontal field of view 2θ in DEGREES (the API's "
+                              "horizontal_fov_rad is radians; the command line converts)")
+                  ->check(CLI::Range(1.0, 179.0))
+                  ->capture_default_str();
+  auto* width = cmd->add_option("--width", a.viewport_width_px, "With --tolerance-px: viewport width w, pixels")
+                    ->check(CLI::PositiveNumber)
+                    ->capture_default_str();
   tolerance->needs(distance);
+  // The view only matters for a pixel tolerance: given without one it would be ignored.
+  for (CLI::Option* view : {distance, fov, width}) view->needs(tolerance);
   cmd->add_option("--pose-file", a.pose_file,
                   "Skeleton pose: B × 12 numbers, each bone's top three matrix rows (default: the rest pose)")
       ->check(CLI::ExistingFile);
@@ -248,6 +267,10 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
 }
 
 int run_lod(const LodArgs& a, Client& client, bool json) {
+  if (const std::string bad = check_output_extension(a.output, {".obj", ".ply", ".glb", ".gltf"}, "lod writes a mesh");
+      !bad.empty()) {
+    return fail("lod", bad);
+  }
   v1::GetLodRequest request;
   request.mutable_model()->set_name(a.model);
   request.mutable_model()->set_version(a.version);
@@ -297,7 +320,8 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
                 {"level", h.level()},
                 {"level_count", h.level_count()},
                 {"epsilon", h.epsilon()},
-                {"tolerated_error", h.tolerated_error()},
+                // Only a level chosen for a view (eq. 7.2) has a tolerated error.
+                {"tolerated_error", request.has_pixel_tolerance() ? nlohmann::json(h.tolerated_error()) : nlohmann::json()},
                 {"vertices", h.vertex_count()},
                 {"faces", h.face_count()},
                 {"bytes_received", received.bytes_received},

@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -70,6 +71,30 @@ std::string kind_label(animspace::v1::ModelKind kind) {
   return name.rfind(prefix, 0) == 0 ? name.substr(prefix.size()) : name;
 }
 
+// `value` with `decimals` fixed decimals, for table cells.
+std::string fixed(double value, int decimals) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.*f", decimals, value);
+  return text;
+}
+
+// "SERVER (the server completes a blend or miss with its posing engine)".
+std::string fail_through_label(animspace::v1::FailThrough fail_through) {
+  std::string name = animspace::v1::FailThrough_Name(fail_through);
+  const std::string prefix = "FAIL_THROUGH_";
+  if (name.rfind(prefix, 0) == 0) name = name.substr(prefix.size());
+  switch (fail_through) {
+    case animspace::v1::FAIL_THROUGH_SERVER:
+      return name + " (the server completes a blend or miss with its posing engine)";
+    case animspace::v1::FAIL_THROUGH_CLIENT:
+      return name + " (a blend or miss asks the caller for the full values)";
+    case animspace::v1::FAIL_THROUGH_IMPOSSIBLE:
+      return name + " (cross-PMSC: a miss cannot be completed)";
+    default:
+      return name;
+  }
+}
+
 void print_summary(const animspace::v1::ModelSummary& model) {
   std::printf("%s (default version %llu)\n", model.name().c_str(),
               static_cast<unsigned long long>(model.default_version()));
@@ -112,6 +137,13 @@ int run_describe(const Globals& g, const std::string& name, uint64_t version) {
   print_summary(model);
   for (const auto& v : model.versions()) {
     if (v.state() != animspace::v1::VERSION_STATE_AVAILABLE) continue;
+    if (v.key_point_count() > 0) {
+      // What --json says too: the soft cache's thresholds on e_key and who computes a miss.
+      std::printf("  version %llu soft cache: ε_min %.6g, ε_max %.6g (RMS key-point error e_key, model units: hit "
+                  "below ε_min, miss above ε_max, blend between); fail-through %s\n",
+                  static_cast<unsigned long long>(v.version()), static_cast<double>(v.epsilon_min()),
+                  static_cast<double>(v.epsilon_max()), fail_through_label(v.fail_through()).c_str());
+    }
     std::printf("  version %llu metadata:\n", static_cast<unsigned long long>(v.version()));
     std::map<std::string, std::string> sorted(v.metadata().begin(), v.metadata().end());
     for (const auto& [key, value] : sorted) std::printf("    %s = %s\n", key.c_str(), value.c_str());
@@ -163,15 +195,32 @@ int run_stats(const Globals& g, const std::string& model, bool reset) {
     animspace::cli::print_json(animspace::cli::proto_json(stats));
     return 0;
   }
-  std::printf("%-24s %10s %10s %10s %10s %10s %8s %10s %10s\n", "model", "requests", "errors", "poses", "hits",
-              "blends", "hit%", "p50 ms", "p99 ms");
+  // Latency: the mean is exact (the histogram's sum / count); p50 and p99 are estimated inside the
+  // histogram bucket that holds them, so they are marked "~" and explained under the table.
+  std::printf("%-24s %9s %7s %9s %9s %9s %9s %7s %9s %9s %9s\n", "model", "requests", "errors", "poses", "hits",
+              "blends", "misses", "hit%", "mean ms", "~p50 ms", "~p99 ms");
   for (const auto& s : stats.models()) {
-    std::printf("%-24s %10llu %10llu %10llu %10llu %10llu %7.1f%% %10.3f %10.3f\n", s.model().c_str(),
+    const uint64_t verdicts = s.hits() + s.blends() + s.misses();
+    // Only poses through a soft cache have a verdict: '-' for a model that had none.
+    const std::string hit_rate =
+        verdicts == 0 ? "-" : fixed(100.0 * static_cast<double>(s.hits()) / static_cast<double>(verdicts), 1) + "%";
+    const auto& latency = s.latency_seconds();
+    const std::string mean =
+        latency.total_count() == 0 ? "-"
+                                   : fixed(1e3 * latency.sum() / static_cast<double>(latency.total_count()), 3);
+    const auto ms = [&latency](double seconds) {
+      return latency.total_count() == 0 ? std::string("-") : fixed(1e3 * seconds, 3);
+    };
+    std::printf("%-24s %9llu %7llu %9llu %9llu %9llu %9llu %7s %9s %9s %9s\n", s.model().c_str(),
                 static_cast<unsigned long long>(s.requests()), static_cast<unsigned long long>(s.errors()),
                 static_cast<unsigned long long>(s.poses()), static_cast<unsigned long long>(s.hits()),
-                static_cast<unsigned long long>(s.blends()), 100.0 * s.hit_rate(), 1e3 * s.latency_p50_s(),
-                1e3 * s.latency_p99_s());
+                static_cast<unsigned long long>(s.blends()), static_cast<unsigned long long>(s.misses()),
+                hit_rate.c_str(), mean.c_str(), ms(s.latency_p50_s()).c_str(), ms(s.latency_p99_s()).c_str());
   }
+  std::printf("poses: key-point poses through the soft cache and skeleton poses; hit%% of the poses with a verdict.\n"
+              "latency: per request on the server, milliseconds; mean exact, ~p50/~p99 interpolated inside the "
+              "latency histogram's bucket\n(bounds 0.05 ms … 10 s, about ×2.5 apart), so they lie between bucket "
+              "bounds rather than being measured values.\n");
   return 0;
 }
 
@@ -292,12 +341,55 @@ int run_demo_repository(const std::string& dir) {
   return 0;
 }
 
+std::string subcommand_list(const CLI::App& app) {
+  std::string list;
+  for (const CLI::App* command : app.get_subcommands([](const CLI::App*) { return true; })) {
+    list += "\n  " + command->get_name();
+    list.append(command->get_name().size() < 18 ? 18 - command->get_name().size() : 1, ' ');
+    std::string description = command->get_description();
+    if (const size_t stop = description.find_first_of(".:("); stop != std::string::npos && stop > 20) {
+      description = description.substr(0, stop);
+    }
+    while (!description.empty() && description.back() == ' ') description.pop_back();
+    if (description.size() > 90) description = description.substr(0, 87) + "...";
+    list += description;
+  }
+  return list;
+}
+
+// 0 when exactly one subcommand was parsed and nothing was left over; else the usage error
+// (exit 2) naming what was wrong, with the subcommands listed.
+int check_subcommand(const CLI::App& app) {
+  const std::vector<std::string> extras = app.remaining();
+  if (app.get_subcommands().empty()) {
+    if (!extras.empty()) {
+      std::fprintf(stderr, "animspace: unknown subcommand '%s'; the subcommands are:%s\n", extras.front().c_str(),
+                   subcommand_list(app).c_str());
+    } else {
+      std::fprintf(stderr, "animspace: a subcommand is required:%s\nRun 'animspace --help' for the global options, "
+                           "'animspace <subcommand> --help' for each.\n",
+                   subcommand_list(app).c_str());
+    }
+    return 2;
+  }
+  if (!extras.empty()) {
+    std::string words;
+    for (const std::string& word : extras) words += " '" + word + "'";
+    std::fprintf(stderr, "animspace %s: unexpected argument%s%s (see 'animspace %s --help')\n",
+                 app.get_subcommands().front()->get_name().c_str(), extras.size() == 1 ? "" : "s", words.c_str(),
+                 app.get_subcommands().front()->get_name().c_str());
+    return 2;
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   Globals g;
   CLI::App app{"animspace — query animspaced, and work on model files offline"};
-  app.require_subcommand(1);
+  // At most one; none, or a word that names none, is reported below with the list.
+  app.require_subcommand(0, 1);
   app.add_option("-s,--server", g.server, "animspaced address (gRPC target)")->capture_default_str();
   app.add_option("--deadline-ms", g.deadline_ms, "Deadline for each call")->capture_default_str();
   app.add_flag("--json", g.json, "Print JSON for scripts instead of tables");
@@ -387,7 +479,12 @@ int main(int argc, char** argv) {
   animspace::cli::RetrainOfflineArgs retrain_offline_args;
   auto* retrain_offline = animspace::cli::add_retrain_offline(app, retrain_offline_args);
 
+  // Extras at the top level only (set after the subcommands, which would inherit it): a word
+  // that is no subcommand lands in remaining() and is named below instead of CLI11's "A
+  // subcommand is required".
+  app.allow_extras();
   CLI11_PARSE(app, argc, argv);
+  if (const int usage = check_subcommand(app); usage != 0) return usage;
   try {
     if (*train_pmsc) return animspace::cli::run_train_pmsc(train_pmsc_args, g.json);
     if (*fit) return animspace::cli::run_fit(fit_args, g.json);

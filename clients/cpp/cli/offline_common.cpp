@@ -3,11 +3,26 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "core/mesh_io/text_io.h"
+
 namespace animspace::cli {
 
 int fail(const char* command, const std::string& message) {
   std::fprintf(stderr, "animspace %s: %s\n", command, message.c_str());
   return 2;
+}
+
+std::string check_output_extension(const std::string& output, std::initializer_list<const char*> extensions,
+                                   const std::string& what) {
+  const std::string extension = mesh_io::lowercase_extension(output);
+  std::string listed;
+  for (const char* allowed : extensions) {
+    if (extension == allowed) return "";
+    listed += (listed.empty() ? "" : ", ") + std::string(allowed);
+  }
+  const std::string given = std::filesystem::path(output).extension().string();
+  return "-o " + output + ": " + (given.empty() ? "no extension" : "unknown extension '" + given + "'") + "; " + what +
+         ": " + listed;
 }
 
 std::filesystem::path model_output_path(const std::string& output, const std::string& model, unsigned version) {

@@ -1,7 +1,8 @@
-// Helpers shared by the offline commands that build model versions (train-pmsc, fit, import-rig).
+// Helpers shared by the commands: failing with a message, output files and model versions.
 #pragma once
 
 #include <filesystem>
+#include <initializer_list>
 #include <string>
 
 #include "core/common/result.h"
@@ -12,6 +13,12 @@ namespace animspace::cli {
 // Prints "animspace <command>: <message>" to stderr and returns the offline commands' exit
 // status for bad input or a failed step (2).
 int fail(const char* command, const std::string& message);
+
+// Empty when `output` ends in one of `extensions` (lower case with the dot, compared ignoring
+// case), else the refusal "-o x.xyz: unknown extension '.xyz'; <what>: .pc2" that a command prints
+// before doing any work — an output file is never written in a format its name does not say.
+std::string check_output_extension(const std::string& output, std::initializer_list<const char*> extensions,
+                                   const std::string& what);
 
 // Where to write: `output` itself when `model` is empty, else
 // <output>/<model>/<version>/model.anim with version 0 meaning one above the newest present.

@@ -71,7 +71,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       sum_error += result->key_point_error;
       max_error = std::max(max_error, double(result->key_point_error));
       if (result->full_evaluation_needed) to_complete.push_back(result->sequence);
-      if (a.verbose) {
+      if (a.verbose && !json) {
         std::printf("frame %5llu  %-5s  e_key %.6g  alpha %.3f\n", static_cast<unsigned long long>(result->sequence),
                     cache_status_name(result->status), result->key_point_error, result->blend_weight);
       }

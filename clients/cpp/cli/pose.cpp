@@ -10,6 +10,7 @@
 #include "clients/cpp/tools/pose_file.h"
 #include "core/mesh_io/posed_mesh.h"
 #include "core/mesh_io/pc2.h"
+#include "core/mesh_io/text_io.h"
 
 namespace animspace::cli {
 namespace {
@@ -36,12 +37,30 @@ CLI::App* add_pose(CLI::App& app, PoseArgs& a) {
       ->capture_default_str();
   cmd->add_option("--lod-level", a.lod_level, "Evaluate this level of detail (0 = full detail)")
       ->capture_default_str();
-  cmd->add_flag("--normals", a.normals, "Also evaluate normals from the tangent planes (§3.5)");
+  cmd->add_flag("--normals", a.normals,
+                "Also evaluate normals from the tangent planes (§3.5), written to the mesh: OBJ vn, PLY nx ny nz, "
+                "glTF NORMAL (a .pc2 point cache holds positions only: refused)");
   cmd->add_option("-o,--output", a.output, "Write .pc2 (every pose), or .obj/.ply/.glb/.gltf (one pose)");
   return cmd;
 }
 
 int run_pose(const PoseArgs& a, Client& client, bool json) {
+  // Refused before any call: a file named for a format the command does not write, and normals
+  // asked for a file that cannot hold them.
+  const bool point_cache = mesh_io::lowercase_extension(a.output) == ".pc2";
+  if (!a.output.empty()) {
+    if (const std::string bad = check_output_extension(
+            a.output, {".pc2", ".obj", ".ply", ".glb", ".gltf"},
+            "pose writes a point cache (every pose) or a mesh (one pose)");
+        !bad.empty()) {
+      return fail("pose", bad);
+    }
+    if (point_cache && a.normals) {
+      return fail("pose", "--normals with -o " + a.output +
+                              ": a .pc2 point cache holds positions only; write a mesh (.obj, .ply, .glb, .gltf) "
+                              "for normals, or drop --normals");
+    }
+  }
   const v1::ModelSummary model = client.describe_model(a.model, a.version);
   uint32_t bones = 0;
   for (const auto& v : model.versions()) {
@@ -58,8 +77,7 @@ int run_pose(const PoseArgs& a, Client& client, bool json) {
   const SkinningResult result = client.evaluate_skeleton_pose(a.model, *poses, options);
   const uint32_t points = result.poses.front().points.point_count;
 
-  const std::string extension = std::filesystem::path(a.output).extension().string();
-  if (extension == ".pc2") {
+  if (point_cache) {
     mesh_io::PointCache cache;
     cache.num_points = static_cast<int>(points);
     cache.samples.resize(static_cast<Eigen::Index>(result.poses.size()), Eigen::Index{points} * 3);

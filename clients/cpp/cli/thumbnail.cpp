@@ -16,7 +16,7 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
       "Draw a served model headless on the daemon (EGL) and save the PNG: the rest pose, a stored frame, or a "
       "sequence frame's key points through the soft cache, with key points, error heat map and wireframe overlays");
   cmd->add_option("model", a.model, "Model name")->required();
-  cmd->add_option("-o,--output", a.output, "PNG file to write")->required();
+  cmd->add_option("-o,--output", a.output, "PNG file to write (.png)")->required();
   cmd->add_option("--version", a.version, "Model version (default: the served one)");
   cmd->add_option("--width", a.width, "Width, pixels")->capture_default_str();
   cmd->add_option("--height", a.height, "Height, pixels")->capture_default_str();
@@ -30,10 +30,17 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--key-points", a.key_points, "Draw the key points as dots (PMSC models)");
-  cmd->add_flag("--heat", a.heat,
-                "Colour each point by |full − returned| (blue 0 → red max): the soft cache's error, from "
-                "--sequence's full frame")
-      ->needs(sequence);
+  auto* heat = cmd->add_flag("--heat", a.heat,
+                             "Colour each point by |full − returned| (blue 0 → red at the scale): the soft cache's "
+                             "error, from --sequence's full frame; prints the largest error and the scale")
+                   ->needs(sequence);
+  cmd->add_option("--heat-max", a.heat_max,
+                  "With --heat: the error drawn red, model units (default: the model's error tolerance, the "
+                  "per-point error its soft cache was calibrated to flag; else the frame's largest error)")
+      ->check(CLI::NonNegativeNumber)
+      ->needs(heat);
+  cmd->add_flag("--heat-legend", a.heat_legend, "With --heat: draw the scale as a colour bar with its numbers")
+      ->needs(heat);
   cmd->add_flag("--wireframe", a.wireframe, "Draw the triangle edges");
   cmd->add_flag("--lambert", a.lambert, "Lambert shading instead of Blinn-Phong");
   cmd->add_option("--samples", a.samples, "Multisampling: 1, 2, 4 or 8")->capture_default_str();
@@ -42,15 +49,24 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
   cmd->add_option("--tolerance-px", a.tolerance_px,
                   "Animation-space models: draw the coarsest level of detail whose error stays under this many "
                   "pixels (eq. 7.2)");
-  cmd->add_option("--eye", a.eye, "Camera position x y z (default: framed from the bounding box)")->expected(3);
-  cmd->add_option("--target", a.target, "Point looked at x y z")->expected(3);
-  cmd->add_option("--up", a.up, "Up direction x y z")->expected(3);
-  cmd->add_option("--fov", a.fov_degrees, "Vertical field of view, degrees (with --eye)");
+  auto* eye =
+      cmd->add_option("--eye", a.eye, "Camera position x y z (default: framed from the bounding box)")->expected(3);
+  // The rest of the camera only means something with --eye: without it they would be ignored.
+  cmd->add_option("--target", a.target, "With --eye: point looked at x y z (default 0 0 0)")->expected(3)->needs(eye);
+  cmd->add_option("--up", a.up, "With --eye: up direction x y z (default 0 1 0)")->expected(3)->needs(eye);
+  cmd->add_option("--fov-deg,--fov", a.fov_degrees,
+                  "With --eye: vertical field of view in DEGREES, default 45 (the API's camera.vertical_fov_rad is "
+                  "radians; the command line converts)")
+      ->check(CLI::Range(1.0, 179.0))
+      ->needs(eye);
   frame->excludes(sequence);
   return cmd;
 }
 
 int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
+  if (const std::string bad = check_output_extension(a.output, {".png"}, "thumbnail writes a PNG"); !bad.empty()) {
+    return fail("thumbnail", bad);
+  }
   v1::RenderThumbnailRequest request;
   request.mutable_model()->set_name(a.model);
   request.mutable_model()->set_version(a.version);
@@ -92,7 +108,11 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
     *request.mutable_key_points()->mutable_key_values() =
         make_point_array(values.data(), static_cast<uint32_t>(keys.indices.size()), D);
     request.mutable_model()->set_version(keys.model_version);
-    if (a.heat) *request.mutable_full_values() = make_point_array(frame.data(), keys.control_point_count, D);
+    if (a.heat) {
+      *request.mutable_full_values() = make_point_array(frame.data(), keys.control_point_count, D);
+      request.set_heat_max(a.heat_max);
+      request.set_show_heat_legend(a.heat_legend);
+    }
   }
 
   const Thumbnail thumbnail = client.render_thumbnail(request);
@@ -111,18 +131,31 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
       out["cache_status"] = cache_status_name(thumbnail.pose->status);
       out["key_point_error"] = thumbnail.pose->key_point_error;
     }
+    if (a.heat) {
+      out["heat_max_error"] = thumbnail.heat_max_error;
+      out["heat_scale_max"] = thumbnail.heat_scale_max;
+      if (a.heat_legend) out["heat_legend_drawn"] = thumbnail.heat_legend_drawn;
+    }
     print_json(out);
     return 0;
   }
   std::string verdict;
   if (thumbnail.pose) {
-    verdict = std::string("; soft cache ") + cache_status_name(thumbnail.pose->status) + ", e_key " +
-              std::to_string(thumbnail.pose->key_point_error);
+    // %g, not to_string's six fixed decimals, which print a small e_key as 0.000000.
+    char e_key[32];
+    std::snprintf(e_key, sizeof e_key, "%.6g", static_cast<double>(thumbnail.pose->key_point_error));
+    verdict = std::string("; soft cache ") + cache_status_name(thumbnail.pose->status) + ", e_key " + e_key;
   }
   std::printf("%s version %llu: %u×%u, level of detail %u, drawn and encoded in %.1f ms%s\nwrote %s (%zu bytes)\n",
               a.model.c_str(), static_cast<unsigned long long>(thumbnail.model_version), thumbnail.width_px,
               thumbnail.height_px, thumbnail.lod_level, thumbnail.render_ms, verdict.c_str(), a.output.c_str(),
               thumbnail.png.size());
+  if (a.heat) {
+    std::printf("heat map: largest |full − returned| %.4g, red at %.4g (%s; model units)%s\n",
+                thumbnail.heat_max_error, thumbnail.heat_scale_max,
+                a.heat_max > 0 ? "--heat-max" : "the model's error tolerance, or the largest error when it has none",
+                a.heat_legend && !thumbnail.heat_legend_drawn ? "; the image is too small for the legend" : "");
+  }
   return 0;
 }
 

@@ -24,13 +24,15 @@ struct ThumbnailArgs {
   int sequence_frame = 0;
   bool key_points = false;   // draw the key points
   bool heat = false;         // heat map of |full − returned| (needs --sequence)
+  float heat_max = 0;        // the error drawn red, model units (0: the server's default)
+  bool heat_legend = false;  // draw the scale's colour bar with its numbers
   bool wireframe = false;
   bool lambert = false;
   uint32_t samples = 4;
   std::vector<float> background;
   float tolerance_px = 0;
   std::vector<float> eye, target, up;
-  float fov_degrees = 0;
+  float fov_degrees = 0;     // vertical, degrees (the API's camera.vertical_fov_rad is radians)
 };
 
 CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& args);

@@ -592,6 +592,7 @@ class Client:
                          background_rgba: Optional[Sequence[float]] = None, shading: Optional[str] = None,
                          samples: int = 0, show_key_points: bool = False, show_wireframe: bool = False,
                          full_values: Optional[npt.ArrayLike] = None, tolerance_px: float = 0.0,
+                         heat_max: float = 0.0, show_heat_legend: bool = False,
                          deadline_s: Optional[float] = None) -> Thumbnail:
         """A PNG of the model drawn headless by the daemon's render thread.
 
@@ -606,7 +607,12 @@ class Client:
             shading: "blinn_phong" or "lambert" (None: the server's default, Blinn-Phong).
             samples: multisampling 1, 2, 4 or 8 (0: the server's default, 4).
             show_key_points, show_wireframe: overlays.
-            full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red ε_max).
+            full_values: N×D full pose, for a heat map of |full − estimate| (blue 0 → red at the
+                scale; ``Thumbnail.heat_max_error`` and ``heat_scale_max`` say the largest error
+                and the scale).
+            heat_max: the error drawn red, model units (needs full_values); 0: the model's error
+                tolerance when it stores one, else the pose's largest error.
+            show_heat_legend: draw the scale as a colour bar with its numbers (needs full_values).
             tolerance_px: draw the coarsest level whose error stays under this many pixels
                 (eq. 7.2, in this ``width_px``-wide view); 0 draws full detail.
 
@@ -621,7 +627,9 @@ class Client:
                                                     height_px=wire.as_uint("height_px", height_px),
                                                     samples=wire.as_uint("samples", samples),
                                                     show_key_points=show_key_points, show_wireframe=show_wireframe,
-                                                    tolerance_px=wire.as_float("tolerance_px", tolerance_px))
+                                                    tolerance_px=wire.as_float("tolerance_px", tolerance_px),
+                                                    heat_max=wire.as_float("heat_max", heat_max),
+                                                    show_heat_legend=show_heat_legend)
         if key_values is not None:
             request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
             if skeleton_pose is not None:

@@ -388,7 +388,9 @@ class Thumbnail:
     """A rendered PNG (8-bit RGBA) and what was drawn.
 
     ``pose`` is the soft cache's verdict when the source was key points, else None;
-    ``lod_level`` the level drawn (0 = full detail).
+    ``lod_level`` the level drawn (0 = full detail). With a heat map: ``heat_max_error`` the
+    largest |full − estimate| and ``heat_scale_max`` the error drawn red (model units), and
+    ``heat_legend_drawn`` whether the asked-for legend fitted on the image.
     """
 
     __repr__ = compact_repr
@@ -400,6 +402,9 @@ class Thumbnail:
     lod_level: int
     pose: Optional[PoseResult]
     render_ms: float
+    heat_max_error: float = 0.0
+    heat_scale_max: float = 0.0
+    heat_legend_drawn: bool = False
 
     def save(self, path: str) -> None:
         """Writes the PNG bytes to ``path``."""
@@ -410,7 +415,8 @@ class Thumbnail:
     def from_proto(cls, m: render_pb2.RenderThumbnailResponse) -> "Thumbnail":
         return cls(png=m.png, width_px=m.width_px, height_px=m.height_px, model_version=m.model_version,
                    lod_level=m.lod_level, pose=PoseResult.from_proto(m.pose, "pose.points") if m.HasField("pose") else None,
-                   render_ms=m.render_ms)
+                   render_ms=m.render_ms, heat_max_error=m.heat_max_error, heat_scale_max=m.heat_scale_max,
+                   heat_legend_drawn=m.heat_legend_drawn)
 
 
 @dataclass(frozen=True)

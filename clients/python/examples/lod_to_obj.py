@@ -44,7 +44,9 @@ def main(argv: Optional[list] = None) -> int:
     choice.add_argument("--tolerance-px", type=float, help="screen-space error, pixels (with --distance)")
     parser.add_argument("--distance", type=float, help="camera to the model's bounding-sphere centre, model units")
     parser.add_argument("--viewport-width", type=int, default=1920, help="viewport width, pixels (default 1920)")
-    parser.add_argument("--fov", type=float, default=45.0, help="horizontal field of view, degrees (default 45)")
+    parser.add_argument("--fov-deg", "--fov", dest="fov", type=float, default=45.0,
+                        help="horizontal field of view in DEGREES (default 45; the API's horizontal_fov_rad is "
+                             "radians, converted here), as the animspace command line's --fov-deg")
     parser.add_argument("--pose", help=".npy of B×3×4 or B×4×4 bone transforms (default: the rest pose)")
     parser.add_argument("--local", action="store_true", help="--pose holds joint transforms L_j, not G_j")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")

@@ -9,6 +9,7 @@
 #include <map>
 #include <numeric>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -379,6 +380,104 @@ TEST(ExportPosedMeshTest, ObjAndPlyReadBackAsTheOptimisedMesh) {
     EXPECT_TRUE(read->V == optimised.points) << name;
     EXPECT_TRUE(read->F == optimised.faces) << name;
   }
+}
+
+// The normals an OBJ file holds, read here without the library's reader (which keeps none):
+// `vn` lines in order, and every face corner must name its vertex's own normal (`v//vn`, v = vn).
+PointMatrix obj_normals(const std::string& text, Eigen::Index faces_expected) {
+  std::vector<std::array<float, 3>> normals;
+  Eigen::Index faces = 0;
+  int corners_without_normal = 0;
+  std::istringstream lines(text);
+  std::string line;
+  while (std::getline(lines, line)) {
+    std::istringstream words(line);
+    std::string tag;
+    words >> tag;
+    if (tag == "vn") {
+      std::array<float, 3> n{};
+      words >> n[0] >> n[1] >> n[2];
+      normals.push_back(n);
+    } else if (tag == "f") {
+      ++faces;
+      std::string corner;
+      while (words >> corner) {
+        const auto slashes = corner.find("//");
+        if (slashes == std::string::npos) {
+          ++corners_without_normal;
+        } else {
+          EXPECT_EQ(corner.substr(0, slashes), corner.substr(slashes + 2)) << line;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(faces, faces_expected);
+  EXPECT_EQ(corners_without_normal, 0) << "face corners that name no normal";
+  PointMatrix out(static_cast<Eigen::Index>(normals.size()), 3);
+  for (size_t v = 0; v < normals.size(); ++v) out.row(static_cast<Eigen::Index>(v)) << normals[v][0], normals[v][1], normals[v][2];
+  return out;
+}
+
+// The vertex records of a binary PLY whose vertex element is `properties` float32 values each.
+PointMatrix ply_vertex_columns(const std::string& bytes, const std::vector<std::string>& properties, int first,
+                               Eigen::Index vertices) {
+  const auto end = bytes.find("end_header\n");
+  EXPECT_NE(end, std::string::npos);
+  const std::string header = bytes.substr(0, end);
+  std::string expected_properties;
+  for (const std::string& name : properties) expected_properties += "property float " + name + "\n";
+  EXPECT_NE(header.find("element vertex " + std::to_string(vertices) + "\n" + expected_properties + "element face"),
+            std::string::npos)
+      << header;
+  PointMatrix out(vertices, 3);
+  const char* records = bytes.data() + end + std::strlen("end_header\n");
+  for (Eigen::Index v = 0; v < vertices; ++v) {
+    for (int c = 0; c < 3; ++c) {
+      float value = 0;
+      const size_t column = static_cast<size_t>(first + c);
+      std::memcpy(&value, records + sizeof(float) * (static_cast<size_t>(v) * properties.size() + column), sizeof value);
+      out(v, c) = value;
+    }
+  }
+  return out;
+}
+
+TEST(ExportPosedMeshTest, ObjAndPlyCarryTheNormalsWhenTheMeshHasThem) {
+  const PosedMesh mesh = shuffled_grid(9, 2, 12);
+  const PosedMesh optimised = optimise_for_rendering(mesh);
+  TempDir dir;
+  ASSERT_TRUE(write_posed_mesh(dir / "n.obj", mesh).ok());
+  const auto obj = read_whole_file(dir / "n.obj");
+  ASSERT_TRUE(obj.ok());
+  const PointMatrix obj_n = obj_normals(*obj, optimised.faces.rows());
+  EXPECT_TRUE(obj_n == optimised.normals) << "OBJ normals, in vertex order, bit for bit";
+  const auto read_obj = mesh_io::read_triangle_mesh(dir / "n.obj");  // v//vn corners still read as faces
+  ASSERT_TRUE(read_obj.ok()) << read_obj.error().message;
+  EXPECT_TRUE(read_obj->F == optimised.faces);
+
+  ASSERT_TRUE(write_posed_mesh(dir / "n.ply", mesh).ok());
+  const auto ply = read_whole_file(dir / "n.ply");
+  ASSERT_TRUE(ply.ok());
+  const std::vector<std::string> with_normals = {"x", "y", "z", "nx", "ny", "nz"};
+  EXPECT_TRUE(ply_vertex_columns(*ply, with_normals, 0, optimised.points.rows()) == optimised.points);
+  EXPECT_TRUE(ply_vertex_columns(*ply, with_normals, 3, optimised.points.rows()) == optimised.normals);
+  const auto read_ply = mesh_io::read_triangle_mesh(dir / "n.ply");  // extra properties are skipped
+  ASSERT_TRUE(read_ply.ok()) << read_ply.error().message;
+  EXPECT_TRUE(read_ply->V == optimised.points);
+  EXPECT_TRUE(read_ply->F == optimised.faces);
+
+  // Without normals: no vn lines, plain corners, x y z only.
+  PosedMesh bare = mesh;
+  bare.normals.resize(0, 3);
+  ASSERT_TRUE(write_posed_mesh(dir / "bare.obj", bare).ok());
+  ASSERT_TRUE(write_posed_mesh(dir / "bare.ply", bare).ok());
+  const auto bare_obj = read_whole_file(dir / "bare.obj");
+  ASSERT_TRUE(bare_obj.ok());
+  EXPECT_EQ(bare_obj->find("vn "), std::string::npos);
+  EXPECT_EQ(bare_obj->find("//"), std::string::npos);
+  const auto bare_ply = read_whole_file(dir / "bare.ply");
+  ASSERT_TRUE(bare_ply.ok());
+  EXPECT_TRUE(ply_vertex_columns(*bare_ply, {"x", "y", "z"}, 0, optimised.points.rows()) == optimised.points);
 }
 
 TEST(ExportPosedMeshTest, GlbAndGltfFilesReadBack) {

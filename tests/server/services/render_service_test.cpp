@@ -3,6 +3,8 @@
 // renderer draws comes back as the PNG, and a bad field is refused — naming it — before the
 // renderer is asked for anything. Real pictures are tests/integration/render_service_test.cpp's.
 #include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <functional>
 #include <memory>
 #include <string>
@@ -12,10 +14,12 @@
 #include <gtest/gtest.h>
 
 #include "animspace/v1/models.grpc.pb.h"
+#include "animspace/v1/poses.grpc.pb.h"
 #include "animspace/v1/render.grpc.pb.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/model/model_info.h"
+#include "core/render/heat_legend.h"
 #include "core/render/png.h"
 #include "server/implemented_rpcs.h"
 #include "tests/server/support/in_process_server.h"
@@ -162,6 +166,131 @@ TEST_F(RenderServiceInProcessTest, BadFieldsAreRefusedBeforeTheRendererIsCalled)
     EXPECT_NE(status.error_message().find(c.message), std::string::npos) << status.error_message();
   }
   EXPECT_TRUE(server_->renders().scenes().empty());
+}
+
+v1::PointArray point_array(const float* values, uint32_t count) {
+  v1::PointArray a;
+  a.set_point_count(count);
+  a.set_channel_count(3);
+  a.set_data(values, sizeof(float) * 3 * count);
+  return a;
+}
+
+// The heat map of a soft-cache estimate: what red means (the model's error tolerance unless the
+// request names a scale), the largest error, and the legend that says so on the image.
+TEST_F(RenderServiceInProcessTest, TheHeatMapIsScaledToTheModelsToleranceAndItsLegendIsDrawn) {
+  const std::string pmsc(demo::kDemoPmscModelName);
+  auto stored = container::read_file(repository() / pmsc / "1" / "model.anim");
+  ASSERT_TRUE(stored.ok());
+  // The model's error tolerance as the trainer wrote it (model units).
+  const double tolerance = std::stod(stored->metadata_value("pmsc.options.error_tolerance"));
+  ASSERT_GT(tolerance, 0);
+  auto frames_file = container::read_file(repository() / kArm / "1" / "model.anim");
+  ASSERT_TRUE(frames_file.ok());
+  auto frames = frames_file->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames.ok());
+  const int f = 3;
+  const Eigen::RowVectorXf full = frames->row(f);
+  const auto n = static_cast<uint32_t>(full.size() / 3);
+
+  auto poses = v1::PoseService::NewStub(server_->channel());
+  v1::DescribeKeyPointsResponse keys;
+  {
+    grpc::ClientContext context;
+    v1::DescribeKeyPointsRequest describe;
+    describe.mutable_model()->set_name(pmsc);
+    ASSERT_TRUE(poses->DescribeKeyPoints(&context, describe, &keys).ok());
+  }
+  std::vector<float> key_values;
+  for (uint32_t k : keys.key_point_indices()) {
+    for (int c = 0; c < 3; ++c) key_values.push_back(full(3 * k + c));
+  }
+  const auto K = static_cast<uint32_t>(keys.key_point_indices_size());
+  // The estimate the soft cache returns for these key points, and its largest distance from the frame.
+  double largest = 0;
+  {
+    grpc::ClientContext context;
+    v1::EvaluateKeyPointsRequest evaluate;
+    evaluate.mutable_model()->set_name(pmsc);
+    *evaluate.add_poses()->mutable_key_values() = point_array(key_values.data(), K);
+    v1::EvaluateKeyPointsResponse evaluated;
+    ASSERT_TRUE(poses->EvaluateKeyPoints(&context, evaluate, &evaluated).ok());
+    const std::string& data = evaluated.results(0).points().data();
+    ASSERT_EQ(data.size(), sizeof(float) * full.size());
+    for (uint32_t p = 0; p < n; ++p) {
+      double squared = 0;
+      for (int c = 0; c < 3; ++c) {
+        float value = 0;
+        std::memcpy(&value, data.data() + sizeof(float) * (3 * p + c), sizeof value);
+        squared += (double(value) - full(3 * p + c)) * (double(value) - full(3 * p + c));
+      }
+      largest = std::max(largest, std::sqrt(squared));
+    }
+  }
+
+  Request r = request(pmsc, 256, 256);
+  *r.mutable_key_points()->mutable_key_values() = point_array(key_values.data(), K);
+  *r.mutable_full_values() = point_array(full.data(), n);
+  r.set_show_heat_legend(true);
+  v1::RenderThumbnailResponse response;
+  const grpc::Status status = render(r, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_NEAR(response.heat_max_error(), largest, 1e-6 * largest + 1e-9);
+  EXPECT_DOUBLE_EQ(response.heat_scale_max(), tolerance) << "red is the model's tolerance";
+  EXPECT_TRUE(response.heat_legend_drawn());
+  const auto scenes = server_->renders().scenes();
+  ASSERT_EQ(scenes.size(), 1u);
+  EXPECT_FLOAT_EQ(scenes[0].heat_max, static_cast<float>(tolerance));
+  ASSERT_EQ(scenes[0].heat.size(), static_cast<Eigen::Index>(n));
+  EXPECT_NEAR(scenes[0].heat.maxCoeff(), largest, 1e-6 * largest + 1e-9);
+
+  // The legend over the fake renderer's picture: red at the top of its bar, blue at the bottom,
+  // the renderer's own pixels elsewhere.
+  auto image = render::decode_png(response.png(), "thumbnail");
+  ASSERT_TRUE(image.ok()) << image.error().message;
+  const render::HeatLegendLayout legend = render::heat_legend_layout(256, 256, response.heat_scale_max());
+  ASSERT_TRUE(legend.fits);
+  EXPECT_EQ(legend.labels[0], render::legend_label(response.heat_scale_max()));
+  const int x = (legend.bar_x0 + legend.bar_x1) / 2;
+  const uint8_t* top = image->pixel(x, legend.bar_y0);
+  const uint8_t* bottom = image->pixel(x, legend.bar_y1 - 1);
+  EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0}));
+  EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255}));
+  const auto fake = FakeRenderer::fake_pixel(3, 3);
+  const uint8_t* outside = image->pixel(3, 3);
+  EXPECT_EQ(std::vector<uint8_t>(outside, outside + 4), std::vector<uint8_t>(fake.begin(), fake.end()));
+
+  // A scale the caller names is the one drawn; no legend unless asked.
+  r.set_heat_max(0.5f);
+  r.set_show_heat_legend(false);
+  ASSERT_TRUE(render(r, &response).ok());
+  EXPECT_DOUBLE_EQ(response.heat_scale_max(), 0.5);
+  EXPECT_FALSE(response.heat_legend_drawn());
+  EXPECT_FLOAT_EQ(server_->renders().scenes().back().heat_max, 0.5f);
+
+  // The heat fields without full_values, or a scale that is no scale, are refused, naming them.
+  for (const auto& [spoil, field] : std::vector<std::pair<std::function<void(Request&)>, std::string>>{
+           {[](Request& q) { q.clear_full_values(); }, "heat_max"},
+           {[](Request& q) {
+              q.clear_full_values();
+              q.set_heat_max(0);
+              q.set_show_heat_legend(true);
+            },
+            "show_heat_legend"},
+           {[](Request& q) { q.set_heat_max(-1); }, "heat_max"},
+           {[&full, n](Request& q) {
+              Eigen::RowVectorXf huge = full;
+              huge.head<3>().setConstant(3e38f);  // finite, but its distance from the estimate is not
+              *q.mutable_full_values() = point_array(huge.data(), n);
+            },
+            "full_values: |full − estimate| overflows float32"}}) {
+    Request bad = r;
+    spoil(bad);
+    const grpc::Status refused = render(bad);
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << field;
+    EXPECT_NE(refused.error_message().find(field), std::string::npos) << refused.error_message();
+  }
+  EXPECT_EQ(server_->renders().scenes().size(), 2u) << "nothing refused reaches the renderer";
 }
 
 TEST_F(RenderServiceInProcessTest, ServerInfoNamesTheRendererAndListsThumbnails) {

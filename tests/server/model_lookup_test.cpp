@@ -1,0 +1,68 @@
+#include "server/model_lookup.h"
+
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tests/support/test_support.h"
+
+namespace animspace::server {
+namespace {
+
+void put(const std::filesystem::path& repo, const std::string& name) {
+  container::ModelContainer model;
+  model.metadata()["kind"] = "mesh_sequence";
+  model.set_points("mesh.rest_points", PointMatrix::Zero(3, 3));
+  std::filesystem::create_directories(repo / name / "1");
+  ASSERT_TRUE(container::write_file(repo / name / "1" / kModelFileName, model).ok());
+}
+
+TEST(NearestNames, TyposFindTheNameOtherModelsDoNot) {
+  const std::vector<std::string> served = {"arm", "arm-pmsc", "crane", "horse-gallop"};
+  // A swap of neighbours is one edit: "crnae" is one step from "crane".
+  EXPECT_EQ(nearest_names("crnae", served), std::vector<std::string>{"crane"});
+  EXPECT_EQ(nearest_names("arm-pmcs", served), std::vector<std::string>{"arm-pmsc"});
+  EXPECT_EQ(nearest_names("horse_galop", served), std::vector<std::string>{"horse-gallop"});
+  EXPECT_EQ(nearest_names("am", served), (std::vector<std::string>{"arm"}));
+  // Nearest first, then the candidates' order for ties.
+  EXPECT_EQ(nearest_names("arm-pms", {"arm-pmsc", "arm-pm", "arm"}),
+            (std::vector<std::string>{"arm-pmsc", "arm-pm"}));
+  EXPECT_TRUE(nearest_names("zebra", served).empty());
+  EXPECT_TRUE(nearest_names("crane", {}).empty());
+  // At most three.
+  EXPECT_EQ(nearest_names("m", {"a", "b", "c", "d"}).size(), 3u);
+}
+
+TEST(UnknownModel, NamesTheNearestAndListsTheServedModels) {
+  testing::TempDir repo;
+  for (const char* name : {"arm", "arm-pmsc", "crane"}) put(repo.path(), name);
+  ModelRegistry registry(repo.path());
+  ASSERT_EQ(registry.load_all(), 3);
+
+  const grpc::Status typo = unknown_model(registry, "crnae");
+  EXPECT_EQ(typo.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(typo.error_message(), "model 'crnae' is not loaded; did you mean 'crane'? models: arm, arm-pmsc, crane");
+  EXPECT_EQ(unknown_model(registry, "zebra").error_message(),
+            "model 'zebra' is not loaded; models: arm, arm-pmsc, crane");
+
+  // find_model answers an unknown name so; a wrong version of a known one keeps listing versions.
+  std::shared_ptr<const LoadedModel> found;
+  v1::ModelRef ref;
+  ref.set_name("arm-pmcs");
+  const grpc::Status by_name = find_model(registry, ref, "model", found);
+  EXPECT_EQ(by_name.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_NE(by_name.error_message().find("did you mean 'arm-pmsc'"), std::string::npos) << by_name.error_message();
+  ref.set_name("arm");
+  ref.set_version(7);
+  const grpc::Status by_version = find_model(registry, ref, "model", found);
+  EXPECT_EQ(by_version.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_NE(by_version.error_message().find("available: 1"), std::string::npos) << by_version.error_message();
+
+  testing::TempDir empty;
+  ModelRegistry none(empty.path());
+  EXPECT_EQ(unknown_model(none, "arm").error_message(), "model 'arm' is not loaded; the server serves no models");
+}
+
+}  // namespace
+}  // namespace animspace::server
