@@ -231,7 +231,7 @@ TEST_F(RenderServiceTest, TheThumbnailCommandSaysTheHeatScaleAndDrawsItsLegend) 
   const std::vector<float> key_values = keys.gather(full);
   const PoseResult evaluated = client.evaluate_key_points(model, {key_values, keys.channel_count});
   double largest = 0;
-  for (uint32_t p = 0; p < evaluated.points.count; ++p) {
+  for (uint32_t p = 0; p < evaluated.points.point_count; ++p) {
     double squared = 0;
     for (uint32_t c = 0; c < 3; ++c) {
       const double d = double(evaluated.points.point(p)[c]) - full[3 * p + c];
