@@ -21,6 +21,7 @@
 #include "core/animspace/import.h"
 #include "core/animspace/model.h"
 #include "core/animspace/tangents.h"
+#include "core/geometry/normals.h"
 #include "fuzz/fuzz_support.h"
 
 namespace animspace::fuzz {
@@ -55,9 +56,8 @@ void check_rig(const as::GltfRig& gltf) {
   // import-rig's next steps.
   const as::AnimationSpaceModel model = as::from_linear_blend(rig.model);
   FUZZ_CHECK(model.vertex_count() == vertices);
-  const Eigen::MatrixX3d normals = gltf.rest_normals.rows() > 0
-                                       ? gltf.rest_normals
-                                       : as::area_weighted_normals(rig.model.rest_points.transpose(), model.faces);
+  Eigen::MatrixX3d normals = gltf.rest_normals;
+  if (normals.rows() == 0) normals = geometry::area_weighted_normals(rig.model.rest_points.transpose(), model.faces);
   const auto planes = as::tangent_planes_from_normals(model, normals);
   if (!planes) FUZZ_CHECK(planes.error().code == ErrorCode::kInvalidArgument);
   PointMatrix posed;
