@@ -20,11 +20,6 @@ namespace animspace::server {
 grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
                         std::shared_ptr<const LoadedModel>& out, const CallControl* call = nullptr);
 
-// Up to three of `candidates` nearest to `name` by edit distance (optimal string alignment:
-// insertions, deletions, substitutions and swaps of neighbours, one each), nearest first, ties in
-// the candidates' order; only names within max(2, |name| / 3) edits — a typo, not another model.
-std::vector<std::string> nearest_names(std::string_view name, const std::vector<std::string>& candidates);
-
 // NOT_FOUND for a model name the registry does not serve, with the nearest names and what it
 // serves: "model 'crnae' is not loaded; did you mean 'crane'? models: arm, arm-pmsc, crane"
 // (at most 20 names listed, then how many more).

@@ -495,6 +495,10 @@ TEST_F(CliClientTest, UnknownOrMissingSubcommandsAreNamedAndTheSubcommandsListed
   const CliRun unknown = cli("frobnicate");
   EXPECT_EQ(unknown.exit_code, 2);
   EXPECT_NE(unknown.err.find("unknown subcommand 'frobnicate'"), std::string::npos) << unknown.err;
+  // A typo gets the nearest subcommand.
+  const CliRun typo = cli("desribe arm");
+  EXPECT_EQ(typo.exit_code, 2);
+  EXPECT_NE(typo.err.find("unknown subcommand 'desribe'; did you mean 'describe'?"), std::string::npos) << typo.err;
   const CliRun bare = cli("");
   EXPECT_EQ(bare.exit_code, 2);
   EXPECT_NE(bare.err.find("a subcommand is required"), std::string::npos) << bare.err;

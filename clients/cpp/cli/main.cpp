@@ -19,6 +19,7 @@
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/common/atomic_file.h"
+#include "core/common/nearest_names.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/model/model_info.h"
@@ -363,8 +364,17 @@ int check_subcommand(const CLI::App& app) {
   const std::vector<std::string> extras = app.remaining();
   if (app.get_subcommands().empty()) {
     if (!extras.empty()) {
-      std::fprintf(stderr, "animspace: unknown subcommand '%s'; the subcommands are:%s\n", extras.front().c_str(),
-                   subcommand_list(app).c_str());
+      std::vector<std::string> names;
+      for (const CLI::App* command : app.get_subcommands([](const CLI::App*) { return true; })) {
+        names.push_back(command->get_name());
+      }
+      std::string suggestion;
+      for (const std::string& near : animspace::nearest_names(extras.front(), names)) {
+        suggestion += (suggestion.empty() ? "; did you mean '" : "' or '") + near;
+      }
+      if (!suggestion.empty()) suggestion += "'?";
+      std::fprintf(stderr, "animspace: unknown subcommand '%s'%s; the subcommands are:%s\n", extras.front().c_str(),
+                   suggestion.c_str(), subcommand_list(app).c_str());
     } else {
       std::fprintf(stderr, "animspace: a subcommand is required:%s\nRun 'animspace --help' for the global options, "
                            "'animspace <subcommand> --help' for each.\n",
