@@ -73,6 +73,14 @@ class ClientTest : public ::testing::Test {
     return {frames_->row(f).data(), static_cast<size_t>(frames_->cols())};
   }
 
+  // Frame f with its points pushed along y: far from anything trained, so the cache blends or
+  // misses it.
+  static std::vector<float> perturbed_frame(int f) {
+    std::vector<float> full(frame(f).begin(), frame(f).end());
+    for (size_t i = 0; i < full.size(); i += 3) full[i + 1] += 0.05f * static_cast<float>(i % 7);
+    return full;
+  }
+
   // What the soft cache makes of frame f, computed in-process from the model file.
   static pmsc::PoseEstimate expected_estimate(int f) {
     pmsc::PoseEstimate estimate;
@@ -251,9 +259,7 @@ TEST_F(ClientTest, AnAbandonedStreamIsCancelledAndTheServerCarriesOn) {
 
 TEST_F(ClientTest, CompleteMissBlendsTheCallersFullValuesByAlpha) {
   const KeyPoints keys = client_->describe_key_points(kPmsc);
-  // The frame's key points moved: far from anything trained, so the cache blends or misses.
-  std::vector<float> full(frame(3).begin(), frame(3).end());
-  for (size_t i = 0; i < full.size(); i += 3) full[i + 1] += 0.05f * static_cast<float>(i % 7);
+  const std::vector<float> full = perturbed_frame(3);
   const std::vector<float> v = keys.gather(full);
   const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3});
   ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
@@ -274,8 +280,7 @@ TEST_F(ClientTest, CompleteMissBlendsTheCallersFullValuesByAlpha) {
 // training example. Full values must repeat the key values at the key points.
 TEST_F(ClientTest, CompleteMissRefusesFullValuesThatAreNotTheKeyPoseAndNeverLogsThem) {
   const KeyPoints keys = client_->describe_key_points(kPmsc);
-  std::vector<float> full(frame(5).begin(), frame(5).end());
-  for (size_t i = 0; i < full.size(); i += 3) full[i + 1] += 0.05f * static_cast<float>(i % 7);
+  const std::vector<float> full = perturbed_frame(5);
   const std::vector<float> v = keys.gather(full);
   const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3});
   ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";

@@ -266,13 +266,9 @@ int run_retrain(const Globals& g, const animspace::v1::RetrainRequest& request, 
               result.misses_used(), result.basis_size(), result.key_point_count());
   std::printf("  max training error %.6g, condition number %.3g, %.2f s\n", result.max_training_error(),
               result.condition_number(), result.training_seconds());
-  // ε is recalibrated on every retrain (held-out training frames), so the hit rate on the same
-  // poses can move although the model got no worse: say so, with numbers.
-  std::printf("  soft cache: ε_min %.4g → %.4g, ε_max %.4g → %.4g (recalibrated on held-out training frames)\n",
-              result.previous_epsilon_min(), result.epsilon_min(), result.previous_epsilon_max(), result.epsilon_max());
-  std::printf("  hit rate on these %u training frames: %.1f%% with the version retrained from, %.1f%% with the "
-              "new one\n",
-              result.training_frames(), 100 * result.previous_hit_rate(), 100 * result.hit_rate());
+  animspace::cli::print_soft_cache_change(result.previous_epsilon_min(), result.epsilon_min(),
+                                          result.previous_epsilon_max(), result.epsilon_max(),
+                                          result.training_frames(), result.previous_hit_rate(), result.hit_rate());
   if (result.misses_inconsistent() > 0) {
     std::printf("  %u logged misses left out: their full values do not repeat their key values\n",
                 result.misses_inconsistent());

@@ -79,4 +79,13 @@ ProgressCallback progress_bars(const std::string& command) {
   };
 }
 
+void print_soft_cache_change(double previous_epsilon_min, double epsilon_min, double previous_epsilon_max,
+                             double epsilon_max, long training_frames, double previous_hit_rate, double hit_rate) {
+  std::printf("  soft cache: ε_min %.4g → %.4g, ε_max %.4g → %.4g (recalibrated on held-out training frames)\n",
+              previous_epsilon_min, epsilon_min, previous_epsilon_max, epsilon_max);
+  std::printf("  hit rate on these %ld training frames: %.1f%% with the version retrained from, %.1f%% with the "
+              "new one\n",
+              training_frames, 100 * previous_hit_rate, 100 * hit_rate);
+}
+
 }  // namespace animspace::cli

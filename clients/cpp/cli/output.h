@@ -15,6 +15,12 @@ namespace animspace::cli {
 // One JSON document on stdout, indented, ending in a newline.
 void print_json(const nlohmann::json& document);
 
+// What a retrain changed for the soft cache (issue #21): ε before → after (recalibrated on every
+// retrain) and the hit rate of the version retrained from and of the new one on the new training
+// frames. Shared by `retrain` (the RPC) and `retrain-offline`.
+void print_soft_cache_change(double previous_epsilon_min, double epsilon_min, double previous_epsilon_max,
+                             double epsilon_max, long training_frames, double previous_hit_rate, double hit_rate);
+
 // A protobuf message as JSON with the .proto field names (what `--json` prints for RPC answers).
 nlohmann::json proto_json(const google::protobuf::Message& message);
 

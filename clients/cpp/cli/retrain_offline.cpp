@@ -129,12 +129,9 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
               a.model.c_str(), static_cast<unsigned long long>(start), rows, logs.size(), result->training_frames,
               result->report.basis_size, result->report.key_points, result->report.max_training_error,
               result->report.seconds);
-  std::printf("  soft cache: ε_min %.4g → %.4g, ε_max %.4g → %.4g (recalibrated on held-out training frames)\n",
-              result->previous_epsilon.epsilon_min, result->epsilon.epsilon_min, result->previous_epsilon.epsilon_max,
-              result->epsilon.epsilon_max);
-  std::printf("  hit rate on these %d training frames: %.1f%% with version %llu, %.1f%% with the new one\n",
-              result->training_frames, 100 * result->previous_hit_rate, static_cast<unsigned long long>(start),
-              100 * result->hit_rate);
+  print_soft_cache_change(result->previous_epsilon.epsilon_min, result->epsilon.epsilon_min,
+                          result->previous_epsilon.epsilon_max, result->epsilon.epsilon_max, result->training_frames,
+                          result->previous_hit_rate, result->hit_rate);
   if (inconsistent > 0) {
     std::printf("  %llu logged misses left out: their full values do not repeat their key values\n",
                 static_cast<unsigned long long>(inconsistent));
