@@ -48,6 +48,10 @@ struct PmscModel {
   int region_count = 0;
   std::vector<int> point_regions;  // N (empty when region_count == 0)
   std::vector<int> key_regions;    // K
+  // Soft-cache thresholds of each region's key-point error (region_errors), calibrated like
+  // `epsilon` on each region's own points; empty: every region uses `epsilon` (models written
+  // before per-region calibration). Read through region_thresholds().
+  std::vector<SoftCacheThresholds> region_epsilon;
 
   // Precomputed by prepare_projection():
   Eigen::MatrixXd projection;   // M × K·D, P with p = P (f_key − key_mean)
@@ -148,6 +152,11 @@ inline constexpr double kKeyConsistencyAbsolute = 1e-3;
 // index, and both values.
 Status check_full_values_at_keys(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                                  const Eigen::Ref<const Eigen::VectorXf>& full_values);
+
+// The thresholds region r's key-point error is compared with (local fail-through).
+inline const SoftCacheThresholds& region_thresholds(const PmscModel& model, int region) {
+  return model.region_epsilon.empty() ? model.epsilon : model.region_epsilon[static_cast<size_t>(region)];
+}
 
 // Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
 Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);
