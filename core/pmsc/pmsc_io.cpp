@@ -20,13 +20,17 @@ Error with_source(const Error& e, const std::string& source) {
 
 // The persisted TrainingOptions fields, one table for writing and reading so the two cannot
 // drift apart. `positions` is deliberately absent (see store_training_options).
+// `optional`: added after models were first written (issue #22); a model without it was trained
+// before the option existed and is retrained with its default.
 struct IntOption {
   const char* name;
   int TrainingOptions::*member;
+  bool optional = false;
 };
 struct DoubleOption {
   const char* name;
   double TrainingOptions::*member;
+  bool optional = false;
 };
 constexpr IntOption kIntOptions[] = {
     {"channels", &TrainingOptions::channel_count},  // metadata pmsc.options.channels, as written since release 0.1
@@ -37,12 +41,14 @@ constexpr IntOption kIntOptions[] = {
     {"grid_cells", &TrainingOptions::grid_cells},
     {"calibration_folds", &TrainingOptions::calibration_folds},
     {"region_count", &TrainingOptions::region_count},
+    {"calibration_block_frames", &TrainingOptions::calibration_block_frames, true},
 };
 constexpr DoubleOption kDoubleOptions[] = {
     {"error_bound", &TrainingOptions::error_bound},
     {"max_basis_fraction", &TrainingOptions::max_basis_fraction},
     {"error_tolerance", &TrainingOptions::error_tolerance},
     {"blend_zone_ratio", &TrainingOptions::blend_zone_ratio},
+    {"false_hit_rate", &TrainingOptions::false_hit_rate, true},
 };
 constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
@@ -62,6 +68,78 @@ Error unparsable(const std::string& source, const std::string& key, const std::s
                  const std::string& text) {
   return make_error(ErrorCode::kInvalidArgument,
                     source + ": metadata '" + key + "' should be " + expected + ", got '" + text + "'");
+}
+
+// The calibration (issue #22, pmsc format 2): how ε was chosen and the held-out samples it came
+// from, so that `describe` can state its meaning and an operator can pick another δ without
+// retraining. Absent in models of format 1, whose ε was the worst held-out ratio's.
+void store_calibration(const PmscModel& m, container::ModelContainer& out) {
+  const PmscModel::Calibration& c = m.calibration;
+  if (c.samples.size() == 0) return;
+  out.metadata()[kFormatVersionKey] = std::to_string(kFormatVersion);
+  out.metadata()[kFalseHitRateKey] = format_number(c.false_hit_rate);
+  out.metadata()[kErrorRatioKey] = format_number(c.error_ratio);
+  out.metadata()[kBlockFramesKey] = std::to_string(c.block_frames);
+  const long n = c.samples.size();
+  const long R = c.samples.region_key_point_errors.cols();
+  Float64Matrix samples(n, 2 + 2 * R);
+  samples.col(0) = c.samples.key_point_errors;
+  samples.col(1) = c.samples.max_errors;
+  if (R > 0) {
+    samples.middleCols(2, R) = c.samples.region_key_point_errors;
+    samples.middleCols(2 + R, R) = c.samples.region_max_errors;
+  }
+  out.set_matrix(kCalibrationSamplesSection, samples);
+  if (!m.region_epsilon.empty()) {
+    Float64Matrix region_epsilon(static_cast<long>(m.region_epsilon.size()), 2);
+    for (size_t r = 0; r < m.region_epsilon.size(); ++r) {
+      region_epsilon.row(static_cast<long>(r)) << m.region_epsilon[r].epsilon_min, m.region_epsilon[r].epsilon_max;
+    }
+    out.set_matrix(kRegionEpsilonSection, region_epsilon);
+  }
+}
+
+Status load_calibration(const container::ModelContainer& in, const std::string& source, PmscModel& m) {
+  if (!in.has_section(kCalibrationSamplesSection)) return Status::Ok();  // format 1
+  auto samples = in.double_matrix(kCalibrationSamplesSection);
+  if (!samples) return with_source(samples.error(), source);
+  const long R = m.region_count;
+  if (samples->cols() != 2 && samples->cols() != 2 + 2 * R) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      source + ": section '" + kCalibrationSamplesSection + "' should have 2 or " +
+                          std::to_string(2 + 2 * R) + " columns (2 + 2 per region), got " +
+                          std::to_string(samples->cols()));
+  }
+  if (!samples->allFinite() || (samples->size() > 0 && samples->minCoeff() < 0)) {
+    return make_error(ErrorCode::kInvalidArgument, source + ": section '" +
+                                                       kCalibrationSamplesSection +
+                                                       "' holds negative, NaN or Inf errors");
+  }
+  PmscModel::Calibration& c = m.calibration;
+  c.samples.key_point_errors = samples->col(0);
+  c.samples.max_errors = samples->col(1);
+  const long sample_regions = (samples->cols() - 2) / 2;
+  c.samples.region_key_point_errors = samples->middleCols(2, sample_regions);
+  c.samples.region_max_errors = samples->middleCols(2 + sample_regions, sample_regions);
+  for (const char* key : {kFalseHitRateKey, kErrorRatioKey}) {
+    double value = 0;
+    const std::string text = in.metadata_value(key);
+    if (!parse_exactly(text, value) || !std::isfinite(value)) {
+      return unparsable(source, key, "a finite decimal number", text);
+    }
+    (key == kFalseHitRateKey ? c.false_hit_rate : c.error_ratio) = value;
+  }
+  if (!parse_exactly(in.metadata_value(kBlockFramesKey), c.block_frames)) {
+    return unparsable(source, kBlockFramesKey, "a decimal integer", in.metadata_value(kBlockFramesKey));
+  }
+  if (in.has_section(kRegionEpsilonSection)) {
+    auto region_epsilon = in.double_matrix(kRegionEpsilonSection, 2);
+    if (!region_epsilon) return with_source(region_epsilon.error(), source);
+    for (long r = 0; r < region_epsilon->rows(); ++r) {
+      m.region_epsilon.push_back({(*region_epsilon)(r, 0), (*region_epsilon)(r, 1)});
+    }
+  }
+  return Status::Ok();  // prepare_projection checks region_epsilon against region_count
 }
 
 }  // namespace
@@ -85,6 +163,7 @@ void store(const PmscModel& m, container::ModelContainer& out) {
     out.set_matrix("pmsc.point_regions", container::as_column(m.point_regions));
     out.set_matrix("pmsc.key_regions", container::as_column(m.key_regions));
   }
+  store_calibration(m, out);
 }
 
 Result<PmscModel> load(const container::ModelContainer& in, const std::string& source) {
@@ -137,6 +216,7 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
     m.point_regions.assign(point_regions->data(), point_regions->data() + point_regions->size());
     m.key_regions.assign(key_regions->data(), key_regions->data() + key_regions->size());
   }
+  if (auto calibration = load_calibration(in, source, m); !calibration.ok()) return calibration.error();
   if (auto prepared = prepare_projection(m); !prepared.ok()) return with_source(prepared.error(), source);
   return m;
 }
@@ -202,7 +282,12 @@ Result<TrainingOptions> load_training_options(const container::ModelContainer& i
   };
 
   TrainingOptions options;
+  const auto absent = [&](const char* name, bool optional) {
+    known.insert(option_key(name));
+    return optional && !metadata.contains(option_key(name));
+  };
   for (const IntOption& option : kIntOptions) {
+    if (absent(option.name, option.optional)) continue;
     auto text = value_of(option.name);
     if (!text) return text.error();
     if (!parse_exactly(*text, options.*option.member)) {
@@ -210,6 +295,7 @@ Result<TrainingOptions> load_training_options(const container::ModelContainer& i
     }
   }
   for (const DoubleOption& option : kDoubleOptions) {
+    if (absent(option.name, option.optional)) continue;
     auto text = value_of(option.name);
     if (!text) return text.error();
     if (!parse_exactly(*text, options.*option.member) || !std::isfinite(options.*option.member)) {

@@ -4,7 +4,12 @@
 // pmsc.key_points (K × 1 i32), pmsc.key_mean (1 × K·D f64), pmsc.key_basis (K·D × M f64),
 // pmsc.epsilon (1 × 2 f64: ε_min, ε_max), pmsc.point_regions (N × 1 i32, optional) and
 // pmsc.key_regions (K × 1 i32, optional); metadata pmsc.channels, pmsc.cross, pmsc.aligned,
-// pmsc.control_point_count, pmsc.region_count. The projection is not stored: it is recomputed
+// pmsc.control_point_count, pmsc.region_count. From pmsc format 2 (metadata pmsc.format_version,
+// absent in format 1) also the ε calibration (calibration.h): pmsc.calibration_samples
+// (n × (2 + 2R) f64: e_key, max error, then R region key errors and R region max errors of each
+// held-out frame), pmsc.region_epsilon (R × 2 f64) and metadata pmsc.calibration.false_hit_rate,
+// pmsc.calibration.error_ratio, pmsc.calibration.block_frames. A format 1 model loads with the ε
+// it was written with and no samples. The projection is not stored: it is recomputed
 // (and its conditioning re-checked) at load, so there is one source of truth.
 //
 // Beside the model a container keeps what retraining needs ("train each night, better
@@ -24,6 +29,15 @@
 #include "core/pmsc/train.h"
 
 namespace animspace::pmsc {
+
+// The pmsc sections' format (docs/FORMATS.md): 1 before the stored calibration, 2 with it.
+inline constexpr int kFormatVersion = 2;
+inline constexpr const char* kFormatVersionKey = "pmsc.format_version";
+inline constexpr const char* kFalseHitRateKey = "pmsc.calibration.false_hit_rate";
+inline constexpr const char* kErrorRatioKey = "pmsc.calibration.error_ratio";
+inline constexpr const char* kBlockFramesKey = "pmsc.calibration.block_frames";
+inline constexpr const char* kCalibrationSamplesSection = "pmsc.calibration_samples";
+inline constexpr const char* kRegionEpsilonSection = "pmsc.region_epsilon";
 
 // Writes the model's sections and metadata; sets metadata "kind" to pmsc or cross_pmsc.
 void store(const PmscModel& model, container::ModelContainer& out);
@@ -49,7 +63,8 @@ inline constexpr const char* kOptionsPrefix = "pmsc.options.";
 // Writes every TrainingOptions field that retraining needs as metadata "pmsc.options.<field>":
 // channels, error_bound, basis_size, max_basis, max_basis_fraction, block_size, max_key_points,
 // fiducial_points (comma-separated indices, empty for none), grid_cells, remove_rigid_motion
-// ("1"/"0"), error_tolerance, calibration_folds, blend_zone_ratio, region_count. Doubles are
+// ("1"/"0"), error_tolerance, calibration_folds, blend_zone_ratio, region_count, false_hit_rate and
+// calibration_block_frames (the last two optional on reading: older models lack them). Doubles are
 // written in the shortest form that reads back to the same bits. `positions` (explicit grid
 // positions) is not stored: a retrained model that uses grid seeds places them on the mean of
 // its own training frames, the default — so the grid may move a little when misses join.

@@ -119,6 +119,12 @@ Status prepare_projection(PmscModel& m) {
       if (r < 0 || r >= m.region_count) return make_error(ErrorCode::kInvalidArgument, "pmsc model: region out of range");
     }
   }
+  if (!m.region_epsilon.empty() && static_cast<long>(m.region_epsilon.size()) != m.region_count) {
+    return make_error(ErrorCode::kInvalidArgument, "pmsc model: region_epsilon should hold " +
+                                                       std::to_string(m.region_count) + " thresholds, got " +
+                                                       std::to_string(m.region_epsilon.size()));
+  }
+  for (const SoftCacheThresholds& t : m.region_epsilon) ANIMSPACE_RETURN_IF_ERROR(validate(t));
 
   m.projection = least_squares_projection(m.key_basis, kMaxConditionNumber, &m.condition_number, &m.regularization,
                                           m.aligned ? &m.key_range : nullptr);
@@ -329,6 +335,42 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
     out.points = std::move(estimate.points);
     out.full_evaluation_needed = true;
   }
+}
+
+Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio) {
+  const CalibrationSamples& samples = m.calibration.samples;
+  const double delta = m.calibration.false_hit_rate;
+  if (!(delta > 0 && delta < 1)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "false_hit_rate must be in (0, 1), got " + format_number(delta));
+  }
+  if (!(tolerance > 0) || !std::isfinite(tolerance)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "error_tolerance must be a positive distance, got " + format_number(tolerance));
+  }
+  if (!(blend_zone_ratio >= 1) || !std::isfinite(blend_zone_ratio)) {
+    return make_error(ErrorCode::kInvalidArgument, "blend_zone_ratio must be ≥ 1, got " + format_number(blend_zone_ratio));
+  }
+  if (samples.size() == 0) {
+    return make_error(ErrorCode::kFailedPrecondition,
+                      "the model keeps no calibration samples (trained before calibration was stored); retrain it");
+  }
+  const long R = samples.region_key_point_errors.cols();
+  if (R != 0 && R != m.region_count) {
+    return make_error(ErrorCode::kInvalidArgument, "calibration samples have " + std::to_string(R) +
+                                                       " region columns, the model has " +
+                                                       std::to_string(m.region_count) + " regions");
+  }
+  const double noise = kCalibrationNoiseFraction * tolerance;
+  m.calibration.error_ratio = conformal_error_ratio(samples.key_point_errors, samples.max_errors, delta, noise);
+  m.epsilon = thresholds_for_ratio(m.calibration.error_ratio, tolerance, blend_zone_ratio);
+  m.region_epsilon.clear();
+  for (long r = 0; r < R; ++r) {
+    const double q = conformal_error_ratio(samples.region_key_point_errors.col(r), samples.region_max_errors.col(r),
+                                           delta, noise);
+    m.region_epsilon.push_back(thresholds_for_ratio(q, tolerance, blend_zone_ratio));
+  }
+  return Status::Ok();
 }
 
 Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {

@@ -27,6 +27,7 @@
 #include "core/common/result.h"
 #include "core/common/types.h"
 #include "core/geometry/rigid_fit.h"
+#include "core/pmsc/calibration.h"
 #include "core/pmsc/soft_cache.h"
 
 namespace animspace::pmsc {
@@ -52,6 +53,15 @@ struct PmscModel {
   // `epsilon` on each region's own points; empty: every region uses `epsilon` (models written
   // before per-region calibration). Read through region_thresholds().
   std::vector<SoftCacheThresholds> region_epsilon;
+
+  // How `epsilon` and `region_epsilon` were calibrated (calibration.h). No samples: a model
+  // written before issue #22, whose ε is the worst held-out ratio's and cannot be recalibrated.
+  struct Calibration {
+    double false_hit_rate = 0;  // δ
+    double error_ratio = 0;     // q: ε_min = tolerance / q
+    int block_frames = 0;       // frames per held-out block
+    CalibrationSamples samples;
+  } calibration;
 
   // Precomputed by prepare_projection():
   Eigen::MatrixXd projection;   // M × K·D, P with p = P (f_key − key_mean)
@@ -157,6 +167,12 @@ Status check_full_values_at_keys(const PmscModel& model, const Eigen::Ref<const 
 inline const SoftCacheThresholds& region_thresholds(const PmscModel& model, int region) {
   return model.region_epsilon.empty() ? model.epsilon : model.region_epsilon[static_cast<size_t>(region)];
 }
+
+// Sets ε (and each region's ε when the samples have regions) from model.calibration's samples
+// and false_hit_rate (calibration.h). Errors: kInvalidArgument for a δ outside (0, 1), a
+// non-positive tolerance, blend_zone_ratio < 1, or samples whose region columns differ from
+// region_count; kFailedPrecondition when the model has no samples (trained before issue #22).
+Status apply_calibration(PmscModel& model, double tolerance, double blend_zone_ratio);
 
 // Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
 Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);

@@ -14,10 +14,6 @@
 namespace animspace::pmsc {
 namespace {
 
-// Held-out frames whose e_key is below this fraction of the tolerance (reproduced to rounding)
-// are not used to calibrate ε.
-constexpr double kNoiseFraction = 1e-4;
-
 Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
 
 Eigen::Map<const Eigen::Matrix3Xd> points_of(const Eigen::VectorXd& frame, long first_point, long count) {
@@ -142,6 +138,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   if (o.block_size < 1 || o.max_key_points < 1) return invalid("block_size and max_key_points must be ≥ 1");
   if (o.remove_rigid_motion && D != 3) return invalid("remove_rigid_motion needs 3 channels (positions)");
   if (o.blend_zone_ratio < 1) return invalid("blend_zone_ratio must be ≥ 1");
+  if (!(o.false_hit_rate > 0 && o.false_hit_rate < 1)) {
+    return invalid("false_hit_rate must be in (0, 1), got " + std::to_string(o.false_hit_rate));
+  }
+  if (o.calibration_block_frames < 0) return invalid("calibration_block_frames must be ≥ 0 (0: automatic)");
   if (!(o.max_basis_fraction > 0 && o.max_basis_fraction <= 1)) return invalid("max_basis_fraction must be in (0, 1]");
   const bool cross = output_frames != nullptr;
   const long control_points = control_frames.cols() / D;
@@ -207,45 +207,87 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     model.key_regions = std::move(regions.key_regions);
   }
 
-  // ε from held-out training frames only: retrain the subspace without each fold (same keys,
-  // same M), evaluate its frames through the runtime, and record how far the true max point
-  // error can exceed e_key. ε_min = tolerance / (largest ratio) flags every such frame whose
-  // error passes the tolerance; ε_max = ratio·ε_min gives the transition zone.
-  double worst_ratio = 0;
-  int calibration_frames = 0;
+  // ε from held-out training frames only (calibration.h): retrain the subspace without each
+  // fold (same keys, same M), evaluate its frames through the runtime, and keep (e_key, true max
+  // point error) of every held-out frame, overall and per region. Two fold families: every
+  // `folds`-th frame (poses between training poses) and blocks of consecutive frames dealt to
+  // the folds in turn (motion the rest of the training never saw).
+  const auto calibration_start = std::chrono::steady_clock::now();
   const int folds = static_cast<int>(std::min<long>(std::max(o.calibration_folds, 2), F));
+  const long block = o.calibration_block_frames > 0
+                         ? o.calibration_block_frames
+                         : std::max<long>(1, (F + 2 * folds - 1) / (2 * folds));  // two blocks per fold
+  std::vector<std::vector<long>> held_out_sets;
+  std::vector<char> held_out_is_block;
   for (int fold = 0; fold < folds; ++fold) {
-    std::vector<long> train_columns, held_out;
-    for (long f = 0; f < F; ++f) (f % folds == fold ? held_out : train_columns).push_back(f);
+    std::vector<long> interleaved, blocks;
+    for (long f = 0; f < F; ++f) {
+      if (f % folds == fold) interleaved.push_back(f);
+      if ((f / block) % folds == fold) blocks.push_back(f);
+    }
+    held_out_sets.push_back(std::move(interleaved));
+    // With one-frame blocks the two families coincide: keep one.
+    if (block > 1) held_out_sets.push_back(std::move(blocks));
+    held_out_is_block.push_back(0);
+    if (block > 1) held_out_is_block.push_back(1);
+  }
+  const long R_count = model.region_count;
+  std::vector<double> sample_key, sample_max;
+  std::vector<char> sample_from_block;
+  std::vector<Eigen::VectorXd> sample_region_key, sample_region_max;
+  for (size_t set = 0; set < held_out_sets.size(); ++set) {
+    const std::vector<long>& held_out = held_out_sets[set];
+    std::vector<char> is_held(static_cast<size_t>(F), 0);
+    for (long f : held_out) is_held[static_cast<size_t>(f)] = 1;
+    std::vector<long> train_columns;
+    for (long f = 0; f < F; ++f) {
+      if (!is_held[static_cast<size_t>(f)]) train_columns.push_back(f);
+    }
     // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
     const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(train_columns.size()) - 1));
-    if (fold_basis < 1) continue;
+    if (fold_basis < 1 || held_out.empty()) continue;
     Eigen::MatrixXd T_fold(rows, static_cast<long>(train_columns.size()));
     for (size_t c = 0; c < train_columns.size(); ++c) T_fold.col(static_cast<long>(c)) = T.col(train_columns[c]);
     PmscModel fold_model = model;
-    report_progress(o.progress, "calibration", fold, folds);
+    report_progress(o.progress, "calibration", static_cast<int>(set), static_cast<int>(held_out_sets.size()));
     if (!assemble(fit_subspace(T_fold, fold_basis), control_rows, cross, model.key_points, fold_model).ok()) continue;
     PoseEstimate estimate;
     for (long f : held_out) {
       // Held-out frames enter in the world frame, as at run time.
-      Eigen::VectorXf control(control_rows);
-      Eigen::VectorXf truth(rows - (cross ? control_rows : 0));
-      control = control_frames.row(f).transpose();
-      truth = cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : control;
+      const Eigen::VectorXf control = control_frames.row(f).transpose();
+      const Eigen::VectorXf truth = cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : control;
       evaluate(fold_model, gather_key_values(fold_model, control), estimate);
-      const Eigen::MatrixXd residual = (truth - estimate.points).cast<double>();
-      const double max_error = max_point_error(residual, D);
-      ++calibration_frames;
-      // A frame reproduced to rounding has a ratio of noise over noise; it says nothing.
-      if (estimate.key_point_error < kNoiseFraction * o.error_tolerance) continue;
-      worst_ratio = std::max(worst_ratio, max_error / std::max(estimate.key_point_error, 1e-30));
+      const Eigen::VectorXf residual = truth - estimate.points;
+      sample_key.push_back(estimate.key_point_error);
+      sample_from_block.push_back(held_out_is_block[set]);
+      sample_max.push_back(max_point_error(residual.cast<double>(), D));
+      if (R_count > 0) {
+        Eigen::VectorXd region_max = Eigen::VectorXd::Zero(R_count);
+        for (long i = 0; i < model.point_count; ++i) {
+          double& m = region_max(model.point_regions[static_cast<size_t>(i)]);
+          m = std::max(m, static_cast<double>(residual.segment(i * D, D).norm()));
+        }
+        sample_region_key.push_back(Eigen::Map<const Eigen::VectorXd>(estimate.region_errors.data(), R_count));
+        sample_region_max.push_back(region_max);
+      }
     }
   }
-  // Without any usable frame fall back to the bound e_key ≤ max point error (the RMS over keys
-  // never exceeds the largest key error), i.e. a ratio of 1.
-  report_progress(o.progress, "calibration", folds, folds);
-  model.epsilon.epsilon_min = o.error_tolerance / std::max(worst_ratio, 1.0);
-  model.epsilon.epsilon_max = model.epsilon.epsilon_min * o.blend_zone_ratio;
+  report_progress(o.progress, "calibration", static_cast<int>(held_out_sets.size()),
+                  static_cast<int>(held_out_sets.size()));
+  CalibrationSamples& samples = model.calibration.samples;
+  const long n = static_cast<long>(sample_key.size());
+  samples.key_point_errors = Eigen::Map<const Eigen::VectorXd>(sample_key.data(), n);
+  samples.max_errors = Eigen::Map<const Eigen::VectorXd>(sample_max.data(), n);
+  samples.region_key_point_errors.resize(R_count > 0 ? n : 0, R_count);
+  samples.region_max_errors.resize(R_count > 0 ? n : 0, R_count);
+  for (long i = 0; i < n && R_count > 0; ++i) {
+    samples.region_key_point_errors.row(i) = sample_region_key[static_cast<size_t>(i)].transpose();
+    samples.region_max_errors.row(i) = sample_region_max[static_cast<size_t>(i)].transpose();
+  }
+  samples.from_block_fold = std::move(sample_from_block);
+  model.calibration.false_hit_rate = o.false_hit_rate;
+  model.calibration.block_frames = static_cast<int>(block);
+  ANIMSPACE_RETURN_IF_ERROR(apply_calibration(model, o.error_tolerance, o.blend_zone_ratio));
 
   if (report) {
     report->frames = static_cast<int>(F);
@@ -256,9 +298,11 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     report->converged = selection->converged;
     report->condition_number = model.condition_number;
     report->regularization = model.regularization;
-    report->error_ratio = worst_ratio;
-    report->calibration_frames = calibration_frames;
-    report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    report->error_ratio = model.calibration.error_ratio;
+    report->calibration_frames = static_cast<int>(n);
+    const auto now = std::chrono::steady_clock::now();
+    report->seconds = std::chrono::duration<double>(now - start).count();
+    report->calibration_seconds = std::chrono::duration<double>(now - calibration_start).count();
   }
   return model;
 }

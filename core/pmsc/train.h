@@ -35,11 +35,17 @@ struct TrainingOptions {
   PointMatrix positions;
   // Remove rigid motion before PCA (channels == 3 only).
   bool remove_rigid_motion = false;
-  // Per-point error that must not pass as a hit: ε is calibrated so that held-out training
-  // frames whose max point error exceeds this would be flagged (blend or miss). Model units, > 0.
+  // Per-point error that must not pass as a hit (model units, > 0): ε is calibrated on held-out
+  // training frames so that at most a fraction false_hit_rate of poses like them are called HIT
+  // with a max point error above it (calibration.h).
   double error_tolerance = 0;
-  // Held-out folds for that calibration (each fold retrains the basis without its frames).
+  // δ of that statement, in (0, 1). The default asks for a miss recall of 0.98 (issue #22).
+  double false_hit_rate = 0.02;
+  // Held-out folds for that calibration (each fold retrains the basis without its frames); every
+  // fold is used twice, as every calibration_folds-th frame and as blocks of consecutive frames.
   int calibration_folds = 5;
+  // Frames per held-out block; 0: two blocks per fold, ⌈F / (2 · calibration_folds)⌉.
+  int calibration_block_frames = 0;
   // ε_max / ε_min (the papers' example uses [0.1, 0.15]).
   double blend_zone_ratio = 1.5;
   // Regions for local fail-through (0 = none; cross-PMSC models have none).
@@ -57,10 +63,12 @@ struct TrainingReport {
   bool converged = false;                 // key selection reached error_bound
   double condition_number = 0;
   double regularization = 0;
-  // ε calibration on held-out frames: the largest observed (max point error / e_key).
+  // ε calibration on held-out frames: the conformal error ratio q (ε_min = tolerance / q) and
+  // the number of held-out samples it came from.
   double error_ratio = 0;
   int calibration_frames = 0;
-  double seconds = 0;
+  double seconds = 0;              // training in all
+  double calibration_seconds = 0;  // of which the ε calibration
 };
 
 // frames: F × N·D (one frame per row, point-major). Errors: kInvalidArgument naming the option

@@ -2,15 +2,65 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <vector>
 
 #include <google/protobuf/util/json_util.h>
 
 namespace animspace::cli {
 
 void print_json(const nlohmann::json& document) { std::cout << document.dump(2) << '\n' << std::flush; }
+
+namespace {
+
+std::string format_fixed(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3f", value);
+  return text;
+}
+
+std::vector<double> offered_false_hit_rates(const pmsc::PmscModel& model) {
+  std::vector<double> rates = pmsc::default_false_hit_rates();
+  if (std::find(rates.begin(), rates.end(), model.calibration.false_hit_rate) == rates.end()) {
+    rates.push_back(model.calibration.false_hit_rate);
+    std::sort(rates.begin(), rates.end());
+  }
+  return rates;
+}
+
+}  // namespace
+
+void print_operating_curve(const pmsc::PmscModel& model, double tolerance) {
+  const pmsc::CalibrationSamples& samples = model.calibration.samples;
+  std::printf("operating curve on %ld held-out frames (cross-validated; * = this model's δ):\n", samples.size());
+  std::printf("  %8s %8s %11s %9s %12s %15s\n", "δ", "ratio q", "ε_min", "hit rate", "miss recall",
+              "worst hit/tol");
+  for (double rate : offered_false_hit_rates(model)) {
+    const pmsc::OperatingPoint p = pmsc::operating_point(samples, rate, tolerance);
+    std::printf("%s %8.3g %8.3g %11.4g %9.3f %12s %15.3f\n", rate == model.calibration.false_hit_rate ? "*" : " ",
+                rate, p.error_ratio, p.epsilon_min, p.hit_rate,
+                p.over_tolerance > 0 ? format_fixed(p.miss_recall).c_str() : "n/a", p.worst_hit_error);
+  }
+}
+
+nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double tolerance) {
+  nlohmann::json curve = nlohmann::json::array();
+  for (double rate : offered_false_hit_rates(model)) {
+    const pmsc::OperatingPoint p = pmsc::operating_point(model.calibration.samples, rate, tolerance);
+    curve.push_back({{"false_hit_rate", rate},
+                     {"error_ratio", p.error_ratio},
+                     {"epsilon_min", p.epsilon_min},
+                     {"hit_rate", p.hit_rate},
+                     {"miss_recall", p.over_tolerance > 0 ? nlohmann::json(p.miss_recall) : nlohmann::json()},
+                     {"over_tolerance", p.over_tolerance},
+                     {"worst_hit_error_over_tolerance", p.worst_hit_error},
+                     {"chosen", rate == model.calibration.false_hit_rate}});
+  }
+  return curve;
+}
 
 nlohmann::json proto_json(const google::protobuf::Message& message) {
   std::string text;

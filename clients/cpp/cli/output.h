@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/common/progress.h"
+#include "core/pmsc/pmsc_model.h"
 
 namespace animspace::cli {
 
@@ -20,6 +21,12 @@ void print_json(const nlohmann::json& document);
 // frames. Shared by `retrain` (the RPC) and `retrain-offline`.
 void print_soft_cache_change(double previous_epsilon_min, double epsilon_min, double previous_epsilon_max,
                              double epsilon_max, long training_frames, double previous_hit_rate, double hit_rate);
+
+// The soft cache's operating curve (issue #22): for each offered false-hit rate δ, the error ratio,
+// ε_min and the cross-validated hit rate and miss recall on the model's calibration samples, the
+// chosen δ marked. Printed by `train-pmsc` and `calibrate`; `tolerance` in model units.
+void print_operating_curve(const pmsc::PmscModel& model, double tolerance);
+nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double tolerance);
 
 // A protobuf message as JSON with the .proto field names (what `--json` prints for RPC answers).
 nlohmann::json proto_json(const google::protobuf::Message& message);

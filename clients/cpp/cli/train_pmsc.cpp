@@ -36,6 +36,11 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
                   "are flagged")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_option("--false-hit-rate", a.false_hit_rate,
+                  "Soft cache: δ, the fraction of poses like the held-out training frames that may be called HIT "
+                  "with an error above the tolerance (conformal calibration; see the operating curve printed)")
+      ->check(CLI::Range(1e-6, 0.999999))
+      ->capture_default_str();
   cmd->add_option("--basis", a.basis, "Subspace dimension M (default: from the error bound); M < frames");
   cmd->add_option("--max-key-points", a.max_key_points, "Key point budget")->capture_default_str();
   cmd->add_option("--block", a.block, "Basis vectors per key-selection block (10–20 in the papers)")
@@ -96,6 +101,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   options.grid_cells = a.grid;
   options.remove_rigid_motion = a.align;
   options.region_count = a.regions;
+  options.false_hit_rate = a.false_hit_rate;
   options.progress = progress_bars("train-pmsc");
 
   pmsc::TrainingReport report;
@@ -126,6 +132,10 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 {"condition_number", report.condition_number},
                 {"epsilon_min", model->epsilon.epsilon_min},
                 {"epsilon_max", model->epsilon.epsilon_max},
+                {"false_hit_rate", model->calibration.false_hit_rate},
+                {"error_ratio", model->calibration.error_ratio},
+                {"calibration_frames", report.calibration_frames},
+                {"operating_curve", operating_curve_json(*model, options.error_tolerance)},
                 {"seconds", report.seconds}});
   } else {
     std::printf("trained on %d frames in %.2f s: basis M = %d, %d key points%s\n", report.frames, report.seconds,
@@ -134,9 +144,10 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 100 * report.max_training_error / diagonal, 100 * a.error_bound_diag);
     std::printf("A_key condition number %.3g%s\n", report.condition_number,
                 report.regularization > 0 ? " (regularised)" : "");
-    std::printf("soft cache ε = [%.4g, %.4g] from %d held-out frames (error ratio %.3g)\n",
-                model->epsilon.epsilon_min, model->epsilon.epsilon_max, report.calibration_frames,
-                report.error_ratio);
+    std::printf("soft cache ε = [%.4g, %.4g]: false-hit rate δ = %g, error ratio %.3g from %d held-out frames\n",
+                model->epsilon.epsilon_min, model->epsilon.epsilon_max, model->calibration.false_hit_rate,
+                report.error_ratio, report.calibration_frames);
+    print_operating_curve(*model, options.error_tolerance);
     std::printf("wrote %s\n", path.c_str());
   }
   if (!report.converged) {

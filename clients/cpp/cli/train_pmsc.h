@@ -7,6 +7,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "core/pmsc/train.h"
+
 namespace animspace::cli {
 
 struct TrainPmscArgs {
@@ -17,6 +19,7 @@ struct TrainPmscArgs {
   std::string select = "::";   // frames, Python slice start:stop:step
   double error_bound_diag = 0.0025;
   double tolerance_diag = 0.01;
+  double false_hit_rate = pmsc::TrainingOptions{}.false_hit_rate;
   int basis = 0;
   int max_key_points = 200;
   int block = 12;

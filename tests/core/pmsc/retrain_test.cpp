@@ -132,6 +132,8 @@ TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   o.calibration_folds = 6;
   o.blend_zone_ratio = std::nextafter(1.5, 2.0);
   o.region_count = 3;
+  o.false_hit_rate = 0.1 + 0.2;
+  o.calibration_block_frames = 7;
   o.positions = PointMatrix::Ones(2, 3);  // not persisted
 
   container::ModelContainer c;
@@ -152,6 +154,8 @@ TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   EXPECT_EQ(loaded->calibration_folds, 6);
   EXPECT_EQ(loaded->blend_zone_ratio, std::nextafter(1.5, 2.0));
   EXPECT_EQ(loaded->region_count, 3);
+  EXPECT_EQ(loaded->false_hit_rate, 0.1 + 0.2);
+  EXPECT_EQ(loaded->calibration_block_frames, 7);
   EXPECT_EQ(loaded->positions.rows(), 0);
   EXPECT_EQ(c.metadata_value("pmsc.options.fiducial_points"), "5,0,1234");
 

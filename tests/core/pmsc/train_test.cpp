@@ -303,12 +303,12 @@ TEST(PmscTrain, ReportsProgressThroughKeySelectionAndCalibration) {
       keys_before = done;
     } else {
       ASSERT_EQ(stage, "calibration");
-      EXPECT_EQ(total, 4);
+      EXPECT_EQ(total, 8);  // four interleaved folds and four block folds (30 frames: blocks of 4)
       folds.push_back(done);
     }
   }
   EXPECT_EQ(keys_before, report.key_points);
-  EXPECT_EQ(folds, (std::vector<int64_t>{0, 1, 2, 3, 4}));
+  EXPECT_EQ(folds, (std::vector<int64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8}));
 }
 
 }  // namespace

@@ -1,0 +1,302 @@
+// The soft cache's calibration (issue #22): the conformal rank rule by hand, its coverage by
+// Monte-Carlo over many random calibration sets, and training on synthetic data whose true error
+// is known, so the stored samples and the thresholds can be recomputed independently.
+#include "core/pmsc/calibration.h"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <Eigen/QR>
+#include <gtest/gtest.h>
+
+#include "core/container/model_container.h"
+#include "core/pmsc/pca.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/train.h"
+
+namespace animspace::pmsc {
+namespace {
+
+Eigen::VectorXd vector_of(std::initializer_list<double> values) {
+  Eigen::VectorXd v(static_cast<Eigen::Index>(values.size()));
+  Eigen::Index i = 0;
+  for (double value : values) v(i++) = value;
+  return v;
+}
+
+TEST(Calibration, ConformalRatioIsTheRankedScoreByHand) {
+  // Scores e_max / e_key = 1 … 9 (shuffled): n = 9.
+  const Eigen::VectorXd key = vector_of({1, 1, 1, 1, 1, 1, 1, 1, 1});
+  const Eigen::VectorXd max = vector_of({4, 9, 1, 7, 2, 8, 3, 6, 5});
+  // δ = 0.2: ⌈0.8 · 10⌉ = 8 → the 8th smallest score, 8.
+  EXPECT_DOUBLE_EQ(conformal_error_ratio(key, max, 0.2, 0), 8.0);
+  // δ = 0.1: ⌈0.9 · 10⌉ = 9 → 9, the largest.
+  EXPECT_DOUBLE_EQ(conformal_error_ratio(key, max, 0.1, 0), 9.0);
+  // δ = 0.5: ⌈0.5 · 10⌉ = 5.
+  EXPECT_DOUBLE_EQ(conformal_error_ratio(key, max, 0.5, 0), 5.0);
+  // δ below 1 / (n + 1): more than nine samples can promise, so the largest (the old rule).
+  EXPECT_DOUBLE_EQ(conformal_error_ratio(key, max, 0.01, 0), 9.0);
+}
+
+TEST(Calibration, NoiseSamplesAreSkippedAndRatiosNeverBelowOne) {
+  long usable = -1;
+  // The first sample's e_key is below the noise floor: its huge ratio must not count.
+  const Eigen::VectorXd key = vector_of({1e-9, 2, 2});
+  const Eigen::VectorXd max = vector_of({1, 1, 1});
+  EXPECT_DOUBLE_EQ(conformal_error_ratio(key, max, 0.4, 1e-6, &usable), 1.0);  // scores 0.5, 0.5 → floor at 1
+  EXPECT_EQ(usable, 2);
+  EXPECT_DOUBLE_EQ(conformal_error_ratio(vector_of({}), vector_of({}), 0.1, 0, &usable), 1.0);
+  EXPECT_EQ(usable, 0);
+  const SoftCacheThresholds t = thresholds_for_ratio(4.0, 2.0, 1.5);
+  EXPECT_DOUBLE_EQ(t.epsilon_min, 0.5);
+  EXPECT_DOUBLE_EQ(t.epsilon_max, 0.75);
+}
+
+// The coverage statement, checked by Monte-Carlo: for samples exchangeable with the calibration
+// set, P(e_max > q · e_key) ≤ δ, and (the ranks being continuous) ≥ δ − 1/(n + 1). Averaged over
+// many independent calibration sets, so the bound is on the marginal probability the theorem
+// states, not on one lucky set.
+TEST(Calibration, CoverageHoldsOverManyRandomCalibrationSets) {
+  std::mt19937 rng(11);
+  std::lognormal_distribution<double> key_error(0.0, 1.0);
+  std::lognormal_distribution<double> ratio(1.5, 0.4);
+  const int n = 60, trials = 2000, fresh = 200;
+  for (double delta : {0.05, 0.1, 0.2}) {
+    double exceed = 0;
+    for (int trial = 0; trial < trials; ++trial) {
+      Eigen::VectorXd key(n), max(n);
+      for (int i = 0; i < n; ++i) {
+        key(i) = key_error(rng);
+        max(i) = key(i) * ratio(rng);
+      }
+      const double q = conformal_error_ratio(key, max, delta, 0);
+      for (int j = 0; j < fresh; ++j) {
+        const double e = key_error(rng);
+        exceed += e * ratio(rng) > q * e ? 1 : 0;
+      }
+    }
+    const double rate = exceed / (static_cast<double>(trials) * fresh);
+    // Monte-Carlo standard error ≈ sqrt(δ/(trials·fresh)) < 0.0007; allow 4 of them.
+    EXPECT_LE(rate, delta + 0.003) << "δ = " << delta;
+    EXPECT_GE(rate, delta - 1.0 / (n + 1) - 0.003) << "δ = " << delta;
+  }
+}
+
+TEST(Calibration, OperatingPointCountsHitsAndMissesOnTheSamples) {
+  CalibrationSamples s;
+  s.key_point_errors = vector_of({1, 1, 1, 1, 2, 3});
+  s.max_errors = vector_of({2, 3, 4, 5, 6, 30});  // ratios 2, 3, 4, 5, 3, 10
+  // δ = 0.3: ⌈0.7 · 7⌉ = 5 → sorted ratios 2 3 3 4 5 10 → q = 5; tolerance 10 → ε_min = 2.
+  const OperatingPoint p = operating_point(s, 0.3, 10.0);
+  EXPECT_DOUBLE_EQ(p.error_ratio, 5.0);
+  EXPECT_DOUBLE_EQ(p.epsilon_min, 2.0);
+  EXPECT_DOUBLE_EQ(p.hit_rate, 5.0 / 6.0);  // e_key ≤ 2: the first five
+  EXPECT_EQ(p.over_tolerance, 1);           // only the last (30 > 10)
+  EXPECT_DOUBLE_EQ(p.miss_recall, 1.0);     // and it is flagged (e_key 3 > 2)
+  EXPECT_DOUBLE_EQ(p.worst_hit_error, 0.6); // largest e_max among hits, 6, over 10
+}
+
+// Synthetic frames whose true error on a new pose is known: an exact rank-4 subspace plus, in each
+// frame, a random "wobble" of one of three fixed localised shapes with a random amplitude. The
+// trained model cannot represent every wobble, so held-out errors are real; the samples stored
+// with the model must be exactly the (e_key, max error) of its fold models, which we recompute
+// from the definitions, and ε must follow from them by the rank rule.
+struct Wobbly {
+  FrameMatrix frames;
+  std::vector<Eigen::VectorXd> shapes;
+};
+
+Wobbly wobbly_frames(int points, int frames, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal;
+  const Eigen::VectorXd mean = Eigen::VectorXd::NullaryExpr(points * 3, [&] { return normal(rng); });
+  const Eigen::MatrixXd B = Eigen::MatrixXd::NullaryExpr(points * 3, 4, [&] { return 0.2 * normal(rng); });
+  Wobbly w;
+  for (int s = 0; s < 3; ++s) {
+    Eigen::VectorXd shape = Eigen::VectorXd::Zero(points * 3);
+    for (int p = s * points / 3; p < (s + 1) * points / 3; ++p) shape.segment<3>(3 * p) = Eigen::Vector3d::Random();
+    w.shapes.push_back(shape);
+  }
+  w.frames.resize(frames, points * 3);
+  std::uniform_int_distribution<int> which(0, 2);
+  for (int f = 0; f < frames; ++f) {
+    const Eigen::VectorXd c = Eigen::VectorXd::NullaryExpr(4, [&] { return normal(rng); });
+    const Eigen::VectorXd frame = mean + B * c + 0.02 * normal(rng) * w.shapes[static_cast<size_t>(which(rng))];
+    w.frames.row(f) = frame.cast<float>().transpose();
+  }
+  return w;
+}
+
+TrainingOptions wobbly_options() {
+  TrainingOptions o;
+  o.basis_size = 4;
+  o.error_bound = 1e-6;
+  o.max_key_points = 12;
+  o.error_tolerance = 0.01;
+  o.region_count = 3;
+  o.calibration_folds = 4;
+  return o;
+}
+
+TEST(Calibration, TrainingStoresHeldOutSamplesAndDerivesEpsilonFromThem) {
+  const Wobbly data = wobbly_frames(90, 40, 3);
+  const TrainingOptions o = wobbly_options();
+  TrainingReport report;
+  auto model = train(data.frames, o, &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  const CalibrationSamples& s = model->calibration.samples;
+  // Blocks of ⌈40 / (2·4)⌉ = 5 frames, two families of four folds: every frame held out twice.
+  EXPECT_EQ(model->calibration.block_frames, 5);
+  ASSERT_EQ(s.size(), 80);
+  EXPECT_EQ(report.calibration_frames, 80);
+  EXPECT_EQ(std::count(s.from_block_fold.begin(), s.from_block_fold.end(), 1), 40);
+  EXPECT_EQ(s.region_key_point_errors.cols(), model->region_count);
+
+  // The first interleaved fold holds out frames 0, 4, 8, …: rebuild its model from the
+  // definitions (mean and PCA of the other frames, same keys) and compare the first sample.
+  std::vector<long> kept;
+  for (long f = 0; f < 40; ++f) {
+    if (f % 4 != 0) kept.push_back(f);
+  }
+  Eigen::MatrixXd T(data.frames.cols(), static_cast<long>(kept.size()));
+  for (size_t c = 0; c < kept.size(); ++c) T.col(static_cast<long>(c)) = data.frames.row(kept[c]).transpose().cast<double>();
+  const Eigen::VectorXd mean = T.rowwise().mean();
+  const Eigen::MatrixXd A = thin_pca(T.colwise() - mean, 4).basis;
+  Eigen::MatrixXd A_key(3 * model->key_point_count(), 4);
+  Eigen::VectorXd b(3 * model->key_point_count());
+  const Eigen::VectorXd frame0 = data.frames.row(0).transpose().cast<double>();
+  for (int k = 0; k < model->key_point_count(); ++k) {
+    const int p = model->key_points[static_cast<size_t>(k)];
+    A_key.middleRows(3 * k, 3) = A.middleRows(3 * p, 3);
+    b.segment<3>(3 * k) = frame0.segment<3>(3 * p) - mean.segment<3>(3 * p);
+  }
+  const Eigen::VectorXd coordinates = A_key.colPivHouseholderQr().solve(b);
+  const double e_key = std::sqrt((b - A_key * coordinates).squaredNorm() / static_cast<double>(b.size()));
+  const Eigen::VectorXd residual = frame0 - mean - A * coordinates;
+  double e_max = 0;
+  for (long p = 0; p < residual.size() / 3; ++p) e_max = std::max(e_max, residual.segment<3>(3 * p).norm());
+  EXPECT_NEAR(s.key_point_errors(0), e_key, 1e-5 * e_key + 1e-7);
+  EXPECT_NEAR(s.max_errors(0), e_max, 1e-4 * e_max + 1e-6);
+
+  // ε from the rank rule, recomputed by sorting the usable ratios.
+  std::vector<double> ratios;
+  for (long i = 0; i < s.size(); ++i) {
+    if (s.key_point_errors(i) >= kCalibrationNoiseFraction * o.error_tolerance) {
+      ratios.push_back(s.max_errors(i) / s.key_point_errors(i));
+    }
+  }
+  std::sort(ratios.begin(), ratios.end());
+  const auto n = static_cast<double>(ratios.size());
+  const auto rank = static_cast<size_t>(std::ceil((1 - o.false_hit_rate) * (n + 1) - 1e-9));
+  const double q = std::max(1.0, ratios[std::min(rank, ratios.size()) - 1]);
+  EXPECT_DOUBLE_EQ(model->calibration.error_ratio, q);
+  EXPECT_DOUBLE_EQ(model->epsilon.epsilon_min, o.error_tolerance / q);
+  EXPECT_DOUBLE_EQ(model->epsilon.epsilon_max, o.blend_zone_ratio * o.error_tolerance / q);
+  ASSERT_EQ(static_cast<int>(model->region_epsilon.size()), model->region_count);
+}
+
+// End to end on fresh poses from the same generator: the fraction called HIT with a true max
+// error above the tolerance stays within δ (plus Monte-Carlo slack), and a larger δ never hits
+// less.
+TEST(Calibration, FreshPosesKeepTheFalseHitRate) {
+  const Wobbly data = wobbly_frames(90, 60, 5);
+  const Wobbly fresh = wobbly_frames(90, 600, 5);  // same seed: same mean, subspace and shapes
+  TrainingOptions o = wobbly_options();
+  o.false_hit_rate = 0.05;
+  auto model = train(data.frames, o, nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  PmscModel looser = *model;
+  looser.calibration.false_hit_rate = 0.2;
+  ASSERT_TRUE(apply_calibration(looser, o.error_tolerance, o.blend_zone_ratio).ok());
+  int false_hits = 0, hits = 0, looser_hits = 0;
+  PoseEstimate estimate;
+  for (long f = 60; f < fresh.frames.rows(); ++f) {  // rows past the training ones are new poses
+    const Eigen::VectorXf truth = fresh.frames.row(f).transpose();
+    evaluate(*model, gather_key_values(*model, truth), estimate);
+    const Eigen::VectorXf residual = truth - estimate.points;
+    const double e_max = max_point_error(residual.cast<double>(), 3);
+    const bool hit = estimate.key_point_error <= model->epsilon.epsilon_min;
+    hits += hit ? 1 : 0;
+    false_hits += hit && e_max > o.error_tolerance ? 1 : 0;
+    looser_hits += estimate.key_point_error <= looser.epsilon.epsilon_min ? 1 : 0;
+  }
+  const double poses = static_cast<double>(fresh.frames.rows() - 60);
+  EXPECT_LE(false_hits / poses, 0.05 + 0.03);
+  EXPECT_GT(hits, 0);
+  EXPECT_GE(looser_hits, hits);
+}
+
+TEST(Calibration, ApplyCalibrationRefusesBadInputAndModelsWithoutSamples) {
+  const Wobbly data = wobbly_frames(90, 40, 3);
+  auto model = train(data.frames, wobbly_options(), nullptr);
+  ASSERT_TRUE(model.ok());
+  PmscModel m = *model;
+  m.calibration.false_hit_rate = 1.0;
+  auto refused = apply_calibration(m, 0.01, 1.5);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("false_hit_rate"), std::string::npos);
+  m = *model;
+  m.calibration.samples = {};
+  refused = apply_calibration(m, 0.01, 1.5);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kFailedPrecondition);
+}
+
+// Format 2 round trip, and a format 1 model (no calibration sections, no newer options) still
+// loads with the ε it was written with and retrains with the new defaults.
+TEST(Calibration, StoredWithTheModelAndOldModelsKeepTheirEpsilon) {
+  const Wobbly data = wobbly_frames(90, 40, 3);
+  TrainingReport report;
+  const TrainingOptions o = wobbly_options();
+  auto model = train(data.frames, o, &report);
+  ASSERT_TRUE(model.ok());
+  TriangleMesh mesh;
+  mesh.V = Eigen::Map<const PointMatrix>(data.frames.row(0).data(), 90, 3);
+  auto container = make_container(mesh, data.frames, nullptr, *model, report, "wobbly");
+  store_training_options(o, container);
+  auto parsed = container::parse(container::serialize(container), "memory");
+  ASSERT_TRUE(parsed.ok());
+  EXPECT_EQ(parsed->metadata_value(kFormatVersionKey), "2");
+  auto loaded = load(*parsed, "memory");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->calibration.samples.max_errors, model->calibration.samples.max_errors);
+  EXPECT_EQ(loaded->calibration.samples.region_max_errors, model->calibration.samples.region_max_errors);
+  EXPECT_EQ(loaded->calibration.false_hit_rate, o.false_hit_rate);
+  EXPECT_EQ(loaded->calibration.error_ratio, model->calibration.error_ratio);
+  ASSERT_EQ(loaded->region_epsilon.size(), model->region_epsilon.size());
+  EXPECT_EQ(loaded->region_epsilon[0].epsilon_min, model->region_epsilon[0].epsilon_min);
+
+  // Format 1: what an earlier trainer wrote — the same model without the calibration.
+  container::ModelContainer old;
+  for (const auto& [key, value] : parsed->metadata()) {
+    if (key.rfind("pmsc.calibration", 0) != 0 && key != kFormatVersionKey && key != "pmsc.options.false_hit_rate" &&
+        key != "pmsc.options.calibration_block_frames") {
+      old.metadata()[key] = value;
+    }
+  }
+  copy_sections(*parsed, [](const std::string& name) {
+    return name != kCalibrationSamplesSection && name != kRegionEpsilonSection;
+  }, old);
+  old.set_matrix("pmsc.epsilon", container::Float64Matrix{{0.25, 0.5}});
+  auto old_loaded = load(old, "old.anim");
+  ASSERT_TRUE(old_loaded.ok()) << old_loaded.error().message;
+  EXPECT_EQ(old_loaded->epsilon.epsilon_min, 0.25);
+  EXPECT_EQ(old_loaded->calibration.samples.size(), 0);
+  EXPECT_TRUE(old_loaded->region_epsilon.empty());
+  EXPECT_EQ(&region_thresholds(*old_loaded, 0), &old_loaded->epsilon);
+  auto options = load_training_options(old, "old.anim");
+  ASSERT_TRUE(options.ok()) << options.error().message;
+  EXPECT_EQ(options->false_hit_rate, TrainingOptions{}.false_hit_rate);
+
+  // A damaged calibration section is refused with its name.
+  container::ModelContainer broken = *parsed;
+  broken.set_matrix(kCalibrationSamplesSection, container::Float64Matrix(container::Float64Matrix::Zero(3, 5)));
+  auto refused = load(broken, "broken.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find(kCalibrationSamplesSection), std::string::npos);
+}
+
+}  // namespace
+}  // namespace animspace::pmsc
