@@ -28,19 +28,44 @@ double conformal_error_ratio(const Eigen::Ref<const Eigen::VectorXd>& key_point_
   return std::max(scores[static_cast<size_t>(rank - 1)], 1.0);
 }
 
-SoftCacheThresholds thresholds_for_ratio(double error_ratio, double tolerance, double blend_zone_ratio) {
-  SoftCacheThresholds t;
-  t.epsilon_min = tolerance / std::max(error_ratio, 1.0);
-  t.epsilon_max = t.epsilon_min * blend_zone_ratio;
-  return t;
+CalibratedEpsilon calibrate_epsilon_min(const Eigen::Ref<const Eigen::VectorXd>& key_point_errors,
+                                        const Eigen::Ref<const Eigen::VectorXd>& max_errors,
+                                        const std::vector<char>& from_block_fold, double tolerance,
+                                        double false_hit_rate) {
+  assert(key_point_errors.size() == max_errors.size());
+  assert(static_cast<Eigen::Index>(from_block_fold.size()) == key_point_errors.size());
+  CalibratedEpsilon out;
+  out.epsilon_min = tolerance;
+  for (char family : {0, 1}) {
+    std::vector<double> bad;  // e_key of this family's held-out frames over the tolerance
+    for (Eigen::Index i = 0; i < key_point_errors.size(); ++i) {
+      if (from_block_fold[static_cast<size_t>(i)] == family && max_errors(i) > tolerance) {
+        bad.push_back(key_point_errors(i));
+      }
+    }
+    if (bad.empty()) continue;
+    out.over_tolerance += static_cast<long>(bad.size());
+    std::sort(bad.begin(), bad.end());
+    const auto allowed = static_cast<size_t>(std::floor(false_hit_rate * static_cast<double>(bad.size() + 1) + 1e-9));
+    // r ≥ 1 bad frames may be HIT (e_key ≤ ε_min includes b_(r)); r = 0: strictly below the first.
+    const double epsilon = allowed >= 1 ? bad[std::min(allowed, bad.size()) - 1] : std::nextafter(bad[0], 0.0);
+    out.epsilon_min = std::min(out.epsilon_min, epsilon);
+  }
+  if (out.over_tolerance == 0) {
+    out.ratio_fallback = true;
+    out.epsilon_min = tolerance / conformal_error_ratio(key_point_errors, max_errors, false_hit_rate,
+                                                        kCalibrationNoiseFraction * tolerance);
+  }
+  return out;
 }
 
 OperatingPoint operating_point(const CalibrationSamples& samples, double false_hit_rate, double tolerance) {
   OperatingPoint point;
   point.false_hit_rate = false_hit_rate;
-  point.error_ratio = conformal_error_ratio(samples.key_point_errors, samples.max_errors, false_hit_rate,
-                                            kCalibrationNoiseFraction * tolerance);
-  point.epsilon_min = tolerance / point.error_ratio;
+  point.epsilon_min = calibrate_epsilon_min(samples.key_point_errors, samples.max_errors, samples.from_block_fold,
+                                            tolerance, false_hit_rate)
+                          .epsilon_min;
+  point.error_ratio = tolerance / point.epsilon_min;
   long hits = 0, flagged_over = 0;
   for (Eigen::Index i = 0; i < samples.size(); ++i) {
     const bool hit = samples.key_point_errors(i) <= point.epsilon_min;

@@ -7,15 +7,22 @@
 // region's RMS; docs/BENCHMARKS.md "pmsc"), and it costs nothing. What was wrong was the
 // calibration: one worst-case ratio from a few folds is dominated by a single outlier.
 //
-// The calibration (split-conformal, in its cross-validated form). Held-out training frames give
-// samples (e_key, true max point error e_max): folds that drop every k-th frame (poses between
-// training poses) and folds that drop whole blocks of consecutive frames (motion the training
-// never saw). The score of a sample is the ratio s = e_max / e_key. For a false-hit rate δ the
-// error ratio q is the ⌈(1 − δ)(n + 1)⌉-th smallest of the n scores, and
-//     ε_min = tolerance / q,   ε_max = blend_zone_ratio · ε_min.
-// Meaning: for a pose exchangeable with the calibration poses, P(e_max > q · e_key) ≤ δ; a pose
-// called HIT has e_key ≤ ε_min, so P(HIT and e_max > tolerance) ≤ δ. δ < 1/(n + 1) asks for more
-// than n samples can promise: q is then the largest score (the pre-#22 rule), reported as such.
+// The calibration (split-conformal, class-conditional, in its cross-validated form). Held-out
+// training frames give samples (e_key, true max point error e_max) in two families: folds that drop
+// every k-th frame (poses between training poses) and folds that drop whole blocks of consecutive
+// frames (motion the rest never saw). What a HIT must not be is a pose over the tolerance, so the
+// rule looks at those: in each family, the held-out frames with e_max > tolerance ("bad") have
+// e_key values b_(1) ≤ … ≤ b_(m); for a false-hit rate δ, r = ⌊δ (m + 1)⌋ of them may lie at or
+// below ε_min, so ε_min = b_(r) (r ≥ 1), or just below b_(1) (r = 0: m < 1/δ − 1 samples promise
+// less than δ, and the rule takes the strictest value they allow). ε_min is the smaller of the two
+// families' values and never above the tolerance (e_key ≤ e_max always: e_key > tolerance is bad).
+// Meaning: for a pose over the tolerance that is exchangeable with one family's bad frames,
+// P(called HIT) ≤ r / (m + 1) ≤ δ — "at most δ of poses over the tolerance are called HIT".
+//
+// When no held-out frame is over the tolerance there is nothing to condition on; the rule falls
+// back to the error ratio: scores s = e_max / e_key, q the ⌈(1 − δ)(n + 1)⌉-th smallest of the n
+// scores (the largest when δ < 1/(n + 1)), ε_min = tolerance / q — "P(e_max > q · e_key) ≤ δ".
+// Either way ε_max = blend_zone_ratio · ε_min, and error_ratio = tolerance / ε_min is reported.
 //
 // Per region (local fail-through): the same rule on each region's RMS key error and the max
 // error over that region's points gives each region its own thresholds.
@@ -35,15 +42,14 @@ inline constexpr double kCalibrationNoiseFraction = 1e-4;
 
 // The samples of a calibration: one row per held-out frame.
 struct CalibrationSamples {
+  // Whether each sample came from a block fold (1) or an interleaved one (0).
+  std::vector<char> from_block_fold;
   Eigen::VectorXd key_point_errors;  // n, e_key of each held-out frame
   Eigen::VectorXd max_errors;        // n, its true max point error
   // n × R (R = regions, 0 without regions): each region's RMS key error and the max point error
   // over the region's points.
   Eigen::MatrixXd region_key_point_errors;
   Eigen::MatrixXd region_max_errors;
-  // Whether each sample came from a block fold (else from an interleaved one). Known at training
-  // only (not stored): the benchmark rebuilds the pre-#22 rule from the interleaved samples.
-  std::vector<char> from_block_fold;
   long size() const { return key_point_errors.size(); }
 };
 
@@ -55,15 +61,23 @@ double conformal_error_ratio(const Eigen::Ref<const Eigen::VectorXd>& key_point_
                              const Eigen::Ref<const Eigen::VectorXd>& max_errors, double false_hit_rate,
                              double noise_floor, long* usable = nullptr);
 
-// ε_min = tolerance / q, ε_max = blend_zone_ratio · ε_min.
-SoftCacheThresholds thresholds_for_ratio(double error_ratio, double tolerance, double blend_zone_ratio);
+// The rule of the header for one set of samples (the whole pose, or one region's columns).
+struct CalibratedEpsilon {
+  double epsilon_min = 0;
+  long over_tolerance = 0;    // held-out frames over the tolerance (both families)
+  bool ratio_fallback = false;  // none was: the error-ratio rule decided
+};
+CalibratedEpsilon calibrate_epsilon_min(const Eigen::Ref<const Eigen::VectorXd>& key_point_errors,
+                                        const Eigen::Ref<const Eigen::VectorXd>& max_errors,
+                                        const std::vector<char>& from_block_fold, double tolerance,
+                                        double false_hit_rate);
 
 // What a choice of δ gives on the calibration samples themselves (cross-validated: each sample
 // came from a model that did not train on its frame).
 struct OperatingPoint {
   double false_hit_rate = 0;   // δ asked for
-  double error_ratio = 0;      // q
-  double epsilon_min = 0;      // tolerance / q
+  double error_ratio = 0;      // tolerance / ε_min
+  double epsilon_min = 0;
   double hit_rate = 0;         // samples with e_key ≤ ε_min
   double miss_recall = 1;      // samples over tolerance with e_key > ε_min, of those over tolerance (1 if none)
   long over_tolerance = 0;     // samples with e_max > tolerance

@@ -80,14 +80,16 @@ void store_calibration(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()[kFalseHitRateKey] = format_number(c.false_hit_rate);
   out.metadata()[kErrorRatioKey] = format_number(c.error_ratio);
   out.metadata()[kBlockFramesKey] = std::to_string(c.block_frames);
+  out.metadata()[kOverToleranceKey] = std::to_string(c.over_tolerance);
   const long n = c.samples.size();
   const long R = c.samples.region_key_point_errors.cols();
-  Float64Matrix samples(n, 2 + 2 * R);
-  samples.col(0) = c.samples.key_point_errors;
-  samples.col(1) = c.samples.max_errors;
+  Float64Matrix samples(n, 3 + 2 * R);
+  for (long i = 0; i < n; ++i) samples(i, 0) = c.samples.from_block_fold[static_cast<size_t>(i)];
+  samples.col(1) = c.samples.key_point_errors;
+  samples.col(2) = c.samples.max_errors;
   if (R > 0) {
-    samples.middleCols(2, R) = c.samples.region_key_point_errors;
-    samples.middleCols(2 + R, R) = c.samples.region_max_errors;
+    samples.middleCols(3, R) = c.samples.region_key_point_errors;
+    samples.middleCols(3 + R, R) = c.samples.region_max_errors;
   }
   out.set_matrix(kCalibrationSamplesSection, samples);
   if (!m.region_epsilon.empty()) {
@@ -104,10 +106,10 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
   auto samples = in.double_matrix(kCalibrationSamplesSection);
   if (!samples) return with_source(samples.error(), source);
   const long R = m.region_count;
-  if (samples->cols() != 2 && samples->cols() != 2 + 2 * R) {
+  if (samples->cols() != 3 && samples->cols() != 3 + 2 * R) {
     return make_error(ErrorCode::kInvalidArgument,
-                      source + ": section '" + kCalibrationSamplesSection + "' should have 2 or " +
-                          std::to_string(2 + 2 * R) + " columns (2 + 2 per region), got " +
+                      source + ": section '" + kCalibrationSamplesSection + "' should have 3 or " +
+                          std::to_string(3 + 2 * R) + " columns (fold family, e_key, max error, 2 per region), got " +
                           std::to_string(samples->cols()));
   }
   if (!samples->allFinite() || (samples->size() > 0 && samples->minCoeff() < 0)) {
@@ -116,11 +118,20 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
                                                        "' holds negative, NaN or Inf errors");
   }
   PmscModel::Calibration& c = m.calibration;
-  c.samples.key_point_errors = samples->col(0);
-  c.samples.max_errors = samples->col(1);
-  const long sample_regions = (samples->cols() - 2) / 2;
-  c.samples.region_key_point_errors = samples->middleCols(2, sample_regions);
-  c.samples.region_max_errors = samples->middleCols(2 + sample_regions, sample_regions);
+  for (long i = 0; i < samples->rows(); ++i) {
+    const double family = (*samples)(i, 0);
+    if (family != 0 && family != 1) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": section '" + kCalibrationSamplesSection + "' row " +
+                                                         std::to_string(i) + ": fold family should be 0 or 1, got " +
+                                                         format_number(family));
+    }
+    c.samples.from_block_fold.push_back(static_cast<char>(family));
+  }
+  c.samples.key_point_errors = samples->col(1);
+  c.samples.max_errors = samples->col(2);
+  const long sample_regions = (samples->cols() - 3) / 2;
+  c.samples.region_key_point_errors = samples->middleCols(3, sample_regions);
+  c.samples.region_max_errors = samples->middleCols(3 + sample_regions, sample_regions);
   for (const char* key : {kFalseHitRateKey, kErrorRatioKey}) {
     double value = 0;
     const std::string text = in.metadata_value(key);
@@ -131,6 +142,9 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
   }
   if (!parse_exactly(in.metadata_value(kBlockFramesKey), c.block_frames)) {
     return unparsable(source, kBlockFramesKey, "a decimal integer", in.metadata_value(kBlockFramesKey));
+  }
+  if (!parse_exactly(in.metadata_value(kOverToleranceKey), c.over_tolerance)) {
+    return unparsable(source, kOverToleranceKey, "a decimal integer", in.metadata_value(kOverToleranceKey));
   }
   if (in.has_section(kRegionEpsilonSection)) {
     auto region_epsilon = in.double_matrix(kRegionEpsilonSection, 2);

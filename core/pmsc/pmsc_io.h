@@ -6,9 +6,9 @@
 // pmsc.key_regions (K × 1 i32, optional); metadata pmsc.channels, pmsc.cross, pmsc.aligned,
 // pmsc.control_point_count, pmsc.region_count. From pmsc format 2 (metadata pmsc.format_version,
 // absent in format 1) also the ε calibration (calibration.h): pmsc.calibration_samples
-// (n × (2 + 2R) f64: e_key, max error, then R region key errors and R region max errors of each
-// held-out frame), pmsc.region_epsilon (R × 2 f64) and metadata pmsc.calibration.false_hit_rate,
-// pmsc.calibration.error_ratio, pmsc.calibration.block_frames. A format 1 model loads with the ε
+// (n × (3 + 2R) f64: fold family (0 interleaved, 1 block), e_key, max error, then R region key
+// errors and R region max errors of each held-out frame), pmsc.region_epsilon (R × 2 f64) and
+// metadata pmsc.calibration.false_hit_rate, .error_ratio, .block_frames, .over_tolerance. A format 1 model loads with the ε
 // it was written with and no samples. The projection is not stored: it is recomputed
 // (and its conditioning re-checked) at load, so there is one source of truth.
 //
@@ -36,6 +36,7 @@ inline constexpr const char* kFormatVersionKey = "pmsc.format_version";
 inline constexpr const char* kFalseHitRateKey = "pmsc.calibration.false_hit_rate";
 inline constexpr const char* kErrorRatioKey = "pmsc.calibration.error_ratio";
 inline constexpr const char* kBlockFramesKey = "pmsc.calibration.block_frames";
+inline constexpr const char* kOverToleranceKey = "pmsc.calibration.over_tolerance";
 inline constexpr const char* kCalibrationSamplesSection = "pmsc.calibration_samples";
 inline constexpr const char* kRegionEpsilonSection = "pmsc.region_epsilon";
 

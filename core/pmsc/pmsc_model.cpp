@@ -361,14 +361,22 @@ Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio
                                                        " region columns, the model has " +
                                                        std::to_string(m.region_count) + " regions");
   }
-  const double noise = kCalibrationNoiseFraction * tolerance;
-  m.calibration.error_ratio = conformal_error_ratio(samples.key_point_errors, samples.max_errors, delta, noise);
-  m.epsilon = thresholds_for_ratio(m.calibration.error_ratio, tolerance, blend_zone_ratio);
+  if (static_cast<long>(samples.from_block_fold.size()) != samples.size()) {
+    return make_error(ErrorCode::kInvalidArgument, "calibration samples: one fold family per sample expected");
+  }
+  const auto thresholds = [&](const CalibratedEpsilon& c) {
+    return SoftCacheThresholds{c.epsilon_min, c.epsilon_min * blend_zone_ratio};
+  };
+  const CalibratedEpsilon whole = calibrate_epsilon_min(samples.key_point_errors, samples.max_errors,
+                                                        samples.from_block_fold, tolerance, delta);
+  m.epsilon = thresholds(whole);
+  m.calibration.error_ratio = tolerance / whole.epsilon_min;
+  m.calibration.over_tolerance = whole.over_tolerance;
   m.region_epsilon.clear();
   for (long r = 0; r < R; ++r) {
-    const double q = conformal_error_ratio(samples.region_key_point_errors.col(r), samples.region_max_errors.col(r),
-                                           delta, noise);
-    m.region_epsilon.push_back(thresholds_for_ratio(q, tolerance, blend_zone_ratio));
+    m.region_epsilon.push_back(thresholds(calibrate_epsilon_min(samples.region_key_point_errors.col(r),
+                                                                samples.region_max_errors.col(r),
+                                                                samples.from_block_fold, tolerance, delta)));
   }
   return Status::Ok();
 }

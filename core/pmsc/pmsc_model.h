@@ -58,7 +58,8 @@ struct PmscModel {
   // written before issue #22, whose ε is the worst held-out ratio's and cannot be recalibrated.
   struct Calibration {
     double false_hit_rate = 0;  // δ
-    double error_ratio = 0;     // q: ε_min = tolerance / q
+    double error_ratio = 0;     // tolerance / ε_min
+    long over_tolerance = 0;    // held-out frames over the tolerance (0: the error-ratio fallback)
     int block_frames = 0;       // frames per held-out block
     CalibrationSamples samples;
   } calibration;

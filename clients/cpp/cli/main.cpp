@@ -15,6 +15,7 @@
 #include "clients/cpp/cli/play.h"
 #include "clients/cpp/cli/pose.h"
 #include "clients/cpp/cli/retrain_offline.h"
+#include "clients/cpp/cli/calibrate.h"
 #include "clients/cpp/cli/thumbnail.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
@@ -144,6 +145,8 @@ int run_describe(const Globals& g, const std::string& name, uint64_t version) {
                   "below ε_min, miss above ε_max, blend between); fail-through %s\n",
                   static_cast<unsigned long long>(v.version()), static_cast<double>(v.epsilon_min()),
                   static_cast<double>(v.epsilon_max()), fail_through_label(v.fail_through()).c_str());
+      std::printf("  version %llu calibration: %s\n", static_cast<unsigned long long>(v.version()),
+                  animspace::cli::calibration_label(v.metadata()).c_str());
     }
     std::printf("  version %llu metadata:\n", static_cast<unsigned long long>(v.version()));
     std::map<std::string, std::string> sorted(v.metadata().begin(), v.metadata().end());
@@ -484,6 +487,8 @@ int main(int argc, char** argv) {
   auto* export_lod = animspace::cli::add_export_lod(app, export_lod_args);
   animspace::cli::RetrainOfflineArgs retrain_offline_args;
   auto* retrain_offline = animspace::cli::add_retrain_offline(app, retrain_offline_args);
+  animspace::cli::CalibrateArgs calibrate_args;
+  auto* calibrate = animspace::cli::add_calibrate(app, calibrate_args);
 
   // Extras at the top level only (set after the subcommands, which would inherit it): a word
   // that is no subcommand lands in remaining() and is named below instead of CLI11's "A
@@ -498,6 +503,7 @@ int main(int argc, char** argv) {
     if (*build_lod) return animspace::cli::run_build_lod(build_lod_args, g.json);
     if (*export_lod) return animspace::cli::run_export_lod(export_lod_args, g.json);
     if (*retrain_offline) return animspace::cli::run_retrain_offline(retrain_offline_args, g.json);
+    if (*calibrate) return animspace::cli::run_calibrate(calibrate_args, g.json);
     if (*list) return run_list(g);
     if (*health) return run_health(g);
     if (*info) return run_server_info(g);

@@ -1,5 +1,7 @@
 #include "clients/cpp/cli/output.h"
 
+#include "core/pmsc/pmsc_io.h"
+
 #include <unistd.h>
 
 #include <algorithm>
@@ -60,6 +62,22 @@ nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double toleran
                      {"chosen", rate == model.calibration.false_hit_rate}});
   }
   return curve;
+}
+
+std::string calibration_label(const google::protobuf::Map<std::string, std::string>& metadata) {
+  const auto value = [&](const char* key) {
+    const auto found = metadata.find(key);
+    return found == metadata.end() ? std::string() : found->second;
+  };
+  const std::string delta = value(pmsc::kFalseHitRateKey);
+  if (delta.empty()) {
+    return "worst ratio of max point error to e_key over held-out frames (pmsc format 1, trained before the "
+           "conformal calibration: no stated false-hit rate; retrain to get one)";
+  }
+  return "conformal, false-hit rate δ = " + delta + " (error ratio q = " + value(pmsc::kErrorRatioKey) +
+         " over held-out frames, blocks of " + value(pmsc::kBlockFramesKey) +
+         "): at most a fraction δ of poses like the training poses is called HIT with a point error above the "
+         "tolerance (pmsc.options.error_tolerance)";
 }
 
 nlohmann::json proto_json(const google::protobuf::Message& message) {

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <string>
 
+#include <google/protobuf/map.h>
 #include <google/protobuf/message.h>
 #include <nlohmann/json.hpp>
 
@@ -27,6 +28,11 @@ void print_soft_cache_change(double previous_epsilon_min, double epsilon_min, do
 // chosen δ marked. Printed by `train-pmsc` and `calibrate`; `tolerance` in model units.
 void print_operating_curve(const pmsc::PmscModel& model, double tolerance);
 nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double tolerance);
+
+// What `describe` says of how a PMSC model's ε was chosen, from its metadata: the false-hit rate δ
+// and error ratio of a conformal calibration (pmsc format 2), or that the model predates it
+// (format 1: ε from the worst held-out ratio, with no stated false-hit rate).
+std::string calibration_label(const google::protobuf::Map<std::string, std::string>& metadata);
 
 // A protobuf message as JSON with the .proto field names (what `--json` prints for RPC answers).
 nlohmann::json proto_json(const google::protobuf::Message& message);
