@@ -6,6 +6,8 @@
 #include <numeric>
 #include <string>
 
+#include <Eigen/Eigenvalues>
+
 #include "core/pmsc/key_points.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/regions.h"
@@ -79,14 +81,43 @@ struct Subspace {
   Eigen::VectorXd sigma;   // M
 };
 
-Subspace fit_subspace(const Eigen::MatrixXd& T_world_or_aligned, int M) {
-  Subspace s;
-  s.mean = T_world_or_aligned.rowwise().mean();
-  const Eigen::MatrixXd centred = T_world_or_aligned.colwise() - s.mean;
-  PcaBasis pca = thin_pca(centred, M);
-  s.basis = std::move(pca.basis);
-  s.sigma = pca.singular_values.head(s.basis.cols());
-  return s;
+// The subspace of the frames `kept` (columns of T) for a calibration fold, through the Gram
+// matrix G = TᵀT of all frames: the fold's centred Gram matrix is G restricted to `kept` and
+// double-centred, its leading eigenvectors v_k give a_k = X v_k / σ_k (X the centred fold, the
+// same identity thin_pca uses), and every product runs on T itself — no R × F copy per fold,
+// which on crane was most of the calibration's time. Basis signs are arbitrary (the projection
+// does not see them); directions with σ_k ≤ kRelativeSingularValueFloor · σ_0 are dropped.
+Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M) {
+  const long s = static_cast<long>(kept.size());
+  Eigen::MatrixXd C(s, s);
+  for (long i = 0; i < s; ++i) {
+    for (long j = 0; j < s; ++j) C(i, j) = G(kept[static_cast<size_t>(i)], kept[static_cast<size_t>(j)]);
+  }
+  const Eigen::VectorXd row_means = C.rowwise().mean();
+  const double total_mean = row_means.mean();
+  C.colwise() -= row_means;
+  C.rowwise() -= row_means.transpose();
+  C.array() += total_mean;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(C);  // ascending eigenvalues
+  const double largest = std::max(eigen.eigenvalues()(s - 1), 0.0);
+  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(T.cols(), M);  // basis = T W
+  Eigen::VectorXd sigma(M);
+  long count = 0;
+  for (; count < M && count < s; ++count) {
+    const double lambda = eigen.eigenvalues()(s - 1 - count);
+    if (!(lambda > 0) || std::sqrt(lambda) <= kRelativeSingularValueFloor * std::sqrt(largest)) break;
+    sigma(count) = std::sqrt(lambda);
+    const Eigen::VectorXd v = eigen.eigenvectors().col(s - 1 - count);
+    const double v_mean = v.mean();  // X v = T_kept (v − mean(v) 1)
+    for (long i = 0; i < s; ++i) W(kept[static_cast<size_t>(i)], count) = (v(i) - v_mean) / sigma(count);
+  }
+  Subspace out;
+  Eigen::VectorXd mean_weights = Eigen::VectorXd::Zero(T.cols());
+  for (long f : kept) mean_weights(f) = 1.0 / static_cast<double>(s);
+  out.mean.noalias() = T * mean_weights;
+  out.basis.noalias() = T * W.leftCols(count);
+  out.sigma = sigma.head(count);
+  return out;
 }
 
 // Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
@@ -232,6 +263,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     if (block > 1) held_out_is_block.push_back(1);
   }
   const long R_count = model.region_count;
+  const Eigen::MatrixXd gram = T.transpose() * T;
   std::vector<double> sample_key, sample_max;
   std::vector<char> sample_from_block;
   std::vector<Eigen::VectorXd> sample_region_key, sample_region_max;
@@ -246,11 +278,11 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
     const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(train_columns.size()) - 1));
     if (fold_basis < 1 || held_out.empty()) continue;
-    Eigen::MatrixXd T_fold(rows, static_cast<long>(train_columns.size()));
-    for (size_t c = 0; c < train_columns.size(); ++c) T_fold.col(static_cast<long>(c)) = T.col(train_columns[c]);
     PmscModel fold_model = model;
     report_progress(o.progress, "calibration", static_cast<int>(set), static_cast<int>(held_out_sets.size()));
-    if (!assemble(fit_subspace(T_fold, fold_basis), control_rows, cross, model.key_points, fold_model).ok()) continue;
+    const Subspace fold = fold_subspace(T, gram, train_columns, fold_basis);
+    if (fold.basis.cols() < 1) continue;
+    if (!assemble(fold, control_rows, cross, model.key_points, fold_model).ok()) continue;
     PoseEstimate estimate;
     for (long f : held_out) {
       // Held-out frames enter in the world frame, as at run time.
