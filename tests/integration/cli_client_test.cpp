@@ -23,6 +23,7 @@
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/container/sections.h"
+#include "core/pmsc/pmsc_io.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
@@ -105,7 +106,7 @@ TEST_F(CliClientTest, EveryCommandExplainsItselfInHelp) {
   const std::vector<std::string> commands = {
       "list", "health", "server-info", "describe", "stats", "keys", "evaluate", "play", "pose", "retrain",
       "load", "unload", "lod", "thumbnail", "inspect", "demo-repository", "train-pmsc", "fit", "import-rig",
-      "build-lod", "export-lod"};
+      "build-lod", "export-lod", "calibrate"};
   const CliRun top = cli("--help");
   ASSERT_EQ(top.exit_code, 0);
   for (const std::string& command : commands) {
@@ -533,21 +534,67 @@ TEST_F(CliClientTest, AMisspelledModelNameGetsTheNearestNames) {
   EXPECT_EQ(far.err.find("did you mean"), std::string::npos) << far.err;
 }
 
-TEST_F(CliClientTest, TrainingThatSpendsItsKeyBudgetSaysWhatToChange) {
-  // The demo arm as a sequence folder: reference.obj + frames.pc2.
-  auto stored = container::read_file(arm_frames());
-  ASSERT_TRUE(stored.ok());
+// The demo arm as a sequence folder: reference.obj + frames.pc2 (what train-pmsc reads).
+std::filesystem::path write_arm_sequence(const std::string& arm_model, const std::filesystem::path& folder) {
+  auto stored = container::read_file(arm_model);
+  EXPECT_TRUE(stored.ok());
   auto rest = stored->points(container::sections::kRestPoints);
   auto faces = stored->faces(container::sections::kFaces);
   auto frames = stored->float_matrix(container::sections::kSequenceFrames);
-  ASSERT_TRUE(rest.ok() && faces.ok() && frames.ok());
-  const auto folder = work_->path() / "arm-sequence";
+  EXPECT_TRUE(rest.ok() && faces.ok() && frames.ok());
   std::filesystem::create_directories(folder);
-  ASSERT_TRUE(mesh_io::write_triangle_mesh(folder / "reference.obj", {*rest, *faces}).ok());
+  EXPECT_TRUE(mesh_io::write_triangle_mesh(folder / "reference.obj", {*rest, *faces}).ok());
   mesh_io::PointCache cache;
   cache.num_points = static_cast<int>(rest->rows());
   cache.samples = *frames;
-  ASSERT_TRUE(mesh_io::write_pc2(folder / "frames.pc2", cache).ok());
+  EXPECT_TRUE(mesh_io::write_pc2(folder / "frames.pc2", cache).ok());
+  return folder;
+}
+
+// The operating curve is printed, `calibrate` moves a model to another δ without retraining and
+// keeps the choice for retrains, and a model trained before the stored calibration is refused
+// with the reason.
+TEST_F(CliClientTest, CalibrateChoosesAnotherFalseHitRateFromTheStoredSamples) {
+  const auto folder = write_arm_sequence(arm_frames(), work_->path() / "arm-sequence-calibrate");
+  const auto trained = work_->path() / "calibrate-in.anim";
+  const CliRun train = cli("train-pmsc " + folder.string() + " --select ::2 --false-hit-rate 0.01 -o " +
+                           trained.string());
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  EXPECT_NE(train.out.find("operating curve on"), std::string::npos) << train.out;
+  EXPECT_NE(train.out.find("false-hit rate δ = 0.01"), std::string::npos) << train.out;
+
+  const auto out = work_->path() / "calibrate-out.anim";
+  const CliRun run = cli("calibrate " + trained.string() + " --false-hit-rate 0.3 -o " + out.string());
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  auto before = container::read_file(trained);
+  auto after = container::read_file(out);
+  ASSERT_TRUE(before.ok() && after.ok());
+  EXPECT_EQ(after->metadata_value(pmsc::kFalseHitRateKey), "0.3");
+  EXPECT_EQ(after->metadata_value("pmsc.options.false_hit_rate"), "0.3");
+  auto old_model = pmsc::load(*before, "before");
+  auto new_model = pmsc::load(*after, "after");
+  ASSERT_TRUE(old_model.ok() && new_model.ok()) << new_model.error().message;
+  // A larger δ is never stricter; the subspace itself is untouched.
+  EXPECT_GE(new_model->epsilon.epsilon_min, old_model->epsilon.epsilon_min);
+  EXPECT_EQ(new_model->key_points, old_model->key_points);
+  EXPECT_TRUE(new_model->basis == old_model->basis);
+
+  // A model without samples (pmsc format 1): the reason, not a crash.
+  container::ModelContainer old_format;
+  for (const auto& [key, value] : before->metadata()) {
+    if (key.rfind("pmsc.calibration", 0) != 0 && key != pmsc::kFormatVersionKey) old_format.metadata()[key] = value;
+  }
+  pmsc::copy_sections(*before, [](const std::string& name) { return name != pmsc::kCalibrationSamplesSection; },
+                      old_format);
+  const auto old_path = work_->path() / "format1.anim";
+  ASSERT_TRUE(container::write_file(old_path, old_format).ok());
+  const CliRun refused = cli("calibrate " + old_path.string() + " --false-hit-rate 0.3 -o " + out.string());
+  EXPECT_EQ(refused.exit_code, 2);
+  EXPECT_NE(refused.err.find("keeps no calibration samples"), std::string::npos) << refused.err;
+}
+
+TEST_F(CliClientTest, TrainingThatSpendsItsKeyBudgetSaysWhatToChange) {
+  const auto folder = write_arm_sequence(arm_frames(), work_->path() / "arm-sequence");
 
   const auto out = work_->path() / "starved.anim";
   // Two key points (6 equations) for a 4-vector basis: far too few to bring every point within
