@@ -64,6 +64,26 @@ Error unparsable(const std::string& source, const std::string& key, const std::s
                     source + ": metadata '" + key + "' should be " + expected + ", got '" + text + "'");
 }
 
+// Local fail-through's soft memberships (local_fail_through.h) are an optional section: a model
+// written before it has hard regions (PmscModel::region_weights left empty).
+void store_region_weights(const PmscModel& m, container::ModelContainer& out) {
+  if (m.region_weights.size() > 0) out.set_matrix(kRegionWeightsSection, Float64Matrix(m.region_weights));
+}
+
+Status load_region_weights(const container::ModelContainer& in, const std::string& source, PmscModel& m) {
+  if (m.region_count == 0 || !in.has_section(kRegionWeightsSection)) return Status::Ok();
+  auto weights = in.double_matrix(kRegionWeightsSection);
+  if (!weights) return weights.error();
+  if (weights->rows() != m.point_count || weights->cols() != m.region_count) {
+    return container::section_shape_error(source, kRegionWeightsSection,
+                                          std::to_string(m.point_count) + "×" + std::to_string(m.region_count) +
+                                              " (points × regions)",
+                                          weights->rows(), weights->cols());
+  }
+  m.region_weights = *weights;
+  return Status::Ok();
+}
+
 }  // namespace
 
 void store(const PmscModel& m, container::ModelContainer& out) {
@@ -85,6 +105,7 @@ void store(const PmscModel& m, container::ModelContainer& out) {
     out.set_matrix("pmsc.point_regions", container::as_column(m.point_regions));
     out.set_matrix("pmsc.key_regions", container::as_column(m.key_regions));
   }
+  store_region_weights(m, out);
 }
 
 Result<PmscModel> load(const container::ModelContainer& in, const std::string& source) {
@@ -137,6 +158,7 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
     m.point_regions.assign(point_regions->data(), point_regions->data() + point_regions->size());
     m.key_regions.assign(key_regions->data(), key_regions->data() + key_regions->size());
   }
+  ANIMSPACE_RETURN_IF_ERROR(load_region_weights(in, source, m));
   if (auto prepared = prepare_projection(m); !prepared.ok()) return with_source(prepared.error(), source);
   return m;
 }

@@ -3,7 +3,8 @@
 // Sections (see docs/FORMATS.md): pmsc.mean (1 × N·D f32), pmsc.basis (N·D × M f32),
 // pmsc.key_points (K × 1 i32), pmsc.key_mean (1 × K·D f64), pmsc.key_basis (K·D × M f64),
 // pmsc.epsilon (1 × 2 f64: ε_min, ε_max), pmsc.point_regions (N × 1 i32, optional) and
-// pmsc.key_regions (K × 1 i32, optional); metadata pmsc.channels, pmsc.cross, pmsc.aligned,
+// pmsc.key_regions (K × 1 i32, optional), pmsc.region_weights (N × R f64, optional: soft
+// memberships for local fail-through; without it the regions are hard); metadata pmsc.channels, pmsc.cross, pmsc.aligned,
 // pmsc.control_point_count, pmsc.region_count. The projection is not stored: it is recomputed
 // (and its conditioning re-checked) at load, so there is one source of truth.
 //
@@ -24,6 +25,9 @@
 #include "core/pmsc/train.h"
 
 namespace animspace::pmsc {
+
+// The section of PmscModel::region_weights (read and written only here, hence not in sections.h).
+inline constexpr const char* kRegionWeightsSection = "pmsc.region_weights";
 
 // Writes the model's sections and metadata; sets metadata "kind" to pmsc or cross_pmsc.
 void store(const PmscModel& model, container::ModelContainer& out);
