@@ -199,6 +199,30 @@ void blend_partial(const PmscModel& m, const LocalFailThrough& local, const Eige
   }
 }
 
+Status evaluate_cached_local(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                             const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
+                             const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local) {
+  // The whole-pose verdict first: without f, a blend or miss leaves f̂ in out.points.
+  evaluate_cached(m, key_values, nullptr, out);
+  local = LocalFailThrough();
+  if (out.status == CacheStatus::kHit || m.cross) return Status::Ok();
+  local = local_fail_through(m, out.key_point_error, out.region_errors);
+  if (full_values != nullptr) {
+    ANIMSPACE_RETURN_IF_ERROR(check_covers(local, full_points));
+    blend_partial(m, local, out.points, full_points, *full_values, out.points);
+    out.full_evaluation_needed = false;
+  } else if (local.full_points.empty()) {
+    out.full_evaluation_needed = false;  // every region within tolerance: f̂ is the answer
+  } else if (full_calculation && full_calculation(local.full_points, out.computed_full_values)) {
+    assert(out.computed_full_values.size() == static_cast<long>(local.full_points.size()) * m.channel_count);
+    blend_partial(m, local, out.points, local.full_points, out.computed_full_values, out.points);
+    out.full_evaluation_needed = false;
+  } else {
+    out.computed_full_values.resize(0);
+  }
+  return Status::Ok();
+}
+
 Eigen::VectorXf complete_partial_frame(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                                        const std::vector<int>& full_points,
                                        const Eigen::Ref<const Eigen::VectorXf>& full_values) {

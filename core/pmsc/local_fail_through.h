@@ -16,6 +16,7 @@
 // is what a caller may do instead of the whole-pose blend on a blend or miss. A hit stays a hit.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -81,6 +82,24 @@ Status check_covers(const LocalFailThrough& needed, const std::vector<int>& full
 void blend_partial(const PmscModel& model, const LocalFailThrough& local,
                    const Eigen::Ref<const Eigen::VectorXf>& estimate, const std::vector<int>& full_points,
                    const Eigen::Ref<const Eigen::VectorXf>& full_values, Eigen::Ref<Eigen::VectorXf> out);
+
+// The full calculation of some points — a posing engine the caller holds, as FullCalculation but
+// for the listed points only (sorted indices): writes |points|·D values in that order and returns
+// true, or returns false when it cannot compute this pose.
+using PartialFullCalculation = std::function<bool(const std::vector<int>& points, Eigen::VectorXf& values)>;
+
+// Local fail-through for one pose: evaluate_cached's verdict (status, α, e_key unchanged); on a
+// blend or miss of a non-cross model, `local` lists the points that need f and out.points is
+// blend_partial of f̂ with full values for them — given (`full_values` for the sorted
+// `full_points`, which must cover local.full_points) or, when none are given, computed by
+// `full_calculation` (may be empty) for local.full_points only, kept in out.computed_full_values
+// (|local.full_points|·D). Without f, out.points is f̂ and out.full_evaluation_needed is set —
+// unless no point needs f (every region within tolerance), when f̂ is the answer. A hit leaves
+// `local` empty and never calls `full_calculation`.
+// Errors: kInvalidArgument from check_covers when `full_points` misses a point that needs f.
+Status evaluate_cached_local(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                             const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
+                             const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local);
 
 // A whole frame (N·D) from a partial one, for retraining: the given points' full values; at the
 // other key points their key values (they are the full calculation at those points); elsewhere

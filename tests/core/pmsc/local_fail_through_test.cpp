@@ -156,6 +156,49 @@ TEST(LocalFailThrough, PartialBlendReadsOnlyThePointsThatNeedTheFullCalculation)
       << missing.error().message;
 }
 
+TEST(LocalFailThrough, CachedEvaluationComputesAndBlendsOnlyTheNeededPoints) {
+  PmscModel m = three_point_model(2);
+  ASSERT_TRUE(prepare_projection(m).ok());
+  m.region_epsilon = {{0.1, 0.5}, {0.3, 0.5}};  // region 0 (point 0) blends with α = 0.75
+  Eigen::VectorXf keys(2);
+  keys << 1, 1;
+  std::vector<std::vector<int>> asked;
+  const PartialFullCalculation engine = [&](const std::vector<int>& points, Eigen::VectorXf& values) {
+    asked.push_back(points);
+    values = Eigen::VectorXf::Constant(static_cast<long>(points.size()), 3.0f);
+    return true;
+  };
+  CachedPose out;
+  LocalFailThrough local;
+  ASSERT_TRUE(evaluate_cached_local(m, keys, {}, nullptr, engine, out, local).ok());
+  // The whole-pose verdict is evaluate_cached's: e_key = √0.1 in [0.1, 0.5].
+  EXPECT_EQ(out.status, CacheStatus::kBlend);
+  EXPECT_NEAR(out.alpha, (std::sqrt(0.1) - 0.1) / 0.4, 1e-7);
+  ASSERT_EQ(asked, (std::vector<std::vector<int>>{{0}}));
+  EXPECT_FALSE(out.full_evaluation_needed);
+  EXPECT_NEAR(out.points(0), 0.75 * 3.0 + 0.25 * 0.6, 1e-6);
+  EXPECT_NEAR(out.points(1), 1.2, 1e-6);
+  EXPECT_NEAR(out.points(2), 1.2, 1e-6);
+  EXPECT_EQ(out.computed_full_values, Eigen::VectorXf::Constant(1, 3.0f));
+
+  // Without an engine: the estimate, flagged; given values that miss point 0: refused.
+  ASSERT_TRUE(evaluate_cached_local(m, keys, {}, nullptr, PartialFullCalculation(), out, local).ok());
+  EXPECT_TRUE(out.full_evaluation_needed);
+  EXPECT_NEAR(out.points(0), 0.6, 1e-6);
+  const Eigen::VectorXf values = Eigen::VectorXf::Constant(1, 3.0f);
+  const Status missing = evaluate_cached_local(m, keys, {2}, &values, engine, out, local);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.error().code, ErrorCode::kInvalidArgument);
+
+  // A hit never asks the engine: keys on the subspace (f = 1.5·a has keys (0.5, 1)).
+  keys << 0.5f, 1.0f;
+  asked.clear();
+  ASSERT_TRUE(evaluate_cached_local(m, keys, {}, nullptr, engine, out, local).ok());
+  EXPECT_EQ(out.status, CacheStatus::kHit);
+  EXPECT_TRUE(asked.empty());
+  EXPECT_TRUE(local.full_points.empty());
+}
+
 TEST(LocalFailThrough, PartialFrameIsCompletedWithKeyValuesAndTheEstimate) {
   PmscModel m = three_point_model(2);
   ASSERT_TRUE(prepare_projection(m).ok());
