@@ -47,6 +47,12 @@ Result<uint64_t> MissLogs::append(const std::string& model, misslog::MissRecord&
   return (*log)->append(record);
 }
 
+Result<uint32_t> MissLogs::format_version(const std::string& model) {
+  auto log = open(model);
+  if (!log) return log.error();
+  return (*log)->format_version();
+}
+
 void MissLogs::sync_all() {
   std::lock_guard lock(mutex_);
   for (auto& [model, log] : logs_) {

@@ -22,6 +22,10 @@ class MissLogs {
   // Errors: the log's (kIo, kDataLoss for a log whose header is not ours).
   Result<uint64_t> append(const std::string& model, misslog::MissRecord& record);
 
+  // The format version `model`'s log is appended in (opening it if needed): a log created before
+  // misslog::kFirstPartialFormatVersion cannot hold partial frames. Errors: as append's.
+  Result<uint32_t> format_version(const std::string& model);
+
   std::filesystem::path path_of(const std::string& model) const;
   // Opens every existing log in the directory at start-up, so a torn tail left by a crash is
   // cut (and reported) before serving begins. Returns how many logs were opened.

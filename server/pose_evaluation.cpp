@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/animspace/model.h"
+#include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pmsc_model.h"
 #include "server/convert.h"
 #include "server/model_lookup.h"
@@ -67,23 +68,61 @@ grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& 
   return grpc::Status::OK;
 }
 
-bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                   const PoseOptions& options, v1::PoseResult* out) {
+grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
+                                const Eigen::VectorXf& key_values, const std::vector<int>& points,
+                                Eigen::VectorXf& out) {
+  if (points.empty()) return decode_full_values(model, values, field, key_values, out);
+  const pmsc::PmscModel& m = *model.pmsc;
+  if (grpc::Status s = decode_points(values, field, static_cast<uint32_t>(points.size()),
+                                     static_cast<uint32_t>(m.channel_count), "points (one per full_points entry)", out);
+      !s.ok()) {
+    return s;
+  }
+  if (m.cross) return grpc::Status::OK;
+  if (auto consistent = pmsc::check_full_values_at_keys(m, key_values, points, out); !consistent.ok()) {
+    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                           const PoseOptions& options, v1::PoseResult* out, bool* logged) {
+  if (logged != nullptr) *logged = false;
   const pmsc::PmscModel& m = *model.pmsc;
   pmsc::CachedPose cached;
+  pmsc::LocalFailThrough local;
   const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
+  const bool local_path = options.local_fail_through || !input.full_points.empty();
   // Server fail-through: the posing engine, posed at the request's skeleton, is the full
-  // calculation (decode_pose accepted a skeleton only for a model that has one).
-  pmsc::FullCalculation engine;
-  if (input.has_skeleton) {
-    engine = [&](Eigen::VectorXf& full) {
-      PointMatrix posed;
-      animation_space::evaluate(*model.animation_space, input.globals, posed);
-      full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
-      return true;
-    };
+  // calculation (decode_pose accepted a skeleton only for a model that has one). Locally it poses
+  // only the points that need it: animation space is evaluated vertex by vertex (eq. 3.1).
+  if (local_path) {
+    pmsc::PartialFullCalculation engine;
+    if (input.has_skeleton) {
+      engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
+        PointMatrix posed;
+        animation_space::evaluate_vertices(*model.animation_space, input.globals, points, posed);
+        full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+        return true;
+      };
+    }
+    if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.full_points, client_full, engine,
+                                                   cached, local);
+        !covered.ok()) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, "full_points: " + covered.error().message};
+    }
+  } else {
+    pmsc::FullCalculation engine;
+    if (input.has_skeleton) {
+      engine = [&](Eigen::VectorXf& full) {
+        PointMatrix posed;
+        animation_space::evaluate(*model.animation_space, input.globals, posed);
+        full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+        return true;
+      };
+    }
+    pmsc::evaluate_cached(m, input.key_values, client_full, engine, cached);
   }
-  pmsc::evaluate_cached(m, input.key_values, client_full, engine, cached);
 
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
@@ -94,18 +133,24 @@ bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const Pose
     encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channel_count),
                   out->mutable_points());
   }
+  for (size_t j = 0; j < local.full_points.size(); ++j) {
+    out->add_full_points(static_cast<uint32_t>(local.full_points[j]));
+    out->add_full_point_blend_weights(static_cast<float>(local.full_point_blend_weights[j]));
+  }
   if (options.include_region_errors) {
     for (size_t r = 0; r < cached.region_errors.size(); ++r) {
       auto* region = out->add_region_errors();
       region->set_region(static_cast<uint32_t>(r));
       region->set_key_point_error(static_cast<float>(cached.region_errors[r]));
-      region->set_status(to_proto(pmsc::decide(cached.region_errors[r], m.epsilon).status));
+      // The verdict local fail-through acts on: each region against its own thresholds.
+      const auto& thresholds = pmsc::region_thresholds(m, static_cast<int>(r));
+      region->set_status(to_proto(pmsc::decide(cached.region_errors[r], thresholds).status));
     }
   }
   if (options.count_in_statistics) {
     env.metrics.record_pose(model.name, cached.status, cached.key_point_error);
   }
-  if (cached.status == pmsc::CacheStatus::kHit) return false;
+  if (cached.status == pmsc::CacheStatus::kHit) return grpc::Status::OK;
 
   misslog::MissRecord record;
   record.model_version = model.version;
@@ -118,14 +163,29 @@ bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const Pose
   const Eigen::VectorXf* full =
       client_full != nullptr ? client_full
                              : (cached.computed_full_values.size() > 0 ? &cached.computed_full_values : nullptr);
-  if (full != nullptr) record.full_values.assign(full->data(), full->data() + full->size());
+  // A partial frame: the client's points, or those the engine computed.
+  const std::vector<int>& points = client_full != nullptr ? input.full_points : local.full_points;
+  if (full != nullptr && local_path && !points.empty()) {
+    auto version = env.miss_logs.format_version(model.name);
+    if (version && *version < misslog::kFirstPartialFormatVersion) {
+      // A log created before partial frames: append the frame retraining would complete anyway.
+      const Eigen::VectorXf frame = pmsc::complete_partial_frame(m, input.key_values, points, *full);
+      record.full_values.assign(frame.data(), frame.data() + frame.size());
+    } else {
+      record.full_points.assign(points.begin(), points.end());
+      record.full_values.assign(full->data(), full->data() + full->size());
+    }
+  } else if (full != nullptr) {
+    record.full_values.assign(full->data(), full->data() + full->size());
+  }
   auto appended = env.miss_logs.append(model.name, record);
   if (!appended) {
     // The answer is still right; only the retraining data is short. Say so loudly.
     spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
-    return false;
+    return grpc::Status::OK;
   }
-  return true;
+  if (logged != nullptr) *logged = true;
+  return grpc::Status::OK;
 }
 
 }  // namespace animspace::server

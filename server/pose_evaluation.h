@@ -6,6 +6,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 #include <grpcpp/support/status.h>
@@ -22,7 +23,8 @@ struct PoseInput {
   Eigen::VectorXf key_values;                // K·D
   bool has_skeleton = false;
   animation_space::TransformList globals;    // G_j, when has_skeleton
-  Eigen::VectorXf full_values;               // N·D from CompleteMiss, else empty
+  Eigen::VectorXf full_values;               // from CompleteMiss: N·D, or |full_points|·D; else empty
+  std::vector<int> full_points;              // CompleteMiss with local fail-through: the points of full_values
 };
 
 // OK for a PMSC model, or FAILED_PRECONDITION naming the model's kind and `why` the call needs
@@ -40,15 +42,26 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
 grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
                                 const Eigen::VectorXf& key_values, Eigen::VectorXf& out);
 
+// The same for partial full values (local fail-through): `points` (decoded, ascending) names the
+// points `values` holds, |points|×D; only the key points among them can be checked.
+grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
+                                const Eigen::VectorXf& key_values, const std::vector<int>& points,
+                                Eigen::VectorXf& out);
+
 struct PoseOptions {
   bool include_region_errors = false;
+  // Local fail-through (core/pmsc/local_fail_through.h): report the points that need the full
+  // calculation and compute or blend only those. Implied by partial full values (full_points).
+  bool local_fail_through = false;
   bool omit_points = false;
   // CompleteMiss answers a pose that EvaluateKeyPoints already counted: log it, don't count it.
   bool count_in_statistics = true;
 };
 
-// Evaluates one decoded pose into `out`. Returns whether the pose was appended to the miss log.
-bool evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                   const PoseOptions& options, v1::PoseResult* out);
+// Evaluates one decoded pose into `out`; `logged` (optional) says whether it was appended to the
+// miss log. INVALID_ARGUMENT naming `full_points` when partial full values (CompleteMiss) miss a
+// point that needs the full calculation — checked before anything is counted or logged; OK else.
+grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                           const PoseOptions& options, v1::PoseResult* out, bool* logged = nullptr);
 
 }  // namespace animspace::server

@@ -82,6 +82,27 @@ grpc::Status decode_points(const v1::PointArray& array, std::string_view field, 
   return grpc::Status::OK;
 }
 
+grpc::Status decode_point_indices(const google::protobuf::RepeatedField<uint32_t>& indices, std::string_view field,
+                                  uint32_t point_count, std::vector<int>& out) {
+  out.clear();
+  out.reserve(static_cast<size_t>(indices.size()));
+  for (int j = 0; j < indices.size(); ++j) {
+    const uint32_t index = indices.Get(j);
+    const std::string entry = std::string(field) + "[" + std::to_string(j) + "]";
+    if (index >= point_count) {
+      return invalid_argument(entry + ": expected a point index below " + std::to_string(point_count) +
+                              " (the model's points), got " + std::to_string(index));
+    }
+    if (j > 0 && index <= indices.Get(j - 1)) {
+      return invalid_argument(entry + ": expected an index above " + std::string(field) + "[" +
+                              std::to_string(j - 1) + "] = " + std::to_string(indices.Get(j - 1)) +
+                              " (ascending, no repeats), got " + std::to_string(index));
+    }
+    out.push_back(static_cast<int>(index));
+  }
+  return grpc::Status::OK;
+}
+
 grpc::Status decode_skeleton_pose(const v1::SkeletonPose& pose, std::string_view field,
                                   const animation_space::Skeleton& skeleton, animation_space::TransformList& globals) {
   const auto bones = static_cast<uint32_t>(skeleton.parents.size());

@@ -7,8 +7,10 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <Eigen/Core>
+#include <google/protobuf/repeated_field.h>
 #include <grpcpp/support/status.h>
 
 #include "animspace/v1/common.pb.h"
@@ -32,6 +34,11 @@ grpc::Status check_response_size(int count, uint64_t bytes_per_entry, int64_t ma
 // ("key points", "points").
 grpc::Status decode_points(const v1::PointArray& array, std::string_view field, uint32_t points,
                            uint32_t channels, std::string_view what_points, Eigen::VectorXf& out);
+
+// Point indices (`field`, e.g. "full_points"): strictly ascending (no repeats), each below
+// `point_count` — the layout of a partial frame (local fail-through). Decoded into `out`.
+grpc::Status decode_point_indices(const google::protobuf::RepeatedField<uint32_t>& indices, std::string_view field,
+                                  uint32_t point_count, std::vector<int>& out);
 
 // A skeleton pose for `skeleton`, as global transforms G_j (local poses are composed down the
 // hierarchy, Merry 2007 §2.2).

@@ -180,6 +180,7 @@ std::vector<PoseResult> Client::evaluate_key_points_batch(const std::string& mod
   request.mutable_model()->set_version(options.version);
   request.set_omit_points(options.omit_points);
   request.set_include_region_errors(options.include_region_errors);
+  request.set_local_fail_through(options.local_fail_through);
   for (const KeyPointPose& pose : poses) *request.add_poses() = encode_key_point_pose(pose);
   grpc::ClientContext context;
   prepare(&context);
@@ -202,7 +203,7 @@ std::unique_ptr<KeyPointStream> Client::open_stream(const std::string& model, co
 }
 
 CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
-                                    std::span<const float> full_values) {
+                                    std::span<const float> full_values, std::span<const uint32_t> full_points) {
   v1::CompleteMissRequest request;
   request.mutable_model()->set_name(model);
   request.mutable_model()->set_version(version);
@@ -213,8 +214,14 @@ CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, 
     throw std::invalid_argument("complete_miss: full_values holds " + std::to_string(full_values.size()) +
                                 " floats, not a whole number of " + std::to_string(channels) + "-channel points");
   }
+  if (!full_points.empty() && full_values.size() != full_points.size() * channels) {
+    throw std::invalid_argument("complete_miss: full_values holds " + std::to_string(full_values.size()) +
+                                " floats, expected " + std::to_string(channels) + " for each of the " +
+                                std::to_string(full_points.size()) + " full_points");
+  }
   *request.mutable_full_values() =
       make_point_array(full_values.data(), static_cast<uint32_t>(full_values.size() / channels), channels);
+  request.mutable_full_points()->Add(full_points.begin(), full_points.end());
   grpc::ClientContext context;
   prepare(&context);
   v1::CompleteMissResponse response;

@@ -113,10 +113,12 @@ class Client {
                                                     const EvaluateOptions& options = {});
   // A session for playing a sequence (see key_point_stream.h).
   std::unique_ptr<KeyPointStream> open_stream(const std::string& model, const StreamOptions& options = {});
-  // Client fail-through: the full N×D values of a pose that blended or missed, from the caller's
-  // own posing engine; `version` is the result's model_version.
+  // Client fail-through: the full values of a pose that blended or missed, from the caller's own
+  // posing engine; `version` is the result's model_version. All N×D values, or — local
+  // fail-through — the values of `full_points` only (|full_points|×D, in that order; at least the
+  // PoseResult::full_points of this pose): the answer is then blended point by point.
   CompletedMiss complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
-                              std::span<const float> full_values);
+                              std::span<const float> full_values, std::span<const uint32_t> full_points = {});
   // Skinning through an animation-space model (Merry 2007 §3.1): one result per pose, in order.
   SkinningResult evaluate_skeleton_pose(const std::string& model, std::span<const SkeletonPose> poses,
                                         const SkinningOptions& options = {});

@@ -59,6 +59,9 @@ PoseResult decode_pose_result(const v1::PoseResult& result) {
   out.model_version = result.model_version();
   out.full_evaluation_needed = result.full_evaluation_needed();
   out.sequence = result.sequence();
+  out.full_points.assign(result.full_points().begin(), result.full_points().end());
+  out.full_point_blend_weights.assign(result.full_point_blend_weights().begin(),
+                                      result.full_point_blend_weights().end());
   out.region_errors.reserve(static_cast<size_t>(result.region_errors_size()));
   for (const auto& region : result.region_errors()) {
     out.region_errors.push_back({region.region(), region.key_point_error(), region.status()});

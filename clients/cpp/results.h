@@ -78,6 +78,11 @@ struct PoseResult {
   bool full_evaluation_needed = false;
   std::vector<RegionError> region_errors;
   uint64_t sequence = 0;  // streams: the frame this answers
+  // Local fail-through (requested; blend or miss): the points that need the full calculation,
+  // ascending — send their values with complete_miss(…, full_points) — and the blend weight α_i of
+  // each. Empty when every region is within tolerance: `points` is the answer.
+  std::vector<uint32_t> full_points;
+  std::vector<float> full_point_blend_weights;
 };
 
 struct CompletedMiss {
@@ -100,6 +105,9 @@ struct EvaluateOptions {
   uint64_t version = 0;  // 0: the served default
   bool omit_points = false;
   bool include_region_errors = false;
+  // Local fail-through: on a blend or miss, PoseResult::full_points names the points that need
+  // the full calculation (those of the failing regions); the rest of the answer is already right.
+  bool local_fail_through = false;
 };
 
 struct SkinningOptions {

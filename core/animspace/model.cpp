@@ -136,21 +136,39 @@ PoseMatrices pose_matrices(const TransformList& globals) {
   return matrices;
 }
 
+namespace {
+
+// v_i = Σ_j G_j p_j over vertex i's influences (eq. 3.1).
+Eigen::Vector3f pose_vertex(const AnimationSpaceModel& model, const PoseMatrices& G, int64_t i) {
+  const int32_t* bones = model.influences.bones.data();
+  const double* p = model.positions.data();
+  Eigen::Vector4d v = Eigen::Vector4d::Zero();
+  for (int k = model.influences.offsets[static_cast<size_t>(i)]; k < model.influences.offsets[static_cast<size_t>(i) + 1]; ++k) {
+    v.noalias() += G[static_cast<size_t>(bones[k])] * Eigen::Map<const Eigen::Vector4d, Eigen::Aligned16>(p + 4L * k);
+  }
+  return v.head<3>().cast<float>();
+}
+
+}  // namespace
+
 void evaluate(const AnimationSpaceModel& model, const TransformList& globals, PointMatrix& out) {
   assert(static_cast<int>(globals.size()) == model.bone_count());
   const PoseMatrices G = pose_matrices(globals);
   out.resize(model.vertex_count(), 3);
-  const int32_t* bones = model.influences.bones.data();
-  const double* p = model.positions.data();
   for_vertex_chunks(model.influences, [&](int64_t first, int64_t last) {
-    for (int64_t i = first; i < last; ++i) {
-      Eigen::Vector4d v = Eigen::Vector4d::Zero();
-      for (int k = model.influences.offsets[static_cast<size_t>(i)]; k < model.influences.offsets[static_cast<size_t>(i) + 1]; ++k) {
-        v.noalias() += G[static_cast<size_t>(bones[k])] * Eigen::Map<const Eigen::Vector4d, Eigen::Aligned16>(p + 4L * k);
-      }
-      out.row(i) = v.head<3>().cast<float>().transpose();
-    }
+    for (int64_t i = first; i < last; ++i) out.row(i) = pose_vertex(model, G, i).transpose();
   });
+}
+
+void evaluate_vertices(const AnimationSpaceModel& model, const TransformList& globals,
+                       const std::vector<int>& vertices, PointMatrix& out) {
+  assert(static_cast<int>(globals.size()) == model.bone_count());
+  const PoseMatrices G = pose_matrices(globals);
+  out.resize(static_cast<Eigen::Index>(vertices.size()), 3);
+  for (size_t j = 0; j < vertices.size(); ++j) {
+    assert(vertices[j] >= 0 && vertices[j] < model.vertex_count());
+    out.row(static_cast<Eigen::Index>(j)) = pose_vertex(model, G, vertices[j]).transpose();
+  }
 }
 
 void evaluate_normals(const AnimationSpaceModel& model, const TransformList& globals, PointMatrix& out) {

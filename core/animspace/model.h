@@ -84,6 +84,12 @@ PoseMatrices pose_matrices(const TransformList& globals);
 // caller, see validate_pose); `out` is resized to V × 3. Runs on all cores for large models.
 void evaluate(const AnimationSpaceModel& model, const TransformList& globals, PointMatrix& out);
 
+// The same for the listed vertices only (each in [0, V), asserted): `out` becomes |vertices| × 3,
+// row j the posed vertices[j]. Each vertex is posed from its own influences alone (eq. 3.1), so a
+// caller that needs a few vertices (local fail-through) pays for those only.
+void evaluate_vertices(const AnimationSpaceModel& model, const TransformList& globals,
+                       const std::vector<int>& vertices, PointMatrix& out);
+
 // n = normalise(G s × G t) for every vertex (§3.5); requires has_tangents(). A vertex whose
 // projected tangent plane collapses (|G s × G t| = 0, only in degenerate poses) gets n = 0.
 void evaluate_normals(const AnimationSpaceModel& model, const TransformList& globals, PointMatrix& out);

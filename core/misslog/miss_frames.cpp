@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "core/misslog/miss_log.h"
+#include "core/pmsc/local_fail_through.h"
 
 namespace animspace::misslog {
 
@@ -20,9 +21,38 @@ Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t 
   ReadReport report;
   auto records = read_records(path, after_sequence, &report);
   if (!records) return records.error();
-  std::vector<const MissRecord*> usable;
+  // Rows of the result: a whole frame as logged, or a partial frame completed here.
+  std::vector<const float*> rows;
+  std::vector<Eigen::VectorXf> completed;
+  completed.reserve(records->size());  // rows point into it: no reallocation
   for (const auto& record : *records) {
     out.last_sequence = std::max(out.last_sequence, record.sequence);
+    if (!record.full_points.empty()) {
+      // A partial frame (local fail-through) is completed from the model that judged it, so only
+      // records of that model version, with its key count and points inside it, can be used.
+      const long D = model.channel_count;
+      const bool usable = !model.cross && record.model_version == model_version &&
+                          static_cast<long>(record.key_values.size()) == key_width &&
+                          static_cast<long>(record.full_values.size()) ==
+                              static_cast<long>(record.full_points.size()) * D &&
+                          record.full_points.back() < static_cast<uint32_t>(model.point_count);
+      if (!usable) {
+        ++out.skipped;
+        continue;
+      }
+      const std::vector<int> points(record.full_points.begin(), record.full_points.end());
+      const Eigen::Map<const Eigen::VectorXf> keys(record.key_values.data(), key_width);
+      const Eigen::Map<const Eigen::VectorXf> values(record.full_values.data(),
+                                                     static_cast<long>(record.full_values.size()));
+      if (!pmsc::check_full_values_at_keys(model, keys, points, values).ok()) {
+        ++out.inconsistent;
+        continue;
+      }
+      completed.push_back(pmsc::complete_partial_frame(model, keys, points, values));
+      rows.push_back(completed.back().data());
+      ++out.partial;
+      continue;
+    }
     if (static_cast<long>(record.full_values.size()) != width) {
       ++out.skipped;
       continue;
@@ -35,11 +65,11 @@ Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t 
       ++out.inconsistent;
       continue;
     }
-    usable.push_back(&record);
+    rows.push_back(record.full_values.data());
   }
-  out.frames.resize(static_cast<long>(usable.size()), width);
-  for (size_t row = 0; row < usable.size(); ++row) {
-    out.frames.row(static_cast<long>(row)) = Eigen::Map<const Eigen::RowVectorXf>(usable[row]->full_values.data(), width);
+  out.frames.resize(static_cast<long>(rows.size()), width);
+  for (size_t row = 0; row < rows.size(); ++row) {
+    out.frames.row(static_cast<long>(row)) = Eigen::Map<const Eigen::RowVectorXf>(rows[row], width);
   }
   return out;
 }

@@ -20,11 +20,20 @@ namespace animspace::misslog {
 // `inconsistent`. Records of other versions were logged against another key set and are taken as
 // they are. A missing file is no misses. `last_sequence` is the newest record read (at least
 // `after_sequence`). Errors: the log reader's (kDataLoss naming the path and byte offset, kIo).
+//
+// A partial frame (local fail-through: full values of the points listed in full_points only) is
+// not a full training frame: it is completed with pmsc::complete_partial_frame — its key points
+// take their key values, every other point the model's estimate f̂ for the record's key values,
+// which the soft cache judged within tolerance there (Meyer & Anderson 2007 §2.4) — and counted
+// in `partial`. Only a record of `model_version` can be completed (f̂ needs that model's key set);
+// partial records of other versions, or whose points or value counts do not fit the model, are
+// skipped. The consistency check applies to the key points among the listed points.
 struct MissFrames {
   FrameMatrix frames;  // rows × point_count·D
   uint64_t last_sequence = 0;
   uint64_t skipped = 0;
   uint64_t inconsistent = 0;
+  uint64_t partial = 0;  // frames completed from partial records (included in `frames`)
 };
 Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence,
                                     const pmsc::PmscModel& model, uint64_t model_version);

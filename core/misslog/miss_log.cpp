@@ -59,7 +59,8 @@ constexpr size_t kUnixTimeAt = 16;
 constexpr size_t kKeyPointErrorAt = 24;
 constexpr size_t kBlendWeightAt = 32;
 constexpr size_t kChannelsAt = 40;
-constexpr size_t kStatusAt = 44;  // then 3 reserved zero bytes
+constexpr size_t kStatusAt = 44;
+constexpr size_t kLayoutAt = 45;  // version 3: 0 = whole frame, 1 = partial; then 2 reserved bytes
 constexpr size_t kKeyCountAt = 48;
 constexpr size_t kFullCountAt = 52;
 constexpr uint64_t kFixedPayloadSize = 56;  // the float arrays follow
@@ -213,6 +214,15 @@ Result<FileHeader> check_file_header(const std::filesystem::path& path, std::str
 
 // --- Records -----------------------------------------------------------------------------------
 
+// Version 3's layout byte: a partial record lists its points (uint32, ascending) between the key
+// and the full values. Earlier versions have no such byte (reserved, ignored).
+constexpr uint8_t kWholeFrame = 0;
+constexpr uint8_t kPartialFrame = 1;
+
+uint8_t layout_of(std::string_view payload, uint32_t version) {
+  return version >= kFirstPartialFormatVersion ? load_le<uint8_t>(payload, kLayoutAt) : kWholeFrame;
+}
+
 // `payload` passed check_payload in the file's `version`.
 MissRecord decode_payload(std::string_view payload, uint32_t version) {
   MissRecord record;
@@ -229,9 +239,13 @@ MissRecord decode_payload(std::string_view payload, uint32_t version) {
   record.full_values.resize(full_count);
   const char* floats = payload.data() + kFixedPayloadSize;
   if (key_count > 0) std::memcpy(record.key_values.data(), floats, 4 * size_t{key_count});
-  if (full_count > 0) {
-    std::memcpy(record.full_values.data(), floats + 4 * size_t{key_count}, 4 * size_t{full_count});
+  floats += 4 * size_t{key_count};
+  if (layout_of(payload, version) == kPartialFrame) {
+    record.full_points.resize(full_count / record.channel_count);
+    std::memcpy(record.full_points.data(), floats, 4 * record.full_points.size());
+    floats += 4 * record.full_points.size();
   }
+  if (full_count > 0) std::memcpy(record.full_values.data(), floats, 4 * size_t{full_count});
   return record;
 }
 
@@ -247,6 +261,10 @@ struct RecordView {
   uint64_t full_count = 0;
   const char* key_bytes = nullptr;   // key_count float32
   const char* full_bytes = nullptr;  // full_count float32
+  uint32_t version = kFormatVersion;        // of the file
+  unsigned layout = kWholeFrame;            // as stored (version 3), for messages
+  uint64_t full_point_count = 0;            // partial records: the points listed
+  const char* full_point_bytes = nullptr;   // full_point_count uint32
 };
 
 RecordView view_of(const MissRecord& record, uint32_t version) {
@@ -258,23 +276,40 @@ RecordView view_of(const MissRecord& record, uint32_t version) {
           record.key_values.size(),
           record.full_values.size(),
           reinterpret_cast<const char*>(record.key_values.data()),
-          reinterpret_cast<const char*>(record.full_values.data())};
+          reinterpret_cast<const char*>(record.full_values.data()),
+          version,
+          record.full_points.empty() ? kWholeFrame : kPartialFrame,
+          record.full_points.size(),
+          reinterpret_cast<const char*>(record.full_points.data())};
 }
 
 // `payload` is as long as its counts say (check_payload has checked).
 RecordView view_of_payload(std::string_view payload, uint32_t version) {
   const uint64_t key_count = load_le<uint32_t>(payload, kKeyCountAt);
+  const uint64_t full_count = load_le<uint32_t>(payload, kFullCountAt);
+  const uint32_t channels = load_le<uint32_t>(payload, kChannelsAt);
+  const uint8_t layout = layout_of(payload, version);
+  const uint64_t points = layout == kPartialFrame && channels > 0 ? full_count / channels : 0;
   const char* floats = payload.data() + kFixedPayloadSize;
   const uint8_t code = load_le<uint8_t>(payload, kStatusAt);
   return {status_of_code(code, version),
           code,
-          load_le<uint32_t>(payload, kChannelsAt),
+          channels,
           load_le<double>(payload, kKeyPointErrorAt),
           load_le<double>(payload, kBlendWeightAt),
           key_count,
-          load_le<uint32_t>(payload, kFullCountAt),
+          full_count,
           floats,
+          floats + 4 * (key_count + points),
+          version,
+          layout,
+          points,
           floats + 4 * key_count};
+}
+
+// The payload length of a record with these counts.
+uint64_t payload_length(uint64_t key_count, uint64_t full_count, uint64_t full_point_count) {
+  return kFixedPayloadSize + 4 * (key_count + full_point_count + full_count);
 }
 
 // The index of the first non-finite of `count` float32 stored from `bytes` on, or -1.
@@ -307,7 +342,36 @@ Result<uint64_t> check_record(const RecordView& record) {
                           ") must be multiples of channel_count (" + std::to_string(record.channel_count) +
                           ")");
   }
-  const uint64_t length = kFixedPayloadSize + 4 * (record.key_count + record.full_count);
+  if (record.layout != kWholeFrame) {
+    if (record.version < kFirstPartialFormatVersion) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        "miss record full_points: a log of format version " + std::to_string(record.version) +
+                            " holds whole frames only (partial frames need version " +
+                            std::to_string(kFirstPartialFormatVersion) + ")");
+    }
+    if (record.layout != kPartialFrame) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "miss record layout " + std::to_string(record.layout) + ", expected 0 or 1");
+    }
+    if (record.full_point_count == 0 || record.full_count != record.full_point_count * record.channel_count) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "miss record full_values (" + std::to_string(record.full_count) + ") must be " +
+                            std::to_string(record.channel_count) + " values for each of the " +
+                            std::to_string(record.full_point_count) + " full_points (at least one)");
+    }
+    uint32_t previous = 0;
+    for (uint64_t j = 0; j < record.full_point_count; ++j) {
+      uint32_t point = 0;
+      std::memcpy(&point, record.full_point_bytes + 4 * j, sizeof point);
+      if (j > 0 && point <= previous) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          "miss record full_points[" + std::to_string(j) + "] = " + std::to_string(point) +
+                              " does not follow " + std::to_string(previous) + " (ascending, no repeats)");
+      }
+      previous = point;
+    }
+  }
+  const uint64_t length = payload_length(record.key_count, record.full_count, record.full_point_count);
   if (length > kMaxPayloadBytes) {
     return make_error(ErrorCode::kInvalidArgument,
                       "miss record of " + std::to_string(record.key_count) + " key and " +
@@ -336,14 +400,16 @@ std::string check_payload(std::string_view payload, uint64_t previous_sequence, 
   const auto channels = load_le<uint32_t>(payload, kChannelsAt);
   const auto key_count = load_le<uint32_t>(payload, kKeyCountAt);
   const auto full_count = load_le<uint32_t>(payload, kFullCountAt);
-  const uint64_t expected_length =
-      kFixedPayloadSize + 4 * (uint64_t{key_count} + uint64_t{full_count});
+  if (channels == 0) return "channels is 0";
+  const bool partial = layout_of(payload, version) == kPartialFrame;
+  const uint64_t points = partial ? full_count / channels : 0;
+  const uint64_t expected_length = payload_length(key_count, full_count, points);
   if (expected_length != payload.size()) {
     return "payload length " + std::to_string(payload.size()) + " does not match " +
-           std::to_string(key_count) + " key and " + std::to_string(full_count) +
-           " full values (expected " + std::to_string(expected_length) + ")";
+           std::to_string(key_count) + " key and " + std::to_string(full_count) + " full values" +
+           (partial ? " of " + std::to_string(points) + " listed points" : std::string()) + " (expected " +
+           std::to_string(expected_length) + ")";
   }
-  if (channels == 0) return "channels is 0";
   if (key_count % channels != 0 || full_count % channels != 0) {
     return std::to_string(key_count) + " key and " + std::to_string(full_count) +
            " full values are not multiples of " + std::to_string(channels) + " channels";
@@ -445,16 +511,19 @@ std::string encode_unsealed(const MissRecord& record, uint64_t payload_length, u
   store_le<double>(framed, p + kBlendWeightAt, record.blend_weight);
   store_le<uint32_t>(framed, p + kChannelsAt, record.channel_count);
   store_le<uint8_t>(framed, p + kStatusAt, status_code(record.status, version));
+  if (!record.full_points.empty()) store_le<uint8_t>(framed, p + kLayoutAt, kPartialFrame);
   store_le<uint32_t>(framed, p + kKeyCountAt, static_cast<uint32_t>(record.key_values.size()));
   store_le<uint32_t>(framed, p + kFullCountAt, static_cast<uint32_t>(record.full_values.size()));
   char* floats = framed.data() + p + kFixedPayloadSize;
   if (!record.key_values.empty()) {
     std::memcpy(floats, record.key_values.data(), 4 * record.key_values.size());
   }
-  if (!record.full_values.empty()) {
-    std::memcpy(floats + 4 * record.key_values.size(), record.full_values.data(),
-                4 * record.full_values.size());
+  floats += 4 * record.key_values.size();
+  if (!record.full_points.empty()) {
+    std::memcpy(floats, record.full_points.data(), 4 * record.full_points.size());
+    floats += 4 * record.full_points.size();
   }
+  if (!record.full_values.empty()) std::memcpy(floats, record.full_values.data(), 4 * record.full_values.size());
   return framed;
 }
 

@@ -51,11 +51,14 @@ enum class FsyncPolicy {
 Result<FsyncPolicy> parse_fsync_policy(std::string_view text);
 
 // Format versions (docs/FORMATS.md). New logs are written in kFormatVersion; a log of an older
-// version is read, and appended to, in its own version. They differ only in the status byte:
-// version 1 stored the API's CacheStatus numbers of the time (blend 2, miss 3); from version 2
-// the log owns its codes (blend 1, miss 2), so the file format depends on no wire enum.
-inline constexpr uint32_t kFormatVersion = 2;
+// version is read, and appended to, in its own version. Version 1 stored the API's CacheStatus
+// numbers of the time (blend 2, miss 3); from version 2 the log owns its codes (blend 1, miss 2),
+// so the file format depends on no wire enum. Version 3 adds partial frames (local
+// fail-through): full values of the listed points only (MissRecord::full_points); its whole-frame
+// records are laid out as version 2's.
+inline constexpr uint32_t kFormatVersion = 3;
 inline constexpr uint32_t kOldestFormatVersion = 1;
+inline constexpr uint32_t kFirstPartialFormatVersion = 3;
 
 // Format limits. A record payload is at most kMaxPayloadBytes, so that a corrupt length field
 // can never ask for a giant allocation.
@@ -72,7 +75,10 @@ struct MissRecord {
   double blend_weight = 0;     // α of the soft-cache blend, in [0, 1]
   uint32_t channel_count = 3;       // D ≥ 1
   std::vector<float> key_values;   // K·D
-  std::vector<float> full_values;  // N·D, or empty when the full values are not known
+  std::vector<float> full_values;  // N·D, |full_points|·D, or empty when the full values are not known
+  // Partial frame (local fail-through, format version ≥ 3): the points, ascending, whose full
+  // values full_values holds. Empty: full_values is the whole frame (or empty).
+  std::vector<uint32_t> full_points;
 };
 
 struct RecoveryReport {
@@ -105,8 +111,10 @@ class MissLog {
   // unchanged, no sequence number is used up, and the file is cut back to the end of the last
   // good record so that later appends stay readable.
   // Errors: kInvalidArgument naming the field for a record the format cannot hold or that would
-  // poison retraining (channels 0, value counts not multiples of channels, a payload over
-  // kMaxPayloadBytes, status hit, non-finite numbers); kIo naming the path
+  // poison retraining (channels 0, value counts not multiples of channels, full_points not
+  // ascending or not matching the full values, a payload over kMaxPayloadBytes, status hit,
+  // non-finite numbers); kFailedPrecondition for a partial record (full_points) in a log of a
+  // format version before kFirstPartialFormatVersion; kIo naming the path
   // (disk full, file size limit, fsync failure).
   Result<uint64_t> append(MissRecord& record);
 

@@ -156,6 +156,26 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
   return Status::Ok();  // prepare_projection checks region_epsilon against region_count
 }
 
+// Local fail-through's soft memberships (local_fail_through.h) are an optional section: a model
+// written before it has hard regions (PmscModel::region_weights left empty).
+void store_region_weights(const PmscModel& m, container::ModelContainer& out) {
+  if (m.region_weights.size() > 0) out.set_matrix(kRegionWeightsSection, Float64Matrix(m.region_weights));
+}
+
+Status load_region_weights(const container::ModelContainer& in, const std::string& source, PmscModel& m) {
+  if (m.region_count == 0 || !in.has_section(kRegionWeightsSection)) return Status::Ok();
+  auto weights = in.double_matrix(kRegionWeightsSection);
+  if (!weights) return weights.error();
+  if (weights->rows() != m.point_count || weights->cols() != m.region_count) {
+    return container::section_shape_error(source, kRegionWeightsSection,
+                                          std::to_string(m.point_count) + "×" + std::to_string(m.region_count) +
+                                              " (points × regions)",
+                                          weights->rows(), weights->cols());
+  }
+  m.region_weights = *weights;
+  return Status::Ok();
+}
+
 }  // namespace
 
 void store(const PmscModel& m, container::ModelContainer& out) {
@@ -178,6 +198,7 @@ void store(const PmscModel& m, container::ModelContainer& out) {
     out.set_matrix("pmsc.key_regions", container::as_column(m.key_regions));
   }
   store_calibration(m, out);
+  store_region_weights(m, out);
 }
 
 Result<PmscModel> load(const container::ModelContainer& in, const std::string& source) {
@@ -231,6 +252,7 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
     m.key_regions.assign(key_regions->data(), key_regions->data() + key_regions->size());
   }
   if (auto calibration = load_calibration(in, source, m); !calibration.ok()) return calibration.error();
+  ANIMSPACE_RETURN_IF_ERROR(load_region_weights(in, source, m));
   if (auto prepared = prepare_projection(m); !prepared.ok()) return with_source(prepared.error(), source);
   return m;
 }

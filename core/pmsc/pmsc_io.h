@@ -3,13 +3,15 @@
 // Sections (see docs/FORMATS.md): pmsc.mean (1 × N·D f32), pmsc.basis (N·D × M f32),
 // pmsc.key_points (K × 1 i32), pmsc.key_mean (1 × K·D f64), pmsc.key_basis (K·D × M f64),
 // pmsc.epsilon (1 × 2 f64: ε_min, ε_max), pmsc.point_regions (N × 1 i32, optional) and
-// pmsc.key_regions (K × 1 i32, optional); metadata pmsc.channels, pmsc.cross, pmsc.aligned,
-// pmsc.control_point_count, pmsc.region_count. From pmsc format 2 (metadata pmsc.format_version,
-// absent in format 1) also the ε calibration (calibration.h): pmsc.calibration_samples
-// (n × (3 + 2R) f64: fold family (0 interleaved, 1 block), e_key, max error, then R region key
-// errors and R region max errors of each held-out frame), pmsc.region_epsilon (R × 2 f64) and
-// metadata pmsc.calibration.false_hit_rate, .error_ratio, .block_frames, .over_tolerance. A format 1 model loads with the ε
-// it was written with and no samples. The projection is not stored: it is recomputed
+// pmsc.key_regions (K × 1 i32, optional), pmsc.region_weights (N × R f64, optional: soft
+// memberships for local fail-through; without it the regions are hard); metadata pmsc.channels,
+// pmsc.cross, pmsc.aligned, pmsc.control_point_count, pmsc.region_count. From pmsc format 2
+// (metadata pmsc.format_version, absent in format 1) also the ε calibration (calibration.h):
+// pmsc.calibration_samples (n × (3 + 2R) f64: fold family (0 interleaved, 1 block), e_key, max
+// error, then R region key errors and R region max errors of each held-out frame),
+// pmsc.region_epsilon (R × 2 f64) and metadata pmsc.calibration.false_hit_rate, .error_ratio,
+// .block_frames, .over_tolerance. A format 1 model loads with the ε it was written with and no
+// samples. The projection is not stored: it is recomputed
 // (and its conditioning re-checked) at load, so there is one source of truth.
 //
 // Beside the model a container keeps what retraining needs ("train each night, better
@@ -39,6 +41,8 @@ inline constexpr const char* kBlockFramesKey = "pmsc.calibration.block_frames";
 inline constexpr const char* kOverToleranceKey = "pmsc.calibration.over_tolerance";
 inline constexpr const char* kCalibrationSamplesSection = "pmsc.calibration_samples";
 inline constexpr const char* kRegionEpsilonSection = "pmsc.region_epsilon";
+// The section of PmscModel::region_weights (read and written only here, hence not in sections.h).
+inline constexpr const char* kRegionWeightsSection = "pmsc.region_weights";
 
 // Writes the model's sections and metadata; sets metadata "kind" to pmsc or cross_pmsc.
 void store(const PmscModel& model, container::ModelContainer& out);

@@ -13,6 +13,7 @@
 #include <Eigen/SVD>
 
 #include "core/common/format.h"
+#include "core/pmsc/local_fail_through.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -118,6 +119,9 @@ Status prepare_projection(PmscModel& m) {
     for (int r : m.key_regions) {
       if (r < 0 || r >= m.region_count) return make_error(ErrorCode::kInvalidArgument, "pmsc model: region out of range");
     }
+    ANIMSPACE_RETURN_IF_ERROR(check_region_weights(m));
+  } else if (m.region_weights.size() > 0) {
+    return make_error(ErrorCode::kInvalidArgument, "pmsc model: region_weights given for a model without regions");
   }
   if (!m.region_epsilon.empty() && static_cast<long>(m.region_epsilon.size()) != m.region_count) {
     return make_error(ErrorCode::kInvalidArgument, "pmsc model: region_epsilon should hold " +
@@ -418,26 +422,52 @@ std::string format_values(const float* values, long count) {
 
 }  // namespace
 
+namespace {
+
+// Key point k against the D full values at `full` (the values of its point).
+Status check_key_point(const PmscModel& m, long k, const float* key, const float* full) {
+  const long D = m.channel_count;
+  const long point = m.key_points[static_cast<size_t>(k)];
+  const double absolute = kKeyConsistencyAbsolute * m.epsilon.epsilon_min;
+  for (long c = 0; c < D; ++c) {
+    const double allowed = kKeyConsistencyRelative * std::max(std::abs(key[c]), std::abs(full[c])) + absolute;
+    if (!(std::abs(static_cast<double>(full[c]) - key[c]) <= allowed)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "key point " + std::to_string(k) + " (point " + std::to_string(point) +
+                            "): the full values hold " + format_values(full, D) + " but the key values hold " +
+                            format_values(key, D) + "; full values must be the pose the key values were read from");
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status check_full_values_at_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                                  const Eigen::Ref<const Eigen::VectorXf>& full_values) {
   const long D = m.channel_count;
   assert(!m.cross);
   assert(key_values.size() == m.key_point_count() * D && full_values.size() == m.control_point_count * D);
-  const double absolute = kKeyConsistencyAbsolute * m.epsilon.epsilon_min;
   for (long k = 0; k < m.key_point_count(); ++k) {
     const long point = m.key_points[static_cast<size_t>(k)];
-    for (long c = 0; c < D; ++c) {
-      const double key = key_values[k * D + c];
-      const double full = full_values[point * D + c];
-      const double allowed = kKeyConsistencyRelative * std::max(std::abs(key), std::abs(full)) + absolute;
-      if (!(std::abs(full - key) <= allowed)) {
-        return make_error(ErrorCode::kInvalidArgument,
-                          "key point " + std::to_string(k) + " (point " + std::to_string(point) +
-                              "): the full values hold " + format_values(full_values.data() + point * D, D) +
-                              " but the key values hold " + format_values(key_values.data() + k * D, D) +
-                              "; full values must be the pose the key values were read from");
-      }
-    }
+    ANIMSPACE_RETURN_IF_ERROR(check_key_point(m, k, key_values.data() + k * D, full_values.data() + point * D));
+  }
+  return Status::Ok();
+}
+
+Status check_full_values_at_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                                 const std::vector<int>& full_points,
+                                 const Eigen::Ref<const Eigen::VectorXf>& full_values) {
+  const long D = m.channel_count;
+  assert(!m.cross);
+  assert(std::is_sorted(full_points.begin(), full_points.end()));
+  assert(key_values.size() == m.key_point_count() * D && full_values.size() == static_cast<long>(full_points.size()) * D);
+  for (long k = 0; k < m.key_point_count(); ++k) {
+    const int point = m.key_points[static_cast<size_t>(k)];
+    const auto given = std::lower_bound(full_points.begin(), full_points.end(), point);
+    if (given == full_points.end() || *given != point) continue;
+    const long g = given - full_points.begin();
+    ANIMSPACE_RETURN_IF_ERROR(check_key_point(m, k, key_values.data() + k * D, full_values.data() + g * D));
   }
   return Status::Ok();
 }

@@ -49,6 +49,11 @@ struct PmscModel {
   int region_count = 0;
   std::vector<int> point_regions;  // N (empty when region_count == 0)
   std::vector<int> key_regions;    // K
+  // Soft memberships w_ir of each output point in each region (N × region_count, rows sum to 1,
+  // at most 3 regions per point; local_fail_through.h), so that per-point blend weights have no
+  // seam at region borders. Empty: the hard regions, w_ir = [r = point_regions[i]] (models
+  // written before pmsc.region_weights).
+  Eigen::MatrixXd region_weights;
   // Soft-cache thresholds of each region's key-point error (region_errors), calibrated like
   // `epsilon` on each region's own points; empty: every region uses `epsilon` (models written
   // before per-region calibration). Read through region_thresholds().
@@ -162,6 +167,13 @@ inline constexpr double kKeyConsistencyAbsolute = 1e-3;
 // the key points. Error: kInvalidArgument naming the first key point that differs, its point
 // index, and both values.
 Status check_full_values_at_keys(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                                 const Eigen::Ref<const Eigen::VectorXf>& full_values);
+
+// The same check for partial full values (local fail-through): `full_points` (sorted, in
+// [0, control_point_count)) names the points whose D values `full_values` holds
+// (|full_points|·D); the key points among them are checked, the others cannot be.
+Status check_full_values_at_keys(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                                 const std::vector<int>& full_points,
                                  const Eigen::Ref<const Eigen::VectorXf>& full_values);
 
 // The thresholds region r's key-point error is compared with (local fail-through).

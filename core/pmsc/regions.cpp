@@ -7,6 +7,20 @@
 
 namespace animspace::pmsc {
 
+Eigen::MatrixXd motion_signatures(const Eigen::MatrixXd& basis, const Eigen::VectorXd& singular_values, int channels) {
+  assert(basis.cols() == singular_values.size() && channels >= 1);
+  const long D = channels;
+  const long N = basis.rows() / D;
+  const long M = basis.cols();
+  Eigen::MatrixXd features(N, D * M);
+  for (long i = 0; i < N; ++i) {
+    for (long d = 0; d < D; ++d) {
+      features.block(i, d * M, 1, M) = basis.row(i * D + d).cwiseProduct(singular_values.transpose());
+    }
+  }
+  return features;
+}
+
 Regions cluster_regions(const Eigen::MatrixXd& basis, const Eigen::VectorXd& singular_values, int channels,
                         const std::vector<int>& key_points, int region_count, uint32_t seed) {
   assert(basis.cols() == singular_values.size());
@@ -17,13 +31,7 @@ Regions cluster_regions(const Eigen::MatrixXd& basis, const Eigen::VectorXd& sin
   if (region_count < 1 || N == 0 || key_points.empty()) return out;
   const long k = std::min<long>(region_count, N);
 
-  // Signatures: one row per point, D·M columns.
-  Eigen::MatrixXd features(N, D * M);
-  for (long i = 0; i < N; ++i) {
-    for (long d = 0; d < D; ++d) {
-      features.block(i, d * M, 1, M) = basis.row(i * D + d).cwiseProduct(singular_values.transpose());
-    }
-  }
+  const Eigen::MatrixXd features = motion_signatures(basis, singular_values, channels);
 
   // k-means++ seeding.
   std::mt19937 rng(seed);

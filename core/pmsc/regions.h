@@ -16,6 +16,11 @@ struct Regions {
   std::vector<int> key_regions;    // K
 };
 
+// The motion signature of each point: the D × M block of its basis rows scaled by the singular
+// values, flattened to one row (N × D·M) — how the point moves along each subspace direction.
+// basis: R × M (R = N·D); singular_values: M.
+Eigen::MatrixXd motion_signatures(const Eigen::MatrixXd& basis, const Eigen::VectorXd& singular_values, int channels);
+
 // k-means (k-means++ seeding, fixed seed: deterministic) of the points' motion signatures — the
 // D × M block of basis rows of each point scaled by the singular values, i.e. how the point moves
 // along each subspace direction. Euclidean distance between signatures is invariant to rotating

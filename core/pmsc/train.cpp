@@ -9,6 +9,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "core/pmsc/key_points.h"
+#include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/regions.h"
 #include "core/geometry/rigid_fit.h"
@@ -236,6 +237,8 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     model.region_count = regions.count;
     model.point_regions = std::move(regions.point_regions);
     model.key_regions = std::move(regions.key_regions);
+    model.region_weights = soft_region_weights(motion_signatures(subspace.basis, subspace.sigma, D),
+                                               model.point_regions, model.region_count);
   }
 
   // ε from held-out training frames only (calibration.h): retrain the subspace without each

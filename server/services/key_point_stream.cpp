@@ -63,8 +63,9 @@ KeyPointStream::Outcome KeyPointStream::evaluate(const v1::KeyPointFrame& frame,
   }
   PoseOptions options;
   options.omit_points = frame.omit_points();
+  options.local_fail_through = frame.local_fail_through();
   v1::PoseResult result;
-  evaluate_pose(env_, model, input, options, &result);
+  if (grpc::Status s = evaluate_pose(env_, model, input, options, &result); !s.ok()) return Outcome::end(std::move(s));
   result.set_sequence(frame.sequence());
   grpc::ByteBuffer bytes;
   if (grpc::Status s = serialize_message(result, bytes); !s.ok()) return Outcome::end(std::move(s));

@@ -52,9 +52,11 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         if (grpc::Status s = check_batch_size(request->poses_size(), env_.options.max_batch_poses, "poses"); !s.ok()) {
           return s;
         }
+        const auto point_count = static_cast<uint64_t>(model->pmsc->point_count);
+        // Local fail-through may name every point: a varint index (≤ 5 bytes) and a float each.
         const uint64_t bytes_per_pose =
-            request->omit_points() ? 0 : uint64_t{4} * static_cast<uint64_t>(model->pmsc->point_count) *
-                                             static_cast<uint64_t>(model->pmsc->channel_count);
+            (request->omit_points() ? 0 : uint64_t{4} * point_count * static_cast<uint64_t>(model->pmsc->channel_count)) +
+            (request->local_fail_through() ? uint64_t{9} * point_count : 0);
         if (grpc::Status s = check_response_size(request->poses_size(), bytes_per_pose, env_.options.max_message_bytes,
                                                  "poses");
             !s.ok()) {
@@ -72,9 +74,10 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         PoseOptions options;
         options.include_region_errors = request->include_region_errors();
         options.omit_points = request->omit_points();
+        options.local_fail_through = request->local_fail_through();
         for (const PoseInput& input : inputs) {
           if (grpc::Status stop = call.stop_status(); !stop.ok()) return stop;
-          evaluate_pose(env_, *model, input, options, response->add_results());
+          if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->add_results()); !s.ok()) return s;
         }
         return grpc::Status::OK;
       });
@@ -103,15 +106,24 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
             !s.ok()) {
           return s;
         }
+        if (grpc::Status s = decode_point_indices(request->full_points(), "full_points",
+                                                  static_cast<uint32_t>(m.point_count), input.full_points);
+            !s.ok()) {
+          return s;
+        }
         // Nothing inconsistent reaches the miss log: it is tomorrow's training data.
         if (grpc::Status s = decode_full_values(*model, request->full_values(), "full_values", input.key_values,
-                                                input.full_values);
+                                                input.full_points, input.full_values);
             !s.ok()) {
           return s;
         }
         PoseOptions options;
         options.count_in_statistics = false;
-        response->set_logged(evaluate_pose(env_, *model, input, options, response->mutable_result()));
+        bool logged = false;
+        if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->mutable_result(), &logged); !s.ok()) {
+          return s;
+        }
+        response->set_logged(logged);
         return grpc::Status::OK;
       });
 }

@@ -217,7 +217,7 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
         }
       }
       v1::PoseResult* result = response->mutable_pose();
-      evaluate_pose(env, model, input, PoseOptions{}, result);
+      if (grpc::Status s = evaluate_pose(env, model, input, PoseOptions{}, result); !s.ok()) return s;
       scene.points = points_of(result->points());
       result->clear_points();  // the client asked for a picture; it has the points API for points
       if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;

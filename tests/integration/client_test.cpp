@@ -21,6 +21,7 @@
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/soft_cache.h"
+#include "animspace/v1/poses.grpc.pb.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
@@ -327,6 +328,123 @@ TEST_F(ClientTest, CompleteMissRefusesFullValuesThatAreNotTheKeyPoseAndNeverLogs
   EXPECT_EQ(logged_records(), before + 1);
 }
 
+// Local fail-through (issue #22): one region of frame f moved, so that only the regions whose
+// key points see it fail. The client computes and sends only the points the server names.
+TEST_F(ClientTest, LocalFailThroughNamesTheFailingPointsAndCompletesThemAlone) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  ASSERT_GT(pmsc_->region_count, 1);
+  const int moved_region = pmsc_->key_regions[0];
+  std::vector<float> full(frame(7).begin(), frame(7).end());
+  for (size_t i = 0; i < full.size() / 3; ++i) {
+    if (pmsc_->point_regions[i] == moved_region) full[3 * i + 1] += 0.1f;
+  }
+  const std::vector<float> v = keys.gather(full);
+  EvaluateOptions options;
+  options.local_fail_through = true;
+  const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3}, options);
+  ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "e_key " << evaluated.key_point_error;
+  ASSERT_GE(evaluated.full_points.size(), 2u);
+  const size_t N = full.size() / 3;
+  EXPECT_LT(evaluated.full_points.size(), N) << "every region failed: the test pose is not local";
+
+  // The points and weights, independently: each region's verdict (eqs. 9–11 on its own key
+  // points' RMS error and thresholds), weighted by the stored memberships.
+  pmsc::PoseEstimate estimate;
+  pmsc::evaluate(*pmsc_, Eigen::Map<const Eigen::VectorXf>(v.data(), static_cast<long>(v.size())), estimate);
+  std::vector<uint32_t> expected_points;
+  std::vector<double> expected_alpha;
+  for (size_t i = 0; i < N; ++i) {
+    double alpha = 0;
+    for (int r = 0; r < pmsc_->region_count; ++r) {
+      const double w = pmsc_->region_weights.size() > 0 ? pmsc_->region_weights(static_cast<long>(i), r)
+                                                          : (pmsc_->point_regions[i] == r ? 1.0 : 0.0);
+      alpha += w * pmsc::decide(estimate.region_errors[static_cast<size_t>(r)], pmsc::region_thresholds(*pmsc_, r)).alpha;
+    }
+    if (alpha > 0) {
+      expected_points.push_back(static_cast<uint32_t>(i));
+      expected_alpha.push_back(std::min(alpha, 1.0));
+    }
+  }
+  ASSERT_EQ(evaluated.full_points, expected_points);
+  for (size_t j = 0; j < expected_alpha.size(); ++j) {
+    EXPECT_NEAR(evaluated.full_point_blend_weights[j], expected_alpha[j], 1e-6) << "point " << expected_points[j];
+  }
+  // Without full values the answer is still the estimate.
+  EXPECT_TRUE(evaluated.full_evaluation_needed);
+
+  // The client's engine computes only those points.
+  std::vector<float> values;
+  for (uint32_t i : evaluated.full_points) values.insert(values.end(), &full[3 * i], &full[3 * i] + 3);
+  const auto log_path = work_->path() / (kPmsc + ".misses");
+  const CompletedMiss completed =
+      client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, values, evaluated.full_points);
+  EXPECT_TRUE(completed.logged);
+  EXPECT_FALSE(completed.result.full_evaluation_needed);
+  EXPECT_EQ(completed.result.full_points, evaluated.full_points);
+  size_t j = 0;
+  for (size_t i = 0; i < N; ++i) {
+    const bool computed = j < expected_points.size() && expected_points[j] == i;
+    const double alpha = computed ? expected_alpha[j++] : 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double expected = alpha * full[3 * i + c] + (1 - alpha) * evaluated.points.values[3 * i + c];
+      ASSERT_NEAR(completed.result.points.values[3 * i + c], expected, 1e-5) << "point " << i;
+    }
+  }
+  // The miss log keeps the partial frame as sent.
+  auto records = misslog::read_records(log_path, 0, nullptr);
+  ASSERT_TRUE(records.ok()) << records.error().message;
+  ASSERT_FALSE(records->empty());
+  EXPECT_EQ(records->back().full_points, evaluated.full_points);
+  EXPECT_EQ(records->back().full_values, values);
+
+  // Refusals name the field, with what was expected and what came.
+  auto refusal = [&](std::vector<uint32_t> points, std::vector<float> wrong) {
+    try {
+      client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, wrong, points);
+    } catch (const RpcError& e) {
+      EXPECT_EQ(e.code(), grpc::StatusCode::INVALID_ARGUMENT) << e.what();
+      return e.server_message();
+    }
+    ADD_FAILURE() << "bad full_points were accepted";
+    return std::string();
+  };
+  const uint32_t first = evaluated.full_points[0];
+  const std::vector<float> one_point(3, 0.0f);
+  const std::string out_of_range = refusal({static_cast<uint32_t>(N)}, one_point);
+  EXPECT_NE(out_of_range.find("full_points[0]: expected a point index below " + std::to_string(N) + " (the model's "
+                              "points), got " + std::to_string(N)),
+            std::string::npos)
+      << out_of_range;
+  std::vector<uint32_t> repeated = {first, first};
+  const std::string not_ascending = refusal(repeated, std::vector<float>(6, 0.0f));
+  EXPECT_NE(not_ascending.find("full_points[1]: expected an index above full_points[0] = " + std::to_string(first)),
+            std::string::npos)
+      << not_ascending;
+  std::vector<uint32_t> missing(evaluated.full_points.begin() + 1, evaluated.full_points.end());
+  std::vector<float> missing_values(values.begin() + 3, values.end());
+  const std::string uncovered = refusal(missing, missing_values);
+  EXPECT_NE(uncovered.find("full_points: point " + std::to_string(first) + " needs the full calculation"),
+            std::string::npos)
+      << uncovered;
+  EXPECT_EQ(records->size(), misslog::read_records(log_path, 0, nullptr)->size()) << "a refusal was logged";
+  // A value count that does not match the points (the wire allows it; the C++ client would not).
+  v1::CompleteMissRequest request;
+  request.mutable_model()->set_name(kPmsc);
+  *request.mutable_key_values() = make_point_array(v.data(), static_cast<uint32_t>(v.size() / 3), 3);
+  *request.mutable_full_values() = make_point_array(values.data(), 1, 3);
+  request.mutable_full_points()->Add(evaluated.full_points.begin(), evaluated.full_points.end());
+  auto stub = v1::PoseService::NewStub(grpc::CreateChannel(daemon_->address(), grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  v1::CompleteMissResponse response;
+  const grpc::Status status = stub->CompleteMiss(&context, request, &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find("full_values.point_count: expected " +
+                                        std::to_string(evaluated.full_points.size()) + " points (one per full_points "
+                                        "entry), got 1"),
+            std::string::npos)
+      << status.error_message();
+}
+
 TEST_F(ClientTest, SkeletonPosesEvaluateLikeTheCoreModel) {
   auto file = container::read_file(repo_->path() / kAnimationSpace / "1" / "model.anim");
   ASSERT_TRUE(file.ok());
@@ -429,6 +547,9 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   // The unseen pose misses and is completed with the rig's real full pose, which the server accepts
   // (it refuses full values that do not repeat the key values) and logs.
   EXPECT_NE(output.find("completed: MISS, logged for retraining: yes"), std::string::npos) << output;
+  // Local fail-through completes a pose whose forearm alone left the training set.
+  EXPECT_NE(output.find("local fail-through: "), std::string::npos) << output;
+  EXPECT_EQ(output.find("local fail-through: 1154 of 1154"), std::string::npos) << "nothing was local: " << output;
 }
 
 // Issue #21: `--help` was resolved as a host name. Every program answers it.

@@ -27,6 +27,7 @@
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
+#include "core/misslog/miss_log.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/train.h"
@@ -755,6 +756,44 @@ TEST_F(ServeTest, ServerFailThroughAndSkeletonPosesMatchTheAnimationSpaceModel) 
   EXPECT_LT((decode(skinned.poses(0).points()) - flatten(posed)).cwiseAbs().maxCoeff(), 1e-5 * diagonal);
   const Eigen::VectorXf normals = decode(skinned.poses(0).normals());
   for (long i = 0; i < normals.size() / 3; ++i) EXPECT_NEAR(normals.segment(3 * i, 3).norm(), 1.0, 1e-4);
+
+  // Local fail-through: the engine poses only the points the server names; every other point is
+  // the estimate f̂, computed here from the model file.
+  request.set_local_fail_through(true);
+  ASSERT_TRUE(evaluate(*poses, request, &response).ok());
+  const auto& local = response.results(0);
+  EXPECT_EQ(local.status(), v1::CACHE_STATUS_MISS);
+  EXPECT_FALSE(local.full_evaluation_needed());
+  ASSERT_GT(local.full_points_size(), 0);
+  ASSERT_EQ(local.full_point_blend_weights_size(), local.full_points_size());
+  auto pmsc_model = pmsc::load(*container, "arm-pmsc-engine");
+  ASSERT_TRUE(pmsc_model.ok()) << pmsc_model.error().message;
+  pmsc::PoseEstimate estimate;
+  pmsc::evaluate(*pmsc_model, gather(keys, full), estimate);
+  const Eigen::VectorXf answer = decode(local.points());
+  Eigen::VectorXf expected = estimate.points;
+  for (int j = 0; j < local.full_points_size(); ++j) {
+    const long i = local.full_points(j);
+    const float alpha = local.full_point_blend_weights(j);
+    if (j > 0) {
+      EXPECT_GT(local.full_points(j), local.full_points(j - 1));
+    }
+    expected.segment(3 * i, 3) = alpha * full.segment(3 * i, 3) + (1 - alpha) * estimate.points.segment(3 * i, 3);
+  }
+  EXPECT_LT((answer - expected).cwiseAbs().maxCoeff(), 1e-5 * diagonal);
+  // The miss log holds what the engine computed: a partial frame of exactly those points.
+  auto records = misslog::read_records(repo_ / "arm-pmsc-engine.misses", 0, nullptr);
+  ASSERT_TRUE(records.ok()) << records.error().message;
+  ASSERT_EQ(records->size(), 2u);  // the whole-pose miss above, then this one
+  EXPECT_TRUE(records->front().full_points.empty());
+  ASSERT_EQ(records->back().full_points.size(), static_cast<size_t>(local.full_points_size()));
+  for (int j = 0; j < local.full_points_size(); ++j) {
+    const uint32_t i = local.full_points(j);
+    EXPECT_EQ(records->back().full_points[static_cast<size_t>(j)], i);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(records->back().full_values[static_cast<size_t>(3 * j + c)], full(3 * i + c), 1e-5 * diagonal);
+    }
+  }
 
   auto levels = lod::load_levels(*animspace_container, *animspace_model, "arm-animspace");
   ASSERT_TRUE(levels.ok());

@@ -267,6 +267,64 @@ def test_complete_miss_blends_the_clients_full_values(client, arm_transforms):
     np.testing.assert_allclose(done.points, alpha * full + (1 - alpha) * result.points, atol=2e-5)
 
 
+def _per_point_blend(estimate, full, points, weights):
+    """Local fail-through's answer, computed here: α_i·f_i + (1 − α_i)·f̂_i at the named points."""
+    expected = np.array(estimate, np.float64)
+    alpha = np.asarray(weights, np.float64)[:, np.newaxis]
+    expected[points] = alpha * full[points] + (1 - alpha) * expected[points]
+    return expected
+
+
+def test_local_fail_through_names_the_points_to_compute_and_completes_only_those(client, arm_transforms):
+    keys = client.describe_key_points("arm-pmsc")
+    full = posed_arm(client, arm_transforms(2.9))
+    whole = client.evaluate_key_points("arm-pmsc", full[keys.indices])
+    local = client.evaluate_key_points("arm-pmsc", full[keys.indices], local_fail_through=True)
+    # The whole-pose verdict is unchanged; the answer without full values is still the estimate.
+    assert (local.status, local.key_point_error, local.blend_weight) == (whole.status, whole.key_point_error,
+                                                                          whole.blend_weight)
+    assert local.status in ("BLEND", "MISS") and local.full_evaluation_needed
+    np.testing.assert_array_equal(local.points, whole.points)
+    points, weights = local.full_points, local.full_point_blend_weights
+    assert points.dtype == np.uint32 and weights.dtype == np.float32
+    assert len(points) == len(weights) > 1 and np.all(np.diff(points.astype(np.int64)) > 0)
+    assert points[-1] < len(full) and np.all((weights > 0) & (weights <= 1))
+    assert len(whole.full_points) == 0  # not asked for
+
+    completion = client.complete_miss("arm-pmsc", full[keys.indices], full[points], full_points=points,
+                                      version=local.model_version)
+    assert completion.logged and not completion.result.full_evaluation_needed
+    np.testing.assert_array_equal(completion.result.full_points, points)
+    np.testing.assert_allclose(completion.result.points, _per_point_blend(local.points, full, points, weights),
+                               atol=2e-5)
+
+    # The server recomputes which points are needed: leaving one out is refused, naming the field.
+    with pytest.raises(animspace.InvalidArgument) as refused:
+        client.complete_miss("arm-pmsc", full[keys.indices], full[points[1:]], full_points=points[1:],
+                             version=local.model_version)
+    assert f"full_points: point {points[0]} needs the full calculation" in refused.value.message
+    with pytest.raises(ValueError, match="full_values: expected 2 rows, one per full_points entry"):
+        client.complete_miss("arm-pmsc", full[keys.indices], full, full_points=points[:2])
+
+    # A stream names the same points.
+    streamed = list(client.stream_key_points("arm-pmsc", [full[keys.indices]], local_fail_through=True))
+    np.testing.assert_array_equal(streamed[0].full_points, points)
+
+
+def test_local_fail_through_with_a_server_engine_poses_only_the_named_points(client, arm_transforms):
+    keys = client.describe_key_points("arm-pmsc-engine")
+    G = arm_transforms(2.9)
+    full = posed_arm(client, G)
+    estimate = client.evaluate_key_points("arm-pmsc-engine", full[keys.indices], local_fail_through=True)
+    assert estimate.status in ("BLEND", "MISS") and len(estimate.full_points) > 0
+    served = client.evaluate_key_points("arm-pmsc-engine", full[keys.indices], skeleton_pose=G,
+                                        local_fail_through=True)
+    assert not served.full_evaluation_needed
+    np.testing.assert_array_equal(served.full_points, estimate.full_points)
+    np.testing.assert_allclose(served.points, _per_point_blend(estimate.points, full, estimate.full_points,
+                                                               estimate.full_point_blend_weights), atol=2e-5)
+
+
 # ----------------------------------------------------------------------------------------------
 # Streaming
 

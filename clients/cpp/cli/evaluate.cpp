@@ -30,6 +30,8 @@ CLI::App* add_evaluate(CLI::App& app, EvaluateArgs& a) {
       ->check(CLI::Range(1u, 1u << 20))
       ->capture_default_str();
   cmd->add_flag("--region-errors", a.region_errors, "Print per-region key-point errors (models with regions)");
+  cmd->add_flag("--local-fail-through", a.local_fail_through,
+                "On a blend or miss, list the points that need the full calculation (those of the failing regions)");
   cmd->add_flag("-q,--quiet", a.quiet, "Print the summary only, not one line per frame");
   cmd->add_flag("-v,--verbose", a.verbose, "One line per frame (the default; kept for older scripts)");
   cmd->add_option("-o,--output", a.output,
@@ -62,6 +64,7 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
   EvaluateOptions options;
   options.version = keys.model_version;
   options.include_region_errors = a.region_errors;
+  options.local_fail_through = a.local_fail_through;
   mesh_io::PointCache returned;
   nlohmann::json per_frame = nlohmann::json::array();
   uint64_t counts[4] = {0, 0, 0, 0};
@@ -108,12 +111,19 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
                                     {"status", cache_status_name(region.status)}});
         }
       }
+      if (a.local_fail_through) {
+        row["full_points"] = r.full_points;
+        row["full_point_blend_weights"] = r.full_point_blend_weights;
+      }
       if (!a.quiet && !json) {
         char error_text[32] = "n/a";
         if (comparable) std::snprintf(error_text, sizeof error_text, "%.6g", max_distance);
         std::printf("frame %5d  %-5s  e_key %.6g  alpha %.3f  max point error %s%s\n", selected[first + i],
                     cache_status_name(r.status), r.key_point_error, r.blend_weight, error_text,
                     r.full_evaluation_needed ? "  (estimate: full values needed)" : "");
+        if (a.local_fail_through && r.status != v1::CACHE_STATUS_HIT) {
+          std::printf("         full points: %zu of %u\n", r.full_points.size(), r.points.point_count);
+        }
         for (const auto& region : r.region_errors) {
           std::printf("         region %u: %-5s e_key %.6g\n", region.region, cache_status_name(region.status),
                       region.key_point_error);

@@ -20,6 +20,7 @@ struct EvaluateArgs {
   std::string select = "::";
   uint32_t batch = 32;
   bool region_errors = false;
+  bool local_fail_through = false;
   bool verbose = false;  // accepted for scripts written when one line per frame needed -v
   bool quiet = false;    // the summary only
   std::string output;    // .pc2 of the returned points, "" = none

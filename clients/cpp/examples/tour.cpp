@@ -1,6 +1,6 @@
 // The README's "Query it from C++", compiled and run by the tests against a real daemon so that
 // the snippet a newcomer pastes keeps working: key points in and the whole pose out, a miss
-// completed with the real full pose, a sequence streamed with back-pressure, a skeleton pose, a LOD
+// completed with the real full pose, then with the failing regions' points only, a sequence streamed with back-pressure, a skeleton pose, a LOD
 // mesh and a thumbnail. "Your posing engine" is the demo's expensive arm rig (core/demo), the one
 // the demo's arm-pmsc model was trained on.
 //
@@ -76,6 +76,29 @@ int main(int argc, char** argv) try {
     const auto completed = client.complete_miss("arm-pmsc", result.model_version, {values, keys.channel_count}, full);
     std::printf("completed: %s, logged for retraining: %s\n", animspace::cache_status_name(completed.result.status),
                 completed.logged ? "yes" : "no");
+  }
+
+  // Local fail-through: a trained pose with the forearm twisted half as far again, the upper
+  // arm as trained. The server names the points whose regions' key points fail (the others are
+  // already right), so the engine computes and sends only those; the answer is blended point by
+  // point and the partial frame is logged for retraining.
+  animspace::demo::ArmPose twisted = animspace::demo::demo_pose(0.3);
+  twisted.forearm_twist_rad *= 1.5;
+  const std::vector<float> bent = full_pose(rig, twisted);
+  const std::vector<float> bent_keys = keys.gather(bent);
+  animspace::EvaluateOptions local_options;
+  local_options.local_fail_through = true;
+  const animspace::PoseResult local =
+      client.evaluate_key_points("arm-pmsc", {bent_keys, keys.channel_count}, local_options);
+  if (!local.full_points.empty()) {
+    std::vector<float> needed;  // a real engine evaluates just these points
+    for (uint32_t i : local.full_points) {
+      needed.insert(needed.end(), bent.begin() + 3 * i, bent.begin() + 3 * (i + 1));
+    }
+    const auto completed = client.complete_miss("arm-pmsc", local.model_version, {bent_keys, keys.channel_count},
+                                                needed, local.full_points);
+    std::printf("local fail-through: %zu of %u points computed, logged for retraining: %s\n",
+                local.full_points.size(), local.points.point_count, completed.logged ? "yes" : "no");
   }
 
   // A sequence: one writer thread, results read in order; write() blocks while `window` results

@@ -335,6 +335,7 @@ class Client:
     def evaluate_key_points(self, model: str, key_values: npt.ArrayLike, *, version: int = 0,
                             skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
                             include_region_errors: bool = False, omit_points: bool = False,
+                            local_fail_through: bool = False,
                             deadline_s: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
         """Key points in, the whole pose out, through the soft cache.
 
@@ -348,6 +349,9 @@ class Client:
             space: "global" (G_j) or "local" (L_j) for ``skeleton_pose``.
             include_region_errors: return per-region e_key (models with regions).
             omit_points: return only the verdicts (``points`` is None): cheap probing.
+            local_fail_through: on a blend or miss, name in ``PoseResult.full_points`` only the
+                points that need the full calculation (those of the regions whose key points
+                fail); complete them with ``complete_miss(..., full_points=...)``.
 
         Raises:
             ValueError: for a wrong shape, naming the argument (nothing is sent).
@@ -374,7 +378,8 @@ class Client:
             raise ValueError(f"space: expected 'global' or 'local', got {space!r}")
         request = poses_pb2.EvaluateKeyPointsRequest(model=_model_ref(model, version),
                                                      include_region_errors=include_region_errors,
-                                                     omit_points=omit_points)
+                                                     omit_points=omit_points,
+                                                     local_fail_through=local_fail_through)
         for i in range(poses.shape[0]):
             pose = request.poses.add()
             pose.key_values.CopyFrom(_point_array(poses[i]))
@@ -390,6 +395,7 @@ class Client:
     @_renamed_keywords(timeout="deadline_s")
     def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
                           version: int = 0, omit_points: bool = False, first_sequence: int = 0,
+                          local_fail_through: bool = False,
                           deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
         """Plays a sequence through the soft cache over one StreamKeyPoints call: one result per
         frame, yielded in frame order as they arrive.
@@ -403,7 +409,7 @@ class Client:
 
         The call starts when iteration starts; ``deadline_s`` (or the client's deadline) bounds the
         whole stream — pass a generous one for a long sequence. Stopping the iteration early
-        cancels the call.
+        cancels the call. ``local_fail_through`` is ``evaluate_key_points``' for every frame.
 
         Raises:
             ValueError: a frame of the wrong shape — after the results of every frame before it.
@@ -412,7 +418,7 @@ class Client:
             InvalidArgument etc.: a frame the server refused (the message names its sequence).
         """
         # Arguments are checked now; the call starts with the iteration.
-        requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence)
+        requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence, local_fail_through)
         self._deadline(deadline_s)
         return self._stream_key_points(requests, first_sequence, deadline_s)
 
@@ -444,6 +450,7 @@ class Client:
 
     @_renamed_keywords(timeout="deadline_s")
     def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
+                      full_points: Optional[npt.ArrayLike] = None,
                       deadline_s: Optional[float] = None) -> MissCompletion:
         """Completes a blend or miss with the full pose from the client's posing engine
         (fail-through "CLIENT"), and logs it for retraining.
@@ -452,13 +459,31 @@ class Client:
         and the ``version`` that produced the estimate (``PoseResult.model_version``). The answer
         is α·full + (1−α)·estimate with the α of this pose.
 
+        Local fail-through: with ``full_points`` (ascending point indices, at least the
+        ``PoseResult.full_points`` of this pose), ``full_values`` holds only those points' values
+        (len(full_points)×D, same order); the answer is blended point by point and the miss log
+        keeps a partial frame.
+
         Raises:
+            ValueError: ``full_values`` rows differ from ``full_points`` (nothing is sent).
+            InvalidArgument: ``full_points`` not ascending, out of range, or missing a point that
+                needs the full calculation (the message names ``full_points``).
             FailedPrecondition: for a cross-PMSC model (no full calculation exists).
         """
         keys = wire.as_points("key_values", key_values, points_label="K")
         full = wire.as_points("full_values", full_values)
+        points = np.zeros(0, np.uint32)
+        if full_points is not None:
+            points = np.asarray(full_points)
+            if points.ndim != 1 or (points.size > 0 and not np.issubdtype(points.dtype, np.integer)):
+                raise ValueError(f"full_points: expected a 1-D array of point indices, got shape "
+                                 f"{wire.shape_text(points.shape)} of {points.dtype}")
+            if points.size > 0 and full.shape[0] != points.size:
+                raise ValueError(f"full_values: expected {points.size} rows, one per full_points entry, got "
+                                 f"{full.shape[0]}")
         request = poses_pb2.CompleteMissRequest(model=_model_ref(model, version), key_values=_point_array(keys),
-                                                full_values=_point_array(full))
+                                                full_values=_point_array(full),
+                                                full_points=[int(p) for p in points])
         response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, deadline_s)
         with _decoding("CompleteMiss"):
             return MissCompletion(result=PoseResult.from_proto(response.result, "result.points"),
@@ -691,11 +716,12 @@ class _FrameRequests:
     """
 
     def __init__(self, model: common_pb2.ModelRef, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]],
-                 omit_points: bool, first_sequence: int) -> None:
+                 omit_points: bool, first_sequence: int, local_fail_through: bool = False) -> None:
         first_sequence = wire.as_uint("first_sequence", first_sequence, 64)
         self._model = model
         self._frames = frames
         self._omit_points = omit_points
+        self._local_fail_through = local_fail_through
         self._first_sequence = first_sequence
         self.sent = 0
         self.failure: Optional[BaseException] = None
@@ -711,7 +737,8 @@ class _FrameRequests:
                 elif values.shape != shape:
                     raise ValueError(f"frames[{i}]: expected shape {wire.shape_text(shape)} like frames[0], "
                                      f"got {wire.shape_text(values.shape)}")
-                message = poses_pb2.KeyPointFrame(sequence=self._first_sequence + i, omit_points=self._omit_points)
+                message = poses_pb2.KeyPointFrame(sequence=self._first_sequence + i, omit_points=self._omit_points,
+                                                  local_fail_through=self._local_fail_through)
                 if i == 0:
                     message.model.CopyFrom(self._model)  # later frames keep the stream's model
                 message.pose.CopyFrom(KeyPointPose(values, pose.skeleton_pose, pose.space).to_proto(f"frames[{i}]"))

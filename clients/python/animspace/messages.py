@@ -327,6 +327,12 @@ class PoseResult:
             full pose and send it with ``Client.complete_miss`` (or accept the estimate).
         region_errors: per-region errors when requested and the model has regions.
         sequence: the frame's sequence number (streams only; 0 otherwise).
+        full_points: local fail-through (requested; blend or miss): uint32 indices, ascending, of
+            the points that need the full calculation — send their values with
+            ``Client.complete_miss(..., full_points=...)``. Empty when every region is within
+            tolerance (``points`` is then the answer) or local fail-through was not requested.
+        full_point_blend_weights: float32 α_i ∈ (0, 1] of each of ``full_points``: point i of the
+            answer is α_i·f_i + (1 − α_i)·f̂_i.
     """
 
     __repr__ = compact_repr
@@ -339,6 +345,8 @@ class PoseResult:
     full_evaluation_needed: bool
     region_errors: Tuple[RegionError, ...] = ()
     sequence: int = 0
+    full_points: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
+    full_point_blend_weights: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
 
     @property
     def hit(self) -> bool:
@@ -350,7 +358,9 @@ class PoseResult:
         return cls(points=points, status=_status(m.status), key_point_error=m.key_point_error,
                    blend_weight=m.blend_weight, model_version=m.model_version,
                    full_evaluation_needed=m.full_evaluation_needed,
-                   region_errors=tuple(RegionError.from_proto(r) for r in m.region_errors), sequence=m.sequence)
+                   region_errors=tuple(RegionError.from_proto(r) for r in m.region_errors), sequence=m.sequence,
+                   full_points=np.array(m.full_points, dtype=np.uint32),
+                   full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32))
 
 
 @dataclass(frozen=True, eq=False)

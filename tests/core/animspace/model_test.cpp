@@ -51,6 +51,26 @@ TEST(AnimationSpaceModelTest, EvaluationEqualsDenseAnimationProjection) {
   }
 }
 
+// Local fail-through poses only the vertices it names: each equals the dense projection G·p_i.
+TEST(AnimationSpaceModelTest, EvaluatingListedVerticesEqualsTheDenseProjectionOfEach) {
+  const Skeleton skeleton = random_skeleton(6, 3);
+  const AnimationSpaceModel model = random_model(skeleton, 200, 4);
+  std::mt19937_64 engine(6);
+  const TransformList globals = random_pose(skeleton, engine, 2.0);
+  Eigen::MatrixXd G(4, 4 * skeleton.bone_count());
+  for (int j = 0; j < skeleton.bone_count(); ++j) G.middleCols<4>(4 * j) = globals[static_cast<size_t>(j)];
+  const std::vector<int> vertices = {0, 17, 18, 150, 199};
+  PointMatrix posed;
+  evaluate_vertices(model, globals, vertices, posed);
+  ASSERT_EQ(posed.rows(), 5);
+  for (size_t j = 0; j < vertices.size(); ++j) {
+    const Eigen::Vector4d v = G * dense_position(model, vertices[j]);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(posed(static_cast<long>(j), c), v(c), 1e-5 * (1 + std::abs(v(c))));
+  }
+  evaluate_vertices(model, globals, {}, posed);
+  EXPECT_EQ(posed.rows(), 0);
+}
+
 // Large enough to run on several threads: chunked evaluation must equal a plain loop.
 TEST(AnimationSpaceModelTest, ThreadedEvaluationMatchesSerialSum) {
   const Skeleton skeleton = random_skeleton(10, 6);

@@ -70,5 +70,61 @@ TEST(MissFrames, KeepsConsistentCompletedMissesAndCountsWhatItLeavesOut) {
   EXPECT_EQ(frames->last_sequence, 0u);
 }
 
+// Three points of one channel, a one-vector subspace a = (1, 2, 2)/3, keys at points 0 and 1:
+// key values (1, 1) give f̂ = (0.6, 1.2, 1.2) (pmsc_model_test's hand-worked example).
+pmsc::PmscModel three_point_model() {
+  pmsc::PmscModel m;
+  m.channel_count = 1;
+  m.point_count = 3;
+  m.control_point_count = 3;
+  m.mean = Eigen::VectorXf::Zero(3);
+  m.basis.resize(3, 1);
+  m.basis << 1.0f / 3, 2.0f / 3, 2.0f / 3;
+  m.key_points = {0, 1};
+  m.key_mean = Eigen::VectorXd::Zero(2);
+  m.key_basis.resize(2, 1);
+  m.key_basis << m.basis(0, 0), m.basis(1, 0);
+  m.epsilon = {0.1, 0.5};
+  return m;
+}
+
+MissRecord partial_record(uint64_t version, std::vector<uint32_t> points, std::vector<float> full) {
+  MissRecord r = record(version, {1, 1}, std::move(full));
+  r.channel_count = 1;
+  r.full_points = std::move(points);
+  return r;
+}
+
+TEST(MissFrames, CompletesPartialFramesWithKeyValuesAndTheEstimate) {
+  pmsc::PmscModel model = three_point_model();
+  ASSERT_TRUE(pmsc::prepare_projection(model).ok());
+  testing::TempDir dir;
+  const auto path = dir.path() / "m.misses";
+  {
+    auto log = MissLog::open(path, FsyncPolicy::kNever, std::chrono::milliseconds(10));
+    ASSERT_TRUE(log.ok()) << log.error().message;
+    // 1: point 2 computed. 2: key point 0 computed (consistent). 3: key point 1 computed as 0,
+    // not its key value 1. 4: another model version (its key set is unknown). 5: a point the
+    // model does not have.
+    for (MissRecord r : {partial_record(1, {2}, {5}), partial_record(1, {0}, {1}), partial_record(1, {1}, {0}),
+                         partial_record(2, {2}, {5}), partial_record(1, {7}, {5})}) {
+      ASSERT_TRUE((*log)->append(r).ok());
+    }
+  }
+  auto frames = read_miss_frames(path, 0, model, 1);
+  ASSERT_TRUE(frames.ok()) << frames.error().message;
+  ASSERT_EQ(frames->frames.rows(), 2);
+  EXPECT_EQ(frames->partial, 2u);
+  EXPECT_EQ(frames->inconsistent, 1u);
+  EXPECT_EQ(frames->skipped, 2u);
+  // Key points take their key values, computed points their values, the rest f̂ — here from an
+  // independent evaluation of the record's key values.
+  pmsc::PoseEstimate estimate;
+  evaluate(model, Eigen::Vector2f(1, 1), estimate);
+  EXPECT_NEAR(estimate.points(2), 1.2, 1e-6);  // 1.8 · 2/3 by hand
+  EXPECT_EQ(frames->frames.row(0), (Eigen::RowVectorXf(3) << 1, 1, 5).finished());
+  EXPECT_EQ(frames->frames.row(1), (Eigen::RowVectorXf(3) << 1, 1, estimate.points(2)).finished());
+}
+
 }  // namespace
 }  // namespace animspace::misslog

@@ -81,6 +81,7 @@ void expect_same_content(const MissRecord& expected, const MissRecord& actual) {
   EXPECT_EQ(expected.channel_count, actual.channel_count);
   EXPECT_EQ(expected.key_values, actual.key_values);
   EXPECT_EQ(expected.full_values, actual.full_values);
+  EXPECT_EQ(expected.full_points, actual.full_points);
 }
 
 std::unique_ptr<MissLog> open_or_die(const fs::path& path,
@@ -178,7 +179,7 @@ TEST(MissLog, WritesTheDocumentedByteLayout) {
   const std::string bytes = read_bytes(path);
   ASSERT_EQ(bytes.size(), kFileHeaderSize + record_size(3, 6));
   EXPECT_EQ(std::memcmp(bytes.data(), kFileMagic, 8), 0);
-  EXPECT_EQ(load_le<uint32_t>(bytes, 8), 2U);   // format version
+  EXPECT_EQ(load_le<uint32_t>(bytes, 8), 3U);   // format version
   EXPECT_EQ(load_le<uint32_t>(bytes, 12), 0U);  // reserved
 
   const size_t r = kFileHeaderSize;
@@ -193,8 +194,8 @@ TEST(MissLog, WritesTheDocumentedByteLayout) {
   EXPECT_EQ(load_le<double>(bytes, p + 24), 0.125 * 7 + 0.001);
   EXPECT_EQ(load_le<double>(bytes, p + 32), 1.0 / 9.0);
   EXPECT_EQ(load_le<uint32_t>(bytes, p + 40), 3U);  // channels
-  EXPECT_EQ(load_le<uint8_t>(bytes, p + 44), 2U);  // status: version 2's code for a miss
-  EXPECT_EQ(bytes.substr(p + 45, 3), std::string(3, '\0'));
+  EXPECT_EQ(load_le<uint8_t>(bytes, p + 44), 2U);  // status: version 2's (and 3's) code for a miss
+  EXPECT_EQ(bytes.substr(p + 45, 3), std::string(3, '\0'));  // layout 0: a whole frame; reserved
   EXPECT_EQ(load_le<uint32_t>(bytes, p + 48), 3U);  // key value count
   EXPECT_EQ(load_le<uint32_t>(bytes, p + 52), 6U);  // full value count
   for (size_t i = 0; i < 3; ++i) EXPECT_EQ(load_le<float>(bytes, p + 56 + 4 * i), value_of(7, i));
@@ -508,8 +509,8 @@ TEST(MissLogHeader, BadFileHeaderIsDataLossAndLeavesTheFileAlone) {
   std::vector<Case> cases;
   cases.push_back({"magic", 0, good});
   cases.back().bytes[3] = 'X';
-  cases.push_back({"version 3", 8, good});
-  store_le<uint32_t>(cases.back().bytes, 8, 3);
+  cases.push_back({"version 4", 8, good});
+  store_le<uint32_t>(cases.back().bytes, 8, 4);
   cases.push_back({"version 0", 8, good});
   store_le<uint32_t>(cases.back().bytes, 8, 0);
   cases.push_back({"reserved", 12, good});
@@ -612,8 +613,8 @@ TEST(MissLogCompatibility, Version1LogsReadWithTheirOwnStatusCodesAndStayVersion
 }
 
 TEST(MissLogCompatibility, StatusCodesMeanWhatTheirVersionSays) {
-  // Code 1 is a blend in version 2 but no status at all in version 1; code 3 the reverse.
-  for (const uint32_t version : {1U, 2U}) {
+  // Code 1 is a blend in versions 2 and 3 but no status at all in version 1; code 3 the reverse.
+  for (const uint32_t version : {1U, 2U, 3U}) {
     for (const uint8_t code : {uint8_t{1}, uint8_t{2}, uint8_t{3}}) {
       SCOPED_TRACE("version " + std::to_string(version) + ", code " + std::to_string(code));
       TempDir dir;
@@ -633,6 +634,86 @@ TEST(MissLogCompatibility, StatusCodesMeanWhatTheirVersionSays) {
       EXPECT_EQ(records[0].status, expected);
     }
   }
+}
+
+// Version 3's partial frames (local fail-through), byte by byte from docs/FORMATS.md: layout byte
+// 45 = 1, then the listed points (uint32, ascending) between the key and the full values.
+TEST(MissLogPartialFrames, PartialRecordsRoundTripInTheDocumentedLayout) {
+  TempDir dir;
+  const fs::path path = dir / "partial.misses";
+  MissRecord partial = make_record(4, 3, 6);
+  partial.full_points = {2, 9};
+  MissRecord whole = make_record(5, 3, 6);
+  {
+    auto log = open_or_die(path);
+    ASSERT_NE(log, nullptr);
+    EXPECT_EQ(log->format_version(), 3U);
+    ASSERT_TRUE(log->append(partial).ok());
+    ASSERT_TRUE(log->append(whole).ok());
+  }
+  const std::string bytes = read_bytes(path);
+  const size_t p = kFileHeaderSize + kRecordHeaderSize;
+  EXPECT_EQ(load_le<uint32_t>(bytes, kFileHeaderSize + 4), kFixedPayloadSize + 4 * (3 + 2 + 6));
+  EXPECT_EQ(load_le<uint8_t>(bytes, p + 45), 1U);    // layout: partial
+  EXPECT_EQ(load_le<uint32_t>(bytes, p + 52), 6U);   // full value count: 2 points · 3
+  EXPECT_EQ(load_le<uint32_t>(bytes, p + 56 + 12), 2U);
+  EXPECT_EQ(load_le<uint32_t>(bytes, p + 56 + 16), 9U);
+  EXPECT_EQ(load_le<float>(bytes, p + 56 + 20), -value_of(4, 0));
+  ASSERT_EQ(bytes.size(), kFileHeaderSize + record_size(3, 6) + 8 + record_size(3, 6));
+
+  const std::vector<MissRecord> records = read_or_die(path);
+  ASSERT_EQ(records.size(), 2U);
+  expect_same_content(partial, records[0]);
+  expect_same_content(whole, records[1]);
+}
+
+TEST(MissLogPartialFrames, MalformedPartialRecordsAreRefusedNamingTheField) {
+  TempDir dir;
+  auto log = open_or_die(dir / "m.misses");
+  ASSERT_NE(log, nullptr);
+  MissRecord unsorted = make_record(2, 3, 6);
+  unsorted.full_points = {5, 5};
+  auto appended = log->append(unsorted);
+  ASSERT_FALSE(appended.ok());
+  EXPECT_EQ(appended.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(appended.error().message.find("full_points[1] = 5 does not follow 5"), std::string::npos)
+      << appended.error().message;
+  MissRecord miscounted = make_record(2, 3, 6);
+  miscounted.full_points = {1, 2, 3};
+  appended = log->append(miscounted);
+  ASSERT_FALSE(appended.ok());
+  EXPECT_NE(appended.error().message.find("full_values (6) must be 3 values for each of the 3 full_points"),
+            std::string::npos)
+      << appended.error().message;
+  EXPECT_EQ(log->record_count(), 0U);
+}
+
+TEST(MissLogPartialFrames, OlderLogsKeepWholeFramesAndRefusePartialOnes) {
+  TempDir dir;
+  const fs::path path = dir / "v2.misses";
+  std::string bytes(reinterpret_cast<const char*>(kFileMagic), 8);
+  bytes += std::string(8, '\0');
+  store_le<uint32_t>(bytes, 8, 2);
+  write_bytes(path, bytes);
+  auto log = open_or_die(path);
+  ASSERT_NE(log, nullptr);
+  EXPECT_EQ(log->format_version(), 2U);
+  MissRecord partial = make_record(2, 3, 3);
+  partial.full_points = {4};
+  auto appended = log->append(partial);
+  ASSERT_FALSE(appended.ok());
+  EXPECT_EQ(appended.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_NE(appended.error().message.find("format version 2 holds whole frames only"), std::string::npos)
+      << appended.error().message;
+  MissRecord whole = make_record(2, 3, 3);
+  ASSERT_TRUE(log->append(whole).ok());
+  log.reset();
+  const std::string after = read_bytes(path);
+  EXPECT_EQ(load_le<uint32_t>(after, 8), 2U);
+  EXPECT_EQ(after.size(), kFileHeaderSize + record_size(3, 3));
+  const std::vector<MissRecord> records = read_or_die(path);
+  ASSERT_EQ(records.size(), 1U);
+  expect_same_content(whole, records[0]);
 }
 
 TEST(MissLogHeader, MissingAndEmptyFiles) {

@@ -4,6 +4,7 @@
 // the integration suite also makes against a daemon process (tests/integration/serve_test.cpp,
 // security_test.cpp), here without one.
 #include <cmath>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -16,7 +17,11 @@
 #include "animspace/v1/models.grpc.pb.h"
 #include "animspace/v1/poses.grpc.pb.h"
 #include "animspace/v1/stats.grpc.pb.h"
+#include "core/container/model_container.h"
+#include "core/container/sections.h"
 #include "core/demo/demo_repository.h"
+#include "core/misslog/miss_log.h"
+#include "core/pmsc/pmsc_io.h"
 #include "tests/server/support/in_process_server.h"
 #include "tests/support/test_support.h"
 
@@ -173,6 +178,78 @@ TEST_F(PoseAndModelServiceTest, UnloadedModelsAreRefusedAndListedNoMore) {
     for (const auto& version : model.versions())
       EXPECT_NE(version.state(), v1::VERSION_STATE_AVAILABLE) << "still serving";
   }
+}
+
+// A miss log created before partial frames (format version 2) cannot hold one: the server logs
+// the frame retraining would complete — the computed points, the key values at the key points,
+// the estimate f̂ elsewhere — as a whole frame, in the log's own version.
+TEST_F(PoseAndModelServiceTest, PartialFramesReachAnOldMissLogAsCompletedFrames) {
+  {
+    std::ofstream old(work_.path() / (kPmsc + ".misses"), std::ios::binary);
+    const char header[16] = {'\x89', 'M', 'I', 'S', '\r', '\n', '\x1a', '\n', 2, 0, 0, 0, 0, 0, 0, 0};
+    old.write(header, sizeof header);
+  }
+  serve();
+  auto stored = container::read_file(repository() / kPmsc / "1" / "model.anim");
+  ASSERT_TRUE(stored.ok());
+  auto model = pmsc::load(*stored, kPmsc);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  auto arm = container::read_file(repository() / std::string(demo::kDemoModelName) / "1" / "model.anim");
+  ASSERT_TRUE(arm.ok());
+  auto frames = arm->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames.ok());
+  Eigen::VectorXf full = frames->row(3).transpose();
+  for (long i = 0; i < full.size(); i += 3) full(i + 1) += 0.05f * static_cast<float>(i % 7);  // off the subspace
+  const Eigen::VectorXf keys = pmsc::gather_key_values(*model, full);
+  const auto K = static_cast<uint32_t>(model->key_point_count());
+
+  v1::EvaluateKeyPointsRequest request;
+  request.mutable_model()->set_name(kPmsc);
+  request.set_local_fail_through(true);
+  *request.add_poses()->mutable_key_values() = point_array({keys.data(), keys.data() + keys.size()}, K, 3);
+  v1::EvaluateKeyPointsResponse evaluated;
+  {
+    grpc::ClientContext context;
+    ASSERT_TRUE(poses_->EvaluateKeyPoints(&context, request, &evaluated).ok());
+  }
+  const v1::PoseResult& result = evaluated.results(0);
+  ASSERT_NE(result.status(), v1::CACHE_STATUS_HIT);
+  ASSERT_GT(result.full_points_size(), 0);
+  std::vector<float> values;
+  for (uint32_t i : result.full_points()) values.insert(values.end(), &full(3 * i), &full(3 * i) + 3);
+  v1::CompleteMissRequest complete;
+  complete.mutable_model()->set_name(kPmsc);
+  *complete.mutable_key_values() = request.poses(0).key_values();
+  *complete.mutable_full_values() = point_array(values, static_cast<uint32_t>(result.full_points_size()), 3);
+  *complete.mutable_full_points() = result.full_points();
+  v1::CompleteMissResponse completed;
+  {
+    grpc::ClientContext context;
+    const grpc::Status status = poses_->CompleteMiss(&context, complete, &completed);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  EXPECT_TRUE(completed.logged());
+
+  auto records = misslog::read_records(work_.path() / (kPmsc + ".misses"), 0, nullptr);
+  ASSERT_TRUE(records.ok()) << records.error().message;
+  ASSERT_EQ(records->size(), 2u);  // the evaluation's miss (no full values), then the completion
+  const misslog::MissRecord& logged = records->back();
+  EXPECT_TRUE(logged.full_points.empty());
+  ASSERT_EQ(logged.full_values.size(), static_cast<size_t>(full.size()));
+  pmsc::PoseEstimate estimate;
+  pmsc::evaluate(*model, keys, estimate);
+  std::vector<float> expected(estimate.points.data(), estimate.points.data() + estimate.points.size());
+  for (int k = 0; k < model->key_point_count(); ++k) {
+    for (int c = 0; c < 3; ++c) expected[static_cast<size_t>(3 * model->key_points[static_cast<size_t>(k)] + c)] = keys(3 * k + c);
+  }
+  for (int j = 0; j < result.full_points_size(); ++j) {
+    for (int c = 0; c < 3; ++c) expected[3 * result.full_points(j) + static_cast<uint32_t>(c)] = values[static_cast<size_t>(3 * j + c)];
+  }
+  EXPECT_EQ(logged.full_values, expected);
+  std::ifstream log(work_.path() / (kPmsc + ".misses"), std::ios::binary);
+  char header[12] = {};
+  log.read(header, sizeof header);
+  EXPECT_EQ(header[8], 2) << "the log keeps its version";
 }
 
 }  // namespace
