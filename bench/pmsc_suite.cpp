@@ -14,6 +14,7 @@
 #include "clients/cpp/tools/frame_selection.h"
 #include "clients/cpp/tools/quantile.h"
 #include "core/mesh_io/sequence_io.h"
+#include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/train.h"
 
@@ -151,24 +152,27 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
                      {"false_hit_worst_error_over_tolerance", v.false_hit_worst}});
   }
 
-  // Local fail-through on the frames the soft cache flags (blend or miss): the points whose region
-  // is flagged against its own thresholds, vs every point (whole-pose fail-through); and of the
-  // points over the tolerance in those frames, the fraction the local path recomputes.
+  // Local fail-through on the frames the soft cache flags (blend or miss): the points whose
+  // blend weight α_i is above zero (pmsc/local_fail_through.h: calibrated region verdicts spread
+  // by soft memberships) vs every point (whole-pose fail-through); and of the points over the
+  // tolerance in those frames, the fraction the local path recomputes.
   double local_full_points = 0, global_full_points = 0, bad_points = 0, bad_points_local = 0;
   double all_bad_points = 0, all_bad_points_flagged = 0;
   for (const TestFrame& t : frames) {
     const bool flagged = t.key_point_error > model->epsilon.epsilon_min;
+    const double tolerance = tolerance_diag * t.diagonal;
+    all_bad_points += static_cast<double>((t.point_errors.array() > tolerance).count());
+    if (!flagged) continue;
+    std::vector<char> local(static_cast<size_t>(model->point_count), 0);
+    for (int i : pmsc::local_fail_through(*model, t.key_point_error, t.region_errors).full_points) {
+      local[static_cast<size_t>(i)] = 1;
+    }
     for (int i = 0; i < model->point_count; ++i) {
-      const bool bad = t.point_errors(i) > tolerance_diag * t.diagonal;
-      all_bad_points += bad ? 1 : 0;
-      if (!flagged) continue;
-      const int region = model->region_count > 0 ? model->point_regions[static_cast<size_t>(i)] : -1;
-      const bool local = region < 0 || t.region_errors[static_cast<size_t>(region)] >
-                                           pmsc::region_thresholds(*model, region).epsilon_min;
-      local_full_points += local ? 1 : 0;
+      const bool bad = t.point_errors(i) > tolerance;
+      local_full_points += local[static_cast<size_t>(i)];
       global_full_points += 1;
       bad_points += bad ? 1 : 0;
-      bad_points_local += bad && local ? 1 : 0;
+      bad_points_local += bad && local[static_cast<size_t>(i)] ? 1 : 0;
       all_bad_points_flagged += bad ? 1 : 0;
     }
   }

@@ -172,7 +172,12 @@ Wobbly wobbly_frames(int points, int frames, unsigned seed) {
   Wobbly w;
   for (int s = 0; s < 3; ++s) {
     Eigen::VectorXd shape = Eigen::VectorXd::Zero(points * 3);
-    for (int p = s * points / 3; p < (s + 1) * points / 3; ++p) shape.segment<3>(3 * p) = Eigen::Vector3d::Random();
+    // From the seeded generator (not Eigen's Random, which draws on std::rand's global state):
+    // the same seed must give the same shapes, or "fresh poses" would not be like the training.
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    for (int p = s * points / 3; p < (s + 1) * points / 3; ++p) {
+      shape.segment<3>(3 * p) = Eigen::Vector3d(unit(rng), unit(rng), unit(rng));
+    }
     w.shapes.push_back(shape);
   }
   w.frames.resize(frames, points * 3);
