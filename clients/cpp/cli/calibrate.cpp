@@ -60,7 +60,7 @@ int run_calibrate(const CalibrateArgs& a, bool json) {
   std::printf("soft cache ε [%.4g, %.4g] → [%.4g, %.4g]: false-hit rate δ = %g, error ratio %.3g\n",
               before.epsilon_min, before.epsilon_max, model->epsilon.epsilon_min, model->epsilon.epsilon_max,
               a.false_hit_rate, model->calibration.error_ratio);
-  print_operating_curve(*model, options->error_tolerance);
+  print_operating_curve(*model, options->error_tolerance, options->calibration_folds);
   std::printf("wrote %s\n", path.c_str());
   return 0;
 }

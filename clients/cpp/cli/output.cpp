@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <memory>
 #include <vector>
@@ -35,9 +36,12 @@ std::vector<double> offered_false_hit_rates(const pmsc::PmscModel& model) {
 
 }  // namespace
 
-void print_operating_curve(const pmsc::PmscModel& model, double tolerance) {
+void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int folds) {
   const pmsc::CalibrationSamples& samples = model.calibration.samples;
-  std::printf("operating curve on %ld held-out frames (cross-validated; * = this model's δ):\n", samples.size());
+  const long over = pmsc::operating_point(samples, model.calibration.false_hit_rate, tolerance).over_tolerance;
+  std::printf("operating curve on %ld held-out frames (every %dth frame and blocks of %d, each predicted by a model "
+              "trained without it; %ld over the tolerance; * = this model's δ):\n",
+              samples.size(), folds, model.calibration.block_frames, over);
   std::printf("  %8s %8s %11s %9s %12s %15s\n", "δ", "ratio q", "ε_min", "hit rate", "miss recall",
               "worst hit/tol");
   for (double rate : offered_false_hit_rates(model)) {
@@ -74,10 +78,13 @@ std::string calibration_label(const google::protobuf::Map<std::string, std::stri
     return "worst ratio of max point error to e_key over held-out frames (pmsc format 1, trained before the "
            "conformal calibration: no stated false-hit rate; retrain to get one)";
   }
-  return "conformal, false-hit rate δ = " + delta + " (error ratio q = " + value(pmsc::kErrorRatioKey) +
-         " over held-out frames, blocks of " + value(pmsc::kBlockFramesKey) +
-         "): at most a fraction δ of poses like the training poses is called HIT with a point error above the "
-         "tolerance (pmsc.options.error_tolerance)";
+  char ratio[32] = "?";
+  if (const std::string text = value(pmsc::kErrorRatioKey); !text.empty()) {
+    std::snprintf(ratio, sizeof ratio, "%.3g", std::strtod(text.c_str(), nullptr));
+  }
+  return "conformal, false-hit rate δ = " + delta + ": of held-out training poses over the tolerance "
+         "(pmsc.options.error_tolerance), at most a fraction δ would be called HIT (" +
+         value(pmsc::kOverToleranceKey) + " such poses; ε_min = tolerance / " + ratio + ")";
 }
 
 nlohmann::json proto_json(const google::protobuf::Message& message) {

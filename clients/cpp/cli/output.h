@@ -25,8 +25,9 @@ void print_soft_cache_change(double previous_epsilon_min, double epsilon_min, do
 
 // The soft cache's operating curve (issue #22): for each offered false-hit rate δ, the error ratio,
 // ε_min and the cross-validated hit rate and miss recall on the model's calibration samples, the
-// chosen δ marked. Printed by `train-pmsc` and `calibrate`; `tolerance` in model units.
-void print_operating_curve(const pmsc::PmscModel& model, double tolerance);
+// chosen δ marked. Printed by `train-pmsc` and `calibrate`; `tolerance` in model units, `folds`
+// the calibration folds per family (TrainingOptions::calibration_folds).
+void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int folds);
 nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double tolerance);
 
 // What `describe` says of how a PMSC model's ε was chosen, from its metadata: the false-hit rate δ

@@ -147,7 +147,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
     std::printf("soft cache ε = [%.4g, %.4g]: false-hit rate δ = %g, error ratio %.3g from %d held-out frames\n",
                 model->epsilon.epsilon_min, model->epsilon.epsilon_max, model->calibration.false_hit_rate,
                 report.error_ratio, report.calibration_frames);
-    print_operating_curve(*model, options.error_tolerance);
+    print_operating_curve(*model, options.error_tolerance, options.calibration_folds);
     std::printf("wrote %s\n", path.c_str());
   }
   if (!report.converged) {
