@@ -669,21 +669,30 @@ TEST_F(ServeTest, CallsBeyondTheConcurrencyLimitAreRefusedAtOnce) {
   auto poses = v1::PoseService::NewStub(ch);
   Client client(daemon->address());
 
-  // An open stream holds the one slot.
-  grpc::ClientContext stream_context;
-  auto stream = poses->StreamKeyPoints(&stream_context);
+  v1::DescribeKeyPointsResponse keys;
   const auto keys_probe = [&] {
     grpc::ClientContext context;
     v1::DescribeKeyPointsRequest request;
     request.mutable_model()->set_name("arm-pmsc");
-    v1::DescribeKeyPointsResponse response;
-    return poses->DescribeKeyPoints(&context, request, &response);
+    return poses->DescribeKeyPoints(&context, request, &keys);
   };
-  // The stream is admitted when the server sees it; wait until a probe is refused. The refusal
-  // comes while the stream still holds the slot, so it did not wait for one.
-  grpc::Status refused;
-  wait_until([&] { return (refused = keys_probe()).error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED; },
-             std::chrono::seconds(30), std::chrono::milliseconds(5));
+  ASSERT_TRUE(keys_probe().ok());  // the slot is free: K, for the stream's frame
+  const int K = keys.key_point_indices_size();
+
+  // An open stream holds the one slot. It is known to hold it once it has answered a frame: a
+  // probe sent before that could take the slot first, and the stream would be the call refused.
+  grpc::ClientContext stream_context;
+  auto stream = poses->StreamKeyPoints(&stream_context);
+  v1::KeyPointFrame frame;
+  frame.mutable_model()->set_name("arm-pmsc");
+  frame.set_sequence(1);
+  const std::vector<float> origin(static_cast<size_t>(3 * K), 0.0f);
+  *frame.mutable_pose()->mutable_key_values() = make_point_array(origin.data(), static_cast<uint32_t>(K), 3);
+  ASSERT_TRUE(stream->Write(frame));
+  v1::PoseResult first;
+  ASSERT_TRUE(stream->Read(&first)) << "the stream was refused: " << stream->Finish().error_message();
+  // Refused while the stream still holds the slot, so it did not wait for one.
+  const grpc::Status refused = keys_probe();
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_NE(refused.error_message().find("server busy: 1 calls are already in progress (--max-concurrent-calls)"),
             std::string::npos)
