@@ -6,6 +6,7 @@
 
 #include "core/misslog/miss_log.h"
 #include "tests/support/test_support.h"
+#include "tests/support/pmsc_fixtures.h"
 
 namespace animspace::misslog {
 namespace {
@@ -72,21 +73,7 @@ TEST(MissFrames, KeepsConsistentCompletedMissesAndCountsWhatItLeavesOut) {
 
 // Three points of one channel, a one-vector subspace a = (1, 2, 2)/3, keys at points 0 and 1:
 // key values (1, 1) give f̂ = (0.6, 1.2, 1.2) (pmsc_model_test's hand-worked example).
-pmsc::PmscModel three_point_model() {
-  pmsc::PmscModel m;
-  m.channel_count = 1;
-  m.point_count = 3;
-  m.control_point_count = 3;
-  m.mean = Eigen::VectorXf::Zero(3);
-  m.basis.resize(3, 1);
-  m.basis << 1.0f / 3, 2.0f / 3, 2.0f / 3;
-  m.key_points = {0, 1};
-  m.key_mean = Eigen::VectorXd::Zero(2);
-  m.key_basis.resize(2, 1);
-  m.key_basis << m.basis(0, 0), m.basis(1, 0);
-  m.epsilon = {0.1, 0.5};
-  return m;
-}
+pmsc::PmscModel three_point_model() { return testing::three_point_model({0, 1}, {0.1, 0.5}); }
 
 MissRecord partial_record(uint64_t version, std::vector<uint32_t> points, std::vector<float> full) {
   MissRecord r = record(version, {1, 1}, std::move(full));

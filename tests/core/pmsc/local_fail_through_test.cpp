@@ -14,6 +14,7 @@
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/regions.h"
 #include "core/pmsc/train.h"
+#include "tests/support/pmsc_fixtures.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -77,18 +78,7 @@ TEST(LocalFailThrough, WithoutRegionsEveryPointTakesTheWholePoseWeight) {
 // Three points, one channel, a one-vector subspace a = (1, 2, 2)/3, keys at points 0 and 1 (as
 // pmsc_model_test's hand-worked example): f_key = (1, 1) gives f̂ = (0.6, 1.2, 1.2), e_key = √0.1.
 PmscModel three_point_model(int region_count) {
-  PmscModel m;
-  m.channel_count = 1;
-  m.point_count = 3;
-  m.control_point_count = 3;
-  m.mean = Eigen::VectorXf::Zero(3);
-  m.basis.resize(3, 1);
-  m.basis << 1.0f / 3, 2.0f / 3, 2.0f / 3;
-  m.key_points = {0, 1};
-  m.key_mean = Eigen::VectorXd::Zero(2);
-  m.key_basis.resize(2, 1);
-  m.key_basis << m.basis(0, 0), m.basis(1, 0);
-  m.epsilon = {0.1, 0.5};
+  PmscModel m = testing::three_point_model({0, 1}, {0.1, 0.5});
   m.region_count = region_count;
   if (region_count == 1) {
     m.point_regions = {0, 0, 0};

@@ -4,29 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/support/pmsc_fixtures.h"
+
 namespace animspace::pmsc {
 namespace {
 
-// Three points, one channel, a one-vector subspace a = (1, 2, 2)/3, zero mean: small enough to
-// work by hand.
-PmscModel three_point_model(std::vector<int> keys) {
-  PmscModel m;
-  m.channel_count = 1;
-  m.point_count = 3;
-  m.control_point_count = 3;
-  m.mean = Eigen::VectorXf::Zero(3);
-  m.basis.resize(3, 1);
-  m.basis << 1.0f / 3, 2.0f / 3, 2.0f / 3;
-  m.key_points = keys;
-  m.key_mean = Eigen::VectorXd::Zero(static_cast<long>(keys.size()));
-  m.key_basis.resize(static_cast<long>(keys.size()), 1);
-  for (size_t k = 0; k < keys.size(); ++k) {
-    // Keys outside the model are legal input here: prepare_projection must refuse them.
-    m.key_basis(static_cast<long>(k), 0) = keys[k] >= 0 && keys[k] < 3 ? m.basis(keys[k], 0) : 0.0f;
-  }
-  m.epsilon = {0.1, 0.2};
-  return m;
-}
+// The hand-worked three-point model (tests/support/pmsc_fixtures.h) with ε = [0.1, 0.2].
+PmscModel three_point_model(std::vector<int> keys) { return testing::three_point_model(keys, {0.1, 0.2}); }
 
 TEST(PmscModel, HandWorkedThreePointExample) {
   PmscModel m = three_point_model({0, 1});
