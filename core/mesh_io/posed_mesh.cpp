@@ -4,20 +4,15 @@
 #include <cassert>
 #include <cstdint>
 #include <cstring>
-#include <exception>
-#include <limits>
 #include <new>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <meshoptimizer.h>
-// The implementation is compiled once, in core/animspace/tiny_gltf_impl.cpp; the configuration
-// macros (no stb_image, no external images) come from core/CMakeLists.txt.
-#include <tiny_gltf.h>
 
 #include "core/common/atomic_file.h"
+#include "core/mesh_io/gltf_writing.h"
 #include "core/mesh_io/text_io.h"
 
 namespace animspace::mesh_io {
@@ -70,33 +65,8 @@ Status check_mesh(const PosedMesh& mesh, const std::string& destination) {
   return Status::Ok();
 }
 
-template <typename Matrix>
-void append_bytes(std::vector<unsigned char>& out, const Matrix& matrix) {
-  const auto* bytes = reinterpret_cast<const unsigned char*>(matrix.data());
-  out.insert(out.end(), bytes, bytes + sizeof(typename Matrix::Scalar) * static_cast<size_t>(matrix.size()));
-}
-
-// Appends a tightly packed buffer view over buffer 0 and an accessor on it; returns the accessor.
-int add_accessor(tinygltf::Model& model, size_t byte_offset, size_t byte_length, int target, int component_type,
-                 int type, size_t count) {
-  tinygltf::BufferView view;
-  view.buffer = 0;
-  view.byteOffset = byte_offset;
-  view.byteLength = byte_length;
-  view.target = target;
-  model.bufferViews.push_back(std::move(view));
-  tinygltf::Accessor accessor;
-  accessor.bufferView = static_cast<int>(model.bufferViews.size() - 1);
-  accessor.byteOffset = 0;
-  accessor.componentType = component_type;
-  accessor.type = type;
-  accessor.count = count;
-  model.accessors.push_back(std::move(accessor));
-  return static_cast<int>(model.accessors.size() - 1);
-}
-
 Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) {
-  const char* kind = binary ? "glb" : "gltf";
+  const std::string kind = binary ? "glb" : "gltf";
   ANIMSPACE_RETURN_IF_ERROR(check_mesh(mesh, kind));
   const size_t vertex_count = static_cast<size_t>(mesh.points.rows());
   const size_t index_count = 3 * static_cast<size_t>(mesh.faces.rows());
@@ -104,27 +74,20 @@ Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) 
   const size_t position_bytes = 3 * sizeof(float) * vertex_count;
   const size_t normal_bytes = has_normals ? position_bytes : 0;
   const size_t index_bytes = sizeof(uint32_t) * index_count;
-  // glTF sizes are uint32 in a .glb header; keep well inside that (and inside int byte offsets).
-  if (position_bytes + normal_bytes + index_bytes > size_t{std::numeric_limits<int32_t>::max()} - (size_t{1} << 20)) {
+  if (position_bytes + normal_bytes + index_bytes > gltf_writing::kMaxBufferBytes) {
     return make_error(ErrorCode::kInvalidArgument,
-                      std::string(kind) + ": mesh of " + std::to_string(vertex_count) + " vertices and " +
+                      kind + ": mesh of " + std::to_string(vertex_count) + " vertices and " +
                           std::to_string(index_count / 3) + " faces is too large for a glTF buffer");
   }
   try {
-    tinygltf::Model model;
-    model.asset.version = "2.0";
-    model.asset.generator = "animspace";
-
-    tinygltf::Buffer buffer;
-    buffer.data.reserve(position_bytes + normal_bytes + index_bytes);
-    append_bytes(buffer.data, mesh.points);  // row-major float32: x0 y0 z0 x1 …
-    if (has_normals) append_bytes(buffer.data, mesh.normals);
-    append_bytes(buffer.data, mesh.faces);  // int32 indices in [0, #V): the same bytes as uint32
-    model.buffers.push_back(std::move(buffer));
+    tinygltf::Model model = gltf_writing::new_document();
+    model.buffers[0].data.reserve(position_bytes + normal_bytes + index_bytes);
 
     tinygltf::Primitive primitive;
     primitive.mode = TINYGLTF_MODE_TRIANGLES;
-    const int position = add_accessor(model, 0, position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
+    // Row-major float32: x0 y0 z0 x1 …
+    const int position =
+        gltf_writing::append_accessor(model, mesh.points.data(), position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
                                       TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
     // min/max are required for POSITION; float32 values are exact in double.
     const Eigen::RowVector3f lo = mesh.points.colwise().minCoeff();
@@ -133,12 +96,14 @@ Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) 
     model.accessors[static_cast<size_t>(position)].maxValues = {hi.x(), hi.y(), hi.z()};
     primitive.attributes["POSITION"] = position;
     if (has_normals) {
-      primitive.attributes["NORMAL"] = add_accessor(model, position_bytes, normal_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
-                                                    TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
+      primitive.attributes["NORMAL"] =
+          gltf_writing::append_accessor(model, mesh.normals.data(), normal_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
+                                        TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
     }
+    // int32 indices in [0, #V): the same bytes as uint32.
     primitive.indices =
-        add_accessor(model, position_bytes + normal_bytes, index_bytes, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER,
-                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, index_count);
+        gltf_writing::append_accessor(model, mesh.faces.data(), index_bytes, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER,
+                                      TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, index_count);
 
     tinygltf::Mesh gltf_mesh;
     gltf_mesh.primitives.push_back(std::move(primitive));
@@ -150,19 +115,9 @@ Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) 
     scene.nodes.push_back(0);
     model.scenes.push_back(std::move(scene));
     model.defaultScene = 0;
-
-    tinygltf::TinyGLTF writer;
-    std::ostringstream stream(std::ios::out | std::ios::binary);
-    if (!writer.WriteGltfSceneToStream(&model, stream, /*prettyPrint=*/!binary, /*writeBinary=*/binary) ||
-        !stream) {
-      return make_error(ErrorCode::kInternal, std::string(kind) + ": tinygltf could not serialise the document");
-    }
-    return std::move(stream).str();
+    return gltf_writing::serialize_document(model, binary, kind);
   } catch (const std::bad_alloc&) {
-    return make_error(ErrorCode::kResourceExhausted, std::string(kind) + ": out of memory while serialising");
-  } catch (const std::exception& exception) {
-    return make_error(ErrorCode::kInternal,
-                      std::string(kind) + ": tinygltf failed while serialising: " + exception.what());
+    return make_error(ErrorCode::kResourceExhausted, kind + ": out of memory while serialising");
   }
 }
 
