@@ -5,7 +5,8 @@
 // This is the file as it stands, checked so that every read is in bounds and every number is
 // usable: no rig convention is applied. animspace/import.h turns a GltfSkin into a linear-blend
 // rig (super-root, parents-first bone order, the weight rules shared with the libigl reader).
-// The writer of glTF files is posed_mesh.h.
+// The writers of glTF files are posed_mesh.h (a posed mesh) and gltf_skin_writer.h (a skinned,
+// animated character).
 #pragma once
 
 #include <cstdint>
