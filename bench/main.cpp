@@ -35,8 +35,19 @@ int main(int argc, char** argv) {
   app.add_option("--skinning-datasets", options.skinning.datasets, "skinning: datasets under --data")
       ->capture_default_str();
   app.add_option("--lod-datasets", options.lod_datasets, "lod: datasets under --data")->capture_default_str();
-  app.add_option("--bones", options.skinning.bones, "skinning, lod: rigid parts for sequences without a skeleton (horse-gallop)")
+  app.add_option("--bones", options.skinning.bones, "lod: rigid parts for sequences without a skeleton (horse-gallop)")
       ->check(CLI::Range(1, 200))
+      ->capture_default_str();
+  app.add_option("--all-frames-bones", options.skinning.all_frames_bones,
+                 "skinning: bone counts for horse-gallop fitted on all frames")
+      ->capture_default_str();
+  app.add_option("--split-bones", options.skinning.split_bones,
+                 "skinning: bone counts for horse-gallop fitted on even frames, tested on odd")
+      ->capture_default_str();
+  app.add_option("--crane-bones", options.skinning.crane_bones, "skinning: bone counts for crane, even → odd")
+      ->capture_default_str();
+  app.add_option("--max-influences", options.skinning.max_influences, "skinning: bones per vertex (K)")
+      ->check(CLI::Range(1, 32))
       ->capture_default_str();
   app.add_option("--edge-regularisation", options.skinning.edge_regularisation, "skinning: δ of Merry 2007 eq. 4.4")
       ->check(CLI::NonNegativeNumber)

@@ -123,6 +123,62 @@ Transform fit_rigid_motion(const Eigen::Matrix3Xd& rest, const Eigen::Matrix3Xd&
   return make_transform(rotation, posed_mean - rotation * rest_mean);
 }
 
+Result<Skeleton> skeleton_from_motions(const Skeleton& user_skeleton, const std::vector<TransformList>& motions,
+                                       double joint_regularisation, std::vector<double>* joint_spread) {
+  const int b = user_skeleton.bone_count();
+  const int n = static_cast<int>(motions.size());
+  if (joint_spread) joint_spread->assign(static_cast<size_t>(b), 0.0);
+  // Rest joints h_j (eq. 4.6), down the tree: with N^p = (M^p_φ)⁻¹ M^p_j = [A^p | t^p],
+  //    L̲_j^p = A^p h_j + t^p − h_φ; minimise Σ_p ‖L̲_j^p − m_j‖² + λ² ‖h_j − u_j‖² over (h_j, m_j),
+  //    i.e. the rows [A^p  −I] (h, m) = h_φ − t^p and [λI  0] (h, m) = λ u_j.
+  const double lambda = joint_regularisation;
+  std::vector<Eigen::Vector3d> joints(static_cast<size_t>(b), Eigen::Vector3d::Zero());
+  for (int j = 1; j < b; ++j) {
+    const size_t parent = static_cast<size_t>(user_skeleton.parents[static_cast<size_t>(j)]);
+    const Eigen::Vector3d u = user_skeleton.rest[static_cast<size_t>(j)].topRightCorner<3, 1>();
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(3L * n + 3, 6);
+    Eigen::VectorXd rhs(3L * n + 3);
+    std::vector<Transform, Eigen::aligned_allocator<Transform>> relative(static_cast<size_t>(n));
+    for (int p = 0; p < n; ++p) {
+      const TransformList& M = motions[static_cast<size_t>(p)];
+      relative[static_cast<size_t>(p)] = affine_inverse(M[parent]) * M[static_cast<size_t>(j)];
+      A.block<3, 3>(3L * p, 0) = relative[static_cast<size_t>(p)].topLeftCorner<3, 3>();
+      A.block<3, 3>(3L * p, 3) = -Eigen::Matrix3d::Identity();
+      rhs.segment<3>(3L * p) = joints[parent] - relative[static_cast<size_t>(p)].topRightCorner<3, 1>();
+    }
+    A.block<3, 3>(3L * n, 0) = lambda * Eigen::Matrix3d::Identity();
+    rhs.segment<3>(3L * n) = lambda * u;
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+    // Without the regulariser a hinge's axis is a null direction, but fitted rotations carry
+    // float-level noise, so rank is judged with a tolerance well above that noise (the pivots of
+    // a column-pivoting QR decrease along R's diagonal).
+    const double smallest_pivot = std::abs(qr.matrixR()(5, 5)), largest_pivot = std::abs(qr.matrixR()(0, 0));
+    if (lambda == 0 && !(smallest_pivot > kUndeterminedJoint * largest_pivot)) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        "skeleton_from_motions: the joint of bone " + std::to_string(j) +
+                            " is not determined by its motion (e.g. a hinge axis); set joint_regularisation > 0");
+    }
+    const Eigen::VectorXd x = qr.solve(rhs);
+    joints[static_cast<size_t>(j)] = x.head<3>();
+    const Eigen::Vector3d mean = x.tail<3>();
+    double squared = 0;
+    for (int p = 0; p < n; ++p) {
+      const Transform& N = relative[static_cast<size_t>(p)];
+      squared += (N.topLeftCorner<3, 3>() * x.head<3>() + N.topRightCorner<3, 1>() - joints[parent] - mean).squaredNorm();
+    }
+    if (joint_spread) (*joint_spread)[static_cast<size_t>(j)] = std::sqrt(squared / n);
+  }
+
+  Skeleton skeleton;
+  skeleton.parents = user_skeleton.parents;
+  skeleton.names = user_skeleton.names;
+  skeleton.rest.resize(static_cast<size_t>(b));
+  for (int j = 0; j < b; ++j) {
+    skeleton.rest[static_cast<size_t>(j)] = make_transform(Eigen::Matrix3d::Identity(), joints[static_cast<size_t>(j)]);
+  }
+  return skeleton;
+}
+
 Result<FittedSkeleton> fit_skeleton(const PointMatrix& reference_points, const FrameMatrix& meshes,
                                     const Skeleton& user_skeleton,
                                     const std::vector<std::vector<int32_t>>& core_vertices,
@@ -173,54 +229,12 @@ Result<FittedSkeleton> fit_skeleton(const PointMatrix& reference_points, const F
     out.rigid_rms[static_cast<size_t>(j)] = std::sqrt(squared / (static_cast<double>(n) * static_cast<double>(rest.cols())));
   }
 
-  // 2. Rest joints h_j (eq. 4.6), down the tree: with N^p = (M^p_φ)⁻¹ M^p_j = [A^p | t^p],
-  //    L̲_j^p = A^p h_j + t^p − h_φ; minimise Σ_p ‖L̲_j^p − m_j‖² + λ² ‖h_j − u_j‖² over (h_j, m_j),
-  //    i.e. the rows [A^p  −I] (h, m) = h_φ − t^p and [λI  0] (h, m) = λ u_j.
-  const double lambda = options.joint_regularisation;
-  std::vector<Eigen::Vector3d> joints(static_cast<size_t>(b), Eigen::Vector3d::Zero());
-  for (int j = 1; j < b; ++j) {
-    const size_t parent = static_cast<size_t>(user_skeleton.parents[static_cast<size_t>(j)]);
-    const Eigen::Vector3d u = user_skeleton.rest[static_cast<size_t>(j)].topRightCorner<3, 1>();
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(3L * n + 3, 6);
-    Eigen::VectorXd rhs(3L * n + 3);
-    std::vector<Transform, Eigen::aligned_allocator<Transform>> relative(static_cast<size_t>(n));
-    for (int p = 0; p < n; ++p) {
-      const TransformList& M = fitted.motions[static_cast<size_t>(p)];
-      relative[static_cast<size_t>(p)] = affine_inverse(M[parent]) * M[static_cast<size_t>(j)];
-      A.block<3, 3>(3L * p, 0) = relative[static_cast<size_t>(p)].topLeftCorner<3, 3>();
-      A.block<3, 3>(3L * p, 3) = -Eigen::Matrix3d::Identity();
-      rhs.segment<3>(3L * p) = joints[parent] - relative[static_cast<size_t>(p)].topRightCorner<3, 1>();
-    }
-    A.block<3, 3>(3L * n, 0) = lambda * Eigen::Matrix3d::Identity();
-    rhs.segment<3>(3L * n) = lambda * u;
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
-    // Without the regulariser a hinge's axis is a null direction, but fitted rotations carry
-    // float-level noise, so rank is judged with a tolerance well above that noise (the pivots of
-    // a column-pivoting QR decrease along R's diagonal).
-    const double smallest_pivot = std::abs(qr.matrixR()(5, 5)), largest_pivot = std::abs(qr.matrixR()(0, 0));
-    if (lambda == 0 && !(smallest_pivot > kUndeterminedJoint * largest_pivot)) {
-      return make_error(ErrorCode::kFailedPrecondition,
-                        "fit_skeleton: the joint of bone " + std::to_string(j) +
-                            " is not determined by its motion (e.g. a hinge axis); set joint_regularisation > 0");
-    }
-    const Eigen::VectorXd x = qr.solve(rhs);
-    joints[static_cast<size_t>(j)] = x.head<3>();
-    const Eigen::Vector3d mean = x.tail<3>();
-    double squared = 0;
-    for (int p = 0; p < n; ++p) {
-      const Transform& N = relative[static_cast<size_t>(p)];
-      squared += (N.topLeftCorner<3, 3>() * x.head<3>() + N.topRightCorner<3, 1>() - joints[parent] - mean).squaredNorm();
-    }
-    out.joint_spread[static_cast<size_t>(j)] = std::sqrt(squared / n);
-  }
+  // 2. Rest joints h_j (eq. 4.6) and the skeleton (Ĝ_j = translation h_j).
+  auto skeleton = skeleton_from_motions(user_skeleton, fitted.motions, options.joint_regularisation, &out.joint_spread);
+  if (!skeleton) return skeleton.error();
+  fitted.skeleton = std::move(*skeleton);
 
-  // 3. The skeleton (Ĝ_j = translation h_j) and the poses G^p_j = M^p_j Ĝ_j.
-  fitted.skeleton.parents = user_skeleton.parents;
-  fitted.skeleton.names = user_skeleton.names;
-  fitted.skeleton.rest.resize(static_cast<size_t>(b));
-  for (int j = 0; j < b; ++j) {
-    fitted.skeleton.rest[static_cast<size_t>(j)] = make_transform(Eigen::Matrix3d::Identity(), joints[static_cast<size_t>(j)]);
-  }
+  // 3. The poses G^p_j = M^p_j Ĝ_j.
   fitted.poses.resize(static_cast<size_t>(n));
   for (int p = 0; p < n; ++p) {
     TransformList& G = fitted.poses[static_cast<size_t>(p)];

@@ -49,6 +49,15 @@ struct SkeletonFitOptions {
   bool inherit_undetermined_bones = false;
 };
 
+// The second half of skeleton fitting on its own, for motions found another way (skinning
+// decomposition): rest joints h_j from the rigid motions M^p_j (n examples × b bones, M^p_0 = I) by
+// eq. 4.6 with λ = `joint_regularisation` pulling h_j towards u_j (the translation of
+// user_skeleton.rest[j]). Returns the skeleton with user_skeleton's hierarchy and names and
+// Ĝ_j = translation h_j; `joint_spread` (nullable) gets the per-bone spread as in
+// SkeletonFitReport. Errors: kFailedPrecondition when λ = 0 and a joint is undetermined.
+Result<Skeleton> skeleton_from_motions(const Skeleton& user_skeleton, const std::vector<TransformList>& motions,
+                                       double joint_regularisation, std::vector<double>* joint_spread = nullptr);
+
 struct SkeletonFitReport {
   // Per bone (b entries; 0 for the root and for inherited bones): RMS distance between the core
   // vertices and their rigidly moved reference positions over all examples, model units.

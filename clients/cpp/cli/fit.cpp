@@ -1,5 +1,7 @@
 #include "clients/cpp/cli/fit.h"
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -12,8 +14,10 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
+#include "core/animspace/rig_export.h"
 #include "core/animspace/tangents.h"
 #include "core/geometry/normals.h"
+#include "core/mesh_io/gltf_skin_writer.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/container/sections.h"
 
@@ -34,8 +38,10 @@ Status add_tangents(animation_space::AnimationSpaceModel& model) {
 CLI::App* add_fit(CLI::App& app, FitArgs& a) {
   auto* cmd = app.add_subcommand(
       "fit",
-      "Offline: fit an animation-space model to a mesh sequence — skeleton found automatically from near-rigid "
-      "parts, then least squares with edge regularisation (Merry 2007 §4.1) — and write a model version");
+      "Offline: fit a skinned character to a mesh sequence — near-rigid parts, then the skinning decomposition "
+      "(alternating rigid bone motions and sparse non-negative weights, SSDR), joints and hierarchy, then the "
+      "animation-space refit with edge regularisation (Merry 2007 §4.1) — and write a model version; --export also "
+      "writes the linear blend rig as glTF 2.0 with the sequence as its animation");
   cmd->add_option("sequence", a.sequence, "Folder with reference.obj + frames.pc2 (or OBJ frames), or a mesh file")
       ->required();
   cmd->add_option("--pc2", a.pc2, "Point cache when SEQUENCE is a mesh file");
@@ -50,12 +56,31 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
   cmd->add_option("--vertex-regularisation", a.vertex_regularisation, "λ of eq. 4.3 in unit-box units")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  cmd->add_option("--rings", a.rings, "Influence sets: bones of parts within this many edges")
+  cmd->add_option("--rings", a.rings, "--first-pass influence sets: bones of parts within this many edges")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
-  cmd->add_option("--max-influences", a.max_influences, "Influence sets: at most this many bones per vertex")
+  cmd->add_option("--max-influences", a.max_influences, "At most this many bones per vertex (K)")
       ->check(CLI::Range(1, 32))
       ->capture_default_str();
+  cmd->add_option("--iterations", a.iterations, "Skinning decomposition: at most this many alternations")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
+  cmd->add_option("--smoothness", a.smoothness, "Skinning decomposition: μ, pull of each weight towards its neighbours'")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--refinement-rounds", a.refinement_rounds,
+                  "Animation space: rounds of {bone motions, model} after the refit")
+      ->check(CLI::Range(0, 100))
+      ->capture_default_str();
+  cmd->add_flag("--first-pass", a.first_pass,
+                "The pipeline before the skinning decomposition (one least-squares solve on §4.1.4's skeleton), as a "
+                "baseline");
+  cmd->add_option("--fps", a.frames_per_second, "--export: frames per second of the animation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--export", a.export_path,
+                  "Also write the linear blend rig as a glTF 2.0 skinned mesh (.glb or .gltf) with the fitted frames as "
+                  "its animation");
   cmd->add_flag("--linear-blend", a.linear_blend,
                 "Fit linear blend skinning weights only (the baseline of thesis Table 8.2), stored in animation-space "
                 "form");
@@ -67,6 +92,16 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
 }
 
 int run_fit(const FitArgs& a, bool json) {
+  const std::filesystem::path export_path(a.export_path);
+  if (!a.export_path.empty()) {
+    std::string extension = export_path.extension().string();
+    std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (extension != ".glb" && extension != ".gltf") {
+      return fail("fit", "--export " + a.export_path + ": " +
+                             (extension.empty() ? "no extension" : "unknown extension '" + extension + "'") +
+                             "; --export writes a glTF 2.0 skinned character: .glb, .gltf");
+    }
+  }
   auto sequence = mesh_io::load_sequence(a.sequence, a.pc2);
   if (!sequence) return fail("fit", sequence.error().message);
   std::string error;
@@ -80,35 +115,51 @@ int run_fit(const FitArgs& a, bool json) {
   options.influences.max_influences = a.max_influences;
   options.fit.edge_regularisation = a.edge_regularisation;
   options.fit.vertex_regularisation = a.vertex_regularisation;
+  options.decompose = !a.first_pass;
+  options.decomposition.iterations = a.iterations;
+  options.decomposition.weights.max_influences = a.max_influences;
+  options.decomposition.weights.smoothness = a.smoothness;
+  options.refinement_rounds = a.refinement_rounds;
   animation_space::SequenceFitReport report;
-  // Three stages, each one call into the core: rigid parts and skeleton (§5), the least-squares
-  // fit (§4.1), tangent planes and metrics.
+  // Stages, each one call into the core: rigid parts, decomposition and skeleton; the model fit
+  // (§4.1) and its refinement; tangent planes and metrics.
   std::optional<ProgressBar> progress(std::in_place, "fit", 3);
   progress->update(0, "rigid parts and skeleton");
-  auto skeleton = animation_space::fit_sequence_skeleton(sequence->reference, frames, options, &report);
+  const ProgressCallback on_progress = [&](std::string_view stage, int64_t done, int64_t total) {
+    progress->update(0, std::string(stage) + " " + std::to_string(done) + "/" + std::to_string(total));
+  };
+  auto skeleton = animation_space::fit_sequence_skeleton(sequence->reference, frames, options, &report, on_progress);
   if (!skeleton) return fail("fit", skeleton.error().message);
-  progress->update(1, "least squares");
+  progress->update(1, a.linear_blend ? "linear blend weights" : "animation space");
   const auto start = std::chrono::steady_clock::now();
+  auto lbs = animation_space::fit_sequence_linear_blend(sequence->reference, frames, *skeleton, options.fit,
+                                                        a.linear_blend ? &report.fit : nullptr);
+  if (!lbs) return fail("fit", lbs.error().message);
+  std::vector<animation_space::TransformList> poses = skeleton->training_poses;
   Result<animation_space::AnimationSpaceModel> model = make_error(ErrorCode::kInternal, "not fitted");
   if (a.linear_blend) {
-    auto lbs = animation_space::fit_sequence_linear_blend(sequence->reference, frames, *skeleton, options.fit,
-                                                          &report.fit);
-    if (!lbs) return fail("fit", lbs.error().message);
     model = animation_space::from_linear_blend(*lbs);
   } else {
     model = animation_space::fit_sequence_model(sequence->reference, frames, *skeleton, options.fit, &report.fit);
+    if (model && options.decompose && options.refinement_rounds > 0) {
+      model = animation_space::refine_animation_space(
+          frames, std::move(*model), poses, options.fit, options.refinement_rounds, &report.fit,
+          [&](std::string_view stage, int64_t done, int64_t total) {
+            progress->update(1, std::string(stage) + " " + std::to_string(done) + "/" + std::to_string(total));
+          });
+    }
   }
   if (!model) return fail("fit", model.error().message);
   report.fit_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   progress->update(2, "tangent planes and metrics");
   if (auto added = add_tangents(*model); !added.ok()) return fail("fit", added.error().message);
 
-  const auto training_error = animation_space::reconstruction_error(*model, skeleton->training_poses, frames);
+  const auto training_error = animation_space::reconstruction_error(*model, poses, frames);
   const double rms = training_error.rms, max_error = training_error.max;
   const double diagonal =
       (sequence->reference.V.colwise().maxCoeff() - sequence->reference.V.colwise().minCoeff()).cast<double>().norm();
 
-  auto metrics = animation_space::stored_metrics_from_poses(*model, skeleton->training_poses);
+  auto metrics = animation_space::stored_metrics_from_poses(*model, poses);
   if (!metrics) return fail("fit", metrics.error().message);
 
   container::ModelContainer out;
@@ -125,16 +176,36 @@ int run_fit(const FitArgs& a, bool json) {
   out.set_matrix(container::sections::kSequenceFrames, frames);
   container::Float64Matrix bone_rows(frames.rows(), 16L * model->bone_count());
   for (Eigen::Index f = 0; f < frames.rows(); ++f) {
-    bone_rows.row(f) = animation_space::pose_row(skeleton->training_poses[static_cast<size_t>(f)]);
+    bone_rows.row(f) = animation_space::pose_row(poses[static_cast<size_t>(f)]);
   }
   out.set_matrix(container::sections::kSequenceBoneTransforms, bone_rows);
   progress->update(3);
   progress.reset();
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("fit", written.error().message);
+  // glTF skins are linear blend skinning (§3.7.3), so the rig exported is the linear blend one,
+  // posed in every frame by the motions it was fitted with.
+  const auto lbs_error = animation_space::reconstruction_error(*lbs, skeleton->training_poses, frames);
+  if (!a.export_path.empty()) {
+    auto character = animation_space::skinned_character(*lbs, skeleton->training_poses, a.frames_per_second);
+    if (!character) return fail("fit", character.error().message);
+    if (auto written = mesh_io::write_skinned_character(export_path, *character); !written.ok()) {
+      return fail("fit", written.error().message);
+    }
+  }
 
   const double total = report.segmentation_seconds + report.skeleton_seconds + report.fit_seconds;
+  // E_RMS as the skinning-decomposition literature reports it (Tan et al. 2020): 1000 · RMS per
+  // coordinate / half the diagonal.
+  const auto e_rms = [&](double value) { return 1000.0 * value / std::sqrt(3.0) / (0.5 * diagonal); };
+  const auto& iterations = report.decomposition.iterations;
   if (json) {
+    nlohmann::json per_iteration = nlohmann::json::array();
+    for (const auto& it : iterations) {
+      per_iteration.push_back({{"rms_over_diagonal", it.rms / diagonal},
+                               {"seconds", it.seconds},
+                               {"influences_per_vertex", it.influences_per_vertex}});
+    }
     print_json({{"output", path.string()},
                 {"frames", frames.rows()},
                 {"bones", model->bone_count() - 1},
@@ -142,20 +213,38 @@ int run_fit(const FitArgs& a, bool json) {
                 {"rms_error", rms},
                 {"max_error", max_error},
                 {"rms_over_diagonal", rms / diagonal},
+                {"e_rms", e_rms(rms)},
+                {"lbs_rms_over_diagonal", lbs_error.rms / diagonal},
                 {"segmentation_seconds", report.segmentation_seconds},
                 {"skeleton_seconds", report.skeleton_seconds},
                 {"fit_seconds", report.fit_seconds},
-                {"seconds", total}});
+                {"seconds", total},
+                {"initial_rms_over_diagonal", a.first_pass ? nlohmann::json(nullptr)
+                                                           : nlohmann::json(report.decomposition.initial_rms / diagonal)},
+                {"iterations", per_iteration},
+                {"converged", report.decomposition.converged},
+                {"export", a.export_path.empty() ? nlohmann::json(nullptr) : nlohmann::json(a.export_path)}});
   } else {
-    std::printf("fitted %d frames in %.2f s (parts %.2f s, skeleton %.2f s, least squares %.2f s)\n",
-                static_cast<int>(frames.rows()), total, report.segmentation_seconds, report.skeleton_seconds,
-                report.fit_seconds);
+    std::printf("fitted %d frames in %.2f s (parts %.2f s, %s %.2f s, %s %.2f s)\n", static_cast<int>(frames.rows()),
+                total, report.segmentation_seconds, a.first_pass ? "skeleton" : "decomposition and joints",
+                report.skeleton_seconds, a.first_pass ? "least squares" : "model fit", report.fit_seconds);
+    if (!a.first_pass) {
+      std::printf("skinning decomposition (RMS, %% of the diagonal): rigid parts %.4f%%", 100 * report.decomposition.initial_rms / diagonal);
+      for (size_t k = 0; k < iterations.size(); ++k) {
+        std::printf("%s%zu: %.4f%%", k % 6 == 0 ? "\n  " : "  ", k + 1, 100 * iterations[k].rms / diagonal);
+      }
+      std::printf("\n  %s after %zu iterations\n", report.decomposition.converged ? "converged" : "stopped", iterations.size());
+    }
     std::printf("%d bones + root, %.2f influences per vertex, %s\n", model->bone_count() - 1,
                 static_cast<double>(model->influences.influence_count()) / model->vertex_count(),
                 a.linear_blend ? "linear blend weights" : "animation space");
-    std::printf("training error: RMS %.4g (%.3f%% of the diagonal), max %.4g (%.3f%%)\n", rms, 100 * rms / diagonal,
-                max_error, 100 * max_error / diagonal);
+    std::printf("training error: RMS %.4g (%.3f%% of the diagonal, E_RMS %.2f), max %.4g (%.3f%%)\n", rms,
+                100 * rms / diagonal, e_rms(rms), max_error, 100 * max_error / diagonal);
     std::printf("wrote %s\n", path.c_str());
+    if (!a.export_path.empty()) {
+      std::printf("wrote %s (linear blend rig, %d joints, %d frames; RMS %.3f%% of the diagonal)\n", a.export_path.c_str(),
+                  lbs->skeleton.bone_count(), static_cast<int>(frames.rows()), 100 * lbs_error.rms / diagonal);
+    }
   }
   return 0;
 }

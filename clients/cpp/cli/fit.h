@@ -1,5 +1,6 @@
 // `animspace fit`: turn a mesh sequence (any geometry cache) into an animation-space model
-// version (Merry 2007 §4.1 with an automatic skeleton, core/animspace/fit_sequence.h), and
+// version (skinning decomposition, then Merry 2007 §4.1's refit; core/animspace/fit_sequence.h),
+// optionally also a glTF 2.0 skinned character with the sequence as its animation, and
 // `animspace import-rig`: convert a linear-blend-skinned rig (libigl TGF + DMAT, or a glTF 2.0
 // skin) to animation space exactly (§3.1).
 #pragma once
@@ -19,7 +20,13 @@ struct FitArgs {
   double vertex_regularisation = 1e-6;
   int rings = 1;
   int max_influences = 4;
+  int iterations = 30;           // skinning decomposition: at most this many alternations
+  double smoothness = 1e-4;      // μ of the weight solve (skinning_weights.h)
+  int refinement_rounds = 3;     // animation space: motions ↔ model rounds
+  bool first_pass = false;       // the pipeline before the decomposition (baseline)
   bool linear_blend = false;
+  std::string export_path;       // .glb / .gltf skinned character
+  double frames_per_second = 24;
   std::string description;
   std::string output;
   std::string model;
