@@ -39,8 +39,9 @@ struct SkinningSuiteOptions {
   // SSDR / Hyperspectral Inverse Skinning tables), and even → odd at these (Dem Bones' protocol).
   std::vector<int> all_frames_bones{10, 20, 30};
   std::vector<int> split_bones{16, 24, 32};
-  std::vector<int> crane_bones{24};
+  std::vector<int> crane_bones{24};        // also the held-out-blocks rows of both sequences
   int max_influences = 4;               // K of the decomposition
+  int candidate_hops = 1;               // the decomposition's candidate bones
   double edge_regularisation = 0.005;   // δ, Merry 2007 §8.2's horse
   double vertex_regularisation = 1e-6;  // λ
 };

@@ -44,10 +44,13 @@ int main(int argc, char** argv) {
   app.add_option("--split-bones", options.skinning.split_bones,
                  "skinning: bone counts for horse-gallop fitted on even frames, tested on odd")
       ->capture_default_str();
-  app.add_option("--crane-bones", options.skinning.crane_bones, "skinning: bone counts for crane, even → odd")
+  app.add_option("--crane-bones", options.skinning.crane_bones, "skinning: bone counts for crane (even → odd) and the held-out-blocks rows")
       ->capture_default_str();
   app.add_option("--max-influences", options.skinning.max_influences, "skinning: bones per vertex (K)")
       ->check(CLI::Range(1, 32))
+      ->capture_default_str();
+  app.add_option("--candidate-hops", options.skinning.candidate_hops, "skinning: candidate bones within this many parts")
+      ->check(CLI::Range(1, 100))
       ->capture_default_str();
   app.add_option("--edge-regularisation", options.skinning.edge_regularisation, "skinning: δ of Merry 2007 eq. 4.4")
       ->check(CLI::NonNegativeNumber)

@@ -59,6 +59,9 @@ Status check_inputs(const PointMatrix& rest, const FaceMatrix& faces, const Fram
   if (options.iterations < 0) return invalid("options.iterations must be ≥ 0, got " + std::to_string(options.iterations));
   if (!(options.tolerance >= 0)) return invalid("options.tolerance must be ≥ 0");
   if (options.motion_sweeps < 1) return invalid("options.motion_sweeps must be ≥ 1, got " + std::to_string(options.motion_sweeps));
+  if (options.candidate_hops < 1) {
+    return invalid("options.candidate_hops must be ≥ 1, got " + std::to_string(options.candidate_hops));
+  }
   if (options.weights.max_influences < 1) {
     return invalid("options.weights.max_influences must be ≥ 1, got " + std::to_string(options.weights.max_influences));
   }
@@ -83,8 +86,10 @@ std::vector<int32_t> dominant_bones(const SkinningWeights& weights) {
   return out;
 }
 
-// See the file comment of the header: own bones, the dominant bone and the parts touching it.
-InfluenceSets candidate_bones(const SkinningWeights& weights, const geometry::Adjacency& adjacency, int bones) {
+// See the file comment of the header: own bones, the dominant bone and the parts within `hops`
+// steps of it in the graph of touching parts.
+InfluenceSets candidate_bones(const SkinningWeights& weights, const geometry::Adjacency& adjacency, int bones,
+                              int hops) {
   const std::vector<int32_t> dominant = dominant_bones(weights);
   std::vector<std::set<int32_t>> touching(static_cast<size_t>(bones));
   for (int i = 0; i < static_cast<int>(dominant.size()); ++i) {
@@ -93,10 +98,19 @@ InfluenceSets candidate_bones(const SkinningWeights& weights, const geometry::Ad
       if (a != b) touching[static_cast<size_t>(a)].insert(b);
     }
   }
+  std::vector<std::set<int32_t>> reach(static_cast<size_t>(bones));
+  for (int j = 0; j < bones; ++j) {
+    std::set<int32_t>& near = reach[static_cast<size_t>(j)];
+    near.insert(j);
+    for (int hop = 0; hop < hops; ++hop) {
+      std::set<int32_t> next = near;
+      for (int32_t b : near) next.insert(touching[static_cast<size_t>(b)].begin(), touching[static_cast<size_t>(b)].end());
+      near = std::move(next);
+    }
+  }
   InfluenceSets out;
   for (int i = 0; i < weights.influences.vertex_count(); ++i) {
-    std::set<int32_t> set(touching[static_cast<size_t>(dominant[static_cast<size_t>(i)])]);
-    set.insert(dominant[static_cast<size_t>(i)]);
+    std::set<int32_t> set(reach[static_cast<size_t>(dominant[static_cast<size_t>(i)])]);
     for (int k = weights.influences.begin(i); k < weights.influences.end(i); ++k) {
       set.insert(weights.influences.bones[static_cast<size_t>(k)]);
     }
@@ -177,7 +191,7 @@ Result<SkinningDecomposition> decompose_skinning(const PointMatrix& rest_points,
   report_progress(progress, "skinning decomposition", 0, options.iterations);
   SkinningDecomposition current = result;
   for (int iteration = 0; iteration < options.iterations; ++iteration) {
-    const InfluenceSets candidates = candidate_bones(current.weights, adjacency, bones);
+    const InfluenceSets candidates = candidate_bones(current.weights, adjacency, bones, options.candidate_hops);
     current.weights = solve_skinning_weights(rest, frames, current.motions, candidates, current.weights, adjacency,
                                              scale, options.weights);
     current.rms = update_motions(current.weights, rest, frames, current.motions, options.motion_sweeps);

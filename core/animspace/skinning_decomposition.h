@@ -14,10 +14,10 @@
 // a little near convergence (the smoothness pull, the truncation to K bones).
 //
 // Candidates of a vertex: the bones it currently has, the bone that dominates it and the bones
-// whose parts touch that bone's part (parts: vertices by dominant bone, touching: a mesh edge
-// across). This keeps every weight local to the surface — a far bone that happens to fit the
-// training frames is not a candidate — with no length or ring count that would depend on the
-// mesh's resolution.
+// whose parts lie within `candidate_hops` steps of that bone's part in the graph of touching parts
+// (parts: vertices by dominant bone; touching: a mesh edge across). This keeps every weight local
+// to the surface — a far bone that happens to fit the training frames is not a candidate — with
+// no length or ring count that would depend on the mesh's resolution.
 #pragma once
 
 #include <cstdint>
@@ -33,10 +33,13 @@ namespace animspace::animation_space {
 
 struct DecompositionOptions {
   WeightSolveOptions weights;
-  // Upper bound on alternations; ≥ 0 (0 returns the segmentation as hard weights).
-  int iterations = 30;
+  // Upper bound on alternations; ≥ 0 (0 returns the segmentation as hard weights). The tolerance
+  // normally ends the loop first (horse-gallop: 25–40 iterations).
+  int iterations = 50;
   // Stop once an iteration lowers the best RMS error by less than this fraction. ≥ 0.
   double tolerance = 1e-3;
+  // Candidate bones: parts within this many steps of the vertex's dominant part. ≥ 1.
+  int candidate_hops = 1;
   // Rounds over all bones of the motion update per iteration. ≥ 1.
   int motion_sweeps = 2;
 };

@@ -20,7 +20,7 @@ struct FitArgs {
   double vertex_regularisation = 1e-6;
   int rings = 1;
   int max_influences = 4;
-  int iterations = 30;           // skinning decomposition: at most this many alternations
+  int iterations = 50;           // skinning decomposition: at most this many alternations
   double smoothness = 1e-4;      // μ of the weight solve (skinning_weights.h)
   int refinement_rounds = 3;     // animation space: motions ↔ model rounds
   bool first_pass = false;       // the pipeline before the decomposition (baseline)
