@@ -41,7 +41,7 @@ struct SkinningSuiteOptions {
   std::vector<int> split_bones{16, 24, 32};
   std::vector<int> crane_bones{24};        // also the held-out-blocks rows of both sequences
   int max_influences = 4;               // K of the decomposition
-  int candidate_hops = 1;               // the decomposition's candidate bones
+  int candidate_hops = 2;               // the decomposition's candidate bones
   double edge_regularisation = 0.005;   // δ, Merry 2007 §8.2's horse
   double vertex_regularisation = 1e-6;  // λ
 };
