@@ -223,6 +223,7 @@ nlohmann::json run_sequence(const Sequence& c, int bones, bool decompose, const 
                         {"influences_per_vertex",
                          static_cast<double>(model.influences.influence_count()) / model.influences.vertex_count()},
                         {"max_influences", suite.max_influences},
+                        {"candidate_hops", suite.candidate_hops},
                         {"train_poses", c.train.rows()},
                         {"test_poses", c.test.rows()},
                         {"fit_seconds", skeleton_seconds + fit_seconds},
@@ -329,8 +330,9 @@ nlohmann::json run_skinning_suite(const SuiteOptions& suite) {
   }
   std::printf("%%d: percent of the reference mesh's bounding-box diagonal; E_RMS: 1000·RMS per coordinate / half "
               "the diagonal (training frames). Test poses solved with the model fixed. δ = %g, λ = %g (unit-box "
-              "units, §4.1.2); K = %d.\n",
-              options.edge_regularisation, options.vertex_regularisation, suite.skinning.max_influences);
+              "units, §4.1.2); K = %d, candidates within %d parts.\n",
+              options.edge_regularisation, options.vertex_regularisation, suite.skinning.max_influences,
+              suite.skinning.candidate_hops);
   if (has("cow-rig")) {
     std::printf("%-13s %-9s %5s %5s %5s %8s %8s %10s %10s %10s %12s %12s\n", "dataset", "method", "bones", "train",
                 "test", "fit_s", "solve_s", "rmse%d_tr", "rmse%d_te", "max%d_te", "eval_v/s", "lbs_eval_v/s");
