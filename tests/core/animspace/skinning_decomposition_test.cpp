@@ -350,7 +350,7 @@ TEST(SkinningDecompositionTest, RecoversAKnownAnimationSpaceModel) {
       if (tube.weights(i, s) != 0) bones.push_back(s);
     }
     if (bones.size() != 2) continue;
-    const Eigen::Vector3d d = 0.01 * length * Eigen::Vector3d(normal(engine), normal(engine), normal(engine));
+    const Eigen::Vector3d d = 0.003 * length * Eigen::Vector3d(normal(engine), normal(engine), normal(engine));
     for (Eigen::Index f = 0; f < frames.rows(); ++f) {
       const auto& M = tube.motions[static_cast<size_t>(f)];
       const Eigen::Vector3d extra = M[static_cast<size_t>(bones[0])].topLeftCorner<3, 3>() * d -
@@ -369,12 +369,14 @@ TEST(SkinningDecompositionTest, RecoversAKnownAnimationSpaceModel) {
   auto model = fit_sequence(reference, frames, options, nullptr, &poses);
   ASSERT_TRUE(model) << model.error().message;
   auto skeleton = fit_sequence_skeleton(reference, frames, options, nullptr);
+  ASSERT_TRUE(skeleton) << skeleton.error().message;
   auto lbs = fit_sequence_linear_blend(reference, frames, *skeleton, options.fit, nullptr);
   ASSERT_TRUE(lbs);
   const double as_error = reconstruction_error(*model, poses, frames).rms;
   const double lbs_error = reconstruction_error(*lbs, skeleton->training_poses, frames).rms;
-  // The offsets move blended vertices by up to ~2% of the length; linear blend skinning cannot
-  // follow them, animation space on the same influence sets can.
+  // The offsets move blended vertices by ~0.5% of the length; linear blend skinning cannot follow
+  // them, animation space on the same influence sets can (to within the motions, which start from
+  // the linear blend fit and each refinement round brings closer).
   EXPECT_GT(lbs_error, 5e-4 * length);
   EXPECT_LT(as_error, 0.1 * lbs_error);
   EXPECT_LT(as_error, 1e-4 * length);
