@@ -95,10 +95,8 @@ Result<SequenceSkeleton> fit_sequence_skeleton(const TriangleMesh& reference, co
     result.skeleton = std::move(fitted->skeleton);
     result.influences = std::move(*influences);
     result.training_poses = std::move(fitted->poses);
-    for (int32_t bone : out.skeleton.inherited_bones) segmentation->core_vertices[static_cast<size_t>(bone)].clear();
   }
   out.skeleton_seconds = seconds_since(start);
-  result.core_vertices = std::move(segmentation->core_vertices);
   result.labels = std::move(segmentation->labels);
   return result;
 }
@@ -189,28 +187,6 @@ Result<AnimationSpaceModel> fit_sequence(const TriangleMesh& reference, const Fr
   out.fit_seconds = seconds_since(start);
   if (poses) *poses = std::move(skeleton->training_poses);
   return model;
-}
-
-TransformList estimate_pose(const SequenceSkeleton& skeleton, const PointMatrix& reference,
-                            const Eigen::Ref<const Eigen::RowVectorXf>& frame) {
-  assert(frame.size() == 3 * reference.rows());
-  const int b = skeleton.skeleton.bone_count();
-  TransformList motions(static_cast<size_t>(b), Transform::Identity());
-  TransformList globals(static_cast<size_t>(b), Transform::Identity());
-  for (int j = 1; j < b; ++j) {
-    const auto& core = skeleton.core_vertices[static_cast<size_t>(j)];
-    Eigen::Matrix3Xd rest(3, static_cast<Eigen::Index>(core.size())), posed(3, static_cast<Eigen::Index>(core.size()));
-    for (size_t c = 0; c < core.size(); ++c) {
-      rest.col(static_cast<Eigen::Index>(c)) = reference.row(core[c]).transpose().cast<double>();
-      posed.col(static_cast<Eigen::Index>(c)) = frame.segment<3>(3L * core[c]).transpose().cast<double>();
-    }
-    // A bone whose core vertices cannot fix a rotation moves with its parent, as in fitting.
-    motions[static_cast<size_t>(j)] = determines_rigid_motion(rest)
-                                          ? fit_rigid_motion(rest, posed)
-                                          : motions[static_cast<size_t>(skeleton.skeleton.parents[static_cast<size_t>(j)])];
-    globals[static_cast<size_t>(j)] = motions[static_cast<size_t>(j)] * skeleton.skeleton.rest[static_cast<size_t>(j)];
-  }
-  return globals;
 }
 
 }  // namespace animspace::animation_space

@@ -18,8 +18,9 @@
 // unconstrained linear blend weights (thesis Table 8.2).
 //
 // Frames that were not fitted get their pose by solve_pose (bone_motions.h): the bones' motions
-// solved with the model fixed, so that test error measures the model and not the pose estimate.
-// estimate_pose is §8.2's cheaper estimate (each bone's rigid fit to its core vertices).
+// solved with the model fixed, so that test error measures the model and not the pose estimate
+// (the first pass used to pose them by §8.2's rigid fit of each bone's core vertices, which
+// charged the model with the estimate's error).
 #pragma once
 
 #include <vector>
@@ -63,7 +64,6 @@ struct SequenceFitReport {
 // What the pipeline found, kept so that new frames can be posed and other fits reuse it.
 struct SequenceSkeleton {
   Skeleton skeleton;                               // B + 1 bones, Ĝ_j from §4.1.4
-  std::vector<std::vector<int32_t>> core_vertices;  // per bone (empty for the root)
   std::vector<int32_t> labels;                      // #V: owning bone of each vertex
   InfluenceSets influences;
   std::vector<TransformList> training_poses;        // G^k of every training frame
@@ -115,11 +115,5 @@ ReconstructionError reconstruction_error(const AnimationSpaceModel& model, const
                                          const FrameMatrix& frames);
 ReconstructionError reconstruction_error(const LinearBlendModel& model, const std::vector<TransformList>& poses,
                                          const FrameMatrix& frames);
-
-// G_j for a frame (3V values, x0 y0 z0 x1 …) that was not fitted: M_j from the rigid fit of bone
-// j's core vertices (reference → frame), G_j = M_j Ĝ_j; a bone without usable core vertices moves
-// with its parent. `frame` must hold 3·#reference values (asserted).
-TransformList estimate_pose(const SequenceSkeleton& skeleton, const PointMatrix& reference,
-                            const Eigen::Ref<const Eigen::RowVectorXf>& frame);
 
 }  // namespace animspace::animation_space
