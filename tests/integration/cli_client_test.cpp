@@ -25,6 +25,7 @@
 #include "core/container/sections.h"
 #include "core/pmsc/pmsc_io.h"
 #include "harness/daemon_process.h"
+#include "tests/support/cli_run.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -35,11 +36,8 @@ namespace as = animation_space;
 using harness::DaemonProcess;
 using testing::TempDir;
 
-struct CliRun {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
+using testing::CliRun;
+using testing::json_of;
 
 class CliClientTest : public ::testing::Test {
  protected:
@@ -63,30 +61,8 @@ class CliClientTest : public ::testing::Test {
   // `animspace -s <daemon> <arguments>`, stdout and stderr kept apart (stderr is a file, not a
   // terminal, as in a script).
   static CliRun cli(const std::string& arguments) {
-    const auto err_path = work_->path() / "stderr.txt";
-    const std::string command = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon_->address() + " " + arguments +
-                                " 2>" + err_path.string();
-    CliRun run;
-    FILE* pipe = popen(command.c_str(), "r");
-    if (pipe == nullptr) return run;
-    char buffer[4096];
-    size_t n = 0;
-    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) run.out.append(buffer, n);
-    const int status = pclose(pipe);
-    run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::ifstream err(err_path);
-    run.err.assign(std::istreambuf_iterator<char>(err), {});
-    return run;
-  }
-
-  static nlohmann::json json_of(const CliRun& run) {
-    EXPECT_EQ(run.exit_code, 0) << run.err;
-    try {
-      return nlohmann::json::parse(run.out);
-    } catch (const nlohmann::json::exception& e) {
-      ADD_FAILURE() << "not JSON: " << e.what() << "\n" << run.out;
-      return {};
-    }
+    return testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon_->address() + " " + arguments,
+                                work_->path() / "stderr.txt");
   }
 
   static std::string arm_frames() { return (repo_->path() / "arm" / "1" / "model.anim").string(); }

@@ -17,6 +17,7 @@
 #include "core/mesh_io/gltf_skin.h"
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
+#include "tests/support/cli_run.h"
 #include "tests/support/articulated_tube.h"
 #include "tests/support/test_support.h"
 
@@ -25,11 +26,8 @@ namespace {
 
 using testing::TempDir;
 
-struct CliRun {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
+using testing::CliRun;
+using testing::json_of;
 
 constexpr int kBones = 3;
 
@@ -57,29 +55,7 @@ class CliFitTest : public ::testing::Test {
 
   // `animspace <arguments>`, stdout and stderr kept apart (stderr a file, as in a script).
   static CliRun cli(const std::string& arguments) {
-    const auto err_path = work_->path() / "stderr.txt";
-    const std::string command = std::string(ANIMSPACE_CLI_PATH) + " " + arguments + " 2>" + err_path.string();
-    CliRun run;
-    FILE* pipe = popen(command.c_str(), "r");
-    if (pipe == nullptr) return run;
-    char buffer[4096];
-    size_t n = 0;
-    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) run.out.append(buffer, n);
-    const int status = pclose(pipe);
-    run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::ifstream err(err_path);
-    run.err.assign(std::istreambuf_iterator<char>(err), {});
-    return run;
-  }
-
-  static nlohmann::json json_of(const CliRun& run) {
-    EXPECT_EQ(run.exit_code, 0) << run.err;
-    try {
-      return nlohmann::json::parse(run.out);
-    } catch (const nlohmann::json::exception& e) {
-      ADD_FAILURE() << "not JSON: " << e.what() << "\n" << run.out;
-      return {};
-    }
+    return testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " " + arguments, work_->path() / "stderr.txt");
   }
 
   // The exported rig as the library's reader sees it: one joint per bone and the root, the

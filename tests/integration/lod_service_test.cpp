@@ -39,12 +39,7 @@
 #include "harness/lod_fixtures.h"
 #include "tests/support/test_support.h"
 
-// tinygltf is compiled once, in animspace_core (core/animspace/tiny_gltf_impl.cpp), with these
-// settings; declaring the same ones here keeps this translation unit's view of it identical.
-#define TINYGLTF_NO_STB_IMAGE
-#define TINYGLTF_NO_STB_IMAGE_WRITE
-#define TINYGLTF_NO_EXTERNAL_IMAGE
-#include <tiny_gltf.h>
+#include "tests/support/tiny_gltf.h"
 
 namespace animspace {
 namespace {

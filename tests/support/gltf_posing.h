@@ -16,18 +16,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
-// The same configuration as core/mesh_io/CMakeLists.txt gives the one translation unit that
-// compiles tinygltf (core/mesh_io/tiny_gltf_impl.cpp), so that the declarations here match it.
-#ifndef TINYGLTF_NO_STB_IMAGE
-#define TINYGLTF_NO_STB_IMAGE
-#endif
-#ifndef TINYGLTF_NO_STB_IMAGE_WRITE
-#define TINYGLTF_NO_STB_IMAGE_WRITE
-#endif
-#ifndef TINYGLTF_NO_EXTERNAL_IMAGE
-#define TINYGLTF_NO_EXTERNAL_IMAGE
-#endif
-#include <tiny_gltf.h>
+#include "tests/support/tiny_gltf.h"
 
 #include "core/mesh_io/gltf_skin.h"  // Matrix4dList
 

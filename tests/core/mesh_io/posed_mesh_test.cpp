@@ -15,18 +15,7 @@
 
 #include <gtest/gtest.h>
 #include <meshoptimizer.h>
-// The same configuration as core/CMakeLists.txt gives the one translation unit that compiles
-// tinygltf (core/animspace/tiny_gltf_impl.cpp), so that the declarations here match it.
-#ifndef TINYGLTF_NO_STB_IMAGE
-#define TINYGLTF_NO_STB_IMAGE
-#endif
-#ifndef TINYGLTF_NO_STB_IMAGE_WRITE
-#define TINYGLTF_NO_STB_IMAGE_WRITE
-#endif
-#ifndef TINYGLTF_NO_EXTERNAL_IMAGE
-#define TINYGLTF_NO_EXTERNAL_IMAGE
-#endif
-#include <tiny_gltf.h>
+#include "tests/support/tiny_gltf.h"
 
 #include "core/common/atomic_file.h"
 #include "core/mesh_io/triangle_mesh_io.h"
