@@ -11,6 +11,8 @@ packages=(
   libgrpc++-dev libgrpc-dev protobuf-compiler protobuf-compiler-grpc libprotobuf-dev grpc-proto
   # core numerics and geometry
   libeigen3-dev libopenmesh-dev libmeshoptimizer-dev libtinygltf-dev nlohmann-json3-dev libstb-dev
+  # indirect illumination (core/illumination): Embree 3 ray tracing
+  libembree-dev
   # server and command line
   libspdlog-dev libfmt-dev libcli11-dev libcpp-httplib-dev
   # headless rendering (Mesa's surfaceless EGL, llvmpipe) and PNG

@@ -1,0 +1,78 @@
+// Direct and one-bounce indirect diffuse illumination by final gather, on Embree 3.
+//
+// Meyer & Anderson 2007 §3.2 (Figs. 5, 10): the indirect illumination of a room lit by a point
+// light, whose cost is nearly linear in the number of points — so computing it at the key points
+// only and reconstructing the rest from the subspace is where the method saves most.
+//
+// Radiance leaving a point x with normal n and albedo ρ (all diffuse, per RGB channel):
+//   direct     L_d(x) = ρ(x)/π · Σ_l I_l · max(0, n·ω_l) / r_l² · V(x, l)
+//   indirect   L_i(x) = ρ(x)/π ∫_H L_d(y(x, ω)) cos θ dω
+//                     ≈ ρ(x) · (1/S) Σ_s L_d(y(x, ω_s)),  ω_s cosine-distributed (pdf cos θ / π)
+// where y(x, ω) is the first surface hit from x along ω (nothing when the ray leaves the scene,
+// or when it hits a surface from its unlit side) and V is a shadow ray from y towards the light.
+// L_d(y) at a hit is evaluated at the hit itself with the triangle's interpolated albedo and
+// its geometric normal, not interpolated from vertices.
+//
+// Determinism: the S directions of point i depend only on (seed, i, S) — a per-point rotation of
+// one low-discrepancy set — never on which other points are computed, the thread count or the
+// light. So a key point's value computed alone equals its value in the full gather bit for bit,
+// and the gather at a point is a smooth function of the light's position (the same rays each
+// time), which is what the subspace has to learn.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/result.h"
+#include "core/illumination/surface.h"
+
+namespace animspace::illumination {
+
+struct GatherOptions {
+  int samples = 64;        // S, hemisphere rays per point, ≥ 1
+  uint64_t seed = 0;       // picks the per-point rotations
+};
+
+// Checks samples ≥ 1. Error: kInvalidArgument naming `samples`.
+Status check_gather_options(const GatherOptions& options);
+
+// Checks 1 ≤ |lights| ≤ max_lights, finite positions, finite intensities ≥ 0. Errors:
+// kInvalidArgument naming `name`[i].position / .intensity with the value.
+Status check_lights(const std::vector<PointLight>& lights, const std::string& name, int max_lights = 64);
+
+// The scene, built once (Embree BVH over the surface's triangles) and then read-only: every
+// method is const and safe to call from many threads at once.
+class IlluminationEngine {
+ public:
+  // Errors: those of check_surface; kInternal when Embree cannot build the scene.
+  static Result<std::unique_ptr<IlluminationEngine>> create(SurfaceMesh surface);
+  ~IlluminationEngine();
+  IlluminationEngine(const IlluminationEngine&) = delete;
+  IlluminationEngine& operator=(const IlluminationEngine&) = delete;
+
+  const SurfaceMesh& surface() const { return surface_; }
+  int point_count() const { return static_cast<int>(surface_.vertices.rows()); }
+
+  // Direct radiance L_d at `points` (indices into the surface's vertices, any order, repeats
+  // allowed), point-major RGB: out has 3·|points| values. Empty `points` is not "all": use
+  // all_points(). One shadow ray per point and light; threads over points.
+  void direct(const std::vector<PointLight>& lights, const std::vector<int>& points, Eigen::VectorXf& out) const;
+
+  // One-bounce indirect radiance L_i at `points`, point-major RGB (3·|points| values).
+  // S hemisphere rays per point plus one shadow ray per hit and light; threads over points.
+  void indirect(const std::vector<PointLight>& lights, const GatherOptions& options, const std::vector<int>& points,
+                Eigen::VectorXf& out) const;
+
+  std::vector<int> all_points() const;
+
+ private:
+  explicit IlluminationEngine(SurfaceMesh surface);
+  SurfaceMesh surface_;
+  struct Embree;
+  std::unique_ptr<Embree> embree_;
+};
+
+}  // namespace animspace::illumination

@@ -1,0 +1,81 @@
+#include "core/illumination/illumination_io.h"
+
+#include <string>
+#include <utility>
+
+#include "core/common/format.h"
+#include "core/container/sections.h"
+
+namespace animspace::illumination {
+
+namespace {
+
+constexpr const char* kSamplesKey = "illumination.samples";
+constexpr const char* kSeedKey = "illumination.seed";
+constexpr const char* kQuantityKey = "illumination.quantity";
+
+Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
+
+}  // namespace
+
+void attach_illumination(container::ModelContainer& out, const IlluminationSetup& setup) {
+  out.set_points(container::sections::kRestPoints, setup.surface.vertices);
+  out.set_faces(container::sections::kFaces, setup.surface.faces);
+  out.set_points(sections::kNormals, setup.surface.normals);
+  out.set_points(sections::kAlbedo, setup.surface.albedo);
+  container::Float64Matrix lights(static_cast<long>(setup.training_lights.size()), 6);
+  for (size_t f = 0; f < setup.training_lights.size(); ++f) {
+    lights.row(static_cast<long>(f)) << setup.training_lights[f].position.transpose(),
+        setup.training_lights[f].intensity.transpose();
+  }
+  out.set_matrix(sections::kTrainingLights, lights);
+  out.metadata()[kSamplesKey] = std::to_string(setup.gather.samples);
+  out.metadata()[kSeedKey] = std::to_string(setup.gather.seed);
+  out.metadata()[kQuantityKey] = setup.quantity;
+}
+
+bool has_illumination(const container::ModelContainer& in) { return in.has_section(sections::kAlbedo); }
+
+Result<IlluminationSetup> load_illumination(const container::ModelContainer& in, const std::string& source) {
+  IlluminationSetup setup;
+  auto vertices = in.points(container::sections::kRestPoints);
+  if (!vertices) return named(vertices.error(), source);
+  auto faces = in.faces(container::sections::kFaces);
+  if (!faces) return named(faces.error(), source);
+  auto normals = in.points(sections::kNormals);
+  if (!normals) return named(normals.error(), source);
+  auto albedo = in.points(sections::kAlbedo);
+  if (!albedo) return named(albedo.error(), source);
+  const long n = vertices->rows();
+  if (normals->rows() != n) return container::section_shape_error(source, sections::kNormals, std::to_string(n) + "×3", normals->rows(), 3);
+  if (albedo->rows() != n) return container::section_shape_error(source, sections::kAlbedo, std::to_string(n) + "×3", albedo->rows(), 3);
+  setup.surface = {std::move(*vertices), std::move(*normals), std::move(*albedo), std::move(*faces)};
+  ANIMSPACE_RETURN_IF_ERROR(check_surface(setup.surface, source));
+
+  auto lights = in.double_matrix(sections::kTrainingLights, 6);
+  if (!lights) return named(lights.error(), source);
+  for (long f = 0; f < lights->rows(); ++f) {
+    setup.training_lights.push_back({lights->row(f).head<3>().transpose(), lights->row(f).tail<3>().transpose()});
+  }
+  auto samples = in.metadata_int(kSamplesKey);
+  if (!samples) return named(samples.error(), source);
+  setup.gather.samples = *samples;
+  const std::string seed = in.metadata_value(kSeedKey, "0");
+  try {
+    size_t used = 0;
+    setup.gather.seed = std::stoull(seed, &used);
+    if (used != seed.size()) throw std::invalid_argument(seed);
+  } catch (const std::exception&) {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kSeedKey + " should be an unsigned integer, got '" + seed + "'");
+  }
+  Status gather = check_gather_options(setup.gather);
+  if (!gather.ok()) return named(gather.error(), source);
+  setup.quantity = in.metadata_value(kQuantityKey, "indirect");
+  if (setup.quantity != "indirect") {
+    return make_error(ErrorCode::kInvalidArgument,
+                      source + ": metadata " + kQuantityKey + " should be 'indirect', got '" + setup.quantity + "'");
+  }
+  return setup;
+}
+
+}  // namespace animspace::illumination
