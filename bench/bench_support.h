@@ -46,6 +46,15 @@ struct SkinningSuiteOptions {
   double vertex_regularisation = 1e-6;  // λ
 };
 
+// illumination (issue #24): the scene's size and the gather's, and the novel lights tested.
+struct IlluminationSuiteOptions {
+  int points = 100000;   // surface sample points of the Cornell box
+  int samples = 64;      // final-gather rays per point, the same for the full gather and the keys
+  int inside = 24;       // novel lights inside the training grid's hull
+  int outside = 12;      // novel lights well outside it (walls, floor level)
+  std::string figure;    // when set: a PNG of full / subspace / error for a few novel lights
+};
+
 struct SuiteOptions {
   std::optional<std::filesystem::path> data;  // ../shared/data, when present
   int repetitions = 21;
@@ -56,6 +65,7 @@ struct SuiteOptions {
   SkinningSuiteOptions skinning;
   // lod: datasets (the horse is fitted with the skinning options above).
   std::vector<std::string> lod_datasets{"cow-rig", "horse-gallop"};
+  IlluminationSuiteOptions illumination;
 };
 
 }  // namespace animspace::bench

@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/crane_split.h"
+#include "bench/serving.h"
 #include "bench/suites.h"
 #include "clients/cpp/client.h"
 #include "core/pmsc/pmsc_model.h"
@@ -87,20 +88,6 @@ int run_program(const std::vector<std::string>& argv, const std::filesystem::pat
   int status = 0;
   if (waitpid(pid, &status, 0) != pid) return -1;
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-bool wait_until_serving(const std::string& address) {
-  Client client(address);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (std::chrono::steady_clock::now() < deadline) {
-    try {
-      if (client.health() == grpc::health::v1::HealthCheckResponse::SERVING) return true;
-    } catch (const std::exception&) {
-      // not up yet
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  return false;
 }
 
 std::string read_text(const std::filesystem::path& path) {

@@ -19,8 +19,9 @@ int main(int argc, char** argv) {
                   "space vs linear blend skinning (fit, accuracy, evaluation speed); lod: animation-space level of detail vs rest-pose "
                   "simplifiers (error across poses); serve: a real animspaced on loopback (unary and streamed PMSC "
                   "poses against in-process evaluation); render: thumbnails and LOD streaming from a real animspaced against "
-                  "in-process drawing; loadtest: animspace-loadtest's concurrency sweep and hit rates on crane against in-process evaluation")
-      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "serve", "render", "loadtest"}))
+                  "in-process drawing; loadtest: animspace-loadtest's concurrency sweep and hit rates on crane against in-process evaluation; illumination: the Cornell box's indirect illumination from key points against the full final "
+                  "gather (accuracy on novel lights, soft-cache flags, speed-up in process and served)")
+      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "serve", "render", "loadtest", "illumination"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -59,6 +60,14 @@ int main(int argc, char** argv) {
                  "skinning: λ of Merry 2007 eq. 4.3")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  app.add_option("--illumination-points", options.illumination.points, "illumination: surface sample points")
+      ->check(CLI::Range(100, 5000000))
+      ->capture_default_str();
+  app.add_option("--illumination-samples", options.illumination.samples, "illumination: final-gather rays per point")
+      ->check(CLI::Range(1, 65536))
+      ->capture_default_str();
+  app.add_option("--illumination-figure", options.illumination.figure,
+                 "illumination: write a PNG of full / subspace / error for novel lights");
   CLI11_PARSE(app, argc, argv);
 
   if (std::filesystem::is_directory(data_dir)) {
@@ -72,6 +81,7 @@ int main(int argc, char** argv) {
                            : suite == "serve" ? animspace::bench::run_serve_suite(options)
                            : suite == "render" ? animspace::bench::run_render_suite(options)
                            : suite == "loadtest" ? animspace::bench::run_loadtest_suite(options)
+                           : suite == "illumination" ? animspace::bench::run_illumination_suite(options)
                                               : animspace::bench::run_skinning_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);

@@ -30,6 +30,7 @@
 
 #include "animspace/v1/skinning.grpc.pb.h"
 #include "bench/scratch_directory.h"
+#include "bench/serving.h"
 #include "bench/suites.h"
 #include "clients/cpp/client.h"
 #include "clients/cpp/tools/quantile.h"
@@ -308,13 +309,9 @@ nlohmann::json run_render_suite(const SuiteOptions& options) {
     return results;
   }
   Client client(daemon->address());
-  // Health turns SERVING once the repository is loaded.
-  for (int i = 0; i < 600; ++i) {
-    try {
-      if (client.health() == grpc::health::v1::HealthCheckResponse::SERVING) break;
-    } catch (const RpcError&) {
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  if (!wait_until_serving(daemon->address(), std::chrono::seconds(30))) {
+    std::printf("render: the daemon never reported SERVING\n%s\n", daemon->log().c_str());
+    return results;
   }
   const auto info = client.server_info();
   std::printf("render: daemon renderer: %s\n", info.renderer().c_str());

@@ -14,5 +14,6 @@ nlohmann::json run_lod_suite(const SuiteOptions& options);
 nlohmann::json run_serve_suite(const SuiteOptions& options);
 nlohmann::json run_render_suite(const SuiteOptions& options);
 nlohmann::json run_loadtest_suite(const SuiteOptions& options);
+nlohmann::json run_illumination_suite(const SuiteOptions& options);
 
 }  // namespace animspace::bench

@@ -22,6 +22,15 @@ v1::FailThrough to_proto(model::FailThrough fail_through) {
   return v1::FAIL_THROUGH_UNSPECIFIED;
 }
 
+v1::ServerEngine to_proto(model::ServerEngine engine) {
+  switch (engine) {
+    case model::ServerEngine::kNone: return v1::SERVER_ENGINE_UNSPECIFIED;
+    case model::ServerEngine::kAnimationSpace: return v1::SERVER_ENGINE_ANIMATION_SPACE;
+    case model::ServerEngine::kIllumination: return v1::SERVER_ENGINE_ILLUMINATION;
+  }
+  return v1::SERVER_ENGINE_UNSPECIFIED;
+}
+
 void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
   out->set_version(entry.version);
   if (!entry.model) {
@@ -45,6 +54,7 @@ void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
   out->set_epsilon_min(info.epsilon_min);
   out->set_epsilon_max(info.epsilon_max);
   out->set_fail_through(to_proto(info.fail_through));
+  out->set_server_engine(to_proto(info.server_engine));
   out->set_file_size_bytes(m.file_size_bytes);
   out->set_loaded_at_unix_s(m.loaded_at_unix_s);
   for (const auto& [key, value] : m.container.metadata()) (*out->mutable_metadata())[key] = value;

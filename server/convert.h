@@ -13,6 +13,7 @@ namespace animspace::server {
 
 v1::ModelKind to_proto(container::ModelKind kind);
 v1::FailThrough to_proto(model::FailThrough fail_through);
+v1::ServerEngine to_proto(model::ServerEngine engine);
 void to_proto(const VersionEntry& entry, v1::ModelVersion* out);
 void to_proto(const ModelEntry& entry, v1::ModelSummary* out);
 v1::CacheStatus to_proto(pmsc::CacheStatus status);

@@ -54,6 +54,9 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
     loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*servable->lod_levels));
     loaded->bounding_sphere = servable->bounding_sphere;
   }
+  loaded->illumination = std::move(servable->illumination);
+  loaded->gather = servable->gather;
+  loaded->training_lights = std::move(servable->training_lights);
   loaded->name = name;
   loaded->version = version;
   loaded->path = path;

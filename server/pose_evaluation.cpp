@@ -34,10 +34,29 @@ grpc::Status require_pmsc(const LoadedModel& model, std::string_view why) {
 grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
                          PoseInput& out) {
   const pmsc::PmscModel& m = *model.pmsc;
-  if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
-                                     static_cast<uint32_t>(m.key_point_count()), static_cast<uint32_t>(m.channel_count),
-                                     "key points", out.key_values);
-      !s.ok()) {
+  const std::string engine_note =
+      m.cross ? "is impossible" : (model.animation_space || model.illumination ? "takes another input"
+                                                                                 : "is by the client: send full values with CompleteMiss");
+  if (pose.has_light_set()) {
+    if (!model.illumination) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, field + ".light_set: model '" + model.name +
+                                                      "' has no illumination engine on the server (fail-through " +
+                                                      engine_note + "); leave light_set unset"};
+    }
+    const Eigen::Vector3d intensity =
+        model.training_lights.empty() ? Eigen::Vector3d::Ones() : model.training_lights.front().intensity;
+    if (grpc::Status s = decode_light_set(pose.light_set(), field + ".light_set", intensity, out.lights); !s.ok()) {
+      return s;
+    }
+  }
+  if (!out.lights.empty() && !pose.has_key_values()) {
+    // The server is the renderer here (Meyer & Anderson 2007 §3.2): it gathers the key points
+    // alone, and the soft cache judges them as it would judge a client's.
+    model.illumination->indirect(out.lights, model.gather, m.key_points, out.key_values);
+  } else if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
+                                            static_cast<uint32_t>(m.key_point_count()),
+                                            static_cast<uint32_t>(m.channel_count), "key points", out.key_values);
+             !s.ok()) {
     return s;
   }
   out.has_skeleton = pose.has_skeleton_pose();
@@ -45,8 +64,7 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
   if (!model.animation_space) {
     return {grpc::StatusCode::INVALID_ARGUMENT,
             field + ".skeleton_pose: model '" + model.name + "' has no posing engine on the server (fail-through " +
-                (m.cross ? "is impossible" : "is by the client: send full values with CompleteMiss") +
-                "); leave skeleton_pose unset"};
+                engine_note + "); leave skeleton_pose unset"};
   }
   return decode_skeleton_pose(pose.skeleton_pose(), field + ".skeleton_pose", model.animation_space->skeleton,
                               out.globals);
@@ -93,9 +111,11 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
   pmsc::LocalFailThrough local;
   const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
   const bool local_path = options.local_fail_through || !input.full_points.empty();
-  // Server fail-through: the posing engine, posed at the request's skeleton, is the full
-  // calculation (decode_pose accepted a skeleton only for a model that has one). Locally it poses
-  // only the points that need it: animation space is evaluated vertex by vertex (eq. 3.1).
+  // Server fail-through: the posing engine, posed at the request's skeleton, or the illumination
+  // engine, gathering for the request's lights, is the full calculation (decode_pose accepted
+  // each input only for a model that has its engine). Locally it computes only the points that
+  // need it: animation space is evaluated vertex by vertex (eq. 3.1), and the gather is per point
+  // and deterministic, so a point computed alone is the point of the whole frame.
   if (local_path) {
     pmsc::PartialFullCalculation engine;
     if (input.has_skeleton) {
@@ -103,6 +123,11 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
         PointMatrix posed;
         animation_space::evaluate_vertices(*model.animation_space, input.globals, points, posed);
         full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+        return true;
+      };
+    } else if (!input.lights.empty()) {
+      engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
+        model.illumination->indirect(input.lights, model.gather, points, full);
         return true;
       };
     }
@@ -118,6 +143,11 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
         PointMatrix posed;
         animation_space::evaluate(*model.animation_space, input.globals, posed);
         full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+        return true;
+      };
+    } else if (!input.lights.empty()) {
+      engine = [&](Eigen::VectorXf& full) {
+        model.illumination->indirect(input.lights, model.gather, model.illumination->all_points(), full);
         return true;
       };
     }

@@ -13,6 +13,7 @@
 
 #include "animspace/v1/poses.pb.h"
 #include "core/animspace/skeleton.h"
+#include "core/illumination/surface.h"
 #include "server/model_registry.h"
 #include "server/service_environment.h"
 
@@ -23,6 +24,7 @@ struct PoseInput {
   Eigen::VectorXf key_values;                // K·D
   bool has_skeleton = false;
   animation_space::TransformList globals;    // G_j, when has_skeleton
+  std::vector<illumination::PointLight> lights;  // the frame's lights (illumination engine), else empty
   Eigen::VectorXf full_values;               // from CompleteMiss: N·D, or |full_points|·D; else empty
   std::vector<int> full_points;              // CompleteMiss with local fail-through: the points of full_values
 };
@@ -32,7 +34,7 @@ struct PoseInput {
 grpc::Status require_pmsc(const LoadedModel& model, std::string_view why = {});
 
 // Decodes `pose` (named `field` in messages, e.g. "poses[3]"). A skeleton pose is accepted only
-// for a model with a posing engine.
+// for a model with a posing engine, a light set only for one with an illumination engine.
 grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
                          PoseInput& out);
 

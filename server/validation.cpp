@@ -145,6 +145,38 @@ grpc::Status decode_skeleton_pose(const v1::SkeletonPose& pose, std::string_view
   return grpc::Status::OK;
 }
 
+grpc::Status decode_light_set(const v1::LightSet& set, std::string_view field, const Eigen::Vector3d& default_intensity,
+                              std::vector<illumination::PointLight>& out) {
+  const std::string lights = join(field, "lights");
+  if (set.lights_size() < 1 || set.lights_size() > kMaxLights) {
+    return invalid_argument(lights + ": expected 1 to " + std::to_string(kMaxLights) + " lights, got " +
+                            std::to_string(set.lights_size()));
+  }
+  out.clear();
+  for (int i = 0; i < set.lights_size(); ++i) {
+    const v1::PointLight& light = set.lights(i);
+    const std::string name = lights + "[" + std::to_string(i) + "]";
+    if (light.position_size() != 3) {
+      return invalid_argument(name + ".position: expected 3 values (x, y, z), got " +
+                              std::to_string(light.position_size()));
+    }
+    if (light.intensity_size() != 0 && light.intensity_size() != 3) {
+      return invalid_argument(name + ".intensity: expected 3 values (R, G, B) or none (the model's training "
+                                     "intensity), got " + std::to_string(light.intensity_size()));
+    }
+    illumination::PointLight decoded;
+    decoded.position = Eigen::Vector3d(light.position(0), light.position(1), light.position(2));
+    decoded.intensity = light.intensity_size() == 3
+                            ? Eigen::Vector3d(light.intensity(0), light.intensity(1), light.intensity(2))
+                            : default_intensity;
+    out.push_back(decoded);
+  }
+  if (auto valid = illumination::check_lights(out, lights, kMaxLights); !valid.ok()) {
+    return to_grpc_status(valid.error());
+  }
+  return grpc::Status::OK;
+}
+
 void encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointArray* out) {
   out->set_point_count(points);
   out->set_channel_count(channels);

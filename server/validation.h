@@ -14,7 +14,9 @@
 #include <grpcpp/support/status.h>
 
 #include "animspace/v1/common.pb.h"
+#include "animspace/v1/poses.pb.h"
 #include "core/animspace/skeleton.h"
+#include "core/illumination/surface.h"
 
 namespace animspace::server {
 
@@ -44,6 +46,13 @@ grpc::Status decode_point_indices(const google::protobuf::RepeatedField<uint32_t
 // hierarchy, Merry 2007 §2.2).
 grpc::Status decode_skeleton_pose(const v1::SkeletonPose& pose, std::string_view field,
                                   const animation_space::Skeleton& skeleton, animation_space::TransformList& globals);
+
+// A light set for an illumination engine (Meyer & Anderson 2007 §3.2): 1..kMaxLights lights,
+// each with a 3-value position and a 3-value or empty intensity (empty: `default_intensity`, the
+// model's training intensity); values checked by illumination::check_lights.
+inline constexpr int kMaxLights = 64;
+grpc::Status decode_light_set(const v1::LightSet& set, std::string_view field, const Eigen::Vector3d& default_intensity,
+                              std::vector<illumination::PointLight>& out);
 
 // Packs `points`·`channels` floats into a PointArray.
 void encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointArray* out);

@@ -87,9 +87,16 @@ v1::KeyPointPose encode_key_point_pose(const KeyPointPose& pose) {
                                 " floats, not a whole number of " + std::to_string(pose.channel_count) + "-channel points");
   }
   v1::KeyPointPose out;
-  *out.mutable_key_values() = make_point_array(
-      pose.key_values.data(), static_cast<uint32_t>(pose.key_values.size() / pose.channel_count), pose.channel_count);
+  if (!pose.key_values.empty() || pose.lights.empty()) {
+    *out.mutable_key_values() = make_point_array(
+        pose.key_values.data(), static_cast<uint32_t>(pose.key_values.size() / pose.channel_count), pose.channel_count);
+  }
   if (pose.skeleton_pose != nullptr) *out.mutable_skeleton_pose() = encode_skeleton_pose(*pose.skeleton_pose);
+  for (const PointLight& light : pose.lights) {
+    v1::PointLight* encoded = out.mutable_light_set()->add_lights();
+    for (double x : light.position) encoded->add_position(x);
+    for (double c : light.intensity) encoded->add_intensity(c);
+  }
   return out;
 }
 

@@ -7,6 +7,7 @@
 // The client library itself does not depend on Eigen (it links only the generated stubs).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -54,12 +55,22 @@ struct SkeletonPose {
   std::vector<float> transforms;  // B·12
 };
 
+// A point light for an illumination model (v1.PointLight): position in the model's units, RGB
+// radiant intensity in W/sr (empty: the model's training intensity).
+struct PointLight {
+  std::array<double, 3> position{};
+  std::vector<double> intensity;
+};
+
 // One key-point pose to evaluate: K×D values in DescribeKeyPoints order, and optionally the
-// skeleton pose it came from so that a server posing engine can complete a blend or miss.
+// engine input it came from so that a server engine can complete a blend or miss — the skeleton
+// pose (animation space) or the lights (illumination). With lights and no key values, an
+// illumination model's server gathers the key values itself.
 struct KeyPointPose {
   std::span<const float> key_values;
   uint32_t channel_count = 3;
   const SkeletonPose* skeleton_pose = nullptr;
+  std::span<const PointLight> lights;
 };
 
 struct RegionError {

@@ -1,6 +1,7 @@
 #include "core/model/model_info.h"
 
 #include "core/animspace/animspace_io.h"
+#include "core/illumination/illumination_io.h"
 #include "core/lod/lod_io.h"
 
 namespace animspace::model {
@@ -167,6 +168,19 @@ Result<ModelInfo> describe(const container::ModelContainer& model, const std::st
       }
       ANIMSPACE_RETURN_IF_ERROR(check_animation_space_shapes(model, info.point_count, "a posing engine", source));
       info.fail_through = FailThrough::kServer;
+      info.server_engine = ServerEngine::kAnimationSpace;
+    } else if (illumination::has_illumination(model)) {
+      // An illumination engine (illumination_io.h): the surface the model's RGB radiance lives
+      // on, from which the server gathers the full values itself for a request's lights
+      // (illumination::load_illumination checks the sections when the model is made servable).
+      if (info.channel_count != 3) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          source + ": a pmsc model with an illumination engine (section '" +
+                              illumination::sections::kAlbedo + "') must have pmsc.channels = 3 (RGB), got " +
+                              std::to_string(info.channel_count));
+      }
+      info.fail_through = FailThrough::kServer;
+      info.server_engine = ServerEngine::kIllumination;
     } else {
       info.fail_through = FailThrough::kClient;
     }

@@ -18,6 +18,10 @@ using container::ModelKind;
 // How a blend or miss obtains the full values (SPEC "Fail-through").
 enum class FailThrough { kNone, kServer, kClient, kImpossible };
 
+// The full calculation a PMSC model with server fail-through carries: an animation-space model
+// posed at a request's skeleton, or the illumination engine gathering for a request's lights.
+enum class ServerEngine { kNone, kAnimationSpace, kIllumination };
+
 struct ModelInfo {
   ModelKind kind = ModelKind::kMeshSequence;
   std::string description;
@@ -32,6 +36,7 @@ struct ModelInfo {
   float epsilon_min = 0;
   float epsilon_max = 0;
   FailThrough fail_through = FailThrough::kNone;
+  ServerEngine server_engine = ServerEngine::kNone;
 };
 
 // Reads and cross-checks the sections every kind shares. Errors: kInvalidArgument (or the

@@ -2,13 +2,17 @@
 // checks and the container fuzzer all run on a container, so that what is fuzzed is what loads.
 #pragma once
 
+#include <memory>
 #include <optional>
+#include <vector>
 #include <string>
 
 #include "core/animspace/metrics.h"
 #include "core/animspace/model.h"
 #include "core/common/result.h"
 #include "core/container/model_container.h"
+#include "core/illumination/gather.h"
+#include "core/illumination/illumination_io.h"
 #include "core/lod/levels.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/pmsc_model.h"
@@ -25,10 +29,15 @@ struct Servable {
   std::optional<animation_space::AnimationSpaceModel> animation_space;
   std::optional<lod::LodLevels> lod_levels;
   geometry::BoundingSphere bounding_sphere;
+  // The illumination engine a PMSC model of RGB radiance carries for server fail-through: the
+  // scene built for ray tracing, and the gather settings and training lights it was trained with.
+  std::shared_ptr<const illumination::IlluminationEngine> illumination;
+  illumination::GatherOptions gather;
+  std::vector<illumination::PointLight> training_lights;
 };
 
 // describe → pmsc::load and/or animation_space::load → lod::load_levels →
-// lod::model_bounding_sphere. Errors: the first refusal, naming `source`.
+// lod::model_bounding_sphere, or illumination::load_illumination → IlluminationEngine::create. Errors: the first refusal, naming `source`.
 Result<Servable> load_servable(const container::ModelContainer& container, const std::string& source);
 
 }  // namespace animspace::model

@@ -17,6 +17,7 @@
 #include "clients/cpp/cli/retrain_offline.h"
 #include "clients/cpp/cli/calibrate.h"
 #include "clients/cpp/cli/thumbnail.h"
+#include "clients/cpp/cli/train_illumination.h"
 #include "clients/cpp/cli/train_pmsc.h"
 #include "clients/cpp/client.h"
 #include "core/common/atomic_file.h"
@@ -477,6 +478,8 @@ int main(int argc, char** argv) {
 
   animspace::cli::TrainPmscArgs train_pmsc_args;
   auto* train_pmsc = animspace::cli::add_train_pmsc(app, train_pmsc_args);
+  animspace::cli::TrainIlluminationArgs train_illumination_args;
+  auto* train_illumination = animspace::cli::add_train_illumination(app, train_illumination_args);
   animspace::cli::FitArgs fit_args;
   auto* fit = animspace::cli::add_fit(app, fit_args);
   animspace::cli::ImportRigArgs import_rig_args;
@@ -498,6 +501,7 @@ int main(int argc, char** argv) {
   if (const int usage = check_subcommand(app); usage != 0) return usage;
   try {
     if (*train_pmsc) return animspace::cli::run_train_pmsc(train_pmsc_args, g.json);
+    if (*train_illumination) return animspace::cli::run_train_illumination(train_illumination_args, g.json);
     if (*fit) return animspace::cli::run_fit(fit_args, g.json);
     if (*import_rig) return animspace::cli::run_import_rig(import_rig_args, g.json);
     if (*build_lod) return animspace::cli::run_build_lod(build_lod_args, g.json);

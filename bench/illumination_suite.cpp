@@ -1,0 +1,311 @@
+// The illumination suite (issue #24): the seeds' second application (Meyer & Anderson 2006 §8;
+// 2007 §3.2, Figs. 5 and 10). The Cornell box lit by one point light at each node of a 12 × 12
+// grid under the ceiling is gathered (one-bounce indirect, final gather on Embree), a PMSC model
+// of the RGB radiance is trained on those 144 frames, and then for novel lights — inside the
+// grid's hull and well outside it (by the walls, at floor level) — the indirect illumination is
+// computed at the key points only and reconstructed everywhere.
+//
+// Per light, against the full gather at every point with the same rays (the baseline, same run):
+//   relative_rms_error        RMS over points and channels of (estimate − full) ÷ the frame's
+//                             mean indirect radiance
+//   max_error_over_frame_max  the largest point error ‖estimate − full‖ ÷ the frame's largest ‖full‖
+//   status                    the soft cache's verdict (hit / blend / miss) for the key values
+// Speed (medians over the inside lights): the full gather, the key gather, the reconstruction
+// (pmsc::evaluate_cached) and, through a real animspaced on loopback, the round trip of
+// EvaluateKeyPoints with the client's key values, and with the light alone (the server gathers
+// the keys).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "bench/scratch_directory.h"
+#include "bench/serving.h"
+#include "bench/suites.h"
+#include "clients/cpp/client.h"
+#include "clients/cpp/tools/quantile.h"
+#include "core/container/model_container.h"
+#include "core/illumination/illumination_model.h"
+#include "core/pmsc/pmsc_io.h"
+#include "harness/daemon_process.h"
+
+namespace animspace::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using illumination::PointLight;
+
+constexpr const char* kModelName = "cornell";
+constexpr int kTimedRepetitions = 5;  // of the cheap steps (key gather, reconstruction, round trip)
+
+double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+struct NovelLight {
+  PointLight light;
+  bool inside = false;
+  std::string where;
+};
+
+// Inside: a low-discrepancy (R2) set over the training grid's rectangle, in its plane — never a
+// grid node. Outside: by each wall at two heights, at floor level clear of the blocks, and the
+// room's centre; every one at least a fifth of the room's height below the grid plane or a tenth
+// of its width outside the rectangle.
+std::vector<NovelLight> novel_lights(const illumination::Box& room, const illumination::LightGrid& grid, int inside,
+                                     int outside) {
+  const Eigen::Vector3d size = room.max - room.min;
+  const double plane = room.max.y() - grid.drop * size.y();
+  std::vector<NovelLight> lights;
+  const double g = 1.32471795724474602596;  // the plastic number: R2's generator
+  for (int k = 1; k <= inside; ++k) {
+    const double u = std::fmod(0.5 + k / g, 1.0);
+    const double v = std::fmod(0.5 + k / (g * g), 1.0);
+    const double x = room.min.x() + size.x() * (grid.inset + (1 - 2 * grid.inset) * u);
+    const double z = room.min.z() + size.z() * (grid.inset + (1 - 2 * grid.inset) * v);
+    lights.push_back({{{x, plane, z}, Eigen::Vector3d::Ones()}, true, "grid plane"});
+  }
+  const auto at = [&](double fx, double fy, double fz, const char* where) {
+    lights.push_back({{room.min + size.cwiseProduct(Eigen::Vector3d(fx, fy, fz)), Eigen::Vector3d::Ones()}, false,
+                      where});
+  };
+  const std::vector<std::function<void()>> outside_set = {
+      [&] { at(0.04, 0.5, 0.5, "left wall"); },     [&] { at(0.96, 0.5, 0.5, "right wall"); },
+      [&] { at(0.5, 0.5, 0.96, "back wall"); },     [&] { at(0.04, 0.75, 0.8, "left wall, high"); },
+      [&] { at(0.96, 0.75, 0.2, "right wall, high"); }, [&] { at(0.5, 0.75, 0.96, "back wall, high"); },
+      [&] { at(0.18, 0.04, 0.8, "floor"); },        [&] { at(0.9, 0.04, 0.15, "floor"); },
+      [&] { at(0.85, 0.04, 0.85, "floor"); },       [&] { at(0.55, 0.04, 0.6, "floor"); },
+      [&] { at(0.5, 0.5, 0.5, "room centre"); },    [&] { at(0.5, 0.3, 0.1, "front, low"); },
+  };
+  for (int k = 0; k < outside; ++k) outside_set[static_cast<size_t>(k) % outside_set.size()]();
+  return lights;
+}
+
+struct Accuracy {
+  double relative_rms_error = 0;
+  double max_error_over_frame_max = 0;
+};
+
+Accuracy accuracy(const Eigen::VectorXf& estimate, const Eigen::VectorXf& full) {
+  const Eigen::ArrayXd e = (estimate - full).cast<double>().array();
+  const double mean = full.cast<double>().mean();
+  const long n = full.size() / 3;
+  const Eigen::Map<const Eigen::Matrix3Xf> f(full.data(), 3, n);
+  const Eigen::Map<const Eigen::Matrix3Xd> d(e.data(), 3, n);
+  Accuracy a;
+  a.relative_rms_error = std::sqrt(e.square().mean()) / mean;
+  a.max_error_over_frame_max = d.colwise().norm().maxCoeff() / static_cast<double>(f.colwise().norm().maxCoeff());
+  return a;
+}
+
+const char* status_name(pmsc::CacheStatus s) {
+  return s == pmsc::CacheStatus::kHit ? "hit" : s == pmsc::CacheStatus::kBlend ? "blend" : "miss";
+}
+
+double median(std::vector<double> values) { return values.empty() ? 0.0 : tools::quantile(std::move(values), 0.5); }
+
+}  // namespace
+
+nlohmann::json run_illumination_suite(const SuiteOptions& options) {
+  const IlluminationSuiteOptions& o = options.illumination;
+  nlohmann::json results = nlohmann::json::array();
+  auto engine = illumination::IlluminationEngine::create(illumination::cornell_box({o.points}));
+  if (!engine) {
+    std::printf("illumination: %s\n", engine.error().message.c_str());
+    return results;
+  }
+  const illumination::IlluminationEngine& scene = **engine;
+  const illumination::Box room = illumination::cornell_room();
+  const illumination::LightGrid grid;  // 12 × 12, the papers' 144
+  illumination::IlluminationTrainingOptions training;
+  for (const Eigen::Vector3d& p : illumination::light_grid(room, grid)) training.lights.push_back({p, Eigen::Vector3d::Ones()});
+  training.gather.samples = o.samples;
+  std::printf("illumination: Cornell box, %d points, %d gather rays per point; training on %zu lights (%d × %d grid)\n",
+              scene.point_count(), o.samples, training.lights.size(), grid.nx, grid.nz);
+
+  illumination::IlluminationTrainingReport report;
+  const auto train_start = Clock::now();
+  auto container = illumination::train_illumination(scene, training, "Cornell box (bench)", &report);
+  const double train_seconds = since(train_start);
+  if (!container) {
+    std::printf("illumination: training failed: %s\n", container.error().message.c_str());
+    return results;
+  }
+  auto loaded = pmsc::load(*container, "bench");
+  if (!loaded) {
+    std::printf("illumination: %s\n", loaded.error().message.c_str());
+    return results;
+  }
+  const pmsc::PmscModel& model = *loaded;
+  std::printf("illumination: trained in %.1f s (gathers %.1f s, PMSC %.1f s): M = %d, K = %d key points, "
+              "ε = [%.4g, %.4g] radiance, tolerance %.4g (radiance scale %.4g)\n",
+              train_seconds, report.gather_seconds, report.pmsc.seconds, model.basis_size(), model.key_point_count(),
+              model.epsilon.epsilon_min, model.epsilon.epsilon_max,
+              training.tolerance_fraction * report.radiance_scale, report.radiance_scale);
+
+  const std::vector<int> all = scene.all_points();
+  const std::vector<NovelLight> lights = novel_lights(room, grid, o.inside, o.outside);
+  std::printf("\n%-4s %-18s %-7s %9s %9s %7s %9s %9s %9s\n", "#", "where", "inside", "rel_rms", "max/max", "status",
+              "full_s", "keys_ms", "recon_ms");
+  std::vector<double> full_s, keys_s, recon_s, rms_inside, max_inside;
+  int hits_inside = 0, flagged_outside = 0, n_inside = 0, n_outside = 0;
+  std::vector<Eigen::VectorXf> inside_keys;
+  std::vector<Eigen::VectorXf> inside_estimates;
+  std::vector<NovelLight> inside_lights;
+  for (size_t l = 0; l < lights.size(); ++l) {
+    const NovelLight& novel = lights[l];
+    Eigen::VectorXf full;
+    const auto full_start = Clock::now();
+    scene.indirect({novel.light}, training.gather, all, full);
+    const double full_seconds = since(full_start);
+    Eigen::VectorXf keys;
+    std::vector<double> key_times, recon_times;
+    pmsc::CachedPose cached;
+    for (int r = 0; r < kTimedRepetitions; ++r) {
+      const auto k0 = Clock::now();
+      scene.indirect({novel.light}, training.gather, model.key_points, keys);
+      key_times.push_back(since(k0));
+      const auto r0 = Clock::now();
+      pmsc::evaluate_cached(model, keys, nullptr, cached);
+      recon_times.push_back(since(r0));
+    }
+    const Accuracy a = accuracy(cached.points, full);
+    nlohmann::json row{{"light", l},
+                       {"position", {novel.light.position.x(), novel.light.position.y(), novel.light.position.z()}},
+                       {"where", novel.where},
+                       {"inside_hull", novel.inside},
+                       {"relative_rms_error", a.relative_rms_error},
+                       {"max_error_over_frame_max", a.max_error_over_frame_max},
+                       {"status", status_name(cached.status)},
+                       {"key_point_error", cached.key_point_error},
+                       {"full_gather_seconds", full_seconds},
+                       {"key_gather_seconds", median(key_times)},
+                       {"reconstruct_seconds", median(recon_times)}};
+    std::printf("%-4zu %-18s %-7s %8.3f%% %8.2f%% %7s %9.3f %9.3f %9.3f\n", l, novel.where.c_str(),
+                novel.inside ? "yes" : "no", 100 * a.relative_rms_error, 100 * a.max_error_over_frame_max,
+                status_name(cached.status), full_seconds, 1e3 * median(key_times), 1e3 * median(recon_times));
+    results.push_back(row);
+    if (novel.inside) {
+      ++n_inside;
+      hits_inside += cached.status == pmsc::CacheStatus::kHit ? 1 : 0;
+      rms_inside.push_back(a.relative_rms_error);
+      max_inside.push_back(a.max_error_over_frame_max);
+      full_s.push_back(full_seconds);
+      keys_s.push_back(median(key_times));
+      recon_s.push_back(median(recon_times));
+      inside_keys.push_back(keys);
+      inside_estimates.push_back(cached.points);
+      inside_lights.push_back(novel);
+    } else {
+      ++n_outside;
+      flagged_outside += cached.status != pmsc::CacheStatus::kHit ? 1 : 0;
+    }
+  }
+  const double full_gather = median(full_s), key_gather = median(keys_s), reconstruct = median(recon_s);
+  const double speedup_in_process = full_gather / (key_gather + reconstruct);
+
+  // Served: the same model from a real daemon on loopback, inside lights only (hits: what the
+  // soft cache answers from the subspace alone).
+  double round_trip = 0, round_trip_light = 0, served_difference = 0;
+  std::string served_problem;
+  try {
+    ScratchDirectory scratch("illumination");
+    const auto dir = scratch.path() / "repository" / kModelName / "1";
+    std::filesystem::create_directories(dir);
+    if (Status written = container::write_file(dir / "model.anim", *container); !written.ok()) {
+      throw std::runtime_error(written.error().message);
+    }
+    harness::DaemonProcess daemon({"--model-repository", (scratch.path() / "repository").string(), "--log-level",
+                                   "warn", "--miss-log-fsync", "never", "--renderer", "none"},
+                                  scratch.path());
+    if (!wait_until_serving(daemon.address(), std::chrono::seconds(120))) {
+      throw std::runtime_error("the daemon never reported SERVING:\n" + daemon.log());
+    }
+    Client client(daemon.address());
+    std::vector<double> trips, trips_light;
+    for (size_t l = 0; l < inside_keys.size(); ++l) {
+      KeyPointPose pose;
+      pose.key_values = std::span<const float>(inside_keys[l].data(), static_cast<size_t>(inside_keys[l].size()));
+      const std::vector<animspace::PointLight> light_set{
+          {{inside_lights[l].light.position.x(), inside_lights[l].light.position.y(),
+            inside_lights[l].light.position.z()},
+           {}}};
+      KeyPointPose by_light;
+      by_light.lights = light_set;
+      for (int r = 0; r < kTimedRepetitions; ++r) {
+        const auto t0 = Clock::now();
+        const PoseResult served = client.evaluate_key_points(kModelName, pose);
+        trips.push_back(since(t0));
+        const auto t1 = Clock::now();
+        const PoseResult served_light = client.evaluate_key_points(kModelName, by_light);
+        trips_light.push_back(since(t1));
+        if (r == 0) {
+          for (const PoseResult* s : {&served, &served_light}) {
+            const Eigen::Map<const Eigen::VectorXf> points(s->points.values.data(),
+                                                           static_cast<long>(s->points.values.size()));
+            if (points.size() != inside_estimates[l].size()) throw std::runtime_error("served a different point count");
+            served_difference =
+                std::max(served_difference, static_cast<double>((points - inside_estimates[l]).cwiseAbs().maxCoeff()));
+          }
+        }
+      }
+    }
+    round_trip = median(trips);
+    round_trip_light = median(trips_light);
+  } catch (const std::exception& e) {
+    served_problem = e.what();
+    std::printf("illumination: served rows skipped: %s\n", e.what());
+  }
+  const double speedup_served = round_trip > 0 ? full_gather / (key_gather + round_trip) : 0;
+  const double speedup_served_light = round_trip_light > 0 ? full_gather / round_trip_light : 0;
+
+  const double hit_rate_inside = n_inside > 0 ? static_cast<double>(hits_inside) / n_inside : 0;
+  const double recall_outside = n_outside > 0 ? static_cast<double>(flagged_outside) / n_outside : 0;
+  nlohmann::json summary{{"summary", true},
+                         {"points", scene.point_count()},
+                         {"samples", o.samples},
+                         {"training_lights", training.lights.size()},
+                         {"key_points", model.key_point_count()},
+                         {"basis", model.basis_size()},
+                         {"train_seconds", train_seconds},
+                         {"training_gather_seconds", report.gather_seconds},
+                         {"pmsc_training_seconds", report.pmsc.seconds},
+                         {"full_gather_seconds", full_gather},
+                         {"key_gather_seconds", key_gather},
+                         {"reconstruct_seconds", reconstruct},
+                         {"round_trip_seconds", round_trip},
+                         {"round_trip_light_set_seconds", round_trip_light},
+                         {"speedup_in_process", speedup_in_process},
+                         {"speedup_served", speedup_served},
+                         {"speedup_served_light_set", speedup_served_light},
+                         {"served_max_difference", served_difference},
+                         {"median_relative_rms_error_inside", median(rms_inside)},
+                         {"p95_max_error_over_frame_max_inside", max_inside.empty() ? 0.0 : tools::quantile(max_inside, 0.95)},
+                         {"hit_rate_inside", hit_rate_inside},
+                         {"recall_outside", recall_outside},
+                         {"epsilon_min", model.epsilon.epsilon_min},
+                         {"epsilon_max", model.epsilon.epsilon_max},
+                         {"radiance_scale", report.radiance_scale}};
+  if (!served_problem.empty()) summary["served_problem"] = served_problem;
+  results.push_back(summary);
+  std::printf("\ninside the hull (%d lights): median relative RMS %.3f%% of the mean radiance, p95 max error %.2f%% of "
+              "the frame max, hit rate %.2f\n",
+              n_inside, 100 * median(rms_inside), 100 * summary["p95_max_error_over_frame_max_inside"].get<double>(),
+              hit_rate_inside);
+  std::printf("outside (%d lights): flagged (blend or miss) %.2f\n", n_outside, recall_outside);
+  std::printf("full gather %.3f s; keys %.3f ms + reconstruction %.3f ms: %.0f× in process\n", full_gather,
+              1e3 * key_gather, 1e3 * reconstruct, speedup_in_process);
+  std::printf("served: round trip %.3f ms with the client's keys (%.0f× with the key gather), %.3f ms with the light "
+              "alone (%.0f×); served points differ from in-process by ≤ %g\n",
+              1e3 * round_trip, speedup_served, 1e3 * round_trip_light, speedup_served_light, served_difference);
+  std::printf("training: %.1f s for %zu frames (%.1f s gathering)\n", train_seconds, training.lights.size(),
+              report.gather_seconds);
+  return results;
+}
+
+}  // namespace animspace::bench

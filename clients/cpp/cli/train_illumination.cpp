@@ -1,0 +1,113 @@
+#include "clients/cpp/cli/train_illumination.h"
+
+#include <cstdio>
+
+#include "clients/cpp/cli/offline_common.h"
+#include "clients/cpp/cli/output.h"
+#include "core/illumination/surface.h"
+
+namespace animspace::cli {
+
+CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
+  auto* cmd = app.add_subcommand(
+      "train-illumination",
+      "Offline: gather the Cornell box's indirect illumination for a grid of point lights and train a PMSC model "
+      "of it that the daemon serves, relighting from key points (Meyer & Anderson 2007 §3.2)");
+  cmd->add_option("--points", a.points, "Surface sample points (vertices) of the tessellated box, about")
+      ->check(CLI::Range(100, 5000000))
+      ->capture_default_str();
+  cmd->add_option("--samples", a.samples, "Final-gather rays per point (the full calculation's cost)")
+      ->check(CLI::Range(1, 65536))
+      ->capture_default_str();
+  cmd->add_option("--seed", a.seed, "Seed of the per-point ray directions")->capture_default_str();
+  cmd->add_option("--lights-x", a.lights_x, "Training lights across the room (x)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  cmd->add_option("--lights-z", a.lights_z, "Training lights along the room (z)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  cmd->add_option("--drop", a.drop, "Light plane below the ceiling, fraction of the room's height")
+      ->check(CLI::Range(0.001, 0.999))
+      ->capture_default_str();
+  cmd->add_option("--inset", a.inset, "Light grid inset from the walls, fraction of width and depth")
+      ->check(CLI::Range(0.0, 0.499))
+      ->capture_default_str();
+  cmd->add_option("--tolerance", a.tolerance,
+                  "Soft cache: ε is calibrated so that frames with a point error above this fraction of the "
+                  "radiance scale (median frame maximum) are flagged")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--error-bound", a.error_bound,
+                  "Key selection stops when every training point is within this fraction of the radiance scale")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--false-hit-rate", a.false_hit_rate, "Soft cache: δ of the conformal calibration")
+      ->check(CLI::Range(1e-6, 0.999999))
+      ->capture_default_str();
+  cmd->add_option("--basis", a.basis, "Subspace dimension M (default: from the error bound); M < lights");
+  cmd->add_option("--max-key-points", a.max_key_points, "Key point budget")->capture_default_str();
+  cmd->add_option("--regions", a.regions, "Regions for local fail-through (0 = none)")->capture_default_str();
+  cmd->add_option("--description", a.description, "One-line description stored in the model");
+  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")
+      ->required();
+  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
+  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  return cmd;
+}
+
+int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
+  auto engine = illumination::IlluminationEngine::create(illumination::cornell_box({a.points}));
+  if (!engine) return fail("train-illumination", engine.error().message);
+  illumination::IlluminationTrainingOptions options;
+  const illumination::LightGrid grid{a.lights_x, a.lights_z, a.drop, a.inset};
+  for (const Eigen::Vector3d& position : illumination::light_grid(illumination::cornell_room(), grid)) {
+    options.lights.push_back({position, Eigen::Vector3d::Ones()});
+  }
+  options.gather.samples = a.samples;
+  options.gather.seed = a.seed;
+  options.tolerance_fraction = a.tolerance;
+  options.error_bound_fraction = a.error_bound;
+  options.pmsc.basis_size = a.basis;
+  options.pmsc.max_key_points = a.max_key_points;
+  options.pmsc.region_count = a.regions;
+  options.pmsc.false_hit_rate = a.false_hit_rate;
+  options.pmsc.progress = progress_bars("train-illumination");
+  const int points = (*engine)->point_count();
+  const std::string description =
+      a.description.empty() ? "Cornell box indirect illumination: " + std::to_string(points) + " points, " +
+                                  std::to_string(options.lights.size()) + " training lights, " +
+                                  std::to_string(a.samples) + " gather rays"
+                            : a.description;
+  illumination::IlluminationTrainingReport report;
+  auto container = illumination::train_illumination(**engine, options, description, &report);
+  if (!container) return fail("train-illumination", container.error().message);
+  const auto path = model_output_path(a.output, a.model, a.version);
+  if (auto written = write_model_file(path, *container); !written.ok()) {
+    return fail("train-illumination", written.error().message);
+  }
+  const pmsc::TrainingReport& r = report.pmsc;
+  if (json) {
+    print_json({{"output", path.string()},
+                {"points", points},
+                {"lights", options.lights.size()},
+                {"samples", a.samples},
+                {"basis", r.basis_size},
+                {"key_points", r.key_points},
+                {"radiance_scale", report.radiance_scale},
+                {"max_training_error", r.max_training_error},
+                {"converged", r.converged},
+                {"gather_seconds", report.gather_seconds},
+                {"train_seconds", r.seconds},
+                {"seconds", report.gather_seconds + r.seconds}});
+  } else {
+    std::printf("gathered %zu frames of %d points (%d rays each) in %.2f s; radiance scale %.4g\n",
+                options.lights.size(), points, a.samples, report.gather_seconds, report.radiance_scale);
+    std::printf("trained in %.2f s: basis M = %d, %d key points; max training error %.4g (%.2f%% of the scale)\n",
+                r.seconds, r.basis_size, r.key_points, r.max_training_error,
+                100 * r.max_training_error / report.radiance_scale);
+    std::printf("wrote %s\n", path.c_str());
+  }
+  return 0;
+}
+
+}  // namespace animspace::cli

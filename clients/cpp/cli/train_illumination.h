@@ -1,0 +1,38 @@
+// `animspace train-illumination`: the seeds' second application (Meyer & Anderson 2007 §3.2):
+// gather the Cornell box's indirect illumination for a grid of point lights under the ceiling,
+// train a PMSC model of the RGB radiance and write a model version that carries its
+// illumination engine (server fail-through for a request's lights).
+#pragma once
+
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "core/illumination/illumination_model.h"
+
+namespace animspace::cli {
+
+struct TrainIlluminationArgs {
+  int points = 100000;         // target surface sample points (vertices)
+  int samples = 64;            // final-gather rays per point
+  unsigned long long seed = 0;
+  int lights_x = 12;           // training grid, 12 × 12 = 144 as in the papers
+  int lights_z = 12;
+  double drop = illumination::LightGrid{}.drop;
+  double inset = illumination::LightGrid{}.inset;
+  double tolerance = illumination::IlluminationTrainingOptions{}.tolerance_fraction;
+  double error_bound = illumination::IlluminationTrainingOptions{}.error_bound_fraction;
+  double false_hit_rate = pmsc::TrainingOptions{}.false_hit_rate;
+  int basis = 0;
+  int max_key_points = 200;
+  int regions = 8;
+  std::string description;
+  std::string output;
+  std::string model;
+  unsigned version = 0;
+};
+
+CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& args);
+int run_train_illumination(const TrainIlluminationArgs& args, bool json);
+
+}  // namespace animspace::cli

@@ -1,0 +1,87 @@
+#include "core/illumination/illumination_model.h"
+
+#include <algorithm>
+#include <utility>
+
+#include "core/common/format.h"
+#include "core/common/timing.h"
+#include "core/pmsc/pmsc_io.h"
+
+namespace animspace::illumination {
+
+FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<PointLight>& lights,
+                          const GatherOptions& gather, const ProgressCallback& progress) {
+  const std::vector<int> points = engine.all_points();
+  FrameMatrix frames(static_cast<long>(lights.size()), static_cast<long>(points.size()) * 3);
+  Eigen::VectorXf frame;
+  for (size_t f = 0; f < lights.size(); ++f) {
+    engine.indirect({lights[f]}, gather, points, frame);
+    frames.row(static_cast<long>(f)) = frame.transpose();
+    report_progress(progress, "gather", static_cast<int64_t>(f + 1), static_cast<int64_t>(lights.size()));
+  }
+  return frames;
+}
+
+double radiance_scale(const FrameMatrix& frames) {
+  if (frames.rows() == 0 || frames.cols() < 3) return 0;
+  std::vector<double> maxima(static_cast<size_t>(frames.rows()));
+  for (long f = 0; f < frames.rows(); ++f) {
+    const Eigen::Map<const Eigen::Matrix3Xf> points(frames.row(f).data(), 3, frames.cols() / 3);
+    maxima[static_cast<size_t>(f)] = points.colwise().norm().maxCoeff();
+  }
+  auto middle = maxima.begin() + static_cast<long>(maxima.size() / 2);
+  std::nth_element(maxima.begin(), middle, maxima.end());
+  return *middle;
+}
+
+Result<container::ModelContainer> train_illumination(const IlluminationEngine& engine,
+                                                     const IlluminationTrainingOptions& options,
+                                                     const std::string& description,
+                                                     IlluminationTrainingReport* report) {
+  ANIMSPACE_RETURN_IF_ERROR(check_lights(options.lights, "lights", static_cast<int>(options.lights.size())));
+  ANIMSPACE_RETURN_IF_ERROR(check_gather_options(options.gather));
+  if (!(options.tolerance_fraction > 0) || !(options.error_bound_fraction > 0)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "tolerance_fraction and error_bound_fraction must be > 0, got " +
+                          format_number(options.tolerance_fraction) + " and " +
+                          format_number(options.error_bound_fraction));
+  }
+  IlluminationTrainingReport local;
+  IlluminationTrainingReport& r = report != nullptr ? *report : local;
+
+  const auto gather_start = std::chrono::steady_clock::now();
+  const FrameMatrix frames = gather_frames(engine, options.lights, options.gather, options.pmsc.progress);
+  r.gather_seconds = seconds_since(gather_start);
+  r.radiance_scale = radiance_scale(frames);
+  if (!(r.radiance_scale > 0)) {
+    return make_error(ErrorCode::kFailedPrecondition,
+                      "no training light reaches a surface twice: every training frame's indirect radiance is 0");
+  }
+
+  pmsc::TrainingOptions trainer = options.pmsc;
+  trainer.channel_count = 3;
+  trainer.error_tolerance = options.tolerance_fraction * r.radiance_scale;
+  trainer.error_bound = options.error_bound_fraction * r.radiance_scale;
+  trainer.positions = engine.surface().vertices;  // grid seeds over the surface, not over colours
+  trainer.remove_rigid_motion = false;            // colours have no rigid motion
+  auto model = pmsc::train(frames, trainer, &r.pmsc);
+  if (!model) return model.error();
+
+  container::ModelContainer out;
+  pmsc::store(*model, out);
+  out.metadata()["description"] = description;
+  pmsc::store_training_report(r.pmsc, out);
+  trainer.progress = nullptr;
+  pmsc::store_training_options(trainer, out);
+  out.metadata()["illumination.radiance_scale"] = format_number(r.radiance_scale);
+  out.metadata()["illumination.gather_seconds"] = format_number(r.gather_seconds);
+  out.metadata()["units"] = "radiance (W/(sr·m²)); positions in metres";
+  IlluminationSetup setup;
+  setup.surface = engine.surface();
+  setup.gather = options.gather;
+  setup.training_lights = options.lights;
+  attach_illumination(out, setup);
+  return out;
+}
+
+}  // namespace animspace::illumination

@@ -1,0 +1,60 @@
+// A PMSC model of indirect illumination (Meyer & Anderson 2006 §8; 2007 §3.2, Figs. 5 and 10):
+// training frames are the one-bounce indirect radiance of the scene lit by each training light,
+// the points are the surface's sample points with D = 3 colour channels, and the model carries
+// its illumination engine so that the server can gather the full values itself on a blend or miss.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/common/progress.h"
+#include "core/common/result.h"
+#include "core/common/types.h"
+#include "core/container/model_container.h"
+#include "core/illumination/gather.h"
+#include "core/illumination/illumination_io.h"
+#include "core/pmsc/train.h"
+
+namespace animspace::illumination {
+
+// The indirect radiance of every point for each light (one light per frame): F × N·3, point-major
+// RGB, as the PMSC trainer takes them.
+FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<PointLight>& lights,
+                          const GatherOptions& gather, const ProgressCallback& progress = {});
+
+// Radiance scale of a set of frames: the median over frames of the largest point radiance ‖L‖
+// (Euclidean over RGB, as the soft cache measures a point's error). The soft cache's tolerance
+// and the key selection's bound are stated as fractions of it, so they mean the same for any
+// scene, light intensity or unit.
+double radiance_scale(const FrameMatrix& frames);
+
+struct IlluminationTrainingOptions {
+  std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 144)
+  GatherOptions gather;
+  // The soft cache must not call HIT a frame with a point error above this fraction of the
+  // radiance scale (pmsc::TrainingOptions::error_tolerance, in radiance units).
+  double tolerance_fraction = 0.05;
+  // Key selection iterates until every training point is within this fraction of the scale.
+  double error_bound_fraction = 0.02;
+  // The rest as pmsc::TrainingOptions (channel_count, error_tolerance, error_bound and positions
+  // are set from the above and the surface).
+  pmsc::TrainingOptions pmsc;
+};
+
+struct IlluminationTrainingReport {
+  pmsc::TrainingReport pmsc;
+  double gather_seconds = 0;   // the training frames' full gathers
+  double radiance_scale = 0;   // of the training frames
+};
+
+// Gathers the training frames, trains the PMSC model (channels = 3, grid seeds and regions over
+// the surface positions) and returns a servable container: the model, its training report and
+// options, and the illumination engine's sections. The training frames are not stored: they are
+// the engine's to recompute. Errors: check_lights / check_gather_options naming `lights` /
+// `gather`, and the trainer's.
+Result<container::ModelContainer> train_illumination(const IlluminationEngine& engine,
+                                                     const IlluminationTrainingOptions& options,
+                                                     const std::string& description,
+                                                     IlluminationTrainingReport* report);
+
+}  // namespace animspace::illumination

@@ -1,0 +1,119 @@
+// The illumination model: the engine's sections round-trip through a container, and a PMSC model
+// trained on gathered frames reproduces its training frames from their key points — and is served
+// with its engine (model::load_servable).
+#include <gtest/gtest.h>
+
+#include "core/container/model_container.h"
+#include "core/illumination/illumination_io.h"
+#include "core/illumination/illumination_model.h"
+#include "core/model/servable.h"
+#include "core/pmsc/pmsc_io.h"
+
+namespace animspace::illumination {
+namespace {
+
+IlluminationSetup small_setup() {
+  IlluminationSetup setup;
+  setup.surface = cornell_box({1500});
+  setup.gather.samples = 8;
+  setup.gather.seed = 7;
+  setup.training_lights = {{{0.1, 0.5, 0.2}, {1, 2, 3}}, {{0.3, 0.5, 0.4}, {0.5, 0.5, 0.5}}};
+  return setup;
+}
+
+TEST(IlluminationIoTest, SetupRoundTripsThroughAContainer) {
+  const IlluminationSetup setup = small_setup();
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  ASSERT_TRUE(has_illumination(out));
+  auto parsed = container::parse(container::serialize(out), "mem");
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  auto loaded = load_illumination(*parsed, "mem");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->surface.vertices, setup.surface.vertices);
+  EXPECT_EQ(loaded->surface.normals, setup.surface.normals);
+  EXPECT_EQ(loaded->surface.albedo, setup.surface.albedo);
+  EXPECT_EQ(loaded->surface.faces, setup.surface.faces);
+  EXPECT_EQ(loaded->gather.samples, 8);
+  EXPECT_EQ(loaded->gather.seed, 7u);
+  ASSERT_EQ(loaded->training_lights.size(), 2u);
+  EXPECT_EQ(loaded->training_lights[1].position, setup.training_lights[1].position);
+  EXPECT_EQ(loaded->training_lights[0].intensity, setup.training_lights[0].intensity);
+  EXPECT_EQ(loaded->quantity, "indirect");
+}
+
+TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
+  const IlluminationSetup setup = small_setup();
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  out.set_points(sections::kAlbedo, setup.surface.albedo.topRows(3));
+  auto loaded = load_illumination(out, "m.anim");
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.error().message.find("m.anim"), std::string::npos);
+  EXPECT_NE(loaded.error().message.find(sections::kAlbedo), std::string::npos);
+
+  container::ModelContainer bad_samples;
+  attach_illumination(bad_samples, setup);
+  bad_samples.metadata()["illumination.samples"] = "0";
+  auto refused = load_illumination(bad_samples, "m.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("samples"), std::string::npos);
+
+  container::ModelContainer bad_quantity;
+  attach_illumination(bad_quantity, setup);
+  bad_quantity.metadata()["illumination.quantity"] = "caustics";
+  EXPECT_FALSE(load_illumination(bad_quantity, "m.anim").ok());
+}
+
+TEST(IlluminationModelTest, RadianceScaleIsTheMedianFrameMaximum) {
+  FrameMatrix frames(3, 6);
+  // Point norms: frame 0 → {5, 1}, frame 1 → {0, 13}, frame 2 → {2, 0}: maxima 5, 13, 2.
+  frames << 3, 4, 0, 1, 0, 0,  //
+      0, 0, 0, 5, 12, 0,       //
+      0, 0, 2, 0, 0, 0;
+  EXPECT_DOUBLE_EQ(radiance_scale(frames), 5.0);
+}
+
+TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWithItsEngine) {
+  auto engine = IlluminationEngine::create(cornell_box({2000}));
+  ASSERT_TRUE(engine.ok()) << engine.error().message;
+  IlluminationTrainingOptions options;
+  for (const Eigen::Vector3d& p : light_grid(cornell_room(), {5, 5, 0.05, 0.1})) {
+    options.lights.push_back({p, Eigen::Vector3d::Ones()});
+  }
+  options.gather.samples = 8;
+  options.pmsc.max_key_points = 60;
+  options.pmsc.region_count = 2;
+  IlluminationTrainingReport report;
+  auto model_file = train_illumination(**engine, options, "test", &report);
+  ASSERT_TRUE(model_file.ok()) << model_file.error().message;
+  EXPECT_GT(report.radiance_scale, 0);
+
+  auto servable = model::load_servable(*model_file, "trained");
+  ASSERT_TRUE(servable.ok()) << servable.error().message;
+  ASSERT_TRUE(servable->pmsc && servable->illumination);
+  EXPECT_EQ(servable->info.fail_through, model::FailThrough::kServer);
+  EXPECT_EQ(servable->info.server_engine, model::ServerEngine::kIllumination);
+  EXPECT_EQ(servable->info.channel_count, 3);
+  EXPECT_EQ(servable->gather.samples, 8);
+  ASSERT_EQ(servable->training_lights.size(), options.lights.size());
+  const pmsc::PmscModel& model = *servable->pmsc;
+
+  // Each training frame, gathered again at its key points only (the engine is deterministic per
+  // point), is reconstructed within the trainer's reported training error.
+  const std::vector<int> all = (*engine)->all_points();
+  for (size_t f = 0; f < options.lights.size(); ++f) {
+    Eigen::VectorXf full, keys;
+    (*engine)->indirect({options.lights[f]}, options.gather, all, full);
+    (*engine)->indirect({options.lights[f]}, options.gather, model.key_points, keys);
+    ASSERT_EQ(keys, pmsc::gather_key_values(model, full)) << "light " << f;
+    pmsc::CachedPose cached;
+    pmsc::evaluate_cached(model, keys, nullptr, cached);
+    const Eigen::Map<const Eigen::Matrix3Xf> error((cached.points - full).eval().data(), 3, model.point_count);
+    EXPECT_LE(error.colwise().norm().maxCoeff(), report.pmsc.max_training_error * 1.001 + 1e-6) << "light " << f;
+    EXPECT_EQ(cached.status, pmsc::CacheStatus::kHit) << "light " << f;
+  }
+}
+
+}  // namespace
+}  // namespace animspace::illumination
