@@ -113,6 +113,25 @@ Status validate_scene(const Scene& scene) {
     }
   }
   if (!std::isfinite(scene.heat_max)) return invalid("heat_max: not finite");
+  if (scene.vertex_colours.rows() != 0) {
+    if (scene.vertex_colours.rows() != n) {
+      return invalid("vertex_colours: expected " + std::to_string(n) + " rows (one per point) or none, got " +
+                     std::to_string(scene.vertex_colours.rows()));
+    }
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const auto colour = scene.vertex_colours.row(i);
+      if (!(colour.allFinite() && (colour.array() >= 0).all())) {
+        return invalid("vertex_colours: colour " + std::to_string(i) + ": expected finite values ≥ 0, got " +
+                       row_text(scene.vertex_colours, i));
+      }
+    }
+    if (scene.heat.size() != 0) {
+      return invalid("vertex_colours: set together with heat; the surface takes its colour from one of them");
+    }
+  }
+  if (!(std::isfinite(scene.exposure) && scene.exposure > 0)) {
+    return invalid("exposure: expected a finite value > 0, got " + format_number(scene.exposure));
+  }
   ANIMSPACE_RETURN_IF_ERROR(require_finite(scene.wireframe_colour, "wireframe_colour"));
   return Status::Ok();
 }
@@ -317,13 +336,16 @@ uniform mat4 u_mvp;
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in float a_heat;
+layout(location = 3) in vec3 a_colour;
 out vec3 v_position;
 out vec3 v_normal;
 out float v_heat;
+out vec3 v_colour;
 void main() {
   v_position = a_position;
   v_normal = a_normal;
   v_heat = a_heat;
+  v_colour = a_colour;
   gl_Position = u_mvp * vec4(a_position, 1.0);
 }
 )";
@@ -334,11 +356,15 @@ uniform vec3 u_eye;
 uniform vec3 u_albedo;
 uniform bool u_use_heat;
 uniform float u_heat_scale;
+uniform bool u_use_colours;
+uniform float u_exposure;
 uniform vec4 u_material;  // ambient, diffuse, specular, shininess
-uniform bool u_blinn_phong;
+uniform int u_shading;    // 0 Lambert, 1 Blinn-Phong, 2 unlit
+uniform bool u_srgb;
 in vec3 v_position;
 in vec3 v_normal;
 in float v_heat;
+in vec3 v_colour;
 out vec4 o_colour;
 
 // Heat map (thesis Fig. 8.6): 0 blue, 1/3 green, 2/3 yellow, 1 red, linear in between. The heat
@@ -351,16 +377,25 @@ vec3 heat_colour(float t) {
   return mix(vec3(1.0, 1.0, 0.0), vec3(1.0, 0.0, 0.0), t - 2.0);
 }
 
+// IEC 61966-2-1 on c in [0, 1].
+vec3 srgb_encode(vec3 c) {
+  vec3 low = 12.92 * c;
+  vec3 high = 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055;
+  return mix(high, low, vec3(lessThanEqual(c, vec3(0.0031308))));
+}
+
 void main() {
   vec3 l = normalize(u_eye - v_position);
   // A zero normal (an isolated vertex) is lit head-on rather than producing NaN.
   vec3 n = dot(v_normal, v_normal) > 0.0 ? normalize(v_normal) : l;
   // Two-sided: a normal facing away from the eye is flipped, so max(n·l, 0) = |n·l|.
   float nl = abs(dot(n, l));
-  vec3 albedo = u_use_heat ? heat_colour(v_heat * u_heat_scale) : u_albedo;
-  vec3 c = albedo * (u_material.x + u_material.y * nl);
-  if (u_blinn_phong && nl > 0.0) c += vec3(u_material.z * pow(nl, u_material.w));
-  o_colour = vec4(clamp(c, 0.0, 1.0), 1.0);
+  vec3 albedo = u_use_heat ? heat_colour(v_heat * u_heat_scale)
+                            : (u_use_colours ? u_exposure * v_colour : u_albedo);
+  vec3 c = u_shading == 2 ? albedo : albedo * (u_material.x + u_material.y * nl);
+  if (u_shading == 1 && nl > 0.0) c += vec3(u_material.z * pow(nl, u_material.w));
+  c = clamp(c, 0.0, 1.0);
+  o_colour = vec4(u_srgb ? srgb_encode(c) : c, 1.0);
 }
 )";
 
@@ -389,6 +424,16 @@ void main() {
   o_colour = vec4(u_colour, 1.0);
 }
 )";
+
+// u_shading in kSurfaceFragmentShader.
+GLint shading_index(Shading shading) {
+  switch (shading) {
+    case Shading::kLambert: return 0;
+    case Shading::kBlinnPhong: return 1;
+    case Shading::kUnlit: return 2;
+  }
+  return 0;
+}
 
 const char* gl_error_name(GLenum code) {
   switch (code) {
@@ -494,12 +539,13 @@ class EglRenderer final : public Renderer {
     int64_t max_vertices = 0;
   };
   struct SurfaceUniforms {
-    GLint mvp = -1, eye = -1, albedo = -1, use_heat = -1, heat_scale = -1, material = -1, blinn_phong = -1;
+    GLint mvp = -1, eye = -1, albedo = -1, use_heat = -1, heat_scale = -1, use_colours = -1, exposure = -1,
+          material = -1, shading = -1, srgb = -1;
   };
   struct OverlayUniforms {
     GLint mvp = -1, point_size = -1, colour = -1, round = -1;
   };
-  enum Buffer { kPositions, kNormals, kHeat, kElements, kBufferCount };
+  enum Buffer { kPositions, kNormals, kHeat, kColours, kElements, kBufferCount };
 
   Status make_current(const std::string& why) const;
   Status check_limits(const Scene& scene) const;
@@ -598,20 +644,23 @@ Status EglRenderer::init() {
                        glGetUniformLocation(surface_program_, "u_albedo"),
                        glGetUniformLocation(surface_program_, "u_use_heat"),
                        glGetUniformLocation(surface_program_, "u_heat_scale"),
+                       glGetUniformLocation(surface_program_, "u_use_colours"),
+                       glGetUniformLocation(surface_program_, "u_exposure"),
                        glGetUniformLocation(surface_program_, "u_material"),
-                       glGetUniformLocation(surface_program_, "u_blinn_phong")};
+                       glGetUniformLocation(surface_program_, "u_shading"),
+                       glGetUniformLocation(surface_program_, "u_srgb")};
   overlay_uniforms_ = {glGetUniformLocation(overlay_program_, "u_mvp"),
                        glGetUniformLocation(overlay_program_, "u_point_size"),
                        glGetUniformLocation(overlay_program_, "u_colour"),
                        glGetUniformLocation(overlay_program_, "u_round")};
 
-  // One vertex array for both programs: attribute 0 positions, 1 normals, 2 heat; the element
-  // buffer holds triangles, then edges, then key points.
+  // One vertex array for both programs: attribute 0 positions, 1 normals, 2 heat, 3 vertex
+  // colours; the element buffer holds triangles, then edges, then key points.
   glGenBuffers(kBufferCount, buffers_);
   glGenVertexArrays(1, &vao_);
   glBindVertexArray(vao_);
-  const GLint sizes[] = {3, 3, 1};
-  for (GLuint attribute = 0; attribute < 3; ++attribute) {
+  const GLint sizes[] = {3, 3, 1, 3};
+  for (GLuint attribute = 0; attribute < 4; ++attribute) {
     glBindBuffer(GL_ARRAY_BUFFER, buffers_[attribute]);
     glVertexAttribPointer(attribute, sizes[attribute], GL_FLOAT, GL_FALSE, 0, nullptr);
   }
@@ -746,6 +795,14 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
     glDisableVertexAttribArray(kHeat);
     glVertexAttrib1f(kHeat, 0);
   }
+  const bool use_colours = scene.vertex_colours.rows() != 0;
+  if (use_colours) {
+    upload(kColours, scene.vertex_colours.data(), static_cast<size_t>(scene.vertex_colours.size()));
+    glEnableVertexAttribArray(kColours);
+  } else {
+    glDisableVertexAttribArray(kColours);
+    glVertexAttrib3f(kColours, 0, 0, 0);
+  }
 
   const GLuint target = targets_.samples > 1 ? targets_.multisample_fbo : targets_.fbo;
   glBindFramebuffer(GL_FRAMEBUFFER, target);
@@ -777,8 +834,11 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
   glUniform3f(surface_uniforms_.albedo, material.albedo.x(), material.albedo.y(), material.albedo.z());
   glUniform1i(surface_uniforms_.use_heat, use_heat ? 1 : 0);
   glUniform1f(surface_uniforms_.heat_scale, heat_max > 0 ? 1 / heat_max : 0);  // all zero: all blue
+  glUniform1i(surface_uniforms_.use_colours, use_colours ? 1 : 0);
+  glUniform1f(surface_uniforms_.exposure, scene.exposure);
   glUniform4f(surface_uniforms_.material, material.ambient, material.diffuse, material.specular, material.shininess);
-  glUniform1i(surface_uniforms_.blinn_phong, scene.shading == Shading::kBlinnPhong ? 1 : 0);
+  glUniform1i(surface_uniforms_.shading, shading_index(scene.shading));
+  glUniform1i(surface_uniforms_.srgb, scene.srgb ? 1 : 0);
   glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(scene.faces.size()), GL_UNSIGNED_INT, nullptr);
   glDisable(GL_POLYGON_OFFSET_FILL);
 

@@ -16,10 +16,11 @@ class Renderer {
   // Draws `scene`. Must be called from the thread that created the renderer.
   // Errors: kInvalidArgument naming the field for a bad scene (size < 1, faces out of range,
   // non-finite points, sample count not 1/2/4/8, key point out of range, heat of the wrong
-  // length or negative); kResourceExhausted when the size exceeds what the GL implementation
-  // can allocate (its maximum renderbuffer size and sample count, and a budget of
-  // width · height · samples ≤ 4096² · 8 that keeps a software rasteriser from being killed for
-  // memory); kInternal for a GL failure (the renderer stays usable).
+  // length or negative, vertex_colours of the wrong row count, negative, not finite or set
+  // together with heat, exposure not finite and > 0); kResourceExhausted when the size exceeds
+  // what the GL implementation can allocate (its maximum renderbuffer size and sample count, and
+  // a budget of width · height · samples ≤ 4096² · 8 that keeps a software rasteriser from being
+  // killed for memory); kInternal for a GL failure (the renderer stays usable).
   virtual Result<Image> render(const Scene& scene) = 0;
   // "EGL surfaceless — llvmpipe (LLVM 15.0.6, 256 bits), OpenGL ES 3.2 Mesa 22.3.6".
   virtual std::string description() const = 0;

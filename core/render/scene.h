@@ -23,7 +23,7 @@ struct Camera {
   double vertical_fov_rad = 0.8;  // in (0, π)
 };
 
-enum class Shading { kLambert, kBlinnPhong };
+enum class Shading { kLambert, kBlinnPhong, kUnlit };
 
 // Thumbnails are small and drawn once: the shading is a fixed, documented model rather than a
 // material system, so that a test can compute the value of any pixel by hand.
@@ -32,8 +32,17 @@ enum class Shading { kLambert, kBlinnPhong };
 // normalise(eye − p). With albedo a, ambient k_a, diffuse k_d, specular k_s and shininess s:
 //   Lambert:      c = a · (k_a + k_d · max(n·l, 0))
 //   Blinn-Phong:  c = a · (k_a + k_d · max(n·l, 0)) + k_s · max(n·h, 0)^s,  h = normalise(l + v) = l
-// each channel clamped to [0, 1], written as 8-bit (round to nearest) with no gamma curve.
-// Back faces are lit with their flipped normal (thumbnails of open meshes stay readable).
+//   Unlit:        c = a  (no light: for colours that already are radiance, e.g. precomputed
+//                 indirect illumination)
+// each channel clamped to [0, 1], then (Scene::srgb only) sRGB-encoded, written as 8-bit (round
+// to nearest). Back faces are lit with their flipped normal (thumbnails of open meshes stay
+// readable).
+//
+// The albedo a of a fragment is, in order of precedence (Scene::heat and Scene::vertex_colours
+// are never both set):
+//   the heat colour of the interpolated heat value (Scene::heat),
+//   exposure · the interpolated vertex colour (Scene::vertex_colours, Scene::exposure),
+//   Material::albedo.
 struct Material {
   Eigen::Vector3f albedo = Eigen::Vector3f(0.80f, 0.78f, 0.74f);
   float ambient = 0.15f;
@@ -66,9 +75,22 @@ struct Scene {
   // 0 is blue, heat_max (or the largest value when heat_max ≤ 0) is red, through green/yellow.
   // The map is piecewise linear in t = heat / heat_max clamped to [0, 1] (blue at 0, green at 1/3,
   // yellow at 2/3, red at 1), evaluated per fragment on the interpolated value, and the colour
-  // replaces the albedo a in the shading model above (still lit, so the shape stays readable).
+  // replaces the albedo a in the shading model above (still lit, so the shape stays readable,
+  // unless the shading is kUnlit).
   Eigen::VectorXf heat;
   float heat_max = 0;
+  // Per-vertex colours (#V × 3, linear RGB, ≥ 0, any scale, e.g. the radiance of indirect
+  // illumination), or empty. Interpolated per fragment and multiplied by `exposure`, they replace
+  // the albedo a in the shading model above, in every shading mode: with Shading::kUnlit the pixel
+  // is round(255 · clamp(exposure · colour, 0, 1)). Refused together with `heat` (one colour
+  // source per surface, so neither is dropped silently).
+  PointMatrix vertex_colours;
+  float exposure = 1.0f;  // > 0; scales vertex_colours only (not Material::albedo nor the heat map)
+  // Encode the surface's colour with the sRGB transfer function after clamping to [0, 1]:
+  //   c ≤ 0.0031308:  12.92 · c,   otherwise  1.055 · c^(1/2.4) − 0.055
+  // (IEC 61966-2-1), for linear radiance shown on a display. The background and the overlays
+  // are drawn as given.
+  bool srgb = false;
   // Triangle edges drawn on top of the shaded surface.
   bool wireframe = false;
   Eigen::Vector3f wireframe_colour = Eigen::Vector3f(0.05f, 0.05f, 0.05f);

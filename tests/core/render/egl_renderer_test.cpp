@@ -15,6 +15,7 @@
 #include <limits>
 #include <memory>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -409,6 +410,251 @@ TEST_F(RenderTest, HeatColoursFollowTheDocumentedMap) {
     ASSERT_FALSE(image.rgba.empty());
     expect_colour_near(rgb(image, 16, 16), to_rgb8(heat_map(heat / 3)), 1, "centre");
   }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Per-vertex colours (Scene::vertex_colours, exposure, srgb, Shading::kUnlit).
+
+// The square [−1, 1]² in the plane z = 0, counter-clockwise from +z, seen head-on from (0, 0, 3)
+// on a black background: corners 0 (−1, −1), 1 (1, −1), 2 (1, 1), 3 (−1, 1). The plane is
+// parallel to the image, so perspective-correct interpolation is affine on screen.
+Scene facing_square(int size) {
+  Scene scene;
+  scene.width = size;
+  scene.height = size;
+  scene.points.resize(4, 3);
+  scene.points << -1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0;
+  scene.faces.resize(2, 3);
+  scene.faces << 0, 1, 2, 0, 2, 3;
+  scene.camera = make_camera({0, 0, 3}, {0, 0, 0}, {0, 1, 0}, 0.8);
+  scene.background = Eigen::Vector4f(0, 0, 0, 1);
+  scene.samples = 1;
+  return scene;
+}
+
+// Where the ray through the centre of pixel (x, y) meets the plane z = 0 of facing_square, if
+// the pixel centre is more than 1.5 px inside the square's projection (clear of its edges).
+std::optional<Eigen::Vector2d> square_point(const Pinhole& camera, int x, int y) {
+  const Eigen::Vector3d ray = camera.pixel_ray(x, y);
+  const Eigen::Vector3d p = camera.eye - camera.eye.z() / ray.z() * ray;
+  const Eigen::Vector2d lower = camera.project(Eigen::Vector3d(-1, 1, 0));  // top-left on screen
+  const Eigen::Vector2d upper = camera.project(Eigen::Vector3d(1, -1, 0));
+  const double margin = std::min({x + 0.5 - lower.x(), upper.x() - x - 0.5, y + 0.5 - lower.y(), upper.y() - y - 0.5});
+  if (margin <= 1.5) return std::nullopt;
+  return Eigen::Vector2d(p.x(), p.y());
+}
+
+TEST_F(RenderTest, UnlitPixelsAreTheExposedVertexColours) {
+  // Every covered pixel is round(255 · clamp(exposure · colour, 0, 1)); 255 · the products are at
+  // least 0.15 away from a rounding boundary, so the check is exact.
+  struct Case {
+    Eigen::Vector3f colour;
+    float exposure;
+    Rgb expected;
+  };
+  const Case cases[] = {
+      {{0.2f, 0.35f, 0.03f}, 1.0f, {51, 89, 8}},           // 51.0, 89.25, 7.65
+      {{6, 1, 0.4f}, 0.125f, {191, 32, 13}},               // 191.25, 31.875, 12.75
+      {{2000, 300, 0}, 0.002f, {255, 153, 0}},             // red clamps from 4
+      {{1e-4f, 5e-4f, 2e-3f}, 400.0f, {10, 51, 204}},      // radiance on a tiny scale
+  };
+  Scene scene = facing_square(65);
+  scene.shading = Shading::kUnlit;
+  scene.material.albedo = Eigen::Vector3f(0, 1, 0);  // must not show
+  const Pinhole camera = pinhole(scene);
+  for (const Case& c : cases) {
+    SCOPED_TRACE("exposure " + std::to_string(c.exposure));
+    scene.vertex_colours = c.colour.transpose().replicate(4, 1);
+    scene.exposure = c.exposure;
+    const Image image = render_ok(scene);
+    ASSERT_FALSE(image.rgba.empty());
+    int checked = 0;
+    for (int y = 0; y < scene.height; ++y) {
+      for (int x = 0; x < scene.width; ++x) {
+        if (!square_point(camera, x, y)) continue;
+        ASSERT_EQ(rgb(image, x, y), c.expected) << "pixel (" << x << ", " << y << ")";
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 40 * 40);
+    EXPECT_TRUE(is_background(image, 0, 0));
+  }
+}
+
+TEST_F(RenderTest, VertexColoursAreInterpolatedAcrossTheSurface) {
+  // Colours that are an affine function of the position, colour(x, y) = b + g_x·x + g_y·y, are
+  // reproduced exactly by barycentric interpolation on both triangles; at the centre pixel the
+  // value is the average of the corners.
+  const Eigen::Vector3f base(0.25f, 0.25f, 0.2f), gx(0.2f, 0, -0.1f), gy(0, 0.1f, 0.05f);
+  const float exposure = 2;
+  Scene scene = facing_square(65);  // odd: the centre pixel's ray is the view axis
+  scene.shading = Shading::kUnlit;
+  scene.exposure = exposure;
+  scene.vertex_colours.resize(4, 3);
+  for (Eigen::Index i = 0; i < 4; ++i) {
+    scene.vertex_colours.row(i) = (base + scene.points(i, 0) * gx + scene.points(i, 1) * gy).transpose();
+  }
+  const Image image = render_ok(scene);
+  ASSERT_FALSE(image.rgba.empty());
+  const Pinhole camera = pinhole(scene);
+  const Eigen::Vector3f average = scene.vertex_colours.colwise().mean().transpose();
+  expect_colour_near(rgb(image, 32, 32), to_rgb8(exposure * average), 1, "centre");
+  int checked = 0;
+  for (int y = 0; y < scene.height; ++y) {
+    for (int x = 0; x < scene.width; ++x) {
+      const std::optional<Eigen::Vector2d> p = square_point(camera, x, y);
+      if (!p) continue;
+      const Eigen::Vector3f expected =
+          exposure * (base + static_cast<float>(p->x()) * gx + static_cast<float>(p->y()) * gy);
+      const std::string where = "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")";
+      expect_colour_near(rgb(image, x, y), to_rgb8(expected), 1, where);
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 40 * 40);
+  // The gradient is visible: the left and right edges differ by 2 · 2 · 0.2 · 255 ≈ 200 in red.
+  EXPECT_GT(rgb(image, 52, 32)[0] - rgb(image, 12, 32)[0], 150);
+}
+
+TEST_F(RenderTest, LitVertexColoursReplaceTheAlbedo) {
+  // Same probes as ShadingMatchesTheDocumentedModel, with a = exposure · colour in place of the
+  // material's albedo (set to a colour that would show if it were used).
+  Scene scene = sphere_scene(201, 201);
+  scene.normals = scene.points;  // on a unit sphere the exact normal is the position
+  scene.material.albedo = Eigen::Vector3f(0, 1, 0);
+  scene.material.ambient = 0.1f;
+  scene.material.diffuse = 0.7f;
+  scene.material.specular = 0.2f;
+  scene.material.shininess = 16;
+  const Eigen::Vector3f colour(0.75f, 0.25f, 0.5f);
+  scene.vertex_colours = colour.transpose().replicate(scene.points.rows(), 1);
+  scene.exposure = 1.2f;
+  Material by_hand = scene.material;
+  by_hand.albedo = scene.exposure * colour;
+
+  // The pixel on the centre row whose ray meets the sphere where n·l = 1/2.
+  const Pinhole camera = pinhole(scene);
+  int probe = -1;
+  double probe_nl = 0;
+  for (int x = 100; x < scene.width; ++x) {
+    const Eigen::Vector3d ray = camera.pixel_ray(x, 100);
+    const auto t = testing::hit_sphere(camera.eye, ray, Eigen::Vector3d::Zero(), 1);
+    if (!t) break;
+    const Eigen::Vector3d p = camera.eye + *t * ray;
+    const double nl = p.normalized().dot((camera.eye - p).normalized());
+    if (probe < 0 || std::abs(nl - 0.5) < std::abs(probe_nl - 0.5)) {
+      probe = x;
+      probe_nl = nl;
+    }
+  }
+  ASSERT_GE(probe, 0);
+  ASSERT_NEAR(probe_nl, 0.5, 0.02);
+
+  for (const Shading shading : {Shading::kLambert, Shading::kBlinnPhong}) {
+    SCOPED_TRACE(shading == Shading::kLambert ? "Lambert" : "Blinn-Phong");
+    scene.shading = shading;
+    const Image image = render_ok(scene);
+    ASSERT_FALSE(image.rgba.empty());
+    expect_colour_near(rgb(image, 100, 100), to_rgb8(expected_colour(by_hand, shading, 1.0)), 2, "centre");
+    expect_colour_near(rgb(image, probe, 100), to_rgb8(expected_colour(by_hand, shading, probe_nl)), 3, "60° pixel");
+  }
+}
+
+// IEC 61966-2-1, written out.
+float srgb_encode(float c) { return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1 / 2.4f) - 0.055f; }
+
+TEST_F(RenderTest, SrgbEncodesTheSurfaceAfterExposureAndClamping) {
+  Scene scene = facing_square(33);
+  scene.shading = Shading::kUnlit;
+  scene.background = Eigen::Vector4f(0.2f, 0.2f, 0.2f, 1);
+  scene.srgb = true;
+  // Exposed: 0.002 (on the linear segment), 0.125, and 2.8, which clamps to 1 before the encoding.
+  scene.exposure = 4;
+  scene.vertex_colours = Eigen::RowVector3f(0.0005f, 0.03125f, 0.7f).replicate(4, 1);
+  const Image image = render_ok(scene);
+  ASSERT_FALSE(image.rgba.empty());
+  const Eigen::Vector3f expected(srgb_encode(0.002f), srgb_encode(0.125f), srgb_encode(1.0f));
+  const Rgb expected8 = to_rgb8(expected);
+  ASSERT_EQ(expected8, (Rgb{7, 99, 255}));  // independent of the helper: 6.59, 99.09, 255
+  expect_colour_near(rgb(image, 16, 16), expected8, 1, "centre");
+  // The background is drawn as given.
+  EXPECT_EQ(rgb(image, 0, 0), (Rgb{51, 51, 51}));
+}
+
+TEST_F(RenderTest, WithoutVertexColoursExposureChangesNothingAndUnlitIsTheAlbedo) {
+  Scene scene = sphere_scene(101, 101, 3);
+  const Image lit = render_ok(scene);
+  scene.exposure = 3;
+  EXPECT_EQ(render_ok(scene).rgba, lit.rgba);
+
+  // Unlit: the albedo on every covered pixel, however the surface turns.
+  scene.shading = Shading::kUnlit;
+  scene.material.albedo = Eigen::Vector3f(0.6f, 0.25f, 0.8f);  // 153, 63.75, 204: clear of rounding ties
+  const Image unlit = render_ok(scene);
+  ASSERT_FALSE(unlit.rgba.empty());
+  for (const int x : {50, 60, 70}) {
+    EXPECT_EQ(rgb(unlit, x, 50), to_rgb8(scene.material.albedo)) << "pixel (" << x << ", 50)";
+  }
+
+  // Unlit heat map: the heat colour itself (the heat map of HeatColoursFollowTheDocumentedMap).
+  scene.heat = Eigen::VectorXf::Constant(scene.points.rows(), 1.4f);
+  scene.heat_max = 3;
+  const Image heat = render_ok(scene);
+  ASSERT_FALSE(heat.rgba.empty());
+  expect_colour_near(rgb(heat, 60, 50), to_rgb8(heat_map(1.4 / 3)), 1, "heat");
+}
+
+TEST_F(RenderTest, BadVertexColoursAndExposureAreRefusedNamingTheField) {
+  const Scene good = sphere_scene(48, 48, 3);
+  const Image before = render_ok(good);
+  ASSERT_FALSE(before.rgba.empty());
+  const Eigen::Index n = good.points.rows();
+
+  Scene scene = good;
+  scene.vertex_colours = PointMatrix::Ones(10, 3);
+  Error error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message, "vertex_colours: expected 642 rows (one per point) or none, got 10");
+
+  scene = good;
+  scene.vertex_colours = PointMatrix::Constant(n, 3, 0.5f);
+  scene.vertex_colours(7, 1) = -0.25f;
+  error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message, "vertex_colours: colour 7: expected finite values ≥ 0, got (0.5, -0.25, 0.5)");
+
+  for (const float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    scene = good;
+    scene.vertex_colours = PointMatrix::Constant(n, 3, 0.5f);
+    scene.vertex_colours(3, 2) = bad;
+    error = render_error(scene);
+    EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+    EXPECT_EQ(error.message.rfind("vertex_colours: colour 3: expected finite values ≥ 0, got (0.5, 0.5, ", 0), 0u)
+        << error.message;
+  }
+
+  scene = good;
+  scene.vertex_colours = PointMatrix::Constant(n, 3, 0.5f);
+  scene.heat = Eigen::VectorXf::Ones(n);
+  error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message, "vertex_colours: set together with heat; the surface takes its colour from one of them");
+
+  scene = good;
+  scene.exposure = 0;
+  error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message, "exposure: expected a finite value > 0, got 0");
+
+  for (const float bad : {-1.0f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    scene = good;
+    scene.exposure = bad;
+    error = render_error(scene);
+    EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+    EXPECT_EQ(error.message.rfind("exposure: expected a finite value > 0, got ", 0), 0u) << error.message;
+  }
+
+  EXPECT_EQ(render_ok(good).rgba, before.rgba);
 }
 
 TEST_F(RenderTest, WireframeIsNotHiddenByTheSurfaceItOutlines) {
