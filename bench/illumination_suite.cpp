@@ -33,7 +33,10 @@
 #include "clients/cpp/tools/quantile.h"
 #include "core/container/model_container.h"
 #include "core/illumination/illumination_model.h"
+#include "core/common/atomic_file.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/render/png.h"
+#include "core/render/renderer.h"
 #include "harness/daemon_process.h"
 
 namespace animspace::bench {
@@ -109,6 +112,84 @@ const char* status_name(pmsc::CacheStatus s) {
 
 double median(std::vector<double> values) { return values.empty() ? 0.0 : tools::quantile(std::move(values), 0.5); }
 
+// One frame of the figure: the surface coloured by `radiance` (N·3, drawn white at `white`), or
+// by the heat map of `heat` (N, red at heat_max).
+render::Scene figure_scene(const illumination::IlluminationEngine& scene, const illumination::SceneView& view,
+                           const Eigen::VectorXf* radiance, double white, const Eigen::VectorXf* heat, double heat_max) {
+  render::Scene s;
+  s.width = 256;
+  s.height = 256;
+  s.points = scene.surface().vertices;
+  s.faces = scene.surface().faces;
+  s.normals = scene.surface().normals;
+  s.camera = render::Camera{view.eye, view.target, view.up, view.vertical_fov_rad};
+  if (radiance != nullptr) {
+    s.vertex_colours = Eigen::Map<const PointMatrix>(radiance->data(), scene.point_count(), 3).cwiseMax(0.0f);
+    s.exposure = static_cast<float>(1.0 / white);
+    s.srgb = true;
+    s.shading = render::Shading::kUnlit;
+  } else {
+    s.heat = *heat;
+    s.heat_max = static_cast<float>(heat_max);
+    s.shading = render::Shading::kLambert;
+  }
+  return s;
+}
+
+// Meyer & Anderson 2007 Fig. 5, on our scene: per novel light (rows) the full calculation
+// (direct + gathered indirect), the subspace's (direct + indirect from key points) and the error
+// of the indirect, |full − subspace|, red at 5% of the frame's largest indirect radiance.
+void write_figure(const std::string& path, const illumination::IlluminationEngine& scene,
+                  const std::vector<PointLight>& lights, const std::vector<Eigen::VectorXf>& full,
+                  const std::vector<Eigen::VectorXf>& estimate) {
+  auto renderer = render::make_egl_renderer(render::EglPlatform::kAuto);
+  if (!renderer) {
+    std::printf("illumination: no figure: %s\n", renderer.error().message.c_str());
+    return;
+  }
+  const illumination::SceneView view = illumination::cornell_view();
+  const std::vector<int> all = scene.all_points();
+  render::Image sheet;
+  sheet.width = 3 * 256;
+  sheet.height = static_cast<int>(lights.size()) * 256;
+  sheet.rgba.assign(static_cast<size_t>(sheet.width) * sheet.height * 4, 255);
+  for (size_t row = 0; row < lights.size(); ++row) {
+    Eigen::VectorXf direct;
+    scene.direct({lights[row]}, all, direct);
+    const Eigen::VectorXf full_total = direct + full[row];
+    const Eigen::VectorXf served_total = direct + estimate[row];
+    std::vector<float> largest(static_cast<size_t>(scene.point_count()));
+    for (int i = 0; i < scene.point_count(); ++i) largest[static_cast<size_t>(i)] = full_total.segment<3>(3 * i).maxCoeff();
+    std::nth_element(largest.begin(), largest.begin() + static_cast<long>(0.99 * (largest.size() - 1)), largest.end());
+    const double white = largest[static_cast<size_t>(0.99 * (largest.size() - 1))];
+    const Eigen::Map<const Eigen::Matrix3Xf> f(full[row].data(), 3, scene.point_count());
+    const Eigen::Map<const Eigen::Matrix3Xf> e(estimate[row].data(), 3, scene.point_count());
+    const Eigen::VectorXf heat = (f - e).colwise().norm().transpose();
+    const double heat_max = 0.05 * f.colwise().norm().maxCoeff();
+    const render::Scene panels[3] = {figure_scene(scene, view, &full_total, white, nullptr, 0),
+                                     figure_scene(scene, view, &served_total, white, nullptr, 0),
+                                     figure_scene(scene, view, nullptr, 0, &heat, heat_max)};
+    for (int column = 0; column < 3; ++column) {
+      auto image = (*renderer)->render(panels[column]);
+      if (!image) {
+        std::printf("illumination: no figure: %s\n", image.error().message.c_str());
+        return;
+      }
+      for (int y = 0; y < 256; ++y) {
+        std::copy_n(image->rgba.data() + static_cast<size_t>(y) * 256 * 4, 256 * 4,
+                    sheet.rgba.data() + ((row * 256 + static_cast<size_t>(y)) * sheet.width + column * 256) * 4);
+      }
+    }
+  }
+  auto png = render::encode_png(sheet);
+  if (!png || !write_file_atomically(path, *png).ok()) {
+    std::printf("illumination: could not write the figure %s\n", path.c_str());
+    return;
+  }
+  std::printf("illumination: figure (rows: novel lights; columns: full, subspace, |error| red at 5%% of the frame's "
+              "largest indirect radiance) written to %s\n", path.c_str());
+}
+
 }  // namespace
 
 nlohmann::json run_illumination_suite(const SuiteOptions& options) {
@@ -157,6 +238,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   std::vector<Eigen::VectorXf> inside_keys;
   std::vector<Eigen::VectorXf> inside_estimates;
   std::vector<NovelLight> inside_lights;
+  std::vector<Eigen::VectorXf> inside_full;  // the first three, for the figure
   for (size_t l = 0; l < lights.size(); ++l) {
     const NovelLight& novel = lights[l];
     Eigen::VectorXf full;
@@ -201,10 +283,17 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       inside_keys.push_back(keys);
       inside_estimates.push_back(cached.points);
       inside_lights.push_back(novel);
+      if (inside_full.size() < 3) inside_full.push_back(full);
     } else {
       ++n_outside;
       flagged_outside += cached.status != pmsc::CacheStatus::kHit ? 1 : 0;
     }
+  }
+  if (!o.figure.empty() && !inside_full.empty()) {
+    std::vector<PointLight> shown;
+    for (size_t l = 0; l < inside_full.size(); ++l) shown.push_back(inside_lights[l].light);
+    write_figure(o.figure, scene, shown, inside_full,
+                 std::vector<Eigen::VectorXf>(inside_estimates.begin(), inside_estimates.begin() + static_cast<long>(shown.size())));
   }
   const double full_gather = median(full_s), key_gather = median(keys_s), reconstruct = median(recon_s);
   const double speedup_in_process = full_gather / (key_gather + reconstruct);

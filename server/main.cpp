@@ -23,6 +23,10 @@ std::filesystem::path make_demo_repository() {
     spdlog::critical("cannot write the demo repository: {}", status.error().message);
     std::exit(EXIT_FAILURE);
   }
+  if (auto status = animspace::demo::write_demo_illumination(dir); !status.ok()) {
+    spdlog::critical("cannot write the demo repository's illumination model: {}", status.error().message);
+    std::exit(EXIT_FAILURE);
+  }
   spdlog::info("no --model-repository given: serving the bundled demo repository generated in {}", dir.string());
   return dir;
 }

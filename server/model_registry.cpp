@@ -54,9 +54,9 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
     loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*servable->lod_levels));
     loaded->bounding_sphere = servable->bounding_sphere;
   }
-  loaded->illumination = std::move(servable->illumination);
-  loaded->gather = servable->gather;
-  loaded->training_lights = std::move(servable->training_lights);
+  if (servable->illumination) {
+    loaded->illumination = std::make_shared<const illumination::ServedIllumination>(std::move(*servable->illumination));
+  }
   loaded->name = name;
   loaded->version = version;
   loaded->path = path;

@@ -24,7 +24,7 @@
 #include "core/model/repository.h"
 #include "core/animspace/metrics.h"
 #include "core/animspace/model.h"
-#include "core/illumination/gather.h"
+#include "core/illumination/illumination_io.h"
 #include "core/lod/levels.h"
 #include "core/pmsc/pmsc_model.h"
 
@@ -50,11 +50,9 @@ struct LoadedModel {
   std::shared_ptr<const lod::LodLevels> lod_levels;
   // The sphere eq. 7.2 measures depth to (lod::model_bounding_sphere), when lod_levels is set.
   geometry::BoundingSphere bounding_sphere;
-  // The illumination engine a PMSC model of RGB radiance carries for server fail-through, and
-  // the gather settings and training lights it was trained with (null otherwise).
-  std::shared_ptr<const illumination::IlluminationEngine> illumination;
-  illumination::GatherOptions gather;
-  std::vector<illumination::PointLight> training_lights;
+  // The illumination engine a PMSC model of RGB radiance carries for server fail-through (null
+  // otherwise).
+  std::shared_ptr<const illumination::ServedIllumination> illumination;
 };
 
 struct VersionEntry {

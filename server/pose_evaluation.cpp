@@ -43,16 +43,16 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
                                                       "' has no illumination engine on the server (fail-through " +
                                                       engine_note + "); leave light_set unset"};
     }
-    const Eigen::Vector3d intensity =
-        model.training_lights.empty() ? Eigen::Vector3d::Ones() : model.training_lights.front().intensity;
-    if (grpc::Status s = decode_light_set(pose.light_set(), field + ".light_set", intensity, out.lights); !s.ok()) {
+    if (grpc::Status s = decode_light_set(pose.light_set(), field + ".light_set",
+                                          model.illumination->default_intensity(), out.lights);
+        !s.ok()) {
       return s;
     }
   }
   if (!out.lights.empty() && !pose.has_key_values()) {
     // The server is the renderer here (Meyer & Anderson 2007 §3.2): it gathers the key points
     // alone, and the soft cache judges them as it would judge a client's.
-    model.illumination->indirect(out.lights, model.gather, m.key_points, out.key_values);
+    model.illumination->engine->indirect(out.lights, model.illumination->gather, m.key_points, out.key_values);
   } else if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
                                             static_cast<uint32_t>(m.key_point_count()),
                                             static_cast<uint32_t>(m.channel_count), "key points", out.key_values);
@@ -127,7 +127,7 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
       };
     } else if (!input.lights.empty()) {
       engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
-        model.illumination->indirect(input.lights, model.gather, points, full);
+        model.illumination->engine->indirect(input.lights, model.illumination->gather, points, full);
         return true;
       };
     }
@@ -147,7 +147,8 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
       };
     } else if (!input.lights.empty()) {
       engine = [&](Eigen::VectorXf& full) {
-        model.illumination->indirect(input.lights, model.gather, model.illumination->all_points(), full);
+        model.illumination->engine->indirect(input.lights, model.illumination->gather,
+                                             model.illumination->engine->all_points(), full);
         return true;
       };
     }

@@ -70,7 +70,7 @@ struct KeyPointPose {
   std::span<const float> key_values;
   uint32_t channel_count = 3;
   const SkeletonPose* skeleton_pose = nullptr;
-  std::span<const PointLight> lights;
+  std::span<const PointLight> lights = {};
 };
 
 struct RegionError {

@@ -78,6 +78,25 @@ Result<container::ModelContainer> make_demo_pmsc_engine_container(int frames = k
 Result<container::ModelContainer> make_demo_pmsc_engine_container(
     const container::ModelContainer& animation_space_demo);
 
+inline constexpr std::string_view kDemoIlluminationModelName = "cornell";
+
+// The seeds' second application (Meyer & Anderson 2007 §3.2): the Cornell box's one-bounce
+// indirect illumination for the 12 × 12 grid of point lights under its ceiling, as a PMSC model of
+// RGB radiance that carries its illumination engine (illumination::train_illumination). Sized for
+// a demo that must start in moments (measured in docs/BENCHMARKS.md): a few thousand surface
+// points and few gather rays; the bench and `animspace train-illumination` use the papers' sizes.
+struct DemoIlluminationOptions {
+  int points = 6000;
+  int samples = 16;
+  int lights_x = 12;
+  int lights_z = 12;
+};
+Result<container::ModelContainer> make_demo_illumination_container(const DemoIlluminationOptions& options = {});
+
+// Writes `cornell` (version 1) into `repository`. Kept apart from write_demo_repository, which the
+// tests call often: only the daemon's and the CLI's demo repositories carry it.
+Status write_demo_illumination(const std::filesystem::path& repository, const DemoIlluminationOptions& options = {});
+
 // The path of the demo model's file inside `repository`.
 std::filesystem::path demo_model_path(const std::filesystem::path& repository);
 

@@ -1,5 +1,7 @@
 #include "core/illumination/illumination_io.h"
 
+#include <cmath>
+#include <cstdlib>
 #include <string>
 #include <utility>
 
@@ -18,6 +20,15 @@ Error named(const Error& e, const std::string& source) { return Error{e.code, so
 
 }  // namespace
 
+SceneView cornell_view() {
+  SceneView view;
+  view.eye = Eigen::Vector3d(0.278, 0.273, -0.800);
+  view.target = Eigen::Vector3d(0.278, 0.273, 0.0);
+  view.up = Eigen::Vector3d::UnitY();
+  view.vertical_fov_rad = 2 * std::atan(0.0125 / 0.035);
+  return view;
+}
+
 void attach_illumination(container::ModelContainer& out, const IlluminationSetup& setup) {
   out.set_points(container::sections::kRestPoints, setup.surface.vertices);
   out.set_faces(container::sections::kFaces, setup.surface.faces);
@@ -29,6 +40,12 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
         setup.training_lights[f].intensity.transpose();
   }
   out.set_matrix(sections::kTrainingLights, lights);
+  if (setup.view) {
+    container::Float64Matrix view(1, 10);
+    view << setup.view->eye.transpose(), setup.view->target.transpose(), setup.view->up.transpose(),
+        setup.view->vertical_fov_rad;
+    out.set_matrix(sections::kView, view);
+  }
   out.metadata()[kSamplesKey] = std::to_string(setup.gather.samples);
   out.metadata()[kSeedKey] = std::to_string(setup.gather.seed);
   out.metadata()[kQuantityKey] = setup.quantity;
@@ -57,6 +74,23 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
   for (long f = 0; f < lights->rows(); ++f) {
     setup.training_lights.push_back({lights->row(f).head<3>().transpose(), lights->row(f).tail<3>().transpose()});
   }
+  if (in.has_section(sections::kView)) {
+    auto view = in.double_matrix(sections::kView, 10);
+    if (!view) return named(view.error(), source);
+    if (view->rows() != 1) return container::section_shape_error(source, sections::kView, "1×10", view->rows(), 10);
+    SceneView v;
+    v.eye = view->row(0).segment<3>(0).transpose();
+    v.target = view->row(0).segment<3>(3).transpose();
+    v.up = view->row(0).segment<3>(6).transpose();
+    v.vertical_fov_rad = (*view)(0, 9);
+    if (!view->allFinite() || !(v.vertical_fov_rad > 0 && v.vertical_fov_rad < M_PI) || (v.eye - v.target).norm() == 0 ||
+        v.up.norm() == 0) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": section " + sections::kView +
+                                                         " should hold a finite eye ≠ target, an up ≠ 0 and a field "
+                                                         "of view in (0, π)");
+    }
+    setup.view = v;
+  }
   auto samples = in.metadata_int(kSamplesKey);
   if (!samples) return named(samples.error(), source);
   setup.gather.samples = *samples;
@@ -76,6 +110,30 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
                       source + ": metadata " + kQuantityKey + " should be 'indirect', got '" + setup.quantity + "'");
   }
   return setup;
+}
+
+}  // namespace animspace::illumination
+
+namespace animspace::illumination {
+
+Result<ServedIllumination> load_served_illumination(const container::ModelContainer& in, const std::string& source) {
+  auto setup = load_illumination(in, source);
+  if (!setup) return setup.error();
+  ServedIllumination served;
+  served.gather = setup->gather;
+  served.training_lights = std::move(setup->training_lights);
+  served.view = setup->view;
+  const std::string scale = in.metadata_value("illumination.radiance_scale", "0");
+  char* end = nullptr;
+  served.radiance_scale = std::strtod(scale.c_str(), &end);
+  if (end == scale.c_str() || *end != '\0' || !std::isfinite(served.radiance_scale) || served.radiance_scale < 0) {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata illumination.radiance_scale should be a finite "
+                                                            "number ≥ 0, got '" + scale + "'");
+  }
+  auto engine = IlluminationEngine::create(std::move(setup->surface));
+  if (!engine) return named(engine.error(), source);
+  served.engine = std::move(*engine);
+  return served;
 }
 
 }  // namespace animspace::illumination

@@ -4,6 +4,8 @@
 // the scene the colours belong to. Shapes in docs/FORMATS.md.
 #pragma once
 
+#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -21,7 +23,20 @@ namespace sections {
 inline constexpr const char* kNormals = "illumination.normals";                  // N×3 float32
 inline constexpr const char* kAlbedo = "illumination.albedo";                    // N×3 float32
 inline constexpr const char* kTrainingLights = "illumination.training_lights";  // F×6 float64: position, intensity
+inline constexpr const char* kView = "illumination.view";  // 1×10 float64: eye, target, up, vertical fov (rad); optional
 }  // namespace sections
+
+// A camera the scene is meant to be seen from (thumbnails draw it when a request names none).
+struct SceneView {
+  Eigen::Vector3d eye = Eigen::Vector3d(0, 0, 1);
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();
+  Eigen::Vector3d up = Eigen::Vector3d::UnitY();
+  double vertical_fov_rad = 0.7;
+};
+
+// The Cornell box's published camera (Cornell "Cornell Box Data": eye (278, 273, −800) mm
+// looking along +z, 35 mm lens over a 25 mm film: a 39.3° field of view), in metres.
+SceneView cornell_view();
 
 // What a model's illumination engine is built from.
 struct IlluminationSetup {
@@ -31,6 +46,7 @@ struct IlluminationSetup {
   std::vector<PointLight> training_lights;
   // Which values the model's points are: "indirect" (one-bounce L_i, the papers' quantity).
   std::string quantity = "indirect";
+  std::optional<SceneView> view;
 };
 
 // Writes the setup's sections and metadata (illumination.samples, illumination.seed,
@@ -38,6 +54,25 @@ struct IlluminationSetup {
 void attach_illumination(container::ModelContainer& out, const IlluminationSetup& setup);
 
 bool has_illumination(const container::ModelContainer& in);
+
+// A model's illumination engine made ready to serve: the scene built for ray tracing, the gather
+// it was trained with (fail-through must compute the same function the subspace learned), the
+// training lights, the view, and the radiance scale its tolerances were stated in.
+struct ServedIllumination {
+  std::shared_ptr<const IlluminationEngine> engine;
+  GatherOptions gather;
+  std::vector<PointLight> training_lights;
+  std::optional<SceneView> view;
+  double radiance_scale = 0;  // metadata illumination.radiance_scale; 0 when absent
+  // The intensity a request's light takes when it names none: the first training light's.
+  Eigen::Vector3d default_intensity() const {
+    return training_lights.empty() ? Eigen::Vector3d::Ones() : training_lights.front().intensity;
+  }
+};
+
+// load_illumination, then the engine built. Errors: load_illumination's; the engine's, naming
+// `source`.
+Result<ServedIllumination> load_served_illumination(const container::ModelContainer& in, const std::string& source);
 
 // Errors: kInvalidArgument naming `source` and the section or key (shapes against
 // mesh.rest_points, check_surface, samples ≥ 1, an unknown quantity).

@@ -80,6 +80,7 @@ Result<container::ModelContainer> train_illumination(const IlluminationEngine& e
   setup.surface = engine.surface();
   setup.gather = options.gather;
   setup.training_lights = options.lights;
+  setup.view = options.view;
   attach_illumination(out, setup);
   return out;
 }

@@ -4,6 +4,7 @@
 // its illumination engine so that the server can gather the full values itself on a blend or miss.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,7 @@ double radiance_scale(const FrameMatrix& frames);
 struct IlluminationTrainingOptions {
   std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 144)
   GatherOptions gather;
+  std::optional<SceneView> view = cornell_view();  // stored for thumbnails
   // The soft cache must not call HIT a frame with a point error above this fraction of the
   // radiance scale (pmsc::TrainingOptions::error_tolerance, in radiance units).
   double tolerance_fraction = 0.05;

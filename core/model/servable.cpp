@@ -30,18 +30,14 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     servable.bounding_sphere = *sphere;
   }
   if (info->server_engine == ServerEngine::kIllumination) {
-    auto setup = illumination::load_illumination(container, source);
-    if (!setup) return setup.error();
-    if (setup->surface.vertices.rows() != info->point_count) {
+    auto served = illumination::load_served_illumination(container, source);
+    if (!served) return served.error();
+    if (served->engine->point_count() != info->point_count) {
       return container::section_shape_error(source, container::sections::kRestPoints,
                                             std::to_string(info->point_count) + "×3 (pmsc.mean's points)",
-                                            setup->surface.vertices.rows(), 3);
+                                            served->engine->point_count(), 3);
     }
-    servable.gather = setup->gather;
-    servable.training_lights = std::move(setup->training_lights);
-    auto engine = illumination::IlluminationEngine::create(std::move(setup->surface));
-    if (!engine) return Error{engine.error().code, source + ": " + engine.error().message};
-    servable.illumination = std::move(*engine);
+    servable.illumination = std::move(*served);
   }
   servable.info = std::move(*info);
   return servable;

@@ -11,7 +11,6 @@
 #include "core/animspace/model.h"
 #include "core/common/result.h"
 #include "core/container/model_container.h"
-#include "core/illumination/gather.h"
 #include "core/illumination/illumination_io.h"
 #include "core/lod/levels.h"
 #include "core/model/model_info.h"
@@ -29,11 +28,8 @@ struct Servable {
   std::optional<animation_space::AnimationSpaceModel> animation_space;
   std::optional<lod::LodLevels> lod_levels;
   geometry::BoundingSphere bounding_sphere;
-  // The illumination engine a PMSC model of RGB radiance carries for server fail-through: the
-  // scene built for ray tracing, and the gather settings and training lights it was trained with.
-  std::shared_ptr<const illumination::IlluminationEngine> illumination;
-  illumination::GatherOptions gather;
-  std::vector<illumination::PointLight> training_lights;
+  // The illumination engine a PMSC model of RGB radiance carries for server fail-through.
+  std::optional<illumination::ServedIllumination> illumination;
 };
 
 // describe → pmsc::load and/or animation_space::load → lod::load_levels →

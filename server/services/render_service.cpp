@@ -1,16 +1,19 @@
 #include "server/services/render_service.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
 #include "core/common/format.h"
 #include "core/geometry/bounding_sphere.h"
+#include "core/illumination/illumination_io.h"
 #include "core/lod/selection.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/render/camera.h"
@@ -174,6 +177,118 @@ double error_tolerance(const LoadedModel& model) {
              : 0.0;
 }
 
+// Thesis Fig. 8.6 style: per point, how far what the cache returned (`estimate`) is from the
+// truth, drawn as the scene's heat map.
+grpc::Status draw_heat(const LoadedModel& model, const Request& request, const Eigen::Ref<const PointMatrix>& truth,
+                       const Eigen::Ref<const PointMatrix>& estimate, render::Scene& scene,
+                       v1::RenderThumbnailResponse* response) {
+  scene.heat = (truth - estimate).rowwise().norm();
+  // Red means the error asked for, else the per-point error the model's ε was calibrated to flag
+  // (its error tolerance): a hit's errors then read as a fraction of what the model promises.
+  // ε_max itself bounds the RMS key-point error, a far smaller number than a point's error, and
+  // turned a hit mostly red.
+  const double largest = scene.heat.size() == 0 ? 0.0 : static_cast<double>(scene.heat.maxCoeff());
+  if (!std::isfinite(largest)) {
+    return invalid_argument("full_values: |full − estimate| overflows float32; expected values on the model's scale");
+  }
+  double scale = request.heat_max();
+  if (scale == 0) scale = error_tolerance(model);
+  if (scale == 0) scale = largest;
+  scene.heat_max = static_cast<float>(scale);
+  response->set_heat_max_error(largest);
+  response->set_heat_scale_max(scale);
+  return grpc::Status::OK;
+}
+
+// An illumination model's thumbnail (IlluminationView, Meyer & Anderson 2007 Figs. 5 and 10): its
+// surface, coloured by the served radiance for the pose's lights, or by the heat map of the
+// served indirect illumination's error; with no source, by the surface's albedo.
+grpc::Status illumination_scene(ServiceEnvironment& env, const LoadedModel& model, const Request& request,
+                                render::Scene& scene, v1::RenderThumbnailResponse* response) {
+  const illumination::ServedIllumination& served = *model.illumination;
+  const illumination::SurfaceMesh& surface = served.engine->surface();
+  const v1::IlluminationView& view = request.illumination();
+  if (!v1::IlluminationView::Radiance_IsValid(view.radiance())) {
+    return invalid_argument("illumination.radiance: unknown value " + std::to_string(static_cast<int>(view.radiance())));
+  }
+  if (!std::isfinite(view.white_radiance()) || view.white_radiance() < 0) {
+    return invalid_argument("illumination.white_radiance: expected a finite value ≥ 0 (0 = the 99th percentile of "
+                            "the drawn radiance), got " + std::to_string(view.white_radiance()));
+  }
+  if (view.heat_from_full_gather() && request.has_full_values()) {
+    return invalid_argument("illumination.heat_from_full_gather: set together with full_values; the heat map's "
+                            "truth is one or the other");
+  }
+  scene.points = surface.vertices;
+  scene.faces = surface.faces;
+  scene.normals = surface.normals;
+  if (!scene.camera && served.view) {
+    scene.camera = render::Camera{served.view->eye, served.view->target, served.view->up, served.view->vertical_fov_rad};
+  }
+  switch (request.source_case()) {
+    case Request::kKeyPoints: break;
+    case Request::SOURCE_NOT_SET:
+      if (view.heat_from_full_gather()) {
+        return invalid_argument("illumination.heat_from_full_gather: needs key_points with a light_set as the source");
+      }
+      scene.vertex_colours = surface.albedo;  // the room as it is, under the thumbnail's headlight
+      return grpc::Status::OK;
+    default:
+      return unsupported_by_kind(model, "sequence_frame / skeleton_pose: an illumination model draws its surface, "
+                                        "lit through key_points (with a light_set) or plain");
+  }
+  PoseInput input;
+  if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
+  const bool total = view.radiance() != v1::IlluminationView::RADIANCE_INDIRECT;
+  const bool heat = request.has_full_values() || view.heat_from_full_gather();
+  if (input.lights.empty() && (view.heat_from_full_gather() || (total && !heat))) {
+    return invalid_argument(std::string("key_points.light_set: needed for ") +
+                            (view.heat_from_full_gather() ? "illumination.heat_from_full_gather"
+                                                          : "illumination.radiance RADIANCE_TOTAL (the server computes "
+                                                            "the direct part)") +
+                            "; send the lights, or ask for RADIANCE_INDIRECT");
+  }
+  const std::vector<int> all = served.engine->all_points();
+  Eigen::VectorXf full;
+  if (request.has_full_values()) {
+    if (grpc::Status s = decode_full_values(model, request.full_values(), "full_values", input.key_values, full);
+        !s.ok()) {
+      return s;
+    }
+  }
+  v1::PoseResult* result = response->mutable_pose();
+  if (grpc::Status s = evaluate_pose(env, model, input, PoseOptions{}, result); !s.ok()) return s;
+  const PointMatrix radiance = points_of(result->points());
+  result->clear_points();
+  if (heat) {
+    if (view.heat_from_full_gather()) served.engine->indirect(input.lights, served.gather, all, full);
+    return draw_heat(model, request, Eigen::Map<const PointMatrix>(full.data(), radiance.rows(), 3), radiance, scene,
+                     response);
+  }
+  PointMatrix colours = radiance;
+  if (total) {
+    Eigen::VectorXf direct;
+    served.engine->direct(input.lights, all, direct);
+    colours += Eigen::Map<const PointMatrix>(direct.data(), colours.rows(), 3);
+  }
+  // A reconstruction may dip a little below zero where the radiance is near zero; light is not
+  // negative, so the picture shows 0 there.
+  colours = colours.cwiseMax(0.0f);
+  double white = view.white_radiance();
+  if (white == 0) {
+    std::vector<double> largest(static_cast<size_t>(colours.rows()));
+    for (long i = 0; i < colours.rows(); ++i) largest[static_cast<size_t>(i)] = colours.row(i).maxCoeff();
+    auto at = largest.begin() + static_cast<long>(0.99 * static_cast<double>(largest.size() - 1));
+    std::nth_element(largest.begin(), at, largest.end());
+    white = largest.empty() || *at <= 0 ? 1.0 : *at;
+  }
+  scene.vertex_colours = std::move(colours);
+  scene.exposure = static_cast<float>(1.0 / white);
+  scene.srgb = true;
+  scene.shading = render::Shading::kUnlit;
+  return grpc::Status::OK;
+}
+
 // Fills the scene's geometry and overlays from the request's source (SPEC: a posed mesh from
 // PMSC key points, a skeleton pose, a stored sequence frame, or the rest pose).
 grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const Request& request,
@@ -182,13 +297,20 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
   if (request.show_key_points() && !model.pmsc) {
     return unsupported_by_kind(model, "show_key_points: it has no key points (only PMSC models do)");
   }
-  if (!request.has_full_values() && (request.heat_max() != 0 || request.show_heat_legend())) {
+  const bool heat_truth = request.has_full_values() || (model.illumination && request.illumination().heat_from_full_gather());
+  if (!heat_truth && (request.heat_max() != 0 || request.show_heat_legend())) {
     return invalid_argument(std::string(request.heat_max() != 0 ? "heat_max" : "show_heat_legend") +
                             ": the heat map needs full_values (and key_points as the source)");
   }
   if (!std::isfinite(request.heat_max()) || request.heat_max() < 0) {
     return invalid_argument("heat_max: expected a finite value ≥ 0 (0 = the model's error tolerance), got " +
                             std::to_string(request.heat_max()));
+  }
+  if (model.illumination) {
+    if (grpc::Status s = illumination_scene(env, model, request, scene, response); !s.ok()) return s;
+    scene.wireframe = request.show_wireframe();
+    if (request.show_key_points()) scene.key_points.assign(model.pmsc->key_points.begin(), model.pmsc->key_points.end());
+    return grpc::Status::OK;
   }
   if (request.has_full_values() && request.source_case() != Request::kKeyPoints) {
     return invalid_argument(
@@ -223,24 +345,11 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
       if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
       if (request.has_full_values()) {
         const auto n = static_cast<uint32_t>(model.info.point_count);
-        // Thesis Fig. 8.6 style: per point, how far what the cache returned is from the truth.
-        const auto truth = Eigen::Map<const PointMatrix>(full.data(), n, 3);
-        scene.heat = (truth - scene.points).rowwise().norm();
-        // Red means the error asked for, else the per-point error the model's ε was calibrated
-        // to flag (its error tolerance): a hit's errors then read as a fraction of what the
-        // model promises. ε_max itself bounds the RMS key-point error, a far smaller number than
-        // a point's error, and turned a hit mostly red.
-        const double largest = scene.heat.size() == 0 ? 0.0 : static_cast<double>(scene.heat.maxCoeff());
-        if (!std::isfinite(largest)) {
-          return invalid_argument("full_values: |full − estimate| overflows float32; expected values on the "
-                                  "model's scale");
+        if (grpc::Status s = draw_heat(model, request, Eigen::Map<const PointMatrix>(full.data(), n, 3), scene.points,
+                                       scene, response);
+            !s.ok()) {
+          return s;
         }
-        double scale = request.heat_max();
-        if (scale == 0) scale = error_tolerance(model);
-        if (scale == 0) scale = largest;
-        scene.heat_max = static_cast<float>(scale);
-        response->set_heat_max_error(largest);
-        response->set_heat_scale_max(scale);
       }
       break;
     }

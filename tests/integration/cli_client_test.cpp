@@ -81,7 +81,7 @@ Client* CliClientTest::client_ = nullptr;
 TEST_F(CliClientTest, EveryCommandExplainsItselfInHelp) {
   const std::vector<std::string> commands = {
       "list", "health", "server-info", "describe", "stats", "keys", "evaluate", "play", "pose", "retrain",
-      "load", "unload", "lod", "thumbnail", "inspect", "demo-repository", "train-pmsc", "fit", "import-rig",
+      "load", "unload", "lod", "thumbnail", "relight", "inspect", "demo-repository", "train-pmsc", "train-illumination", "fit", "import-rig",
       "build-lod", "export-lod", "calibrate"};
   const CliRun top = cli("--help");
   ASSERT_EQ(top.exit_code, 0);

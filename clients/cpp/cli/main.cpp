@@ -16,6 +16,7 @@
 #include "clients/cpp/cli/pose.h"
 #include "clients/cpp/cli/retrain_offline.h"
 #include "clients/cpp/cli/calibrate.h"
+#include "clients/cpp/cli/relight.h"
 #include "clients/cpp/cli/thumbnail.h"
 #include "clients/cpp/cli/train_illumination.h"
 #include "clients/cpp/cli/train_pmsc.h"
@@ -82,13 +83,16 @@ std::string fixed(double value, int decimals) {
 }
 
 // "SERVER (the server completes a blend or miss with its posing engine)".
-std::string fail_through_label(animspace::v1::FailThrough fail_through) {
+std::string fail_through_label(animspace::v1::FailThrough fail_through, animspace::v1::ServerEngine engine) {
   std::string name = animspace::v1::FailThrough_Name(fail_through);
   const std::string prefix = "FAIL_THROUGH_";
   if (name.rfind(prefix, 0) == 0) name = name.substr(prefix.size());
   switch (fail_through) {
     case animspace::v1::FAIL_THROUGH_SERVER:
-      return name + " (the server completes a blend or miss with its posing engine)";
+      return name + (engine == animspace::v1::SERVER_ENGINE_ILLUMINATION
+                         ? " (the server completes a blend or miss with its illumination engine, for the lights a "
+                           "request sends)"
+                         : " (the server completes a blend or miss with its posing engine)");
     case animspace::v1::FAIL_THROUGH_CLIENT:
       return name + " (a blend or miss asks the caller for the full values)";
     case animspace::v1::FAIL_THROUGH_IMPOSSIBLE:
@@ -145,7 +149,7 @@ int run_describe(const Globals& g, const std::string& name, uint64_t version) {
       std::printf("  version %llu soft cache: ε_min %.6g, ε_max %.6g (RMS key-point error e_key, model units: hit "
                   "below ε_min, miss above ε_max, blend between); fail-through %s\n",
                   static_cast<unsigned long long>(v.version()), static_cast<double>(v.epsilon_min()),
-                  static_cast<double>(v.epsilon_max()), fail_through_label(v.fail_through()).c_str());
+                  static_cast<double>(v.epsilon_max()), fail_through_label(v.fail_through(), v.server_engine()).c_str());
       std::printf("  version %llu calibration: %s\n", static_cast<unsigned long long>(v.version()),
                   animspace::cli::calibration_label(v.metadata()).c_str());
     }
@@ -338,6 +342,10 @@ int run_demo_repository(const std::string& dir) {
     std::fprintf(stderr, "animspace demo-repository: %s\n", status.error().message.c_str());
     return 2;
   }
+  if (auto status = animspace::demo::write_demo_illumination(dir); !status.ok()) {
+    std::fprintf(stderr, "animspace demo-repository: %s\n", status.error().message.c_str());
+    return 2;
+  }
   std::printf("wrote the demo model repository to %s\n", dir.c_str());
   return 0;
 }
@@ -461,6 +469,8 @@ int main(int argc, char** argv) {
   auto* lod = animspace::cli::add_lod(app, lod_args);
   animspace::cli::ThumbnailArgs thumbnail_args;
   auto* thumbnail = animspace::cli::add_thumbnail(app, thumbnail_args);
+  animspace::cli::RelightArgs relight_args;
+  auto* relight = animspace::cli::add_relight(app, relight_args);
 
   auto* load = app.add_subcommand("load", "Admin: (re)load a model, or one version, from the repository");
   load->add_option("model", model, "Model name")->required();
@@ -533,6 +543,10 @@ int main(int argc, char** argv) {
     if (*thumbnail) {
       auto client = connect(g);
       return animspace::cli::run_thumbnail(thumbnail_args, client, g.json);
+    }
+    if (*relight) {
+      auto client = connect(g);
+      return animspace::cli::run_relight(relight_args, client, g.json);
     }
     if (*retrain) {
       retrain_request.mutable_model()->set_name(retrain_model);

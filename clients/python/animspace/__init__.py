@@ -44,9 +44,9 @@ from animspace.errors import (Aborted, AlreadyExists, Cancelled, DataLoss, Deadl
                               ResourceExhausted, RpcError, Unauthenticated, Unavailable, Unimplemented,
                               error_from_grpc)
 from animspace.lod import LodHeader, LodMesh, Skeleton
-from animspace.messages import (Camera, HistogramData, KeyPointPose, KeyPoints, MissCompletion, ModelStats,
-                                ModelSummary, ModelVersion, PoseResult, RegionError, RetrainResult, ServerInfo,
-                                SkinnedPose, Stats, Thumbnail)
+from animspace.messages import (Camera, HistogramData, IlluminationView, KeyPointPose, KeyPoints, MissCompletion,
+                                ModelStats, ModelSummary, ModelVersion, PointLight, PoseResult, RegionError,
+                                RetrainResult, ServerInfo, SkinnedPose, Stats, Thumbnail)
 from animspace.pc2 import PointCache, read_pc2, write_pc2
 
 __version__ = "0.1.0"
@@ -78,6 +78,7 @@ __all__ = [
     # results and inputs
     "Camera",
     "HistogramData",
+    "IlluminationView",
     "KeyPointPose",
     "KeyPoints",
     "LodHeader",
@@ -86,6 +87,7 @@ __all__ = [
     "ModelStats",
     "ModelSummary",
     "ModelVersion",
+    "PointLight",
     "PoseResult",
     "RegionError",
     "RetrainResult",

@@ -27,11 +27,11 @@ import numpy as np
 import numpy.typing as npt
 
 from animspace import health as health_messages
-from animspace import wire
+from animspace import messages, wire
 from animspace.errors import DeadlineExceeded, ProtocolError, Unavailable, error_from_grpc
 from animspace.lod import FORMS, LodAssembler, LodMesh
-from animspace.messages import (Camera, KeyPointPose, KeyPoints, MissCompletion, ModelSummary, PoseResult,
-                                RetrainResult, ServerInfo, SkinnedPose, Stats, Thumbnail)
+from animspace.messages import (Camera, IlluminationView, KeyPointPose, KeyPoints, MissCompletion, ModelSummary,
+                                PointLight, PoseResult, RetrainResult, ServerInfo, SkinnedPose, Stats, Thumbnail)
 from animspace.v1 import (common_pb2, lod_pb2, lod_pb2_grpc, models_pb2, models_pb2_grpc, poses_pb2, poses_pb2_grpc,
                           render_pb2, render_pb2_grpc, skinning_pb2, skinning_pb2_grpc, stats_pb2, stats_pb2_grpc,
                           training_pb2, training_pb2_grpc)
@@ -392,6 +392,40 @@ class Client:
             results = [PoseResult.from_proto(r, f"results[{i}].points") for i, r in enumerate(response.results)]
         return results if batch else results[0]
 
+    def relight(self, model: str, lights: Union[PointLight, Sequence[PointLight], npt.ArrayLike], *,
+                key_values: Optional[npt.ArrayLike] = None, version: int = 0, include_region_errors: bool = False,
+                omit_points: bool = False, local_fail_through: bool = False,
+                deadline_s: Optional[float] = None) -> PoseResult:
+        """One frame of an illumination model (``ModelVersion.server_engine`` "ILLUMINATION";
+        Meyer & Anderson 2007 §3.2): the RGB radiance of every point for ``lights``.
+
+        Args:
+            lights: a PointLight, a sequence of them, or an L×3 array of positions (the model's
+                training intensity).
+            key_values: K×3 indirect radiance at the key points, if the caller gathered them; None
+                lets the server gather them (the cheap part of the full calculation).
+            Others as ``evaluate_key_points``. On a blend or miss the server gathers the full
+                values for ``lights`` itself (fail-through "SERVER").
+
+        Raises:
+            ValueError: a malformed light (nothing is sent).
+            InvalidArgument: a model without an illumination engine (naming ``poses[0].light_set``),
+                or a light the server refuses (position or intensity not finite, intensity < 0).
+        """
+        request = poses_pb2.EvaluateKeyPointsRequest(model=_model_ref(model, version),
+                                                     include_region_errors=include_region_errors,
+                                                     omit_points=omit_points,
+                                                     local_fail_through=local_fail_through)
+        pose = request.poses.add()
+        pose.light_set.CopyFrom(messages.light_set("lights", lights))
+        if key_values is not None:
+            pose.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
+        response = self._unary("EvaluateKeyPoints", self._poses.EvaluateKeyPoints, request, deadline_s)
+        if len(response.results) != 1:
+            raise ProtocolError("EvaluateKeyPoints", f"{len(response.results)} results for 1 pose")
+        with _decoding("EvaluateKeyPoints"):
+            return PoseResult.from_proto(response.results[0], "results[0].points")
+
     @_renamed_keywords(timeout="deadline_s")
     def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
                           version: int = 0, omit_points: bool = False, first_sequence: int = 0,
@@ -618,6 +652,8 @@ class Client:
                          samples: int = 0, show_key_points: bool = False, show_wireframe: bool = False,
                          full_values: Optional[npt.ArrayLike] = None, tolerance_px: float = 0.0,
                          heat_max: float = 0.0, show_heat_legend: bool = False,
+                         lights: Optional[Union[PointLight, Sequence[PointLight], npt.ArrayLike]] = None,
+                         illumination: Optional[IlluminationView] = None,
                          deadline_s: Optional[float] = None) -> Thumbnail:
         """A PNG of the model drawn headless by the daemon's render thread.
 
@@ -640,6 +676,9 @@ class Client:
             show_heat_legend: draw the scale as a colour bar with its numbers (needs full_values).
             tolerance_px: draw the coarsest level whose error stays under this many pixels
                 (eq. 7.2, in this ``width_px``-wide view); 0 draws full detail.
+            lights: an illumination model's lights (PointLight(s) or L×3 positions): draws its
+                surface coloured by the served radiance (key_values optional: the server gathers
+                them); ``illumination`` says which radiance and how bright (IlluminationView).
 
         Raises:
             InvalidArgument: a size outside 1..max_thumbnail_px (naming ``width_px``) or a bad camera.
@@ -655,6 +694,10 @@ class Client:
                                                     tolerance_px=wire.as_float("tolerance_px", tolerance_px),
                                                     heat_max=wire.as_float("heat_max", heat_max),
                                                     show_heat_legend=show_heat_legend)
+        if lights is not None:
+            request.key_points.light_set.CopyFrom(messages.light_set("lights", lights))
+        if illumination is not None:
+            request.illumination.CopyFrom(illumination.to_proto())
         if key_values is not None:
             request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
             if skeleton_pose is not None:

@@ -9,7 +9,7 @@ using the client never touches protobuf. Dataclasses holding arrays are declared
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Optional, Tuple
+from typing import Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -80,6 +80,70 @@ class Camera:
                                  up=[float(v) for v in self.up], vertical_fov_rad=float(self.vertical_fov_rad))
 
 
+@dataclass(frozen=True)
+class PointLight:
+    """A point light for an illumination model (poses.proto PointLight; Meyer & Anderson 2007
+    §3.2): ``position`` in the model's units (metres for the Cornell box), ``intensity`` the RGB
+    radiant intensity in W/sr, None for the model's training intensity."""
+
+    position: Tuple[float, float, float]
+    intensity: Optional[Tuple[float, float, float]] = None
+
+    def to_proto(self, name: str) -> poses_pb2.PointLight:
+        position = [float(v) for v in self.position]
+        if len(position) != 3:
+            raise ValueError(f"{name}.position: expected 3 floats, got {len(position)}")
+        light = poses_pb2.PointLight(position=position)
+        if self.intensity is not None:
+            intensity = [float(v) for v in self.intensity]
+            if len(intensity) != 3:
+                raise ValueError(f"{name}.intensity: expected 3 floats (R, G, B), got {len(intensity)}")
+            light.intensity.extend(intensity)
+        return light
+
+
+def light_set(name: str, lights: Union["PointLight", Sequence["PointLight"], npt.ArrayLike]) -> poses_pb2.LightSet:
+    """A LightSet from one PointLight, a sequence of them, or an L×3 (or 3) array of positions at
+    the model's training intensity."""
+    if isinstance(lights, PointLight):
+        lights = [lights]
+    elif not (isinstance(lights, (list, tuple)) and lights and all(isinstance(x, PointLight) for x in lights)):
+        positions = np.asarray(lights, dtype=np.float64)
+        if positions.shape == (3,):
+            positions = positions[np.newaxis]
+        if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] == 0:
+            raise ValueError(f"{name}: expected PointLight(s) or an L×3 array of positions, got shape "
+                             f"{wire.shape_text(positions.shape)}")
+        lights = [PointLight(tuple(float(v) for v in p)) for p in positions]
+    message = poses_pb2.LightSet()
+    for i, light in enumerate(lights):
+        message.lights.append(light.to_proto(f"{name}[{i}]"))
+    return message
+
+
+@dataclass(frozen=True)
+class IlluminationView:
+    """How a thumbnail of an illumination model shows its radiance (render.proto IlluminationView).
+
+    ``radiance`` is "total" (direct, computed by the server for the lights, plus the served
+    indirect) or "indirect"; ``white_radiance`` the radiance drawn white (0: the 99th percentile
+    of the drawn points); ``heat_from_full_gather`` draws |full − served| instead, with the full
+    indirect illumination gathered by the server (as slow as a full calculation).
+    """
+
+    radiance: str = "total"
+    white_radiance: float = 0.0
+    heat_from_full_gather: bool = False
+
+    def to_proto(self) -> render_pb2.IlluminationView:
+        values = {"total": render_pb2.IlluminationView.RADIANCE_TOTAL,
+                  "indirect": render_pb2.IlluminationView.RADIANCE_INDIRECT}
+        if self.radiance not in values:
+            raise ValueError(f"illumination.radiance: expected 'total' or 'indirect', got {self.radiance!r}")
+        return render_pb2.IlluminationView(radiance=values[self.radiance], white_radiance=float(self.white_radiance),
+                                           heat_from_full_gather=self.heat_from_full_gather)
+
+
 @dataclass(frozen=True, eq=False)
 class KeyPointPose:
     """One frame for the soft cache: K×D key values, and optionally the skeleton pose they came from.
@@ -115,8 +179,10 @@ class ModelVersion:
 
     ``state`` is "AVAILABLE" or "FAILED" (then ``error`` says why); ``kind`` is "PMSC",
     "CROSS_PMSC", "ANIMATION_SPACE" or "MESH_SEQUENCE"; ``fail_through`` is "SERVER", "CLIENT",
-    "IMPOSSIBLE" or "UNSPECIFIED" (a model without a soft cache). ε_min ≤ ε_max bound the RMS
-    key-point error of a hit and of a blend (Meyer & Anderson 2006 §5), model units.
+    "IMPOSSIBLE" or "UNSPECIFIED" (a model without a soft cache); with "SERVER", ``server_engine``
+    says which full calculation the server runs: "ANIMATION_SPACE" (send skeleton poses) or
+    "ILLUMINATION" (send lights), else "UNSPECIFIED". ε_min ≤ ε_max bound the RMS key-point error
+    of a hit and of a blend (Meyer & Anderson 2006 §5), model units.
     """
 
     version: int
@@ -139,6 +205,7 @@ class ModelVersion:
     loaded_at_unix_s: int
     metadata: Dict[str, str] = field(hash=False)
     sections: Tuple[str, ...]
+    server_engine: str = "UNSPECIFIED"
 
     @classmethod
     def from_proto(cls, m: models_pb2.ModelVersion) -> "ModelVersion":
@@ -149,7 +216,8 @@ class ModelVersion:
                    basis_size=m.basis_size, frame_count=m.frame_count, lod_level_count=m.lod_level_count,
                    epsilon_min=m.epsilon_min, epsilon_max=m.epsilon_max, fail_through=_fail_through(m.fail_through),
                    file_size_bytes=m.file_size_bytes, loaded_at_unix_s=m.loaded_at_unix_s,
-                   metadata=dict(m.metadata), sections=tuple(m.sections))
+                   metadata=dict(m.metadata), sections=tuple(m.sections),
+                   server_engine=enum_name(models_pb2.ServerEngine, m.server_engine, "SERVER_ENGINE_"))
 
 
 @dataclass(frozen=True)

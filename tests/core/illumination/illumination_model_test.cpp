@@ -18,6 +18,7 @@ IlluminationSetup small_setup() {
   setup.gather.samples = 8;
   setup.gather.seed = 7;
   setup.training_lights = {{{0.1, 0.5, 0.2}, {1, 2, 3}}, {{0.3, 0.5, 0.4}, {0.5, 0.5, 0.5}}};
+  setup.view = cornell_view();
   return setup;
 }
 
@@ -40,6 +41,9 @@ TEST(IlluminationIoTest, SetupRoundTripsThroughAContainer) {
   EXPECT_EQ(loaded->training_lights[1].position, setup.training_lights[1].position);
   EXPECT_EQ(loaded->training_lights[0].intensity, setup.training_lights[0].intensity);
   EXPECT_EQ(loaded->quantity, "indirect");
+  ASSERT_TRUE(loaded->view.has_value());
+  EXPECT_EQ(loaded->view->target, setup.view->target);
+  EXPECT_EQ(loaded->view->vertical_fov_rad, setup.view->vertical_fov_rad);
 }
 
 TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
@@ -91,12 +95,15 @@ TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWith
 
   auto servable = model::load_servable(*model_file, "trained");
   ASSERT_TRUE(servable.ok()) << servable.error().message;
-  ASSERT_TRUE(servable->pmsc && servable->illumination);
+  ASSERT_TRUE(servable->pmsc && servable->illumination && servable->illumination->engine);
   EXPECT_EQ(servable->info.fail_through, model::FailThrough::kServer);
   EXPECT_EQ(servable->info.server_engine, model::ServerEngine::kIllumination);
   EXPECT_EQ(servable->info.channel_count, 3);
-  EXPECT_EQ(servable->gather.samples, 8);
-  ASSERT_EQ(servable->training_lights.size(), options.lights.size());
+  EXPECT_EQ(servable->illumination->gather.samples, 8);
+  ASSERT_EQ(servable->illumination->training_lights.size(), options.lights.size());
+  EXPECT_NEAR(servable->illumination->radiance_scale, report.radiance_scale, 1e-6 * report.radiance_scale);
+  ASSERT_TRUE(servable->illumination->view.has_value());
+  EXPECT_EQ(servable->illumination->view->eye, cornell_view().eye);
   const pmsc::PmscModel& model = *servable->pmsc;
 
   // Each training frame, gathered again at its key points only (the engine is deterministic per
