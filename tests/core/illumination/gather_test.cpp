@@ -163,43 +163,37 @@ struct ParallelPlanes {
 TEST(IlluminationIndirect, ParallelPlanesMatchQuadratureWithinStandardError) {
   const ParallelPlanes scene;
   auto engine = make_engine(scene.mesh);
-  const int samples = 1024;
-  Eigen::VectorXf out;
-  engine->indirect({scene.light}, {samples, 7}, range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count),
-                   out);
+  // Each seed rotates the point set independently, so the estimates of one point over seeds are
+  // independent and unbiased: their spread gives the standard error of their mean. The ray
+  // origins sit ~1e-4 × the scene's size (here ~6e-4 m) below the ceiling, which moves the
+  // value by ~2·6e-4 / H; hence the 2e-3 relative allowance besides the statistical one.
+  const int samples = 256, seeds = 16;
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  std::vector<Eigen::VectorXf> estimates(seeds);
+  for (int seed = 0; seed < seeds; ++seed) {
+    engine->indirect({scene.light}, {samples, static_cast<uint64_t>(seed)}, ceiling, estimates[static_cast<size_t>(seed)]);
+  }
   for (int p = 0; p < scene.ceiling_count; ++p) {
-    const Eigen::Vector3d x = scene.mesh.vertices.row(scene.ceiling_first + p).cast<double>();
+    const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
     const PlaneMoments m = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
     for (int k = 0; k < 3; ++k) {
       const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
-      const double mean = scale * m.mean;
-      const double sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
-      EXPECT_NEAR(out[3 * p + k], mean, 4 * sigma) << "ceiling vertex " << p << " channel " << k;
-      EXPECT_GT(out[3 * p + k], 0.0f);
+      const double exact = scale * m.mean;
+      // Independent samples would have this standard error; one rotated Hammersley set is no worse.
+      const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
+      double sum = 0, sum2 = 0;
+      for (const Eigen::VectorXf& estimate : estimates) {
+        const double value = estimate[3 * p + k];
+        EXPECT_NEAR(value, exact, 4 * iid_sigma) << "ceiling vertex " << p << " channel " << k;
+        sum += value;
+        sum2 += value * value;
+      }
+      const double mean = sum / seeds;
+      const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
+      EXPECT_GT(spread, 0.0);  // the seeds do rotate the directions
+      EXPECT_NEAR(mean, exact, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * exact)
+          << "ceiling vertex " << p << " channel " << k;
     }
-  }
-}
-
-TEST(IlluminationIndirect, UnbiasedOverSeeds) {
-  // Each seed rotates the point set independently, so the mean over seeds converges to L_i at
-  // the rate of S · seeds independent samples (or faster).
-  const ParallelPlanes scene;
-  auto engine = make_engine(scene.mesh);
-  const int centre = scene.ceiling_first + scene.ceiling_count / 2;
-  const Eigen::Vector3d x = scene.mesh.vertices.row(centre).cast<double>();
-  ASSERT_TRUE(x.isApprox(Eigen::Vector3d(0, 1, 0)));
-  const PlaneMoments m = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
-  const int samples = 256, seeds = 64;
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::VectorXf out;
-  for (int seed = 0; seed < seeds; ++seed) {
-    engine->indirect({scene.light}, {samples, static_cast<uint64_t>(seed)}, {centre}, out);
-    sum += out.cast<double>();
-  }
-  for (int k = 0; k < 3; ++k) {
-    const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
-    const double sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / (samples * seeds));
-    EXPECT_NEAR(sum[k] / seeds, scale * m.mean, 4 * sigma) << "channel " << k;
   }
 }
 
@@ -242,7 +236,7 @@ TEST(IlluminationIndirect, ClosedCubeConservesFlux) {
     const double expected_direct = 4 * cube.rho[k] * light.intensity[k];
     const double expected_indirect = 4 * cube.rho[k] * cube.rho[k] * light.intensity[k];
     EXPECT_NEAR(direct_integral[k], expected_direct, 2e-3 * expected_direct) << "channel " << k;
-    EXPECT_NEAR(indirect_integral[k], expected_indirect, 1e-2 * expected_indirect) << "channel " << k;
+    EXPECT_NEAR(indirect_integral[k], expected_indirect, 3e-3 * expected_indirect) << "channel " << k;
   }
 }
 
