@@ -8,13 +8,13 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <string>
 
 #include <Eigen/Geometry>
 
-#include "core/common/format.h"
 
 namespace animspace::illumination {
 
@@ -22,8 +22,16 @@ namespace {
 
 Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
 
+// The shortest text that reads back as the same float (format_number would print the float's
+// exact double value: 0.001f as 0.0010000000474974513).
+std::string format_float(float value) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
+  return std::string(buffer, result.ptr);
+}
+
 std::string row_text(const PointMatrix& m, Eigen::Index r) {
-  return "(" + format_number(m(r, 0)) + ", " + format_number(m(r, 1)) + ", " + format_number(m(r, 2)) + ")";
+  return "(" + format_float(m(r, 0)) + ", " + format_float(m(r, 1)) + ", " + format_float(m(r, 2)) + ")";
 }
 
 // ---- Cornell box data --------------------------------------------------------------------------
@@ -229,16 +237,16 @@ Status check_surface(const SurfaceMesh& surface, const std::string& name) {
     if (!surface.normals.row(v).allFinite()) {
       return invalid(name + ".normals row " + std::to_string(v) + " is not finite: " + row_text(surface.normals, v));
     }
-    const double length = surface.normals.row(v).cast<double>().norm();
+    const auto length = static_cast<float>(surface.normals.row(v).cast<double>().norm());
     if (std::abs(length - 1.0) > 1e-3) {
       return invalid(name + ".normals row " + std::to_string(v) + " " + row_text(surface.normals, v) + " has length " +
-                     format_number(length) + ", not 1 (±1e-3)");
+                     format_float(length) + ", not 1 (±1e-3)");
     }
     for (int k = 0; k < 3; ++k) {
       const float rho = surface.albedo(v, k);
       if (!(rho >= 0.0f && rho < 1.0f)) {  // also rejects NaN
         return invalid(name + ".albedo row " + std::to_string(v) + " " + row_text(surface.albedo, v) +
-                       ": each channel must be in [0, 1), channel " + std::to_string(k) + " is " + format_number(rho));
+                       ": each channel must be in [0, 1), channel " + std::to_string(k) + " is " + format_float(rho));
       }
     }
   }

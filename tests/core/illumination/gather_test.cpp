@@ -206,14 +206,15 @@ struct ClosedCube {
   SurfaceMesh mesh;
   std::vector<double> weights;
 
-  explicit ClosedCube(int n) {
+  explicit ClosedCube(int n, double side = 1.0) {
     const Eigen::Vector3d ex(1, 0, 0), ey(0, 1, 0), ez(0, 0, 1), o(0, 0, 0);
-    add_rectangle(mesh, o, ex, ez, n, n, ey, rho, &weights);   // floor
-    add_rectangle(mesh, ey, ex, ez, n, n, -ey, rho, &weights);  // ceiling
-    add_rectangle(mesh, o, ey, ez, n, n, ex, rho, &weights);   // x = 0
-    add_rectangle(mesh, ex, ey, ez, n, n, -ex, rho, &weights);  // x = 1
-    add_rectangle(mesh, o, ex, ey, n, n, ez, rho, &weights);   // z = 0
-    add_rectangle(mesh, ez, ex, ey, n, n, -ez, rho, &weights);  // z = 1
+    const double s = side;
+    add_rectangle(mesh, o, s * ex, s * ez, n, n, ey, rho, &weights);       // floor
+    add_rectangle(mesh, s * ey, s * ex, s * ez, n, n, -ey, rho, &weights);  // ceiling
+    add_rectangle(mesh, o, s * ey, s * ez, n, n, ex, rho, &weights);       // x = 0
+    add_rectangle(mesh, s * ex, s * ey, s * ez, n, n, -ex, rho, &weights);  // x = side
+    add_rectangle(mesh, o, s * ex, s * ey, n, n, ez, rho, &weights);       // z = 0
+    add_rectangle(mesh, s * ez, s * ex, s * ey, n, n, -ez, rho, &weights);  // z = side
   }
 
   Eigen::Vector3d integral(const Eigen::VectorXf& radiance) const {
@@ -224,19 +225,23 @@ struct ClosedCube {
 };
 
 TEST(IlluminationIndirect, ClosedCubeConservesFlux) {
-  const ClosedCube cube(32);
-  auto engine = make_engine(cube.mesh);
-  const PointLight light{{0.45, 0.55, 0.4}, {1, 2, 3}};
-  Eigen::VectorXf direct, indirect;
-  engine->direct({light}, engine->all_points(), direct);
-  engine->indirect({light}, {64, 0}, engine->all_points(), indirect);
-  const Eigen::Vector3d direct_integral = cube.integral(direct);
-  const Eigen::Vector3d indirect_integral = cube.integral(indirect);
-  for (int k = 0; k < 3; ++k) {
-    const double expected_direct = 4 * cube.rho[k] * light.intensity[k];
-    const double expected_indirect = 4 * cube.rho[k] * cube.rho[k] * light.intensity[k];
-    EXPECT_NEAR(direct_integral[k], expected_direct, 2e-3 * expected_direct) << "channel " << k;
-    EXPECT_NEAR(indirect_integral[k], expected_indirect, 3e-3 * expected_indirect) << "channel " << k;
+  // The flux balance holds at any size: ray offsets scale with the scene (STYLE.md §6).
+  for (const double side : {1.0, 1e-3, 1e3}) {
+    SCOPED_TRACE("side " + std::to_string(side));
+    const ClosedCube cube(32, side);
+    auto engine = make_engine(cube.mesh);
+    const PointLight light{side * Eigen::Vector3d(0.45, 0.55, 0.4), {1, 2, 3}};
+    Eigen::VectorXf direct, indirect;
+    engine->direct({light}, engine->all_points(), direct);
+    engine->indirect({light}, {64, 0}, engine->all_points(), indirect);
+    const Eigen::Vector3d direct_integral = cube.integral(direct);
+    const Eigen::Vector3d indirect_integral = cube.integral(indirect);
+    for (int k = 0; k < 3; ++k) {
+      const double expected_direct = 4 * cube.rho[k] * light.intensity[k];
+      const double expected_indirect = 4 * cube.rho[k] * cube.rho[k] * light.intensity[k];
+      EXPECT_NEAR(direct_integral[k], expected_direct, 2e-3 * expected_direct) << "channel " << k;
+      EXPECT_NEAR(indirect_integral[k], expected_indirect, 3e-3 * expected_indirect) << "channel " << k;
+    }
   }
 }
 
