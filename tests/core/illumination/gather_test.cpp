@@ -1,0 +1,390 @@
+#include "core/illumination/gather.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+namespace animspace::illumination {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Appends the rectangle corner + a·u + b·v (a, b ∈ [0, 1]) as an nu × nv grid with its own
+// vertices, lit on the side of `normal`, triangles counter-clockwise seen from that side. When
+// `weights` is given, appends each vertex's trapezoid-rule area weight.
+void add_rectangle(SurfaceMesh& mesh, const Eigen::Vector3d& corner, const Eigen::Vector3d& u, const Eigen::Vector3d& v,
+                   int nu, int nv, const Eigen::Vector3d& normal, const Eigen::Vector3d& rho,
+                   std::vector<double>* weights = nullptr) {
+  const Eigen::Index first = mesh.vertices.rows();
+  const Eigen::Index count = static_cast<Eigen::Index>(nu + 1) * (nv + 1);
+  mesh.vertices.conservativeResize(first + count, 3);
+  mesh.normals.conservativeResize(first + count, 3);
+  mesh.albedo.conservativeResize(first + count, 3);
+  const double cell_area = u.norm() * v.norm() / (nu * nv);
+  for (int j = 0; j <= nv; ++j) {
+    for (int i = 0; i <= nu; ++i) {
+      const Eigen::Index row = first + j * (nu + 1) + i;
+      mesh.vertices.row(row) = (corner + (static_cast<double>(i) / nu) * u + (static_cast<double>(j) / nv) * v).cast<float>();
+      mesh.normals.row(row) = normal.cast<float>();
+      mesh.albedo.row(row) = rho.cast<float>();
+      if (weights != nullptr) {
+        weights->push_back(cell_area * ((i == 0 || i == nu) ? 0.5 : 1.0) * ((j == 0 || j == nv) ? 0.5 : 1.0));
+      }
+    }
+  }
+  const bool ccw = u.cross(v).dot(normal) > 0;
+  const Eigen::Index first_face = mesh.faces.rows();
+  mesh.faces.conservativeResize(first_face + 2 * nu * nv, 3);
+  Eigen::Index f = first_face;
+  for (int j = 0; j < nv; ++j) {
+    for (int i = 0; i < nu; ++i) {
+      const auto a = static_cast<int32_t>(first + j * (nu + 1) + i);
+      const int32_t b = a + 1, c = a + nu + 2, d = a + nu + 1;
+      if (ccw) {
+        mesh.faces.row(f++) << a, b, c;
+        mesh.faces.row(f++) << a, c, d;
+      } else {
+        mesh.faces.row(f++) << a, c, b;
+        mesh.faces.row(f++) << a, d, c;
+      }
+    }
+  }
+}
+
+std::unique_ptr<IlluminationEngine> make_engine(SurfaceMesh mesh) {
+  auto engine = IlluminationEngine::create(std::move(mesh));
+  EXPECT_TRUE(engine.ok()) << (engine.ok() ? "" : engine.error().message);
+  return std::move(engine).value();
+}
+
+std::vector<int> range(int begin, int end) {
+  std::vector<int> points;
+  for (int i = begin; i < end; ++i) points.push_back(i);
+  return points;
+}
+
+// ---- Direct ------------------------------------------------------------------------------------
+
+TEST(IlluminationDirect, MatchesThePointLightFormulaAndShadows) {
+  const Eigen::Vector3d rho(0.5, 0.3, 0.2);
+  SurfaceMesh mesh;
+  add_rectangle(mesh, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, 10, 10, {0, 1, 0}, rho);  // floor: 121 vertices
+  const int floor_vertices = 121;
+  // A blocker at y = 0.4 over x ∈ [−0.3, 0.1], z ∈ [−0.5, −0.1].
+  add_rectangle(mesh, {-0.3, 0.4, -0.5}, {0.4, 0, 0}, {0, 0, 0.4}, 2, 2, {0, 1, 0}, rho);
+  auto engine = make_engine(mesh);
+  const PointLight light{{0.2, 0.8, -0.1}, {2, 3, 4}};
+  Eigen::VectorXf out;
+  engine->direct({light}, range(0, floor_vertices), out);
+  ASSERT_EQ(out.size(), 3 * floor_vertices);
+  int lit = 0, shadowed = 0;
+  for (int v = 0; v < floor_vertices; ++v) {
+    const Eigen::Vector3d x = mesh.vertices.row(v).cast<double>();
+    const Eigen::Vector3d to_light = light.position - x;
+    // Where the segment to the light crosses the blocker's plane (half way up).
+    const Eigen::Vector3d crossing = x + (0.4 / to_light.y()) * to_light;
+    const double outside = std::max({-0.3 - crossing.x(), crossing.x() - 0.1, -0.5 - crossing.z(), crossing.z() + 0.1});
+    if (std::abs(outside) < 1e-3) continue;  // grazing the blocker's edge
+    const double r = to_light.norm();
+    const Eigen::Vector3d expected =
+        outside > 0 ? Eigen::Vector3d(rho.cwiseProduct(light.intensity) / kPi * to_light.y() / (r * r * r))
+                    : Eigen::Vector3d::Zero();
+    ++(outside > 0 ? lit : shadowed);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(out[3 * v + k], expected[k], 1e-6 * expected[k]) << "vertex " << v << " channel " << k;
+    }
+  }
+  EXPECT_GT(lit, 60);
+  EXPECT_GT(shadowed, 3);
+
+  // A light below the floor lights nothing (the floor's lit side faces up).
+  engine->direct({{{0.2, -0.5, 0.0}, {1, 1, 1}}}, range(0, floor_vertices), out);
+  EXPECT_TRUE(out.isZero(0));
+}
+
+// ---- Indirect: closed forms and quadratures --------------------------------------------------
+
+// One bounce between parallel planes: a point light at height h over a lit floor square
+// [−L, L]² (y = 0, albedo ρ_f), seen from a ceiling point x at height H (albedo ρ_c) looking down:
+//   L_i(x) = ρ_c/π ∫ L_d(y) cos θ_x cos θ_y / r² dA,   L_d(y) = ρ_f/π · I h / d(y)³,
+// with cos θ_x = cos θ_y = H / r. The gather's estimator f = ρ_c L_d(y(ω)) under the cosine pdf
+// has mean L_i and second moment ρ_c²/π ∫ L_d² cos θ_x cos θ_y / r² dA, which bound its standard
+// error (for independent samples; the rotated Hammersley set does better).
+struct PlaneMoments {
+  double mean = 0;           // per unit ρ_c ρ_f I
+  double second_moment = 0;  // per unit (ρ_c ρ_f I)²
+};
+
+PlaneMoments floor_moments(const Eigen::Vector3d& x, const Eigen::Vector3d& light, double half_side) {
+  const int cells = 1200;
+  const double step = 2 * half_side / cells;
+  const double h = light.y();
+  const double H = x.y();
+  double m1 = 0, m2 = 0;
+  for (int i = 0; i < cells; ++i) {
+    for (int j = 0; j < cells; ++j) {
+      const Eigen::Vector3d y(-half_side + (i + 0.5) * step, 0.0, -half_side + (j + 0.5) * step);
+      const double d = (light - y).norm();
+      const double r2 = (x - y).squaredNorm();
+      const double psi = h / (kPi * d * d * d);   // L_d / (ρ_f I)
+      const double kernel = H * H / (r2 * r2) / kPi;  // cos θ_x cos θ_y / (π r²)
+      m1 += psi * kernel;
+      m2 += psi * psi * kernel;
+    }
+  }
+  return {m1 * step * step, m2 * step * step};
+}
+
+struct ParallelPlanes {
+  static constexpr double kHalfSide = 2.0;
+  static constexpr double kCeiling = 1.0;
+  const Eigen::Vector3d rho_floor{0.6, 0.5, 0.4};
+  const Eigen::Vector3d rho_ceiling{0.7, 0.3, 0.5};
+  const PointLight light{{0.1, 0.5, -0.2}, {3, 2, 1}};
+  SurfaceMesh mesh;
+  int ceiling_first = 0;
+  int ceiling_count = 0;
+
+  ParallelPlanes() {
+    add_rectangle(mesh, {-kHalfSide, 0, kHalfSide}, {2 * kHalfSide, 0, 0}, {0, 0, -2 * kHalfSide}, 8, 8, {0, 1, 0},
+                  rho_floor);
+    ceiling_first = static_cast<int>(mesh.vertices.rows());
+    add_rectangle(mesh, {-0.5, kCeiling, -0.5}, {1, 0, 0}, {0, 0, 1}, 4, 4, {0, -1, 0}, rho_ceiling);
+    ceiling_count = static_cast<int>(mesh.vertices.rows()) - ceiling_first;
+  }
+};
+
+TEST(IlluminationIndirect, ParallelPlanesMatchQuadratureWithinStandardError) {
+  const ParallelPlanes scene;
+  auto engine = make_engine(scene.mesh);
+  // Each seed rotates the point set independently, so the estimates of one point over seeds are
+  // independent and unbiased: their spread gives the standard error of their mean. The ray
+  // origins sit ~1e-4 × the scene's size (here ~6e-4 m) below the ceiling, which moves the
+  // value by ~2·6e-4 / H; hence the 2e-3 relative allowance besides the statistical one.
+  const int samples = 256, seeds = 16;
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  std::vector<Eigen::VectorXf> estimates(seeds);
+  for (int seed = 0; seed < seeds; ++seed) {
+    engine->indirect({scene.light}, {samples, static_cast<uint64_t>(seed)}, ceiling, estimates[static_cast<size_t>(seed)]);
+  }
+  for (int p = 0; p < scene.ceiling_count; ++p) {
+    const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
+    const PlaneMoments m = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
+    for (int k = 0; k < 3; ++k) {
+      const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
+      const double exact = scale * m.mean;
+      // Independent samples would have this standard error; one rotated Hammersley set is no worse.
+      const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
+      double sum = 0, sum2 = 0;
+      for (const Eigen::VectorXf& estimate : estimates) {
+        const double value = estimate[3 * p + k];
+        EXPECT_NEAR(value, exact, 4 * iid_sigma) << "ceiling vertex " << p << " channel " << k;
+        sum += value;
+        sum2 += value * value;
+      }
+      const double mean = sum / seeds;
+      const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
+      EXPECT_GT(spread, 0.0);  // the seeds do rotate the directions
+      EXPECT_NEAR(mean, exact, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * exact)
+          << "ceiling vertex " << p << " channel " << k;
+    }
+  }
+}
+
+// A closed unit cube, each wall an n × n grid lit on the inside, albedo ρ, a point light inside.
+// All of the light's flux 4πI lands on the walls, so ∫ E_d dA = 4πI and ∫ L_d dA = 4ρI; all the
+// flux the walls reflect, π ∫ L_d dA, lands on the walls again, so ∫ L_i dA = ρ/π · π ∫ L_d dA
+// = 4ρ²I. The integrals over the walls are trapezoid sums over the vertices.
+struct ClosedCube {
+  const Eigen::Vector3d rho{0.8, 0.5, 0.2};
+  SurfaceMesh mesh;
+  std::vector<double> weights;
+
+  explicit ClosedCube(int n, double side = 1.0) {
+    const Eigen::Vector3d ex(1, 0, 0), ey(0, 1, 0), ez(0, 0, 1), o(0, 0, 0);
+    const double s = side;
+    add_rectangle(mesh, o, s * ex, s * ez, n, n, ey, rho, &weights);       // floor
+    add_rectangle(mesh, s * ey, s * ex, s * ez, n, n, -ey, rho, &weights);  // ceiling
+    add_rectangle(mesh, o, s * ey, s * ez, n, n, ex, rho, &weights);       // x = 0
+    add_rectangle(mesh, s * ex, s * ey, s * ez, n, n, -ex, rho, &weights);  // x = side
+    add_rectangle(mesh, o, s * ex, s * ey, n, n, ez, rho, &weights);       // z = 0
+    add_rectangle(mesh, s * ez, s * ex, s * ey, n, n, -ez, rho, &weights);  // z = side
+  }
+
+  Eigen::Vector3d integral(const Eigen::VectorXf& radiance) const {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (size_t v = 0; v < weights.size(); ++v) sum += weights[v] * radiance.segment<3>(3 * static_cast<Eigen::Index>(v)).cast<double>();
+    return sum;
+  }
+};
+
+TEST(IlluminationIndirect, ClosedCubeConservesFlux) {
+  // The flux balance holds at any size: ray offsets scale with the scene (STYLE.md §6).
+  for (const double side : {1.0, 1e-3, 1e3}) {
+    SCOPED_TRACE("side " + std::to_string(side));
+    const ClosedCube cube(32, side);
+    auto engine = make_engine(cube.mesh);
+    const PointLight light{side * Eigen::Vector3d(0.45, 0.55, 0.4), {1, 2, 3}};
+    Eigen::VectorXf direct, indirect;
+    engine->direct({light}, engine->all_points(), direct);
+    engine->indirect({light}, {64, 0}, engine->all_points(), indirect);
+    const Eigen::Vector3d direct_integral = cube.integral(direct);
+    const Eigen::Vector3d indirect_integral = cube.integral(indirect);
+    for (int k = 0; k < 3; ++k) {
+      const double expected_direct = 4 * cube.rho[k] * light.intensity[k];
+      const double expected_indirect = 4 * cube.rho[k] * cube.rho[k] * light.intensity[k];
+      EXPECT_NEAR(direct_integral[k], expected_direct, 2e-3 * expected_direct) << "channel " << k;
+      EXPECT_NEAR(indirect_integral[k], expected_indirect, 3e-3 * expected_indirect) << "channel " << k;
+    }
+  }
+}
+
+TEST(IlluminationIndirect, ClosedCubeDoesNotLeakAtItsEdges) {
+  // A light outside the cube: every wall's inside is in shadow, and so is every ray's hit — a
+  // single ray slipping through a crease would show. (The last light is 2 mm above the ceiling:
+  // rays start and stop ~1e-4 × the scene's size off surfaces, so a light closer than that to a
+  // wall is out of scope.)
+  const ClosedCube cube(16);
+  auto engine = make_engine(cube.mesh);
+  for (const Eigen::Vector3d& position : {Eigen::Vector3d(-0.5, 0.5, 0.5), Eigen::Vector3d(-0.3, -0.3, -0.3),
+                                          Eigen::Vector3d(1.2, 1.2, 0.5), Eigen::Vector3d(0.5, 1.002, 0.5)}) {
+    Eigen::VectorXf out;
+    engine->direct({{position, {1, 1, 1}}}, engine->all_points(), out);
+    EXPECT_TRUE(out.isZero(0)) << "direct, light at " << position.transpose();
+    engine->indirect({{position, {1, 1, 1}}}, {32, 3}, engine->all_points(), out);
+    EXPECT_TRUE(out.isZero(0)) << "indirect, light at " << position.transpose();
+  }
+}
+
+// ---- Determinism and linearity ----------------------------------------------------------------
+
+void expect_bitwise_equal(const Eigen::VectorXf& full, const std::vector<int>& points, const Eigen::VectorXf& part,
+                          const std::string& what) {
+  ASSERT_EQ(part.size(), 3 * static_cast<Eigen::Index>(points.size())) << what;
+  for (size_t p = 0; p < points.size(); ++p) {
+    for (int k = 0; k < 3; ++k) {
+      const float a = full[3 * points[p] + k];
+      const float b = part[3 * static_cast<Eigen::Index>(p) + k];
+      ASSERT_EQ(std::memcmp(&a, &b, sizeof a), 0) << what << ": point " << points[p] << " channel " << k;
+    }
+  }
+}
+
+TEST(IlluminationGather, APointsValueDoesNotDependOnTheBatch) {
+  const SurfaceMesh mesh = cornell_box({3000});
+  auto engine = make_engine(mesh);
+  const int n = engine->point_count();
+  const std::vector<PointLight> lights = {{{0.3, 0.5, 0.25}, {1, 1, 1}}};
+  const GatherOptions options{16, 42};
+  Eigen::VectorXf full_indirect, full_direct, part;
+  engine->indirect(lights, options, engine->all_points(), full_indirect);
+  engine->direct(lights, engine->all_points(), full_direct);
+  EXPECT_GT(full_indirect.maxCoeff(), 0.0f);
+
+  std::vector<int> subset = {n - 1, 0, 17, 1234, 17, n / 2, 2 * n / 3, 5};
+  engine->indirect(lights, options, subset, part);
+  expect_bitwise_equal(full_indirect, subset, part, "subset");
+  engine->direct(lights, subset, part);
+  expect_bitwise_equal(full_direct, subset, part, "direct subset");
+  std::reverse(subset.begin(), subset.end());
+  engine->indirect(lights, options, subset, part);
+  expect_bitwise_equal(full_indirect, subset, part, "reversed subset");
+  for (int v : subset) {
+    engine->indirect(lights, options, {v}, part);
+    expect_bitwise_equal(full_indirect, {v}, part, "single point");
+  }
+  // The full set reversed: other chunks, other threads.
+  std::vector<int> reversed = engine->all_points();
+  std::reverse(reversed.begin(), reversed.end());
+  engine->indirect(lights, options, reversed, part);
+  expect_bitwise_equal(full_indirect, reversed, part, "all points reversed");
+
+  // Another engine over the same surface gives the same values.
+  auto again = make_engine(mesh);
+  again->indirect(lights, options, engine->all_points(), part);
+  expect_bitwise_equal(full_indirect, engine->all_points(), part, "second engine");
+
+  // The seed does pick other directions.
+  engine->indirect(lights, {16, 43}, engine->all_points(), part);
+  int differ = 0;
+  for (Eigen::Index i = 0; i < part.size(); ++i) differ += part[i] != full_indirect[i];
+  EXPECT_GT(differ, part.size() / 2);
+}
+
+TEST(IlluminationGather, LinearInTheLights) {
+  auto engine = make_engine(cornell_box({2000}));
+  const PointLight a{{0.2, 0.5, 0.3}, {1.0, 0.5, 0.25}};
+  const PointLight b{{0.4, 0.45, 0.2}, {0.2, 0.7, 1.5}};
+  const GatherOptions options{16, 5};
+  const std::vector<int> points = engine->all_points();
+  for (const bool indirect : {false, true}) {
+    auto run = [&](const std::vector<PointLight>& lights) {
+      Eigen::VectorXf out;
+      if (indirect) {
+        engine->indirect(lights, options, points, out);
+      } else {
+        engine->direct(lights, points, out);
+      }
+      return out;
+    };
+    const Eigen::VectorXf both = run({a, b});
+    const Eigen::VectorXf only_a = run({a});
+    const Eigen::VectorXf only_b = run({b});
+    for (Eigen::Index i = 0; i < both.size(); ++i) {
+      const double sum = double{only_a[i]} + double{only_b[i]};
+      ASSERT_NEAR(both[i], sum, 1e-6 * sum + 1e-30) << (indirect ? "indirect" : "direct") << " value " << i;
+    }
+    // Doubling the intensity doubles every value exactly (a power of two commutes with rounding).
+    PointLight brighter = a;
+    brighter.intensity *= 2;
+    const Eigen::VectorXf doubled = run({brighter});
+    for (Eigen::Index i = 0; i < doubled.size(); ++i) ASSERT_EQ(doubled[i], 2 * only_a[i]) << "value " << i;
+  }
+}
+
+// ---- Validation --------------------------------------------------------------------------------
+
+void expect_invalid(const Status& status, const std::vector<std::string>& parts) {
+  ASSERT_FALSE(status.ok());
+  EXPECT_EQ(status.error().code, ErrorCode::kInvalidArgument);
+  for (const std::string& part : parts) EXPECT_NE(status.error().message.find(part), std::string::npos) << status.error().message;
+}
+
+TEST(IlluminationValidation, ErrorsNameTheField) {
+  EXPECT_TRUE(check_gather_options({1, 0}).ok());
+  expect_invalid(check_gather_options({0, 0}), {"samples", "0"});
+  expect_invalid(check_gather_options({-3, 0}), {"samples", "-3"});
+
+  const PointLight good{{0.1, 0.2, 0.3}, {1, 1, 1}};
+  EXPECT_TRUE(check_lights({good}, "lights").ok());
+  EXPECT_TRUE(check_lights(std::vector<PointLight>(64, good), "lights").ok());
+  expect_invalid(check_lights({}, "lights"), {"lights", "0"});
+  expect_invalid(check_lights(std::vector<PointLight>(65, good), "lights"), {"lights", "65", "64"});
+  expect_invalid(check_lights(std::vector<PointLight>(3, good), "lights", 2), {"lights", "3", "2"});
+  PointLight bad = good;
+  bad.position.y() = std::numeric_limits<double>::quiet_NaN();
+  expect_invalid(check_lights({good, bad}, "request.lights"), {"request.lights[1].position", "nan"});
+  bad = good;
+  bad.intensity.z() = -1;
+  expect_invalid(check_lights({bad}, "lights"), {"lights[0].intensity", "-1"});
+  bad = good;
+  bad.intensity.x() = std::numeric_limits<double>::infinity();
+  expect_invalid(check_lights({good, good, bad}, "lights"), {"lights[2].intensity", "inf"});
+
+  SurfaceMesh mesh;
+  add_rectangle(mesh, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, 1, 1, {0, 1, 0}, {0.5, 0.5, 0.5});
+  mesh.normals.row(2) *= 2;
+  auto engine = IlluminationEngine::create(mesh);
+  ASSERT_FALSE(engine.ok());
+  EXPECT_EQ(engine.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(engine.error().message.find("surface.normals row 2"), std::string::npos) << engine.error().message;
+}
+
+}  // namespace
+}  // namespace animspace::illumination
