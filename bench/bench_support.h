@@ -52,6 +52,7 @@ struct IlluminationSuiteOptions {
   int samples = 64;      // final-gather rays per point, the same for the full gather and the keys
   int inside = 24;       // novel lights inside the training grid's hull
   int outside = 12;      // novel lights well outside it (walls, floor level)
+  double drop = 0;       // the training grid's drop below the ceiling (0: LightGrid's default)
   std::string figure;    // when set: a PNG of full / subspace / error for a few novel lights
 };
 

@@ -66,6 +66,11 @@ int main(int argc, char** argv) {
   app.add_option("--illumination-samples", options.illumination.samples, "illumination: final-gather rays per point")
       ->check(CLI::Range(1, 65536))
       ->capture_default_str();
+  app.add_option("--illumination-drop", options.illumination.drop,
+                 "illumination: the training grid's plane below the ceiling, fraction of the room's height (0: the "
+                 "default)")
+      ->check(CLI::Range(0.0, 0.999))
+      ->capture_default_str();
   app.add_option("--illumination-figure", options.illumination.figure,
                  "illumination: write a PNG of full / subspace / error for novel lights");
   CLI11_PARSE(app, argc, argv);

@@ -18,7 +18,7 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     if (!runtime) return runtime.error();
     servable.pmsc = std::move(*runtime);
   }
-  if (info->kind == ModelKind::kAnimationSpace || info->fail_through == FailThrough::kServer) {
+  if (info->kind == ModelKind::kAnimationSpace || info->server_engine == ServerEngine::kAnimationSpace) {
     auto runtime = animation_space::load(container, source);
     if (!runtime) return runtime.error();
     auto levels = lod::load_levels(container, *runtime, source);

@@ -1,5 +1,6 @@
 #include "server/services/pose_service.h"
 
+#include "server/convert.h"
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
 #include "server/services/key_point_stream.h"
@@ -7,14 +8,6 @@
 #include "server/validation.h"
 
 namespace animspace::server {
-namespace {
-
-v1::FailThrough fail_through_of(const LoadedModel& model) {
-  if (model.pmsc->cross) return v1::FAIL_THROUGH_IMPOSSIBLE;
-  return model.animation_space ? v1::FAIL_THROUGH_SERVER : v1::FAIL_THROUGH_CLIENT;
-}
-
-}  // namespace
 
 grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServerContext* context,
                                                              const grpc::ByteBuffer* request_bytes,
@@ -34,7 +27,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServe
         response->set_channel_count(static_cast<uint32_t>(m.channel_count));
         response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
         for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
-        response->set_fail_through(fail_through_of(*model));
+        response->set_fail_through(to_proto(model->info.fail_through));
         return grpc::Status::OK;
       });
 }

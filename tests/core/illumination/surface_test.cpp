@@ -206,7 +206,7 @@ TEST(CornellBox, CellsAreNearSquare) {
 
 TEST(LightGrid, RowMajorInZThenXInsetBelowTheCeiling) {
   const Box room = cornell_room();
-  const LightGrid grid;  // 12 × 12, 5% drop, 10% inset
+  const LightGrid grid{12, 12, 0.05, 0.1};
   const std::vector<Eigen::Vector3d> lights = light_grid(room, grid);
   ASSERT_EQ(lights.size(), 144u);
   const double x0 = 0.1 * 0.556, x1 = 0.9 * 0.556, z0 = 0.1 * 0.5592, z1 = 0.9 * 0.5592;
