@@ -86,7 +86,7 @@ inline constexpr std::string_view kDemoIlluminationModelName = "cornell";
 // a demo that must start in moments (measured in docs/BENCHMARKS.md): a few thousand surface
 // points and few gather rays; the bench and `animspace train-illumination` use the papers' sizes.
 struct DemoIlluminationOptions {
-  int points = 6000;
+  int points = 3000;
   int samples = 16;
   int lights_x = 12;
   int lights_z = 12;

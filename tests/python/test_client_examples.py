@@ -147,11 +147,16 @@ def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path)
     snippet = section[start:section.index("\n```", start)]
     assert "127.0.0.1:50051" in snippet
     script = tmp_path / "snippet.py"
-    script.write_text(snippet.replace("127.0.0.1:50051", daemon).replace("/tmp/arm.png", str(tmp_path / "arm.png")))
+    # Every file the snippet writes ("/tmp/…", f"/tmp/…") goes to the test's folder.
+    script.write_text(snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/'))
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    assert lines[0] == "arm MESH_SEQUENCE 1154 points" and lines[5].startswith("HIT ")
+    assert lines[0] == "arm MESH_SEQUENCE 1154 points" and lines[5].startswith("cornell PMSC ")
+    assert lines[6].startswith("HIT ")
+    assert any(line.split(" ")[:2] in (["cornell", "HIT"], ["cornell", "BLEND"], ["cornell", "MISS"])
+               for line in lines), lines
     assert lines[-1].startswith("NOT_FOUND model 'no-such-model' is not loaded; models: arm, arm-animspace, ")
     assert (tmp_path / "arm.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "cornell-3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
