@@ -11,6 +11,8 @@ In another terminal:
   build/bin/animspace --server ${listen} list            # models and versions
   build/bin/animspace --server ${listen} describe arm    # sizes, metadata, sections
   build/bin/animspace --server ${listen} describe arm-animspace   # skeleton model with LOD levels
+  build/bin/animspace --server ${listen} relight cornell --from 0.1 0.44 0.45 --to 0.45 0.44 0.1 --frames 6 -o /tmp/relight-%02d.png
+                                                         # the Cornell box relit from key points, as PNGs
   build/bin/animspace --server ${listen} server-info     # limits and implemented RPCs
   build/bin/animspace --server ${listen} stats           # per-model requests, poses, hit rates, latency (ms)
   curl -s http://${metrics}/metrics                      # Prometheus metrics

@@ -13,7 +13,7 @@ def wait_until_loaded(stub):
     deadline = time.time() + 30
     while time.time() < deadline:
         models = stub.ListModels(models_pb2.ListModelsRequest(), timeout=5).models
-        if len(models) == 5:
+        if len(models) == 6:
             return models
         time.sleep(0.05)
     pytest.fail("the demo repository never finished loading")
@@ -22,7 +22,7 @@ def wait_until_loaded(stub):
 def test_demo_models_are_listed_with_their_kinds(channel):
     stub = models_pb2_grpc.ModelServiceStub(channel)
     models = {m.name: m for m in wait_until_loaded(stub)}
-    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine"]
+    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine", "cornell"]
     animspace = models["arm-animspace"].versions[0]
     assert animspace.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE
     assert animspace.bone_count == 3 and animspace.point_count > 0

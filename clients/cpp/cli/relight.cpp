@@ -16,9 +16,8 @@ CLI::App* add_relight(CLI::App& app, RelightArgs& a) {
   cmd->add_option("model", a.model, "Model name (server engine ILLUMINATION, e.g. the demo's cornell)")->required();
   cmd->add_option("--from", a.from, "The light's first position x y z (model units)")->expected(3)->required();
   cmd->add_option("--to", a.to, "The light's last position x y z (default: --from)")->expected(3);
-  cmd->add_option("--frames", a.frames, "Frames along the path, both ends included")
-      ->check(CLI::Range(1, 10000))
-      ->capture_default_str();
+  cmd->add_option("--frames", a.frames, "Frames along the path, both ends included (default: 8 with --to, else 1)")
+      ->check(CLI::Range(1, 10000));
   cmd->add_option("-o,--output", a.output,
                   "PNG files to write: a pattern with one %d for the frame number (e.g. /tmp/relight-%02d.png), "
                   "or a .png name for a single frame")
@@ -41,14 +40,18 @@ CLI::App* add_relight(CLI::App& app, RelightArgs& a) {
 
 int run_relight(const RelightArgs& a, Client& client, bool json) {
   const bool pattern = a.output.find('%') != std::string::npos;
-  if (!pattern && a.frames != 1) {
-    return fail("relight", "-o " + a.output + ": " + std::to_string(a.frames) +
+  const int frames = a.frames > 0 ? a.frames : (a.to.empty() ? 1 : 8);
+  if (!pattern && frames != 1) {
+    return fail("relight", "-o " + a.output + ": " + std::to_string(frames) +
                                " frames need a file name pattern with %d (e.g. /tmp/relight-%02d.png)");
+  }
+  if (const std::string bad = check_output_extension(a.output, {".png"}, "relight writes PNGs"); !bad.empty()) {
+    return fail("relight", bad);
   }
   const std::vector<double>& to = a.to.empty() ? a.from : a.to;
   nlohmann::json rows = nlohmann::json::array();
-  for (int f = 0; f < a.frames; ++f) {
-    const double t = a.frames == 1 ? 0.0 : static_cast<double>(f) / (a.frames - 1);
+  for (int f = 0; f < frames; ++f) {
+    const double t = frames == 1 ? 0.0 : static_cast<double>(f) / (frames - 1);
     v1::RenderThumbnailRequest request;
     request.mutable_model()->set_name(a.model);
     request.mutable_model()->set_version(a.version);

@@ -17,7 +17,7 @@ struct RelightArgs {
   std::string model;
   uint64_t version = 0;
   std::vector<double> from, to;  // light positions, model units
-  int frames = 8;
+  int frames = 0;                // 0: 8 along --from → --to, 1 without --to
   std::string output;            // a printf pattern with one %d (frame), or a single .png for one frame
   uint32_t width = 256;
   uint32_t height = 256;
