@@ -42,6 +42,7 @@ class ClientTest : public ::testing::Test {
     repo_ = new TempDir();
     work_ = new TempDir();
     ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
+    ASSERT_TRUE(demo::write_demo_illumination(repo_->path()).ok());
     daemon_ = new DaemonProcess({"--model-repository", repo_->path().string(), "--miss-log-dir",
                                  work_->path().string(), "--renderer", "none"},
                                 work_->path());
@@ -542,6 +543,8 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   EXPECT_NE(output.find("streamed 100 frames"), std::string::npos) << output;
   EXPECT_NE(output.find("skinned "), std::string::npos) << output;
   EXPECT_NE(output.find("LOD level "), std::string::npos) << output;
+  EXPECT_NE(output.find("relit by a light at (0.45, 0.44, 0.45): HIT, "), std::string::npos) << output;
+  EXPECT_NE(output.find("relit by a light at (0.28, 0.05, 0.50): MISS, "), std::string::npos) << output;
   EXPECT_NE(output.find("no thumbnail: "), std::string::npos) << "this daemon runs without a renderer: " << output;
   EXPECT_GT(lod_levels, 1u);
   // The unseen pose misses and is completed with the rig's real full pose, which the server accepts
