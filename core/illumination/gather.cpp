@@ -9,9 +9,9 @@
 //   - Duff et al. 2017, "Building an Orthonormal Basis, Revisited" (JCGT 6(1)): the tangent frame.
 //
 // Determinism: everything a point's value depends on — its rotation, its frame, its ray origin,
-// the order of its sums — is a function of the point alone, and each ray is traced on its own
-// (rtcIntersect1 / rtcOccluded1), so the value does not depend on the batch, the order or the
-// thread that computes it.
+// the order of its sums — is a function of the point alone, and its rays are traced in packets of
+// its own consecutive samples (rtcIntersect16 / rtcOccluded16; a point never shares a packet with
+// another), so the value does not depend on the batch, the order or the thread that computes it.
 #include "core/illumination/gather.h"
 
 #include <algorithm>
@@ -97,6 +97,23 @@ RTCRay make_ray(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
   return ray;
 }
 
+// Ray k of a packet of kPacket rays (an RTCRay16, or the ray of an RTCRayHit16), as make_ray.
+constexpr int kPacket = 16;
+void set_ray(RTCRay16& packet, int k, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, float tfar) {
+  packet.org_x[k] = static_cast<float>(origin.x());
+  packet.org_y[k] = static_cast<float>(origin.y());
+  packet.org_z[k] = static_cast<float>(origin.z());
+  packet.tnear[k] = 0.0f;
+  packet.dir_x[k] = static_cast<float>(direction.x());
+  packet.dir_y[k] = static_cast<float>(direction.y());
+  packet.dir_z[k] = static_cast<float>(direction.z());
+  packet.time[k] = 0.0f;
+  packet.tfar[k] = tfar;
+  packet.mask[k] = std::numeric_limits<unsigned>::max();
+  packet.id[k] = 0;
+  packet.flags[k] = 0;
+}
+
 const char* embree_error_name(RTCError code) {
   switch (code) {
     case RTC_ERROR_NONE: return "no error";
@@ -176,6 +193,39 @@ struct IlluminationEngine::Embree {
       rtcOccluded1(scene, &context, &ray);
       if (ray.tfar < 0) continue;  // Embree sets tfar to −∞ when the ray is blocked
       sum += light.intensity * (n_dot / (std::sqrt(r2) * r2));
+    }
+  }
+
+  // add_irradiance for the hits of one packet (`lit` marks the hits that count): per light, one
+  // packet of shadow rays from each hit moved off its surface. irradiance[k] gains what hit k
+  // receives, lights in order, as add_irradiance would add it.
+  void add_irradiance_packet(const Eigen::Vector3d* x, const Eigen::Vector3d* n, const bool* lit, int count,
+                             const std::vector<PointLight>& lights, RTCIntersectContext& context,
+                             Eigen::Vector3d* irradiance) const {
+    for (const PointLight& light : lights) {
+      alignas(64) int valid[kPacket];
+      alignas(64) RTCRay16 shadow;
+      double received[kPacket];
+      for (int k = 0; k < kPacket; ++k) {
+        valid[k] = 0;
+        if (k >= count || !lit[k]) continue;
+        const Eigen::Vector3d to_light = light.position - x[k];
+        const double n_dot = n[k].dot(to_light);
+        if (!(n_dot > 0)) continue;
+        const double r2 = to_light.squaredNorm();
+        const Eigen::Vector3d origin = x[k] + offset * n[k];
+        const Eigen::Vector3d to = light.position - origin;
+        const double distance = to.norm();
+        if (!(distance > 0)) continue;
+        set_ray(shadow, k, origin, to / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
+        received[k] = n_dot / (std::sqrt(r2) * r2);
+        valid[k] = -1;
+      }
+      rtcOccluded16(valid, scene, &context, &shadow);
+      for (int k = 0; k < count; ++k) {
+        // Embree sets tfar to −∞ when the ray is blocked.
+        if (valid[k] != 0 && shadow.tfar[k] >= 0) irradiance[k] += light.intensity * received[k];
+      }
     }
   }
 };
@@ -315,41 +365,60 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
       orthonormal_basis(normal, tangent, bitangent);
       const Eigen::Vector3d& origin = e.ray_origins[vs];
 
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();  // Σ_s L_d(y_s)
-      for (int s = 0; s < samples; ++s) {
-        // Cosine-weighted direction (pdf cos θ / π): r = √u₁ on the unit disc, lifted to the
-        // hemisphere.
-        const double u1 = fractional(static_cast<double>(s) / samples + rotation_1);
-        const double u2 = fractional(radical_inverse_base2(static_cast<uint32_t>(s)) + rotation_2);
-        const double radius = std::sqrt(u1);
-        const double phi = 2.0 * kPi * u2;
-        const Eigen::Vector3d direction = (radius * std::cos(phi)) * tangent + (radius * std::sin(phi)) * bitangent +
-                                          std::sqrt(std::max(0.0, 1.0 - u1)) * normal;
-        RTCRayHit ray_hit;
-        ray_hit.ray = make_ray(origin, direction, std::numeric_limits<float>::infinity());
-        ray_hit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        ray_hit.hit.primID = RTC_INVALID_GEOMETRY_ID;
-        rtcIntersect1(e.scene, &context, &ray_hit);
-        if (ray_hit.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;  // left the scene
-        const auto f = static_cast<Eigen::Index>(ray_hit.hit.primID);
-        const Eigen::Vector3d& hit_normal = e.triangle_normals[static_cast<size_t>(f)];
-        if (!(hit_normal.dot(direction) < 0)) continue;  // the unlit side (or a degenerate triangle)
-        // The hit point and albedo by barycentrics (Embree: p = (1−u−v)·v₀ + u·v₁ + v·v₂).
-        const double bu = ray_hit.hit.u;
-        const double bv = ray_hit.hit.v;
-        const double bw = 1.0 - bu - bv;
-        const int i0 = surface_.faces(f, 0);
-        const int i1 = surface_.faces(f, 1);
-        const int i2 = surface_.faces(f, 2);
-        const Eigen::Vector3d y = bw * surface_.vertices.row(i0).cast<double>() +
-                                  bu * surface_.vertices.row(i1).cast<double>() +
-                                  bv * surface_.vertices.row(i2).cast<double>();
-        const Eigen::Vector3d albedo = bw * surface_.albedo.row(i0).cast<double>() +
-                                       bu * surface_.albedo.row(i1).cast<double>() +
-                                       bv * surface_.albedo.row(i2).cast<double>();
-        Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();
-        e.add_irradiance(y, hit_normal, y + e.offset * hit_normal, lights, context, irradiance);
-        sum += albedo.cwiseProduct(irradiance) / kPi;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();  // Σ_s L_d(y_s), in the order of s
+      // The point's rays go in packets of kPacket consecutive samples (always the same packets for
+      // the same point, whatever the batch): they share an origin, which Embree's packet traversal
+      // turns into shared work near it. Each packet's shadow rays, one per hit and light, go as a
+      // packet too.
+      for (int first = 0; first < samples; first += kPacket) {
+        const int count = std::min(kPacket, samples - first);
+        alignas(64) int valid[kPacket];
+        alignas(64) RTCRayHit16 packet;
+        Eigen::Vector3d directions[kPacket];
+        for (int k = 0; k < kPacket; ++k) {
+          valid[k] = k < count ? -1 : 0;
+          packet.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+          packet.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
+          if (k >= count) continue;
+          const int s = first + k;
+          // Cosine-weighted direction (pdf cos θ / π): r = √u₁ on the unit disc, lifted to the
+          // hemisphere.
+          const double u1 = fractional(static_cast<double>(s) / samples + rotation_1);
+          const double u2 = fractional(radical_inverse_base2(static_cast<uint32_t>(s)) + rotation_2);
+          const double radius = std::sqrt(u1);
+          const double phi = 2.0 * kPi * u2;
+          directions[k] = (radius * std::cos(phi)) * tangent + (radius * std::sin(phi)) * bitangent +
+                          std::sqrt(std::max(0.0, 1.0 - u1)) * normal;
+          set_ray(packet.ray, k, origin, directions[k], std::numeric_limits<float>::infinity());
+        }
+        rtcIntersect16(valid, e.scene, &context, &packet);
+
+        // Each hit's point, normal and albedo (Embree: p = (1−u−v)·v₀ + u·v₁ + v·v₂); hits on
+        // the unlit side (or a degenerate triangle) and rays that left the scene add nothing.
+        bool lit[kPacket] = {};
+        Eigen::Vector3d hits[kPacket], hit_normals[kPacket], albedos[kPacket], irradiance[kPacket];
+        for (int k = 0; k < count; ++k) {
+          if (packet.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) continue;
+          const auto f = static_cast<Eigen::Index>(packet.hit.primID[k]);
+          hit_normals[k] = e.triangle_normals[static_cast<size_t>(f)];
+          if (!(hit_normals[k].dot(directions[k]) < 0)) continue;
+          const double bu = packet.hit.u[k];
+          const double bv = packet.hit.v[k];
+          const double bw = 1.0 - bu - bv;
+          const int i0 = surface_.faces(f, 0);
+          const int i1 = surface_.faces(f, 1);
+          const int i2 = surface_.faces(f, 2);
+          hits[k] = bw * surface_.vertices.row(i0).cast<double>() + bu * surface_.vertices.row(i1).cast<double>() +
+                    bv * surface_.vertices.row(i2).cast<double>();
+          albedos[k] = bw * surface_.albedo.row(i0).cast<double>() + bu * surface_.albedo.row(i1).cast<double>() +
+                       bv * surface_.albedo.row(i2).cast<double>();
+          irradiance[k].setZero();
+          lit[k] = true;
+        }
+        e.add_irradiance_packet(hits, hit_normals, lit, count, lights, context, irradiance);
+        for (int k = 0; k < count; ++k) {
+          if (lit[k]) sum += albedos[k].cwiseProduct(irradiance[k]) / kPi;
+        }
       }
       const Eigen::Vector3d radiance = surface_.albedo.row(v).cast<double>().transpose().cwiseProduct(sum) / samples;
       out.segment<3>(3 * p) = radiance.cast<float>();
