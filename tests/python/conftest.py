@@ -23,7 +23,9 @@ def run_animspaced(work, *arguments):
     process = subprocess.Popen(
         [str(BUILD / "bin" / "animspaced"), "--listen", "127.0.0.1:0", "--port-file", str(port_file), *arguments],
         stdout=log, stderr=subprocess.STDOUT)
-    deadline = time.time() + 30
+    # Generous: without --model-repository the daemon first generates the demo repository, which
+    # takes seconds (the Cornell box's gathers and training) and a sanitized build several times that.
+    deadline = time.time() + 180
     while not (port_file.exists() and port_file.read_text().strip()):
         if process.poll() is not None or time.time() > deadline:
             process.kill()
