@@ -383,7 +383,9 @@ TEST(DaemonStartup, RefusesAnAddressAnotherDaemonListensOn) {
 
 TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   TempDir work;
-  DaemonProcess daemon({}, work.path());
+  // The daemon writes the demo repository before it listens, the Cornell box's gathers and
+  // training included: a second or two here, about a minute under ThreadSanitizer on two busy cores.
+  DaemonProcess daemon({}, work.path(), std::chrono::minutes(5));
   Client client(daemon.address());
   wait_until_serving(client);
   const auto models = client.list_models();
