@@ -200,6 +200,28 @@ grpc::Status draw_heat(const LoadedModel& model, const Request& request, const E
   return grpc::Status::OK;
 }
 
+// The key_points source, decoded: the pose and, for a heat map, the full values, both checked
+// before the pose is evaluated so that a refused request leaves no trace in the statistics or the
+// miss log.
+grpc::Status decode_key_points(const LoadedModel& model, const Request& request, PoseInput& input,
+                               Eigen::VectorXf& full) {
+  if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
+  if (!request.has_full_values()) return grpc::Status::OK;
+  return decode_full_values(model, request.full_values(), "full_values", input.key_values, full);
+}
+
+// Evaluates the decoded pose through the soft cache into response.pose (counted and logged as any
+// pose) and returns its points for the picture: the client asked for a picture and has the points
+// API for points, so the response keeps the verdict without them.
+grpc::Status evaluate_for_picture(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                                  v1::RenderThumbnailResponse* response, PointMatrix& points) {
+  v1::PoseResult* result = response->mutable_pose();
+  if (grpc::Status s = evaluate_pose(env, model, input, PoseOptions{}, result); !s.ok()) return s;
+  points = points_of(result->points());
+  result->clear_points();
+  return grpc::Status::OK;
+}
+
 // An illumination model's thumbnail (IlluminationView, Meyer & Anderson 2007 Figs. 5 and 10): its
 // surface, coloured by the served radiance for the pose's lights, or by the heat map of the
 // served indirect illumination's error; with no source, by the surface's albedo.
@@ -238,7 +260,8 @@ grpc::Status illumination_scene(ServiceEnvironment& env, const LoadedModel& mode
                                         "lit through key_points (with a light_set) or plain");
   }
   PoseInput input;
-  if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
+  Eigen::VectorXf full;
+  if (grpc::Status s = decode_key_points(model, request, input, full); !s.ok()) return s;
   const bool total = view.radiance() != v1::IlluminationView::RADIANCE_INDIRECT;
   const bool heat = request.has_full_values() || view.heat_from_full_gather();
   if (input.lights.empty() && (view.heat_from_full_gather() || (total && !heat))) {
@@ -249,17 +272,8 @@ grpc::Status illumination_scene(ServiceEnvironment& env, const LoadedModel& mode
                             "; send the lights, or ask for RADIANCE_INDIRECT");
   }
   const std::vector<int> all = served.engine->all_points();
-  Eigen::VectorXf full;
-  if (request.has_full_values()) {
-    if (grpc::Status s = decode_full_values(model, request.full_values(), "full_values", input.key_values, full);
-        !s.ok()) {
-      return s;
-    }
-  }
-  v1::PoseResult* result = response->mutable_pose();
-  if (grpc::Status s = evaluate_pose(env, model, input, PoseOptions{}, result); !s.ok()) return s;
-  const PointMatrix radiance = points_of(result->points());
-  result->clear_points();
+  PointMatrix radiance;
+  if (grpc::Status s = evaluate_for_picture(env, model, input, response, radiance); !s.ok()) return s;
   if (heat) {
     if (view.heat_from_full_gather()) served.engine->indirect(input.lights, served.gather, all, full);
     return draw_heat(model, request, Eigen::Map<const PointMatrix>(full.data(), radiance.rows(), 3), radiance, scene,
@@ -328,20 +342,9 @@ grpc::Status pose_scene(ServiceEnvironment& env, const LoadedModel& model, const
                                               " channels, not 3-D positions to draw");
       }
       PoseInput input;
-      if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
-      // Checked before the pose is evaluated, so that a refused request leaves no trace in the
-      // statistics or the miss log.
       Eigen::VectorXf full;
-      if (request.has_full_values()) {
-        if (grpc::Status s = decode_full_values(model, request.full_values(), "full_values", input.key_values, full);
-            !s.ok()) {
-          return s;
-        }
-      }
-      v1::PoseResult* result = response->mutable_pose();
-      if (grpc::Status s = evaluate_pose(env, model, input, PoseOptions{}, result); !s.ok()) return s;
-      scene.points = points_of(result->points());
-      result->clear_points();  // the client asked for a picture; it has the points API for points
+      if (grpc::Status s = decode_key_points(model, request, input, full); !s.ok()) return s;
+      if (grpc::Status s = evaluate_for_picture(env, model, input, response, scene.points); !s.ok()) return s;
       if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
       if (request.has_full_values()) {
         const auto n = static_cast<uint32_t>(model.info.point_count);

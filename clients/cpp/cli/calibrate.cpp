@@ -20,10 +20,7 @@ CLI::App* add_calibrate(CLI::App& app, CalibrateArgs& a) {
                   "error above the tolerance")
       ->required()
       ->check(CLI::Range(1e-6, 0.999999));
-  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")
-      ->required();
-  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
-  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
 

@@ -85,9 +85,7 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
                 "Fit linear blend skinning weights only (the baseline of thesis Table 8.2), stored in animation-space "
                 "form");
   cmd->add_option("--description", a.description, "One-line description stored in the model");
-  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")->required();
-  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
-  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
 
@@ -259,9 +257,7 @@ CLI::App* add_import_rig(CLI::App& app, ImportRigArgs& a) {
   cmd->add_option("--dmat", a.dmat, "libigl rig: weights (DMAT, #V × #bones)");
   cmd->add_option("--gltf", a.gltf, "A glTF 2.0 file (.gltf or .glb) with a skinned mesh");
   cmd->add_option("--description", a.description, "One-line description stored in the model");
-  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")->required();
-  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
-  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
 

@@ -48,9 +48,7 @@ CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
       ->check(CLI::Range(0.0, 180.0))
       ->capture_default_str();
   cmd->add_option("--seed", a.seed, "Random poses: seed")->capture_default_str();
-  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")->required();
-  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
-  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
 

@@ -50,4 +50,10 @@ Status write_model_file(const std::filesystem::path& path, const container::Mode
   return container::write_file(path, model);
 }
 
+void add_model_output_options(CLI::App* cmd, std::string& output, std::string& model, unsigned& version) {
+  cmd->add_option("-o,--output", output, "Output model.anim file, or the repository folder with --model")->required();
+  cmd->add_option("--model", model, "Model name: write <output>/<model>/<version>/model.anim");
+  cmd->add_option("--version", version, "Version to write (default: one above the newest)");
+}
+
 }  // namespace animspace::cli

@@ -5,6 +5,8 @@
 #include <initializer_list>
 #include <string>
 
+#include <CLI/CLI.hpp>
+
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 
@@ -23,6 +25,10 @@ std::string check_output_extension(const std::string& output, std::initializer_l
 // Where to write: `output` itself when `model` is empty, else
 // <output>/<model>/<version>/model.anim with version 0 meaning one above the newest present.
 std::filesystem::path model_output_path(const std::string& output, const std::string& model, unsigned version);
+
+// The options every command that writes a model shares: -o/--output (required), --model and
+// --version, read by model_output_path.
+void add_model_output_options(CLI::App* cmd, std::string& output, std::string& model, unsigned& version);
 
 // Creates the parent folder and writes the container atomically.
 Status write_model_file(const std::filesystem::path& path, const container::ModelContainer& model);

@@ -48,10 +48,7 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
   cmd->add_option("--max-key-points", a.max_key_points, "Key point budget")->capture_default_str();
   cmd->add_option("--regions", a.regions, "Regions for local fail-through (0 = none)")->capture_default_str();
   cmd->add_option("--description", a.description, "One-line description stored in the model");
-  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")
-      ->required();
-  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
-  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
 

@@ -51,10 +51,7 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
   cmd->add_flag("--align", a.align, "Remove rigid motion before PCA (captured whole-body data)");
   cmd->add_option("--regions", a.regions, "Regions for local fail-through (0 = none)")->capture_default_str();
   cmd->add_option("--description", a.description, "One-line description stored in the model");
-  cmd->add_option("-o,--output", a.output, "Output model.anim file, or the repository folder with --model")
-      ->required();
-  cmd->add_option("--model", a.model, "Model name: write <output>/<model>/<version>/model.anim");
-  cmd->add_option("--version", a.version, "Version to write (default: one above the newest)");
+  add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
 
