@@ -13,6 +13,7 @@
 #include <Eigen/SVD>
 
 #include "core/common/format.h"
+#include "core/common/kernels.h"
 #include "core/pmsc/local_fail_through.h"
 
 namespace animspace::pmsc {
@@ -160,6 +161,20 @@ Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
   return m;
 }
 
+// p = P·b and the residual b − A_key·p for centred key values b, through the active kernel. One
+// pose at a time, in a batch or alone alike: e_key, and so the verdict, never depends on what
+// else was evaluated with a pose.
+Eigen::VectorXd project_centred(const PmscModel& m, Eigen::VectorXd centred, Eigen::VectorXd& p) {
+  const long M = m.projection.rows();
+  const long rows = centred.size();
+  p.resize(M);
+  gemm(M, rows, 1, m.projection.data(), M, centred.data(), rows, 0.0, p.data(), M);
+  Eigen::VectorXd product(rows);
+  gemm(rows, M, 1, m.key_basis.data(), rows, p.data(), M, 0.0, product.data(), rows);
+  centred -= product;
+  return centred;
+}
+
 // Eq. 2 for one pose: p from the key values, and the key residual f_key − f̂_key in the subspace
 // frame. With alignment the rigid motion and p are solved together, by Gauss–Newton on
 //   min over (R, t, p) of ‖Rᵀ(f_key − t) − key_mean − A_key p‖²
@@ -173,10 +188,7 @@ Eigen::VectorXd project_keys(const PmscModel& m, const Eigen::Ref<const Eigen::V
                              Eigen::VectorXd& p, geometry::RigidTransform& transform) {
   Eigen::VectorXd keys = key_values.cast<double>();
   transform = geometry::RigidTransform();
-  if (!m.aligned) {
-    p.noalias() = m.projection * (keys - m.key_mean);
-    return keys - m.key_mean - m.key_basis * p;
-  }
+  if (!m.aligned) return project_centred(m, keys - m.key_mean, p);
   const long K = keys.size() / 3;
   const long r = m.key_range.cols();
   const Eigen::Matrix3Xd observed = as_points(keys);
@@ -230,9 +242,7 @@ Eigen::VectorXd project_keys(const PmscModel& m, const Eigen::Ref<const Eigen::V
   }
   const geometry::RigidTransform to_aligned = transform.inverse();
   aligned = (to_aligned.rotation * observed).colwise() + to_aligned.translation;
-  b = keys - m.key_mean;
-  p.noalias() = m.projection * b;
-  return b - m.key_basis * p;
+  return project_centred(m, keys - m.key_mean, p);
 }
 
 double rms(const Eigen::VectorXd& residual) {
@@ -247,16 +257,13 @@ void to_world(const geometry::RigidTransform& t, int point_count, float* frame) 
 
 }  // namespace
 
-void evaluate(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values, PoseEstimate& out) {
+void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                          PoseEstimate& out) {
   assert(key_values.size() == m.key_mean.size());
   assert(m.projection.rows() == m.basis.cols());
   const Eigen::VectorXd key_residual = project_keys(m, key_values, out.coordinates, out.alignment);
   out.key_point_error = rms(key_residual);
-
-  // f̂ = mean + A p: the one large product, in float like the stored basis.
-  out.points = m.mean;
-  out.points.noalias() += m.basis * out.coordinates.cast<float>();
-  if (m.aligned) to_world(out.alignment, m.point_count, out.points.data());
+  out.points.resize(0);
 
   // Local fail-through: the same RMS, restricted to the key points of each region.
   out.region_errors.assign(static_cast<size_t>(m.region_count), 0.0);
@@ -274,32 +281,95 @@ void evaluate(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_v
   }
 }
 
+void reconstruct(const PmscModel& m, std::span<const PoseEstimate* const> estimates,
+                 std::span<float* const> destinations) {
+  assert(estimates.size() == destinations.size());
+  const long rows = m.basis.rows();
+  const long M = m.basis.cols();
+  const long B = static_cast<long>(estimates.size());
+  if (B == 0) return;
+  Eigen::MatrixXf coordinates(M, B);
+  for (long b = 0; b < B; ++b) coordinates.col(b) = estimates[static_cast<size_t>(b)]->coordinates.cast<float>();
+  if (B < kBlasGemmMinColumns) {
+    // Alone (or nearly): one matrix–vector product per pose, straight into its destination.
+    for (long b = 0; b < B; ++b) {
+      float* out = destinations[static_cast<size_t>(b)];
+      std::copy(m.mean.data(), m.mean.data() + rows, out);
+      gemm(rows, M, 1, m.basis.data(), rows, coordinates.col(b).data(), M, 1.0f, out, rows);
+    }
+  } else {
+    // One product for the batch, a block of rows at a time: the block's B columns stay in cache
+    // while the mean is added on the way to each pose's destination, so every answer is written
+    // once, and the basis is read once per batch instead of once per pose.
+    const long block = std::max(kReconstructionBlockValues / B, 256L);
+    Eigen::MatrixXf scratch(std::min(block, rows), B);
+    for (long r0 = 0; r0 < rows; r0 += block) {
+      const long n = std::min(block, rows - r0);
+      gemm(n, M, B, m.basis.data() + r0, rows, coordinates.data(), M, 0.0f, scratch.data(), scratch.rows());
+      for (long b = 0; b < B; ++b) {
+        Eigen::Map<Eigen::VectorXf>(destinations[static_cast<size_t>(b)] + r0, n) =
+            m.mean.segment(r0, n) + scratch.col(b).head(n);
+      }
+    }
+  }
+  if (m.aligned) {
+    for (long b = 0; b < B; ++b) {
+      to_world(estimates[static_cast<size_t>(b)]->alignment, m.point_count, destinations[static_cast<size_t>(b)]);
+    }
+  }
+}
+
+void evaluate(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values, PoseEstimate& out) {
+  estimate_coordinates(m, key_values, out);
+  Eigen::VectorXf points(m.mean.size());
+  const PoseEstimate* estimate = &out;
+  float* destination = points.data();
+  reconstruct(m, {&estimate, 1}, {&destination, 1});
+  out.points = std::move(points);
+}
+
 void evaluate_batch(const PmscModel& m, const Eigen::Ref<const Eigen::MatrixXf>& key_values, Eigen::MatrixXf& points,
                     Eigen::VectorXd& key_point_errors) {
   assert(key_values.rows() == m.key_mean.size());
   const long B = key_values.cols();
+  std::vector<PoseEstimate> estimates(static_cast<size_t>(B));
+  std::vector<const PoseEstimate*> inputs(static_cast<size_t>(B));
+  std::vector<float*> destinations(static_cast<size_t>(B));
+  points.resize(m.mean.size(), B);
   key_point_errors.resize(B);
-  Eigen::MatrixXd coordinates(m.basis.cols(), B);
-  std::vector<geometry::RigidTransform> transforms;
-  if (m.aligned) {
-    // The rigid fit is per pose; the reconstruction below is still one matrix product.
-    transforms.resize(static_cast<size_t>(B));
-    Eigen::VectorXd p;
-    for (long b = 0; b < B; ++b) {
-      key_point_errors(b) = rms(project_keys(m, key_values.col(b), p, transforms[static_cast<size_t>(b)]));
-      coordinates.col(b) = p;
-    }
-  } else {
-    const Eigen::MatrixXd centred = key_values.cast<double>().colwise() - m.key_mean;
-    coordinates.noalias() = m.projection * centred;
-    const Eigen::MatrixXd residual = centred - m.key_basis * coordinates;
-    key_point_errors =
-        (residual.colwise().squaredNorm() / static_cast<double>(residual.rows())).cwiseSqrt().transpose();
+  for (long b = 0; b < B; ++b) {
+    const auto i = static_cast<size_t>(b);
+    estimate_coordinates(m, key_values.col(b), estimates[i]);
+    key_point_errors(b) = estimates[i].key_point_error;
+    inputs[i] = &estimates[i];
+    destinations[i] = points.col(b).data();
   }
-  points.noalias() = m.basis * coordinates.cast<float>();
-  points.colwise() += m.mean;
-  for (size_t b = 0; b < transforms.size(); ++b) {
-    to_world(transforms[b], m.point_count, points.col(static_cast<long>(b)).data());
+  reconstruct(m, inputs, destinations);
+}
+
+void finish_cached(const PmscModel& m, const PoseEstimate& estimate, Eigen::Ref<Eigen::VectorXf> points,
+                   const Eigen::VectorXf* full_values, const FullCalculation& full_calculation, CachedPose& out) {
+  assert(full_values == nullptr || full_values->size() == m.mean.size());
+  assert(points.size() == m.mean.size());
+  const SoftCacheDecision decision = decide(estimate.key_point_error, m.epsilon);
+  out.status = decision.status;
+  out.alpha = decision.alpha;
+  out.key_point_error = estimate.key_point_error;
+  out.region_errors = estimate.region_errors;
+  out.full_evaluation_needed = false;
+  out.computed_full_values.resize(0);
+  if (decision.status == CacheStatus::kHit || m.cross) return;
+  // Step 5: the full calculation, when the caller brought none and holds an engine.
+  if (full_values == nullptr && full_calculation && full_calculation(out.computed_full_values)) {
+    assert(out.computed_full_values.size() == m.mean.size());
+    full_values = &out.computed_full_values;
+  }
+  if (full_values != nullptr && decision.status == CacheStatus::kMiss) {
+    points = *full_values;  // eq. 9: f itself, not 1·f + 0·f̂ (which an overflowed f̂ would spoil)
+  } else if (full_values != nullptr) {
+    blend(points, *full_values, decision.alpha, points);
+  } else {
+    out.full_evaluation_needed = true;
   }
 }
 
@@ -311,34 +381,10 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
 void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                      const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
                      CachedPose& out) {
-  assert(full_values == nullptr || full_values->size() == m.mean.size());
   PoseEstimate estimate;
   evaluate(m, key_values, estimate);
-  const SoftCacheDecision decision = decide(estimate.key_point_error, m.epsilon);
-  out.status = decision.status;
-  out.alpha = decision.alpha;
-  out.key_point_error = estimate.key_point_error;
-  out.region_errors = std::move(estimate.region_errors);
-  out.full_evaluation_needed = false;
-  out.computed_full_values.resize(0);
-  if (decision.status == CacheStatus::kHit || m.cross) {
-    out.points = std::move(estimate.points);
-    return;
-  }
-  // Step 5: the full calculation, when the caller brought none and holds an engine.
-  if (full_values == nullptr && full_calculation && full_calculation(out.computed_full_values)) {
-    assert(out.computed_full_values.size() == m.mean.size());
-    full_values = &out.computed_full_values;
-  }
-  if (full_values != nullptr && decision.status == CacheStatus::kMiss) {
-    out.points = *full_values;  // eq. 9: f itself, not 1·f + 0·f̂ (which an overflowed f̂ would spoil)
-  } else if (full_values != nullptr) {
-    out.points.resize(estimate.points.size());
-    blend(estimate.points, *full_values, decision.alpha, out.points);
-  } else {
-    out.points = std::move(estimate.points);
-    out.full_evaluation_needed = true;
-  }
+  out.points = std::move(estimate.points);
+  finish_cached(m, estimate, out.points, full_values, full_calculation, out);
 }
 
 Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio) {
@@ -401,7 +447,7 @@ double hit_rate(const PmscModel& m, const FrameMatrix& control_frames) {
   PoseEstimate estimate;
   for (Eigen::Index f = 0; f < control_frames.rows(); ++f) {
     const Eigen::VectorXf frame = control_frames.row(f).transpose();
-    evaluate(m, gather_key_values(m, frame), estimate);
+    estimate_coordinates(m, gather_key_values(m, frame), estimate);  // e_key needs no f̂
     hits += decide(estimate.key_point_error, m.epsilon).status == CacheStatus::kHit ? 1 : 0;
   }
   return static_cast<double>(hits) / static_cast<double>(control_frames.rows());

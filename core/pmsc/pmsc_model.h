@@ -20,6 +20,7 @@
 #pragma once
 
 #include <functional>
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -108,12 +109,45 @@ struct PoseEstimate {
   geometry::RigidTransform alignment;          // aligned frame → world (identity unless aligned)
 };
 
-// One pose. `key_values` holds K·D values in key order. The model must be prepared. Values are
-// assumed finite (the caller validates input; asserted in debug builds).
+// Evaluation is two steps, so that a server can evaluate poses that arrive together as one
+// matrix product (issue #25, dynamic batching):
+//   estimate_coordinates   eq. 2 for one pose: p, e_key, region errors, the rigid alignment —
+//                          always one pose at a time, so a pose's verdict never depends on what
+//                          else it was evaluated with;
+//   reconstruct            eq. 1, f̂ = mean + A p, for any number of poses at once.
+// Products run through the active kernel (core/common/kernels.h).
+
+// Eq. 2 for one pose. `key_values` holds K·D values in key order. The model must be prepared.
+// Values are assumed finite (the caller validates input; asserted in debug builds). Leaves
+// out.points empty.
+void estimate_coordinates(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                          PoseEstimate& out);
+
+// Rows of the basis per block of a batched reconstruction: block × B floats of products stay in
+// cache (256 KB) while the mean is added on the way to each pose's destination.
+inline constexpr long kReconstructionBlockValues = 65536;
+
+// Eq. 1 for the poses `estimates` (from estimate_coordinates): f̂_b = mean + A p_b, moved to the
+// world for aligned models, written to destinations[b] (N·D floats each; may be a message's
+// buffer). The basis is read once for the whole batch. A pose reconstructed alone or in any batch
+// differs only by float rounding, at most
+//   reconstruction_rounding_bound(M) · (|mean_i| + Σ_j |A_ij p_j|)
+// in value i (both orders of the M + 1 float additions are within γ_{M+1} of the exact sum;
+// an aligned model's rotation then moves each point's error, not its size).
+void reconstruct(const PmscModel& model, std::span<const PoseEstimate* const> estimates,
+                 std::span<float* const> destinations);
+
+inline double reconstruction_rounding_bound(long basis_size) {
+  const double u = 0x1p-24;  // float's unit roundoff
+  const double gamma = static_cast<double>(basis_size + 2) * u;
+  return 2 * gamma / (1 - gamma);
+}
+
+// Both steps for one pose: out.points is f̂.
 void evaluate(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values, PoseEstimate& out);
 
 // A batch: `key_values` is K·D × B (one pose per column); `points` becomes N·D × B and
-// `key_point_errors` B. Uses matrix–matrix products for the reconstruction.
+// `key_point_errors` B. One reconstruction for the batch.
 void evaluate_batch(const PmscModel& model, const Eigen::Ref<const Eigen::MatrixXf>& key_values,
                     Eigen::MatrixXf& points, Eigen::VectorXd& key_point_errors);
 
@@ -152,6 +186,12 @@ using FullCalculation = std::function<bool(Eigen::VectorXf& full_values)>;
 void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                      const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
                      CachedPose& out);
+
+// The soft cache on a pose whose f̂ is already in `points` (N·D, from reconstruct): the verdict
+// and α of `estimate`, fail-through and blend as evaluate_cached does, with the answer written
+// over f̂ in place. Fills every member of `out` but `points`.
+void finish_cached(const PmscModel& model, const PoseEstimate& estimate, Eigen::Ref<Eigen::VectorXf> points,
+                   const Eigen::VectorXf* full_values, const FullCalculation& full_calculation, CachedPose& out);
 
 // Full values belong to the pose their key values came from: at each key point the full frame
 // must repeat the key values (a client that sends an unrelated "full pose" — zeros, the previous

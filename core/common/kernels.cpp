@@ -1,0 +1,104 @@
+#include "core/common/kernels.h"
+
+#include <atomic>
+#include <cassert>
+#include <cctype>
+
+#include <Eigen/Core>
+#include <cblas.h>
+
+namespace animspace {
+namespace {
+
+std::atomic<Kernel> active{Kernel::kBlas};
+
+template <typename T>
+using Matrix = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
+template <typename T>
+using View = Eigen::Map<const Matrix<T>, 0, Eigen::OuterStride<>>;
+template <typename T>
+using Target = Eigen::Map<Matrix<T>, 0, Eigen::OuterStride<>>;
+
+template <typename T>
+void portable_gemm(long rows, long inner, long columns, const T* a, long lda, const T* b, long ldb, T beta, T* c,
+                   long ldc) {
+  const View<T> A(a, rows, inner, Eigen::OuterStride<>(lda));
+  const View<T> B(b, inner, columns, Eigen::OuterStride<>(ldb));
+  Target<T> C(c, rows, columns, Eigen::OuterStride<>(ldc));
+  if (beta == T(0)) {
+    C.noalias() = A * B;
+  } else {
+    C.noalias() += A * B;
+  }
+}
+
+int blas_int(long n) {
+  assert(n >= 0 && n <= 0x7fffffff);
+  return static_cast<int>(n);
+}
+
+}  // namespace
+
+Kernel active_kernel() { return active.load(std::memory_order_relaxed); }
+
+void use_kernel(Kernel kernel) { active.store(kernel, std::memory_order_relaxed); }
+
+std::string kernel_name(Kernel kernel) {
+  if (kernel == Kernel::kPortable) {
+#if defined(__AVX512F__)
+    return "eigen:avx512";
+#elif defined(__AVX2__)
+    return "eigen:avx2";
+#elif defined(__SSE2__)
+    return "eigen:sse2";
+#else
+    return "eigen:scalar";
+#endif
+  }
+  std::string core = openblas_get_corename();
+  for (char& ch : core) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return "openblas:" + core;
+}
+
+bool parse_kernel(const std::string& text, Kernel& out) {
+  if (text == "portable") {
+    out = Kernel::kPortable;
+  } else if (text == "blas") {
+    out = Kernel::kBlas;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+void gemm(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
+          float* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
+  if (active_kernel() == Kernel::kPortable) return portable_gemm(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
+  if (columns < kBlasGemmMinColumns) {
+    for (long j = 0; j < columns; ++j) {
+      cblas_sgemv(CblasColMajor, CblasNoTrans, blas_int(rows), blas_int(inner), 1.0f, a, blas_int(lda), b + j * ldb, 1,
+                  beta, c + j * ldc, 1);
+    }
+    return;
+  }
+  cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0f, a,
+              blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
+}
+
+void gemm(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb, double beta,
+          double* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
+  if (active_kernel() == Kernel::kPortable) return portable_gemm(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
+  if (columns < kBlasGemmMinColumns) {
+    for (long j = 0; j < columns; ++j) {
+      cblas_dgemv(CblasColMajor, CblasNoTrans, blas_int(rows), blas_int(inner), 1.0, a, blas_int(lda), b + j * ldb, 1,
+                  beta, c + j * ldc, 1);
+    }
+    return;
+  }
+  cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
+              blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
+}
+
+}  // namespace animspace

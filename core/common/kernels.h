@@ -1,0 +1,46 @@
+// The dense products the hot paths spend their time in, run by the kernel the process selected.
+//
+// The build targets baseline x86-64 (SSE2), so that `make run` and the container image work on
+// any x86-64; Eigen's products are then compiled for SSE2 alone. Debian's OpenBLAS is built for
+// every x86-64 too, but picks the code for the CPU it runs on when it loads (AVX2/FMA, AVX-512):
+// the speed of the machine without giving up portability (issue #25). Both kernels compute the
+// same products; only the order of the float additions differs.
+//
+// Measured on the 2-core AVX-512 development machine, crane's reconstruction (30006 × 61 float
+// basis): one pose, sgemv 123 µs vs Eigen/SSE2 167 µs; OpenBLAS's sgemm is slower than one sgemv
+// per pose below about 4 poses (444 µs for 1, 240 µs/pose for 2), faster from 4 on (65 µs/pose at
+// 64): `kBlasGemmMinColumns`.
+#pragma once
+
+#include <string>
+
+namespace animspace {
+
+enum class Kernel {
+  kPortable,  // Eigen, as compiled (baseline x86-64)
+  kBlas,      // OpenBLAS, dispatched at load time to the CPU it runs on
+};
+
+// The kernel every product below uses. Process-wide, like the CPU it describes: set once at start
+// (animspaced --kernel, a tool's flag) before any thread evaluates. Default: kBlas.
+Kernel active_kernel();
+void use_kernel(Kernel kernel);
+
+// "openblas:<core>" (the core OpenBLAS chose for this CPU, e.g. "openblas:haswell") or
+// "eigen:sse2" (the instruction set Eigen was compiled for).
+std::string kernel_name(Kernel kernel);
+
+// Parses "portable" / "blas" (a flag's value); false for anything else.
+bool parse_kernel(const std::string& text, Kernel& out);
+
+// Fewer columns than this: the BLAS kernel multiplies one column at a time (gemv).
+inline constexpr long kBlasGemmMinColumns = 4;
+
+// C = A·B + beta·C, column-major, A rows × inner (leading dimension lda), B inner × columns
+// (ldb), C rows × columns (ldc). beta is 0 or 1.
+void gemm(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
+          float* c, long ldc);
+void gemm(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb, double beta,
+          double* c, long ldc);
+
+}  // namespace animspace

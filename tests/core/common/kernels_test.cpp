@@ -1,0 +1,93 @@
+#include "core/common/kernels.h"
+
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace animspace {
+namespace {
+
+// Restores the process's kernel after a test that switches it.
+class KernelTest : public ::testing::Test {
+ protected:
+  void TearDown() override { use_kernel(saved_); }
+  Kernel saved_ = active_kernel();
+};
+
+// C = A·B + beta·C by the definition, in long double, for strided column-major operands.
+template <typename T>
+std::vector<long double> reference(long rows, long inner, long columns, const std::vector<T>& a, long lda,
+                                   const std::vector<T>& b, long ldb, T beta, const std::vector<T>& c, long ldc) {
+  std::vector<long double> out(static_cast<size_t>(ldc * columns));
+  for (long j = 0; j < columns; ++j) {
+    for (long i = 0; i < rows; ++i) {
+      long double sum = beta * static_cast<long double>(c[static_cast<size_t>(i + j * ldc)]);
+      for (long k = 0; k < inner; ++k) {
+        sum += static_cast<long double>(a[static_cast<size_t>(i + k * lda)]) * b[static_cast<size_t>(k + j * ldb)];
+      }
+      out[static_cast<size_t>(i + j * ldc)] = sum;
+    }
+  }
+  return out;
+}
+
+template <typename T>
+void check_products(Kernel kernel, double relative) {
+  use_kernel(kernel);
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> value(-1, 1);
+  // Column counts on both sides of the BLAS kernel's switch from gemv to gemm.
+  for (long columns : {1L, 2L, kBlasGemmMinColumns - 1, kBlasGemmMinColumns, 9L, 64L}) {
+    for (T beta : {T(0), T(1)}) {
+      const long rows = 37, inner = 11, lda = rows + 3, ldb = inner + 2, ldc = rows + 5;
+      std::vector<T> a(static_cast<size_t>(lda * inner)), b(static_cast<size_t>(ldb * columns)),
+          c(static_cast<size_t>(ldc * columns));
+      for (T& x : a) x = static_cast<T>(value(random));
+      for (T& x : b) x = static_cast<T>(value(random));
+      for (T& x : c) x = static_cast<T>(value(random));
+      const std::vector<long double> expected = reference(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
+      std::vector<T> out = c;
+      gemm(rows, inner, columns, a.data(), lda, b.data(), ldb, beta, out.data(), ldc);
+      for (long j = 0; j < columns; ++j) {
+        for (long i = 0; i < ldc; ++i) {
+          const auto at = static_cast<size_t>(i + j * ldc);
+          if (i >= rows) {
+            EXPECT_EQ(out[at], c[at]) << "padding below row " << rows << " was written";
+          } else {
+            // |a·b| ≤ 1 per term: the sum of inner + 1 terms is within (inner + 1)·ε of exact.
+            EXPECT_NEAR(out[at], static_cast<double>(expected[at]), relative * (inner + 1))
+                << kernel_name(kernel) << " columns " << columns << " beta " << beta << " at " << i << "," << j;
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST_F(KernelTest, BothKernelsComputeTheProductOfTheDefinition) {
+  for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
+    check_products<float>(kernel, 2e-7);
+    check_products<double>(kernel, 4e-16);
+  }
+}
+
+TEST_F(KernelTest, TheBlasKernelNamesTheCoreItDispatchedTo) {
+  const std::string blas = kernel_name(Kernel::kBlas);
+  ASSERT_EQ(blas.rfind("openblas:", 0), 0u) << blas;
+  EXPECT_GT(blas.size(), std::string("openblas:").size());
+  EXPECT_EQ(kernel_name(Kernel::kPortable).rfind("eigen:", 0), 0u);
+}
+
+TEST_F(KernelTest, FlagValuesParse) {
+  Kernel kernel = Kernel::kBlas;
+  ASSERT_TRUE(parse_kernel("portable", kernel));
+  EXPECT_EQ(kernel, Kernel::kPortable);
+  ASSERT_TRUE(parse_kernel("blas", kernel));
+  EXPECT_EQ(kernel, Kernel::kBlas);
+  EXPECT_FALSE(parse_kernel("avx512", kernel));
+  EXPECT_FALSE(parse_kernel("", kernel));
+}
+
+}  // namespace
+}  // namespace animspace
