@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/common/atomic_file.h"
+#include "core/common/kernels.h"
 #include "server/port_owner.h"
 #include "server/services/lod_service.h"
 #include "server/services/model_service.h"
@@ -87,12 +88,21 @@ Status Daemon::start() {
     return make_error(ErrorCode::kNotFound, "--miss-log-dir: '" + miss_log_dir.string() + "' is not a directory");
   }
   miss_logs_ = std::make_unique<MissLogs>(miss_log_dir, *fsync_policy, options_.miss_log_fsync_interval);
+  Kernel kernel = Kernel::kBlas;
+  if (!parse_kernel(options_.kernel, kernel)) {
+    return make_error(ErrorCode::kInvalidArgument, "--kernel: expected blas or portable, got '" + options_.kernel + "'");
+  }
+  if (options_.max_batch_size < 1) {
+    return make_error(ErrorCode::kInvalidArgument, "--max-batch-size: expected at least 1, got 0");
+  }
+  use_kernel(kernel);
+  batcher_ = std::make_unique<PoseBatcher>(PoseBatcher::Options{options_.batch_delay, options_.max_batch_size});
   request_pool_ = std::make_unique<WorkPool>(
       options_.work_threads > 0 ? options_.work_threads : default_work_threads(), "animspace-work");
   admin_pool_ = std::make_unique<WorkPool>(1, "animspace-admin");
   env_ = std::make_unique<ServiceEnvironment>(ServiceEnvironment{registry_, metrics_, options_, *request_pool_,
                                                                  *admin_pool_, admission_, *authenticator_,
-                                                                 *miss_logs_});
+                                                                 *miss_logs_, *batcher_});
 
   ANIMSPACE_RETURN_IF_ERROR(start_renderer());
 

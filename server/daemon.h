@@ -82,6 +82,8 @@ class Daemon {
   Admission admission_;
   std::unique_ptr<Authenticator> authenticator_;
   std::unique_ptr<MissLogs> miss_logs_;
+  // Before the pools: destroyed after them, once no task can hold a batch open.
+  std::unique_ptr<PoseBatcher> batcher_;
   std::unique_ptr<WorkPool> request_pool_;
   std::unique_ptr<WorkPool> admin_pool_;
   std::unique_ptr<RenderThread> render_thread_;

@@ -57,6 +57,21 @@ int main(int argc, char** argv) {
   app.add_option("--max-batch-poses", options.max_batch_poses, "Largest batch in one evaluation request")
       ->check(CLI::Range(1u, 1000000u))
       ->capture_default_str();
+  app.add_option("--max-batch-size", options.max_batch_size,
+                 "Dynamic batching: the most waiting poses of one model reconstructed as one matrix product")
+      ->check(CLI::Range(1u, 4096u))
+      ->capture_default_str();
+  int64_t batch_delay_us = options.batch_delay.count();
+  app.add_option("--batch-delay-us", batch_delay_us,
+                 "Dynamic batching: how long a batch may wait to fill to --max-batch-size (0: batch only the "
+                 "poses already waiting, adding no latency)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1000000}))
+      ->capture_default_str();
+  app.add_option("--kernel", options.kernel,
+                 "Dense products: blas (OpenBLAS, dispatched to this CPU at start) or portable (Eigen, baseline "
+                 "x86-64)")
+      ->check(CLI::IsMember({"blas", "portable"}))
+      ->capture_default_str();
   app.add_option("--max-thumbnail-px", options.max_thumbnail_px, "Largest thumbnail edge in pixels")
       ->check(CLI::Range(16u, 4096u))
       ->capture_default_str();
@@ -111,6 +126,7 @@ int main(int argc, char** argv) {
   app.add_option("--port-file", options.port_file, "Write the bound gRPC port to this file once listening");
   CLI11_PARSE(app, argc, argv);
   options.shutdown_grace = std::chrono::milliseconds(grace_ms);
+  options.batch_delay = std::chrono::microseconds(batch_delay_us);
   options.miss_log_fsync_interval = std::chrono::milliseconds(fsync_ms);
 
   spdlog::set_level(spdlog::level::from_str(options.log_level));

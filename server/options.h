@@ -25,6 +25,14 @@ struct ServerOptions {
   int64_t grpc_memory_bytes = 256LL << 20;
   // Largest batch in one evaluation request, poses.
   uint32_t max_batch_poses = 1024;
+  // Dynamic batching (server/pose_batcher.h): the most poses reconstructed as one product, and
+  // how long the thread that takes a batch may wait for it to fill (0: only poses already
+  // waiting join; no pose is delayed).
+  uint32_t max_batch_size = 64;
+  std::chrono::microseconds batch_delay{0};
+  // The kernel of the dense products (core/common/kernels.h): "blas" (OpenBLAS, dispatched to
+  // this CPU at load time) or "portable" (Eigen as compiled, baseline x86-64).
+  std::string kernel = "blas";
   // Largest thumbnail edge, pixels.
   uint32_t max_thumbnail_px = 4096;
   // EGL platform of the render thread: "auto", "surfaceless", "device" or "none". With "auto" a

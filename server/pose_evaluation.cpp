@@ -103,65 +103,49 @@ grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& 
   return grpc::Status::OK;
 }
 
-grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                           const PoseOptions& options, v1::PoseResult* out, bool* logged) {
+namespace {
+
+// The server's full calculation of a whole pose (fail-through): the posing engine posed at the
+// request's skeleton, or the illumination engine gathering for its lights (decode_pose accepted
+// each input only for a model that has its engine); empty when the pose brought neither.
+pmsc::FullCalculation full_calculation(const LoadedModel& model, const PoseInput& input) {
+  if (input.has_skeleton) {
+    return [engine = model.animation_space.get(), globals = &input.globals](Eigen::VectorXf& full) {
+      PointMatrix posed;
+      animation_space::evaluate(*engine, *globals, posed);
+      full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+      return true;
+    };
+  }
+  if (!input.lights.empty()) {
+    return [served = model.illumination.get(), lights = &input.lights](Eigen::VectorXf& full) {
+      served->engine->indirect(*lights, served->gather, served->engine->all_points(), full);
+      return true;
+    };
+  }
+  return {};
+}
+
+// Writes the soft cache's answer into `out` and records it: statistics, and the miss log for a
+// blend or miss. `answer` is the answer (N·D); `in_response` says it already lies in out's
+// points.data. `local` is empty outside local fail-through.
+grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                         const PoseOptions& options, const pmsc::CachedPose& cached, const float* answer,
+                         bool in_response, const pmsc::LocalFailThrough& local, v1::PoseResult* out, bool* logged) {
   if (logged != nullptr) *logged = false;
   const pmsc::PmscModel& m = *model.pmsc;
-  pmsc::CachedPose cached;
-  pmsc::LocalFailThrough local;
   const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
   const bool local_path = options.local_fail_through || !input.full_points.empty();
-  // Server fail-through: the posing engine, posed at the request's skeleton, or the illumination
-  // engine, gathering for the request's lights, is the full calculation (decode_pose accepted
-  // each input only for a model that has its engine). Locally it computes only the points that
-  // need it: animation space is evaluated vertex by vertex (eq. 3.1), and the gather is per point
-  // and deterministic, so a point computed alone is the point of the whole frame.
-  if (local_path) {
-    pmsc::PartialFullCalculation engine;
-    if (input.has_skeleton) {
-      engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
-        PointMatrix posed;
-        animation_space::evaluate_vertices(*model.animation_space, input.globals, points, posed);
-        full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
-        return true;
-      };
-    } else if (!input.lights.empty()) {
-      engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
-        model.illumination->engine->indirect(input.lights, model.illumination->gather, points, full);
-        return true;
-      };
-    }
-    if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.full_points, client_full, engine,
-                                                   cached, local);
-        !covered.ok()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, "full_points: " + covered.error().message};
-    }
-  } else {
-    pmsc::FullCalculation engine;
-    if (input.has_skeleton) {
-      engine = [&](Eigen::VectorXf& full) {
-        PointMatrix posed;
-        animation_space::evaluate(*model.animation_space, input.globals, posed);
-        full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
-        return true;
-      };
-    } else if (!input.lights.empty()) {
-      engine = [&](Eigen::VectorXf& full) {
-        model.illumination->engine->indirect(input.lights, model.illumination->gather,
-                                             model.illumination->engine->all_points(), full);
-        return true;
-      };
-    }
-    pmsc::evaluate_cached(m, input.key_values, client_full, engine, cached);
-  }
-
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
   out->set_blend_weight(static_cast<float>(cached.alpha));
   out->set_model_version(model.version);
   out->set_full_evaluation_needed(cached.full_evaluation_needed);
-  if (!options.omit_points) {
-    encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channel_count),
+  if (in_response) {
+    out->mutable_points()->set_point_count(static_cast<uint32_t>(m.point_count));
+    out->mutable_points()->set_channel_count(static_cast<uint32_t>(m.channel_count));
+  } else if (!options.omit_points) {
+    encode_points(answer, static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channel_count),
                   out->mutable_points());
   }
   for (size_t j = 0; j < local.full_points.size(); ++j) {
@@ -217,6 +201,80 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
   }
   if (logged != nullptr) *logged = true;
   return grpc::Status::OK;
+}
+
+
+}  // namespace
+
+bool batchable(const PoseInput& input, const PoseOptions& options) {
+  return !options.local_fail_through && input.full_points.empty();
+}
+
+PoseBatcher::Pose prepare_pose(const LoadedModel& model, const PoseInput& input, const PoseOptions& options,
+                               v1::PoseResult* out, PendingPose& pending) {
+  const pmsc::PmscModel& m = *model.pmsc;
+  const auto values = static_cast<size_t>(m.point_count) * static_cast<size_t>(m.channel_count);
+  pending.in_response = !options.omit_points;
+  if (pending.in_response) {
+    // f̂ is reconstructed into the message itself, and the blend of a blend or miss happens
+    // there too: no copy of the points between the evaluation and serialisation.
+    std::string* data = out->mutable_points()->mutable_data();
+    data->resize(values * sizeof(float));
+    pending.points = reinterpret_cast<float*>(data->data());
+  } else {
+    pending.scratch.resize(static_cast<long>(values));
+    pending.points = pending.scratch.data();
+  }
+  return {&input.key_values, &pending.estimate, pending.points};
+}
+
+grpc::Status finish_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                         const PoseOptions& options, PendingPose& pending, v1::PoseResult* out, bool* logged) {
+  const pmsc::PmscModel& m = *model.pmsc;
+  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
+  Eigen::Map<Eigen::VectorXf> points(pending.points, m.mean.size());
+  pmsc::CachedPose cached;
+  pmsc::finish_cached(m, pending.estimate, points, client_full, full_calculation(model, input), cached);
+  return record_pose(env, model, input, options, cached, pending.points, pending.in_response, {}, out, logged);
+}
+
+grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                           const PoseOptions& options, v1::PoseResult* out, bool* logged) {
+  if (batchable(input, options)) {
+    PendingPose pending;
+    const PoseBatcher::Pose pose = prepare_pose(model, input, options, out, pending);
+    PoseBatcher::Group group;
+    env.batcher.enqueue(*model.pmsc, {&pose, 1}, group);
+    env.batcher.await(group);
+    return finish_pose(env, model, input, options, pending, out, logged);
+  }
+  // Local fail-through: the engine computes only the points that need it. Animation space is
+  // evaluated vertex by vertex (eq. 3.1), and the gather is per point and deterministic, so a
+  // point computed alone is the point of the whole frame.
+  const pmsc::PmscModel& m = *model.pmsc;
+  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
+  pmsc::PartialFullCalculation engine;
+  if (input.has_skeleton) {
+    engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
+      PointMatrix posed;
+      animation_space::evaluate_vertices(*model.animation_space, input.globals, points, posed);
+      full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
+      return true;
+    };
+  } else if (!input.lights.empty()) {
+    engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
+      model.illumination->engine->indirect(input.lights, model.illumination->gather, points, full);
+      return true;
+    };
+  }
+  pmsc::CachedPose cached;
+  pmsc::LocalFailThrough local;
+  if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.full_points, client_full, engine,
+                                                 cached, local);
+      !covered.ok()) {
+    return {grpc::StatusCode::INVALID_ARGUMENT, "full_points: " + covered.error().message};
+  }
+  return record_pose(env, model, input, options, cached, cached.points.data(), false, local, out, logged);
 }
 
 }  // namespace animspace::server

@@ -14,7 +14,9 @@
 #include "animspace/v1/poses.pb.h"
 #include "core/animspace/skeleton.h"
 #include "core/illumination/surface.h"
+#include "core/pmsc/pmsc_model.h"
 #include "server/model_registry.h"
+#include "server/pose_batcher.h"
 #include "server/service_environment.h"
 
 namespace animspace::server {
@@ -32,6 +34,10 @@ struct PoseInput {
 // OK for a PMSC model, or FAILED_PRECONDITION naming the model's kind and `why` the call needs
 // PMSC (default: key points; a model with a skeleton is pointed at EvaluateSkeletonPose).
 grpc::Status require_pmsc(const LoadedModel& model, std::string_view why = {});
+
+// Whether decoding `pose` gathers its key values on the server (a light set without key values):
+// milliseconds of ray tracing, for the request pool, not a transport thread.
+inline bool gathers_keys(const v1::KeyPointPose& pose) { return pose.has_light_set() && !pose.has_key_values(); }
 
 // Decodes `pose` (named `field` in messages, e.g. "poses[3]"). A skeleton pose is accepted only
 // for a model with a posing engine, a light set only for one with an illumination engine.
@@ -60,7 +66,29 @@ struct PoseOptions {
   bool count_in_statistics = true;
 };
 
-// Evaluates one decoded pose into `out`; `logged` (optional) says whether it was appended to the
+// The batched path (server/pose_batcher.h), for a pose that `batchable` accepts:
+//   prepare_pose  — where f̂ goes; enqueue the returned pose in the batcher, await it;
+//   finish_pose   — the verdict, fail-through, blend, statistics and miss log, as evaluate_pose.
+struct PendingPose {
+  pmsc::PoseEstimate estimate;
+  float* points = nullptr;   // f̂ (N·D), then the answer
+  bool in_response = false;  // points is the response's own points.data
+  Eigen::VectorXf scratch;   // the points when they cannot go straight into the response
+};
+
+// Everything but local fail-through, whose answer is assembled point by point.
+bool batchable(const PoseInput& input, const PoseOptions& options);
+
+// Points the pose's f̂ at the response's points.data (sized for N·D float32) when the answer
+// goes out as float32, else at pending.scratch. `input`, `out` and `pending` must stay put until
+// finish_pose.
+PoseBatcher::Pose prepare_pose(const LoadedModel& model, const PoseInput& input, const PoseOptions& options,
+                               v1::PoseResult* out, PendingPose& pending);
+
+grpc::Status finish_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
+                         const PoseOptions& options, PendingPose& pending, v1::PoseResult* out, bool* logged = nullptr);
+
+// Evaluates one decoded pose into `out` (through the batcher, with whatever else is waiting); `logged` (optional) says whether it was appended to the
 // miss log. INVALID_ARGUMENT naming `full_points` when partial full values (CompleteMiss) miss a
 // point that needs the full calculation — checked before anything is counted or logged; OK else.
 grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,

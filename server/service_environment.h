@@ -10,6 +10,7 @@
 #include "server/miss_logs.h"
 #include "server/model_registry.h"
 #include "server/options.h"
+#include "server/pose_batcher.h"
 #include "server/render_thread.h"
 #include "server/work_pool.h"
 
@@ -26,6 +27,8 @@ struct ServiceEnvironment {
   Admission& admission;
   const Authenticator& authenticator;
   MissLogs& miss_logs;
+  // Dynamic batching of the poses waiting for one model version.
+  PoseBatcher& batcher;
   // The thread that owns the EGL context; null when the server draws no thumbnails, and then
   // `renderer_unavailable` says why.
   RenderThread* renderer = nullptr;

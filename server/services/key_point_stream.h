@@ -18,6 +18,7 @@
 
 #include "animspace/v1/poses.pb.h"
 #include "server/model_registry.h"
+#include "server/pose_evaluation.h"
 #include "server/service_environment.h"
 #include "server/stream_reactor.h"
 
@@ -39,8 +40,23 @@ class KeyPointStream final
 
   bool want_more(size_t unwritten, size_t /*producing*/) const override { return unwritten < kWindow; }
   void request_more() override { StartRead(&incoming_); }
+  // A frame on its way: read, decoded (here or on the pool), waiting in the batcher, evaluated.
+  struct Pose {
+    std::shared_ptr<const LoadedModel> model;
+    v1::KeyPointFrame frame;
+    PoseOptions options;
+    bool decoded = false;
+    PoseInput input;
+    v1::PoseResult result;
+    PendingPose pending;
+    // Last: destroyed first, taking the pose out of the batcher before the memory it writes goes
+    // (a frame skipped because the stream stopped is never awaited).
+    PoseBatcher::Group group;
+  };
+  // Decodes the frame's pose and, on the batched path, enqueues it.
+  grpc::Status decode(Pose& pose);
   // One frame through the soft cache, on the request pool.
-  Outcome evaluate(const v1::KeyPointFrame& frame, const LoadedModel& model);
+  Outcome evaluate(Pose& pose);
 
   ServiceEnvironment& env_;
   // Read by one reaction at a time: a read starts only after the previous one is answered.

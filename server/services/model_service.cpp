@@ -1,5 +1,6 @@
 #include "server/services/model_service.h"
 
+#include "core/common/kernels.h"
 #include "server/convert.h"
 #include "server/implemented_rpcs.h"
 #include "server/model_lookup.h"
@@ -99,6 +100,9 @@ grpc::ServerUnaryReactor* ModelServiceImpl::GetServerInfo(grpc::CallbackServerCo
         response->set_max_batch_poses(env_.options.max_batch_poses);
         response->set_max_thumbnail_px(env_.options.max_thumbnail_px);
         response->set_max_concurrent_calls(env_.options.max_concurrent_calls);
+        response->set_kernel(kernel_name(active_kernel()));
+        response->set_max_batch_size(env_.options.max_batch_size);
+        response->set_batch_delay_us(static_cast<uint64_t>(env_.options.batch_delay.count()));
         response->set_renderer(env_.renderer != nullptr ? env_.renderer->description()
                                                         : "none (" + env_.renderer_unavailable + ")");
         for (const char* rpc : kImplementedRpcs) {

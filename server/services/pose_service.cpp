@@ -68,9 +68,25 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         options.include_region_errors = request->include_region_errors();
         options.omit_points = request->omit_points();
         options.local_fail_through = request->local_fail_through();
-        for (const PoseInput& input : inputs) {
+        // The request's poses wait in the batcher together (with any other call's for this model):
+        // their f̂ is one matrix product.
+        const size_t count = inputs.size();
+        std::vector<v1::PoseResult*> results(count);
+        std::vector<PendingPose> pending(count);
+        std::vector<PoseBatcher::Pose> batched;
+        for (size_t i = 0; i < count; ++i) {
+          results[i] = response->add_results();
+          if (batchable(inputs[i], options)) batched.push_back(prepare_pose(*model, inputs[i], options, results[i], pending[i]));
+        }
+        PoseBatcher::Group group;
+        env_.batcher.enqueue(*model->pmsc, batched, group);
+        env_.batcher.await(group);
+        for (size_t i = 0; i < count; ++i) {
           if (grpc::Status stop = call.stop_status(); !stop.ok()) return stop;
-          if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->add_results()); !s.ok()) return s;
+          grpc::Status s = batchable(inputs[i], options)
+                               ? finish_pose(env_, *model, inputs[i], options, pending[i], results[i])
+                               : evaluate_pose(env_, *model, inputs[i], options, results[i]);
+          if (!s.ok()) return s;
         }
         return grpc::Status::OK;
       });

@@ -192,6 +192,8 @@ int run_server_info(const Globals& g) {
   } else {
     std::printf("requests arriving %llu bytes\n", static_cast<unsigned long long>(info.grpc_memory_bytes()));
   }
+  std::printf("kernel %s; batching up to %u poses, delay %llu µs\n", info.kernel().c_str(), info.max_batch_size(),
+              static_cast<unsigned long long>(info.batch_delay_us()));
   std::printf("implemented:\n");
   for (const auto& rpc : info.implemented_rpcs()) std::printf("  %s\n", rpc.c_str());
   return 0;

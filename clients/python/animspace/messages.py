@@ -253,6 +253,9 @@ class ServerInfo:
     renderer: str
     implemented_rpcs: Tuple[str, ...]
     grpc_memory_bytes: int  # memory for requests still arriving, all connections; 0 = unbounded
+    kernel: str = ""  # the dense products' kernel, e.g. "openblas:haswell" or "eigen:sse2"
+    max_batch_size: int = 0  # dynamic batching: most poses reconstructed as one product
+    batch_delay_us: int = 0  # how long a batch may wait to fill (0: only poses already waiting)
 
     @classmethod
     def from_proto(cls, m: models_pb2.GetServerInfoResponse) -> "ServerInfo":
@@ -260,7 +263,8 @@ class ServerInfo:
                    max_message_bytes=m.max_message_bytes, max_batch_poses=m.max_batch_poses,
                    max_thumbnail_px=m.max_thumbnail_px, max_concurrent_calls=m.max_concurrent_calls,
                    renderer=m.renderer, implemented_rpcs=tuple(m.implemented_rpcs),
-                   grpc_memory_bytes=m.grpc_memory_bytes)
+                   grpc_memory_bytes=m.grpc_memory_bytes, kernel=m.kernel, max_batch_size=m.max_batch_size,
+                   batch_delay_us=m.batch_delay_us)
 
 
 @dataclass(frozen=True, eq=False)
