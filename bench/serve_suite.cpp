@@ -16,6 +16,10 @@
 //   in_process_batch[_after_idle]
 //                          pmsc::evaluate_batch on 8 poses (the stream's read-ahead window): what
 //                          a server that batched a stream's frames into one GEMM would pay
+//   in_process_batch64     pmsc::evaluate_batch on 64 poses, with OpenBLAS's cblas_sgemm on the same
+//                          product (the float basis A, N·D × M, times the batch's coordinates,
+//                          M × 64) timed right after each batch: how close the batch comes to
+//                          the machine's GEMM (openblas_sgemm_poses_per_second)
 //   encode_response / decode_response
 //                          one EvaluateKeyPointsResponse with N·D points built and serialised /
 //                          parsed: the protobuf share of every answer
@@ -28,6 +32,16 @@
 //                          thread per stream; 1 and 2 streams at once; stream_omit_points
 //   …, work threads 1      unary and stream against a second daemon started with
 //                          --work-threads 1 (the default is one per core)
+//   floor_unary, floor_stream
+//                          the same client code against animspace-transport-floor
+//                          (server/transport_floor/): the daemon's gRPC server with canned answers
+//                          of the same size and no work behind them, the transport's ceiling on
+//                          this machine; unary at 1 and 8 threads and one stream, each measured
+//                          right before the daemon row it is the floor of
+//
+// Served rows carry their points `encoding` (float32; see kEncodings) and `bytes_per_pose`, the
+// response bytes received per pose. At the end the suite sets every served row against its floor
+// row (same kind, concurrency and encoding) and prints issue #25's targets as ratios.
 //
 // Every served row carries the in-process time per pose measured right before and right after it
 // (`in_process_us_per_pose`): this machine is shared and its speed drifts by several times within
@@ -56,6 +70,7 @@
 #include <utility>
 #include <vector>
 
+#include <cblas.h>
 #include <grpcpp/grpcpp.h>
 #include <nlohmann/json.hpp>
 
@@ -83,8 +98,30 @@ constexpr double kWarmupSeconds = 0.3;
 constexpr int kStreamFrames = 3480;
 // The server's stream read-ahead window (server/services/key_point_stream.h, kWindow).
 constexpr int kBatchPoses = 8;
+// Issue #25's batch: large enough that the reconstruction is a GEMM bound by arithmetic, not by
+// streaming the basis from memory once per pose.
+constexpr int kGemmBatchPoses = 64;
 // How long a server thread sleeps between requests in the *_after_idle baselines.
 constexpr auto kIdleGap = std::chrono::milliseconds(1);
+
+// A points encoding of the served answers. Hook for issue #25's 16-bit encodings: once
+// EvaluateKeyPointsRequest and KeyPointFrame carry `points_encoding`, add {"float16", 2} and
+// {"fixed16", 2} to kEncodings and set the field where the requests are built (unary_requests,
+// measure_stream's frames); every encoding then gets its own floor (--bytes-per-value), floor rows
+// and daemon rows, and the "vs floor" table and targets pair rows of the same encoding.
+struct Encoding {
+  const char* name;
+  int bytes_per_value;
+};
+constexpr Encoding kEncodings[] = {{"float32", 4}};
+
+// Where served rows send their calls: a daemon, or the transport floor, whose answers are canned
+// (no soft-cache verdicts to check).
+struct Endpoint {
+  std::string address;
+  pid_t pid = -1;
+  bool floor = false;
+};
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -164,6 +201,9 @@ struct Row {
   std::string mode;
   int concurrency = 1;
   std::string channels;          // unary: "shared" or "per-thread"
+  std::string encoding;          // served rows with points: kEncodings' name
+  long response_bytes = 0;       // served rows: response messages' bytes received while measured
+  std::optional<double> sgemm_poses_per_second;  // in_process_batch64: cblas_sgemm in the same loop
   std::optional<int> work_threads;  // served rows: the daemon's --work-threads (0 = one per core)
   long poses = 0;
   double seconds = 0;
@@ -266,25 +306,43 @@ Row measure_in_process_parallel(const pmsc::PmscModel& model, const Workload& wo
   return row;
 }
 
-// evaluate_batch on kBatchPoses poses at a time; latency_us holds µs per pose of each batch.
-Row measure_in_process_batch(const pmsc::PmscModel& model, const Workload& work, int batches, bool after_idle) {
-  Row row(after_idle ? "in_process_batch_after_idle" : "in_process_batch");
-  Eigen::MatrixXf keys(work.keys.front().size(), kBatchPoses);
+// evaluate_batch on `batch_poses` poses at a time; latency_us holds µs per pose of each batch. With
+// `with_sgemm`, each batch is followed by cblas_sgemm on the reconstruction it contains (the float
+// basis times the batch's coordinates, computed beforehand), timed alone: the same product at
+// OpenBLAS's speed, in the same moments.
+Row measure_in_process_batch(const pmsc::PmscModel& model, const Workload& work, int batch_poses, int batches,
+                             bool after_idle, bool with_sgemm) {
+  Row row(std::string("in_process_batch") + (batch_poses == kBatchPoses ? "" : std::to_string(batch_poses)) +
+          (after_idle ? "_after_idle" : ""));
+  Eigen::MatrixXf keys(work.keys.front().size(), batch_poses);
   Eigen::MatrixXf points;
   Eigen::VectorXd errors;
+  Eigen::MatrixXf coordinates, gemm_points(model.basis.rows(), batch_poses);
+  double sgemm_seconds = 0;
   for (int batch = -1; batch < batches; ++batch) {  // batch −1 warms up
-    for (long b = 0; b < kBatchPoses; ++b) {
-      keys.col(b) = work.keys[static_cast<size_t>((batch + 1) * kBatchPoses + b) % work.keys.size()];
+    for (long b = 0; b < batch_poses; ++b) {
+      keys.col(b) = work.keys[static_cast<size_t>((batch + 1) * batch_poses + b) % work.keys.size()];
     }
     if (after_idle) std::this_thread::sleep_for(kIdleGap);
-    const auto start = Clock::now();
+    auto start = Clock::now();
     pmsc::evaluate_batch(model, keys, points, errors);
     do_not_optimize(points.data());
-    if (batch >= 0) row.latency_us.push_back(1e6 * seconds_since(start) / kBatchPoses);
+    if (batch >= 0) row.latency_us.push_back(1e6 * seconds_since(start) / batch_poses);
+    if (!with_sgemm) continue;
+    // p = P (f_key − mean_key), as evaluate_batch projects an unaligned model's keys.
+    coordinates = (model.projection * (keys.cast<double>().colwise() - model.key_mean)).cast<float>();
+    start = Clock::now();
+    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, static_cast<int>(model.basis.rows()), batch_poses,
+                static_cast<int>(model.basis.cols()), 1.0f, model.basis.data(), static_cast<int>(model.basis.rows()),
+                coordinates.data(), static_cast<int>(coordinates.rows()), 0.0f, gemm_points.data(),
+                static_cast<int>(gemm_points.rows()));
+    do_not_optimize(gemm_points.data());
+    if (batch >= 0) sgemm_seconds += seconds_since(start);
   }
-  row.poses = static_cast<long>(row.latency_us.size()) * kBatchPoses;
+  row.poses = static_cast<long>(row.latency_us.size()) * batch_poses;
   // Throughput from the evaluation time alone (the idle gaps and key copies excluded).
-  row.seconds = std::accumulate(row.latency_us.begin(), row.latency_us.end(), 0.0) * kBatchPoses * 1e-6;
+  row.seconds = std::accumulate(row.latency_us.begin(), row.latency_us.end(), 0.0) * batch_poses * 1e-6;
+  if (with_sgemm && sgemm_seconds > 0) row.sgemm_poses_per_second = static_cast<double>(row.poses) / sgemm_seconds;
   return row;
 }
 
@@ -395,19 +453,27 @@ std::string check_points(const std::string& address, const Workload& work, doubl
   return "";
 }
 
+// Bytes of points in each answer.
+size_t point_bytes(const Workload& work, const Encoding& encoding, bool omit_points) {
+  return omit_points ? 0 : static_cast<size_t>(encoding.bytes_per_value) * 3 * static_cast<size_t>(work.point_count);
+}
+
 // `concurrency` threads, each with its own stub (on one shared channel or on its own), calling
 // EvaluateKeyPoints back to back for kMeasureSeconds after a warm-up.
-Row measure_unary(const std::string& address, pid_t daemon, const Workload& work, int concurrency,
+Row measure_unary(const Endpoint& server, const Workload& work, const Encoding& encoding, int concurrency,
                   bool channel_per_thread, bool omit_points) {
-  Row row(omit_points ? "unary_omit_points" : "unary", concurrency);
+  Row row(std::string(server.floor ? "floor_" : "") + (omit_points ? "unary_omit_points" : "unary"), concurrency);
   row.channels = channel_per_thread ? "per-thread" : "shared";
+  row.encoding = encoding.name;
+  const std::string& address = server.address;
   const auto requests = unary_requests(work, omit_points);
   const auto shared = make_channel(address, false);
-  const size_t expected_bytes = omit_points ? 0 : sizeof(float) * 3 * static_cast<size_t>(work.point_count);
+  const size_t expected_bytes = point_bytes(work, encoding, omit_points);
 
   struct Worker {
     std::vector<double> latency_us;
     Outcomes outcomes;
+    long response_bytes = 0;
     std::string error;
   };
   std::vector<Worker> workers(static_cast<size_t>(concurrency));
@@ -446,14 +512,15 @@ Row measure_unary(const std::string& address, pid_t daemon, const Workload& work
       const auto start = Clock::now();
       if (!call(frame)) break;
       me.latency_us.push_back(1e6 * seconds_since(start));
-      me.outcomes.add(response.results(0).status(), work.expected[frame]);
+      me.response_bytes += static_cast<long>(response.ByteSizeLong());
+      if (!server.floor) me.outcomes.add(response.results(0).status(), work.expected[frame]);
     }
   };
 
   std::vector<std::thread> threads;
   for (int t = 0; t < concurrency; ++t) threads.emplace_back(body, t);
   while (ready.load() < concurrency) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  CpuMeter cpu(daemon);
+  CpuMeter cpu(server.pid);
   const auto measure_start = Clock::now();
   measure_end =
       measure_start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kMeasureSeconds));
@@ -466,6 +533,7 @@ Row measure_unary(const std::string& address, pid_t daemon, const Workload& work
   for (const Worker& w : workers) {
     row.latency_us.insert(row.latency_us.end(), w.latency_us.begin(), w.latency_us.end());
     row.outcomes.merge(w.outcomes);
+    row.response_bytes += w.response_bytes;
     if (row.error.empty()) row.error = w.error;
   }
   row.poses = static_cast<long>(row.latency_us.size());
@@ -480,16 +548,19 @@ Row measure_round_trip(const std::string& address, pid_t daemon) {
   auto stub = v1::PoseService::NewStub(make_channel(address, false));
   v1::DescribeKeyPointsRequest request;
   request.mutable_model()->set_name(kModelName);
+  long response_bytes = 0;
   auto call = [&]() -> bool {
     grpc::ClientContext context;
     v1::DescribeKeyPointsResponse response;
     const grpc::Status status = stub->DescribeKeyPoints(&context, request, &response);
     if (!status.ok()) row.error = "DescribeKeyPoints: " + status.error_message();
+    response_bytes += static_cast<long>(response.ByteSizeLong());
     return status.ok();
   };
   for (const auto warm_until = Clock::now() + std::chrono::duration<double>(kWarmupSeconds);
        Clock::now() < warm_until && call();) {
   }
+  response_bytes = 0;
   CpuMeter cpu(daemon);
   const auto t0 = Clock::now();
   while (row.error.empty() && seconds_since(t0) < kMeasureSeconds / 2) {
@@ -501,21 +572,24 @@ Row measure_round_trip(const std::string& address, pid_t daemon) {
   row.daemon_cpu_seconds = cpu.daemon_seconds;
   row.client_cpu_seconds = cpu.client_seconds;
   row.poses = static_cast<long>(row.latency_us.size());
+  row.response_bytes = response_bytes;
   return row;
 }
 
 // `streams` StreamKeyPoints calls at once, each replaying kStreamFrames frames (the odd frames
 // looped) from a writer thread while its reader checks that results arrive in order. The writer
 // never waits for results, so the latency of a frame includes every frame queued ahead of it.
-Row measure_stream(const std::string& address, pid_t daemon, const Workload& work, int streams, bool omit_points) {
-  Row row(omit_points ? "stream_omit_points" : "stream", streams);
-  const size_t expected_bytes = omit_points ? 0 : sizeof(float) * 3 * static_cast<size_t>(work.point_count);
+Row measure_stream(const Endpoint& server, const Workload& work, const Encoding& encoding, int streams,
+                   bool omit_points) {
+  Row row(std::string(server.floor ? "floor_" : "") + (omit_points ? "stream_omit_points" : "stream"), streams);
+  row.encoding = encoding.name;
+  const size_t expected_bytes = point_bytes(work, encoding, omit_points);
   std::vector<v1::KeyPointFrame> frames(work.packed_keys.size());
   for (size_t f = 0; f < frames.size(); ++f) {
     *frames[f].mutable_pose()->mutable_key_values() = point_array(work.packed_keys[f], work.key_count);
     frames[f].set_omit_points(omit_points);
   }
-  const auto channel = make_channel(address, false);
+  const auto channel = make_channel(server.address, false);
 
   struct StreamState {
     std::unique_ptr<v1::PoseService::Stub> stub;
@@ -526,6 +600,7 @@ Row measure_stream(const std::string& address, pid_t daemon, const Workload& wor
     Outcomes outcomes;
     bool in_order = true;
     long received = 0;
+    long response_bytes = 0;
     std::string error;
   };
   std::vector<std::unique_ptr<StreamState>> states;
@@ -536,7 +611,7 @@ Row measure_stream(const std::string& address, pid_t daemon, const Workload& wor
     states.push_back(std::move(state));
   }
 
-  CpuMeter cpu(daemon);
+  CpuMeter cpu(server.pid);
   const auto t0 = Clock::now();
   auto now_ns = [&] { return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count(); };
   std::vector<std::thread> threads;
@@ -563,7 +638,8 @@ Row measure_stream(const std::string& address, pid_t daemon, const Workload& wor
         const size_t index = static_cast<size_t>(result.sequence() % static_cast<uint64_t>(kStreamFrames));
         state->latency_us.push_back(
             1e-3 * static_cast<double>(now_ns() - state->sent_ns[index].load(std::memory_order_acquire)));
-        state->outcomes.add(result.status(), work.expected[index % work.expected.size()]);
+        if (!server.floor) state->outcomes.add(result.status(), work.expected[index % work.expected.size()]);
+        state->response_bytes += static_cast<long>(result.ByteSizeLong());
         ++state->received;
       }
     });
@@ -586,6 +662,7 @@ Row measure_stream(const std::string& address, pid_t daemon, const Workload& wor
     row.in_order = row.in_order && state->in_order;
     if (row.error.empty()) row.error = state->error;
     row.poses += state->received;
+    row.response_bytes += state->response_bytes;
   }
   return row;
 }
@@ -594,8 +671,8 @@ Row measure_stream(const std::string& address, pid_t daemon, const Workload& wor
 // Reporting
 
 void print_header() {
-  std::printf("%-27s %4s %-10s %9s %9s %9s %8s %6s %6s %6s %6s %4s %5s\n", "mode", "conc", "variant", "poses/s",
-              "p50 us", "p99 us", "base us", "dcpu/b", "d cpu", "c cpu", "hit", "mism", "load");
+  std::printf("%-27s %4s %-10s %-7s %7s %9s %9s %9s %8s %6s %6s %6s %6s %4s %5s\n", "mode", "conc", "variant", "enc",
+              "B/pose", "poses/s", "p50 us", "p99 us", "base us", "dcpu/b", "d cpu", "c cpu", "hit", "mism", "load");
 }
 
 void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>& out) {
@@ -622,6 +699,13 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
       variant = "wt=" + std::to_string(*row.work_threads) + (variant.empty() ? "" : " ") + variant;
     }
   }
+  if (!row.encoding.empty()) json["encoding"] = row.encoding;
+  char bytes_per_pose[16] = "-";
+  if (row.response_bytes > 0 && row.poses > 0) {
+    json["bytes_per_pose"] = static_cast<double>(row.response_bytes) / static_cast<double>(row.poses);
+    std::snprintf(bytes_per_pose, sizeof bytes_per_pose, "%.0f", json["bytes_per_pose"].get<double>());
+  }
+  if (row.sgemm_poses_per_second) json["openblas_sgemm_poses_per_second"] = *row.sgemm_poses_per_second;
   const long total = row.outcomes.total();
   char hit[16] = "-", mismatched[16] = "-";
   if (total > 0) {
@@ -634,7 +718,8 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
     std::snprintf(hit, sizeof hit, "%.3f", hit_rate);
     std::snprintf(mismatched, sizeof mismatched, "%ld", row.outcomes.mismatched);
   }
-  if (row.mode.starts_with("stream")) json["in_order"] = row.in_order;
+  const bool stream = row.mode.starts_with("stream") || row.mode.starts_with("floor_stream");
+  if (stream) json["in_order"] = row.in_order;
   char daemon_cpu[16] = "-", client_cpu[16] = "-", daemon_ratio[16] = "-";
   if (row.daemon_cpu_seconds && row.poses > 0) {
     const double daemon_us = 1e6 * *row.daemon_cpu_seconds / static_cast<double>(row.poses);
@@ -646,11 +731,17 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
     std::snprintf(daemon_ratio, sizeof daemon_ratio, "%.2f", daemon_us / baseline);
   }
   if (!row.error.empty()) json["error"] = row.error;
-  if (row.mode.starts_with("stream") && !row.in_order && row.error.empty()) json["error"] = "results out of order";
+  if (stream && !row.in_order && row.error.empty()) json["error"] = "results out of order";
   const std::string error = json.contains("error") ? " ERROR " + json["error"].get<std::string>() : "";
-  std::printf("%-27s %4d %-10s %9.0f %9.1f %9.1f %8.1f %6s %6s %6s %6s %4s %5.1f%s\n", row.mode.c_str(),
-              row.concurrency, variant.empty() ? "-" : variant.c_str(), pps, p50, p99, baseline, daemon_ratio,
-              daemon_cpu, client_cpu, hit, mismatched, row.load_average, error.c_str());
+  std::printf("%-27s %4d %-10s %-7s %7s %9.0f %9.1f %9.1f %8.1f %6s %6s %6s %6s %4s %5.1f%s\n", row.mode.c_str(),
+              row.concurrency, variant.empty() ? "-" : variant.c_str(),
+              row.encoding.empty() ? "-" : row.encoding.c_str(), bytes_per_pose, pps, p50, p99, baseline, daemon_ratio, daemon_cpu, client_cpu, hit, mismatched,
+              row.load_average, error.c_str());
+  if (row.sgemm_poses_per_second) {
+    std::printf("  openblas cblas_sgemm on the same products (N·D × M times M × %d): %.0f poses/s; this row / sgemm "
+                "= %.2f\n",
+                kGemmBatchPoses, *row.sgemm_poses_per_second, pps / *row.sgemm_poses_per_second);
+  }
   std::fflush(stdout);
   out.push_back(json);
 }
@@ -682,6 +773,148 @@ std::unique_ptr<harness::DaemonProcess> start_daemon(const ScratchDirectory& scr
     std::printf("serve: note: served points differ from the in-process ones by up to %g\n", max_difference);
   }
   return daemon;
+}
+
+// Starts animspace-transport-floor answering as the daemon would for `work`'s model in `encoding`,
+// in a folder of its own (its log and port file). Null, with the reason printed, when it does not
+// start: the daemon rows are still measured, without their floor.
+std::unique_ptr<harness::DaemonProcess> start_floor(const ScratchDirectory& scratch, const Workload& work,
+                                                    const Encoding& encoding) {
+  const auto folder = scratch.path() / (std::string("floor-") + encoding.name);
+  try {
+    std::filesystem::create_directories(folder);
+    return std::make_unique<harness::DaemonProcess>(
+        harness::transport_floor_binary(),
+        std::vector<std::string>{"--point-count", std::to_string(work.point_count), "--channel-count", "3",
+                                 "--bytes-per-value", std::to_string(encoding.bytes_per_value)},
+        folder);
+  } catch (const std::exception& e) {
+    std::printf("serve: the transport floor did not start (no floor rows): %s\n", e.what());
+    return nullptr;
+  }
+}
+
+// A JSON row of `rows` with this mode, concurrency and encoding, from the default daemon (no
+// --work-threads 1) on one shared channel; null when there is none.
+const nlohmann::json* find_row(const std::vector<nlohmann::json>& rows, const std::string& mode, int concurrency,
+                               const std::string& encoding = "") {
+  for (const nlohmann::json& row : rows) {
+    if (row.value("mode", "") == mode && row.value("concurrency", 0) == concurrency &&
+        row.value("encoding", "") == encoding && row.value("work_threads", 0) == 0 &&
+        row.value("channels", "shared") == "shared") {
+      return &row;
+    }
+  }
+  return nullptr;
+}
+
+// Sets every unary and stream row against the floor row of the same kind, concurrency and
+// encoding (the floor's is measured on a shared channel): prints the ratios and adds them to the
+// row's JSON (floor_poses_per_second_ratio, floor_daemon_cpu_excess_us_per_pose; unary rows also
+// floor_p50_excess_us, p50 minus the floor's, and floor_p50_excess_per_in_process_pose, that
+// excess over the row's in-process µs per pose). A stream's p50 is mostly the queue its writer
+// builds ahead of the server, so its excess over the floor's says nothing about the work per pose.
+void compare_with_floors(std::vector<nlohmann::json>& rows) {
+  std::printf("\nvs floor (same kind, concurrency and encoding against animspace-transport-floor):\n");
+  // ASCII column names: printf pads by bytes.
+  std::printf("%-27s %4s %-10s %-7s %11s %13s %14s %13s\n", "mode", "conc", "variant", "enc", "pps/floor",
+              "p50-floor us", "(p50-fl)/base", "dcpu-floor");
+  for (nlohmann::json& row : rows) {
+    const std::string mode = row.value("mode", "");
+    if ((mode != "unary" && mode != "stream") || row.value("channels", "shared") != "shared") continue;
+    const std::string encoding = row.value("encoding", "");
+    const nlohmann::json* floor = find_row(rows, "floor_" + mode, row.value("concurrency", 0), encoding);
+    if (!floor || floor->value("poses_per_second", 0.0) <= 0) continue;
+    const double ratio = row.value("poses_per_second", 0.0) / floor->value("poses_per_second", 0.0);
+    row["floor_poses_per_second_ratio"] = ratio;
+    char excess[16] = "-", excess_per_base[16] = "-";
+    if (mode == "unary") {
+      const double excess_us = row.value("p50_us", 0.0) - floor->value("p50_us", 0.0);
+      const double base = row.value("in_process_us_per_pose", 0.0);
+      row["floor_p50_excess_us"] = excess_us;
+      std::snprintf(excess, sizeof excess, "%.1f", excess_us);
+      if (base > 0) {
+        row["floor_p50_excess_per_in_process_pose"] = excess_us / base;
+        std::snprintf(excess_per_base, sizeof excess_per_base, "%.2f", excess_us / base);
+      }
+    }
+    char cpu[16] = "-";
+    if (row.contains("daemon_cpu_us_per_pose") && floor->contains("daemon_cpu_us_per_pose")) {
+      const double excess_cpu =
+          row["daemon_cpu_us_per_pose"].get<double>() - (*floor)["daemon_cpu_us_per_pose"].get<double>();
+      row["floor_daemon_cpu_excess_us_per_pose"] = excess_cpu;
+      std::snprintf(cpu, sizeof cpu, "%.0f", excess_cpu);
+    }
+    const int work_threads = row.value("work_threads", 0);
+    const std::string variant = work_threads > 0 ? "wt=" + std::to_string(work_threads) : "-";
+    std::printf("%-27s %4d %-10s %-7s %11.2f %13s %14s %13s\n", mode.c_str(), row.value("concurrency", 0),
+                variant.c_str(), encoding.c_str(), ratio, excess, excess_per_base, cpu);
+  }
+}
+
+// Issue #25's targets, read off the rows of this run (each against its own floor or baseline):
+// printed, and returned as the JSON row {"mode": "targets", "targets": [...]}.
+nlohmann::json print_targets(const std::vector<nlohmann::json>& rows) {
+  struct Target {
+    std::string name, encoding;
+    std::optional<double> measured;  // none when a row it needs is missing (e.g. the floor did not start)
+    double limit;
+    bool at_most;  // measured ≤ limit is met; else measured ≥ limit
+  };
+  // (a[a_key] − b[b_key] when b is given) / c[c_key]; none when a row is missing or c is not positive.
+  auto ratio = [](const nlohmann::json* a, const char* a_key, const nlohmann::json* b, const char* b_key,
+                  const nlohmann::json* c, const char* c_key) -> std::optional<double> {
+    if (!a || !c || (b_key && !b) || !a->contains(a_key) || (b_key && !b->contains(b_key)) || !c->contains(c_key) ||
+        (*c)[c_key].get<double>() <= 0) {
+      return std::nullopt;
+    }
+    const double minus = b_key ? (*b)[b_key].get<double>() : 0.0;
+    return ((*a)[a_key].get<double>() - minus) / (*c)[c_key].get<double>();
+  };
+  // Names in ASCII: printf pads by bytes.
+  std::vector<Target> targets;
+  for (const Encoding& encoding : kEncodings) {
+    const nlohmann::json* stream = find_row(rows, "stream", 1, encoding.name);
+    const nlohmann::json* floor_stream = find_row(rows, "floor_stream", 1, encoding.name);
+    const nlohmann::json* unary1 = find_row(rows, "unary", 1, encoding.name);
+    const nlohmann::json* floor_unary1 = find_row(rows, "floor_unary", 1, encoding.name);
+    const nlohmann::json* unary8 = find_row(rows, "unary", 8, encoding.name);
+    const nlohmann::json* floor_unary8 = find_row(rows, "floor_unary", 8, encoding.name);
+    targets.push_back({"daemon CPU per streamed pose / in-process pose", encoding.name,
+                       ratio(stream, "daemon_cpu_us_per_pose", nullptr, nullptr, stream, "in_process_us_per_pose"),
+                       1.3, true});
+    targets.push_back({"daemon CPU per unary pose (1 caller) / in-process pose", encoding.name,
+                       ratio(unary1, "daemon_cpu_us_per_pose", nullptr, nullptr, unary1, "in_process_us_per_pose"),
+                       1.6, true});
+    targets.push_back({"1 stream poses/s / floor_stream poses/s", encoding.name,
+                       ratio(stream, "poses_per_second", nullptr, nullptr, floor_stream, "poses_per_second"), 0.8,
+                       false});
+    targets.push_back({"(unary c1 p50 - floor_unary c1 p50) / in-process pose", encoding.name,
+                       ratio(unary1, "p50_us", floor_unary1, "p50_us", unary1, "in_process_us_per_pose"), 1.5, true});
+    targets.push_back({"unary c8 poses/s / floor_unary c8 poses/s", encoding.name,
+                       ratio(unary8, "poses_per_second", nullptr, nullptr, floor_unary8, "poses_per_second"), 0.7,
+                       false});
+  }
+  const nlohmann::json* batch = find_row(rows, "in_process_batch" + std::to_string(kGemmBatchPoses), 1);
+  targets.push_back({"in_process_batch64 poses/s / openblas sgemm poses/s", "",
+                     ratio(batch, "poses_per_second", nullptr, nullptr, batch, "openblas_sgemm_poses_per_second"), 0.8,
+                     false});
+
+  std::printf("\ntargets (issue #25):\n");
+  nlohmann::json list = nlohmann::json::array();
+  for (const Target& t : targets) {
+    const bool met = t.measured && (t.at_most ? *t.measured <= t.limit : *t.measured >= t.limit);
+    std::printf("  %-56s %-7s %6.2f %s %4.2f  %s\n", t.name.c_str(), t.encoding.c_str(), t.measured.value_or(0),
+                t.at_most ? "<=" : ">=", t.limit, t.measured ? (met ? "met" : "NOT MET") : "not measured");
+    list.push_back({{"target", t.name},
+                    {"measured", t.measured ? nlohmann::json(*t.measured) : nlohmann::json()},
+                    {"limit", t.limit},
+                    {"comparison", t.at_most ? "<=" : ">="},
+                    {"met", met}});
+    if (!t.encoding.empty()) list.back()["encoding"] = t.encoding;
+  }
+  std::fflush(stdout);
+  return {{"mode", "targets"}, {"targets", list}};
 }
 
 }  // namespace
@@ -737,8 +970,9 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
   measured(measure_in_process(model, work, std::max(1, passes / 7), Gap::kSleep));
   measured(measure_in_process(model, work, std::max(1, passes / 7), Gap::kSpin));
   measured(measure_in_process_parallel(model, work, 2));
-  measured(measure_in_process_batch(model, work, 4 * passes, false));
-  measured(measure_in_process_batch(model, work, passes, true));
+  measured(measure_in_process_batch(model, work, kBatchPoses, 4 * passes, false, false));
+  measured(measure_in_process_batch(model, work, kBatchPoses, passes, true, false));
+  measured(measure_in_process_batch(model, work, kGemmBatchPoses, passes, false, true));
   auto [encode, decode] = measure_protobuf(work, 8 * passes);
   measured(std::move(encode));
   measured(std::move(decode));
@@ -753,32 +987,57 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
     row.work_threads = work_threads;
     measured(std::move(row));
   };
+  // One floor per encoding, started once: idle, it costs nothing while the daemon rows run.
+  std::vector<std::unique_ptr<harness::DaemonProcess>> floors;
+  for (const Encoding& encoding : kEncodings) floors.push_back(start_floor(scratch, work, encoding));
   for (int work_threads : {0, 1}) {
     auto daemon = start_daemon(scratch, repository, work_threads, model, work);
     if (!daemon) return results;
-    const std::string address = daemon->address();
-    const pid_t pid = daemon->pid();
-    auto unary = [&](int concurrency, bool per_thread, bool omit) {
-      served([&] { return measure_unary(address, pid, work, concurrency, per_thread, omit); }, work_threads);
+    const Endpoint endpoint{daemon->address(), daemon->pid(), false};
+    auto unary = [&](const Endpoint& server, const Encoding& encoding, int concurrency, bool per_thread, bool omit) {
+      served([&] { return measure_unary(server, work, encoding, concurrency, per_thread, omit); },
+             server.floor ? std::nullopt : std::optional<int>(work_threads));
     };
-    auto stream = [&](int streams, bool omit) {
-      served([&] { return measure_stream(address, pid, work, streams, omit); }, work_threads);
+    auto stream = [&](const Endpoint& server, const Encoding& encoding, int streams, bool omit) {
+      served([&] { return measure_stream(server, work, encoding, streams, omit); },
+             server.floor ? std::nullopt : std::optional<int>(work_threads));
     };
-    if (work_threads == 0) served([&] { return measure_round_trip(address, pid); }, work_threads);
-    unary(1, false, false);
-    if (work_threads == 0) {
-      unary(1, false, true);
-      for (int concurrency : {4, 16}) {
-        unary(concurrency, false, false);
-        unary(concurrency, true, false);
-      }
-    } else {
-      unary(4, false, false);
+    const Encoding& float32 = kEncodings[0];
+    if (work_threads == 1) {
+      unary(endpoint, float32, 1, false, false);
+      unary(endpoint, float32, 4, false, false);
+      stream(endpoint, float32, 1, false);
+      stream(endpoint, float32, 2, false);
+      continue;
     }
-    stream(1, false);
-    stream(2, false);
-    if (work_threads == 0) stream(1, true);
+    served([&] { return measure_round_trip(endpoint.address, endpoint.pid); }, work_threads);
+    // Each floor row right before the daemon row it is the floor of (the machine's speed drifts).
+    for (size_t e = 0; e < std::size(kEncodings); ++e) {
+      const Encoding& encoding = kEncodings[e];
+      const std::optional<Endpoint> floor =
+          floors[e] ? std::optional<Endpoint>({floors[e]->address(), floors[e]->pid(), true}) : std::nullopt;
+      if (floor) unary(*floor, encoding, 1, false, false);
+      unary(endpoint, encoding, 1, false, false);
+      if (e == 0) {
+        unary(endpoint, encoding, 1, false, true);
+        for (int concurrency : {4, 16}) {
+          unary(endpoint, encoding, concurrency, false, false);
+          unary(endpoint, encoding, concurrency, true, false);
+        }
+      }
+      if (floor) unary(*floor, encoding, 8, false, false);
+      unary(endpoint, encoding, 8, false, false);
+      if (floor) stream(*floor, encoding, 1, false);
+      stream(endpoint, encoding, 1, false);
+      if (e == 0) {
+        stream(endpoint, encoding, 2, false);
+        stream(endpoint, encoding, 1, true);
+      }
+    }
   }
+  floors.clear();
+  compare_with_floors(results);
+  results.push_back(print_targets(results));
 
   std::printf(
       "conc: client threads (in_process: evaluating threads; stream: concurrent streams). variant: unary channel use; "
@@ -786,8 +1045,9 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
       "per pose (in_process; batch: per pose of each batch), per response (encode/decode), send→result per frame "
       "including the frames queued ahead of it (stream). base: in-process µs per pose measured right before and after "
       "the row (baseline rows: the first in_process row). d cpu / c cpu: CPU µs per pose spent by the daemon / this "
-      "client; dcpu/b: d cpu over base. mism: answers whose soft-cache status differs from the in-process one. load: "
-      "1-minute load average.\n");
+      "client (floor rows: the floor process's); dcpu/b: d cpu over base. enc: points encoding of the answers; B/pose: "
+      "response bytes received per pose. mism: answers whose soft-cache status differs from the in-process one (not "
+      "checked for the floor's canned answers). load: 1-minute load average.\n");
   return results;
 }
 

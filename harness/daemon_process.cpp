@@ -23,12 +23,26 @@ std::filesystem::path daemon_binary() {
 #endif
 }
 
+std::filesystem::path transport_floor_binary() {
+  if (const char* env = std::getenv("ANIMSPACE_TRANSPORT_FLOOR")) return env;
+#ifdef ANIMSPACE_TRANSPORT_FLOOR_PATH
+  return ANIMSPACE_TRANSPORT_FLOOR_PATH;
+#else
+  throw std::runtime_error("ANIMSPACE_TRANSPORT_FLOOR is not set and no transport floor path was compiled in");
+#endif
+}
+
 DaemonProcess::DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,
                              std::chrono::milliseconds timeout)
-    : log_path_(work_dir / "animspaced.log") {
-  const auto port_file = work_dir / "animspaced.port";
+    : DaemonProcess(daemon_binary(), extra_args, work_dir, timeout) {}
+
+DaemonProcess::DaemonProcess(const std::filesystem::path& binary, const std::vector<std::string>& extra_args,
+                             const std::filesystem::path& work_dir, std::chrono::milliseconds timeout)
+    : log_path_(work_dir / (binary.filename().string() + ".log")) {
+  const std::string name = binary.filename().string();
+  const auto port_file = work_dir / (name + ".port");
   std::filesystem::remove(port_file);
-  std::vector<std::string> args{daemon_binary().string(), "--port-file", port_file.string()};
+  std::vector<std::string> args{binary.string(), "--port-file", port_file.string()};
   if (std::find(extra_args.begin(), extra_args.end(), "--listen") == extra_args.end()) {
     args.insert(args.end(), {"--listen", "127.0.0.1:0"});
   }
@@ -56,11 +70,11 @@ DaemonProcess::DaemonProcess(const std::vector<std::string>& extra_args, const s
     int status = 0;
     if (::waitpid(pid_, &status, WNOHANG) == pid_) {
       pid_ = -1;
-      throw std::runtime_error("animspaced exited before listening; log:\n" + log());
+      throw std::runtime_error(name + " exited before listening; log:\n" + log());
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  throw std::runtime_error("animspaced did not write its port in time; log:\n" + log());
+  throw std::runtime_error(name + " did not write its port in time; log:\n" + log());
 }
 
 DaemonProcess::~DaemonProcess() {

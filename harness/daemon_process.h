@@ -1,6 +1,7 @@
-// Runs the real animspaced binary as a child process and waits until it listens: the integration
-// tests and animspace-bench's serving suites both drive the daemon from the outside, through the
-// protocol, so neither may carry its own copy of the launcher.
+// Runs the real animspaced binary (or another server started the same way: the transport floor) as
+// a child process and waits until it listens: the integration tests and animspace-bench's serving
+// suites both drive the daemon from the outside, through the protocol, so neither may carry its
+// own copy of the launcher.
 #pragma once
 
 #include <sys/types.h>
@@ -20,6 +21,10 @@ class DaemonProcess {
   // (failing the test, ending the bench) when it does not come up within `timeout`.
   DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,
                 std::chrono::milliseconds timeout = std::chrono::seconds(90));
+  // The same for another server binary that takes --port-file and --listen as animspaced does
+  // (the transport floor). The log and port file are named after the binary (<name>.log).
+  DaemonProcess(const std::filesystem::path& binary, const std::vector<std::string>& extra_args,
+                const std::filesystem::path& work_dir, std::chrono::milliseconds timeout = std::chrono::seconds(90));
   // Kills the process if it is still running.
   ~DaemonProcess();
   DaemonProcess(const DaemonProcess&) = delete;
@@ -43,5 +48,9 @@ class DaemonProcess {
 
 // Path of the animspaced binary to run: $ANIMSPACED, else the one the build compiled in.
 std::filesystem::path daemon_binary();
+
+// Path of animspace-transport-floor (server/transport_floor/): $ANIMSPACE_TRANSPORT_FLOOR, else the
+// one the build compiled in.
+std::filesystem::path transport_floor_binary();
 
 }  // namespace animspace::harness

@@ -2,7 +2,6 @@
 
 #include <grpc/grpc.h>
 #include <sys/socket.h>
-#include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <httplib.h>
@@ -11,6 +10,7 @@
 #include "core/common/atomic_file.h"
 #include "core/common/kernels.h"
 #include "server/port_owner.h"
+#include "server/server_builder.h"
 #include "server/services/lod_service.h"
 #include "server/services/model_service.h"
 #include "server/services/pose_service.h"
@@ -69,13 +69,7 @@ Status Daemon::start() {
                       "--model-repository: '" + options_.repository.string() + "' is not a directory");
   }
 
-  if (options_.grpc_memory_bytes != 0 && options_.grpc_memory_bytes < 2 * options_.max_message_bytes) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "--grpc-memory-bytes: expected 0 (unbounded) or at least twice --max-message-bytes (" +
-                          std::to_string(2 * options_.max_message_bytes) + "), got " +
-                          std::to_string(options_.grpc_memory_bytes) +
-                          "; a request of the largest size must fit while it arrives");
-  }
+  ANIMSPACE_RETURN_IF_ERROR(check_transport_options(options_));
   auto authenticator = Authenticator::from_options(options_);
   if (!authenticator) return authenticator.error();
   authenticator_ = std::make_unique<Authenticator>(std::move(*authenticator));
@@ -114,41 +108,18 @@ Status Daemon::start() {
   render_service_ = std::make_unique<RenderServiceImpl>(*env_);
   training_service_ = std::make_unique<TrainingServiceImpl>(*env_);
 
-  grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort(options_.listen_address, *credentials, &port_);
-  // gRPC sets SO_REUSEPORT by default: a second daemon would bind a busy address and take a random
-  // share of its connections. One address, one daemon (issue #21).
-  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
-  builder.SetMaxReceiveMessageSize(static_cast<int>(options_.max_message_bytes));
-  builder.SetMaxSendMessageSize(static_cast<int>(options_.max_message_bytes));
-  grpc::ResourceQuota quota("animspaced");
-  quota.SetMaxThreads(std::max(2, options_.worker_threads));
-  // gRPC 1.51 buffers a whole message before its size check (grpc/grpc#43012); the quota is what
-  // bounds that memory. Measured (docs/RELIABILITY.md): one 256 MiB request against a 1 MiB limit
-  // peaks at +251 MiB unbounded and +10 MiB under a 16 MiB quota.
-  if (options_.grpc_memory_bytes > 0) quota.Resize(static_cast<size_t>(options_.grpc_memory_bytes));
-  builder.SetResourceQuota(quota);
-  // Sync-server pollers (the health service) wake at this period; it bounds shutdown's wait.
-  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
-  builder.RegisterService(model_service_.get());
-  builder.RegisterService(stats_service_.get());
-  builder.RegisterService(pose_service_.get());
-  builder.RegisterService(skinning_service_.get());
-  builder.RegisterService(lod_service_.get());
-  builder.RegisterService(render_service_.get());
-  builder.RegisterService(training_service_.get());
-  server_ = builder.BuildAndStart();
+  const auto builder = make_server_builder(options_, *credentials, &port_);
+  builder->RegisterService(model_service_.get());
+  builder->RegisterService(stats_service_.get());
+  builder->RegisterService(pose_service_.get());
+  builder->RegisterService(skinning_service_.get());
+  builder->RegisterService(lod_service_.get());
+  builder->RegisterService(render_service_.get());
+  builder->RegisterService(training_service_.get());
+  server_ = builder->BuildAndStart();
   if (!server_ || port_ == 0) {
     server_.reset();
-    if (auto owner = busy_address_owner(options_.listen_address)) {
-      return make_error(ErrorCode::kFailedPrecondition,
-                        "--listen: '" + options_.listen_address + "' is already in use by " + *owner);
-    }
-    return make_error(ErrorCode::kInvalidArgument,
-                      "--listen: cannot bind '" + options_.listen_address + "' (in use or not a local address?" +
-                          (tls_enabled(options_) ? " Or --tls-cert and --tls-key do not belong together?)" : ")"));
+    return listen_failure(options_);
   }
   // Health is NOT_SERVING until the repository is loaded, so that load balancers and probes
   // wait for a replica that can answer.

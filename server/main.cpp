@@ -9,6 +9,7 @@
 
 #include "core/demo/demo_repository.h"
 #include "server/daemon.h"
+#include "server/transport_flags.h"
 #include "server/version.h"
 
 namespace {
@@ -38,22 +39,10 @@ int main(int argc, char** argv) {
   CLI::App app{"animspaced — serves trained character-animation models (PMSC soft cache, animation-space "
                "skinning, LOD, thumbnails) over gRPC"};
   app.set_version_flag("--version", animspace::server::kServerVersion);
-  app.add_option("--listen", options.listen_address, "gRPC address, host:port (port 0 picks a free one)")
-      ->capture_default_str();
+  animspace::server::add_transport_flags(app, options);
   app.add_option("--model-repository", options.repository,
                  "Model repository <repo>/<model>/<version>/model.anim; default: generate and serve the "
                  "bundled demo repository");
-  app.add_option("--worker-threads", options.worker_threads, "Upper bound on gRPC worker threads")
-      ->check(CLI::Range(1, 1024))
-      ->capture_default_str();
-  app.add_option("--max-message-bytes", options.max_message_bytes, "Largest request or response message")
-      ->check(CLI::Range(int64_t{1024}, int64_t{2000000000}))
-      ->capture_default_str();
-  app.add_option("--grpc-memory-bytes", options.grpc_memory_bytes,
-                 "Memory gRPC may hold for requests being received, all connections together; past it calls "
-                 "are reset RESOURCE_EXHAUSTED (0: unbounded; else at least twice --max-message-bytes)")
-      ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
-      ->capture_default_str();
   app.add_option("--max-batch-poses", options.max_batch_poses, "Largest batch in one evaluation request")
       ->check(CLI::Range(1u, 1000000u))
       ->capture_default_str();
@@ -123,7 +112,6 @@ int main(int argc, char** argv) {
                  "Bearer tokens accepted on every RPC but health, one per line ('#' comments)");
   app.add_option("--admin-token-file", options.admin_token_file,
                  "Bearer tokens required for LoadModel, UnloadModel, Retrain and GetStats reset");
-  app.add_option("--port-file", options.port_file, "Write the bound gRPC port to this file once listening");
   CLI11_PARSE(app, argc, argv);
   options.shutdown_grace = std::chrono::milliseconds(grace_ms);
   options.batch_delay = std::chrono::microseconds(batch_delay_us);
