@@ -161,8 +161,12 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
   out->set_model_version(model.version);
   out->set_full_evaluation_needed(cached.full_evaluation_needed);
   if (!options.omit_points) {
-    encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channel_count),
-                  out->mutable_points());
+    if (grpc::Status s = encode_points(cached.points.data(), static_cast<uint32_t>(m.point_count),
+                                       static_cast<uint32_t>(m.channel_count), options.points_encoding,
+                                       out->mutable_points());
+        !s.ok()) {
+      return s;
+    }
   }
   for (size_t j = 0; j < local.full_points.size(); ++j) {
     out->add_full_points(static_cast<uint32_t>(local.full_points[j]));

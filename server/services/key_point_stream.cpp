@@ -5,6 +5,7 @@
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
 #include "server/raw_messages.h"
+#include "server/validation.h"
 
 namespace animspace::server {
 namespace {
@@ -57,12 +58,17 @@ void KeyPointStream::OnReadDone(bool ok) {
 }
 
 KeyPointStream::Outcome KeyPointStream::evaluate(const v1::KeyPointFrame& frame, const LoadedModel& model) {
+  const std::string encoding_field = frame_field(frame.sequence()) + ".points_encoding";
+  if (grpc::Status s = check_points_encoding(frame.points_encoding(), encoding_field); !s.ok()) {
+    return Outcome::end(std::move(s));
+  }
   PoseInput input;
   if (grpc::Status s = decode_pose(model, frame.pose(), frame_field(frame.sequence()) + ".pose", input); !s.ok()) {
     return Outcome::end(std::move(s));
   }
   PoseOptions options;
   options.omit_points = frame.omit_points();
+  options.points_encoding = frame.points_encoding();
   options.local_fail_through = frame.local_fail_through();
   v1::PoseResult result;
   if (grpc::Status s = evaluate_pose(env_, model, input, options, &result); !s.ok()) return Outcome::end(std::move(s));
