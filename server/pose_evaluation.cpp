@@ -145,8 +145,12 @@ grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, cons
     out->mutable_points()->set_point_count(static_cast<uint32_t>(m.point_count));
     out->mutable_points()->set_channel_count(static_cast<uint32_t>(m.channel_count));
   } else if (!options.omit_points) {
-    encode_points(answer, static_cast<uint32_t>(m.point_count), static_cast<uint32_t>(m.channel_count),
-                  out->mutable_points());
+    if (grpc::Status s = encode_points(answer, static_cast<uint32_t>(m.point_count),
+                                       static_cast<uint32_t>(m.channel_count), options.points_encoding,
+                                       out->mutable_points());
+        !s.ok()) {
+      return s;
+    }
   }
   for (size_t j = 0; j < local.full_points.size(); ++j) {
     out->add_full_points(static_cast<uint32_t>(local.full_points[j]));
@@ -214,7 +218,8 @@ PoseBatcher::Pose prepare_pose(const LoadedModel& model, const PoseInput& input,
                                v1::PoseResult* out, PendingPose& pending) {
   const pmsc::PmscModel& m = *model.pmsc;
   const auto values = static_cast<size_t>(m.point_count) * static_cast<size_t>(m.channel_count);
-  pending.in_response = !options.omit_points;
+  // float32 goes out as computed; a 16-bit encoding is written from the scratch values.
+  pending.in_response = !options.omit_points && bytes_per_value(options.points_encoding) == sizeof(float);
   if (pending.in_response) {
     // f̂ is reconstructed into the message itself, and the blend of a blend or miss happens
     // there too: no copy of the points between the evaluation and serialisation.

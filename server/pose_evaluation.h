@@ -62,6 +62,8 @@ struct PoseOptions {
   // calculation and compute or blend only those. Implied by partial full values (full_points).
   bool local_fail_through = false;
   bool omit_points = false;
+  // The encoding of the answer's points (checked by the RPC: check_points_encoding).
+  v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
   // CompleteMiss answers a pose that EvaluateKeyPoints already counted: log it, don't count it.
   bool count_in_statistics = true;
 };

@@ -1,8 +1,13 @@
 #include "server/validation.h"
 
 #include <bit>
+#include <cassert>
 #include <cmath>
 #include <cstring>
+#include <span>
+#include <utility>
+
+#include "core/common/point_codec.h"
 
 #include "server/model_registry.h"
 #include "server/status_mapping.h"
@@ -15,6 +20,10 @@ static_assert(std::endian::native == std::endian::little, "animspaced assumes a 
 
 std::string join(std::string_view field, std::string_view member) {
   return std::string(field) + "." + std::string(member);
+}
+
+std::span<const float> floats(const google::protobuf::RepeatedField<float>& field) {
+  return {field.data(), static_cast<size_t>(field.size())};
 }
 
 }  // namespace
@@ -63,14 +72,44 @@ grpc::Status decode_points(const v1::PointArray& array, std::string_view field, 
     return invalid_argument(join(field, "channel_count") + ": expected " + std::to_string(channels) + ", got " +
                             std::to_string(array.channel_count()));
   }
+  if (grpc::Status s = check_points_encoding(array.encoding(), join(field, "encoding")); !s.ok()) return s;
+  const v1::PointEncoding encoding = array.encoding();
+  const bool fixed16 = encoding == v1::POINT_ENCODING_FIXED16;
+  // scale and offset belong to FIXED16 alone: on another array they mean the encoding was forgotten.
+  for (const auto& [member, parameters] : {std::pair{"scale", &array.scale()}, std::pair{"offset", &array.offset()}}) {
+    if (!fixed16 && !parameters->empty()) {
+      return invalid_argument(join(field, member) + ": only FIXED16 arrays carry one; this one is " +
+                              std::string(encoding_name(encoding)) + " (set encoding = POINT_ENCODING_FIXED16?)");
+    }
+    if (fixed16 && static_cast<uint64_t>(parameters->size()) != channels) {
+      return invalid_argument(join(field, member) + ": expected " + std::to_string(channels) +
+                              " values (one per channel) for FIXED16, got " + std::to_string(parameters->size()));
+    }
+    for (int c = 0; c < parameters->size(); ++c) {
+      if (!std::isfinite(parameters->Get(c))) {
+        return invalid_argument(join(field, member) + "[" + std::to_string(c) + "]: " +
+                                (std::isnan(parameters->Get(c)) ? "NaN" : "infinite") + "; expected a finite value");
+      }
+    }
+  }
   const uint64_t values = uint64_t{points} * channels;
-  if (array.data().size() != values * sizeof(float)) {
-    return invalid_argument(join(field, "data") + ": expected " + std::to_string(values * sizeof(float)) +
-                            " bytes (4 · " + std::to_string(points) + " · " + std::to_string(channels) + "), got " +
-                            std::to_string(array.data().size()));
+  const uint64_t width = bytes_per_value(encoding);
+  if (array.data().size() != values * width) {
+    const std::string named = width == 2 ? std::string(", ") + encoding_name(encoding) : std::string();
+    return invalid_argument(join(field, "data") + ": expected " + std::to_string(values * width) + " bytes (" +
+                            std::to_string(width) + " · " + std::to_string(points) + " · " + std::to_string(channels) +
+                            named + "), got " + std::to_string(array.data().size()));
   }
   out.resize(static_cast<Eigen::Index>(values));
-  std::memcpy(out.data(), array.data().data(), array.data().size());
+  const std::span<float> decoded(out.data(), values);
+  if (encoding == v1::POINT_ENCODING_FLOAT16) {
+    point_codec::decode_float16(array.data(), decoded);
+  } else if (fixed16) {
+    point_codec::decode_fixed16(array.data(), floats(array.scale()), floats(array.offset()), decoded);
+  } else if (values > 0) {
+    std::memcpy(out.data(), array.data().data(), array.data().size());
+  }
+  // Decoded values too: a float16 Inf pattern, or a FIXED16 scale and offset that overflow.
   if (!out.allFinite()) {
     for (Eigen::Index i = 0; i < out.size(); ++i) {
       if (std::isfinite(out[i])) continue;
@@ -181,6 +220,66 @@ void encode_points(const float* values, uint32_t points, uint32_t channels, v1::
   out->set_point_count(points);
   out->set_channel_count(channels);
   out->set_data(values, size_t{points} * channels * sizeof(float));
+}
+
+grpc::Status encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointEncoding encoding,
+                           v1::PointArray* out) {
+  if (encoding == v1::POINT_ENCODING_UNSPECIFIED || encoding == v1::POINT_ENCODING_FLOAT32) {
+    encode_points(values, points, channels, out);
+    out->set_encoding(encoding);
+    return grpc::Status::OK;
+  }
+  assert(encoding == v1::POINT_ENCODING_FLOAT16 || encoding == v1::POINT_ENCODING_FIXED16);
+  out->set_point_count(points);
+  out->set_channel_count(channels);
+  out->set_encoding(encoding);
+  const size_t count = size_t{points} * channels;
+  const std::span<const float> input(values, count);
+  // Straight into the message's bytes: no intermediate buffer for a large answer.
+  std::string* data = out->mutable_data();
+  data->resize(2 * count);
+  const std::span<char> bytes(data->data(), data->size());
+  Result<float> max_error = 0.0f;
+  if (encoding == v1::POINT_ENCODING_FLOAT16) {
+    max_error = point_codec::encode_float16(input, channels, bytes);
+  } else {
+    out->mutable_scale()->Resize(static_cast<int>(channels), 0.0f);
+    out->mutable_offset()->Resize(static_cast<int>(channels), 0.0f);
+    max_error = point_codec::encode_fixed16(input, channels, bytes, {out->mutable_scale()->mutable_data(), channels},
+                                            {out->mutable_offset()->mutable_data(), channels});
+  }
+  if (!max_error.ok()) {
+    Error error = max_error.error();
+    error.message = "points_encoding: " + std::string(encoding_name(encoding)) + " cannot carry this answer: " +
+                    error.message +
+                    (encoding == v1::POINT_ENCODING_FLOAT16 ? "; ask for POINT_ENCODING_FIXED16 or FLOAT32" : "");
+    out->Clear();
+    return to_grpc_status(error);
+  }
+  out->set_max_error(*max_error);
+  return grpc::Status::OK;
+}
+
+uint64_t bytes_per_value(v1::PointEncoding encoding) {
+  return encoding == v1::POINT_ENCODING_FLOAT16 || encoding == v1::POINT_ENCODING_FIXED16 ? 2 : 4;
+}
+
+const char* encoding_name(v1::PointEncoding encoding) {
+  switch (encoding) {
+    case v1::POINT_ENCODING_UNSPECIFIED: return "float32 (encoding unset)";
+    case v1::POINT_ENCODING_FLOAT32: return "FLOAT32";
+    case v1::POINT_ENCODING_FLOAT16: return "FLOAT16";
+    case v1::POINT_ENCODING_FIXED16: return "FIXED16";
+    default: return "an unknown encoding";
+  }
+}
+
+grpc::Status check_points_encoding(v1::PointEncoding encoding, std::string_view field) {
+  // proto3 enums are open: a newer client's value arrives as a plain number.
+  if (v1::PointEncoding_IsValid(encoding)) return grpc::Status::OK;
+  return invalid_argument(std::string(field) + ": unknown PointEncoding " + std::to_string(static_cast<int>(encoding)) +
+                          "; expected POINT_ENCODING_FLOAT32 (or unset), POINT_ENCODING_FLOAT16 or "
+                          "POINT_ENCODING_FIXED16");
 }
 
 }  // namespace animspace::server

@@ -31,9 +31,11 @@ grpc::Status check_batch_size(int size, uint32_t max_batch, std::string_view fie
 grpc::Status check_response_size(int count, uint64_t bytes_per_entry, int64_t max_message_bytes,
                                  std::string_view field);
 
-// A PointArray of exactly `points` × `channels` finite float32 values, decoded into `out`
-// (points·channels values, point-major). `what_points` names the points in messages
-// ("key points", "points").
+// A PointArray of exactly `points` × `channels` values in any PointEncoding (float32, FLOAT16,
+// FIXED16 with its D scales and offsets), decoded into `out` as float32 (points·channels values,
+// point-major) and each finite. `what_points` names the points in messages ("key points",
+// "points"); a refusal names the member ("<field>.scale: expected 3 values (one per channel) for
+// FIXED16, got 1").
 grpc::Status decode_points(const v1::PointArray& array, std::string_view field, uint32_t points,
                            uint32_t channels, std::string_view what_points, Eigen::VectorXf& out);
 
@@ -54,7 +56,23 @@ inline constexpr int kMaxLights = 64;
 grpc::Status decode_light_set(const v1::LightSet& set, std::string_view field, const Eigen::Vector3d& default_intensity,
                               std::vector<illumination::PointLight>& out);
 
-// Packs `points`·`channels` floats into a PointArray.
+// Packs `points`·`channels` floats into a PointArray as float32.
 void encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointArray* out);
+
+// The same in `encoding` (checked by check_points_encoding), encoded straight into the message's
+// bytes (core/common/point_codec.h) with `max_error` set. OUT_OF_RANGE naming `points_encoding`
+// when the values cannot be carried (FLOAT16 beyond ±65504): never clamped; `out` is then cleared.
+grpc::Status encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointEncoding encoding,
+                           v1::PointArray* out);
+
+// A request's encoding for its answer (`field`, e.g. "points_encoding"): INVALID_ARGUMENT for a
+// value this server does not know (proto3 enums are open).
+grpc::Status check_points_encoding(v1::PointEncoding encoding, std::string_view field);
+
+// Bytes per value on the wire: 4 for float32, 2 for the 16-bit encodings.
+uint64_t bytes_per_value(v1::PointEncoding encoding);
+
+// "FLOAT16", … for messages.
+const char* encoding_name(v1::PointEncoding encoding);
 
 }  // namespace animspace::server

@@ -181,6 +181,7 @@ std::vector<PoseResult> Client::evaluate_key_points_batch(const std::string& mod
   request.set_omit_points(options.omit_points);
   request.set_include_region_errors(options.include_region_errors);
   request.set_local_fail_through(options.local_fail_through);
+  request.set_points_encoding(options.points_encoding);
   for (const KeyPointPose& pose : poses) *request.add_poses() = encode_key_point_pose(pose);
   grpc::ClientContext context;
   prepare(&context);
@@ -203,7 +204,8 @@ std::unique_ptr<KeyPointStream> Client::open_stream(const std::string& model, co
 }
 
 CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
-                                    std::span<const float> full_values, std::span<const uint32_t> full_points) {
+                                    std::span<const float> full_values, std::span<const uint32_t> full_points,
+                                    v1::PointEncoding points_encoding) {
   v1::CompleteMissRequest request;
   request.mutable_model()->set_name(model);
   request.mutable_model()->set_version(version);
@@ -222,6 +224,7 @@ CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, 
   *request.mutable_full_values() =
       make_point_array(full_values.data(), static_cast<uint32_t>(full_values.size() / channels), channels);
   request.mutable_full_points()->Add(full_points.begin(), full_points.end());
+  request.set_points_encoding(points_encoding);
   grpc::ClientContext context;
   prepare(&context);
   v1::CompleteMissResponse response;

@@ -116,9 +116,11 @@ class Client {
   // Client fail-through: the full values of a pose that blended or missed, from the caller's own
   // posing engine; `version` is the result's model_version. All N×D values, or — local
   // fail-through — the values of `full_points` only (|full_points|×D, in that order; at least the
-  // PoseResult::full_points of this pose): the answer is then blended point by point.
+  // PoseResult::full_points of this pose): the answer is then blended point by point, its points in
+  // `points_encoding` (as EvaluateOptions::points_encoding).
   CompletedMiss complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
-                              std::span<const float> full_values, std::span<const uint32_t> full_points = {});
+                              std::span<const float> full_values, std::span<const uint32_t> full_points = {},
+                              v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED);
   // Skinning through an animation-space model (Merry 2007 §3.1): one result per pose, in order.
   SkinningResult evaluate_skeleton_pose(const std::string& model, std::span<const SkeletonPose> poses,
                                         const SkinningOptions& options = {});

@@ -1,4 +1,5 @@
-// Decoding the wire's packed float32 arrays into plain results, and encoding poses.
+// Decoding the wire's packed point arrays (float32, or a 16-bit PointEncoding) into plain results,
+// and encoding poses.
 #include <bit>
 #include <cstring>
 #include <stdexcept>
@@ -7,7 +8,7 @@
 
 namespace animspace {
 
-static_assert(std::endian::native == std::endian::little, "the wire format is little-endian float32");
+static_assert(std::endian::native == std::endian::little, "the wire format is little-endian");
 
 const char* cache_status_name(v1::CacheStatus status) {
   switch (status) {
@@ -34,19 +35,69 @@ std::vector<float> KeyPoints::gather(std::span<const float> frame) const {
   return out;
 }
 
+namespace {
+
+// IEEE-754 binary16 → float32, exact. Written here rather than taken from core/common/point_codec.h
+// because the client library depends only on the generated stubs; tests/clients checks the two
+// agree on every pattern.
+float half_to_float(uint16_t half) {
+  const uint32_t sign = (uint32_t{half} & 0x8000u) << 16;
+  const uint32_t exponent = (uint32_t{half} >> 10) & 0x1Fu;
+  const uint32_t fraction = uint32_t{half} & 0x3FFu;
+  if (exponent == 0x1Fu) {  // Inf, or NaN quieted
+    return std::bit_cast<float>(sign | 0x7F80'0000u | (fraction != 0 ? 0x0040'0000u | (fraction << 13) : 0u));
+  }
+  if (exponent == 0) {  // ±0 or a subnormal: fraction·2^-24, exact in float32
+    return std::bit_cast<float>(sign | std::bit_cast<uint32_t>(static_cast<float>(fraction) * 0x1p-24f));
+  }
+  return std::bit_cast<float>(sign | ((exponent + 127 - 15) << 23) | (fraction << 13));
+}
+
+[[noreturn]] void malformed(const std::string& why) {
+  // The server checks its own answers; a mismatch means a broken peer, not a user error.
+  throw std::runtime_error("malformed PointArray from the server: " + why);
+}
+
+}  // namespace
+
 Points decode_points(const v1::PointArray& array) {
   Points out;
   out.point_count = array.point_count();
   out.channel_count = array.channel_count();
-  const size_t expected = size_t{out.point_count} * out.channel_count * sizeof(float);
-  if (array.data().size() != expected) {
-    // The server checks its own answers; a mismatch means a broken peer, not a user error.
-    throw std::runtime_error("malformed PointArray from the server: " + std::to_string(out.point_count) + " points × " +
-                             std::to_string(out.channel_count) + " channels need " + std::to_string(expected) +
-                             " bytes, got " + std::to_string(array.data().size()));
+  out.max_error = array.max_error();
+  const size_t count = size_t{out.point_count} * out.channel_count;
+  const v1::PointEncoding encoding = array.encoding();
+  const bool float32 = encoding == v1::POINT_ENCODING_UNSPECIFIED || encoding == v1::POINT_ENCODING_FLOAT32;
+  if (!float32 && encoding != v1::POINT_ENCODING_FLOAT16 && encoding != v1::POINT_ENCODING_FIXED16) {
+    malformed("unknown PointEncoding " + std::to_string(static_cast<int>(encoding)) + " (a newer server?)");
   }
-  out.values.resize(size_t{out.point_count} * out.channel_count);
-  if (expected > 0) std::memcpy(out.values.data(), array.data().data(), expected);
+  const size_t expected = count * (float32 ? sizeof(float) : sizeof(uint16_t));
+  if (array.data().size() != expected) {
+    malformed(std::to_string(out.point_count) + " points × " + std::to_string(out.channel_count) + " channels need " +
+              std::to_string(expected) + " bytes, got " + std::to_string(array.data().size()));
+  }
+  out.values.resize(count);
+  if (float32) {
+    if (expected > 0) std::memcpy(out.values.data(), array.data().data(), expected);
+    return out;
+  }
+  std::vector<uint16_t> q(count);
+  if (expected > 0) std::memcpy(q.data(), array.data().data(), expected);
+  if (encoding == v1::POINT_ENCODING_FLOAT16) {
+    for (size_t i = 0; i < count; ++i) out.values[i] = half_to_float(q[i]);
+    return out;
+  }
+  const uint32_t channels = out.channel_count;
+  if (static_cast<uint32_t>(array.scale_size()) != channels || static_cast<uint32_t>(array.offset_size()) != channels) {
+    malformed("FIXED16 needs " + std::to_string(channels) + " scales and offsets (one per channel), got " +
+              std::to_string(array.scale_size()) + " and " + std::to_string(array.offset_size()));
+  }
+  for (size_t i = 0; i < count; ++i) {
+    const int c = static_cast<int>(i % channels);
+    // common.proto: value = offset[c] + scale[c]·q, two float32 roundings (as the server measured).
+    const float step = array.scale(c) * static_cast<float>(q[i]);
+    out.values[i] = array.offset(c) + step;
+  }
   return out;
 }
 

@@ -23,7 +23,10 @@ namespace animspace {
 struct Points {
   uint32_t point_count = 0;    // N
   uint32_t channel_count = 0;  // D
-  std::vector<float> values;   // N·D
+  std::vector<float> values;   // N·D, float32 whatever the wire's PointEncoding
+  // For points that travelled in a 16-bit encoding (EvaluateOptions::points_encoding): the largest
+  // |decoded − float32 value| over the array, as the server measured it; 0 for float32.
+  float max_error = 0;
 
   bool empty() const { return point_count == 0; }
   // The D channels of point i.
@@ -119,6 +122,9 @@ struct EvaluateOptions {
   // Local fail-through: on a blend or miss, PoseResult::full_points names the points that need
   // the full calculation (those of the failing regions); the rest of the answer is already right.
   bool local_fail_through = false;
+  // How the answers' points travel: float32 (unset), FLOAT16 or FIXED16 — half the bytes, decoded
+  // to float32 by decode_points, Points::max_error saying what was lost (common.proto).
+  v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
 };
 
 struct SkinningOptions {
@@ -130,7 +136,8 @@ struct SkinningOptions {
 // "HIT", "BLEND", "MISS" (or "UNSPECIFIED").
 const char* cache_status_name(v1::CacheStatus status);
 
-// Wire conversions, shared by the unary calls and the stream session.
+// Wire conversions, shared by the unary calls and the stream session. decode_points reads every
+// PointEncoding (std::runtime_error for a malformed array or an encoding this client does not know).
 Points decode_points(const v1::PointArray& array);
 PoseResult decode_pose_result(const v1::PoseResult& result);
 v1::KeyPointPose encode_key_point_pose(const KeyPointPose& pose);

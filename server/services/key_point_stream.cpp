@@ -5,6 +5,7 @@
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
 #include "server/raw_messages.h"
+#include "server/validation.h"
 
 namespace animspace::server {
 namespace {
@@ -58,6 +59,7 @@ void KeyPointStream::OnReadDone(bool ok) {
   pose->frame = std::move(frame);
   pose->options.omit_points = pose->frame.omit_points();
   pose->options.local_fail_through = pose->frame.local_fail_through();
+  pose->options.points_encoding = pose->frame.points_encoding();
   // Decoded here, in order, so that the frames read ahead wait in the batcher together and the
   // first pool thread to await reconstructs them as one product. A frame whose key values the
   // server gathers is decoded on the pool: the gather takes milliseconds.
@@ -74,6 +76,11 @@ void KeyPointStream::OnReadDone(bool ok) {
 
 grpc::Status KeyPointStream::decode(Pose& pose) {
   const LoadedModel& model = *pose.model;
+  if (grpc::Status s = check_points_encoding(pose.options.points_encoding,
+                                             frame_field(pose.frame.sequence()) + ".points_encoding");
+      !s.ok()) {
+    return s;
+  }
   if (grpc::Status s = decode_pose(model, pose.frame.pose(), frame_field(pose.frame.sequence()) + ".pose", pose.input);
       !s.ok()) {
     return s;

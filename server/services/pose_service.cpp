@@ -45,10 +45,13 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         if (grpc::Status s = check_batch_size(request->poses_size(), env_.options.max_batch_poses, "poses"); !s.ok()) {
           return s;
         }
+        if (grpc::Status s = check_points_encoding(request->points_encoding(), "points_encoding"); !s.ok()) return s;
         const auto point_count = static_cast<uint64_t>(model->pmsc->point_count);
+        const uint64_t bytes_per_point =
+            bytes_per_value(request->points_encoding()) * static_cast<uint64_t>(model->pmsc->channel_count);
         // Local fail-through may name every point: a varint index (≤ 5 bytes) and a float each.
         const uint64_t bytes_per_pose =
-            (request->omit_points() ? 0 : uint64_t{4} * point_count * static_cast<uint64_t>(model->pmsc->channel_count)) +
+            (request->omit_points() ? 0 : bytes_per_point * point_count) +
             (request->local_fail_through() ? uint64_t{9} * point_count : 0);
         if (grpc::Status s = check_response_size(request->poses_size(), bytes_per_pose, env_.options.max_message_bytes,
                                                  "poses");
@@ -67,6 +70,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         PoseOptions options;
         options.include_region_errors = request->include_region_errors();
         options.omit_points = request->omit_points();
+        options.points_encoding = request->points_encoding();
         options.local_fail_through = request->local_fail_through();
         // The request's poses wait in the batcher together (with any other call's for this model):
         // their f̂ is one matrix product.
@@ -108,6 +112,9 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
                                   "' is cross-PMSC: its key points drive a different point set, so no full "
                                   "values exist to complete a miss with (fail-through impossible)"};
         }
+        if (grpc::Status s = check_points_encoding(request->points_encoding(), "points_encoding"); !s.ok()) {
+          return s;
+        }
         PoseInput input;
         if (grpc::Status s = decode_points(request->key_values(), "key_values",
                                            static_cast<uint32_t>(m.key_point_count()),
@@ -128,6 +135,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         }
         PoseOptions options;
         options.count_in_statistics = false;
+        options.points_encoding = request->points_encoding();
         bool logged = false;
         if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->mutable_result(), &logged); !s.ok()) {
           return s;

@@ -53,6 +53,93 @@ TEST(Validation, NamesTheFieldWithExpectedAndActual) {
                  "f.data: value of point 1, channel 0 is infinite; expected finite values");
 }
 
+v1::PointArray halves_of(const std::vector<uint16_t>& halves, uint32_t points, uint32_t channels) {
+  v1::PointArray out;
+  out.set_point_count(points);
+  out.set_channel_count(channels);
+  out.set_encoding(v1::POINT_ENCODING_FLOAT16);
+  out.set_data(halves.data(), halves.size() * 2);
+  return out;
+}
+
+TEST(Validation, Decodes16BitArraysByHand) {
+  Eigen::VectorXf out;
+  // binary16 by hand: 0x3C00 = 1, 0xC000 = −2, 0x0001 = 2^-24, 0x7BFF = 65504,
+  // 0x3555 = 2^(13−15)·(1 + 0x155/1024) = (1 + 341/1024)/4.
+  ASSERT_TRUE(decode_points(halves_of({0x3C00, 0xC000, 0x0001, 0x7BFF, 0x3555, 0x0000}, 2, 3), "f", 2, 3, "points", out)
+                  .ok());
+  const std::vector<float> expected = {1.0f, -2.0f, 0x1p-24f, 65504.0f, (1.0f + 341.0f / 1024.0f) / 4.0f, 0.0f};
+  for (int i = 0; i < 6; ++i) EXPECT_EQ(out[i], expected[static_cast<size_t>(i)]) << i;
+  // FIXED16: value = offset[c] + scale[c]·q.
+  v1::PointArray fixed = halves_of({0, 1, 2, 3, 4, 5}, 2, 3);
+  fixed.set_encoding(v1::POINT_ENCODING_FIXED16);
+  for (float v : {0.5f, 2.0f, 0.0f}) fixed.add_scale(v);
+  for (float v : {1.0f, -3.0f, 7.0f}) fixed.add_offset(v);
+  ASSERT_TRUE(decode_points(fixed, "f", 2, 3, "points", out).ok());
+  const std::vector<float> fixed_expected = {1.0f, -1.0f, 7.0f, 2.5f, 5.0f, 7.0f};
+  for (int i = 0; i < 6; ++i) EXPECT_EQ(out[i], fixed_expected[static_cast<size_t>(i)]) << i;
+}
+
+TEST(Validation, Bad16BitArraysAreRefusedNamingTheMember) {
+  Eigen::VectorXf out;
+  const v1::PointArray good = halves_of({0x3C00, 0x3C00, 0x3C00, 0x3C00, 0x3C00, 0x3C00}, 2, 3);
+  v1::PointArray a = good;
+  a.set_data(std::string(24, '\0'));  // float32's length for a FLOAT16 array
+  expect_refusal(decode_points(a, "poses[0].key_values", 2, 3, "key points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "poses[0].key_values.data: expected 12 bytes (2 · 2 · 3, FLOAT16), got 24");
+  a = good;
+  a.set_encoding(static_cast<v1::PointEncoding>(9));
+  expect_refusal(decode_points(a, "poses[0].key_values", 2, 3, "key points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "poses[0].key_values.encoding: unknown PointEncoding 9; expected POINT_ENCODING_FLOAT32 (or unset), "
+                 "POINT_ENCODING_FLOAT16 or POINT_ENCODING_FIXED16");
+  a = good;
+  a.set_encoding(v1::POINT_ENCODING_FIXED16);
+  a.add_scale(1.0f);
+  for (int c = 0; c < 3; ++c) a.add_offset(0.0f);
+  expect_refusal(decode_points(a, "poses[0].key_values", 2, 3, "key points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "poses[0].key_values.scale: expected 3 values (one per channel) for FIXED16, got 1");
+  a.add_scale(1.0f);
+  a.add_scale(1.0f);
+  a.set_offset(1, std::numeric_limits<float>::quiet_NaN());
+  expect_refusal(decode_points(a, "f", 2, 3, "points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "f.offset[1]: NaN; expected a finite value");
+  a.set_offset(1, 0.0f);
+  a.set_scale(2, std::numeric_limits<float>::infinity());
+  expect_refusal(decode_points(a, "f", 2, 3, "points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "f.scale[2]: infinite; expected a finite value");
+  // Finite parameters whose values overflow float32 are refused like an infinite value.
+  a.set_scale(2, 3e38f);
+  a.set_offset(2, 3e38f);
+  expect_refusal(decode_points(a, "f", 2, 3, "points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "f.data: value of point 0, channel 2 is infinite; expected finite values");
+  // scale on a float32 array: the encoding was forgotten.
+  v1::PointArray plain = array_of(std::vector<float>(6, 1.0f), 2, 3);
+  plain.add_scale(1.0f);
+  expect_refusal(decode_points(plain, "f", 2, 3, "points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "f.scale: only FIXED16 arrays carry one; this one is float32 (encoding unset) "
+                 "(set encoding = POINT_ENCODING_FIXED16?)");
+  // A float16 Inf pattern.
+  expect_refusal(decode_points(halves_of({0x3C00, 0x7C00, 0, 0, 0, 0}, 2, 3), "f", 2, 3, "points", out),
+                 grpc::StatusCode::INVALID_ARGUMENT, "f.data: value of point 0, channel 1 is infinite; expected finite values");
+}
+
+TEST(Validation, EncodingRefusesWhatFloat16CannotCarry) {
+  const std::vector<float> values = {1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 1e5f};
+  v1::PointArray out;
+  expect_refusal(encode_points(values.data(), 2, 3, v1::POINT_ENCODING_FLOAT16, &out), grpc::StatusCode::OUT_OF_RANGE,
+                 "points_encoding: FLOAT16 cannot carry this answer: value of point 1, channel 2 is 1e+05, beyond "
+                 "±65504, the largest float16; ask for POINT_ENCODING_FIXED16 or FLOAT32");
+  EXPECT_EQ(out.data().size(), 0u);
+  // FIXED16 carries it, within half a step of its channel.
+  ASSERT_TRUE(encode_points(values.data(), 2, 3, v1::POINT_ENCODING_FIXED16, &out).ok());
+  EXPECT_EQ(out.data().size(), 12u);
+  EXPECT_LE(out.max_error(), (1e5f - 3.0f) / 65535.0f);
+  expect_refusal(check_points_encoding(static_cast<v1::PointEncoding>(7), "points_encoding"),
+                 grpc::StatusCode::INVALID_ARGUMENT,
+                 "points_encoding: unknown PointEncoding 7; expected POINT_ENCODING_FLOAT32 (or unset), "
+                 "POINT_ENCODING_FLOAT16 or POINT_ENCODING_FIXED16");
+}
+
 TEST(Validation, ABogusPointCountNeverAllocates) {
   // 4 billion points claimed with 12 bytes of data: refused by the count check, before any
   // allocation could follow the claim.

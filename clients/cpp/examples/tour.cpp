@@ -71,6 +71,16 @@ int main(int argc, char** argv) try {
   //   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
   //       result.points.values.data(), result.points.point_count, 3);
 
+  // Half the bytes on the wire: the answer's points as per-channel 16-bit fixed point (or FLOAT16),
+  // decoded to float32 by the client; points.max_error is what the encoding lost, measured by the
+  // server. The verdict is the float32 one.
+  animspace::EvaluateOptions compact_options;
+  compact_options.points_encoding = animspace::v1::POINT_ENCODING_FIXED16;
+  const animspace::PoseResult compact =
+      client.evaluate_key_points("arm-pmsc", {values, keys.channel_count}, compact_options);
+  std::printf("fixed16: %s, %u points within %.3g of float32\n", animspace::cache_status_name(compact.status),
+              compact.points.point_count, compact.points.max_error);
+
   // On a blend or miss the client's own engine supplies the full pose (client fail-through); the
   // server checks it repeats the key values, answers with it and logs it for retraining.
   if (result.full_evaluation_needed) {

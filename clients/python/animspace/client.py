@@ -335,7 +335,7 @@ class Client:
     def evaluate_key_points(self, model: str, key_values: npt.ArrayLike, *, version: int = 0,
                             skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
                             include_region_errors: bool = False, omit_points: bool = False,
-                            local_fail_through: bool = False,
+                            local_fail_through: bool = False, points_encoding: str = "float32",
                             deadline_s: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
         """Key points in, the whole pose out, through the soft cache.
 
@@ -352,9 +352,15 @@ class Client:
             local_fail_through: on a blend or miss, name in ``PoseResult.full_points`` only the
                 points that need the full calculation (those of the regions whose key points
                 fail); complete them with ``complete_miss(..., full_points=...)``.
+            points_encoding: how the answer's points travel: "float32" (exact), "float16"
+                (IEEE binary16: half the bytes, relative error ≤ 2^-11; refused with OutOfRange for
+                a pose with a value beyond ±65504) or "fixed16" (per-channel 16-bit fixed point:
+                half the bytes, error ≤ half the channel's range / 65535). Points always decode
+                to float32; ``PoseResult.points_max_error`` says what the encoding lost.
 
         Raises:
-            ValueError: for a wrong shape, naming the argument (nothing is sent).
+            ValueError: for a wrong shape or an unknown ``points_encoding``, naming the argument
+                (nothing is sent).
             InvalidArgument: a key point count or channel count the model does not expect, or
                 non-finite values (the message names ``poses[i].key_values``).
             ResourceExhausted: a batch over the server's ``max_batch_poses``.
@@ -379,7 +385,9 @@ class Client:
         request = poses_pb2.EvaluateKeyPointsRequest(model=_model_ref(model, version),
                                                      include_region_errors=include_region_errors,
                                                      omit_points=omit_points,
-                                                     local_fail_through=local_fail_through)
+                                                     local_fail_through=local_fail_through,
+                                                     points_encoding=wire.points_encoding("points_encoding",
+                                                                                          points_encoding))
         for i in range(poses.shape[0]):
             pose = request.poses.add()
             pose.key_values.CopyFrom(_point_array(poses[i]))
@@ -429,7 +437,7 @@ class Client:
     @_renamed_keywords(timeout="deadline_s")
     def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
                           version: int = 0, omit_points: bool = False, first_sequence: int = 0,
-                          local_fail_through: bool = False,
+                          local_fail_through: bool = False, points_encoding: str = "float32",
                           deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
         """Plays a sequence through the soft cache over one StreamKeyPoints call: one result per
         frame, yielded in frame order as they arrive.
@@ -443,7 +451,8 @@ class Client:
 
         The call starts when iteration starts; ``deadline_s`` (or the client's deadline) bounds the
         whole stream — pass a generous one for a long sequence. Stopping the iteration early
-        cancels the call. ``local_fail_through`` is ``evaluate_key_points``' for every frame.
+        cancels the call. ``local_fail_through`` and ``points_encoding`` are
+        ``evaluate_key_points``' for every frame.
 
         Raises:
             ValueError: a frame of the wrong shape — after the results of every frame before it.
@@ -452,7 +461,8 @@ class Client:
             InvalidArgument etc.: a frame the server refused (the message names its sequence).
         """
         # Arguments are checked now; the call starts with the iteration.
-        requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence, local_fail_through)
+        requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence, local_fail_through,
+                                  wire.points_encoding("points_encoding", points_encoding))
         self._deadline(deadline_s)
         return self._stream_key_points(requests, first_sequence, deadline_s)
 
@@ -484,7 +494,7 @@ class Client:
 
     @_renamed_keywords(timeout="deadline_s")
     def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
-                      full_points: Optional[npt.ArrayLike] = None,
+                      full_points: Optional[npt.ArrayLike] = None, points_encoding: str = "float32",
                       deadline_s: Optional[float] = None) -> MissCompletion:
         """Completes a blend or miss with the full pose from the client's posing engine
         (fail-through "CLIENT"), and logs it for retraining.
@@ -498,12 +508,16 @@ class Client:
         (len(full_points)×D, same order); the answer is blended point by point and the miss log
         keeps a partial frame.
 
+        ``points_encoding`` is ``evaluate_key_points``' for the answer's points.
+
         Raises:
-            ValueError: ``full_values`` rows differ from ``full_points`` (nothing is sent).
+            ValueError: ``full_values`` rows differ from ``full_points``, or an unknown
+                ``points_encoding`` (nothing is sent).
             InvalidArgument: ``full_points`` not ascending, out of range, or missing a point that
                 needs the full calculation (the message names ``full_points``).
             FailedPrecondition: for a cross-PMSC model (no full calculation exists).
         """
+        encoding = wire.points_encoding("points_encoding", points_encoding)
         keys = wire.as_points("key_values", key_values, points_label="K")
         full = wire.as_points("full_values", full_values)
         points = np.zeros(0, np.uint32)
@@ -517,7 +531,7 @@ class Client:
                                  f"{full.shape[0]}")
         request = poses_pb2.CompleteMissRequest(model=_model_ref(model, version), key_values=_point_array(keys),
                                                 full_values=_point_array(full),
-                                                full_points=[int(p) for p in points])
+                                                full_points=[int(p) for p in points], points_encoding=encoding)
         response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, deadline_s)
         with _decoding("CompleteMiss"):
             return MissCompletion(result=PoseResult.from_proto(response.result, "result.points"),
@@ -759,11 +773,13 @@ class _FrameRequests:
     """
 
     def __init__(self, model: common_pb2.ModelRef, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]],
-                 omit_points: bool, first_sequence: int, local_fail_through: bool = False) -> None:
+                 omit_points: bool, first_sequence: int, local_fail_through: bool = False,
+                 points_encoding: int = common_pb2.POINT_ENCODING_UNSPECIFIED) -> None:
         first_sequence = wire.as_uint("first_sequence", first_sequence, 64)
         self._model = model
         self._frames = frames
         self._omit_points = omit_points
+        self._points_encoding = points_encoding
         self._local_fail_through = local_fail_through
         self._first_sequence = first_sequence
         self.sent = 0
@@ -781,7 +797,8 @@ class _FrameRequests:
                     raise ValueError(f"frames[{i}]: expected shape {wire.shape_text(shape)} like frames[0], "
                                      f"got {wire.shape_text(values.shape)}")
                 message = poses_pb2.KeyPointFrame(sequence=self._first_sequence + i, omit_points=self._omit_points,
-                                                  local_fail_through=self._local_fail_through)
+                                                  local_fail_through=self._local_fail_through,
+                                                  points_encoding=self._points_encoding)
                 if i == 0:
                     message.model.CopyFrom(self._model)  # later frames keep the stream's model
                 message.pose.CopyFrom(KeyPointPose(values, pose.skeleton_pose, pose.space).to_proto(f"frames[{i}]"))

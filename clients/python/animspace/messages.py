@@ -405,6 +405,8 @@ class PoseResult:
             tolerance (``points`` is then the answer) or local fail-through was not requested.
         full_point_blend_weights: float32 α_i ∈ (0, 1] of each of ``full_points``: point i of the
             answer is α_i·f_i + (1 − α_i)·f̂_i.
+        points_max_error: with ``points_encoding`` "float16" or "fixed16": the largest
+            |decoded − float32 value| over ``points``, measured by the server; 0 for float32.
     """
 
     __repr__ = compact_repr
@@ -419,6 +421,7 @@ class PoseResult:
     sequence: int = 0
     full_points: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
     full_point_blend_weights: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    points_max_error: float = 0.0
 
     @property
     def hit(self) -> bool:
@@ -432,7 +435,8 @@ class PoseResult:
                    full_evaluation_needed=m.full_evaluation_needed,
                    region_errors=tuple(RegionError.from_proto(r) for r in m.region_errors), sequence=m.sequence,
                    full_points=np.array(m.full_points, dtype=np.uint32),
-                   full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32))
+                   full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32),
+                   points_max_error=m.points.max_error)
 
 
 @dataclass(frozen=True, eq=False)

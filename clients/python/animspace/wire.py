@@ -2,7 +2,8 @@
 
 The API moves point sets as ``PointArray``: N×D little-endian float32, point-major, packed into
 one ``bytes`` field (common.proto), so a 100k-point pose costs one copy each way instead of a
-repeated-float walk. Skeleton poses are B×12 float32: the top three rows of each bone's 4×4
+repeated-float walk. Answers may come in a 16-bit ``PointEncoding`` (binary16, or per-channel
+fixed point): :func:`points_from` decodes each with numpy alone. Skeleton poses are B×12 float32: the top three rows of each bone's 4×4
 affine matrix, row-major (``SkeletonPose.transforms``).
 
 Every function here checks shapes before packing and raises ``ValueError`` naming the argument,
@@ -28,15 +29,27 @@ __all__ = [
     "as_points",
     "as_transforms",
     "point_array",
+    "points_encoding",
     "points_from",
     "skeleton_pose",
     "transforms_from",
     "SPACES",
+    "POINT_ENCODINGS",
 ]
 
 # The wire's float: little-endian IEEE-754 binary32 whatever the host's byte order.
 WIRE_FLOAT = np.dtype("<f4")
 WIRE_UINT32 = np.dtype("<u4")
+# The 16-bit PointEncodings: IEEE-754 binary16 (FLOAT16) and the q of FIXED16.
+WIRE_HALF = np.dtype("<f2")
+WIRE_UINT16 = np.dtype("<u2")
+
+# The ``points_encoding=`` keyword's values → PointEncoding (common.proto).
+POINT_ENCODINGS = {
+    "float32": common_pb2.POINT_ENCODING_UNSPECIFIED,
+    "float16": common_pb2.POINT_ENCODING_FLOAT16,
+    "fixed16": common_pb2.POINT_ENCODING_FIXED16,
+}
 WIRE_INT32 = np.dtype("<i4")
 
 # SkeletonPose.space by name. Unspecified is refused by the server, so there is no default here:
@@ -137,17 +150,51 @@ def point_array(name: str, values: npt.ArrayLike, *, channels: Optional[int] = N
                                  data=array.astype(WIRE_FLOAT, copy=False).tobytes())
 
 
-def points_from(message: common_pb2.PointArray, what: str = "points") -> np.ndarray:
-    """A ``PointArray`` as a writable N×D float32 array (native byte order).
+def points_encoding(name: str, encoding: str) -> int:
+    """A ``points_encoding=`` keyword ("float32", "float16" or "fixed16") as the PointEncoding value
+    a request carries ("float32" is sent as the unset default, which every server reads as float32).
 
     Raises:
-        ValueError: when ``data`` is not exactly 4·N·D bytes (the server never sends that; a
-            proxy or a truncated message could).
+        ValueError: for another value, naming the argument.
+    """
+    try:
+        return POINT_ENCODINGS[encoding]
+    except (KeyError, TypeError):
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, POINT_ENCODINGS))}, got {encoding!r}") from None
+
+
+def points_from(message: common_pb2.PointArray, what: str = "points") -> np.ndarray:
+    """A ``PointArray`` in any encoding as a writable N×D float32 array (native byte order).
+
+    FLOAT16 values widen exactly; FIXED16 values are ``offset[c] + scale[c]·q`` evaluated in
+    float32 (two roundings, as the server computes its ``max_error``).
+
+    Raises:
+        ValueError: when ``data`` is not exactly 4·N·D bytes (float32) or 2·N·D bytes (16-bit
+            encodings), FIXED16 lacks one scale and offset per channel, or the encoding is one
+            this client does not know (the server never sends those; a proxy, a truncated message
+            or a newer server could).
     """
     n, d = message.point_count, message.channel_count
-    if len(message.data) != 4 * n * d:
-        raise ValueError(f"{what}: {n} × {d} float32 need {4 * n * d} bytes, got {len(message.data)}")
-    return np.frombuffer(message.data, dtype=WIRE_FLOAT).astype(np.float32).reshape(n, d)
+    encoding = message.encoding
+    if encoding in (common_pb2.POINT_ENCODING_UNSPECIFIED, common_pb2.POINT_ENCODING_FLOAT32):
+        if len(message.data) != 4 * n * d:
+            raise ValueError(f"{what}: {n} × {d} float32 need {4 * n * d} bytes, got {len(message.data)}")
+        return np.frombuffer(message.data, dtype=WIRE_FLOAT).astype(np.float32).reshape(n, d)
+    if encoding not in (common_pb2.POINT_ENCODING_FLOAT16, common_pb2.POINT_ENCODING_FIXED16):
+        raise ValueError(f"{what}: unknown PointEncoding {encoding} (a newer server?)")
+    name = common_pb2.PointEncoding.Name(encoding)[len("POINT_ENCODING_"):]
+    if len(message.data) != 2 * n * d:
+        raise ValueError(f"{what}: {n} × {d} {name} values need {2 * n * d} bytes, got {len(message.data)}")
+    if encoding == common_pb2.POINT_ENCODING_FLOAT16:
+        return np.frombuffer(message.data, dtype=WIRE_HALF).astype(np.float32).reshape(n, d)
+    if len(message.scale) != d or len(message.offset) != d:
+        raise ValueError(f"{what}: FIXED16 needs {d} scales and offsets (one per channel), got "
+                         f"{len(message.scale)} and {len(message.offset)}")
+    q = np.frombuffer(message.data, dtype=WIRE_UINT16).astype(np.float32).reshape(n, d)
+    scale = np.asarray(message.scale, dtype=np.float32)
+    offset = np.asarray(message.offset, dtype=np.float32)
+    return q * scale + offset
 
 
 def as_transforms(name: str, transforms: npt.ArrayLike, *, batch: bool = False) -> np.ndarray:
