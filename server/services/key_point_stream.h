@@ -2,7 +2,9 @@
 //
 // Pipelined: up to kWindow frames are read ahead and evaluated on the request pool while earlier
 // results are still being written, so a client that streams a sequence keeps both the network
-// and the cores busy; results still leave in request order (server/stream_reactor.h owns the
+// and the cores busy. Each frame is decoded as it arrives and waits in the batcher
+// (server/pose_batcher.h), so the frames read ahead are reconstructed as one product by the first
+// pool thread that gets to them; results still leave in request order (server/stream_reactor.h owns the
 // ordering, the lifetime and cancellation). The model version is resolved on the first frame
 // (version 0 = the default then) and pinned for the whole stream, so a hot swap never changes the
 // key points a running stream must send (a later frame may name another model or version

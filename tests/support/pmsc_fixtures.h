@@ -1,7 +1,10 @@
 // A PMSC model small enough to work by hand, shared by the pmsc and misslog tests.
 #pragma once
 
+#include <random>
 #include <vector>
+
+#include <Eigen/QR>
 
 #include "core/pmsc/pmsc_model.h"
 
@@ -26,6 +29,54 @@ inline pmsc::PmscModel three_point_model(const std::vector<int>& keys, pmsc::Sof
   }
   m.epsilon = epsilon;
   return m;
+}
+
+// A random prepared model: N points × 3 channels, M orthonormal basis vectors (as PCA gives), K
+// keys spread over the points, a mean around 10 in each channel, ε = [0.05, 0.1].
+inline pmsc::PmscModel random_model(std::mt19937& random, int points, int basis_size, int keys, bool aligned) {
+  std::normal_distribution<float> normal;
+  pmsc::PmscModel m;
+  m.channel_count = 3;
+  m.point_count = points;
+  m.control_point_count = points;
+  m.aligned = aligned;
+  m.mean = Eigen::VectorXf::NullaryExpr(3 * points, [&] { return 10.0f + normal(random); });
+  Eigen::MatrixXd a =
+      Eigen::MatrixXd::NullaryExpr(3 * points, basis_size, [&] { return static_cast<double>(normal(random)); });
+  a = a.householderQr().householderQ() * Eigen::MatrixXd::Identity(3 * points, basis_size);
+  m.basis = a.cast<float>();
+  for (int k = 0; k < keys; ++k) m.key_points.push_back(k * (points / keys));
+  m.key_mean.resize(3 * keys);
+  m.key_basis.resize(3 * keys, basis_size);
+  for (int k = 0; k < keys; ++k) {
+    const long point = m.key_points[static_cast<size_t>(k)];
+    m.key_mean.segment(3 * k, 3) = m.mean.segment(3 * point, 3).cast<double>();
+    m.key_basis.middleRows(3 * k, 3) = m.basis.middleRows(3 * point, 3).cast<double>();
+  }
+  m.epsilon = {0.05, 0.1};
+  if (!pmsc::prepare_projection(m).ok()) m.projection.resize(0, 0);  // callers check projection's size
+  return m;
+}
+
+// Key values of a random pose near random_model's subspace, with noise of a random size so that
+// verdicts vary across hit, blend and miss.
+inline Eigen::VectorXf random_keys(std::mt19937& random, const pmsc::PmscModel& m) {
+  std::normal_distribution<float> normal;
+  const Eigen::VectorXf p = Eigen::VectorXf::NullaryExpr(m.basis_size(), [&] { return 3 * normal(random); });
+  const Eigen::VectorXf frame = m.mean + m.basis * p;
+  Eigen::VectorXf keys = pmsc::gather_key_values(m, frame);
+  const float noise = std::uniform_real_distribution<float>(0, 0.15f)(random);
+  for (long i = 0; i < keys.size(); ++i) keys(i) += noise * normal(random);
+  return keys;
+}
+
+// How far apart two reconstructions of the same pose may be (batched and alone, or two batches),
+// value by value: pmsc::reconstruction_rounding_bound times |mean_i| + Σ_j |A_ij p_j|, the size
+// of the sum both round, computed here in double from the pose's coordinates.
+inline Eigen::VectorXd reconstruction_tolerance(const pmsc::PmscModel& m, const Eigen::VectorXd& coordinates) {
+  const Eigen::VectorXd p = coordinates.cast<float>().cast<double>().cwiseAbs();  // as reconstruct uses them
+  return pmsc::reconstruction_rounding_bound(m.basis_size()) *
+         (m.mean.cast<double>().cwiseAbs() + m.basis.cast<double>().cwiseAbs() * p);
 }
 
 }  // namespace animspace::testing

@@ -4,11 +4,11 @@
 #include <random>
 #include <vector>
 
-#include <Eigen/QR>
 #include <gtest/gtest.h>
 
 #include "core/common/kernels.h"
 #include "core/pmsc/pmsc_model.h"
+#include "tests/support/pmsc_fixtures.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -20,40 +20,12 @@ class BatchReconstructionTest : public ::testing::TestWithParam<Kernel> {
   Kernel saved_ = active_kernel();
 };
 
-// A random prepared model: N points × 3 channels, M basis vectors (orthonormalised columns, as
-// PCA gives), K keys, points spread over a few units around an offset mean.
-PmscModel random_model(std::mt19937& random, int points, int basis_size, int keys, bool aligned) {
-  std::normal_distribution<float> normal;
-  PmscModel m;
-  m.channel_count = 3;
-  m.point_count = points;
-  m.control_point_count = points;
-  m.aligned = aligned;
-  m.mean = Eigen::VectorXf::NullaryExpr(3 * points, [&] { return 10.0f + normal(random); });
-  Eigen::MatrixXd a = Eigen::MatrixXd::NullaryExpr(3 * points, basis_size, [&] { return double(normal(random)); });
-  a = a.householderQr().householderQ() * Eigen::MatrixXd::Identity(3 * points, basis_size);
-  m.basis = a.cast<float>();
-  for (int k = 0; k < keys; ++k) m.key_points.push_back(k * (points / keys));
-  m.key_mean.resize(3 * keys);
-  m.key_basis.resize(3 * keys, basis_size);
-  for (int k = 0; k < keys; ++k) {
-    m.key_mean.segment(3 * k, 3) = m.mean.segment(3 * m.key_points[static_cast<size_t>(k)], 3).cast<double>();
-    m.key_basis.middleRows(3 * k, 3) = m.basis.middleRows(3 * m.key_points[static_cast<size_t>(k)], 3).cast<double>();
-  }
-  m.epsilon = {0.05, 0.1};
-  EXPECT_TRUE(prepare_projection(m).ok());
-  return m;
-}
+using testing::random_keys;
 
-// Key values of a pose near the subspace, with noise so that verdicts vary.
-Eigen::VectorXf random_keys(std::mt19937& random, const PmscModel& m) {
-  std::normal_distribution<float> normal;
-  const Eigen::VectorXf p = Eigen::VectorXf::NullaryExpr(m.basis_size(), [&] { return 3 * normal(random); });
-  const Eigen::VectorXf frame = m.mean + m.basis * p;
-  Eigen::VectorXf keys = gather_key_values(m, frame);
-  const float noise = std::uniform_real_distribution<float>(0, 0.15f)(random);
-  for (long i = 0; i < keys.size(); ++i) keys(i) += noise * normal(random);
-  return keys;
+PmscModel random_model(std::mt19937& random, int points, int basis_size, int keys, bool aligned) {
+  PmscModel m = testing::random_model(random, points, basis_size, keys, aligned);
+  EXPECT_GT(m.projection.size(), 0) << "the random model did not prepare";
+  return m;
 }
 
 void check_batches(const PmscModel& m, std::mt19937& random) {
@@ -75,21 +47,20 @@ void check_batches(const PmscModel& m, std::mt19937& random) {
       const PoseEstimate* one = &e;
       float* to = alone.data();
       reconstruct(m, {&one, 1}, {&to, 1});
-      // The scale of each value's sum, in double, independently of both paths.
-      const Eigen::VectorXf p = e.coordinates.cast<float>();
-      const Eigen::VectorXd scale = m.mean.cast<double>().cwiseAbs() +
-                                    m.basis.cast<double>().cwiseAbs() * p.cast<double>().cwiseAbs();
+      // The size of each value's sum, in double, independently of both paths.
+      const Eigen::VectorXd tolerance = testing::reconstruction_tolerance(m, e.coordinates);
       const Eigen::VectorXf& batched = outputs[static_cast<size_t>(b)];
       if (!m.aligned) {
+        const Eigen::VectorXf p = e.coordinates.cast<float>();
         const Eigen::VectorXd exact = m.mean.cast<double>() + m.basis.cast<double>() * p.cast<double>();
         for (long i = 0; i < exact.size(); ++i) {
-          ASSERT_LE(std::abs(batched(i) - exact(i)), bound * scale(i)) << "batch " << batch << " value " << i;
-          ASSERT_LE(std::abs(batched(i) - alone(i)), bound * scale(i)) << "batch " << batch << " value " << i;
+          ASSERT_LE(std::abs(batched(i) - exact(i)), tolerance(i)) << "batch " << batch << " value " << i;
+          ASSERT_LE(std::abs(batched(i) - alone(i)), tolerance(i)) << "batch " << batch << " value " << i;
         }
       } else {
         // The rotation moves each point's rounding error without growing it (plus its own rounding).
         for (long i = 0; i < m.point_count; ++i) {
-          const double allowed = (bound + 1e-6) * scale.segment(3 * i, 3).norm();
+          const double allowed = (1 + 1e-6 / bound) * tolerance.segment(3 * i, 3).norm();
           ASSERT_LE((batched.segment(3 * i, 3) - alone.segment(3 * i, 3)).norm(), allowed) << "point " << i;
         }
       }

@@ -1,0 +1,155 @@
+#include "server/pose_batcher.h"
+
+#include <atomic>
+#include <memory>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tests/support/pmsc_fixtures.h"
+
+namespace animspace::server {
+namespace {
+
+// A pose's inputs and outputs, kept at a fixed address while it waits in the batcher.
+struct Slot {
+  Eigen::VectorXf keys;
+  pmsc::PoseEstimate estimate;
+  Eigen::VectorXf points;
+};
+
+// What the one-pose path gives for `keys`: e_key and f̂.
+pmsc::PoseEstimate alone(const pmsc::PmscModel& m, const Eigen::VectorXf& keys) {
+  pmsc::PoseEstimate e;
+  pmsc::evaluate(m, keys, e);
+  return e;
+}
+
+// The batched answer equals the one-pose answer: e_key bit for bit (it is computed per pose),
+// points within the stated rounding bound of each value's sum.
+void expect_one_pose_answer(const pmsc::PmscModel& m, const Slot& slot) {
+  const pmsc::PoseEstimate one = alone(m, slot.keys);
+  ASSERT_EQ(slot.estimate.key_point_error, one.key_point_error);
+  ASSERT_EQ(pmsc::decide(slot.estimate.key_point_error, m.epsilon).status,
+            pmsc::decide(one.key_point_error, m.epsilon).status);
+  const Eigen::VectorXd tolerance = testing::reconstruction_tolerance(m, one.coordinates);
+  for (long i = 0; i < tolerance.size(); ++i) {
+    ASSERT_LE(std::abs(slot.points(i) - one.points(i)), tolerance(i)) << "value " << i;
+  }
+}
+
+TEST(PoseBatcher, ConcurrentCallersGetTheOnePoseAnswersOfTheirOwnPoses) {
+  std::mt19937 random(21);
+  const pmsc::PmscModel a = testing::random_model(random, 500, 8, 16, false);
+  const pmsc::PmscModel b = testing::random_model(random, 300, 5, 10, false);
+  ASSERT_GT(a.projection.size(), 0);
+  ASSERT_GT(b.projection.size(), 0);
+  PoseBatcher batcher({std::chrono::microseconds(0), 7});
+  constexpr int kThreads = 6, kRounds = 25;
+  std::vector<std::thread> threads;
+  std::atomic<int> failures{0};
+  for (int t = 0; t < kThreads; ++t) {
+    threads.emplace_back([&, t] {
+      std::mt19937 mine(100 + static_cast<unsigned>(t));
+      for (int round = 0; round < kRounds; ++round) {
+        const pmsc::PmscModel& m = (round + t) % 3 == 0 ? b : a;
+        // Groups of 1 to 20 poses: some larger than max_batch, so they span batches.
+        std::vector<std::unique_ptr<Slot>> slots(1 + mine() % 20);
+        std::vector<PoseBatcher::Pose> poses;
+        for (auto& slot : slots) {
+          slot = std::make_unique<Slot>();
+          slot->keys = testing::random_keys(mine, m);
+          slot->points.resize(m.mean.size());
+          poses.push_back({&slot->keys, &slot->estimate, slot->points.data()});
+        }
+        PoseBatcher::Group group;
+        batcher.enqueue(m, poses, group);
+        batcher.await(group);
+        if (group.pending()) ++failures;
+        for (const auto& slot : slots) {
+          expect_one_pose_answer(m, *slot);
+          if (::testing::Test::HasFatalFailure()) {
+            ++failures;
+            return;
+          }
+        }
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  EXPECT_EQ(failures.load(), 0);
+}
+
+TEST(PoseBatcher, AWaitingPoseIsTakenIntoAnotherCallersBatch) {
+  std::mt19937 random(22);
+  const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  PoseBatcher batcher({std::chrono::microseconds(0), 64});
+  Slot first, second;
+  for (Slot* slot : {&first, &second}) {
+    slot->keys = testing::random_keys(random, m);
+    slot->points.resize(m.mean.size());
+  }
+  const PoseBatcher::Pose p1{&first.keys, &first.estimate, first.points.data()};
+  const PoseBatcher::Pose p2{&second.keys, &second.estimate, second.points.data()};
+  PoseBatcher::Group g1, g2;
+  batcher.enqueue(m, {&p1, 1}, g1);
+  batcher.enqueue(m, {&p2, 1}, g2);
+  // One await reconstructs everything waiting for the model: the second group is done without
+  // anyone awaiting it.
+  batcher.await(g1);
+  EXPECT_FALSE(g2.pending());
+  expect_one_pose_answer(m, first);
+  expect_one_pose_answer(m, second);
+  batcher.await(g2);  // returns at once
+}
+
+TEST(PoseBatcher, WithdrawnPosesAreNeverWritten) {
+  std::mt19937 random(23);
+  const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  PoseBatcher batcher({std::chrono::microseconds(0), 64});
+  Slot kept, dropped;
+  for (Slot* slot : {&kept, &dropped}) {
+    slot->keys = testing::random_keys(random, m);
+    slot->points = Eigen::VectorXf::Constant(m.mean.size(), -7.0f);
+  }
+  const PoseBatcher::Pose p1{&dropped.keys, &dropped.estimate, dropped.points.data()};
+  const PoseBatcher::Pose p2{&kept.keys, &kept.estimate, kept.points.data()};
+  {
+    PoseBatcher::Group gone;
+    batcher.enqueue(m, {&p1, 1}, gone);
+  }  // destroyed unawaited (a stream frame skipped after a cancel): withdrawn
+  PoseBatcher::Group group;
+  batcher.enqueue(m, {&p2, 1}, group);
+  batcher.await(group);
+  expect_one_pose_answer(m, kept);
+  EXPECT_TRUE((dropped.points.array() == -7.0f).all());
+}
+
+TEST(PoseBatcher, ADelayLetsABatchFillFromAnotherThread) {
+  std::mt19937 random(24);
+  const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  // A delay far longer than the test: the batch can only start because it filled.
+  PoseBatcher batcher({std::chrono::microseconds(60'000'000), 2});
+  Slot first, second;
+  for (Slot* slot : {&first, &second}) {
+    slot->keys = testing::random_keys(random, m);
+    slot->points.resize(m.mean.size());
+  }
+  const PoseBatcher::Pose p1{&first.keys, &first.estimate, first.points.data()};
+  const PoseBatcher::Pose p2{&second.keys, &second.estimate, second.points.data()};
+  PoseBatcher::Group g1, g2;
+  batcher.enqueue(m, {&p1, 1}, g1);
+  std::thread late([&] {
+    batcher.enqueue(m, {&p2, 1}, g2);
+    batcher.await(g2);
+  });
+  batcher.await(g1);
+  late.join();
+  expect_one_pose_answer(m, first);
+  expect_one_pose_answer(m, second);
+}
+
+}  // namespace
+}  // namespace animspace::server
