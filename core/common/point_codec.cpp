@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include <cpuid.h>
 #include <immintrin.h>
@@ -268,28 +269,50 @@ Result<float> encode_fixed16(std::span<const float> values, size_t channels, std
     if (static_cast<double>(step) * 65535.0 < range) step = std::nextafter(step, std::numeric_limits<float>::infinity());
     scale[c] = step;
   }
-  // Phase 3: quantise, and measure what the decoder will give back.
-  float max_error = 0.0f;
-  for (size_t i = 0; i < values.size(); ++i) {
-    const size_t c = i % channels;
-    const float v = values[i];
-    double q = 0.0;
-    if (scale[c] > 0.0f) {
-      q = std::nearbyint((static_cast<double>(v) - static_cast<double>(offset[c])) / static_cast<double>(scale[c]));
+  // Phase 3: quantise, and measure what the decoder will give back. This is the per-value loop of
+  // every fixed16 answer the server sends, so it is kept to arithmetic: (v − min)/step ≥ 0, so
+  // rounding to nearest is ⌊x + ½⌋ (halves go up), and the error is taken exactly in double (the
+  // difference of two floats is exact unless their exponents lie 29 binades apart); only the
+  // largest is rounded up to float32 at the end.
+  std::vector<double> inverse(channels);
+  for (size_t c = 0; c < channels; ++c) inverse[c] = scale[c] > 0.0f ? 1.0 / static_cast<double>(scale[c]) : 0.0;
+  double worst = 0.0;
+  size_t worst_at = 0;
+  bool finite = true;
+  for (size_t first = 0; first < values.size(); first += channels) {
+    for (size_t c = 0; c < channels; ++c) {
+      const size_t i = first + c;
+      const float v = values[i];
+      const double x = (static_cast<double>(v) - static_cast<double>(offset[c])) * inverse[c];
+      // (v − min) ≤ range ≤ 65535·step: x ≤ 65535 up to the product's rounding.
+      const auto bits = static_cast<uint16_t>(std::min(x + 0.5, 65535.0));
+      std::memcpy(out.data() + 2 * i, &bits, sizeof bits);
+      const float decoded = fixed16_value(scale[c], offset[c], bits);
+      finite = finite && std::isfinite(decoded);
+      const double difference = std::fabs(static_cast<double>(decoded) - static_cast<double>(v));
+      if (difference > worst) {
+        worst = difference;
+        worst_at = i;
+      }
     }
-    // (v − min) ≤ range ≤ 65535·step, and rounding is monotone: q is in range by construction.
-    assert(q >= 0.0 && q <= 65535.0);
-    const auto bits = static_cast<uint16_t>(q);
-    std::memcpy(out.data() + 2 * i, &bits, sizeof bits);
-    const float decoded = fixed16_value(scale[c], offset[c], bits);
-    if (!std::isfinite(decoded)) {
-      return make_error(ErrorCode::kOutOfRange, where(i, channels) + " is " + format_number(v) +
-                                                    ": channel " + std::to_string(c) +
-                                                    "'s range is too wide for fixed16 (it decodes beyond float32)");
-    }
-    max_error = std::max(max_error, abs_difference_rounded_up(decoded, v));
   }
-  return max_error;
+  if (!finite) {
+    for (size_t i = 0; i < values.size(); ++i) {
+      const size_t c = i % channels;
+      uint16_t bits;
+      std::memcpy(&bits, out.data() + 2 * i, sizeof bits);
+      if (!std::isfinite(fixed16_value(scale[c], offset[c], bits))) {
+        return make_error(ErrorCode::kOutOfRange, where(i, channels) + " is " + format_number(values[i]) +
+                                                      ": channel " + std::to_string(c) +
+                                                      "'s range is too wide for fixed16 (it decodes beyond float32)");
+      }
+    }
+  }
+  if (worst == 0.0) return 0.0f;
+  const size_t c = worst_at % channels;
+  uint16_t bits;
+  std::memcpy(&bits, out.data() + 2 * worst_at, sizeof bits);
+  return abs_difference_rounded_up(fixed16_value(scale[c], offset[c], bits), values[worst_at]);
 }
 
 void decode_fixed16(std::span<const char> in, std::span<const float> scale, std::span<const float> offset,

@@ -64,7 +64,7 @@ void decode_float16(std::span<const char> in, std::span<float> out,
 //   scale[c]  = (max_c − min_c)/65535, rounded up to float32 (so 65535·scale[c] ≥ max_c − min_c
 //               and every q lands in [0, 65535]); 0 when max_c == min_c (every q is 0 and the
 //               channel decodes exactly),
-//   q         = round((v − offset[c])/scale[c]), computed in double.
+//   q         = round((v − offset[c])/scale[c]), computed in double (halves round up).
 // Error bound for every value v of channel c (stated here, checked by brute force in the tests):
 //   |decoded − v| ≤ scale[c]/2 + 2^-23·(max_c − min_c + max(|min_c|, |max_c|)),
 // the quantisation's half step plus the two float32 roundings of the decoder.
