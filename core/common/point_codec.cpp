@@ -243,18 +243,28 @@ Result<float> encode_fixed16(std::span<const float> values, size_t channels, std
                              std::span<float> scale, std::span<float> offset) {
   assert(channels >= 1 && values.size() % channels == 0 && out.size() == 2 * values.size());
   assert(scale.size() == channels && offset.size() == channels);
-  // Phase 1: every value finite; each channel's min (in offset) and max (in scale, for now).
-  std::fill(offset.begin(), offset.end(), std::numeric_limits<float>::infinity());
-  std::fill(scale.begin(), scale.end(), -std::numeric_limits<float>::infinity());
-  for (size_t i = 0; i < values.size(); ++i) {
-    const float v = values[i];
-    if (!std::isfinite(v)) {
-      return make_error(ErrorCode::kOutOfRange,
-                        where(i, channels) + " is " + (std::isnan(v) ? "NaN" : "infinite") + "; expected finite values");
+  // Phase 1: every value finite; each channel's min (in offset) and max (in scale, for now). One
+  // channel at a time with the extremes in registers: this loop runs over every fixed16 answer.
+  bool finite = true;
+  for (size_t c = 0; c < channels; ++c) {
+    float low = std::numeric_limits<float>::infinity(), high = -low;
+    for (size_t i = c; i < values.size(); i += channels) {
+      const float v = values[i];
+      finite = finite && std::isfinite(v);
+      low = std::min(low, v);
+      high = std::max(high, v);
     }
-    const size_t c = i % channels;
-    offset[c] = std::min(offset[c], v);
-    scale[c] = std::max(scale[c], v);
+    offset[c] = low;
+    scale[c] = high;
+  }
+  if (!finite) {
+    for (size_t i = 0; i < values.size(); ++i) {
+      if (!std::isfinite(values[i])) {
+        return make_error(ErrorCode::kOutOfRange, where(i, channels) + " is " +
+                                                      (std::isnan(values[i]) ? "NaN" : "infinite") +
+                                                      "; expected finite values");
+      }
+    }
   }
   // Phase 2: the step of each channel, rounded up so that 65535 steps cover its range. The
   // range is taken in double: max − min of two float32 may exceed FLT_MAX.
@@ -274,17 +284,15 @@ Result<float> encode_fixed16(std::span<const float> values, size_t channels, std
   // rounding to nearest is ⌊x + ½⌋ (halves go up), and the error is taken exactly in double (the
   // difference of two floats is exact unless their exponents lie 29 binades apart); only the
   // largest is rounded up to float32 at the end.
-  std::vector<double> inverse(channels);
-  for (size_t c = 0; c < channels; ++c) inverse[c] = scale[c] > 0.0f ? 1.0 / static_cast<double>(scale[c]) : 0.0;
   double worst = 0.0;
   size_t worst_at = 0;
-  bool finite = true;
-  for (size_t first = 0; first < values.size(); first += channels) {
-    for (size_t c = 0; c < channels; ++c) {
-      const size_t i = first + c;
+  for (size_t c = 0; c < channels; ++c) {
+    const double low = offset[c];
+    const double inverse = scale[c] > 0.0f ? 1.0 / static_cast<double>(scale[c]) : 0.0;
+    for (size_t i = c; i < values.size(); i += channels) {
       const float v = values[i];
-      const double x = (static_cast<double>(v) - static_cast<double>(offset[c])) * inverse[c];
       // (v − min) ≤ range ≤ 65535·step: x ≤ 65535 up to the product's rounding.
+      const double x = (static_cast<double>(v) - low) * inverse;
       const auto bits = static_cast<uint16_t>(std::min(x + 0.5, 65535.0));
       std::memcpy(out.data() + 2 * i, &bits, sizeof bits);
       const float decoded = fixed16_value(scale[c], offset[c], bits);
