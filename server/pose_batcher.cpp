@@ -40,10 +40,13 @@ void PoseBatcher::await(Group& group) {
   while (group.remaining_ > 0) {
     auto lane = lanes_.find(group.model_);
     assert(lane != lanes_.end());
-    if (!lane->second.reconstructing && !lane->second.waiting.empty()) {
-      run_batch(lock, *group.model_, lane->second);
+    const size_t waiting = lane->second.waiting.size();
+    if (lane->second.batching || waiting == 0) {
+      changed_.wait(lock);  // a batch is being taken or holds this group's poses
+    } else if (waiting >= options_.min_batch || options_.delay.count() > 0) {
+      compute(lock, *group.model_, lane->second, nullptr);
     } else {
-      changed_.wait(lock);
+      compute(lock, *group.model_, lane->second, &group);
     }
   }
 }
@@ -57,23 +60,40 @@ void PoseBatcher::withdraw(Group& group) {
   const auto removed = std::remove_if(waiting.begin(), waiting.end(), [&](const Job& job) { return job.group == &group; });
   group.remaining_ -= static_cast<size_t>(waiting.end() - removed);
   waiting.erase(removed, waiting.end());
-  const bool taken = group.remaining_ > 0;
-  if (!taken && !lane->second.reconstructing && waiting.empty()) lanes_.erase(lane);
-  // The rest is in a batch being reconstructed into this group's memory: wait for it (the batch
+  if (lane->second.computing == 0 && waiting.empty()) lanes_.erase(lane);
+  // The rest is being reconstructed into this group's memory: wait for it (the thread doing so
   // erases the lane when it leaves it empty).
   changed_.wait(lock, [&] { return group.remaining_ == 0; });
 }
 
-void PoseBatcher::run_batch(std::unique_lock<std::mutex>& lock, const pmsc::PmscModel& model, Lane& lane) {
-  lane.reconstructing = true;
-  if (options_.delay.count() > 0 && lane.waiting.size() < options_.max_batch) {
-    changed_.wait_for(lock, options_.delay, [&] { return lane.waiting.size() >= options_.max_batch; });
+void PoseBatcher::compute(std::unique_lock<std::mutex>& lock, const pmsc::PmscModel& model, Lane& lane,
+                          const Group* own) {
+  std::vector<Job> batch;
+  if (own == nullptr) {
+    lane.batching = true;
+    if (options_.delay.count() > 0 && lane.waiting.size() < options_.max_batch) {
+      changed_.wait_for(lock, options_.delay, [&] { return lane.waiting.size() >= options_.max_batch; });
+    }
+    const size_t size = std::min(lane.waiting.size(), options_.max_batch);
+    batch.assign(lane.waiting.begin(), lane.waiting.begin() + static_cast<long>(size));
+    lane.waiting.erase(lane.waiting.begin(), lane.waiting.begin() + static_cast<long>(size));
+  } else {
+    // Too few poses wait for one product to pay: this caller computes its own, and the others
+    // theirs, on the other cores.
+    const auto mine = std::stable_partition(lane.waiting.begin(), lane.waiting.end(),
+                                            [&](const Job& job) { return job.group == own; });
+    const size_t size = std::min(static_cast<size_t>(mine - lane.waiting.begin()), options_.max_batch);
+    if (size == 0) {  // its poses are in a batch that is finishing: nothing to take
+      changed_.wait(lock);
+      return;
+    }
+    batch.assign(lane.waiting.begin(), lane.waiting.begin() + static_cast<long>(size));
+    lane.waiting.erase(lane.waiting.begin(), lane.waiting.begin() + static_cast<long>(size));
   }
-  const size_t size = std::min(lane.waiting.size(), options_.max_batch);
-  std::vector<Job> batch(lane.waiting.begin(), lane.waiting.begin() + static_cast<long>(size));
-  lane.waiting.erase(lane.waiting.begin(), lane.waiting.begin() + static_cast<long>(size));
+  ++lane.computing;
   lock.unlock();
 
+  const size_t size = batch.size();
   std::vector<const pmsc::PoseEstimate*> estimates(size);
   std::vector<float*> destinations(size);
   for (size_t i = 0; i < size; ++i) {
@@ -85,8 +105,9 @@ void PoseBatcher::run_batch(std::unique_lock<std::mutex>& lock, const pmsc::Pmsc
 
   lock.lock();
   for (const Job& job : batch) --job.group->remaining_;
-  lane.reconstructing = false;
-  if (lane.waiting.empty()) lanes_.erase(&model);
+  --lane.computing;
+  if (own == nullptr) lane.batching = false;
+  if (lane.computing == 0 && lane.waiting.empty()) lanes_.erase(&model);
   changed_.notify_all();
 }
 

@@ -4,9 +4,12 @@
 // than once per pose (core/pmsc/pmsc_model.h, `reconstruct`).
 //
 // A caller enqueues its poses (cheap, any thread) and later awaits them on a pool thread. There
-// is no batching thread: whoever awaits while nobody is reconstructing for that model takes what
+// is no batching thread: whoever awaits while nobody is taking a batch for that model takes what
 // is waiting — up to `max_batch` poses, oldest first — and reconstructs it for everyone, so
-// waiting never depends on another pool thread being free. By default that is all the batching
+// waiting never depends on another pool thread being free. Fewer than `min_batch` poses gain
+// nothing from one product (below 4 columns OpenBLAS's product is one matrix–vector product per
+// pose, core/common/kernels.h), so then each caller computes only its own, and callers on
+// different cores run in parallel instead of one of them sleeping. By default that is all the batching
 // there is: only poses already waiting join a batch, and no pose waits for a batch to fill.
 // `delay` lets an operator trade latency for throughput (Triton's max_queue_delay_microseconds):
 // the thread that takes a batch first waits up to `delay` for it to reach `max_batch`.
@@ -26,6 +29,7 @@
 
 #include <Eigen/Core>
 
+#include "core/common/kernels.h"
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::server {
@@ -35,6 +39,7 @@ class PoseBatcher {
   struct Options {
     std::chrono::microseconds delay{0};
     size_t max_batch = 64;  // ≥ 1
+    size_t min_batch = static_cast<size_t>(kBlasGemmMinColumns);
   };
 
   // One pose to estimate: its key values (K·D), where its estimate goes, and where f̂ goes
@@ -84,11 +89,13 @@ class PoseBatcher {
   };
   struct Lane {
     std::vector<Job> waiting;  // oldest first
-    bool reconstructing = false;
+    bool batching = false;     // a thread is taking or computing a batch of everyone's poses
+    int computing = 0;         // threads computing poses taken from this lane
   };
 
-  // Takes one batch from `lane` and reconstructs it; the lock is released while it computes.
-  void run_batch(std::unique_lock<std::mutex>& lock, const pmsc::PmscModel& model, Lane& lane);
+  // Takes a batch from `lane` — everyone's poses, or only `own`'s when not null — and
+  // reconstructs it; the lock is released while it computes.
+  void compute(std::unique_lock<std::mutex>& lock, const pmsc::PmscModel& model, Lane& lane, const Group* own);
 
   const Options options_;
   mutable std::mutex mutex_;
