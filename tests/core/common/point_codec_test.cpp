@@ -56,7 +56,7 @@ uint16_t nearest_half(float v) {
 
 std::vector<uint16_t> halves_of(const std::vector<char>& bytes) {
   std::vector<uint16_t> out(bytes.size() / 2);
-  std::memcpy(out.data(), bytes.data(), bytes.size());
+  if (!bytes.empty()) std::memcpy(out.data(), bytes.data(), bytes.size());  // an empty vector's data() may be null
   return out;
 }
 

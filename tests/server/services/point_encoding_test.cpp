@@ -40,13 +40,13 @@ v1::PointArray float32_array(const float* values, uint32_t count, uint32_t chann
 
 std::vector<float> float32_values(const v1::PointArray& a) {
   std::vector<float> out(a.data().size() / 4);
-  std::memcpy(out.data(), a.data().data(), a.data().size());
+  if (!out.empty()) std::memcpy(out.data(), a.data().data(), a.data().size());
   return out;
 }
 
 std::vector<uint16_t> uint16_values(const v1::PointArray& a) {
   std::vector<uint16_t> out(a.data().size() / 2);
-  std::memcpy(out.data(), a.data().data(), a.data().size());
+  if (!out.empty()) std::memcpy(out.data(), a.data().data(), a.data().size());
   return out;
 }
 
