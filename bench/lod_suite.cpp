@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
@@ -61,6 +62,7 @@ struct Dataset {
   as::AnimationSpaceModel model;
   as::AnimationSpaceMetrics metrics;
   std::vector<as::TransformList> poses;  // where the error is measured
+  std::vector<as::TransformList> statistics;  // the poses P is built from (all a simplifier may see)
   double diagonal = 1;
 };
 
@@ -128,6 +130,112 @@ Simplified openmesh_quadric(const as::AnimationSpaceModel& model, int target_ver
   decimater.add(quadric);
   decimater.add(flipping);
   decimater.module(quadric).unset_max_err();
+  decimater.initialize();
+  decimater.decimate_to(static_cast<size_t>(target_vertices));
+  std::vector<int32_t> keep;
+  for (const Mesh::VertexHandle v : mesh.vertices()) {
+    if (!mesh.status(v).deleted()) keep.push_back(v.idx());
+  }
+  std::vector<std::array<int32_t, 3>> faces;
+  for (const Mesh::FaceHandle f : mesh.faces()) {
+    if (mesh.status(f).deleted()) continue;
+    std::array<int32_t, 3> corners{};
+    int c = 0;
+    for (const Mesh::VertexHandle v : mesh.fv_range(f)) corners[static_cast<size_t>(c++)] = v.idx();
+    faces.push_back(corners);
+  }
+  std::sort(keep.begin(), keep.end());
+  Simplified s{subset(model, keep, faces), 0};
+  s.build_seconds = seconds_since(start);
+  return s;
+}
+
+// Deformation-sensitive decimation (Mohr & Gleicher 2003): Garland–Heckbert quadrics summed over
+// sampled poses. Every vertex keeps one area-weighted plane quadric per pose (the planes of its
+// faces posed by that pose's skinning), a collapse v0 → v1 costs Σ_k (Q_k(v0) + Q_k(v1)) at v1's
+// posed positions, and merged vertices add their quadrics — OpenMesh's ModQuadricT with the pose
+// sum inside. The poses are the ones P is built from, so it sees what our simplifier sees.
+template <class MeshT>
+class ModMultiPoseQuadricT : public OpenMesh::Decimater::ModBaseT<MeshT> {
+ public:
+  DECIMATING_MODULE(ModMultiPoseQuadricT, MeshT, MultiPoseQuadric);
+
+  explicit ModMultiPoseQuadricT(MeshT& mesh) : Base(mesh, false) {}
+
+  // posed[k] is every vertex in pose k (V × 3); set before initialize().
+  void set_poses(std::vector<lod::Points3d> posed) { posed_ = std::move(posed); }
+
+  void initialize() override {
+    const size_t S = posed_.size();
+    const size_t V = Base::mesh().n_vertices();
+    quadrics_.assign(V * S, OpenMesh::Geometry::Quadricd());
+    for (const typename MeshT::FaceHandle f : Base::mesh().faces()) {
+      std::array<int, 3> c{};
+      int i = 0;
+      for (const typename MeshT::VertexHandle v : Base::mesh().fv_range(f)) c[static_cast<size_t>(i++)] = v.idx();
+      for (size_t k = 0; k < S; ++k) {
+        const lod::Points3d& x = posed_[k];
+        const Eigen::Vector3d a = x.row(c[0]).transpose(), b = x.row(c[1]).transpose(), e = x.row(c[2]).transpose();
+        Eigen::Vector3d n = (b - a).cross(e - a);
+        const double area = 0.5 * n.norm();
+        if (!(area > 0)) continue;
+        n.normalize();
+        OpenMesh::Geometry::Quadricd q(n.x(), n.y(), n.z(), -n.dot(a));
+        q *= area;
+        for (const int v : c) quadrics_[static_cast<size_t>(v) * S + k] += q;
+      }
+    }
+  }
+
+  float collapse_priority(const CollapseInfo& ci) override {
+    const size_t S = posed_.size();
+    const size_t v0 = static_cast<size_t>(ci.v0.idx()), v1 = static_cast<size_t>(ci.v1.idx());
+    double error = 0;
+    for (size_t k = 0; k < S; ++k) {
+      OpenMesh::Geometry::Quadricd q = quadrics_[v0 * S + k];
+      q += quadrics_[v1 * S + k];
+      const lod::Points3d& x = posed_[k];
+      error += q(OpenMesh::Vec3d(x(ci.v1.idx(), 0), x(ci.v1.idx(), 1), x(ci.v1.idx(), 2)));
+    }
+    return static_cast<float>(error);
+  }
+
+  void postprocess_collapse(const CollapseInfo& ci) override {
+    const size_t S = posed_.size();
+    for (size_t k = 0; k < S; ++k) {
+      quadrics_[static_cast<size_t>(ci.v1.idx()) * S + k] += quadrics_[static_cast<size_t>(ci.v0.idx()) * S + k];
+    }
+  }
+
+ private:
+  std::vector<lod::Points3d> posed_;
+  std::vector<OpenMesh::Geometry::Quadricd> quadrics_;  // vertex-major, one per pose
+};
+
+Simplified multi_pose_quadric(const Dataset& d, int target_vertices) {
+  using Mesh = OpenMesh::TriMesh_ArrayKernelT<>;
+  const auto start = std::chrono::steady_clock::now();
+  const as::AnimationSpaceModel& model = d.model;
+  const lod::Points3d rest = posed(model, model.skeleton.rest);
+  Mesh mesh;
+  for (Eigen::Index v = 0; v < rest.rows(); ++v) {
+    mesh.add_vertex(Mesh::Point(static_cast<float>(rest(v, 0)), static_cast<float>(rest(v, 1)), static_cast<float>(rest(v, 2))));
+  }
+  for (Eigen::Index f = 0; f < model.faces.rows(); ++f) {
+    mesh.add_face(Mesh::VertexHandle(model.faces(f, 0)), Mesh::VertexHandle(model.faces(f, 1)),
+                  Mesh::VertexHandle(model.faces(f, 2)));
+  }
+  mesh.request_face_normals();
+  mesh.update_face_normals();
+  std::vector<lod::Points3d> posed_statistics;
+  posed_statistics.reserve(d.statistics.size());
+  for (const as::TransformList& G : d.statistics) posed_statistics.push_back(posed(model, G));
+  OpenMesh::Decimater::DecimaterT<Mesh> decimater(mesh);
+  typename ModMultiPoseQuadricT<Mesh>::Handle quadric;
+  OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle flipping;
+  decimater.add(quadric);
+  decimater.add(flipping);
+  decimater.module(quadric).set_poses(std::move(posed_statistics));
   decimater.initialize();
   decimater.decimate_to(static_cast<size_t>(target_vertices));
   std::vector<int32_t> keep;
@@ -221,6 +329,7 @@ std::optional<Dataset> cow_dataset(const std::filesystem::path& data) {
     return std::nullopt;
   }
   d.metrics = std::move(*metrics);
+  d.statistics = statistics;
   d.diagonal = rest_diagonal(d.model);
   return d;
 }
@@ -251,6 +360,7 @@ std::optional<Dataset> horse_dataset(const std::filesystem::path& data, const Sk
   d.model = std::move(*model);
   d.model.faces = sequence->reference.F;
   d.poses = skeleton->training_poses;
+  d.statistics = d.poses;
   auto metrics = as::metrics_from_poses(d.model.skeleton, d.poses);
   if (!metrics) {
     std::printf("horse-gallop: %s (skipped)\n", metrics.error().message.c_str());
@@ -282,8 +392,18 @@ nlohmann::json run_dataset(const Dataset& d) {
                     {"max_error_over_diag", e.max},
                     {"build_seconds", seconds}});
   };
-  for (const bool influences : {true, false}) {
+  struct Variant {
+    const char* method;
+    lod::CollapseCost cost;
+    bool influences;
+  };
+  for (const Variant& variant : {Variant{"animspace-lod", lod::CollapseCost::kMemoryless, true},
+                                 Variant{"animspace-lod-no-influence", lod::CollapseCost::kMemoryless, false},
+                                 Variant{"animspace-lod-quadric", lod::CollapseCost::kQuadric, true},
+                                 Variant{"animspace-lod-quadric-no-influence", lod::CollapseCost::kQuadric, false}}) {
+    const bool influences = variant.influences;
     lod::SimplifyOptions options;
+    options.cost = variant.cost;
     options.influence_simplification = influences;
     const auto start = std::chrono::steady_clock::now();
     auto pm = lod::build_progressive_mesh(d.model, d.metrics, options);
@@ -299,13 +419,13 @@ nlohmann::json run_dataset(const Dataset& d) {
       ++removals;
       if (step.cost < 1e-6 * d.diagonal) ++negligible;
     }
-    std::printf("  progressive mesh%s: %zu steps (%ld influence removals, %ld of them below 1e-6 of the diagonal), "
+    std::printf("  %s: %zu steps (%ld influence removals, %ld of them below 1e-6 of the diagonal), "
                 "base %d vertices, %d levels, built in %.3f s\n",
-                influences ? "" : " (no influence simplification)", pm->steps.size(), removals, negligible,
+                variant.method, pm->steps.size(), removals, negligible,
                 pm->base.vertex_count(), levels.count(), seconds);
     for (const double fraction : kFractions) {
       const int target = static_cast<int>(std::lround(fraction * V));
-      row(influences ? "animspace-lod" : "animspace-lod-no-influence", fraction,
+      row(variant.method, fraction,
           lod::simplify_to_vertex_count(*pm, target), seconds);
     }
   }
@@ -313,6 +433,11 @@ nlohmann::json run_dataset(const Dataset& d) {
     const int target = static_cast<int>(std::lround(fraction * V));
     const Simplified s = openmesh_quadric(d.model, target);
     row("openmesh-quadric-rest", fraction, s.model, s.build_seconds);
+  }
+  for (const double fraction : kFractions) {
+    const int target = static_cast<int>(std::lround(fraction * V));
+    const Simplified s = multi_pose_quadric(d, target);
+    row("multi-pose-quadric", fraction, s.model, s.build_seconds);
   }
   for (const double fraction : kFractions) {
     const int target = static_cast<int>(std::lround(fraction * V));

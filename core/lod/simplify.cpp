@@ -14,6 +14,7 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
 #include "core/lod/influence_simplification.h"
+#include "core/lod/surface_quadrics.h"
 
 namespace animspace::lod {
 
@@ -73,6 +74,10 @@ class Simplifier {
     rest_.resize(static_cast<size_t>(V));
     normalised_.resize(C_.rows(), V);
     for (int v = 0; v < V; ++v) update_vertex_geometry(v);
+    if (options_.cost == CollapseCost::kQuadric) {
+      quadrics_.emplace(normalised_, model_.faces);
+      vertex_error_.assign(static_cast<size_t>(V), 0.0);  // every vertex on its own planes
+    }
     return Status::Ok();
   }
 
@@ -81,17 +86,22 @@ class Simplifier {
     collapse_version_.assign(static_cast<size_t>(V), 0);
     influence_version_.assign(static_cast<size_t>(V), 0);
     pending_removal_.resize(static_cast<size_t>(V));
-    for (int v = 0; v < V; ++v) schedule_influence(v);
-    // Negligible removals first, with no neighbour updates (SimplifyOptions::negligible_cost).
+    // Negligible removals first, in order of their L2,2 motion, with no neighbour updates
+    // (SimplifyOptions::negligible_cost): what they move is below any error either cost sees.
     Eigen::AlignedBox3d box;
     for (const Eigen::Vector3d& r : rest_) box.extend(r);
-    const double negligible = options_.negligible_cost * box.diagonal().norm();
+    negligible_ = options_.negligible_cost * box.diagonal().norm();
+    prepass_ = true;
+    for (int v = 0; v < V; ++v) schedule_influence(v);
     while (const Candidate* removal = top(removals_, influence_version_)) {
-      if (!(removal->cost < negligible)) break;
+      if (!(removal->deviation < negligible_)) break;
       const Candidate c = *removal;
       removals_.pop();
       apply_influence_removal(c, /*update_neighbours=*/false);
     }
+    prepass_ = false;
+    removals_ = Queue();
+    for (int v = 0; v < V; ++v) schedule_influence(v);
     for (int v = 0; v < V; ++v) schedule_collapse(v);
     const int64_t collapsible = std::max(0, V - options_.min_vertices);
     for (size_t step = 0;; ++step) {
@@ -132,7 +142,8 @@ class Simplifier {
 
  private:
   struct Candidate {
-    double cost = 0;
+    double cost = 0;       // the queue's order: SimplifyOptions::cost's units
+    double deviation = 0;  // the step's memoryless deviation (Simplification::cost)
     int32_t vertex = -1;
     int32_t target = -1;
     uint32_t version = 0;
@@ -346,20 +357,31 @@ class Simplifier {
         phi += step;
       }
     }
-    // Cheapest first, so OpenMesh's topology test runs only until one candidate passes.
-    std::vector<std::pair<double, int>>& costs = scratch_.costs;
+    // Cheapest first, so OpenMesh's topology test runs only until one candidate passes. The
+    // memoryless deviation is computed for every candidate either way: its guards (folds in the
+    // flattening, the normal guard) decide what is allowed, and it is the step's recorded cost.
+    std::vector<CollapseOption>& costs = scratch_.costs;
     costs.clear();
     for (int m = 0; m < n; ++m) {
       if (ring.boundary && m != 0 && m != n - 1) continue;  // boundary vertices move along the boundary
-      const std::optional<double> cost = collapse_cost(u, ring, m, q, gram);
-      if (cost) costs.emplace_back(*cost, m);
+      const std::optional<double> deviation = collapse_cost(u, ring, m, q, gram);
+      if (!deviation) continue;
+      const int v = ring.vertices[static_cast<size_t>(m)];
+      // Quadric cost: the merged vertex, kept at y_v, against every original plane u and v
+      // stand for (Q_u + Q_v)(y_v); v's part is its error so far.
+      const double cost = quadrics_ ? quadrics_->error(u, normalised_.col(v)) + vertex_error_[static_cast<size_t>(v)]
+                                    : *deviation;
+      costs.push_back({cost, *deviation, m});
     }
-    std::sort(costs.begin(), costs.end());
+    std::sort(costs.begin(), costs.end(), [](const CollapseOption& a, const CollapseOption& b) {
+      return a.cost != b.cost ? a.cost < b.cost : a.m < b.m;
+    });
     Candidate best;
-    for (const auto& [cost, m] : costs) {
-      if (!collapse_legal(ring.outgoing[static_cast<size_t>(m)])) continue;
-      best.cost = cost;
-      best.target = ring.vertices[static_cast<size_t>(m)];
+    for (const CollapseOption& option : costs) {
+      if (!collapse_legal(ring.outgoing[static_cast<size_t>(option.m)])) continue;
+      best.cost = option.cost;
+      best.deviation = option.deviation;
+      best.target = ring.vertices[static_cast<size_t>(option.m)];
       break;
     }
     if (best.target < 0) return;
@@ -368,17 +390,48 @@ class Simplifier {
     collapses_.push(best);
   }
 
+  // The removal to queue for v. Memoryless (and in the negligible pre-pass): the bone whose
+  // removal moves v least in L2,2, costed by that motion (§6.3.1). Quadric: the bone whose
+  // removal raises Q_v least, costed by that rise — the units of a collapse's cost, so that one
+  // queue orders both by the harm they do to the original surface (issue #26). A motion within
+  // the planes v stands for costs nothing there, as it changes no surface point's distance.
   void schedule_influence(int v) {
     ++influence_version_[static_cast<size_t>(v)];
     pending_removal_[static_cast<size_t>(v)].reset();
-    if (!influences_ || state_.vertex(v).influence_count() < 2) return;
-    Result<InfluenceRemoval> removal = influences_->cheapest_removal(state_.vertex(v));
-    if (!removal.ok()) return;  // a solver failure leaves the vertex as it is
-    pending_removal_[static_cast<size_t>(v)] = *removal;
+    const VertexState& state = state_.vertex(v);
+    if (!influences_ || state.influence_count() < 2) return;
+    std::optional<InfluenceRemoval> chosen;
+    double cost = 0;
+    if (!quadrics_ || prepass_) {
+      Result<InfluenceRemoval> removal = influences_->cheapest_removal(state);
+      if (!removal.ok()) return;  // a solver failure leaves the vertex as it is
+      cost = removal->cost;
+      chosen = std::move(*removal);
+    } else {
+      Eigen::VectorXd& moved = scratch_.moved;
+      for (int slot = 0; slot < state.influence_count(); ++slot) {
+        Result<InfluenceRemoval> removal = influences_->removal(state, slot);
+        if (!removal.ok()) continue;
+        moved = normalised_.col(v);
+        for (int k = 0; k < state.influence_count(); ++k) {
+          moved.noalias() += C_.middleCols(4 * state.bones[static_cast<size_t>(k)], 4) * removal->correction.col(k);
+        }
+        const double rise = std::max(0.0, quadrics_->error(v, moved) - vertex_error_[static_cast<size_t>(v)]);
+        if (!chosen || rise < cost) {
+          cost = rise;
+          chosen = std::move(*removal);
+        }
+      }
+      if (!chosen) return;
+    }
+    const double deviation = chosen->cost;
+    const int32_t bone = chosen->bone;
+    pending_removal_[static_cast<size_t>(v)] = std::move(chosen);
     Candidate c;
-    c.cost = removal->cost;
+    c.cost = cost;
+    c.deviation = deviation;
     c.vertex = v;
-    c.target = removal->bone;
+    c.target = bone;
     c.version = influence_version_[static_cast<size_t>(v)];
     removals_.push(c);
   }
@@ -390,7 +443,7 @@ class Simplifier {
     assert(h.is_valid());
     Simplification step;
     step.kind = SimplificationKind::kEdgeCollapse;
-    step.cost = c.cost;
+    step.cost = c.deviation;
     step.vertex = u;
     step.target = c.target;
     step.before = state_.vertex(u);
@@ -415,7 +468,18 @@ class Simplifier {
     ++collapse_version_[static_cast<size_t>(u)];
     pending_removal_[static_cast<size_t>(u)].reset();
     steps_.push_back(std::move(step));
-    // Every vertex whose one-ring changed: v and u's old neighbours (v among them).
+    if (quadrics_) {
+      const int v = c.target;
+      quadrics_->merge(u, v);
+      vertex_error_[static_cast<size_t>(v)] = quadrics_->error(v, normalised_.col(v));
+      // v's error changed, so every collapse into v costs more now, and so may its removal.
+      for (const Mesh::VertexHandle a : mesh_.vv_range(Mesh::VertexHandle(v))) {
+        if (std::find(neighbours.begin(), neighbours.end(), a.idx()) == neighbours.end()) neighbours.push_back(a.idx());
+      }
+      schedule_influence(v);
+    }
+    // Every vertex whose one-ring changed: v and u's old neighbours (v among them); with
+    // quadrics also v's other neighbours.
     for (const int32_t a : neighbours) schedule_collapse(a);
   }
 
@@ -433,6 +497,7 @@ class Simplifier {
     influences_->apply(*removal, step.after);
     state_.apply(step);
     update_vertex_geometry(v);
+    if (quadrics_) vertex_error_[static_cast<size_t>(v)] = quadrics_->error(v, normalised_.col(v));
     steps_.push_back(std::move(step));
     // v moved: its own collapses and every collapse whose one-ring holds v change (Fig. 6.6).
     schedule_influence(v);
@@ -450,19 +515,29 @@ class Simplifier {
   MeshState state_;
   std::vector<Eigen::Vector3d> rest_;
   std::optional<InfluenceSimplifier> influences_;
+  std::optional<SurfaceQuadrics> quadrics_;  // CollapseCost::kQuadric only
+  std::vector<double> vertex_error_;         // Q_v(y_v) of every live vertex
+  double negligible_ = 0;                    // SimplifyOptions::negligible_cost in model units
+  bool prepass_ = false;                     // taking the negligible removals
   std::vector<uint32_t> collapse_version_;
   std::vector<uint32_t> influence_version_;
   std::vector<std::optional<InfluenceRemoval>> pending_removal_;  // the removal each queued entry stands for
   Queue collapses_;
   Queue removals_;
   std::vector<Simplification> steps_;
+  struct CollapseOption {
+    double cost = 0;
+    double deviation = 0;
+    int m = -1;
+  };
   struct Scratch {
     Ring ring;
     Eigen::MatrixXd d, gram;
     std::vector<double> length, angle;
     std::vector<Vector2> q;
-    std::vector<std::pair<double, int>> costs;
+    std::vector<CollapseOption> costs;
     std::vector<int> kept;
+    Eigen::VectorXd moved;
   };
   mutable Scratch scratch_;
 };

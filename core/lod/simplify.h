@@ -25,7 +25,20 @@
 
 namespace animspace::lod {
 
+// What orders the sequence.
+//   kMemoryless  the thesis's cost (§6.2.1, §6.3.1): the largest deviation from the previous
+//                mesh, and ‖s‖₂,₂ for a removal. The default: it measured best (below).
+//   kQuadric     quadric error memory in normalised animation space (surface_quadrics.h): a
+//                collapse costs (Q_u + Q_v)(y_v), an influence removal the rise of Q_v; both are
+//                errors against the original surface, in one unit. With half-edge collapses
+//                (vertices kept where they are) it measured worse than kMemoryless across poses
+//                on every size of both bench characters (docs/BENCHMARKS.md, issue #26): it is
+//                kept as an option and as the error that vertex placement will minimise.
+// Either way each step records its memoryless deviation as Simplification::cost (levels.h's ε^l).
+enum class CollapseCost { kMemoryless, kQuadric };
+
 struct SimplifyOptions {
+  CollapseCost cost = CollapseCost::kMemoryless;
   // Interleave influence removals with the edge collapses (§6.3.1); off gives pure APS.
   bool influence_simplification = true;
   // Normal-flip guard, in the rest pose.

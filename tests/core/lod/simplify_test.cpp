@@ -84,6 +84,32 @@ TEST(ProgressiveMesh, FlatSheetCollapsesCostNothing) {
   }
 }
 
+TEST(ProgressiveMesh, QuadricOrderKeepsTheGuardsAndReplaysExactly) {
+  // Ordering by quadric memory changes which steps come first, not what a step is allowed to do:
+  // a flat sheet still costs nothing, and the arm's sequence replays to its base mesh.
+  SimplifyOptions options;
+  options.cost = CollapseCost::kQuadric;
+  {
+    const LodCase c = flat_sheet_case(6);
+    auto pm = build_progressive_mesh(c.model, c.metrics, options);
+    ASSERT_TRUE(pm.ok()) << pm.error().message;
+    ASSERT_GT(pm->steps.size(), 30u);
+    for (const Simplification& step : pm->steps) EXPECT_NEAR(step.cost, 0, 1e-6);
+  }
+  const LodCase c = arm_lod_case();
+  auto pm = build_progressive_mesh(c.model, c.metrics, options);
+  ASSERT_TRUE(pm.ok()) << pm.error().message;
+  EXPECT_LT(pm->base.vertex_count(), 10);
+  MeshState state = MeshState::from_model(c.model);
+  for (size_t k = 0; k < pm->steps.size(); ++k) {
+    state.apply(pm->steps[k]);
+    expect_manifold(state, k);
+    if (::testing::Test::HasFatalFailure()) return;
+  }
+  expect_same_model(state.to_model(pm->skeleton), pm->base);
+  expect_same_model(pm->state_after(0).to_model(pm->skeleton), c.model);
+}
+
 TEST(ProgressiveMesh, PyramidApexCostsItsHeight) {
   // Apex u = (0,0,h) over a unit square ring: collapsing u into a corner leaves the flat square,
   // whose point at u's parameter (the centre, on the new diagonal) is (0,0,0): deviation h.
