@@ -392,15 +392,20 @@ nlohmann::json run_dataset(const Dataset& d) {
                     {"max_error_over_diag", e.max},
                     {"build_seconds", seconds}});
   };
+  // The served levels are animspace-lod: memoryless order, influence simplification, vertices
+  // placed by fit_level. The other rows take one of those away.
   struct Variant {
     const char* method;
     lod::CollapseCost cost;
     bool influences;
+    bool fit;
   };
-  for (const Variant& variant : {Variant{"animspace-lod", lod::CollapseCost::kMemoryless, true},
-                                 Variant{"animspace-lod-no-influence", lod::CollapseCost::kMemoryless, false},
-                                 Variant{"animspace-lod-quadric", lod::CollapseCost::kQuadric, true},
-                                 Variant{"animspace-lod-quadric-no-influence", lod::CollapseCost::kQuadric, false}}) {
+  for (const Variant& variant :
+       {Variant{"animspace-lod", lod::CollapseCost::kMemoryless, true, true},
+        Variant{"animspace-lod-no-influence", lod::CollapseCost::kMemoryless, false, true},
+        Variant{"animspace-lod-unplaced", lod::CollapseCost::kMemoryless, true, false},
+        Variant{"animspace-lod-unplaced-no-influence", lod::CollapseCost::kMemoryless, false, false},
+        Variant{"animspace-lod-quadric-unplaced-no-influence", lod::CollapseCost::kQuadric, false, false}}) {
     const bool influences = variant.influences;
     lod::SimplifyOptions options;
     options.cost = variant.cost;
@@ -425,8 +430,19 @@ nlohmann::json run_dataset(const Dataset& d) {
                 pm->base.vertex_count(), levels.count(), seconds);
     for (const double fraction : kFractions) {
       const int target = static_cast<int>(std::lround(fraction * V));
-      row(variant.method, fraction,
-          lod::simplify_to_vertex_count(*pm, target), seconds);
+      std::vector<int32_t> representative;
+      as::AnimationSpaceModel level = lod::simplify_to_vertex_count(*pm, target, nullptr, nullptr, &representative);
+      double fit_seconds = 0;
+      if (variant.fit) {
+        const auto fit_start = std::chrono::steady_clock::now();
+        auto fit = lod::fit_level(d.model, d.metrics.P, representative, level);
+        fit_seconds = seconds_since(fit_start);
+        if (!fit) {
+          std::printf("%s: %s\n", d.name.c_str(), fit.error().message.c_str());
+          continue;
+        }
+      }
+      row(variant.method, fraction, level, seconds + fit_seconds);
     }
   }
   for (const double fraction : kFractions) {

@@ -225,14 +225,17 @@ Result<container::ModelContainer> make_demo_animation_space_container(int frames
   if (!metrics) return metrics.error();
 
   // Discrete levels of detail under the same metric (Merry 2007 ch. 6, §7.3): memoryless APS in
-  // animation space with influence simplification.
+  // animation space with influence simplification, each level's vertices placed to fit the model
+  // across poses (lod/level_fit.h).
   auto progressive = lod::build_progressive_mesh(*model, metrics->metrics);
   if (!progressive) return progressive.error();
 
   container::ModelContainer out;
   animation_space::store(*model, out);
   animation_space::store_metrics(*metrics, out);
-  lod::store_levels(lod::make_levels(*progressive), out);
+  lod::LodLevels levels = lod::make_levels(*progressive);
+  if (auto placed = lod::fit_levels(levels, metrics->metrics.P); !placed.ok()) return placed.error();
+  lod::store_levels(levels, out);
   out.metadata()["description"] =
       "Animation-space model of the bending arm, fitted (Merry 2007 section 4.1) to every other frame of the "
       "expensive rig: it learns the biceps bulge and the kept elbow volume that linear blend skinning loses.";

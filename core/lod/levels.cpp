@@ -73,15 +73,50 @@ LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels) {
 }
 
 as::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveMesh& mesh, int vertex_count,
-                                                 std::vector<int32_t>* vertex_ids, double* error) {
+                                                 std::vector<int32_t>* vertex_ids, double* error,
+                                                 std::vector<int32_t>* representative) {
   MeshState state = mesh.state_after(0);
+  std::vector<int32_t> parent(static_cast<size_t>(mesh.input_vertex_count));
+  for (int32_t v = 0; v < mesh.input_vertex_count; ++v) parent[static_cast<size_t>(v)] = v;
   double worst = 0;
   for (size_t k = 0; k < mesh.steps.size() && state.live_vertex_count() > vertex_count; ++k) {
-    state.apply(mesh.steps[k]);
-    worst = std::max(worst, mesh.steps[k].cost);
+    const Simplification& step = mesh.steps[k];
+    state.apply(step);
+    worst = std::max(worst, step.cost);
+    if (step.kind == SimplificationKind::kEdgeCollapse) parent[static_cast<size_t>(step.vertex)] = step.target;
   }
   if (error) *error = worst;
-  return state.to_model(mesh.skeleton, vertex_ids);
+  std::vector<int32_t> ids;
+  as::AnimationSpaceModel model = state.to_model(mesh.skeleton, &ids);
+  if (representative) {
+    std::vector<int32_t> compact(static_cast<size_t>(mesh.input_vertex_count), -1);
+    for (size_t k = 0; k < ids.size(); ++k) compact[static_cast<size_t>(ids[k])] = static_cast<int32_t>(k);
+    representative->resize(static_cast<size_t>(mesh.input_vertex_count));
+    for (int32_t v = 0; v < mesh.input_vertex_count; ++v) {
+      (*representative)[static_cast<size_t>(v)] = compact[static_cast<size_t>(lod::representative(parent, v))];
+    }
+  }
+  if (vertex_ids) *vertex_ids = std::move(ids);
+  return model;
+}
+
+Status fit_levels(LodLevels& lods, const Eigen::MatrixXd& P, const LevelFitOptions& options) {
+  if (lods.count() == 0) return Status::Ok();
+  const as::AnimationSpaceModel& input = lods.levels[0].model;
+  // Where every input vertex is at level l: follow coarser_vertex down from level 0.
+  std::vector<int32_t> at(static_cast<size_t>(input.vertex_count()));
+  for (int32_t v = 0; v < input.vertex_count(); ++v) at[static_cast<size_t>(v)] = v;
+  double epsilon = 0;
+  for (int l = 1; l < lods.count(); ++l) {
+    const LodLevel& finer = lods.levels[static_cast<size_t>(l) - 1];
+    for (int32_t& v : at) v = finer.coarser_vertex[static_cast<size_t>(v)];
+    LodLevel& level = lods.levels[static_cast<size_t>(l)];
+    Result<LevelFit> fit = fit_level(input, P, at, level.model, options);
+    if (!fit.ok()) return fit.error();
+    epsilon = std::max(epsilon, fit->bound);
+    level.epsilon = epsilon;
+  }
+  return Status::Ok();
 }
 
 Geomorph geomorph(const LodLevels& lods, int level) {

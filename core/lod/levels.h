@@ -3,8 +3,10 @@
 //
 // Level 0 is the input; level l+1 is the first state of the sequence with at most half the
 // influences of level l (counted over live vertices), and so on down to the base mesh. Each level
-// carries ε^l, the largest cost of any step taken to reach it — a bound, in model units, on the
-// RMS deviation any one step introduced (memoryless: the steps' deviations are not summed, §8.5).
+// carries ε^l in model units. As cut, it is the largest cost of any step taken to reach it: a
+// bound on the RMS deviation any one step introduced (memoryless: the steps' deviations are not
+// summed, §8.5). fit_levels then places the vertices (level_fit.h) and makes ε^l a bound on the
+// whole error: no input vertex is farther from the level, in RMS over the poses P describes.
 //
 // A viewer with pixel tolerance p, viewport width w pixels, horizontal field of view 2θ and the
 // model's nearest bounding-sphere depth d may use geometric error ε = 2pd sinθ / w (eq. 7.2);
@@ -17,6 +19,7 @@
 
 #include "core/animspace/model.h"
 #include "core/common/result.h"
+#include "core/lod/level_fit.h"
 #include "core/lod/progressive_mesh.h"
 
 namespace animspace::lod {
@@ -50,10 +53,18 @@ struct LodLevels {
 LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels = 16);
 
 // The state after the first step at which at most `vertex_count` vertices are live (or the base
-// mesh), as a compact model; `error` receives the largest cost so far when not null.
+// mesh), as a compact model; `error` receives the largest cost so far, and `representative` the
+// vertex of the result every input vertex was collapsed into (fit_level's argument), when not null.
 animation_space::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveMesh& mesh, int vertex_count,
                                                               std::vector<int32_t>* vertex_ids = nullptr,
-                                                              double* error = nullptr);
+                                                              double* error = nullptr,
+                                                              std::vector<int32_t>* representative = nullptr);
+
+// Places the vertices of every level l ≥ 1 against level 0 (the input) under P = E[GᵀG]
+// (fit_level), and sets ε^l to the largest fit bound of levels 1..l, so that ε^l never decreases
+// and bounds the RMS-over-poses distance of every input vertex from level l.
+// Errors: fit_level's.
+Status fit_levels(LodLevels& lods, const Eigen::MatrixXd& P, const LevelFitOptions& options = {});
 
 // Δp and the aligned influences from level `level` to `level + 1` (asserted: level + 1 < count).
 Geomorph geomorph(const LodLevels& lods, int level);

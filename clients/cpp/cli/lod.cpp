@@ -27,13 +27,16 @@ CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
   auto* cmd = app.add_subcommand(
       "build-lod",
       "Offline: add levels of detail to an animation-space model — memoryless appearance-preserving simplification "
-      "in animation space with influence simplification (Merry 2007 ch. 6), levels halving the influences (§7.3) — "
-      "and write a model version");
+      "in animation space with influence simplification (Merry 2007 ch. 6), levels halving the influences (§7.3), "
+      "each level's vertices placed to fit the model across poses — and write a model version");
   cmd->add_option("input", a.input, "An animation-space model.anim (from fit or import-rig)")
       ->required()
       ->check(CLI::ExistingFile);
   cmd->add_flag("--no-influence-simplification", a.no_influence_simplification,
                 "Edge collapses only (no §6.3 influence removals)");
+  cmd->add_flag("--no-placement", a.no_placement,
+                "Keep every level's vertices where the input had them (no fit across poses; ε^l is then the "
+                "largest step's deviation)");
   cmd->add_option("--max-levels", a.max_levels, "Levels to keep, level 0 included")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
@@ -83,10 +86,16 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
   auto pm = lod::build_progressive_mesh(*model, stored.metrics, options);
   options.progress = nullptr;  // ends the bar's line before the report
   if (!pm) return fail("build-lod", pm.error().message);
-  const lod::LodLevels levels = lod::make_levels(*pm, a.max_levels);
+  lod::LodLevels levels = lod::make_levels(*pm, a.max_levels);
+  if (!a.no_placement) {
+    if (auto placed = lod::fit_levels(levels, stored.metrics.P); !placed.ok()) {
+      return fail("build-lod", placed.error().message);
+    }
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   lod::store_levels(levels, out);
   out.metadata()["lod.influence_simplification"] = options.influence_simplification ? "true" : "false";
+  out.metadata()["lod.placement"] = a.no_placement ? "none" : "fitted";
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("build-lod", written.error().message);
 

@@ -1,0 +1,270 @@
+#include "core/lod/level_fit.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <string>
+
+#include <Eigen/Cholesky>
+
+#include "core/animspace/metrics.h"
+
+namespace animspace::lod {
+
+namespace as = animation_space;
+
+namespace {
+
+Error invalid(std::string message) { return make_error(ErrorCode::kInvalidArgument, std::move(message)); }
+
+// y = C p of every vertex of `model` (n × V).
+Eigen::MatrixXd normalised_positions(const as::AnimationSpaceModel& model, const Eigen::MatrixXd& C) {
+  Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(C.rows(), model.vertex_count());
+  for (int v = 0; v < model.vertex_count(); ++v) {
+    for (int i = model.influences.begin(v); i < model.influences.end(v); ++i) {
+      Y.col(v).noalias() += C.middleCols(4 * model.influences.bones[static_cast<size_t>(i)], 4) * model.positions.col(i);
+    }
+  }
+  return Y;
+}
+
+// The closest point to d (= y − A) of the triangle A + s e0 + t e1 (s, t ≥ 0, s + t ≤ 1), from
+// the Gram entries a = e0·e0, b = e0·e1, c = e1·e1, d0 = e0·d, d1 = e1·d and dd = d·d: the
+// unconstrained minimiser if it is inside, otherwise the best of the three edges.
+struct Closest {
+  double s = 0, t = 0, distance2 = 0;
+};
+
+Closest closest_on_triangle(double a, double b, double c, double d0, double d1, double dd) {
+  const auto f = [&](double s, double t) {
+    return std::max(0.0, dd - 2 * (s * d0 + t * d1) + a * s * s + 2 * b * s * t + c * t * t);
+  };
+  const double det = a * c - b * b;
+  if (det > 1e-14 * (a * c)) {
+    const double s = (c * d0 - b * d1) / det;
+    const double t = (a * d1 - b * d0) / det;
+    if (s >= 0 && t >= 0 && s + t <= 1) return {s, t, f(s, t)};
+  }
+  const auto clamp01 = [](double x) { return std::clamp(std::isfinite(x) ? x : 0.0, 0.0, 1.0); };
+  Closest best;
+  best.distance2 = f(0, 0);
+  const auto consider = [&](double s, double t) {
+    const double value = f(s, t);
+    if (value < best.distance2) best = {s, t, value};
+  };
+  if (a > 0) consider(clamp01(d0 / a), 0);
+  if (c > 0) consider(0, clamp01(d1 / c));
+  const double e = a - 2 * b + c;  // |e1 − e0|²
+  if (e > 0) {
+    const double t = clamp01((a - b - d0 + d1) / e);
+    consider(1 - t, t);
+  }
+  return best;
+}
+
+// One input vertex's closest point: a face of the level and the barycentric weights of its corners.
+struct Foot {
+  int32_t face = -1;
+  std::array<double, 3> weight{};
+  double distance2 = 0;
+};
+
+}  // namespace
+
+Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::MatrixXd& P,
+                           const std::vector<int32_t>& representative, as::AnimationSpaceModel& level,
+                           const LevelFitOptions& options) {
+  const int V = input.vertex_count();
+  const int L = level.vertex_count();
+  if (static_cast<int>(representative.size()) != V) {
+    return invalid("representative: expected " + std::to_string(V) + " entries (the input's vertices), got " +
+                   std::to_string(representative.size()));
+  }
+  for (const int32_t r : representative) {
+    if (r < 0 || r >= L) {
+      return invalid("representative: expected level vertices in [0, " + std::to_string(L) + "), got " +
+                     std::to_string(r));
+    }
+  }
+  if (P.rows() != 4 * input.bone_count() || P.cols() != P.rows() || level.bone_count() != input.bone_count()) {
+    return invalid("P: expected " + std::to_string(4 * input.bone_count()) + " × " +
+                   std::to_string(4 * input.bone_count()) + " (the input's bones), got " + std::to_string(P.rows()) +
+                   " × " + std::to_string(P.cols()));
+  }
+  if (options.rounds < 0 || options.sweeps < 1) {
+    return invalid("options: expected rounds ≥ 0 and sweeps ≥ 1, got " + std::to_string(options.rounds) + " and " +
+                   std::to_string(options.sweeps));
+  }
+  auto C = as::normalised_animation_space_matrix(P);
+  if (!C) return invalid("P: " + C.error().message);
+  const Eigen::MatrixXd Yin = normalised_positions(input, *C);
+  Eigen::MatrixXd Y = normalised_positions(level, *C);
+
+  // Faces around each level vertex, and the candidate faces of each representative: its own and
+  // its neighbours' (the closest point of a collapsed vertex lies near where it went).
+  std::vector<std::vector<int32_t>> faces_of(static_cast<size_t>(L));
+  for (Eigen::Index f = 0; f < level.faces.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) faces_of[static_cast<size_t>(level.faces(f, k))].push_back(static_cast<int32_t>(f));
+  }
+  std::vector<std::vector<int32_t>> candidates(static_cast<size_t>(L));
+  for (int v = 0; v < L; ++v) {
+    std::vector<int32_t>& list = candidates[static_cast<size_t>(v)];
+    for (const int32_t f : faces_of[static_cast<size_t>(v)]) {
+      for (int k = 0; k < 3; ++k) {
+        const auto& around = faces_of[static_cast<size_t>(level.faces(f, k))];
+        list.insert(list.end(), around.begin(), around.end());
+      }
+    }
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+  }
+
+  std::vector<Foot> feet(static_cast<size_t>(V));
+  // Per face, its first corner's position and edge vectors with their Gram entries, made once a
+  // round: a closest-point query is then three dot products of length n.
+  const Eigen::Index F = level.faces.rows();
+  Eigen::MatrixXd E0(Y.rows(), F), E1(Y.rows(), F);
+  Eigen::MatrixXd gram(3, F);
+  Eigen::VectorXd d(Y.rows());
+  const auto find_feet = [&] {
+    for (Eigen::Index f = 0; f < F; ++f) {
+      E0.col(f) = Y.col(level.faces(f, 1)) - Y.col(level.faces(f, 0));
+      E1.col(f) = Y.col(level.faces(f, 2)) - Y.col(level.faces(f, 0));
+      gram(0, f) = E0.col(f).squaredNorm();
+      gram(1, f) = E0.col(f).dot(E1.col(f));
+      gram(2, f) = E1.col(f).squaredNorm();
+    }
+    for (int o = 0; o < V; ++o) {
+      Foot best;
+      best.distance2 = std::numeric_limits<double>::infinity();
+      const int32_t r = representative[static_cast<size_t>(o)];
+      for (const int32_t f : candidates[static_cast<size_t>(r)]) {
+        d = Yin.col(o) - Y.col(level.faces(f, 0));
+        const Closest c = closest_on_triangle(gram(0, f), gram(1, f), gram(2, f), E0.col(f).dot(d), E1.col(f).dot(d),
+                                              d.squaredNorm());
+        if (c.distance2 < best.distance2) best = {f, {1 - c.s - c.t, c.s, c.t}, c.distance2};
+      }
+      if (best.face < 0) {  // a vertex with no faces: its own position
+        best.distance2 = (Yin.col(o) - Y.col(r)).squaredNorm();
+      }
+      feet[static_cast<size_t>(o)] = best;
+    }
+  };
+  const auto summary = [&] {
+    LevelFit fit;
+    double sum = 0;
+    for (const Foot& foot : feet) {
+      fit.bound = std::max(fit.bound, foot.distance2);
+      sum += foot.distance2;
+    }
+    fit.bound = std::sqrt(fit.bound);
+    fit.rms = V > 0 ? std::sqrt(sum / V) : 0;
+    return fit;
+  };
+
+  // B_k: the moves of a k-bone vertex that keep its weight (x, y, z of every bone free; the
+  // weights of all but the last bone free, the last one taking minus their sum).
+  // Sized once for the largest influence set, so references into it stay valid.
+  int most_bones = 0;
+  for (int v = 0; v < L; ++v) most_bones = std::max(most_bones, level.influences.end(v) - level.influences.begin(v));
+  std::vector<Eigen::MatrixXd> free_moves(static_cast<size_t>(most_bones) + 1);
+  const auto weight_free = [&](int k) -> const Eigen::MatrixXd& {
+    Eigen::MatrixXd& B = free_moves[static_cast<size_t>(k)];
+    if (B.size() == 0) {
+      B = Eigen::MatrixXd::Zero(4 * k, 4 * k - 1);
+      for (int j = 0; j < k; ++j) {
+        for (int axis = 0; axis < 3; ++axis) B(4 * j + axis, 3 * j + axis) = 1;
+        if (j + 1 < k) {
+          B(4 * j + 3, 3 * k + j) = 1;
+          B(4 * (k - 1) + 3, 3 * k + j) = -1;
+        }
+      }
+    }
+    return B;
+  };
+  // Per level vertex, the factorised Bᵀ P_II B (CᵀC = P): its bones never change, so it is made
+  // once. A damping far below anything P sees keeps directions P does not measure where they are.
+  std::vector<std::optional<Eigen::LDLT<Eigen::MatrixXd>>> systems(static_cast<size_t>(L));
+  const auto system_of = [&](int v) -> const Eigen::LDLT<Eigen::MatrixXd>& {
+    std::optional<Eigen::LDLT<Eigen::MatrixXd>>& system = systems[static_cast<size_t>(v)];
+    if (!system) {
+      const int begin = level.influences.begin(v);
+      const int k = level.influences.end(v) - begin;
+      Eigen::MatrixXd PI(4 * k, 4 * k);
+      for (int a = 0; a < k; ++a) {
+        for (int b = 0; b < k; ++b) {
+          PI.block<4, 4>(4 * a, 4 * b) = P.block<4, 4>(4 * level.influences.bones[static_cast<size_t>(begin + a)],
+                                                       4 * level.influences.bones[static_cast<size_t>(begin + b)]);
+        }
+      }
+      const Eigen::MatrixXd& B = weight_free(k);
+      Eigen::MatrixXd H = B.transpose() * PI * B;
+      H.diagonal().array() += 1e-9 * std::max(H.trace() / static_cast<double>(H.rows()), std::numeric_limits<double>::min());
+      system.emplace(H);
+    }
+    return *system;
+  };
+
+  find_feet();
+  for (int round = 0; round < options.rounds; ++round) {
+    // Residuals r_o = y_o − Σ λ_c y_c, and which input vertices each level vertex carries.
+    Eigen::MatrixXd R(Yin.rows(), V);
+    std::vector<std::vector<std::pair<int32_t, double>>> carried(static_cast<size_t>(L));
+    for (int o = 0; o < V; ++o) {
+      const Foot& foot = feet[static_cast<size_t>(o)];
+      R.col(o) = Yin.col(o);
+      if (foot.face < 0) continue;
+      for (int k = 0; k < 3; ++k) {
+        const int32_t c = level.faces(foot.face, k);
+        R.col(o) -= foot.weight[static_cast<size_t>(k)] * Y.col(c);
+        if (foot.weight[static_cast<size_t>(k)] != 0) carried[static_cast<size_t>(c)].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
+      }
+    }
+    for (int sweep = 0; sweep < options.sweeps; ++sweep) {
+      for (int v = 0; v < L; ++v) {
+        const auto& points = carried[static_cast<size_t>(v)];
+        if (points.empty()) continue;
+        const int begin = level.influences.begin(v);
+        const int k = level.influences.end(v) - begin;
+        // Minimise Σ_o ‖r_o − λ_o C_I Δ‖² over the move Δ (4k) with Σ Δ̲ = 0: with Δ = B z,
+        // (Σλ²) Bᵀ P_II B z = Bᵀ C_Iᵀ Σ λ r_o.
+        double lambda2 = 0;
+        Eigen::VectorXd pull = Eigen::VectorXd::Zero(Yin.rows());
+        for (const auto& [o, lambda] : points) {
+          lambda2 += lambda * lambda;
+          pull.noalias() += lambda * R.col(o);
+        }
+        if (!(lambda2 > 0)) continue;
+        const Eigen::LDLT<Eigen::MatrixXd>& solver = system_of(v);
+        if (solver.info() != Eigen::Success) continue;
+        Eigen::VectorXd g(4 * k);
+        for (int j = 0; j < k; ++j) {
+          g.segment<4>(4 * j).noalias() =
+              C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4).transpose() * pull;
+        }
+        const Eigen::VectorXd z = solver.solve(weight_free(k).transpose() * g) / lambda2;
+        if (!z.allFinite()) continue;
+        const Eigen::MatrixXd& B = weight_free(k);
+        const Eigen::VectorXd delta = B * z;
+        for (int j = 0; j < k; ++j) level.positions.col(begin + j) += delta.segment<4>(4 * j);
+        // Weight exactly 1 again (the move's weights sum to zero only to rounding).
+        double weight = 0;
+        for (int j = 0; j < k; ++j) weight += level.positions(3, begin + j);
+        level.positions(3, begin + k - 1) += 1 - weight;
+        Eigen::VectorXd moved = Eigen::VectorXd::Zero(Yin.rows());
+        for (int j = 0; j < k; ++j) {
+          moved.noalias() +=
+              C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4) * delta.segment<4>(4 * j);
+        }
+        Y.col(v) += moved;
+        for (const auto& [o, lambda] : points) R.col(o) -= lambda * moved;
+      }
+    }
+    find_feet();
+  }
+  return summary();
+}
+
+}  // namespace animspace::lod
