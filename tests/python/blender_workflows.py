@@ -89,6 +89,51 @@ def pose_arm(rig, shoulder_rad, elbow_rad):
         bpy.context.view_layer.update()  # a child's matrix is set relative to its parent's new pose
 
 
+class CheckedLayout:
+    """Stands in for a panel's UILayout (background Blender draws no UI): every property a panel
+    draws must exist on its data and every operator must be registered, else the draw fails."""
+
+    def __init__(self, drawn):
+        self.drawn = drawn
+
+    def _child(self, *args, **kwargs):
+        return self
+
+    row = column = box = split = _child
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.drawn["props"].append(name)
+
+    def prop_search(self, data, name, search_data, search_name, **kwargs):
+        self.prop(data, name)
+        self.prop(search_data, search_name)
+
+    def operator(self, idname, **kwargs):
+        group, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, group), name) and getattr(getattr(bpy.ops, group), name).idname(), idname
+        self.drawn["operators"].append(idname)
+
+    def label(self, text="", **kwargs):
+        self.drawn["labels"].append(text)
+
+    def template_list(self, list_type, list_id, data, name, active_data, active_name, **kwargs):
+        assert hasattr(bpy.types, list_type), list_type
+        self.prop(data, name)
+        self.prop(active_data, active_name)
+
+
+def draw_panels():
+    """Draws every add-on panel into a CheckedLayout; returns what was drawn."""
+    drawn = {"props": [], "operators": [], "labels": [], "panels": []}
+    for name in dir(bpy.types):
+        if name.startswith("ANIMSPACE_PT_"):
+            panel = getattr(bpy.types, name)
+            panel.draw(type("Panel", (), {"layout": CheckedLayout(drawn)})(), bpy.context)
+            drawn["panels"].append(name)
+    return drawn
+
+
 scene = bpy.context.scene
 settings = None
 try:
@@ -104,6 +149,13 @@ try:
     settings.address = config["unreachable"]
     settings.deadline_s = 5.0
     results["unreachable_report"] = report_of(bpy.ops.animspace.connect)
+    # A daemon that wants a bearer token: refused without the token file, listed with it.
+    settings.address = config["token_address"]
+    results["no_token_report"] = report_of(bpy.ops.animspace.connect)
+    settings.token_file = config["token_file"]
+    bpy.ops.animspace.connect()
+    results["token_models"] = sorted(m.name for m in settings.models)
+    settings.token_file = ""
     settings.address = config["address"]
     bpy.ops.animspace.connect()
     results["health"] = settings.health
@@ -280,6 +332,18 @@ try:
         scene.render.filepath = screenshot["path"]
         bpy.ops.render.render(write_still=True)
         results["screenshot"] = screenshot["path"]
+    # 9. The sidebar draws (with a LOD object active, and the verdict set), and the add-on leaves
+    # nothing behind when disabled.
+    bpy.context.view_layer.objects.active = bpy.data.objects[lods["level"]["object"]]
+    settings.use_tls = True
+    results["panels"] = draw_panels()
+    results["operators"] = sorted(f"animspace.{name}" for name in dir(bpy.ops.animspace))
+    bpy.ops.preferences.addon_disable(module="animspace_blender")
+    results["after_disable"] = {
+        "handlers": [f"{h.__module__}.{h.__name__}" for h in bpy.app.handlers.frame_change_post],
+        "scene_settings": hasattr(scene, "animspace"),
+        "panels": [name for name in dir(bpy.types) if name.startswith("ANIMSPACE_")],
+    }
 except Exception:  # noqa: BLE001 — the test shows this and fails
     results["script_error"] = traceback.format_exc()
 finally:

@@ -60,7 +60,12 @@ def blender_run(tmp_path_factory, request):
     out.mkdir()
     misses = work / "misses"
     misses.mkdir()
-    with run_animspaced(work, "--miss-log-dir", str(misses)) as address, animspace.Client(address) as client:
+    (work / "users").write_text("user-secret\n")
+    (work / "token").write_text("user-secret\n")
+    token_work = work / "token-daemon"
+    token_work.mkdir()
+    with run_animspaced(work, "--miss-log-dir", str(misses)) as address, animspace.Client(address) as client, \
+            run_animspaced(token_work, "--auth-token-file", str(work / "users")) as token_address:
         client.wait_until_serving(deadline_s=60)
         # The sequence the Mesh Cache modifier plays: three of the demo's unseen frames (hits),
         # an elbow bent past the training range (a blend) and one bent backwards (a miss).
@@ -73,6 +78,7 @@ def blender_run(tmp_path_factory, request):
         np.save(work / "faces.npy", level0.indices.astype(np.int64))
         config = {
             "zip": str(ZIP), "out_dir": str(out), "address": address, "unreachable": f"127.0.0.1:{_closed_port()}",
+            "token_address": token_address, "token_file": str(work / "token"),
             "rest_points": str(work / "rest.npy"), "faces": str(work / "faces.npy"),
             "sequence_pc2": str(work / "sequence.pc2"), "frame_count": len(frames), "complete_frames": [4, 5],
             "pmsc_model": PMSC_MODEL, "bad_model": "no-such-model", "skinned_model": SKINNED_MODEL,
@@ -119,6 +125,25 @@ def test_connect_lists_the_models_and_reports_an_unreachable_server(blender_run)
         assert listed["has_tangents"] == ("animspace.tangents" in expected[name].sections)
     report = results["unreachable_report"]
     assert report is not None and "UNAVAILABLE" in report and "Traceback" not in report
+
+
+def test_a_token_file_is_sent_as_the_bearer_token(blender_run):
+    results = blender_run["results"]
+    report = results["no_token_report"]
+    assert report is not None and "UNAUTHENTICATED" in report and "Traceback" not in report
+    assert results["token_models"] == sorted(m.name for m in blender_run["client"].list_models())
+
+
+def test_the_sidebar_draws_every_workflow_and_disabling_leaves_nothing_behind(blender_run):
+    results = blender_run["results"]
+    drawn = results["panels"]
+    assert len(drawn["panels"]) == 5
+    assert set(drawn["operators"]) == set(results["operators"])  # every operator has its button
+    assert {"address", "token_file", "root_certificates_file", "pmsc_model", "source", "model", "lod_selection"} \
+        <= set(drawn["props"])
+    assert not any("animspace" in name for name in results["after_disable"]["handlers"])
+    assert results["after_disable"]["scene_settings"] is False
+    assert results["after_disable"]["panels"] == []
 
 
 def test_bad_input_is_a_report_with_the_servers_message_not_a_traceback(blender_run):
