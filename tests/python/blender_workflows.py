@@ -228,12 +228,19 @@ try:
     save("skinned_operator", mesh_positions(skinned))
     save("skinned_operator_normals", vertex_normals(skinned))
 
+    # Live skinning chained with live playback: the posed arm is the soft cache's source (arm-pmsc's
+    # key points index the same points), so the handler must pose it before the soft cache reads it.
+    sequence_output = settings.output
+    settings.source, settings.output = skinned, None
     pose_arm(rig, *poses["handler"])
-    settings.live_skinning = True
+    settings.live_skinning = settings.live_soft_cache = True
     scene.frame_set(2)
-    settings.live_skinning = False
+    settings.live_skinning = settings.live_soft_cache = False
     save("skinned_handler", mesh_positions(skinned))
+    save("chained", mesh_positions(settings.output))
     results["skinned_handler_error"] = settings.last_error
+    results["chained"] = {"status": settings.status, "key_point_error": settings.key_point_error}
+    settings.source, settings.output = source, sequence_output
 
     # Keyframes at 1 and 3 (the bake's first and last frames are exactly these poses).
     for frame, key in ((1, "bake_first"), (3, "bake_last")):
@@ -294,7 +301,7 @@ try:
     # verdict), the armature-posed mesh, and the level the camera picked, each with a label.
     screenshot = config.get("screenshot")
     if screenshot:
-        miss_output = settings.output  # its last answer: frame 5 completed, a MISS
+        miss_output = sequence_output  # its last answer: frame 5 completed, a MISS
         settings.output = None  # the next answer makes a new output object
         settings.live_soft_cache = True
         scene.frame_set(2)  # a HIT (the demo's frame 31, elbow bent)
@@ -329,6 +336,8 @@ try:
         shading.show_cavity = True
         scene.render.resolution_x, scene.render.resolution_y = screenshot["resolution"]
         scene.render.resolution_percentage = 100
+        scene.render.image_settings.color_mode = "RGB"
+        scene.render.image_settings.compression = 100
         scene.render.filepath = screenshot["path"]
         bpy.ops.render.render(write_still=True)
         results["screenshot"] = screenshot["path"]

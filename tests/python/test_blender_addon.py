@@ -231,6 +231,14 @@ def test_posing_from_the_armature_equals_evaluate_skeleton_pose(blender_run):
             unit = expected.normals / np.linalg.norm(expected.normals, axis=1, keepdims=True)
             cosine = np.sum(load(blender_run, "skinned_operator_normals") * unit, axis=1)
             assert cosine.min() > 0.9999
+    # The soft cache, live on the posed arm, answered for the new pose (not the one before it).
+    keys = client.describe_key_points(PMSC_MODEL)
+    posed = client.evaluate_skeleton_pose(SKINNED_MODEL, _G(*POSES["handler"])).points
+    played = client.evaluate_key_points(PMSC_MODEL, keys.select(load(blender_run, "skinned_handler")))
+    assert blender_run["results"]["chained"]["status"] == played.status
+    np.testing.assert_allclose(load(blender_run, "chained"), played.points, rtol=0, atol=1e-6)
+    assert client.evaluate_key_points(PMSC_MODEL, keys.select(posed)).status == played.status
+    assert blender_run["results"]["skinned_handler_error"] == ""
     baked = animspace.read_pc2(blender_run["out"] / "skinned.pc2")
     assert baked.frame_count == 3 and baked.start_frame == 1.0
     for index, name in ((0, "bake_first"), (2, "bake_last")):

@@ -47,9 +47,9 @@ def _use_vendored_client() -> None:
 
 _use_vendored_client()
 
-from . import connection, lod_import, panel, properties, skinning, soft_cache, thumbnail  # noqa: E402
+from . import connection, frame_change, lod_import, panel, properties, skinning, soft_cache, thumbnail  # noqa: E402
 
-_MODULES = (properties, connection, soft_cache, skinning, lod_import, thumbnail, panel)
+_MODULES = (properties, connection, soft_cache, skinning, frame_change, lod_import, thumbnail, panel)
 
 
 def register() -> None:

@@ -28,8 +28,16 @@ class SetupError(Exception):
     """Something the user must fix in Blender (no source object, wrong object type, …)."""
 
 
+def file_path(path: str, what: str) -> str:
+    """An absolute path for a property's file path ("//…" is relative to the saved .blend)."""
+    if path.startswith("//") and not bpy.data.filepath:
+        raise SetupError(f"{what}: '{path}' is relative to the .blend file, which is not saved yet; save it or "
+                         "give an absolute path")
+    return bpy.path.abspath(path)
+
+
 def _read(path: str, what: str, mode: str = "rb"):
-    full = bpy.path.abspath(path)
+    full = file_path(path, what)
     try:
         with open(full, mode) as f:
             return f.read()

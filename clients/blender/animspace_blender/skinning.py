@@ -13,16 +13,14 @@ from typing import List, Optional
 
 import bpy
 import numpy as np
-from bpy.app.handlers import persistent
 from bpy.props import IntProperty, StringProperty
 
 import animspace
 
-from . import connection, mesh_data
+from . import connection, frame_change, mesh_data
 from .connection import SetupError, reporting
 
 POSES_PER_CALL = 64  # a bake's batch per EvaluateSkeletonPose, well under any server's max_batch_poses
-_baking = False
 
 
 def _model_name(context) -> str:
@@ -188,7 +186,6 @@ class ANIMSPACE_OT_bake_skinned(bpy.types.Operator):
 
     @reporting
     def execute(self, context):
-        global _baking
         scene = context.scene
         obj = _skinned(context.active_object)
         start = scene.frame_start if self.frame_start < 0 else self.frame_start
@@ -197,33 +194,32 @@ class ANIMSPACE_OT_bake_skinned(bpy.types.Operator):
             raise SetupError(f"End: {end} is before Start {start}")
         if not self.filepath.lower().endswith(".pc2"):
             raise SetupError(f"PC2 file: expected a .pc2 path, got '{self.filepath}'")
+        path = connection.file_path(self.filepath, "PC2 file")
         poses = []
         was = scene.frame_current
-        _baking = True
-        try:
-            for frame in range(start, end + 1):
-                scene.frame_set(frame)
-                poses.append(skeleton_pose(obj.animspace.armature, context.evaluated_depsgraph_get()))
-        finally:
-            scene.frame_set(was)
-            _baking = False
+        with frame_change.suspended("skinning", "soft_cache"):
+            try:
+                for frame in range(start, end + 1):
+                    scene.frame_set(frame)
+                    poses.append(skeleton_pose(obj.animspace.armature, context.evaluated_depsgraph_get()))
+            finally:
+                scene.frame_set(was)
         client = connection.client(context)
         points = []
         for first in range(0, len(poses), POSES_PER_CALL):
             batch = np.stack(poses[first:first + POSES_PER_CALL])
             points.extend(p.points for p in client.evaluate_skeleton_pose(obj.animspace.model, batch))
-        path = bpy.path.abspath(self.filepath)
         animspace.write_pc2(path, np.stack(points), start_frame=float(start), sample_rate=1.0)
         self.report({"INFO"}, f"{len(points)} frames → {path}")
         return {"FINISHED"}
 
 
-@persistent
-def on_frame_change(scene, depsgraph=None):
+def on_frame_change(scene) -> None:
+    """Live skinning of every animation-space mesh in the scene (frame_change.py calls it)."""
     settings = scene.animspace
-    if _baking or not settings.live_skinning:
+    if not settings.live_skinning:
         return
-    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
     for obj in scene.objects:
         if obj.type != "MESH" or obj.animspace.role != "SKINNED" or obj.animspace.armature is None:
             continue
@@ -241,11 +237,8 @@ _CLASSES = (ANIMSPACE_OT_build_skinned, ANIMSPACE_OT_pose_skinned, ANIMSPACE_OT_
 def register() -> None:
     for cls in _CLASSES:
         bpy.utils.register_class(cls)
-    bpy.app.handlers.frame_change_post.append(on_frame_change)
 
 
 def unregister() -> None:
-    if on_frame_change in bpy.app.handlers.frame_change_post:
-        bpy.app.handlers.frame_change_post.remove(on_frame_change)
     for cls in reversed(_CLASSES):
         bpy.utils.unregister_class(cls)

@@ -13,18 +13,16 @@ from typing import Dict, List, Optional, Tuple
 
 import bpy
 import numpy as np
-from bpy.app.handlers import persistent
 from bpy.props import IntProperty, StringProperty
 
 import animspace
 
-from . import connection, mesh_data
+from . import connection, frame_change, mesh_data
 from .connection import SetupError, reporting
 
 # describe_key_points per (client, model): a frame-change handler must not ask every frame. The
 # answer pins its model_version, so the indices stay those of the version that answers.
 _key_points: Dict[Tuple[int, str], animspace.KeyPoints] = {}
-_baking = False  # frames stepped by a bake do not run the live handler too
 
 
 def _keys(client: animspace.Client, model: str) -> animspace.KeyPoints:
@@ -133,7 +131,6 @@ class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
 
     @reporting
     def execute(self, context):
-        global _baking
         scene = context.scene
         settings = scene.animspace
         source, model = _checked_setup(context)
@@ -143,6 +140,7 @@ class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
             raise SetupError(f"End: {end} is before Start {start}")
         if not self.filepath.lower().endswith(".pc2"):
             raise SetupError(f"PC2 file: expected a .pc2 path, got '{self.filepath}'")
+        path = connection.file_path(self.filepath, "PC2 file")
         client = connection.client(context)
         forget_key_points()
         keys = _keys(client, model)
@@ -151,16 +149,16 @@ class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
         key_frames: List[np.ndarray] = []
         full_frames: List[Optional[np.ndarray]] = []
         was = scene.frame_current
-        _baking = True
-        try:
-            for frame in range(start, end + 1):
-                scene.frame_set(frame)
-                full = _full_pose(source, context.evaluated_depsgraph_get(), keys)
-                key_frames.append(keys.select(full))
-                full_frames.append(full if settings.complete_misses else None)
-        finally:
-            scene.frame_set(was)
-            _baking = False
+        # Live skinning keeps running: the source may be an animation-space mesh it poses.
+        with frame_change.suspended("soft_cache"):
+            try:
+                for frame in range(start, end + 1):
+                    scene.frame_set(frame)
+                    full = _full_pose(source, context.evaluated_depsgraph_get(), keys)
+                    key_frames.append(keys.select(full))
+                    full_frames.append(full if settings.complete_misses else None)
+            finally:
+                scene.frame_set(was)
 
         # The deadline bounds the whole stream: the per-call deadline, plus 50 ms a frame.
         results = list(client.stream_key_points(model, key_frames, version=keys.model_version,
@@ -173,7 +171,6 @@ class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
                 result = completion.result
                 logged += completion.logged
             points.append(result.points)
-        path = bpy.path.abspath(self.filepath)
         animspace.write_pc2(path, np.stack(points), start_frame=float(start), sample_rate=1.0)
         counts = {status: sum(r.status == status for r in results) for status in ("HIT", "BLEND", "MISS")}
         self.report({"INFO"}, f"{len(results)} frames → {path}: {counts['HIT']} hits, {counts['BLEND']} blends, "
@@ -181,13 +178,14 @@ class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
         return {"FINISHED"}
 
 
-@persistent
-def on_frame_change(scene, depsgraph=None):
+def on_frame_change(scene) -> None:
+    """Live playback (frame_change.py calls it after live skinning)."""
     settings = scene.animspace
-    if _baking or not settings.live_soft_cache:
+    if not settings.live_soft_cache:
         return
     try:
-        evaluate_frame(bpy.context, depsgraph or bpy.context.evaluated_depsgraph_get())
+        # Asked now rather than taken from the handler: live skinning may just have moved the source.
+        evaluate_frame(bpy.context, bpy.context.evaluated_depsgraph_get())
         settings.last_error = ""
     except (SetupError,) + connection.EXPECTED_ERRORS as error:
         forget_key_points()
@@ -201,13 +199,10 @@ _CLASSES = (ANIMSPACE_OT_soft_cache_frame, ANIMSPACE_OT_soft_cache_bake)
 def register() -> None:
     for cls in _CLASSES:
         bpy.utils.register_class(cls)
-    bpy.app.handlers.frame_change_post.append(on_frame_change)
     connection.reset_hooks.append(forget_key_points)
 
 
 def unregister() -> None:
-    if on_frame_change in bpy.app.handlers.frame_change_post:
-        bpy.app.handlers.frame_change_post.remove(on_frame_change)
     if forget_key_points in connection.reset_hooks:
         connection.reset_hooks.remove(forget_key_points)
     for cls in reversed(_CLASSES):
