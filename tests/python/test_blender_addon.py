@@ -292,3 +292,30 @@ def test_workbench_draws_the_workflows_headless(blender_run):
     assert picture.shape[:2] == (520, 1200)
     # Something was drawn: the verdict colours and the grey meshes are not one flat background.
     assert np.unique(picture.reshape(-1, picture.shape[2]), axis=0).shape[0] > 100
+
+
+def test_the_readmes_blender_snippet_runs(daemon, tmp_path):
+    readme = (HERE.parents[1] / "README.md").read_text()
+    section = readme[readme.index("### Use it from Blender"):]
+    start = section.index("```python\n") + len("```python\n")
+    snippet = section[start:section.index("\n```", start)]
+    assert "127.0.0.1:50051" in snippet
+    # The add-on as a user has it: installed from the zip and enabled; files the snippet writes
+    # ("/tmp/…") go to the test's folder.
+    prelude = (f"import bpy\nbpy.ops.preferences.addon_install(filepath={str(ZIP)!r})\n"
+               "bpy.ops.preferences.addon_enable(module='animspace_blender')\n")
+    script = tmp_path / "snippet.py"
+    script.write_text(prelude + snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/'))
+    environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "user-scripts"),
+                       BLENDER_USER_CONFIG=str(tmp_path / "user-config"))
+    done = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script)],
+                          capture_output=True, text=True, timeout=300, env=environment)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    with animspace.Client(daemon) as client:
+        names = [m.name for m in client.list_models()]
+    lines = done.stdout.splitlines()
+    assert f"SERVING {names}" in lines
+    assert any(line.split(" ")[0] in ("HIT", "BLEND", "MISS") for line in lines), lines
+    assert "(256, 256)" in lines
+    baked = animspace.read_pc2(tmp_path / "arm-pmsc.pc2")
+    assert (baked.frame_count, baked.point_count) == (24, 1154)
