@@ -6,6 +6,7 @@ test here compares one workflow with the daemon's own answers for the same input
 Python client outside Blender, and with poses built independently (conftest's arm transforms,
 restated from core/demo/bending_arm.h).
 """
+import ast
 import json
 import math
 import os
@@ -13,6 +14,7 @@ import pathlib
 import shutil
 import socket
 import subprocess
+import zipfile
 
 import numpy as np
 import pytest
@@ -27,8 +29,7 @@ BLENDER = shutil.which("blender")
 # Set to a path to refresh the README's picture from this run (docs/blender/workflows.png).
 SCREENSHOT = os.environ.get("ANIMSPACE_BLENDER_SCREENSHOT")
 
-pytestmark = pytest.mark.skipif(BLENDER is None, reason="Blender is not installed (scripts/install-deps.sh "
-                                                        "installs Debian's blender package)")
+NO_BLENDER = "Blender is not installed (scripts/install-deps.sh installs Debian's blender package)"
 
 PMSC_MODEL = "arm-pmsc"  # client fail-through: blends and misses wait for CompleteMiss
 SKINNED_MODEL = "arm-animspace"
@@ -51,6 +52,8 @@ def _closed_port():
 @pytest.fixture(scope="module")
 def blender_run(tmp_path_factory, request):
     """One Blender session over every workflow: (daemon address, out dir, results, frames)."""
+    if BLENDER is None:
+        pytest.skip(NO_BLENDER)
     if not ZIP.is_file():
         pytest.fail(f"{ZIP} is missing: the build makes it (target animspace_blender_addon)")
     from conftest import _arm_transforms, _demo_arm_transforms, run_animspaced
@@ -100,6 +103,32 @@ def blender_run(tmp_path_factory, request):
         if SCREENSHOT:
             shutil.copyfile(out / "workflows.png", SCREENSHOT)
         yield {"client": client, "out": out, "results": results, "frames": frames, "work": work, "misses": misses}
+
+
+def test_the_zip_holds_the_add_on_and_the_client_it_carries_and_builds_reproducibly(tmp_path):
+    # No Blender needed: what Blender's "Install from file" would unpack.
+    assert ZIP.is_file(), f"{ZIP} is missing: the build makes it (target animspace_blender_addon)"
+    addon = HERE.parents[1] / "clients" / "blender"
+    with zipfile.ZipFile(ZIP) as archive:
+        entries = {name: archive.read(name) for name in archive.namelist()}
+    expected = {f"animspace_blender/{p.relative_to(addon / 'animspace_blender').as_posix()}": p.read_bytes()
+                for p in (addon / "animspace_blender").rglob("*.py")}
+    client = BUILD / "python" / "animspace"
+    expected.update({f"animspace_blender/vendor/animspace/{p.relative_to(client).as_posix()}": p.read_bytes()
+                     for p in client.rglob("*") if p.is_file() and p.suffix in (".py", ".typed")
+                     and "__pycache__" not in p.parts})
+    assert entries == expected
+    assert "animspace_blender/vendor/animspace/v1/poses_pb2_grpc.py" in entries
+    # bl_info, read without importing bpy: the add-on declares the Blender it was tested on.
+    tree = ast.parse(entries["animspace_blender/__init__.py"])
+    bl_info = next(ast.literal_eval(node.value) for node in tree.body
+                   if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "bl_info")
+    assert bl_info["blender"] == (3, 4, 0) and bl_info["name"] == "animspace"
+    # The same sources give the same bytes.
+    again = tmp_path / "again.zip"
+    subprocess.run(["/usr/bin/python3", str(addon / "build_addon.py"), "--addon", str(addon / "animspace_blender"),
+                    "--python", str(BUILD / "python"), "--output", str(again)], check=True, timeout=60)
+    assert again.read_bytes() == ZIP.read_bytes()
 
 
 def load(run, name):
@@ -294,6 +323,7 @@ def test_workbench_draws_the_workflows_headless(blender_run):
     assert np.unique(picture.reshape(-1, picture.shape[2]), axis=0).shape[0] > 100
 
 
+@pytest.mark.skipif(BLENDER is None, reason=NO_BLENDER)
 def test_the_readmes_blender_snippet_runs(daemon, tmp_path):
     readme = (HERE.parents[1] / "README.md").read_text()
     section = readme[readme.index("### Use it from Blender"):]
