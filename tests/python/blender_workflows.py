@@ -149,13 +149,27 @@ try:
     settings.address = config["unreachable"]
     settings.deadline_s = 5.0
     results["unreachable_report"] = report_of(bpy.ops.animspace.connect)
-    # A daemon that wants a bearer token: refused without the token file, listed with it.
+    # A daemon that wants a bearer token (and mutual TLS under another name, when the test could
+    # make certificates): refused without the token file, listed with it.
     settings.address = config["token_address"]
+    tls = config["tls"]
+    results["plaintext_report"] = None
+    if tls:
+        results["plaintext_report"] = report_of(bpy.ops.animspace.connect)
+        settings.use_tls = True
+        settings.root_certificates_file = tls["root_certificates_file"]
+        settings.server_name = tls["server_name"]
+        results["no_client_certificate_report"] = report_of(bpy.ops.animspace.connect)
+        settings.client_certificate_file = tls["client_certificate_file"]
+        settings.client_key_file = tls["client_key_file"]
+        results["tls"] = True
     results["no_token_report"] = report_of(bpy.ops.animspace.connect)
     settings.token_file = config["token_file"]
     bpy.ops.animspace.connect()
     results["token_models"] = sorted(m.name for m in settings.models)
-    settings.token_file = ""
+    settings.token_file = settings.root_certificates_file = settings.server_name = ""
+    settings.client_certificate_file = settings.client_key_file = ""
+    settings.use_tls = False
     settings.address = config["address"]
     bpy.ops.animspace.connect()
     results["health"] = settings.health

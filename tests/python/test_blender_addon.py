@@ -63,12 +63,27 @@ def blender_run(tmp_path_factory, request):
     out.mkdir()
     misses = work / "misses"
     misses.mkdir()
-    (work / "users").write_text("user-secret\n")
-    (work / "token").write_text("user-secret\n")
-    token_work = work / "token-daemon"
-    token_work.mkdir()
+    # A second daemon that wants a bearer token and, where openssl can make certificates, mutual
+    # TLS under a name other than its address.
+    secure = work / "secure"
+    secure.mkdir()
+    (secure / "users").write_text("user-secret\n")
+    (secure / "token").write_text("user-secret\n")
+    secure_flags = ["--auth-token-file", str(secure / "users")]
+    tls = None
+    if shutil.which("openssl") is not None:
+        from test_client_admin import _certificate, _openssl
+
+        _openssl("req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes", "-keyout",
+                 "ca.key", "-out", "ca.pem", "-days", "2", "-subj", "/CN=animspace test CA", cwd=secure)
+        _certificate(secure, "server", "/CN=animspace.test", "subjectAltName=DNS:animspace.test")
+        _certificate(secure, "client", "/CN=animspace test client", "extendedKeyUsage=clientAuth")
+        secure_flags += ["--tls-cert", str(secure / "server.pem"), "--tls-key", str(secure / "server.key"),
+                         "--tls-client-ca", str(secure / "ca.pem")]
+        tls = {"root_certificates_file": str(secure / "ca.pem"), "client_certificate_file": str(secure / "client.pem"),
+               "client_key_file": str(secure / "client.key"), "server_name": "animspace.test"}
     with run_animspaced(work, "--miss-log-dir", str(misses)) as address, animspace.Client(address) as client, \
-            run_animspaced(token_work, "--auth-token-file", str(work / "users")) as token_address:
+            run_animspaced(secure, *secure_flags) as token_address:
         client.wait_until_serving(deadline_s=60)
         # The sequence the Mesh Cache modifier plays: three of the demo's unseen frames (hits),
         # an elbow bent past the training range (a blend) and one bent backwards (a miss).
@@ -81,7 +96,7 @@ def blender_run(tmp_path_factory, request):
         np.save(work / "faces.npy", level0.indices.astype(np.int64))
         config = {
             "zip": str(ZIP), "out_dir": str(out), "address": address, "unreachable": f"127.0.0.1:{_closed_port()}",
-            "token_address": token_address, "token_file": str(work / "token"),
+            "token_address": token_address, "token_file": str(secure / "token"), "tls": tls,
             "rest_points": str(work / "rest.npy"), "faces": str(work / "faces.npy"),
             "sequence_pc2": str(work / "sequence.pc2"), "frame_count": len(frames), "complete_frames": [4, 5],
             "pmsc_model": PMSC_MODEL, "bad_model": "no-such-model", "skinned_model": SKINNED_MODEL,
@@ -161,6 +176,18 @@ def test_a_token_file_is_sent_as_the_bearer_token(blender_run):
     report = results["no_token_report"]
     assert report is not None and "UNAUTHENTICATED" in report and "Traceback" not in report
     assert results["token_models"] == sorted(m.name for m in blender_run["client"].list_models())
+
+
+def test_tls_options_reach_the_client(blender_run):
+    results = blender_run["results"]
+    if "tls" not in results:
+        pytest.skip("needs the openssl command to make test certificates")
+    # Plaintext to a TLS-only daemon, and TLS without the client certificate it requires: refused.
+    # With the CA, the client certificate and key and the server name the models are listed (the
+    # token test above ran over that connection).
+    assert results["token_models"]
+    for report in (results["plaintext_report"], results["no_client_certificate_report"]):
+        assert report is not None and "UNAVAILABLE" in report and "Traceback" not in report
 
 
 def test_the_sidebar_draws_every_workflow_and_disabling_leaves_nothing_behind(blender_run):
