@@ -67,6 +67,8 @@ def _output(context, source: bpy.types.Object, model: str) -> bpy.types.Object:
         output.matrix_world = source.matrix_world
         mesh_data.link(context, output)
         settings.output = output
+    if output == source:
+        raise SetupError("Output: choose another object than the source (the answer would feed back into it)")
     output.animspace.role = "SOFT_CACHE_OUTPUT"
     output.animspace.model = model
     return output
