@@ -49,10 +49,11 @@ def view_of(scene: bpy.types.Scene, camera: Optional[bpy.types.Object]) -> Tuple
 def camera_distance(client: animspace.Client, model: str, camera: bpy.types.Object,
                     placement: Optional[bpy.types.Object]) -> float:
     """Camera to the model's rest bounding-box centre, model units (the module doc says why)."""
-    coarsest = client.describe_model(model).default
-    if coarsest is None or coarsest.lod_level_count == 0:
-        raise SetupError(f"Model: '{model}' has no levels of detail")
-    mesh = client.get_lod(model, level=coarsest.lod_level_count - 1)
+    version = client.describe_model(model).default
+    if version is None:
+        raise SetupError(f"Model: no version of '{model}' is loaded")
+    # A PMSC model serving its engine's levels lists none of its own: its level 0 is then used.
+    mesh = client.get_lod(model, level=max(version.lod_level_count - 1, 0))
     centre = 0.5 * (mesh.positions.min(axis=0) + mesh.positions.max(axis=0)).astype(np.float64)
     eye = np.array(camera.matrix_world.translation, dtype=np.float64)
     if placement is not None:  # into the model's space: the placement may move or scale it

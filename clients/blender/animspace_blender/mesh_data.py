@@ -48,7 +48,8 @@ def set_normals(mesh: bpy.types.Mesh, normals: Optional[np.ndarray]) -> None:
         return
     unit = np.asarray(normals, dtype=np.float64)
     unit = unit / np.maximum(np.linalg.norm(unit, axis=1, keepdims=True), 1e-30)
-    mesh.use_auto_smooth = True  # Blender 3.4 draws custom normals only with auto smooth on
+    if hasattr(mesh, "use_auto_smooth"):  # Blender before 4.1 draws custom normals only with it on
+        mesh.use_auto_smooth = True
     mesh.normals_split_custom_set_from_vertices([tuple(n) for n in unit])
 
 
