@@ -64,7 +64,7 @@ def client(context) -> animspace.Client:
     if settings.token_file:
         token = _read(settings.token_file, "Token file", "r").strip()
     tls = {}
-    if settings.use_tls or settings.root_certificates_file or settings.client_certificate_file:
+    if settings.use_tls:  # only then: the panel hides the TLS files while it is off
         tls["tls"] = True
         if settings.root_certificates_file:
             tls["root_certificates"] = _read(settings.root_certificates_file, "CA")
