@@ -28,6 +28,9 @@ packages=(
   python3-pip python3-setuptools python3-wheel python3-venv
   # deploy/: manifests parsed and linted by the tests
   python3-yaml yamllint
+  # clients/blender: the add-on is tested headless in Debian's Blender (3.4, on the system Python 3.11,
+  # which imports python3-grpcio, python3-protobuf and python3-numpy above)
+  blender
 )
 
 missing=()

@@ -1,0 +1,124 @@
+"""Levels of detail (Merry 2007 ch. 6, §7.3) imported as new mesh objects (GetLod, posed form).
+
+A level is chosen by index, by vertex budget, or by the active camera: the coarsest level whose
+error ε^l projects under ``tolerance_px`` pixels (eq. 7.2, ε = 2·p·d·sin θ / w, evaluated by the
+server). The view's quantities come from the scene: ``viewport_width_px`` is the render width
+(resolution × percentage), ``horizontal_fov_rad`` the camera's horizontal angle for that
+resolution and sensor fit, and ``distance`` runs from the camera to the model's centre. The
+server measures distance to its bounding sphere's centre, which the API does not expose; the
+add-on uses the centre of the model's rest bounding box (of its coarsest level, one cheap call),
+which coincides with it for a symmetric model and is close otherwise.
+
+When the active object is an animation-space mesh built by the add-on, the level is placed where
+that mesh is and posed at its armature's pose; otherwise it is placed at the origin, at rest.
+"""
+import math
+from typing import Optional, Tuple
+
+import bpy
+import numpy as np
+
+import animspace
+
+from . import connection, mesh_data, skinning
+from .connection import SetupError, reporting
+
+
+def view_of(scene: bpy.types.Scene, camera: Optional[bpy.types.Object]) -> Tuple[int, float]:
+    """(viewport_width_px, horizontal_fov_rad) of ``camera`` rendering ``scene``."""
+    if camera is None or camera.type != "CAMERA":
+        raise SetupError("Camera: the scene has no active camera")
+    data = camera.data
+    if data.type != "PERSP":
+        raise SetupError(f"Camera: '{camera.name}' is {data.type.lower()}; eq. 7.2 needs a perspective camera")
+    render = scene.render
+    width_px = max(1, round(render.resolution_x * render.resolution_percentage / 100))
+    height_px = max(1, round(render.resolution_y * render.resolution_percentage / 100))
+    aspect = (width_px * render.pixel_aspect_x) / (height_px * render.pixel_aspect_y)
+    fit = data.sensor_fit
+    if fit == "AUTO":  # the sensor width spans the image's larger side
+        fit, sensor_mm = ("HORIZONTAL", data.sensor_width) if aspect >= 1 else ("VERTICAL", data.sensor_width)
+    else:
+        sensor_mm = data.sensor_width if fit == "HORIZONTAL" else data.sensor_height
+    half_angle = math.atan(sensor_mm / (2.0 * data.lens))
+    if fit == "VERTICAL":
+        half_angle = math.atan(math.tan(half_angle) * aspect)
+    return width_px, 2.0 * half_angle
+
+
+def camera_distance(client: animspace.Client, model: str, camera: bpy.types.Object,
+                    placement: Optional[bpy.types.Object]) -> float:
+    """Camera to the model's rest bounding-box centre, model units (the module doc says why)."""
+    version = client.describe_model(model).default
+    if version is None:
+        raise SetupError(f"Model: no version of '{model}' is loaded")
+    # A PMSC model serving its engine's levels lists none of its own: its level 0 is then used.
+    mesh = client.get_lod(model, level=max(version.lod_level_count - 1, 0))
+    centre = 0.5 * (mesh.positions.min(axis=0) + mesh.positions.max(axis=0)).astype(np.float64)
+    eye = np.array(camera.matrix_world.translation, dtype=np.float64)
+    if placement is not None:  # into the model's space: the placement may move or scale it
+        to_model = np.linalg.inv(np.array(placement.matrix_world, dtype=np.float64))
+        eye = (to_model @ np.append(eye, 1.0))[:3]
+    return float(np.linalg.norm(eye - centre))
+
+
+class ANIMSPACE_OT_import_lod(bpy.types.Operator):
+    """Import one level of detail of the model as a new mesh object"""
+    bl_idname = "animspace.import_lod"
+    bl_label = "Import level"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @reporting
+    def execute(self, context):
+        scene = context.scene
+        settings = scene.animspace
+        model = settings.model.strip()
+        if not model:
+            raise SetupError("Model: choose a model with levels (Connect lists them)")
+        client = connection.client(context)
+        active = context.active_object
+        placement = active if active is not None and active.animspace.role == "SKINNED" else None
+        pose = None
+        if placement is not None and placement.animspace.armature is not None:
+            pose = skinning.skeleton_pose(placement.animspace.armature, context.evaluated_depsgraph_get())
+        selection = {}
+        if settings.lod_selection == "LEVEL":
+            selection["level"] = settings.lod_level
+        elif settings.lod_selection == "BUDGET":
+            selection["max_vertices"] = settings.max_vertices
+        else:
+            width_px, fov_rad = view_of(scene, scene.camera)
+            selection.update(tolerance_px=settings.tolerance_px, viewport_width_px=width_px,
+                             horizontal_fov_rad=fov_rad,
+                             distance=camera_distance(client, model, scene.camera, placement))
+        level = client.get_lod(model, pose=pose, **selection)
+        header = level.header
+        mesh = mesh_data.new_mesh(f"{model} LOD {header.level}", level.positions, level.indices)
+        obj = bpy.data.objects.new(f"{model} LOD {header.level}", mesh)
+        if placement is not None:
+            obj.matrix_world = placement.matrix_world
+        mesh_data.link(context, obj)
+        obj.animspace.role = "LOD"
+        obj.animspace.model = model
+        obj.animspace.model_version = header.model_version
+        obj.animspace.lod_level = header.level
+        obj.animspace.epsilon = header.epsilon
+        obj.animspace.tolerated_error = header.tolerated_error
+        view = (f", tolerated error {header.tolerated_error:.6g} at distance {selection['distance']:.6g}"
+                if "distance" in selection else "")
+        self.report({"INFO"}, f"level {header.level} of {header.level_count}: {header.vertex_count} vertices, "
+                              f"{header.face_count} faces, ε^l {header.epsilon:.6g}{view}")
+        return {"FINISHED"}
+
+
+_CLASSES = (ANIMSPACE_OT_import_lod,)
+
+
+def register() -> None:
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,134 @@
+"""The sidebar (N-panel) tab "animspace": the connection and one sub-panel per workflow."""
+import bpy
+
+from . import mesh_data
+
+
+class ANIMSPACE_UL_models(bpy.types.UIList):
+    def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
+        row = layout.row(align=True)
+        row.label(text=item.name)
+        detail = f"{item.kind.lower()}, {item.point_count} pts"
+        if item.key_point_count:
+            detail += f", {item.key_point_count} keys"
+        if item.bone_count:
+            detail += f", {item.bone_count} bones"
+        if item.lod_level_count:
+            detail += f", {item.lod_level_count} levels"
+        row.label(text=detail)
+
+
+class _Panel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "animspace"
+
+
+class ANIMSPACE_PT_connection(_Panel, bpy.types.Panel):
+    bl_label = "animspace"
+
+    def draw(self, context):
+        settings = context.scene.animspace
+        layout = self.layout
+        layout.prop(settings, "address")
+        layout.prop(settings, "token_file")
+        layout.prop(settings, "use_tls")
+        if settings.use_tls:
+            box = layout.box()
+            box.prop(settings, "root_certificates_file")
+            box.prop(settings, "client_certificate_file")
+            box.prop(settings, "client_key_file")
+            box.prop(settings, "server_name")
+        layout.prop(settings, "deadline_s")
+        row = layout.row()
+        row.operator("animspace.connect", icon="URL")
+        row.label(text=f"Health: {settings.health}")
+        layout.template_list("ANIMSPACE_UL_models", "", settings, "models", settings, "model_index", rows=3)
+        if settings.last_error:
+            layout.label(text=settings.last_error, icon="ERROR")
+
+
+class ANIMSPACE_PT_soft_cache(_Panel, bpy.types.Panel):
+    bl_label = "Soft-cache playback"
+    bl_parent_id = "ANIMSPACE_PT_connection"
+
+    def draw(self, context):
+        settings = context.scene.animspace
+        layout = self.layout
+        layout.prop_search(settings, "pmsc_model", settings, "models")
+        layout.prop(settings, "source")
+        layout.prop(settings, "output")
+        row = layout.row()
+        row.prop(settings, "live_soft_cache")
+        row.prop(settings, "complete_misses")
+        row = layout.row()
+        row.operator("animspace.soft_cache_frame")
+        row.operator("animspace.soft_cache_bake")
+        box = layout.box()
+        box.label(text=f"Verdict: {settings.status if settings.status != 'NONE' else '—'}"
+                       + (" (logged)" if settings.logged else ""))
+        box.label(text=f"e_key: {settings.key_point_error:.6g}    α: {settings.blend_weight:.4g}")
+        box.label(text=f"Colour attribute: {mesh_data.VERDICT_ATTRIBUTE}")
+
+
+class ANIMSPACE_PT_skinning(_Panel, bpy.types.Panel):
+    bl_label = "Animation space"
+    bl_parent_id = "ANIMSPACE_PT_connection"
+
+    def draw(self, context):
+        settings = context.scene.animspace
+        layout = self.layout
+        layout.prop_search(settings, "model", settings, "models")
+        layout.operator("animspace.build_skinned")
+        row = layout.row()
+        row.prop(settings, "live_skinning")
+        row.operator("animspace.pose_skinned")
+        layout.operator("animspace.bake_skinned")
+
+
+class ANIMSPACE_PT_lod(_Panel, bpy.types.Panel):
+    bl_label = "Level of detail"
+    bl_parent_id = "ANIMSPACE_PT_connection"
+
+    def draw(self, context):
+        settings = context.scene.animspace
+        layout = self.layout
+        layout.prop(settings, "lod_selection", expand=True)
+        if settings.lod_selection == "LEVEL":
+            layout.prop(settings, "lod_level")
+        elif settings.lod_selection == "BUDGET":
+            layout.prop(settings, "max_vertices")
+        else:
+            layout.prop(settings, "tolerance_px")
+        layout.operator("animspace.import_lod")
+        obj = context.active_object
+        if obj is not None and obj.animspace.role == "LOD":
+            layout.label(text=f"Level {obj.animspace.lod_level}: ε^l {obj.animspace.epsilon:.6g}")
+
+
+class ANIMSPACE_PT_thumbnail(_Panel, bpy.types.Panel):
+    bl_label = "Thumbnail"
+    bl_parent_id = "ANIMSPACE_PT_connection"
+
+    def draw(self, context):
+        settings = context.scene.animspace
+        layout = self.layout
+        row = layout.row(align=True)
+        row.prop(settings, "width_px")
+        row.prop(settings, "height_px")
+        layout.prop(settings, "show_wireframe")
+        layout.operator("animspace.thumbnail", icon="IMAGE_DATA")
+
+
+_CLASSES = (ANIMSPACE_UL_models, ANIMSPACE_PT_connection, ANIMSPACE_PT_soft_cache, ANIMSPACE_PT_skinning,
+            ANIMSPACE_PT_lod, ANIMSPACE_PT_thumbnail)
+
+
+def register() -> None:
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)

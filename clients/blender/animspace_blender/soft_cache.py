@@ -1,0 +1,212 @@
+"""Soft-cache playback of a PMSC model (Meyer & Anderson 2006 §5, 2007 §2).
+
+The source is a mesh whose vertices are the model's points in order (typically a sequence brought
+in with a Mesh Cache modifier reading a PC2 file). For a frame, the source's evaluated key points
+— K of its N vertices, ``describe_key_points`` order — go to the server (EvaluateKeyPoints; a
+range goes over one StreamKeyPoints call) and the whole answered pose is written into the output
+object, its vertices coloured by the verdict (HIT / BLEND / MISS, attribute ``animspace_verdict``)
+and e_key and α shown in the panel. On a BLEND or MISS the evaluated full mesh can be sent back
+(CompleteMiss): the answer is then α·full + (1−α)·estimate, and the server logs the pose for the
+next retrain ("train each night, better tomorrow").
+"""
+from typing import Dict, List, Optional, Tuple
+
+import bpy
+import numpy as np
+from bpy.props import IntProperty, StringProperty
+
+import animspace
+
+from . import connection, frame_change, mesh_data
+from .connection import SetupError, reporting
+
+# describe_key_points per (client, model): a frame-change handler must not ask every frame. The
+# answer pins its model_version, so the indices stay those of the version that answers.
+_key_points: Dict[Tuple[int, str], animspace.KeyPoints] = {}
+
+
+def _keys(client: animspace.Client, model: str) -> animspace.KeyPoints:
+    key = (id(client), model)
+    if key not in _key_points:
+        _key_points[key] = client.describe_key_points(model)
+    return _key_points[key]
+
+
+def forget_key_points() -> None:
+    _key_points.clear()
+
+
+def _checked_setup(context) -> Tuple[bpy.types.Object, str]:
+    settings = context.scene.animspace
+    source = settings.source
+    if source is None or source.type != "MESH":
+        raise SetupError("Source: choose the mesh whose vertices are the model's points")
+    model = settings.pmsc_model.strip()
+    if not model:
+        raise SetupError("PMSC model: choose a model (Connect lists them)")
+    return source, model
+
+
+def _full_pose(source: bpy.types.Object, depsgraph, keys: animspace.KeyPoints) -> np.ndarray:
+    full = mesh_data.evaluated_positions(source, depsgraph)
+    if full.shape[0] != keys.control_point_count:
+        raise SetupError(f"Source: '{source.name}' has {full.shape[0]} vertices at this frame, the model's "
+                         f"key points index {keys.control_point_count} points")
+    if keys.channel_count != 3:
+        raise SetupError(f"PMSC model: its points have {keys.channel_count} channels, not positions (3)")
+    return full
+
+
+def _output(context, source: bpy.types.Object, model: str) -> bpy.types.Object:
+    """The output object: the scene's choice, else a copy of the source's mesh (same topology,
+    no modifiers) placed where the source is."""
+    settings = context.scene.animspace
+    output = settings.output
+    if output is None:
+        output = bpy.data.objects.new(f"{source.name} ({model})", source.data.copy())
+        output.matrix_world = source.matrix_world
+        mesh_data.link(context, output)
+        settings.output = output
+    if output == source:
+        raise SetupError("Output: choose another object than the source (the answer would feed back into it)")
+    output.animspace.role = "SOFT_CACHE_OUTPUT"
+    output.animspace.model = model
+    return output
+
+
+def _show(context, output: bpy.types.Object, result: animspace.PoseResult, logged: bool) -> None:
+    if result.points is None or result.points.shape != (len(output.data.vertices), 3):
+        raise SetupError(f"Output: '{output.name}' has {len(output.data.vertices)} vertices, the answer "
+                         f"{0 if result.points is None else result.points.shape[0]} points")
+    mesh_data.set_positions(output.data, result.points)
+    mesh_data.set_verdict(output.data, result.status)
+    output.animspace.model_version = result.model_version
+    settings = context.scene.animspace
+    settings.status = result.status
+    settings.key_point_error = result.key_point_error
+    settings.blend_weight = result.blend_weight
+    settings.logged = logged
+
+
+def evaluate_frame(context, depsgraph) -> animspace.PoseResult:
+    """The current frame of the source through the soft cache, written into the output."""
+    source, model = _checked_setup(context)
+    client = connection.client(context)
+    keys = _keys(client, model)
+    full = _full_pose(source, depsgraph, keys)
+    key_values = keys.select(full)
+    result = client.evaluate_key_points(model, key_values, version=keys.model_version)
+    logged = False
+    if result.full_evaluation_needed and context.scene.animspace.complete_misses:
+        completion = client.complete_miss(model, key_values, full, version=result.model_version)
+        result, logged = completion.result, completion.logged
+    _show(context, _output(context, source, model), result, logged)
+    return result
+
+
+class ANIMSPACE_OT_soft_cache_frame(bpy.types.Operator):
+    """Send the source's key points at this frame through the soft cache and write the answer into the output"""
+    bl_idname = "animspace.soft_cache_frame"
+    bl_label = "Evaluate frame"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @reporting
+    def execute(self, context):
+        try:
+            result = evaluate_frame(context, context.evaluated_depsgraph_get())
+        except animspace.RpcError:
+            forget_key_points()  # a retrain or reload may have changed them: ask again next time
+            raise
+        self.report({"INFO"}, f"{result.status}: e_key {result.key_point_error:.6g}, α {result.blend_weight:.4g}")
+        return {"FINISHED"}
+
+
+class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
+    """Play a frame range through the soft cache (one stream) and bake the answers to a PC2 point cache"""
+    bl_idname = "animspace.soft_cache_bake"
+    bl_label = "Bake range to PC2"
+    bl_options = {"REGISTER"}
+
+    filepath: StringProperty(name="PC2 file", subtype="FILE_PATH", default="//soft_cache.pc2")
+    frame_start: IntProperty(name="Start", default=-1, description="First frame (-1: the scene's)")
+    frame_end: IntProperty(name="End", default=-1, description="Last frame, included (-1: the scene's)")
+
+    @reporting
+    def execute(self, context):
+        scene = context.scene
+        settings = scene.animspace
+        source, model = _checked_setup(context)
+        start = scene.frame_start if self.frame_start < 0 else self.frame_start
+        end = scene.frame_end if self.frame_end < 0 else self.frame_end
+        if end < start:
+            raise SetupError(f"End: {end} is before Start {start}")
+        if not self.filepath.lower().endswith(".pc2"):
+            raise SetupError(f"PC2 file: expected a .pc2 path, got '{self.filepath}'")
+        path = connection.file_path(self.filepath, "PC2 file")
+        client = connection.client(context)
+        forget_key_points()
+        keys = _keys(client, model)
+
+        # Blender's data is read on this thread only; the stream then sends what was collected.
+        key_frames: List[np.ndarray] = []
+        full_frames: List[Optional[np.ndarray]] = []
+        was = scene.frame_current
+        # Live skinning keeps running: the source may be an animation-space mesh it poses.
+        with frame_change.suspended("soft_cache"):
+            try:
+                for frame in range(start, end + 1):
+                    scene.frame_set(frame)
+                    full = _full_pose(source, context.evaluated_depsgraph_get(), keys)
+                    key_frames.append(keys.select(full))
+                    full_frames.append(full if settings.complete_misses else None)
+            finally:
+                scene.frame_set(was)
+
+        # The deadline bounds the whole stream: the per-call deadline, plus 50 ms a frame.
+        results = list(client.stream_key_points(model, key_frames, version=keys.model_version,
+                                                deadline_s=settings.deadline_s + 0.05 * len(key_frames)))
+        points = []
+        logged = 0
+        for key_values, full, result in zip(key_frames, full_frames, results):
+            if result.full_evaluation_needed and full is not None:
+                completion = client.complete_miss(model, key_values, full, version=result.model_version)
+                result = completion.result
+                logged += completion.logged
+            points.append(result.points)
+        animspace.write_pc2(path, np.stack(points), start_frame=float(start), sample_rate=1.0)
+        counts = {status: sum(r.status == status for r in results) for status in ("HIT", "BLEND", "MISS")}
+        self.report({"INFO"}, f"{len(results)} frames → {path}: {counts['HIT']} hits, {counts['BLEND']} blends, "
+                              f"{counts['MISS']} misses" + (f", {logged} logged" if settings.complete_misses else ""))
+        return {"FINISHED"}
+
+
+def on_frame_change(scene) -> None:
+    """Live playback (frame_change.py calls it after live skinning)."""
+    settings = scene.animspace
+    if not settings.live_soft_cache:
+        return
+    try:
+        # Asked now rather than taken from the handler: live skinning may just have moved the source.
+        evaluate_frame(bpy.context, bpy.context.evaluated_depsgraph_get())
+        settings.last_error = ""
+    except (SetupError,) + connection.EXPECTED_ERRORS as error:
+        forget_key_points()
+        settings.last_error = connection.error_text(error)
+        print(f"animspace soft cache, frame {scene.frame_current}: {settings.last_error}")
+
+
+_CLASSES = (ANIMSPACE_OT_soft_cache_frame, ANIMSPACE_OT_soft_cache_bake)
+
+
+def register() -> None:
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
+    connection.reset_hooks.append(forget_key_points)
+
+
+def unregister() -> None:
+    if forget_key_points in connection.reset_hooks:
+        connection.reset_hooks.remove(forget_key_points)
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)
+    forget_key_points()

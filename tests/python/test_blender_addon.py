@@ -1,0 +1,378 @@
+"""The Blender add-on (clients/blender), installed from the built zip into Debian's Blender and
+driven headless (`blender -b`) against a daemon serving the demo repository.
+
+Blender runs once (tests/python/blender_workflows.py) and writes what it ended up holding; each
+test here compares one workflow with the daemon's own answers for the same input, fetched with the
+Python client outside Blender, and with poses built independently (conftest's arm transforms,
+restated from core/demo/bending_arm.h).
+"""
+import ast
+import json
+import math
+import os
+import pathlib
+import shutil
+import socket
+import subprocess
+import zipfile
+
+import numpy as np
+import pytest
+
+import animspace
+
+from conftest import BUILD
+
+HERE = pathlib.Path(__file__).resolve().parent
+ZIP = BUILD / "clients" / "blender" / "animspace_blender.zip"
+BLENDER = shutil.which("blender")
+# Set to a path to refresh the README's picture from this run (docs/blender/workflows.png).
+SCREENSHOT = os.environ.get("ANIMSPACE_BLENDER_SCREENSHOT")
+
+NO_BLENDER = "Blender is not installed (scripts/install-deps.sh installs Debian's blender package)"
+
+PMSC_MODEL = "arm-pmsc"  # client fail-through: blends and misses wait for CompleteMiss
+SKINNED_MODEL = "arm-animspace"
+# Poses as (shoulder_rad, elbow_rad) of the bending arm.
+POSES = {"operator": (0.3, 1.1), "handler": (-0.2, 0.6), "bake_first": (0.1, 0.4), "bake_last": (0.25, 1.5)}
+LOD_LEVEL = 3
+MAX_VERTICES = 600
+VIEW = {"location": (0.5, -20.0, 3.0), "rotation_euler": (math.radians(85), 0.0, 0.0), "lens_mm": 50.0,
+        "sensor_width_mm": 36.0, "resolution": (1920, 1080), "resolution_percentage": 50, "tolerance_px": 1.5}
+THUMBNAIL = (200, 150)
+VERDICT_COLOURS = {"HIT": (0.05, 0.60, 0.10, 1.0), "BLEND": (0.90, 0.55, 0.00, 1.0), "MISS": (0.80, 0.02, 0.02, 1.0)}
+
+
+def _closed_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def blender_run(tmp_path_factory, request):
+    """One Blender session over every workflow: (daemon address, out dir, results, frames)."""
+    if BLENDER is None:
+        pytest.skip(NO_BLENDER)
+    if not ZIP.is_file():
+        pytest.fail(f"{ZIP} is missing: the build makes it (target animspace_blender_addon)")
+    from conftest import _arm_transforms, _demo_arm_transforms, run_animspaced
+
+    work = tmp_path_factory.mktemp("blender")
+    out = work / "out"
+    out.mkdir()
+    misses = work / "misses"
+    misses.mkdir()
+    # A second daemon that wants a bearer token and, where openssl can make certificates, mutual
+    # TLS under a name other than its address.
+    secure = work / "secure"
+    secure.mkdir()
+    (secure / "users").write_text("user-secret\n")
+    (secure / "token").write_text("user-secret\n")
+    secure_flags = ["--auth-token-file", str(secure / "users")]
+    tls = None
+    if shutil.which("openssl") is not None:
+        from test_client_admin import _certificate, _openssl
+
+        _openssl("req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes", "-keyout",
+                 "ca.key", "-out", "ca.pem", "-days", "2", "-subj", "/CN=animspace test CA", cwd=secure)
+        _certificate(secure, "server", "/CN=animspace.test", "subjectAltName=DNS:animspace.test")
+        _certificate(secure, "client", "/CN=animspace test client", "extendedKeyUsage=clientAuth")
+        secure_flags += ["--tls-cert", str(secure / "server.pem"), "--tls-key", str(secure / "server.key"),
+                         "--tls-client-ca", str(secure / "ca.pem")]
+        tls = {"root_certificates_file": str(secure / "ca.pem"), "client_certificate_file": str(secure / "client.pem"),
+               "client_key_file": str(secure / "client.key"), "server_name": "animspace.test"}
+    with run_animspaced(work, "--miss-log-dir", str(misses)) as address, animspace.Client(address) as client, \
+            run_animspaced(secure, *secure_flags) as token_address:
+        client.wait_until_serving(deadline_s=60)
+        # The sequence the Mesh Cache modifier plays: three of the demo's unseen frames (hits),
+        # an elbow bent past the training range (a blend) and one bent backwards (a miss).
+        transforms = [_demo_arm_transforms(f / 120) for f in (1, 31, 61)] + [_arm_transforms(2.4),
+                                                                             _arm_transforms(math.radians(-60))]
+        frames = np.stack([client.evaluate_skeleton_pose(SKINNED_MODEL, G).points for G in transforms])
+        animspace.write_pc2(work / "sequence.pc2", frames)
+        level0 = client.get_lod(SKINNED_MODEL, level=0)
+        np.save(work / "rest.npy", level0.positions)
+        np.save(work / "faces.npy", level0.indices.astype(np.int64))
+        config = {
+            "zip": str(ZIP), "out_dir": str(out), "address": address, "unreachable": f"127.0.0.1:{_closed_port()}",
+            "token_address": token_address, "token_file": str(secure / "token"), "tls": tls,
+            "rest_points": str(work / "rest.npy"), "faces": str(work / "faces.npy"),
+            "sequence_pc2": str(work / "sequence.pc2"), "frame_count": len(frames), "complete_frames": [4, 5],
+            "pmsc_model": PMSC_MODEL, "bad_model": "no-such-model", "skinned_model": SKINNED_MODEL,
+            "poses": POSES, "lod_level": LOD_LEVEL, "max_vertices": MAX_VERTICES, "view": VIEW,
+            "thumbnail": THUMBNAIL, "screenshot": {"path": str(out / "workflows.png"), "resolution": [1200, 520]},
+        }
+        (work / "config.json").write_text(json.dumps(config))
+        # Blender's user folders in the test's tree: installing the add-on must not touch $HOME.
+        environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(work / "user-scripts"),
+                           BLENDER_USER_CONFIG=str(work / "user-config"))
+        done = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
+                               str(HERE / "blender_workflows.py"), "--", str(work / "config.json")],
+                              capture_output=True, text=True, timeout=300, env=environment)
+        (work / "blender.log").write_text(done.stdout + done.stderr)
+        results_file = out / "results.json"
+        assert done.returncode == 0 and results_file.is_file(), done.stdout[-4000:] + done.stderr[-4000:]
+        results = json.loads(results_file.read_text())
+        assert "script_error" not in results, results["script_error"] + "\n" + done.stdout[-3000:]
+        if SCREENSHOT:
+            shutil.copyfile(out / "workflows.png", SCREENSHOT)
+        yield {"client": client, "out": out, "results": results, "frames": frames, "work": work, "misses": misses}
+
+
+def test_the_zip_holds_the_add_on_and_the_client_it_carries_and_builds_reproducibly(tmp_path):
+    # No Blender needed: what Blender's "Install from file" would unpack.
+    assert ZIP.is_file(), f"{ZIP} is missing: the build makes it (target animspace_blender_addon)"
+    addon = HERE.parents[1] / "clients" / "blender"
+    with zipfile.ZipFile(ZIP) as archive:
+        entries = {name: archive.read(name) for name in archive.namelist()}
+    expected = {f"animspace_blender/{p.relative_to(addon / 'animspace_blender').as_posix()}": p.read_bytes()
+                for p in (addon / "animspace_blender").rglob("*.py")}
+    client = BUILD / "python" / "animspace"
+    expected.update({f"animspace_blender/vendor/animspace/{p.relative_to(client).as_posix()}": p.read_bytes()
+                     for p in client.rglob("*") if p.is_file() and p.suffix in (".py", ".typed")
+                     and "__pycache__" not in p.parts})
+    assert entries == expected
+    assert "animspace_blender/vendor/animspace/v1/poses_pb2_grpc.py" in entries
+    # bl_info, read without importing bpy: the add-on declares the Blender it was tested on.
+    tree = ast.parse(entries["animspace_blender/__init__.py"])
+    bl_info = next(ast.literal_eval(node.value) for node in tree.body
+                   if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "bl_info")
+    assert bl_info["blender"] == (3, 4, 0) and bl_info["name"] == "animspace"
+    # The same sources give the same bytes.
+    again = tmp_path / "again.zip"
+    subprocess.run(["/usr/bin/python3", str(addon / "build_addon.py"), "--addon", str(addon / "animspace_blender"),
+                    "--python", str(BUILD / "python"), "--output", str(again)], check=True, timeout=60)
+    assert again.read_bytes() == ZIP.read_bytes()
+
+
+def load(run, name):
+    return np.load(run["out"] / f"{name}.npy")
+
+
+def test_the_add_on_installs_from_the_zip_and_uses_the_client_it_carries(blender_run):
+    results = blender_run["results"]
+    user_scripts = blender_run["work"] / "user-scripts"
+    addon = pathlib.Path(results["addon_file"])
+    assert addon.is_relative_to(user_scripts / "addons" / "animspace_blender")
+    assert pathlib.Path(results["client_file"]) == addon.parent / "vendor" / "animspace" / "__init__.py"
+
+
+def test_connect_lists_the_models_and_reports_an_unreachable_server(blender_run):
+    results, client = blender_run["results"], blender_run["client"]
+    assert results["health"] == "SERVING"
+    expected = {m.name: m.default for m in client.list_models()}
+    assert set(results["models"]) == set(expected)
+    for name, listed in results["models"].items():
+        assert listed["kind"] == expected[name].kind
+        assert listed["point_count"] == expected[name].point_count
+        assert listed["has_tangents"] == ("animspace.tangents" in expected[name].sections)
+    report = results["unreachable_report"]
+    assert report is not None and "UNAVAILABLE" in report and "Traceback" not in report
+
+
+def test_a_token_file_is_sent_as_the_bearer_token(blender_run):
+    results = blender_run["results"]
+    report = results["no_token_report"]
+    assert report is not None and "UNAUTHENTICATED" in report and "Traceback" not in report
+    assert results["token_models"] == sorted(m.name for m in blender_run["client"].list_models())
+
+
+def test_tls_options_reach_the_client(blender_run):
+    results = blender_run["results"]
+    if "tls" not in results:
+        pytest.skip("needs the openssl command to make test certificates")
+    # Plaintext to a TLS-only daemon, and TLS without the client certificate it requires: refused.
+    # With the CA, the client certificate and key and the server name the models are listed (the
+    # token test above ran over that connection).
+    assert results["token_models"]
+    for report in (results["plaintext_report"], results["no_client_certificate_report"]):
+        assert report is not None and "UNAVAILABLE" in report and "Traceback" not in report
+
+
+def test_the_sidebar_draws_every_workflow_and_disabling_leaves_nothing_behind(blender_run):
+    results = blender_run["results"]
+    drawn = results["panels"]
+    assert len(drawn["panels"]) == 5
+    assert set(drawn["operators"]) == set(results["operators"])  # every operator has its button
+    assert {"address", "token_file", "root_certificates_file", "pmsc_model", "source", "model", "lod_selection"} \
+        <= set(drawn["props"])
+    assert not any("animspace" in name for name in results["after_disable"]["handlers"])
+    assert results["after_disable"]["scene_settings"] is False
+    assert results["after_disable"]["panels"] == []
+
+
+def test_bad_input_is_a_report_with_the_servers_message_not_a_traceback(blender_run):
+    client, results = blender_run["client"], blender_run["results"]
+    with pytest.raises(animspace.NotFound) as unknown_model:
+        client.describe_key_points("no-such-model")
+    with pytest.raises(animspace.InvalidArgument) as bad_level:
+        client.get_lod(SKINNED_MODEL, level=10_000)
+    for report, refused in ((results["bad_model_report"], unknown_model.value),
+                            (results["bad_level_report"], bad_level.value)):
+        assert report is not None and refused.message in report and refused.code.name in report
+        assert "Traceback" not in report
+
+
+def test_playback_writes_the_daemons_answer_for_each_frames_key_points(blender_run):
+    client, frames = blender_run["client"], blender_run["frames"]
+    keys = client.describe_key_points(PMSC_MODEL)
+    played = load(blender_run, "played")
+    statuses = set()
+    for i, shown in enumerate(blender_run["results"]["played"]):
+        expected = client.evaluate_key_points(PMSC_MODEL, keys.select(frames[i]))
+        assert shown["last_error"] == ""
+        assert shown["status"] == expected.status, f"frame {i + 1}"
+        assert shown["key_point_error"] == pytest.approx(expected.key_point_error, rel=1e-5)
+        assert shown["blend_weight"] == pytest.approx(expected.blend_weight, abs=1e-6)
+        np.testing.assert_allclose(played[i], expected.points, rtol=0, atol=1e-6, err_msg=f"frame {i + 1}")
+        # The verdict as a colour attribute on every point.
+        attribute = shown["attribute"]
+        assert attribute["domain"] == "POINT"
+        np.testing.assert_allclose(attribute["colours"], np.tile(VERDICT_COLOURS[expected.status], (len(played[i]), 1)),
+                                   atol=1e-6)
+        statuses.add(expected.status)
+    assert statuses == {"HIT", "BLEND", "MISS"}  # the sequence was chosen to show all three
+
+
+def test_blends_and_misses_are_completed_with_the_evaluated_mesh_and_logged(blender_run):
+    client, frames = blender_run["client"], blender_run["frames"]
+    keys = client.describe_key_points(PMSC_MODEL)
+    for completed in blender_run["results"]["completed"]:
+        full = frames[completed["frame"] - 1]
+        estimate = client.evaluate_key_points(PMSC_MODEL, keys.select(full))
+        assert completed["status"] == estimate.status and estimate.status in ("BLEND", "MISS")
+        assert completed["logged"] is True
+        expected = client.complete_miss(PMSC_MODEL, keys.select(full), full, version=estimate.model_version).result
+        np.testing.assert_allclose(load(blender_run, f"completed_{completed['frame']}"), expected.points,
+                                   rtol=0, atol=1e-6)
+    log = blender_run["misses"] / f"{PMSC_MODEL}.misses"
+    assert log.is_file() and log.stat().st_size > 0
+
+
+def test_a_baked_range_holds_the_streams_answers(blender_run):
+    client, frames = blender_run["client"], blender_run["frames"]
+    keys = client.describe_key_points(PMSC_MODEL)
+    baked = animspace.read_pc2(blender_run["out"] / "soft_cache.pc2")
+    assert (baked.frame_count, baked.point_count, baked.start_frame) == (len(frames), frames.shape[1], 1.0)
+    streamed = list(client.stream_key_points(PMSC_MODEL, keys.select(frames)))
+    for i, result in enumerate(streamed):
+        np.testing.assert_allclose(baked.frames[i], result.points, rtol=0, atol=1e-5, err_msg=f"frame {i + 1}")
+
+
+def _G(shoulder_rad, elbow_rad):
+    from conftest import _arm_transforms
+    return _arm_transforms(elbow_rad=elbow_rad, shoulder_rad=shoulder_rad)
+
+
+def test_the_built_model_is_the_servers_rest_mesh_with_its_skeleton(blender_run):
+    client = blender_run["client"]
+    built = blender_run["results"]["skinned"]
+    level = client.get_lod(SKINNED_MODEL, level=0, form="animation_space")
+    assert built["vertices"] == level.header.vertex_count and built["bones"] == level.header.bone_count
+    assert built["parent"] == built["rig"] and built["include_normals"] is True
+    rest = client.evaluate_skeleton_pose(SKINNED_MODEL, level.skeleton.rest_transforms).points
+    np.testing.assert_allclose(load(blender_run, "skinned_rest"), rest, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(load(blender_run, "skinned_faces"), level.indices)
+
+
+def test_posing_from_the_armature_equals_evaluate_skeleton_pose(blender_run):
+    client = blender_run["client"]
+    for name in ("operator", "handler"):
+        expected = client.evaluate_skeleton_pose(SKINNED_MODEL, _G(*POSES[name]), include_normals=True)
+        np.testing.assert_allclose(load(blender_run, f"skinned_{name}"), expected.points, rtol=0, atol=2e-5,
+                                   err_msg=name)
+        if name == "operator":
+            # Custom split normals as Blender draws them: the server's, to Blender's storage precision.
+            unit = expected.normals / np.linalg.norm(expected.normals, axis=1, keepdims=True)
+            cosine = np.sum(load(blender_run, "skinned_operator_normals") * unit, axis=1)
+            assert cosine.min() > 0.9999
+    # The soft cache, live on the posed arm, answered for the new pose (not the one before it).
+    keys = client.describe_key_points(PMSC_MODEL)
+    posed = client.evaluate_skeleton_pose(SKINNED_MODEL, _G(*POSES["handler"])).points
+    played = client.evaluate_key_points(PMSC_MODEL, keys.select(load(blender_run, "skinned_handler")))
+    assert blender_run["results"]["chained"]["status"] == played.status
+    np.testing.assert_allclose(load(blender_run, "chained"), played.points, rtol=0, atol=1e-6)
+    assert client.evaluate_key_points(PMSC_MODEL, keys.select(posed)).status == played.status
+    assert blender_run["results"]["skinned_handler_error"] == ""
+    baked = animspace.read_pc2(blender_run["out"] / "skinned.pc2")
+    assert baked.frame_count == 3 and baked.start_frame == 1.0
+    for index, name in ((0, "bake_first"), (2, "bake_last")):
+        expected = client.evaluate_skeleton_pose(SKINNED_MODEL, _G(*POSES[name])).points
+        np.testing.assert_allclose(baked.frames[index], expected, rtol=0, atol=2e-5, err_msg=name)
+
+
+def _check_lod(run, name, expected):
+    shown = run["results"]["lods"][name]
+    assert shown["level"] == expected.header.level
+    assert shown["epsilon"] == pytest.approx(expected.header.epsilon, rel=1e-6)
+    positions = load(run, f"lod_{name}_positions")
+    assert positions.shape == (expected.header.vertex_count, 3)
+    np.testing.assert_allclose(positions, expected.positions, rtol=0, atol=2e-5)
+    np.testing.assert_array_equal(load(run, f"lod_{name}_faces"), expected.indices)
+    return shown
+
+
+def test_imported_levels_have_the_levels_counts_and_positions(blender_run):
+    client = blender_run["client"]
+    # By index, with the armature at the "bake_first" keyframe (frame 1): posed there.
+    _check_lod(blender_run, "level", client.get_lod(SKINNED_MODEL, level=LOD_LEVEL, pose=_G(*POSES["bake_first"])))
+    budget = _check_lod(blender_run, "budget", client.get_lod(SKINNED_MODEL, max_vertices=MAX_VERTICES))
+    assert np.allclose(budget["matrix_world"], np.eye(4))
+
+    # By camera: eq. 7.2's view restated from the scene's camera, 50 mm lens on a 36 mm sensor
+    # across a 960-px-wide (1920 at 50 %) landscape render, at the distance from the camera to the
+    # centre of the model's rest bounding box (of its coarsest level).
+    info = client.describe_model(SKINNED_MODEL).default
+    coarsest = client.get_lod(SKINNED_MODEL, level=info.lod_level_count - 1).positions
+    centre = 0.5 * (coarsest.min(axis=0) + coarsest.max(axis=0))
+    distance = float(np.linalg.norm(np.array(VIEW["location"]) - centre))
+    expected = client.get_lod(SKINNED_MODEL, tolerance_px=VIEW["tolerance_px"], distance=distance,
+                              viewport_width_px=960, horizontal_fov_rad=2 * math.atan(36.0 / (2 * 50.0)))
+    assert 0 < expected.header.level < info.lod_level_count - 1  # the view picks a level between the ends
+    shown = _check_lod(blender_run, "view", expected)
+    assert shown["tolerated_error"] == pytest.approx(expected.header.tolerated_error, rel=1e-4)
+
+
+def test_the_thumbnail_is_the_servers_png_in_an_image_datablock(blender_run):
+    results = blender_run["results"]
+    assert results["thumbnail"] == {"size": list(THUMBNAIL), "packed": True}
+    expected = blender_run["client"].render_thumbnail(SKINNED_MODEL, *THUMBNAIL)
+    assert (blender_run["out"] / "thumbnail.png").read_bytes() == expected.png
+
+
+def test_workbench_draws_the_workflows_headless(blender_run):
+    import matplotlib.image
+
+    picture = matplotlib.image.imread(blender_run["out"] / "workflows.png")
+    assert picture.shape[:2] == (520, 1200)
+    # Something was drawn: the verdict colours and the grey meshes are not one flat background.
+    assert np.unique(picture.reshape(-1, picture.shape[2]), axis=0).shape[0] > 100
+
+
+@pytest.mark.skipif(BLENDER is None, reason=NO_BLENDER)
+def test_the_readmes_blender_snippet_runs(daemon, tmp_path):
+    readme = (HERE.parents[1] / "README.md").read_text()
+    section = readme[readme.index("### Use it from Blender"):]
+    start = section.index("```python\n") + len("```python\n")
+    snippet = section[start:section.index("\n```", start)]
+    assert "127.0.0.1:50051" in snippet
+    # The add-on as a user has it: installed from the zip and enabled; files the snippet writes
+    # ("/tmp/…") go to the test's folder.
+    prelude = (f"import bpy\nbpy.ops.preferences.addon_install(filepath={str(ZIP)!r})\n"
+               "bpy.ops.preferences.addon_enable(module='animspace_blender')\n")
+    script = tmp_path / "snippet.py"
+    script.write_text(prelude + snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/'))
+    environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "user-scripts"),
+                       BLENDER_USER_CONFIG=str(tmp_path / "user-config"))
+    done = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script)],
+                          capture_output=True, text=True, timeout=300, env=environment)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    with animspace.Client(daemon) as client:
+        names = [m.name for m in client.list_models()]
+    lines = done.stdout.splitlines()
+    assert f"SERVING {names}" in lines
+    assert any(line.split(" ")[0] in ("HIT", "BLEND", "MISS") for line in lines), lines
+    assert "(256, 256)" in lines
+    baked = animspace.read_pc2(tmp_path / "arm-pmsc.pc2")
+    assert (baked.frame_count, baked.point_count) == (24, 1154)
