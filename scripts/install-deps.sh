@@ -33,8 +33,14 @@ packages=(
   blender
 )
 
+# The container image builds the daemon only; it has no use for Blender's ~500 MB.
+if [ "${ANIMSPACE_WITHOUT_BLENDER:-0}" = "1" ]; then
+  packages=("${packages[@]/blender}")
+fi
+
 missing=()
 for p in "${packages[@]}"; do
+  [ -n "$p" ] || continue
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed'; then
     missing+=("$p")
   fi
