@@ -10,6 +10,7 @@
 #include <Eigen/Cholesky>
 
 #include "core/animspace/metrics.h"
+#include "core/common/parallel.h"
 
 namespace animspace::lod {
 
@@ -24,7 +25,8 @@ Eigen::MatrixXd normalised_positions(const as::AnimationSpaceModel& model, const
   Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(C.rows(), model.vertex_count());
   for (int v = 0; v < model.vertex_count(); ++v) {
     for (int i = model.influences.begin(v); i < model.influences.end(v); ++i) {
-      Y.col(v).noalias() += C.middleCols(4 * model.influences.bones[static_cast<size_t>(i)], 4) * model.positions.col(i);
+      Y.col(v).noalias() +=
+          C.middleCols(4 * model.influences.bones[static_cast<size_t>(i)], 4) * model.positions.col(i);
     }
   }
   return Y;
@@ -127,7 +129,6 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
   const Eigen::Index F = level.faces.rows();
   Eigen::MatrixXd E0(Y.rows(), F), E1(Y.rows(), F);
   Eigen::MatrixXd gram(3, F);
-  Eigen::VectorXd d(Y.rows());
   const auto find_feet = [&] {
     for (Eigen::Index f = 0; f < F; ++f) {
       E0.col(f) = Y.col(level.faces(f, 1)) - Y.col(level.faces(f, 0));
@@ -136,21 +137,25 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
       gram(1, f) = E0.col(f).dot(E1.col(f));
       gram(2, f) = E1.col(f).squaredNorm();
     }
-    for (int o = 0; o < V; ++o) {
-      Foot best;
-      best.distance2 = std::numeric_limits<double>::infinity();
-      const int32_t r = representative[static_cast<size_t>(o)];
-      for (const int32_t f : candidates[static_cast<size_t>(r)]) {
-        d = Yin.col(o) - Y.col(level.faces(f, 0));
-        const Closest c = closest_on_triangle(gram(0, f), gram(1, f), gram(2, f), E0.col(f).dot(d), E1.col(f).dot(d),
-                                              d.squaredNorm());
-        if (c.distance2 < best.distance2) best = {f, {1 - c.s - c.t, c.s, c.t}, c.distance2};
+    // Input vertices are independent here: split them over the cores.
+    parallel_for_chunks(V, 256, [&](int64_t first, int64_t last) {
+      Eigen::VectorXd d(Y.rows());
+      for (int o = static_cast<int>(first); o < static_cast<int>(last); ++o) {
+        Foot best;
+        best.distance2 = std::numeric_limits<double>::infinity();
+        const int32_t r = representative[static_cast<size_t>(o)];
+        for (const int32_t f : candidates[static_cast<size_t>(r)]) {
+          d = Yin.col(o) - Y.col(level.faces(f, 0));
+          const Closest c = closest_on_triangle(gram(0, f), gram(1, f), gram(2, f), E0.col(f).dot(d), E1.col(f).dot(d),
+                                                d.squaredNorm());
+          if (c.distance2 < best.distance2) best = {f, {1 - c.s - c.t, c.s, c.t}, c.distance2};
+        }
+        if (best.face < 0) {  // a vertex with no faces: its own position
+          best.distance2 = (Yin.col(o) - Y.col(r)).squaredNorm();
+        }
+        feet[static_cast<size_t>(o)] = best;
       }
-      if (best.face < 0) {  // a vertex with no faces: its own position
-        best.distance2 = (Yin.col(o) - Y.col(r)).squaredNorm();
-      }
-      feet[static_cast<size_t>(o)] = best;
-    }
+    });
   };
   const auto summary = [&] {
     LevelFit fit;
@@ -201,7 +206,8 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
       }
       const Eigen::MatrixXd& B = weight_free(k);
       Eigen::MatrixXd H = B.transpose() * PI * B;
-      H.diagonal().array() += 1e-9 * std::max(H.trace() / static_cast<double>(H.rows()), std::numeric_limits<double>::min());
+      H.diagonal().array() +=
+          1e-9 * std::max(H.trace() / static_cast<double>(H.rows()), std::numeric_limits<double>::min());
       system.emplace(H);
     }
     return *system;
@@ -219,7 +225,8 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
       for (int k = 0; k < 3; ++k) {
         const int32_t c = level.faces(foot.face, k);
         R.col(o) -= foot.weight[static_cast<size_t>(k)] * Y.col(c);
-        if (foot.weight[static_cast<size_t>(k)] != 0) carried[static_cast<size_t>(c)].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
+        if (foot.weight[static_cast<size_t>(k)] != 0)
+          carried[static_cast<size_t>(c)].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
       }
     }
     for (int sweep = 0; sweep < options.sweeps; ++sweep) {

@@ -63,6 +63,28 @@ TEST(CliLod, BuildsLevelsAndExportsTheCoresLevel) {
   EXPECT_EQ(mesh->F.rows(), level.model.faces.rows());
   EXPECT_EQ(sorted_rows(mesh->V), sorted_rows(expected));  // reordered for the vertex cache, same points
 
+  // --no-placement: the same levels' topology and influences; only where the vertices are differs.
+  ASSERT_EQ(run("build-lod " + (dir / "arm.anim").string() + " --max-levels 5 --no-placement -o " +
+                (dir / "arm-unplaced.anim").string()),
+            0);
+  auto unplaced_file = container::read_file(dir / "arm-unplaced.anim");
+  ASSERT_TRUE(unplaced_file.ok());
+  EXPECT_EQ(built->metadata().at("lod.placement"), "fitted");
+  EXPECT_EQ(unplaced_file->metadata().at("lod.placement"), "none");
+  auto unplaced = lod::load_levels(*unplaced_file, *model, "arm-unplaced.anim");
+  ASSERT_TRUE(unplaced.ok()) << unplaced.error().message;
+  ASSERT_EQ(unplaced->count(), levels->count());
+  bool moved = false;
+  for (int l = 1; l < levels->count(); ++l) {
+    const lod::LodLevel& a = levels->levels[static_cast<size_t>(l)];
+    const lod::LodLevel& b = unplaced->levels[static_cast<size_t>(l)];
+    EXPECT_EQ(a.vertex_ids, b.vertex_ids) << "level " << l;
+    EXPECT_EQ(a.model.faces, b.model.faces) << "level " << l;
+    EXPECT_EQ(a.model.influences.bones, b.model.influences.bones) << "level " << l;
+    moved = moved || !a.model.positions.isApprox(b.model.positions, 1e-9);
+  }
+  EXPECT_TRUE(moved);
+
   // Refusals: a level that does not exist, a model without metrics and no --sample-poses.
   EXPECT_NE(run("export-lod " + (dir / "arm-lod.anim").string() + " --level 9 -o " + (dir / "x.obj").string()), 0);
   container::ModelContainer bare;

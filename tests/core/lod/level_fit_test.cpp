@@ -55,7 +55,10 @@ TEST(LevelFit, WithFixedClosestPointsThePlacementIsTheLeastSquaresOptimum) {
   std::vector<Eigen::Vector3d> lambdas = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   for (int k = 0; k < 12; ++k) {
     double s = unit(random), t = unit(random);
-    if (s + t > 0.95) { s *= 0.5; t *= 0.5; }
+    if (s + t > 0.95) {
+      s *= 0.5;
+      t *= 0.5;
+    }
     input.col(3 + k) = Eigen::Vector3d(2 * s, 2 * t, lift(random));
     lambdas.emplace_back(1 - s - t, s, t);
   }
@@ -73,7 +76,8 @@ TEST(LevelFit, WithFixedClosestPointsThePlacementIsTheLeastSquaresOptimum) {
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(3 * input.cols(), 9);
   Eigen::VectorXd b(3 * input.cols());
   for (Eigen::Index o = 0; o < input.cols(); ++o) {
-    for (int c = 0; c < 3; ++c) A.block<3, 3>(3 * o, 3 * c) = lambdas[static_cast<size_t>(o)](c) * Eigen::Matrix3d::Identity();
+    for (int c = 0; c < 3; ++c)
+      A.block<3, 3>(3 * o, 3 * c) = lambdas[static_cast<size_t>(o)](c) * Eigen::Matrix3d::Identity();
     b.segment<3>(3 * o) = input.col(o);
   }
   const Eigen::VectorXd best = A.colPivHouseholderQr().solve(b);
@@ -95,8 +99,10 @@ TEST(LevelFit, ALevelPushedOffAFlatInputComesBackOntoIt) {
     int r = 0;
     for (int j = 0; j + 1 < n; ++j) {
       for (int i = 0; i + 1 < n; ++i) {
-        const int a = ids[static_cast<size_t>(j * stride_ids + i)], b = ids[static_cast<size_t>(j * stride_ids + i + 1)];
-        const int c = ids[static_cast<size_t>((j + 1) * stride_ids + i)], d = ids[static_cast<size_t>((j + 1) * stride_ids + i + 1)];
+        const int a = ids[static_cast<size_t>(j * stride_ids + i)],
+                  b = ids[static_cast<size_t>(j * stride_ids + i + 1)];
+        const int c = ids[static_cast<size_t>((j + 1) * stride_ids + i)],
+                  d = ids[static_cast<size_t>((j + 1) * stride_ids + i + 1)];
         f.row(r++) << a, b, d;
         f.row(r++) << a, d, c;
       }
