@@ -10,13 +10,18 @@
 //                 the same 48 (the only poses there are).
 //
 // Methods, each asked for 50%, 25%, 10% and 5% of the vertices:
-//   animspace-lod               memoryless APS in animation space + influence simplification
+//   animspace-lod               the served levels: memoryless APS in animation space + influence
+//                               simplification, the cut placed across poses (lod/level_fit.h)
 //   animspace-lod-no-influence  the same without influence removals
+//   animspace-lod-unplaced[-no-influence]   the same without placement (what was served before)
+//   animspace-lod-quadric-unplaced-no-influence   ordered by quadric memory (CollapseCost::kQuadric)
 //   openmesh-quadric-rest       OpenMesh's decimater, quadric error (ModQuadric) with its
 //                               normal-flip guard, on the rest pose
+//   multi-pose-quadric          the same decimater with quadrics summed over the poses P is built
+//                               from (Mohr & Gleicher 2003)
 //   meshoptimizer-rest          meshopt_simplify on the rest pose
-// All four keep a subset of the input vertices (half-edge collapses), so each simplified mesh is
-// posed with its vertices' own skinning (ours possibly influence-simplified). Error: for every
+// All keep a subset of the input vertices (half-edge collapses; placement then moves ours), so each
+// simplified mesh is posed with its vertices' own skinning (ours possibly influence-simplified). Error: for every
 // pose, the distance from each original posed vertex to the posed simplified surface (one
 // routine, lod/surface_distance.h, for every method), RMS and max over vertices and poses, over
 // the rest pose's bounding-box diagonal.
@@ -108,10 +113,14 @@ as::AnimationSpaceModel subset(const as::AnimationSpaceModel& model, const std::
   return out;
 }
 
-// OpenMesh's decimater on the rest pose: quadric cost, half-edge collapses that keep the
-// surviving vertex where it is, with the normal-flipping guard users normally add.
-Simplified openmesh_quadric(const as::AnimationSpaceModel& model, int target_vertices) {
-  using Mesh = OpenMesh::TriMesh_ArrayKernelT<>;
+using OpenMeshMesh = OpenMesh::TriMesh_ArrayKernelT<>;
+
+// OpenMesh's decimater on the rest pose: half-edge collapses that keep the surviving vertex where
+// it is, with the normal-flipping guard users normally add. `add_cost` adds the cost module to the
+// decimater before the guard (the time it takes counts).
+template <typename AddCost>
+Simplified openmesh_decimate(const as::AnimationSpaceModel& model, int target_vertices, AddCost&& add_cost) {
+  using Mesh = OpenMeshMesh;
   const auto start = std::chrono::steady_clock::now();
   const lod::Points3d rest = posed(model, model.skeleton.rest);
   Mesh mesh;
@@ -125,11 +134,9 @@ Simplified openmesh_quadric(const as::AnimationSpaceModel& model, int target_ver
   mesh.request_face_normals();  // the normal-flipping module reads them
   mesh.update_face_normals();
   OpenMesh::Decimater::DecimaterT<Mesh> decimater(mesh);
-  OpenMesh::Decimater::ModQuadricT<Mesh>::Handle quadric;
+  add_cost(decimater);
   OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle flipping;
-  decimater.add(quadric);
   decimater.add(flipping);
-  decimater.module(quadric).unset_max_err();
   decimater.initialize();
   decimater.decimate_to(static_cast<size_t>(target_vertices));
   std::vector<int32_t> keep;
@@ -148,6 +155,15 @@ Simplified openmesh_quadric(const as::AnimationSpaceModel& model, int target_ver
   Simplified s{subset(model, keep, faces), 0};
   s.build_seconds = seconds_since(start);
   return s;
+}
+
+// OpenMesh's quadric error (ModQuadric) on the rest pose.
+Simplified openmesh_quadric(const as::AnimationSpaceModel& model, int target_vertices) {
+  return openmesh_decimate(model, target_vertices, [](OpenMesh::Decimater::DecimaterT<OpenMeshMesh>& decimater) {
+    OpenMesh::Decimater::ModQuadricT<OpenMeshMesh>::Handle quadric;
+    decimater.add(quadric);
+    decimater.module(quadric).unset_max_err();
+  });
 }
 
 // Deformation-sensitive decimation (Mohr & Gleicher 2003): Garland–Heckbert quadrics summed over
@@ -213,47 +229,14 @@ class ModMultiPoseQuadricT : public OpenMesh::Decimater::ModBaseT<MeshT> {
 };
 
 Simplified multi_pose_quadric(const Dataset& d, int target_vertices) {
-  using Mesh = OpenMesh::TriMesh_ArrayKernelT<>;
-  const auto start = std::chrono::steady_clock::now();
-  const as::AnimationSpaceModel& model = d.model;
-  const lod::Points3d rest = posed(model, model.skeleton.rest);
-  Mesh mesh;
-  for (Eigen::Index v = 0; v < rest.rows(); ++v) {
-    mesh.add_vertex(Mesh::Point(static_cast<float>(rest(v, 0)), static_cast<float>(rest(v, 1)), static_cast<float>(rest(v, 2))));
-  }
-  for (Eigen::Index f = 0; f < model.faces.rows(); ++f) {
-    mesh.add_face(Mesh::VertexHandle(model.faces(f, 0)), Mesh::VertexHandle(model.faces(f, 1)),
-                  Mesh::VertexHandle(model.faces(f, 2)));
-  }
-  mesh.request_face_normals();
-  mesh.update_face_normals();
-  std::vector<lod::Points3d> posed_statistics;
-  posed_statistics.reserve(d.statistics.size());
-  for (const as::TransformList& G : d.statistics) posed_statistics.push_back(posed(model, G));
-  OpenMesh::Decimater::DecimaterT<Mesh> decimater(mesh);
-  typename ModMultiPoseQuadricT<Mesh>::Handle quadric;
-  OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle flipping;
-  decimater.add(quadric);
-  decimater.add(flipping);
-  decimater.module(quadric).set_poses(std::move(posed_statistics));
-  decimater.initialize();
-  decimater.decimate_to(static_cast<size_t>(target_vertices));
-  std::vector<int32_t> keep;
-  for (const Mesh::VertexHandle v : mesh.vertices()) {
-    if (!mesh.status(v).deleted()) keep.push_back(v.idx());
-  }
-  std::vector<std::array<int32_t, 3>> faces;
-  for (const Mesh::FaceHandle f : mesh.faces()) {
-    if (mesh.status(f).deleted()) continue;
-    std::array<int32_t, 3> corners{};
-    int c = 0;
-    for (const Mesh::VertexHandle v : mesh.fv_range(f)) corners[static_cast<size_t>(c++)] = v.idx();
-    faces.push_back(corners);
-  }
-  std::sort(keep.begin(), keep.end());
-  Simplified s{subset(model, keep, faces), 0};
-  s.build_seconds = seconds_since(start);
-  return s;
+  return openmesh_decimate(d.model, target_vertices, [&d](OpenMesh::Decimater::DecimaterT<OpenMeshMesh>& decimater) {
+    std::vector<lod::Points3d> posed_statistics;
+    posed_statistics.reserve(d.statistics.size());
+    for (const as::TransformList& G : d.statistics) posed_statistics.push_back(posed(d.model, G));
+    ModMultiPoseQuadricT<OpenMeshMesh>::Handle quadric;
+    decimater.add(quadric);
+    decimater.module(quadric).set_poses(std::move(posed_statistics));
+  });
 }
 
 // meshopt_simplify on the rest pose. It targets an index count; ask for the triangle count a
