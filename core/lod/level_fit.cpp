@@ -144,11 +144,21 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
         Foot best;
         best.distance2 = std::numeric_limits<double>::infinity();
         const int32_t r = representative[static_cast<size_t>(o)];
-        for (const int32_t f : candidates[static_cast<size_t>(r)]) {
+        const auto consider = [&](int32_t f) {
           d = Yin.col(o) - Y.col(level.faces(f, 0));
           const Closest c = closest_on_triangle(gram(0, f), gram(1, f), gram(2, f), E0.col(f).dot(d), E1.col(f).dot(d),
                                                 d.squaredNorm());
           if (c.distance2 < best.distance2) best = {f, {1 - c.s - c.t, c.s, c.t}, c.distance2};
+        };
+        // Later rounds: the vertices move little, so the faces around the previous closest face's
+        // corners are searched (any face gives a valid bound; these hold the closest one in practice).
+        const int32_t previous = feet[static_cast<size_t>(o)].face;
+        if (previous >= 0) {
+          for (int k = 0; k < 3; ++k) {
+            for (const int32_t f : faces_of[static_cast<size_t>(level.faces(previous, k))]) consider(f);
+          }
+        } else {
+          for (const int32_t f : candidates[static_cast<size_t>(r)]) consider(f);
         }
         if (best.face < 0) {  // a vertex with no faces: its own position
           best.distance2 = (Yin.col(o) - Y.col(r)).squaredNorm();
@@ -229,6 +239,8 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
           carried[static_cast<size_t>(c)].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
       }
     }
+    // Scratch, sized once (this loop runs sweeps × L times).
+    Eigen::VectorXd pull(Yin.rows()), moved(Yin.rows()), g, rhs, z, delta;
     for (int sweep = 0; sweep < options.sweeps; ++sweep) {
       for (int v = 0; v < L; ++v) {
         const auto& points = carried[static_cast<size_t>(v)];
@@ -238,7 +250,7 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
         // Minimise Σ_o ‖r_o − λ_o C_I Δ‖² over the move Δ (4k) with Σ Δ̲ = 0: with Δ = B z,
         // (Σλ²) Bᵀ P_II B z = Bᵀ C_Iᵀ Σ λ r_o.
         double lambda2 = 0;
-        Eigen::VectorXd pull = Eigen::VectorXd::Zero(Yin.rows());
+        pull.setZero();
         for (const auto& [o, lambda] : points) {
           lambda2 += lambda * lambda;
           pull.noalias() += lambda * R.col(o);
@@ -246,21 +258,23 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
         if (!(lambda2 > 0)) continue;
         const Eigen::LDLT<Eigen::MatrixXd>& solver = system_of(v);
         if (solver.info() != Eigen::Success) continue;
-        Eigen::VectorXd g(4 * k);
+        g.resize(4 * k);
         for (int j = 0; j < k; ++j) {
           g.segment<4>(4 * j).noalias() =
               C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4).transpose() * pull;
         }
-        const Eigen::VectorXd z = solver.solve(weight_free(k).transpose() * g) / lambda2;
-        if (!z.allFinite()) continue;
         const Eigen::MatrixXd& B = weight_free(k);
-        const Eigen::VectorXd delta = B * z;
+        rhs.noalias() = B.transpose() * g;
+        rhs /= lambda2;
+        z = solver.solve(rhs);
+        if (!z.allFinite()) continue;
+        delta.noalias() = B * z;
         for (int j = 0; j < k; ++j) level.positions.col(begin + j) += delta.segment<4>(4 * j);
         // Weight exactly 1 again (the move's weights sum to zero only to rounding).
         double weight = 0;
         for (int j = 0; j < k; ++j) weight += level.positions(3, begin + j);
         level.positions(3, begin + k - 1) += 1 - weight;
-        Eigen::VectorXd moved = Eigen::VectorXd::Zero(Yin.rows());
+        moved.setZero();
         for (int j = 0; j < k; ++j) {
           moved.noalias() +=
               C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4) * delta.segment<4>(4 * j);
