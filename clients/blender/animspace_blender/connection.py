@@ -14,6 +14,8 @@ import bpy
 
 import animspace
 
+from . import registry
+
 _clients: Dict[Tuple, animspace.Client] = {}
 # Called when the clients close: what was cached from a server (key points) is asked again.
 reset_hooks: List[Callable[[], None]] = []
@@ -146,12 +148,4 @@ def find_model(context, name: str):
 
 _CLASSES = (ANIMSPACE_OT_connect,)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

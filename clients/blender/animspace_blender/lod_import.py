@@ -20,7 +20,7 @@ import numpy as np
 
 import animspace
 
-from . import connection, mesh_data, skinning
+from . import connection, mesh_data, registry, skinning
 from .connection import SetupError, reporting
 
 
@@ -113,12 +113,4 @@ class ANIMSPACE_OT_import_lod(bpy.types.Operator):
 
 _CLASSES = (ANIMSPACE_OT_import_lod,)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

@@ -1,7 +1,7 @@
 """The sidebar (N-panel) tab "animspace": the connection and one sub-panel per workflow."""
 import bpy
 
-from . import mesh_data
+from . import mesh_data, registry
 
 
 class ANIMSPACE_UL_models(bpy.types.UIList):
@@ -123,12 +123,4 @@ class ANIMSPACE_PT_thumbnail(_Panel, bpy.types.Panel):
 _CLASSES = (ANIMSPACE_UL_models, ANIMSPACE_PT_connection, ANIMSPACE_PT_soft_cache, ANIMSPACE_PT_skinning,
             ANIMSPACE_PT_lod, ANIMSPACE_PT_thumbnail)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

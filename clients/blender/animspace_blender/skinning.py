@@ -17,7 +17,7 @@ from bpy.props import IntProperty, StringProperty
 
 import animspace
 
-from . import connection, frame_change, mesh_data
+from . import connection, frame_change, mesh_data, registry
 from .connection import SetupError, reporting
 
 POSES_PER_CALL = 64  # a bake's batch per EvaluateSkeletonPose, well under any server's max_batch_poses
@@ -233,12 +233,4 @@ def on_frame_change(scene) -> None:
 
 _CLASSES = (ANIMSPACE_OT_build_skinned, ANIMSPACE_OT_pose_skinned, ANIMSPACE_OT_bake_skinned)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

@@ -17,7 +17,7 @@ from bpy.props import IntProperty, StringProperty
 
 import animspace
 
-from . import connection, frame_change, mesh_data
+from . import connection, frame_change, mesh_data, registry
 from .connection import SetupError, reporting
 
 # describe_key_points per (client, model): a frame-change handler must not ask every frame. The
@@ -199,14 +199,12 @@ _CLASSES = (ANIMSPACE_OT_soft_cache_frame, ANIMSPACE_OT_soft_cache_bake)
 
 
 def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
+    registry.register_classes(_CLASSES)
     connection.reset_hooks.append(forget_key_points)
 
 
 def unregister() -> None:
     if forget_key_points in connection.reset_hooks:
         connection.reset_hooks.remove(forget_key_points)
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+    registry.unregister_classes(_CLASSES)
     forget_key_points()

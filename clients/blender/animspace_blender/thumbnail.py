@@ -5,7 +5,7 @@ import tempfile
 
 import bpy
 
-from . import connection, skinning
+from . import connection, registry, skinning
 from .connection import SetupError, reporting
 
 
@@ -56,12 +56,4 @@ class ANIMSPACE_OT_thumbnail(bpy.types.Operator):
 
 _CLASSES = (ANIMSPACE_OT_thumbnail,)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)
