@@ -3,7 +3,7 @@ through the range with the live updates the bake does itself suspended, and writ
 from typing import Callable, List, Sequence, Tuple, TypeVar
 
 import numpy as np
-from bpy.props import IntProperty
+from bpy.props import IntProperty, StringProperty
 
 import animspace
 
@@ -13,12 +13,9 @@ from .connection import SetupError
 T = TypeVar("T")
 
 
-class RangeBake(connection.ReportingOperator):
-    """Mixed into a bake operator, which declares its own ``filepath`` (a FILE_PATH StringProperty)."""
+class _RangeBake(connection.ReportingOperator):
+    bl_label = "Bake range to PC2"
     bl_options = {"REGISTER"}
-
-    frame_start: IntProperty(name="Start", default=-1, description="First frame (-1: the scene's)")
-    frame_end: IntProperty(name="End", default=-1, description="Last frame, included (-1: the scene's)")
 
     def range_and_path(self, scene) -> Tuple[int, int, str]:
         """(first frame, last frame, absolute PC2 path), checked."""
@@ -29,6 +26,18 @@ class RangeBake(connection.ReportingOperator):
         if not self.filepath.lower().endswith(".pc2"):
             raise SetupError(f"PC2 file: expected a .pc2 path, got '{self.filepath}'")
         return start, end, connection.file_path(self.filepath, "PC2 file")
+
+
+def range_bake(default_file: str) -> type:
+    """The mixin of a bake operator whose PC2 file defaults to ``default_file``: its settings (file,
+    then range) and their checks."""
+
+    class RangeBake(_RangeBake):
+        filepath: StringProperty(name="PC2 file", subtype="FILE_PATH", default=default_file)
+        frame_start: IntProperty(name="Start", default=-1, description="First frame (-1: the scene's)")
+        frame_end: IntProperty(name="End", default=-1, description="Last frame, included (-1: the scene's)")
+
+    return RangeBake
 
 
 def step_frames(scene, start: int, end: int, suspend: Sequence[str], read: Callable[[], T]) -> List[T]:

@@ -13,7 +13,6 @@ from typing import List, Optional
 
 import bpy
 import numpy as np
-from bpy.props import StringProperty
 
 import animspace
 
@@ -177,12 +176,9 @@ class ANIMSPACE_OT_pose_skinned(connection.ReportingOperator, bpy.types.Operator
         return None
 
 
-class ANIMSPACE_OT_bake_skinned(bake.RangeBake, bpy.types.Operator):
+class ANIMSPACE_OT_bake_skinned(bake.range_bake("//skinned.pc2"), bpy.types.Operator):
     """Pose the active animation-space mesh at every frame of a range and bake the positions to PC2"""
     bl_idname = "animspace.bake_skinned"
-    bl_label = "Bake range to PC2"
-
-    filepath: StringProperty(name="PC2 file", subtype="FILE_PATH", default="//skinned.pc2")
 
     def run(self, context):
         scene = context.scene

@@ -13,7 +13,6 @@ from typing import Dict, List, Optional, Tuple
 
 import bpy
 import numpy as np
-from bpy.props import StringProperty
 
 import animspace
 
@@ -115,12 +114,9 @@ class ANIMSPACE_OT_soft_cache_frame(connection.ReportingOperator, bpy.types.Oper
         return f"{result.status}: e_key {result.key_point_error:.6g}, α {result.blend_weight:.4g}"
 
 
-class ANIMSPACE_OT_soft_cache_bake(bake.RangeBake, bpy.types.Operator):
+class ANIMSPACE_OT_soft_cache_bake(bake.range_bake("//soft_cache.pc2"), bpy.types.Operator):
     """Play a frame range through the soft cache (one stream) and bake the answers to a PC2 point cache"""
     bl_idname = "animspace.soft_cache_bake"
-    bl_label = "Bake range to PC2"
-
-    filepath: StringProperty(name="PC2 file", subtype="FILE_PATH", default="//soft_cache.pc2")
 
     def run(self, context):
         scene = context.scene
