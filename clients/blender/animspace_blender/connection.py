@@ -7,12 +7,13 @@ refuses before sending — is shown as a Blender report (``{'ERROR'}``, the serv
 and cancels the operator; none escapes as a traceback. Handlers cannot report: they keep the
 message in ``scene.animspace.last_error`` for the panel and print it.
 """
-import functools
 from typing import Callable, Dict, List, Optional, Tuple
 
 import bpy
 
 import animspace
+
+from . import registry
 
 _clients: Dict[Tuple, animspace.Client] = {}
 # Called when the clients close: what was cached from a server (key points) is asked again.
@@ -92,28 +93,57 @@ def error_text(error: BaseException) -> str:
     return str(error) or type(error).__name__
 
 
-def reporting(execute: Callable) -> Callable:
-    """Wraps an operator's ``execute``: expected failures become an ERROR report and CANCELLED."""
+def in_handler(scene, workflow: str, action: Callable[[], object], prefix: str = "",
+               on_error: Optional[Callable[[], None]] = None) -> None:
+    """Runs ``action`` for a frame-change handler, which cannot report: success clears
+    ``last_error``; an expected failure calls ``on_error``, is kept there (after ``prefix``) for the
+    panel and printed."""
+    settings = scene.animspace
+    try:
+        action()
+        settings.last_error = ""
+    except (SetupError,) + EXPECTED_ERRORS as error:
+        if on_error is not None:
+            on_error()
+        settings.last_error = prefix + error_text(error)
+        print(f"animspace {workflow}, frame {scene.frame_current}: {settings.last_error}")
 
-    @functools.wraps(execute)
-    def run(self, context):
+
+class ReportingOperator:
+    """An operator's ``execute`` (mixed in before ``bpy.types.Operator``): ``run(context)`` does the
+    work and returns its INFO report, or None for none; expected failures become an ERROR report
+    and CANCELLED."""
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context) -> Optional[str]:
+        raise NotImplementedError
+
+    def execute(self, context):
         try:
-            return execute(self, context)
+            message = self.run(context)
         except (SetupError,) + EXPECTED_ERRORS as error:
             self.report({"ERROR"}, error_text(error))
             return {"CANCELLED"}
+        if message:
+            self.report({"INFO"}, message)
+        return {"FINISHED"}
 
-    return run
+
+def chosen_model(context, kind: str = "a model", prop: str = "model", label: str = "Model") -> str:
+    """The model named by the scene setting ``prop``; a SetupError asking for ``kind`` when empty."""
+    model = getattr(context.scene.animspace, prop).strip()
+    if not model:
+        raise SetupError(f"{label}: choose {kind} (Connect lists them)")
+    return model
 
 
-class ANIMSPACE_OT_connect(bpy.types.Operator):
+class ANIMSPACE_OT_connect(ReportingOperator, bpy.types.Operator):
     """Check the server's health and list its models"""
     bl_idname = "animspace.connect"
     bl_label = "Connect"
     bl_options = {"REGISTER"}
 
-    @reporting
-    def execute(self, context):
+    def run(self, context):
         settings = context.scene.animspace
         settings.health = "not checked"
         settings.models.clear()
@@ -135,8 +165,7 @@ class ANIMSPACE_OT_connect(bpy.types.Operator):
             item.lod_level_count = version.lod_level_count
             item.server_engine = version.server_engine
             item.has_tangents = "animspace.tangents" in version.sections
-        self.report({"INFO"}, f"{settings.address}: {settings.health}, {len(settings.models)} models")
-        return {"FINISHED"}
+        return f"{settings.address}: {settings.health}, {len(settings.models)} models"
 
 
 def find_model(context, name: str):
@@ -146,12 +175,4 @@ def find_model(context, name: str):
 
 _CLASSES = (ANIMSPACE_OT_connect,)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

@@ -20,8 +20,8 @@ import numpy as np
 
 import animspace
 
-from . import connection, mesh_data, skinning
-from .connection import SetupError, reporting
+from . import connection, mesh_data, registry, skinning
+from .connection import SetupError
 
 
 def view_of(scene: bpy.types.Scene, camera: Optional[bpy.types.Object]) -> Tuple[int, float]:
@@ -62,25 +62,18 @@ def camera_distance(client: animspace.Client, model: str, camera: bpy.types.Obje
     return float(np.linalg.norm(eye - centre))
 
 
-class ANIMSPACE_OT_import_lod(bpy.types.Operator):
+class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
     """Import one level of detail of the model as a new mesh object"""
     bl_idname = "animspace.import_lod"
     bl_label = "Import level"
-    bl_options = {"REGISTER", "UNDO"}
 
-    @reporting
-    def execute(self, context):
+    def run(self, context):
         scene = context.scene
         settings = scene.animspace
-        model = settings.model.strip()
-        if not model:
-            raise SetupError("Model: choose a model with levels (Connect lists them)")
+        model = connection.chosen_model(context, "a model with levels")
         client = connection.client(context)
-        active = context.active_object
-        placement = active if active is not None and active.animspace.role == "SKINNED" else None
-        pose = None
-        if placement is not None and placement.animspace.armature is not None:
-            pose = skinning.skeleton_pose(placement.animspace.armature, context.evaluated_depsgraph_get())
+        placement = skinning.active_skinned(context)
+        pose = skinning.armature_pose(context, placement)
         selection = {}
         if settings.lod_selection == "LEVEL":
             selection["level"] = settings.lod_level
@@ -106,19 +99,10 @@ class ANIMSPACE_OT_import_lod(bpy.types.Operator):
         obj.animspace.tolerated_error = header.tolerated_error
         view = (f", tolerated error {header.tolerated_error:.6g} at distance {selection['distance']:.6g}"
                 if "distance" in selection else "")
-        self.report({"INFO"}, f"level {header.level} of {header.level_count}: {header.vertex_count} vertices, "
-                              f"{header.face_count} faces, ε^l {header.epsilon:.6g}{view}")
-        return {"FINISHED"}
+        return (f"level {header.level} of {header.level_count}: {header.vertex_count} vertices, "
+                f"{header.face_count} faces, ε^l {header.epsilon:.6g}{view}")
 
 
 _CLASSES = (ANIMSPACE_OT_import_lod,)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

@@ -1,7 +1,10 @@
 """The sidebar (N-panel) tab "animspace": the connection and one sub-panel per workflow."""
+import functools
+from typing import Callable
+
 import bpy
 
-from . import mesh_data
+from . import mesh_data, registry
 
 
 class ANIMSPACE_UL_models(bpy.types.UIList):
@@ -24,21 +27,38 @@ class _Panel:
     bl_category = "animspace"
 
 
+class _SubPanel(_Panel):
+    """A workflow's sub-panel under the connection's."""
+    bl_parent_id = "ANIMSPACE_PT_connection"
+
+
+def _settings_draw(draw: Callable) -> Callable:
+    """A panel's ``draw(self, context)`` made from ``draw(context, layout, settings)``, given the
+    panel's layout and the scene's settings."""
+
+    @functools.wraps(draw)
+    def panel_draw(self, context):
+        draw(context, self.layout, context.scene.animspace)
+
+    return panel_draw
+
+
+def _props(layout, settings, *props: str):
+    """``settings``' properties ``props`` into ``layout``, one after the other; returns it."""
+    for prop in props:
+        layout.prop(settings, prop)
+    return layout
+
+
 class ANIMSPACE_PT_connection(_Panel, bpy.types.Panel):
     bl_label = "animspace"
 
-    def draw(self, context):
-        settings = context.scene.animspace
-        layout = self.layout
-        layout.prop(settings, "address")
-        layout.prop(settings, "token_file")
-        layout.prop(settings, "use_tls")
+    @_settings_draw
+    def draw(context, layout, settings):
+        _props(layout, settings, "address", "token_file", "use_tls")
         if settings.use_tls:
-            box = layout.box()
-            box.prop(settings, "root_certificates_file")
-            box.prop(settings, "client_certificate_file")
-            box.prop(settings, "client_key_file")
-            box.prop(settings, "server_name")
+            _props(layout.box(), settings, "root_certificates_file", "client_certificate_file", "client_key_file",
+                   "server_name")
         layout.prop(settings, "deadline_s")
         row = layout.row()
         row.operator("animspace.connect", icon="URL")
@@ -48,19 +68,14 @@ class ANIMSPACE_PT_connection(_Panel, bpy.types.Panel):
             layout.label(text=settings.last_error, icon="ERROR")
 
 
-class ANIMSPACE_PT_soft_cache(_Panel, bpy.types.Panel):
+class ANIMSPACE_PT_soft_cache(_SubPanel, bpy.types.Panel):
     bl_label = "Soft-cache playback"
-    bl_parent_id = "ANIMSPACE_PT_connection"
 
-    def draw(self, context):
-        settings = context.scene.animspace
-        layout = self.layout
+    @_settings_draw
+    def draw(context, layout, settings):
         layout.prop_search(settings, "pmsc_model", settings, "models")
-        layout.prop(settings, "source")
-        layout.prop(settings, "output")
-        row = layout.row()
-        row.prop(settings, "live_soft_cache")
-        row.prop(settings, "complete_misses")
+        _props(layout, settings, "source", "output")
+        _props(layout.row(), settings, "live_soft_cache", "complete_misses")
         row = layout.row()
         row.operator("animspace.soft_cache_frame")
         row.operator("animspace.soft_cache_bake")
@@ -71,28 +86,22 @@ class ANIMSPACE_PT_soft_cache(_Panel, bpy.types.Panel):
         box.label(text=f"Colour attribute: {mesh_data.VERDICT_ATTRIBUTE}")
 
 
-class ANIMSPACE_PT_skinning(_Panel, bpy.types.Panel):
+class ANIMSPACE_PT_skinning(_SubPanel, bpy.types.Panel):
     bl_label = "Animation space"
-    bl_parent_id = "ANIMSPACE_PT_connection"
 
-    def draw(self, context):
-        settings = context.scene.animspace
-        layout = self.layout
+    @_settings_draw
+    def draw(context, layout, settings):
         layout.prop_search(settings, "model", settings, "models")
         layout.operator("animspace.build_skinned")
-        row = layout.row()
-        row.prop(settings, "live_skinning")
-        row.operator("animspace.pose_skinned")
+        _props(layout.row(), settings, "live_skinning").operator("animspace.pose_skinned")
         layout.operator("animspace.bake_skinned")
 
 
-class ANIMSPACE_PT_lod(_Panel, bpy.types.Panel):
+class ANIMSPACE_PT_lod(_SubPanel, bpy.types.Panel):
     bl_label = "Level of detail"
-    bl_parent_id = "ANIMSPACE_PT_connection"
 
-    def draw(self, context):
-        settings = context.scene.animspace
-        layout = self.layout
+    @_settings_draw
+    def draw(context, layout, settings):
         layout.prop(settings, "lod_selection", expand=True)
         if settings.lod_selection == "LEVEL":
             layout.prop(settings, "lod_level")
@@ -106,16 +115,12 @@ class ANIMSPACE_PT_lod(_Panel, bpy.types.Panel):
             layout.label(text=f"Level {obj.animspace.lod_level}: ε^l {obj.animspace.epsilon:.6g}")
 
 
-class ANIMSPACE_PT_thumbnail(_Panel, bpy.types.Panel):
+class ANIMSPACE_PT_thumbnail(_SubPanel, bpy.types.Panel):
     bl_label = "Thumbnail"
-    bl_parent_id = "ANIMSPACE_PT_connection"
 
-    def draw(self, context):
-        settings = context.scene.animspace
-        layout = self.layout
-        row = layout.row(align=True)
-        row.prop(settings, "width_px")
-        row.prop(settings, "height_px")
+    @_settings_draw
+    def draw(context, layout, settings):
+        _props(layout.row(align=True), settings, "width_px", "height_px")
         layout.prop(settings, "show_wireframe")
         layout.operator("animspace.thumbnail", icon="IMAGE_DATA")
 
@@ -123,12 +128,4 @@ class ANIMSPACE_PT_thumbnail(_Panel, bpy.types.Panel):
 _CLASSES = (ANIMSPACE_UL_models, ANIMSPACE_PT_connection, ANIMSPACE_PT_soft_cache, ANIMSPACE_PT_skinning,
             ANIMSPACE_PT_lod, ANIMSPACE_PT_thumbnail)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

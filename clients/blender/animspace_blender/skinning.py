@@ -13,21 +13,13 @@ from typing import List, Optional
 
 import bpy
 import numpy as np
-from bpy.props import IntProperty, StringProperty
 
 import animspace
 
-from . import connection, frame_change, mesh_data
-from .connection import SetupError, reporting
+from . import bake, connection, mesh_data, registry
+from .connection import SetupError
 
 POSES_PER_CALL = 64  # a bake's batch per EvaluateSkeletonPose, well under any server's max_batch_poses
-
-
-def _model_name(context) -> str:
-    model = context.scene.animspace.model.strip()
-    if not model:
-        raise SetupError("Model: choose a model with a skeleton (Connect lists them)")
-    return model
 
 
 def _tail(j: int, heads: np.ndarray, axes: np.ndarray, children: List[List[int]], length: float) -> np.ndarray:
@@ -123,6 +115,23 @@ def skeleton_pose(rig: bpy.types.Object, depsgraph) -> np.ndarray:
     return G
 
 
+def active_skinned(context, model: Optional[str] = None) -> Optional[bpy.types.Object]:
+    """The active object when it is an animation-space mesh (of ``model``, when given), else None."""
+    active = context.active_object
+    if active is None or active.animspace.role != "SKINNED":
+        return None
+    if model is not None and active.animspace.model != model:
+        return None
+    return active
+
+
+def armature_pose(context, obj: Optional[bpy.types.Object]) -> Optional[np.ndarray]:
+    """``skeleton_pose`` of ``obj``'s armature as evaluated now; None without ``obj`` or armature."""
+    if obj is None or obj.animspace.armature is None:
+        return None
+    return skeleton_pose(obj.animspace.armature, context.evaluated_depsgraph_get())
+
+
 def _skinned(obj: Optional[bpy.types.Object]) -> bpy.types.Object:
     if obj is None or obj.type != "MESH" or obj.animspace.role != "SKINNED":
         raise SetupError("Select an animation-space mesh made by 'Build model'")
@@ -146,72 +155,44 @@ def pose(context, obj: bpy.types.Object, depsgraph) -> animspace.SkinnedPose:
     return result
 
 
-class ANIMSPACE_OT_build_skinned(bpy.types.Operator):
+class ANIMSPACE_OT_build_skinned(connection.ReportingOperator, bpy.types.Operator):
     """Build the model as a mesh plus an armature from its skeleton"""
     bl_idname = "animspace.build_skinned"
     bl_label = "Build model"
-    bl_options = {"REGISTER", "UNDO"}
 
-    @reporting
-    def execute(self, context):
-        model = _model_name(context)
-        skinned = build(context, model)
-        self.report({"INFO"}, f"'{skinned.name}': {len(skinned.data.vertices)} vertices, "
-                              f"{len(skinned.animspace.armature.data.bones)} bones")
-        return {"FINISHED"}
+    def run(self, context):
+        skinned = build(context, connection.chosen_model(context, "a model with a skeleton"))
+        return (f"'{skinned.name}': {len(skinned.data.vertices)} vertices, "
+                f"{len(skinned.animspace.armature.data.bones)} bones")
 
 
-class ANIMSPACE_OT_pose_skinned(bpy.types.Operator):
+class ANIMSPACE_OT_pose_skinned(connection.ReportingOperator, bpy.types.Operator):
     """Pose the active animation-space mesh from its armature at this frame"""
     bl_idname = "animspace.pose_skinned"
     bl_label = "Pose from armature"
-    bl_options = {"REGISTER", "UNDO"}
 
-    @reporting
-    def execute(self, context):
-        obj = _skinned(context.active_object)
-        pose(context, obj, context.evaluated_depsgraph_get())
-        return {"FINISHED"}
+    def run(self, context):
+        pose(context, _skinned(context.active_object), context.evaluated_depsgraph_get())
+        return None
 
 
-class ANIMSPACE_OT_bake_skinned(bpy.types.Operator):
+class ANIMSPACE_OT_bake_skinned(bake.range_bake("//skinned.pc2"), bpy.types.Operator):
     """Pose the active animation-space mesh at every frame of a range and bake the positions to PC2"""
     bl_idname = "animspace.bake_skinned"
-    bl_label = "Bake range to PC2"
-    bl_options = {"REGISTER"}
 
-    filepath: StringProperty(name="PC2 file", subtype="FILE_PATH", default="//skinned.pc2")
-    frame_start: IntProperty(name="Start", default=-1, description="First frame (-1: the scene's)")
-    frame_end: IntProperty(name="End", default=-1, description="Last frame, included (-1: the scene's)")
-
-    @reporting
-    def execute(self, context):
+    def run(self, context):
         scene = context.scene
         obj = _skinned(context.active_object)
-        start = scene.frame_start if self.frame_start < 0 else self.frame_start
-        end = scene.frame_end if self.frame_end < 0 else self.frame_end
-        if end < start:
-            raise SetupError(f"End: {end} is before Start {start}")
-        if not self.filepath.lower().endswith(".pc2"):
-            raise SetupError(f"PC2 file: expected a .pc2 path, got '{self.filepath}'")
-        path = connection.file_path(self.filepath, "PC2 file")
-        poses = []
-        was = scene.frame_current
-        with frame_change.suspended("skinning", "soft_cache"):
-            try:
-                for frame in range(start, end + 1):
-                    scene.frame_set(frame)
-                    poses.append(skeleton_pose(obj.animspace.armature, context.evaluated_depsgraph_get()))
-            finally:
-                scene.frame_set(was)
+        start, end, path = self.range_and_path(scene)
+        poses = bake.step_frames(scene, start, end, ("skinning", "soft_cache"),
+                                 lambda: armature_pose(context, obj))
         client = connection.client(context)
         points = []
         for first in range(0, len(poses), POSES_PER_CALL):
             batch = np.stack(poses[first:first + POSES_PER_CALL])
             points.extend(p.points for p in client.evaluate_skeleton_pose(obj.animspace.model, batch))
-        animspace.write_pc2(path, np.stack(points), start_frame=float(start), sample_rate=1.0)
-        self.report({"INFO"}, f"{len(points)} frames → {path}")
-        return {"FINISHED"}
+        bake.write_pc2(path, points, start)
+        return f"{len(points)} frames → {path}"
 
 
 def on_frame_change(scene) -> None:
@@ -223,22 +204,9 @@ def on_frame_change(scene) -> None:
     for obj in scene.objects:
         if obj.type != "MESH" or obj.animspace.role != "SKINNED" or obj.animspace.armature is None:
             continue
-        try:
-            pose(bpy.context, obj, depsgraph)
-            settings.last_error = ""
-        except (SetupError,) + connection.EXPECTED_ERRORS as error:
-            settings.last_error = f"{obj.name}: {connection.error_text(error)}"
-            print(f"animspace skinning, frame {scene.frame_current}: {settings.last_error}")
+        connection.in_handler(scene, "skinning", lambda: pose(bpy.context, obj, depsgraph), prefix=f"{obj.name}: ")
 
 
 _CLASSES = (ANIMSPACE_OT_build_skinned, ANIMSPACE_OT_pose_skinned, ANIMSPACE_OT_bake_skinned)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)

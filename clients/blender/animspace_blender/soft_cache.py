@@ -13,12 +13,11 @@ from typing import Dict, List, Optional, Tuple
 
 import bpy
 import numpy as np
-from bpy.props import IntProperty, StringProperty
 
 import animspace
 
-from . import connection, frame_change, mesh_data
-from .connection import SetupError, reporting
+from . import bake, connection, mesh_data, registry
+from .connection import SetupError
 
 # describe_key_points per (client, model): a frame-change handler must not ask every frame. The
 # answer pins its model_version, so the indices stay those of the version that answers.
@@ -41,10 +40,7 @@ def _checked_setup(context) -> Tuple[bpy.types.Object, str]:
     source = settings.source
     if source is None or source.type != "MESH":
         raise SetupError("Source: choose the mesh whose vertices are the model's points")
-    model = settings.pmsc_model.strip()
-    if not model:
-        raise SetupError("PMSC model: choose a model (Connect lists them)")
-    return source, model
+    return source, connection.chosen_model(context, prop="pmsc_model", label="PMSC model")
 
 
 def _full_pose(source: bpy.types.Object, depsgraph, keys: animspace.KeyPoints) -> np.ndarray:
@@ -104,63 +100,42 @@ def evaluate_frame(context, depsgraph) -> animspace.PoseResult:
     return result
 
 
-class ANIMSPACE_OT_soft_cache_frame(bpy.types.Operator):
+class ANIMSPACE_OT_soft_cache_frame(connection.ReportingOperator, bpy.types.Operator):
     """Send the source's key points at this frame through the soft cache and write the answer into the output"""
     bl_idname = "animspace.soft_cache_frame"
     bl_label = "Evaluate frame"
-    bl_options = {"REGISTER", "UNDO"}
 
-    @reporting
-    def execute(self, context):
+    def run(self, context):
         try:
             result = evaluate_frame(context, context.evaluated_depsgraph_get())
         except animspace.RpcError:
             forget_key_points()  # a retrain or reload may have changed them: ask again next time
             raise
-        self.report({"INFO"}, f"{result.status}: e_key {result.key_point_error:.6g}, α {result.blend_weight:.4g}")
-        return {"FINISHED"}
+        return f"{result.status}: e_key {result.key_point_error:.6g}, α {result.blend_weight:.4g}"
 
 
-class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
+class ANIMSPACE_OT_soft_cache_bake(bake.range_bake("//soft_cache.pc2"), bpy.types.Operator):
     """Play a frame range through the soft cache (one stream) and bake the answers to a PC2 point cache"""
     bl_idname = "animspace.soft_cache_bake"
-    bl_label = "Bake range to PC2"
-    bl_options = {"REGISTER"}
 
-    filepath: StringProperty(name="PC2 file", subtype="FILE_PATH", default="//soft_cache.pc2")
-    frame_start: IntProperty(name="Start", default=-1, description="First frame (-1: the scene's)")
-    frame_end: IntProperty(name="End", default=-1, description="Last frame, included (-1: the scene's)")
-
-    @reporting
-    def execute(self, context):
+    def run(self, context):
         scene = context.scene
         settings = scene.animspace
         source, model = _checked_setup(context)
-        start = scene.frame_start if self.frame_start < 0 else self.frame_start
-        end = scene.frame_end if self.frame_end < 0 else self.frame_end
-        if end < start:
-            raise SetupError(f"End: {end} is before Start {start}")
-        if not self.filepath.lower().endswith(".pc2"):
-            raise SetupError(f"PC2 file: expected a .pc2 path, got '{self.filepath}'")
-        path = connection.file_path(self.filepath, "PC2 file")
+        start, end, path = self.range_and_path(scene)
         client = connection.client(context)
         forget_key_points()
         keys = _keys(client, model)
 
         # Blender's data is read on this thread only; the stream then sends what was collected.
-        key_frames: List[np.ndarray] = []
-        full_frames: List[Optional[np.ndarray]] = []
-        was = scene.frame_current
+        def read() -> Tuple[np.ndarray, Optional[np.ndarray]]:
+            full = _full_pose(source, context.evaluated_depsgraph_get(), keys)
+            return keys.select(full), (full if settings.complete_misses else None)
+
         # Live skinning keeps running: the source may be an animation-space mesh it poses.
-        with frame_change.suspended("soft_cache"):
-            try:
-                for frame in range(start, end + 1):
-                    scene.frame_set(frame)
-                    full = _full_pose(source, context.evaluated_depsgraph_get(), keys)
-                    key_frames.append(keys.select(full))
-                    full_frames.append(full if settings.complete_misses else None)
-            finally:
-                scene.frame_set(was)
+        frames = bake.step_frames(scene, start, end, ("soft_cache",), read)
+        key_frames: List[np.ndarray] = [key_values for key_values, _ in frames]
+        full_frames: List[Optional[np.ndarray]] = [full for _, full in frames]
 
         # The deadline bounds the whole stream: the per-call deadline, plus 50 ms a frame.
         results = list(client.stream_key_points(model, key_frames, version=keys.model_version,
@@ -173,11 +148,10 @@ class ANIMSPACE_OT_soft_cache_bake(bpy.types.Operator):
                 result = completion.result
                 logged += completion.logged
             points.append(result.points)
-        animspace.write_pc2(path, np.stack(points), start_frame=float(start), sample_rate=1.0)
+        bake.write_pc2(path, points, start)
         counts = {status: sum(r.status == status for r in results) for status in ("HIT", "BLEND", "MISS")}
-        self.report({"INFO"}, f"{len(results)} frames → {path}: {counts['HIT']} hits, {counts['BLEND']} blends, "
-                              f"{counts['MISS']} misses" + (f", {logged} logged" if settings.complete_misses else ""))
-        return {"FINISHED"}
+        return (f"{len(results)} frames → {path}: {counts['HIT']} hits, {counts['BLEND']} blends, "
+                f"{counts['MISS']} misses" + (f", {logged} logged" if settings.complete_misses else ""))
 
 
 def on_frame_change(scene) -> None:
@@ -185,28 +159,22 @@ def on_frame_change(scene) -> None:
     settings = scene.animspace
     if not settings.live_soft_cache:
         return
-    try:
-        # Asked now rather than taken from the handler: live skinning may just have moved the source.
-        evaluate_frame(bpy.context, bpy.context.evaluated_depsgraph_get())
-        settings.last_error = ""
-    except (SetupError,) + connection.EXPECTED_ERRORS as error:
-        forget_key_points()
-        settings.last_error = connection.error_text(error)
-        print(f"animspace soft cache, frame {scene.frame_current}: {settings.last_error}")
+    # Asked now rather than taken from the handler: live skinning may just have moved the source.
+    connection.in_handler(scene, "soft cache",
+                          lambda: evaluate_frame(bpy.context, bpy.context.evaluated_depsgraph_get()),
+                          on_error=forget_key_points)
 
 
 _CLASSES = (ANIMSPACE_OT_soft_cache_frame, ANIMSPACE_OT_soft_cache_bake)
 
 
 def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
+    registry.register_classes(_CLASSES)
     connection.reset_hooks.append(forget_key_points)
 
 
 def unregister() -> None:
     if forget_key_points in connection.reset_hooks:
         connection.reset_hooks.remove(forget_key_points)
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+    registry.unregister_classes(_CLASSES)
     forget_key_points()

@@ -5,8 +5,7 @@ import tempfile
 
 import bpy
 
-from . import connection, skinning
-from .connection import SetupError, reporting
+from . import connection, registry, skinning
 
 
 def image_from_png(name: str, png: bytes) -> bpy.types.Image:
@@ -28,40 +27,23 @@ def image_from_png(name: str, png: bytes) -> bpy.types.Image:
     return image
 
 
-class ANIMSPACE_OT_thumbnail(bpy.types.Operator):
+class ANIMSPACE_OT_thumbnail(connection.ReportingOperator, bpy.types.Operator):
     """Render a thumbnail of the model on the server into an image datablock"""
     bl_idname = "animspace.thumbnail"
     bl_label = "Thumbnail"
-    bl_options = {"REGISTER", "UNDO"}
 
-    @reporting
-    def execute(self, context):
+    def run(self, context):
         settings = context.scene.animspace
-        model = settings.model.strip()
-        if not model:
-            raise SetupError("Model: choose a model (Connect lists them)")
-        active = context.active_object
-        pose = None
-        if (active is not None and active.animspace.role == "SKINNED" and active.animspace.model == model
-                and active.animspace.armature is not None):
-            pose = skinning.skeleton_pose(active.animspace.armature, context.evaluated_depsgraph_get())
+        model = connection.chosen_model(context)
+        pose = skinning.armature_pose(context, skinning.active_skinned(context, model))
         drawn = connection.client(context).render_thumbnail(model, settings.width_px, settings.height_px,
                                                             skeleton_pose=pose,
                                                             show_wireframe=settings.show_wireframe)
         image = image_from_png(f"{model} thumbnail", drawn.png)
-        self.report({"INFO"}, f"'{image.name}': {drawn.width_px}×{drawn.height_px}, model version "
-                              f"{drawn.model_version}, {drawn.render_ms:.1f} ms")
-        return {"FINISHED"}
+        return (f"'{image.name}': {drawn.width_px}×{drawn.height_px}, model version "
+                f"{drawn.model_version}, {drawn.render_ms:.1f} ms")
 
 
 _CLASSES = (ANIMSPACE_OT_thumbnail,)
 
-
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = registry.for_classes(_CLASSES)
