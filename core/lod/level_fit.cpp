@@ -11,6 +11,7 @@
 
 #include "core/animspace/metrics.h"
 #include "core/common/parallel.h"
+#include "core/lod/vertex_state.h"
 
 namespace animspace::lod {
 
@@ -24,10 +25,9 @@ Error invalid(std::string message) { return make_error(ErrorCode::kInvalidArgume
 Eigen::MatrixXd normalised_positions(const as::AnimationSpaceModel& model, const Eigen::MatrixXd& C) {
   Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(C.rows(), model.vertex_count());
   for (int v = 0; v < model.vertex_count(); ++v) {
-    for (int i = model.influences.begin(v); i < model.influences.end(v); ++i) {
-      Y.col(v).noalias() +=
-          C.middleCols(4 * model.influences.bones[static_cast<size_t>(i)], 4) * model.positions.col(i);
-    }
+    const int begin = model.influences.begin(v);
+    add_normalised(C, model.influences.bones.data() + begin,
+                   model.positions.middleCols(begin, model.influences.end(v) - begin), Y.col(v));
   }
   return Y;
 }
@@ -275,10 +275,8 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
         for (int j = 0; j < k; ++j) weight += level.positions(3, begin + j);
         level.positions(3, begin + k - 1) += 1 - weight;
         moved.setZero();
-        for (int j = 0; j < k; ++j) {
-          moved.noalias() +=
-              C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4) * delta.segment<4>(4 * j);
-        }
+        add_normalised(*C, level.influences.bones.data() + begin,
+                       Eigen::Map<const Eigen::Matrix<double, 4, Eigen::Dynamic>>(delta.data(), 4, k), moved);
         Y.col(v) += moved;
         for (const auto& [o, lambda] : points) R.col(o) -= lambda * moved;
       }

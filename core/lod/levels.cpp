@@ -14,17 +14,45 @@ namespace as = animation_space;
 
 namespace {
 
-// Where each vertex went: a collapse u → v sends u to v; follow until a live vertex.
-int32_t representative(std::vector<int32_t>& parent, int32_t v) {
-  int32_t root = v;
-  while (parent[static_cast<size_t>(root)] != root) root = parent[static_cast<size_t>(root)];
-  while (parent[static_cast<size_t>(v)] != root) {
-    const int32_t next = parent[static_cast<size_t>(v)];
-    parent[static_cast<size_t>(v)] = root;
-    v = next;
+// Where each vertex went: a collapse u → v sends u to v; a vertex's representative is the live
+// vertex at the end of that chain (union–find with path compression).
+class CollapseForest {
+ public:
+  explicit CollapseForest(int vertices) : parent_(static_cast<size_t>(vertices)) {
+    for (int32_t v = 0; v < vertices; ++v) parent_[static_cast<size_t>(v)] = v;
   }
-  return root;
-}
+
+  void record(const Simplification& step) {
+    if (step.kind == SimplificationKind::kEdgeCollapse) parent_[static_cast<size_t>(step.vertex)] = step.target;
+  }
+
+  // For each input vertex in `vertices`, the position in `live_ids` (a level's input ids) of its
+  // representative.
+  std::vector<int32_t> positions_of(const std::vector<int32_t>& vertices, const std::vector<int32_t>& live_ids) {
+    std::vector<int32_t> compact(parent_.size(), -1);
+    for (size_t k = 0; k < live_ids.size(); ++k) compact[static_cast<size_t>(live_ids[k])] = static_cast<int32_t>(k);
+    std::vector<int32_t> out(vertices.size());
+    for (size_t k = 0; k < vertices.size(); ++k) {
+      out[k] = compact[static_cast<size_t>(representative(vertices[k]))];
+      assert(out[k] >= 0);
+    }
+    return out;
+  }
+
+ private:
+  int32_t representative(int32_t v) {
+    int32_t root = v;
+    while (parent_[static_cast<size_t>(root)] != root) root = parent_[static_cast<size_t>(root)];
+    while (parent_[static_cast<size_t>(v)] != root) {
+      const int32_t next = parent_[static_cast<size_t>(v)];
+      parent_[static_cast<size_t>(v)] = root;
+      v = next;
+    }
+    return root;
+  }
+
+  std::vector<int32_t> parent_;
+};
 
 LodLevel cut_level(const MeshState& state, const as::Skeleton& skeleton, double error, int64_t steps) {
   LodLevel level;
@@ -34,26 +62,13 @@ LodLevel cut_level(const MeshState& state, const as::Skeleton& skeleton, double 
   return level;
 }
 
-// Fills finer.coarser_vertex from the collapse forest.
-void link_levels(LodLevel& finer, const LodLevel& coarser, std::vector<int32_t>& parent, int input_vertices) {
-  std::vector<int32_t> compact(static_cast<size_t>(input_vertices), -1);
-  for (size_t k = 0; k < coarser.vertex_ids.size(); ++k) compact[static_cast<size_t>(coarser.vertex_ids[k])] = static_cast<int32_t>(k);
-  finer.coarser_vertex.resize(finer.vertex_ids.size());
-  for (size_t k = 0; k < finer.vertex_ids.size(); ++k) {
-    const int32_t target = compact[static_cast<size_t>(representative(parent, finer.vertex_ids[k]))];
-    assert(target >= 0);
-    finer.coarser_vertex[k] = target;
-  }
-}
-
 }  // namespace
 
 LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels) {
   assert(max_levels >= 1);
   LodLevels lods;
   MeshState state = mesh.state_after(0);
-  std::vector<int32_t> parent(static_cast<size_t>(mesh.input_vertex_count));
-  for (int32_t v = 0; v < mesh.input_vertex_count; ++v) parent[static_cast<size_t>(v)] = v;
+  CollapseForest forest(mesh.input_vertex_count);
   lods.levels.push_back(cut_level(state, mesh.skeleton, 0, 0));
   double error = 0;
   int budget = state.live_influence_count() / 2;
@@ -61,11 +76,12 @@ LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels) {
     const Simplification& step = mesh.steps[k];
     state.apply(step);
     error = std::max(error, step.cost);
-    if (step.kind == SimplificationKind::kEdgeCollapse) parent[static_cast<size_t>(step.vertex)] = step.target;
+    forest.record(step);
     const bool last = k + 1 == mesh.steps.size();
     if (state.live_influence_count() <= budget || (last && lods.levels.back().step_count < static_cast<int64_t>(k + 1))) {
       lods.levels.push_back(cut_level(state, mesh.skeleton, error, static_cast<int64_t>(k + 1)));
-      link_levels(lods.levels[lods.levels.size() - 2], lods.levels.back(), parent, mesh.input_vertex_count);
+      LodLevel& finer = lods.levels[lods.levels.size() - 2];
+      finer.coarser_vertex = forest.positions_of(finer.vertex_ids, lods.levels.back().vertex_ids);
       budget = state.live_influence_count() / 2;
     }
   }
@@ -76,25 +92,21 @@ as::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveMesh& mesh, in
                                                  std::vector<int32_t>* vertex_ids, double* error,
                                                  std::vector<int32_t>* representative) {
   MeshState state = mesh.state_after(0);
-  std::vector<int32_t> parent(static_cast<size_t>(mesh.input_vertex_count));
-  for (int32_t v = 0; v < mesh.input_vertex_count; ++v) parent[static_cast<size_t>(v)] = v;
+  CollapseForest forest(mesh.input_vertex_count);
   double worst = 0;
   for (size_t k = 0; k < mesh.steps.size() && state.live_vertex_count() > vertex_count; ++k) {
     const Simplification& step = mesh.steps[k];
     state.apply(step);
     worst = std::max(worst, step.cost);
-    if (step.kind == SimplificationKind::kEdgeCollapse) parent[static_cast<size_t>(step.vertex)] = step.target;
+    forest.record(step);
   }
   if (error) *error = worst;
   std::vector<int32_t> ids;
   as::AnimationSpaceModel model = state.to_model(mesh.skeleton, &ids);
   if (representative) {
-    std::vector<int32_t> compact(static_cast<size_t>(mesh.input_vertex_count), -1);
-    for (size_t k = 0; k < ids.size(); ++k) compact[static_cast<size_t>(ids[k])] = static_cast<int32_t>(k);
-    representative->resize(static_cast<size_t>(mesh.input_vertex_count));
-    for (int32_t v = 0; v < mesh.input_vertex_count; ++v) {
-      (*representative)[static_cast<size_t>(v)] = compact[static_cast<size_t>(lod::representative(parent, v))];
-    }
+    std::vector<int32_t> every(static_cast<size_t>(mesh.input_vertex_count));
+    for (int32_t v = 0; v < mesh.input_vertex_count; ++v) every[static_cast<size_t>(v)] = v;
+    *representative = forest.positions_of(every, ids);
   }
   if (vertex_ids) *vertex_ids = std::move(ids);
   return model;

@@ -176,11 +176,8 @@ class Simplifier {
   void update_vertex_geometry(int v) {
     const VertexState& s = state_.vertex(v);
     rest_[static_cast<size_t>(v)] = rest_position(s);
-    auto y = normalised_.col(v);
-    y.setZero();
-    for (size_t k = 0; k < s.bones.size(); ++k) {
-      y.noalias() += C_.middleCols(4 * s.bones[k], 4) * s.position.col(static_cast<Eigen::Index>(k));
-    }
+    normalised_.col(v).setZero();
+    add_normalised(C_, s.bones.data(), s.position, normalised_.col(v));
   }
 
   // u's one-ring in rotation order: ring[k] = a_k; face k lies between a_k and a_{k+1} (wrapping
@@ -413,9 +410,7 @@ class Simplifier {
         Result<InfluenceRemoval> removal = influences_->removal(state, slot);
         if (!removal.ok()) continue;
         moved = normalised_.col(v);
-        for (int k = 0; k < state.influence_count(); ++k) {
-          moved.noalias() += C_.middleCols(4 * state.bones[static_cast<size_t>(k)], 4) * removal->correction.col(k);
-        }
+        add_normalised(C_, state.bones.data(), removal->correction, moved);
         const double rise = std::max(0.0, quadrics_->error(v, moved) - vertex_error_[static_cast<size_t>(v)]);
         if (!chosen || rise < cost) {
           cost = rise;

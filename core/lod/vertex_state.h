@@ -29,6 +29,15 @@ struct VertexState {
   }
 };
 
+// y += C p for a p given on `bones` as one 4-vector per bone (the columns of `vectors`): the
+// normalised-animation-space image (y = C p, C = P^½, §3.3.2) of a vertex or of a move, where
+// L2,2 inner products are dot products.
+template <typename Vectors>
+void add_normalised(const Eigen::MatrixXd& C, const int32_t* bones, const Vectors& vectors,
+                    Eigen::Ref<Eigen::VectorXd> y) {
+  for (Eigen::Index j = 0; j < vectors.cols(); ++j) y.noalias() += C.middleCols(4 * bones[j], 4) * vectors.col(j);
+}
+
 // Vertex `vertex` of `model` (asserted in range).
 VertexState vertex_state(const animation_space::AnimationSpaceModel& model, int vertex);
 
