@@ -65,7 +65,7 @@ struct SuiteOptions {
   std::vector<std::string> datasets{"crane", "horse-gallop"};
   SkinningSuiteOptions skinning;
   // lod: datasets (the horse is fitted with the skinning options above).
-  std::vector<std::string> lod_datasets{"cow-rig", "horse-gallop"};
+  std::vector<std::string> lod_datasets{"cow-rig", "horse-gallop", "horse-gallop-block"};
   IlluminationSuiteOptions illumination;
 };
 
