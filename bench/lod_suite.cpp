@@ -68,7 +68,7 @@ struct Dataset {
   std::string name;
   as::AnimationSpaceModel model;
   as::AnimationSpaceMetrics metrics;
-  std::vector<as::TransformList> poses;  // where the error is measured
+  std::vector<as::TransformList> poses;       // where the error is measured
   std::vector<as::TransformList> statistics;  // the poses P is built from (all a simplifier may see)
   double diagonal = 1;
 };
@@ -110,7 +110,8 @@ as::AnimationSpaceModel subset(const as::AnimationSpaceModel& model, const std::
   for (size_t k = 0; k < columns.size(); ++k) out.positions.col(static_cast<Eigen::Index>(k)) = columns[k];
   out.faces.resize(static_cast<Eigen::Index>(faces.size()), 3);
   for (size_t f = 0; f < faces.size(); ++f) {
-    for (int c = 0; c < 3; ++c) out.faces(static_cast<Eigen::Index>(f), c) = compact[static_cast<size_t>(faces[f][static_cast<size_t>(c)])];
+    for (int c = 0; c < 3; ++c)
+      out.faces(static_cast<Eigen::Index>(f), c) = compact[static_cast<size_t>(faces[f][static_cast<size_t>(c)])];
   }
   return out;
 }
@@ -127,7 +128,8 @@ Simplified openmesh_decimate(const as::AnimationSpaceModel& model, int target_ve
   const lod::Points3d rest = posed(model, model.skeleton.rest);
   Mesh mesh;
   for (Eigen::Index v = 0; v < rest.rows(); ++v) {
-    mesh.add_vertex(Mesh::Point(static_cast<float>(rest(v, 0)), static_cast<float>(rest(v, 1)), static_cast<float>(rest(v, 2))));
+    mesh.add_vertex(
+        Mesh::Point(static_cast<float>(rest(v, 0)), static_cast<float>(rest(v, 1)), static_cast<float>(rest(v, 2))));
   }
   for (Eigen::Index f = 0; f < model.faces.rows(); ++f) {
     mesh.add_face(Mesh::VertexHandle(model.faces(f, 0)), Mesh::VertexHandle(model.faces(f, 1)),
@@ -306,7 +308,8 @@ std::optional<Dataset> cow_dataset(const std::filesystem::path& data) {
   Dataset d;
   d.name = "cow-rig";
   d.model = as::from_linear_blend(rig->model);
-  const std::vector<as::TransformList> statistics = as::random_joint_rotation_poses(d.model.skeleton, kCowPoses, kMaxJointAngle, 7);
+  const std::vector<as::TransformList> statistics =
+      as::random_joint_rotation_poses(d.model.skeleton, kCowPoses, kMaxJointAngle, 7);
   d.poses = as::random_joint_rotation_poses(d.model.skeleton, kCowPoses, kMaxJointAngle, 2026);
   auto metrics = as::metrics_from_poses(d.model.skeleton, statistics);
   if (!metrics) {
@@ -385,24 +388,33 @@ nlohmann::json run_dataset(const Dataset& d) {
                     {"max_error_over_diag", e.max},
                     {"build_seconds", seconds}});
   };
-  // The served levels are animspace-lod: memoryless order, influence simplification, vertices
-  // placed by fit_level. The other rows take one of those away.
+  // The served levels are animspace-lod: lod::LevelBuildOptions' defaults (edge collapses in the
+  // memoryless order, vertices placed by fit_level, then influences simplified under the exchange
+  // rule). The other rows change one of those choices.
   struct Variant {
     const char* method;
     lod::CollapseCost cost;
     bool influences;
-    bool fit;
+    bool placement;
+    bool combined_order = false;  // §6.3.1's one order of collapses and removals, then placement
   };
   for (const Variant& variant :
        {Variant{"animspace-lod", lod::CollapseCost::kMemoryless, true, true},
         Variant{"animspace-lod-no-influence", lod::CollapseCost::kMemoryless, false, true},
+        Variant{"animspace-lod-combined-order", lod::CollapseCost::kMemoryless, true, true, true},
         Variant{"animspace-lod-unplaced", lod::CollapseCost::kMemoryless, true, false},
         Variant{"animspace-lod-unplaced-no-influence", lod::CollapseCost::kMemoryless, false, false},
         Variant{"animspace-lod-quadric-unplaced-no-influence", lod::CollapseCost::kQuadric, false, false}}) {
-    const bool influences = variant.influences;
-    lod::SimplifyOptions options;
+    lod::LevelBuildOptions build;
+    build.influence_simplification = variant.influences;
+    build.placement = variant.placement;
+    lod::SimplifyOptions options = lod::progressive_mesh_options(build);
+    lod::LevelFitOptions fit_options = lod::level_fit_options(build);
     options.cost = variant.cost;
-    options.influence_simplification = influences;
+    if (variant.combined_order) {  // what was served before
+      options.influence_simplification = true;
+      fit_options.influence_exchange = -1;
+    }
     const auto start = std::chrono::steady_clock::now();
     auto pm = lod::build_progressive_mesh(d.model, d.metrics, options);
     const double seconds = seconds_since(start);
@@ -417,18 +429,18 @@ nlohmann::json run_dataset(const Dataset& d) {
       ++removals;
       if (step.cost < 1e-6 * d.diagonal) ++negligible;
     }
-    std::printf("  %s: %zu steps (%ld influence removals, %ld of them below 1e-6 of the diagonal), "
-                "base %d vertices, %d levels, built in %.3f s\n",
-                variant.method, pm->steps.size(), removals, negligible,
-                pm->base.vertex_count(), levels.count(), seconds);
+    std::printf(
+        "  %s: %zu steps (%ld influence removals, %ld of them below 1e-6 of the diagonal), "
+        "base %d vertices, %d levels, built in %.3f s\n",
+        variant.method, pm->steps.size(), removals, negligible, pm->base.vertex_count(), levels.count(), seconds);
     for (const double fraction : kFractions) {
       const int target = static_cast<int>(std::lround(fraction * V));
       std::vector<int32_t> representative;
       as::AnimationSpaceModel level = lod::simplify_to_vertex_count(*pm, target, nullptr, nullptr, &representative);
       double fit_seconds = 0;
-      if (variant.fit) {
+      if (variant.placement) {
         const auto fit_start = std::chrono::steady_clock::now();
-        auto fit = lod::fit_level(d.model, d.metrics.P, representative, level);
+        auto fit = lod::fit_level(d.model, d.metrics.P, representative, level, fit_options);
         fit_seconds = seconds_since(fit_start);
         if (!fit) {
           std::printf("%s: %s\n", d.name.c_str(), fit.error().message.c_str());
@@ -465,12 +477,13 @@ nlohmann::json run_lod_suite(const SuiteOptions& suite) {
     return rows;
   }
   for (const std::string& name : suite.lod_datasets) {
-    std::optional<Dataset> d = name == "cow-rig"        ? cow_dataset(*suite.data)
-                               : name == "horse-gallop" ? horse_dataset(*suite.data, suite.skinning, false)
+    std::optional<Dataset> d = name == "cow-rig"              ? cow_dataset(*suite.data)
+                               : name == "horse-gallop"       ? horse_dataset(*suite.data, suite.skinning, false)
                                : name == "horse-gallop-block" ? horse_dataset(*suite.data, suite.skinning, true)
-                                                        : std::nullopt;
+                                                              : std::nullopt;
     if (!d) {
-      if (name != "cow-rig" && name != "horse-gallop" && name != "horse-gallop-block") std::printf("%s: unknown dataset (skipped)\n", name.c_str());
+      if (name != "cow-rig" && name != "horse-gallop" && name != "horse-gallop-block")
+        std::printf("%s: unknown dataset (skipped)\n", name.c_str());
       continue;
     }
     for (auto& r : run_dataset(*d)) rows.push_back(r);

@@ -148,8 +148,8 @@ Status write_model(const std::filesystem::path& repository, std::string_view nam
   std::error_code error;
   std::filesystem::create_directories(path.parent_path(), error);
   if (error) {
-    return make_error(ErrorCode::kIo, "cannot create the demo model directory " + path.parent_path().string() +
-                                          ": " + error.message());
+    return make_error(ErrorCode::kIo,
+                      "cannot create the demo model directory " + path.parent_path().string() + ": " + error.message());
   }
   return container::write_file(path, model);
 }
@@ -225,17 +225,15 @@ Result<container::ModelContainer> make_demo_animation_space_container(int frames
   if (!metrics) return metrics.error();
 
   // Discrete levels of detail under the same metric (Merry 2007 ch. 6, §7.3): memoryless APS in
-  // animation space with influence simplification, each level's vertices placed to fit the model
-  // across poses (lod/level_fit.h).
-  auto progressive = lod::build_progressive_mesh(*model, metrics->metrics);
-  if (!progressive) return progressive.error();
+  // animation space, each level's vertices placed to fit the model across poses and its influences
+  // simplified after (lod/level_fit.h), as build-lod makes them.
+  auto built = lod::build_levels(*model, metrics->metrics);
+  if (!built) return built.error();
 
   container::ModelContainer out;
   animation_space::store(*model, out);
   animation_space::store_metrics(*metrics, out);
-  lod::LodLevels levels = lod::make_levels(*progressive);
-  if (auto placed = lod::fit_levels(levels, metrics->metrics.P); !placed.ok()) return placed.error();
-  lod::store_levels(levels, out);
+  lod::store_levels(built->lods, out);
   out.metadata()["description"] =
       "Animation-space model of the bending arm, fitted (Merry 2007 section 4.1) to every other frame of the "
       "expensive rig: it learns the biceps bulge and the kept elbow volume that linear blend skinning loses.";
@@ -259,8 +257,8 @@ Result<container::ModelContainer> make_demo_pmsc_engine_container(
   const std::string source(kDemoAnimationSpaceModelName);
   auto engine = animation_space::load(animation_space_demo, source);
   if (!engine) return engine.error();
-  auto bone_rows = animation_space_demo.double_matrix(container::sections::kSequenceBoneTransforms,
-                                                       16 * engine->bone_count());
+  auto bone_rows =
+      animation_space_demo.double_matrix(container::sections::kSequenceBoneTransforms, 16 * engine->bone_count());
   if (!bone_rows) return bone_rows.error();
   TriangleMesh rest;
   auto rest_points = animation_space_demo.points(container::sections::kRestPoints);
@@ -295,8 +293,7 @@ Result<container::ModelContainer> make_demo_pmsc_engine_container(
 }
 
 std::filesystem::path demo_model_path(const std::filesystem::path& repository) {
-  return repository / std::string(kDemoModelName) / std::to_string(kDemoModelVersion) /
-         std::string(kDemoModelFileName);
+  return repository / std::string(kDemoModelName) / std::to_string(kDemoModelVersion) / std::string(kDemoModelFileName);
 }
 
 Status write_demo_repository(const std::filesystem::path& repository) {

@@ -5,12 +5,15 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <queue>
 #include <string>
+#include <utility>
 
 #include <Eigen/Cholesky>
 
 #include "core/animspace/metrics.h"
 #include "core/common/parallel.h"
+#include "core/lod/influence_simplification.h"
 #include "core/lod/vertex_state.h"
 
 namespace animspace::lod {
@@ -73,11 +76,151 @@ struct Foot {
   double distance2 = 0;
 };
 
+// For each level vertex, the input vertices whose closest points it carries, with their weights λ.
+using Carried = std::vector<std::vector<std::pair<int32_t, double>>>;
+
+// Influence simplification after placement (level_fit.h): removes influences from `level`
+// cheapest harm first under the two rules there, given the residuals R (n × V) and what each
+// vertex carries; updates R. Returns the number removed.
+Result<int> remove_influences(const Eigen::MatrixXd& C, InfluenceSimplifier& simplifier, double exchange,
+                              const Carried& carried, Eigen::MatrixXd& R, as::AnimationSpaceModel& level) {
+  const int L = level.vertex_count();
+  const int before = level.influences.influence_count();
+  double error = 0, bound2 = 0;  // Σ ‖r_o‖² and max ‖r_o‖² before any removal
+  for (Eigen::Index o = 0; o < R.cols(); ++o) {
+    const double d2 = R.col(o).squaredNorm();
+    error += d2;
+    bound2 = std::max(bound2, d2);
+  }
+  const double error_before = error;
+  std::vector<VertexState> states(static_cast<size_t>(L));
+  for (int v = 0; v < L; ++v) states[static_cast<size_t>(v)] = vertex_state(level, v);
+
+  // Removals whose harm is below this are negligible: a millionth of one influence's share of the
+  // level's error. Only speed depends on it (below); every harm taken is counted exactly.
+  const double negligible = 1e-6 * error_before / std::max(before, 1);
+
+  // The cheapest removal of vertex v now, its harm h(s) and C s.
+  //  - First, a bone that can simply hand its vector to the vertex's heaviest bone (s_i = −p_i,
+  //    s_j = +p_i: the move LBS weight pruning makes) at negligible harm goes that way. A rig's
+  //    near-zero weights (the cow's 47 000 below 10⁻⁶) then cost two 4-column products each,
+  //    instead of §6.3's operators for every influence set they pass through.
+  //  - Otherwise the bone is §6.3's choice, the least ‖s‖₂,₂: with v at its placed optimum the
+  //    pull term of h vanishes to first order and h = (Σλ²)‖s‖²₂,₂, so that is also the least
+  //    harm (costing every slot's h exactly would form every slot's correction: k times the work).
+  struct Candidate {
+    double harm = 0;
+    InfluenceRemoval removal;
+    int heir = -1;  // slot that takes the removed vector (a handed-over bone); -1: §6.3's correction
+    Eigen::VectorXd moved;
+  };
+  Eigen::VectorXd pull(C.rows());
+  const auto cheapest = [&](int v) -> Result<Candidate> {
+    const VertexState& state = states[static_cast<size_t>(v)];
+    double mass = 0;
+    pull.setZero();
+    for (const auto& [o, lambda] : carried[static_cast<size_t>(v)]) {
+      mass += lambda * lambda;
+      pull.noalias() += lambda * R.col(o);
+    }
+    const auto harm_of = [&](const Eigen::VectorXd& moved) { return mass * moved.squaredNorm() - 2 * moved.dot(pull); };
+    Candidate best;
+    best.moved.resize(C.rows());
+    int heir = 0;
+    for (int j = 1; j < state.influence_count(); ++j) {
+      if (state.position(3, j) > state.position(3, heir)) heir = j;
+    }
+    for (int i = 0; i < state.influence_count(); ++i) {
+      if (i == heir) continue;
+      const Eigen::Vector4d p = state.position.col(i);
+      best.moved.noalias() = (C.middleCols(4 * state.bones[static_cast<size_t>(heir)], 4) -
+                              C.middleCols(4 * state.bones[static_cast<size_t>(i)], 4)) *
+                             p;
+      best.harm = harm_of(best.moved);
+      if (best.harm <= negligible) {
+        best.heir = heir;
+        best.removal.slot = i;
+        best.removal.bone = state.bones[static_cast<size_t>(i)];
+        return best;
+      }
+    }
+    Result<InfluenceRemoval> removal = simplifier.cheapest_removal(state);
+    if (!removal) return removal.error();
+    best.moved.setZero();
+    add_normalised(C, state.bones.data(), removal->correction, best.moved);
+    best.harm = harm_of(best.moved);
+    best.removal = std::move(*removal);
+    return best;
+  };
+  // Hands slot i's vectors to slot j and drops slot i (tangents too: the same vectors move, so
+  // the plane moves with the point, by a negligible amount).
+  const auto hand_over = [](VertexState& state, int i, int j) {
+    const auto drop = [i](as::InfluenceVectors& vectors) {
+      as::InfluenceVectors out(4, vectors.cols() - 1);
+      out.leftCols(i) = vectors.leftCols(i);
+      out.rightCols(vectors.cols() - 1 - i) = vectors.rightCols(vectors.cols() - 1 - i);
+      vectors = std::move(out);
+    };
+    for (as::InfluenceVectors* vectors : {&state.position, &state.tangent_s, &state.tangent_t}) {
+      if (vectors->cols() == 0) continue;
+      vectors->col(j) += vectors->col(i);
+      drop(*vectors);
+    }
+    state.bones.erase(state.bones.begin() + i);
+  };
+
+  using Entry = std::pair<double, int>;  // (harm when queued, vertex)
+  std::priority_queue<Entry, std::vector<Entry>, std::greater<>> queue;
+  for (int v = 0; v < L; ++v) {
+    if (states[static_cast<size_t>(v)].influence_count() < 2) continue;
+    Result<Candidate> c = cheapest(v);
+    if (!c) return c.error();
+    queue.emplace(c->harm, v);
+  }
+  int removed = 0;
+  while (!queue.empty()) {
+    const int v = queue.top().second;
+    queue.pop();
+    // Neighbours' removals change the residuals v's harm depends on: re-cost it, and put it back
+    // if something else is now cheaper.
+    Result<Candidate> c = cheapest(v);
+    if (!c) return c.error();
+    if (!queue.empty() && c->harm > queue.top().first) {
+      queue.emplace(c->harm, v);
+      continue;
+    }
+    // Rule 1: stop at the first removal the exchange does not pay for.
+    const double allowed = 1 + exchange * (removed + 1) / static_cast<double>(before);
+    if (error + c->harm > error_before * allowed * allowed) break;
+    // Rule 2: skip a vertex whose removal takes some input vertex past the level's bound.
+    const auto& points = carried[static_cast<size_t>(v)];
+    const bool within = std::all_of(points.begin(), points.end(), [&](const auto& point) {
+      return (R.col(point.first) - point.second * c->moved).squaredNorm() <= bound2;
+    });
+    if (!within) continue;
+    for (const auto& [o, lambda] : points) R.col(o) -= lambda * c->moved;
+    error += c->harm;
+    if (c->heir >= 0) {
+      hand_over(states[static_cast<size_t>(v)], c->removal.slot, c->heir);
+    } else {
+      simplifier.apply(c->removal, states[static_cast<size_t>(v)]);
+    }
+    ++removed;
+    if (states[static_cast<size_t>(v)].influence_count() >= 2) {
+      Result<Candidate> next = cheapest(v);
+      if (!next) return next.error();
+      queue.emplace(next->harm, v);
+    }
+  }
+  if (removed > 0) set_vertex_states(level, states);
+  return removed;
+}
+
 }  // namespace
 
 Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::MatrixXd& P,
                            const std::vector<int32_t>& representative, as::AnimationSpaceModel& level,
-                           const LevelFitOptions& options) {
+                           const LevelFitOptions& options, InfluenceSimplifier* simplifier) {
   const int V = input.vertex_count();
   const int L = level.vertex_count();
   if (static_cast<int>(representative.size()) != V) {
@@ -223,11 +366,11 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
     return *system;
   };
 
-  find_feet();
-  for (int round = 0; round < options.rounds; ++round) {
-    // Residuals r_o = y_o − Σ λ_c y_c, and which input vertices each level vertex carries.
-    Eigen::MatrixXd R(Yin.rows(), V);
-    std::vector<std::vector<std::pair<int32_t, double>>> carried(static_cast<size_t>(L));
+  // Residuals r_o = y_o − Σ λ_c y_c, and which input vertices each level vertex carries.
+  Eigen::MatrixXd R(Yin.rows(), V);
+  Carried carried;
+  const auto gather = [&] {
+    carried.assign(static_cast<size_t>(L), {});
     for (int o = 0; o < V; ++o) {
       const Foot& foot = feet[static_cast<size_t>(o)];
       R.col(o) = Yin.col(o);
@@ -239,51 +382,84 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
           carried[static_cast<size_t>(c)].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
       }
     }
-    // Scratch, sized once (this loop runs sweeps × L times).
-    Eigen::VectorXd pull(Yin.rows()), moved(Yin.rows()), g, rhs, z, delta;
-    for (int sweep = 0; sweep < options.sweeps; ++sweep) {
-      for (int v = 0; v < L; ++v) {
-        const auto& points = carried[static_cast<size_t>(v)];
-        if (points.empty()) continue;
-        const int begin = level.influences.begin(v);
-        const int k = level.influences.end(v) - begin;
-        // Minimise Σ_o ‖r_o − λ_o C_I Δ‖² over the move Δ (4k) with Σ Δ̲ = 0: with Δ = B z,
-        // (Σλ²) Bᵀ P_II B z = Bᵀ C_Iᵀ Σ λ r_o.
-        double lambda2 = 0;
-        pull.setZero();
-        for (const auto& [o, lambda] : points) {
-          lambda2 += lambda * lambda;
-          pull.noalias() += lambda * R.col(o);
+  };
+  const auto settle = [&](int rounds) {
+    for (int round = 0; round < rounds; ++round) {
+      gather();
+      // Scratch, sized once (this loop runs sweeps × L times).
+      Eigen::VectorXd pull(Yin.rows()), moved(Yin.rows()), g, rhs, z, delta;
+      for (int sweep = 0; sweep < options.sweeps; ++sweep) {
+        for (int v = 0; v < L; ++v) {
+          const auto& points = carried[static_cast<size_t>(v)];
+          if (points.empty()) continue;
+          const int begin = level.influences.begin(v);
+          const int k = level.influences.end(v) - begin;
+          // Minimise Σ_o ‖r_o − λ_o C_I Δ‖² over the move Δ (4k) with Σ Δ̲ = 0: with Δ = B z,
+          // (Σλ²) Bᵀ P_II B z = Bᵀ C_Iᵀ Σ λ r_o.
+          double lambda2 = 0;
+          pull.setZero();
+          for (const auto& [o, lambda] : points) {
+            lambda2 += lambda * lambda;
+            pull.noalias() += lambda * R.col(o);
+          }
+          if (!(lambda2 > 0)) continue;
+          const Eigen::LDLT<Eigen::MatrixXd>& solver = system_of(v);
+          if (solver.info() != Eigen::Success) continue;
+          g.resize(4 * k);
+          for (int j = 0; j < k; ++j) {
+            g.segment<4>(4 * j).noalias() =
+                C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4).transpose() * pull;
+          }
+          const Eigen::MatrixXd& B = weight_free(k);
+          rhs.noalias() = B.transpose() * g;
+          rhs /= lambda2;
+          z = solver.solve(rhs);
+          if (!z.allFinite()) continue;
+          delta.noalias() = B * z;
+          for (int j = 0; j < k; ++j) level.positions.col(begin + j) += delta.segment<4>(4 * j);
+          // Weight exactly 1 again (the move's weights sum to zero only to rounding).
+          double weight = 0;
+          for (int j = 0; j < k; ++j) weight += level.positions(3, begin + j);
+          level.positions(3, begin + k - 1) += 1 - weight;
+          moved.setZero();
+          add_normalised(*C, level.influences.bones.data() + begin,
+                         Eigen::Map<const Eigen::Matrix<double, 4, Eigen::Dynamic>>(delta.data(), 4, k), moved);
+          Y.col(v) += moved;
+          for (const auto& [o, lambda] : points) R.col(o) -= lambda * moved;
         }
-        if (!(lambda2 > 0)) continue;
-        const Eigen::LDLT<Eigen::MatrixXd>& solver = system_of(v);
-        if (solver.info() != Eigen::Success) continue;
-        g.resize(4 * k);
-        for (int j = 0; j < k; ++j) {
-          g.segment<4>(4 * j).noalias() =
-              C->middleCols(4 * level.influences.bones[static_cast<size_t>(begin + j)], 4).transpose() * pull;
-        }
-        const Eigen::MatrixXd& B = weight_free(k);
-        rhs.noalias() = B.transpose() * g;
-        rhs /= lambda2;
-        z = solver.solve(rhs);
-        if (!z.allFinite()) continue;
-        delta.noalias() = B * z;
-        for (int j = 0; j < k; ++j) level.positions.col(begin + j) += delta.segment<4>(4 * j);
-        // Weight exactly 1 again (the move's weights sum to zero only to rounding).
-        double weight = 0;
-        for (int j = 0; j < k; ++j) weight += level.positions(3, begin + j);
-        level.positions(3, begin + k - 1) += 1 - weight;
-        moved.setZero();
-        add_normalised(*C, level.influences.bones.data() + begin,
-                       Eigen::Map<const Eigen::Matrix<double, 4, Eigen::Dynamic>>(delta.data(), 4, k), moved);
-        Y.col(v) += moved;
-        for (const auto& [o, lambda] : points) R.col(o) -= lambda * moved;
       }
+      find_feet();
     }
-    find_feet();
+  };
+
+  find_feet();
+  settle(options.rounds);
+  LevelFit fit = summary();
+  fit.influences_before = fit.influences = level.influences.influence_count();
+  fit.rms_before = fit.rms;
+  if (options.influence_exchange >= 0) {
+    gather();
+    std::optional<InfluenceSimplifier> own;
+    if (!simplifier) simplifier = &own.emplace(P);
+    Result<int> removed = remove_influences(*C, *simplifier, options.influence_exchange, carried, R, level);
+    if (!removed) return removed.error();
+    if (*removed > 0) {
+      // New influence sets: new normalised positions and systems, then one round on the bones left.
+      Y = normalised_positions(level, *C);
+      systems.assign(static_cast<size_t>(L), std::nullopt);
+      // The feet found last are still points of the level: settle starts from them.
+      if (options.rounds > 0) {
+        settle(1);
+      } else {
+        find_feet();
+      }
+      const LevelFit after = summary();
+      fit.bound = after.bound;
+      fit.rms = after.rms;
+      fit.influences = level.influences.influence_count();
+    }
   }
-  return summary();
+  return fit;
 }
 
 }  // namespace animspace::lod

@@ -16,6 +16,22 @@
 // level in every pose) satisfy E_G‖G p_o − G p‖² = ‖C(p_o − p)‖², so the posed level is never
 // farther from the posed input vertex, in RMS over the poses, than that distance. `bound` is its
 // largest value over the input vertices.
+//
+// Influence simplification after placement (issue #26): a level vertex v carries the closest
+// points of some input vertices o, each with its barycentric weight λ_o on v. With those points
+// held, moving v by s changes the level's summed squared distance Σ_o ‖r_o‖² (r_o = y_o − its
+// closest point) by exactly
+//     h(s) = (Σ λ_o²) ‖s‖²₂,₂ − 2 ⟨C s, Σ λ_o r_o⟩,
+// the same units as the fit itself: squared RMS-over-poses distance of the input surface, summed.
+// Removing bone i from v moves it by §6.3's correction s (influence_simplification.h); its harm
+// is h(s). Removals are taken cheapest harm first while
+//   1. the level's RMS stays within (1 + x · removed / I₀) of its RMS before any removal, I₀ its
+//      influences and x = influence_exchange: the level is never worse than edge collapses
+//      alone by a larger fraction than the fraction of influences it saves (x = 1), and
+//   2. no input vertex gets farther from the level than the largest distance before removals
+//      (a removal that would do so is skipped): ε^l stays that of edge collapses.
+// Then one more round of placement settles the surface on the remaining bones. Re-placement and
+// the closest-point search only lower the summed distance, so the rule holds after it as well.
 #pragma once
 
 #include <cstdint>
@@ -28,11 +44,16 @@
 
 namespace animspace::lod {
 
+class InfluenceSimplifier;  // influence_simplification.h
+
 struct LevelFitOptions {
   // Rounds of (closest points, then positions); 0 measures the bound without moving anything.
   int rounds = 3;
   // Gauss–Seidel sweeps over the vertices per round.
   int sweeps = 4;
+  // Influence simplification after placement (above): the error a level may gain, as a fraction
+  // of its RMS, per fraction of its influences removed. Negative: no influence is removed.
+  double influence_exchange = -1;
 };
 
 struct LevelFit {
@@ -41,16 +62,23 @@ struct LevelFit {
   // from the posed input vertex to the posed level (for the poses P describes).
   double bound = 0;
   double rms = 0;
+  // The level as placed with every influence it was cut with, before influence simplification:
+  // its influences and its RMS (equal to the above when nothing was removed).
+  int influences_before = 0;
+  double rms_before = 0;
+  int influences = 0;
 };
 
 // Moves the vertices of `level` (a simplification of `input` with the same skeleton) to fit the
 // input surface under P = E[GᵀG] (4b × 4b). `representative[o]` names, for every input vertex o,
 // the level vertex it was collapsed into (the level's own vertices name themselves): the closest
 // point of o is searched on the faces around that vertex and its neighbours.
+// `simplifier` (built on the same P), when given, is used for influence simplification and keeps
+// its per-influence-set operators for the next call (fit_levels shares one across levels).
 // Errors: kInvalidArgument naming the argument whose size does not fit, or a P that is not
-// non-negative definite.
+// non-negative definite; InfluenceSimplifier's.
 Result<LevelFit> fit_level(const animation_space::AnimationSpaceModel& input, const Eigen::MatrixXd& P,
                            const std::vector<int32_t>& representative, animation_space::AnimationSpaceModel& level,
-                           const LevelFitOptions& options = {});
+                           const LevelFitOptions& options = {}, InfluenceSimplifier* simplifier = nullptr);
 
 }  // namespace animspace::lod

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/common/format.h"
+#include "core/lod/influence_simplification.h"
 
 namespace animspace::lod {
 
@@ -78,7 +79,8 @@ LodLevels make_levels(const ProgressiveMesh& mesh, int max_levels) {
     error = std::max(error, step.cost);
     forest.record(step);
     const bool last = k + 1 == mesh.steps.size();
-    if (state.live_influence_count() <= budget || (last && lods.levels.back().step_count < static_cast<int64_t>(k + 1))) {
+    if (state.live_influence_count() <= budget ||
+        (last && lods.levels.back().step_count < static_cast<int64_t>(k + 1))) {
       lods.levels.push_back(cut_level(state, mesh.skeleton, error, static_cast<int64_t>(k + 1)));
       LodLevel& finer = lods.levels[lods.levels.size() - 2];
       finer.coarser_vertex = forest.positions_of(finer.vertex_ids, lods.levels.back().vertex_ids);
@@ -112,23 +114,58 @@ as::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveMesh& mesh, in
   return model;
 }
 
-Status fit_levels(LodLevels& lods, const Eigen::MatrixXd& P, const LevelFitOptions& options) {
-  if (lods.count() == 0) return Status::Ok();
+Result<std::vector<LevelFit>> fit_levels(LodLevels& lods, const Eigen::MatrixXd& P, const LevelFitOptions& options) {
+  std::vector<LevelFit> fits;
+  if (lods.count() == 0) return fits;
   const as::AnimationSpaceModel& input = lods.levels[0].model;
+  LevelFit exact;
+  exact.influences_before = exact.influences = input.influences.influence_count();
+  fits.push_back(exact);
   // Where every input vertex is at level l: follow coarser_vertex down from level 0.
   std::vector<int32_t> at(static_cast<size_t>(input.vertex_count()));
   for (int32_t v = 0; v < input.vertex_count(); ++v) at[static_cast<size_t>(v)] = v;
   double epsilon = 0;
+  InfluenceSimplifier simplifier(P);  // its operators serve every level
   for (int l = 1; l < lods.count(); ++l) {
     const LodLevel& finer = lods.levels[static_cast<size_t>(l) - 1];
     for (int32_t& v : at) v = finer.coarser_vertex[static_cast<size_t>(v)];
     LodLevel& level = lods.levels[static_cast<size_t>(l)];
-    Result<LevelFit> fit = fit_level(input, P, at, level.model, options);
+    Result<LevelFit> fit = fit_level(input, P, at, level.model, options, &simplifier);
     if (!fit.ok()) return fit.error();
     epsilon = std::max(epsilon, fit->bound);
     level.epsilon = epsilon;
+    fits.push_back(*fit);
   }
-  return Status::Ok();
+  return fits;
+}
+
+SimplifyOptions progressive_mesh_options(const LevelBuildOptions& options) {
+  SimplifyOptions simplify;
+  simplify.influence_simplification = options.influence_simplification && !options.placement;
+  simplify.max_normal_deviation_degrees = options.max_normal_deviation_degrees;
+  simplify.progress = options.progress;
+  return simplify;
+}
+
+LevelFitOptions level_fit_options(const LevelBuildOptions& options) {
+  LevelFitOptions fit;
+  fit.influence_exchange = options.influence_simplification ? options.influence_exchange : -1;
+  return fit;
+}
+
+Result<BuiltLevels> build_levels(const as::AnimationSpaceModel& model, const as::AnimationSpaceMetrics& metrics,
+                                 const LevelBuildOptions& options) {
+  auto pm = build_progressive_mesh(model, metrics, progressive_mesh_options(options));
+  if (!pm) return pm.error();
+  BuiltLevels built;
+  built.steps = pm->steps.size();
+  built.lods = make_levels(*pm, options.max_levels);
+  if (options.placement) {
+    auto fits = fit_levels(built.lods, metrics.P, level_fit_options(options));
+    if (!fits) return fits.error();
+    built.fits = std::move(*fits);
+  }
+  return built;
 }
 
 Geomorph geomorph(const LodLevels& lods, int level) {

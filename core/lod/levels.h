@@ -21,6 +21,7 @@
 #include "core/common/result.h"
 #include "core/lod/level_fit.h"
 #include "core/lod/progressive_mesh.h"
+#include "core/lod/simplify.h"
 
 namespace animspace::lod {
 
@@ -28,7 +29,7 @@ namespace animspace::lod {
 // its position p^l and Δp = p^{l+1} − p^l on the union of both influence sets (aligned), where
 // p^{l+1} is the position of the coarser vertex it was collapsed into.
 struct Geomorph {
-  animation_space::InfluenceSets aligned;     // finer level's vertex count
+  animation_space::InfluenceSets aligned;      // finer level's vertex count
   animation_space::InfluenceVectors position;  // 4 × I_aligned, p^l
   animation_space::InfluenceVectors delta;     // 4 × I_aligned, Δp (weight 0)
 };
@@ -61,10 +62,43 @@ animation_space::AnimationSpaceModel simplify_to_vertex_count(const ProgressiveM
                                                               std::vector<int32_t>* representative = nullptr);
 
 // Places the vertices of every level l ≥ 1 against level 0 (the input) under P = E[GᵀG]
-// (fit_level), and sets ε^l to the largest fit bound of levels 1..l, so that ε^l never decreases
-// and bounds the RMS-over-poses distance of every input vertex from level l.
+// (fit_level, which also simplifies influences when options ask), and sets ε^l to the largest fit
+// bound of levels 1..l, so that ε^l never decreases and bounds the RMS-over-poses distance of
+// every input vertex from level l. Returns each level's fit (level 0: zero error, its influences).
 // Errors: fit_level's.
-Status fit_levels(LodLevels& lods, const Eigen::MatrixXd& P, const LevelFitOptions& options = {});
+Result<std::vector<LevelFit>> fit_levels(LodLevels& lods, const Eigen::MatrixXd& P,
+                                         const LevelFitOptions& options = {});
+
+// How the served levels are made: one set of choices for the CLI, the demo and the bench.
+struct LevelBuildOptions {
+  // Influence simplification. With placement it runs after each level is placed, under the
+  // exchange rule of level_fit.h, and the progressive mesh is edge collapses only: the combined
+  // order of §6.3.1 costs a removal by how far the vertex moves, not by what the placed level
+  // loses, and measured worse (docs/BENCHMARKS.md, issue #26). Without placement it is §6.3.1's.
+  bool influence_simplification = true;
+  bool placement = true;
+  // level_fit.h's x: a level may lose this fraction of RMS per fraction of influences removed.
+  double influence_exchange = 1;
+  int max_levels = 16;  // ≥ 1
+  double max_normal_deviation_degrees = 90;
+  ProgressCallback progress = {};  // the progressive mesh's
+};
+
+// The progressive mesh's and the placement's options for `options`.
+SimplifyOptions progressive_mesh_options(const LevelBuildOptions& options);
+LevelFitOptions level_fit_options(const LevelBuildOptions& options);
+
+struct BuiltLevels {
+  LodLevels lods;
+  std::vector<LevelFit> fits;  // per level, when placed; empty otherwise
+  size_t steps = 0;            // of the progressive mesh
+};
+
+// Progressive mesh, levels, placement and influence simplification, as `options` say.
+// Errors: build_progressive_mesh's and fit_levels'.
+Result<BuiltLevels> build_levels(const animation_space::AnimationSpaceModel& model,
+                                 const animation_space::AnimationSpaceMetrics& metrics,
+                                 const LevelBuildOptions& options = {});
 
 // Δp and the aligned influences from level `level` to `level + 1` (asserted: level + 1 < count).
 Geomorph geomorph(const LodLevels& lods, int level);

@@ -15,7 +15,7 @@
 namespace animspace::lod {
 
 struct VertexState {
-  std::vector<int32_t> bones;           // strictly increasing
+  std::vector<int32_t> bones;                  // strictly increasing
   animation_space::InfluenceVectors position;  // 4 × bones.size(), weight Σ p̲_j = 1
   // Tangent plane (§3.5): both empty, or both 4 × bones.size() with weight 0.
   animation_space::InfluenceVectors tangent_s;
@@ -24,8 +24,7 @@ struct VertexState {
   int influence_count() const { return static_cast<int>(bones.size()); }
   bool has_tangents() const { return tangent_s.cols() > 0; }
   friend bool operator==(const VertexState& a, const VertexState& b) {
-    return a.bones == b.bones && a.position == b.position && a.tangent_s == b.tangent_s &&
-           a.tangent_t == b.tangent_t;
+    return a.bones == b.bones && a.position == b.position && a.tangent_s == b.tangent_s && a.tangent_t == b.tangent_t;
   }
 };
 
@@ -40,5 +39,9 @@ void add_normalised(const Eigen::MatrixXd& C, const int32_t* bones, const Vector
 
 // Vertex `vertex` of `model` (asserted in range).
 VertexState vertex_state(const animation_space::AnimationSpaceModel& model, int vertex);
+
+// The inverse: `model`'s influences, positions and tangents rebuilt from one state per vertex
+// (asserted: as many states as vertices, all with tangents or none). Skeleton and faces stay.
+void set_vertex_states(animation_space::AnimationSpaceModel& model, const std::vector<VertexState>& states);
 
 }  // namespace animspace::lod

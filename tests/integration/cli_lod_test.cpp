@@ -47,7 +47,8 @@ TEST(CliLod, BuildsLevelsAndExportsTheCoresLevel) {
   ASSERT_FALSE(input.has_section(lod::sections::kErrors));
   ASSERT_TRUE(container::write_file(dir / "arm.anim", input).ok());
 
-  ASSERT_EQ(run("build-lod " + (dir / "arm.anim").string() + " --max-levels 5 -o " + (dir / "arm-lod.anim").string()), 0);
+  ASSERT_EQ(run("build-lod " + (dir / "arm.anim").string() + " --max-levels 5 -o " + (dir / "arm-lod.anim").string()),
+            0);
   auto built = container::read_file(dir / "arm-lod.anim");
   ASSERT_TRUE(built.ok());
   auto levels = lod::load_levels(*built, *model, "arm-lod.anim");
@@ -63,25 +64,42 @@ TEST(CliLod, BuildsLevelsAndExportsTheCoresLevel) {
   EXPECT_EQ(mesh->F.rows(), level.model.faces.rows());
   EXPECT_EQ(sorted_rows(mesh->V), sorted_rows(expected));  // reordered for the vertex cache, same points
 
-  // --no-placement: the same levels' topology and influences; only where the vertices are differs.
-  ASSERT_EQ(run("build-lod " + (dir / "arm.anim").string() + " --max-levels 5 --no-placement -o " +
-                (dir / "arm-unplaced.anim").string()),
-            0);
-  auto unplaced_file = container::read_file(dir / "arm-unplaced.anim");
-  ASSERT_TRUE(unplaced_file.ok());
+  // Placement moves vertices and nothing else: with edge collapses only, placed and unplaced
+  // levels share topology and influences. The default then simplifies each placed level's
+  // influences: same vertices and faces, no more influences than edge collapses alone.
+  const auto build = [&](const std::string& flags, const std::string& name) {
+    EXPECT_EQ(
+        run("build-lod " + (dir / "arm.anim").string() + " --max-levels 5 " + flags + " -o " + (dir / name).string()),
+        0);
+    auto file = container::read_file(dir / name);
+    EXPECT_TRUE(file.ok());
+    return *file;
+  };
+  const container::ModelContainer collapses_file = build("--no-influence-simplification", "arm-collapses.anim");
+  const container::ModelContainer unplaced_file =
+      build("--no-influence-simplification --no-placement", "arm-unplaced.anim");
   EXPECT_EQ(built->metadata().at("lod.placement"), "fitted");
-  EXPECT_EQ(unplaced_file->metadata().at("lod.placement"), "none");
-  auto unplaced = lod::load_levels(*unplaced_file, *model, "arm-unplaced.anim");
+  EXPECT_EQ(unplaced_file.metadata().at("lod.placement"), "none");
+  EXPECT_EQ(collapses_file.metadata().at("lod.influence_simplification"), "false");
+  EXPECT_NE(built->metadata().at("lod.influence_simplification").find("after placement"), std::string::npos);
+  auto collapses = lod::load_levels(collapses_file, *model, "arm-collapses.anim");
+  auto unplaced = lod::load_levels(unplaced_file, *model, "arm-unplaced.anim");
+  ASSERT_TRUE(collapses.ok()) << collapses.error().message;
   ASSERT_TRUE(unplaced.ok()) << unplaced.error().message;
   ASSERT_EQ(unplaced->count(), levels->count());
+  ASSERT_EQ(collapses->count(), levels->count());
   bool moved = false;
   for (int l = 1; l < levels->count(); ++l) {
-    const lod::LodLevel& a = levels->levels[static_cast<size_t>(l)];
+    const lod::LodLevel& a = collapses->levels[static_cast<size_t>(l)];
     const lod::LodLevel& b = unplaced->levels[static_cast<size_t>(l)];
+    const lod::LodLevel& served = levels->levels[static_cast<size_t>(l)];
     EXPECT_EQ(a.vertex_ids, b.vertex_ids) << "level " << l;
     EXPECT_EQ(a.model.faces, b.model.faces) << "level " << l;
     EXPECT_EQ(a.model.influences.bones, b.model.influences.bones) << "level " << l;
     moved = moved || !a.model.positions.isApprox(b.model.positions, 1e-9);
+    EXPECT_EQ(served.vertex_ids, a.vertex_ids) << "level " << l;
+    EXPECT_EQ(served.model.faces, a.model.faces) << "level " << l;
+    EXPECT_LE(served.model.influences.influence_count(), a.model.influences.influence_count()) << "level " << l;
   }
   EXPECT_TRUE(moved);
 

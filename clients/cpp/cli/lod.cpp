@@ -13,10 +13,11 @@
 #include "clients/cpp/tools/pose_file.h"
 #include "core/animspace/animspace_io.h"
 #include "core/common/atomic_file.h"
+#include "core/common/format.h"
 #include "core/mesh_io/posed_mesh.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
-#include "core/lod/simplify.h"
+#include "core/lod/levels.h"
 #include "core/container/sections.h"
 
 namespace animspace::cli {
@@ -27,8 +28,9 @@ CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
   auto* cmd = app.add_subcommand(
       "build-lod",
       "Offline: add levels of detail to an animation-space model — memoryless appearance-preserving simplification "
-      "in animation space with influence simplification (Merry 2007 ch. 6), levels halving the influences (§7.3), "
-      "each level's vertices placed to fit the model across poses — and write a model version");
+      "in animation space (Merry 2007 ch. 6), levels halving the influences (§7.3), each level's vertices placed to "
+      "fit the model across poses, then its influences simplified while the error they add pays for itself — and "
+      "write a model version");
   cmd->add_option("input", a.input, "An animation-space model.anim (from fit or import-rig)")
       ->required()
       ->check(CLI::ExistingFile);
@@ -36,7 +38,12 @@ CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
                 "Edge collapses only (no §6.3 influence removals)");
   cmd->add_flag("--no-placement", a.no_placement,
                 "Keep every level's vertices where the input had them (no fit across poses; ε^l is then the "
-                "largest step's deviation)");
+                "largest step's deviation, and influences are removed in the progressive mesh's own order, §6.3.1)");
+  cmd->add_option("--influence-exchange", a.influence_exchange,
+                  "Placed levels: the fraction of RMS error a level may gain per fraction of its influences removed "
+                  "(0: only removals that cost nothing)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
   cmd->add_option("--max-levels", a.max_levels, "Levels to keep, level 0 included")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
@@ -78,45 +85,60 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
     }
     stored = std::move(*loaded);
   }
-  lod::SimplifyOptions options;
+  lod::LevelBuildOptions options;
   options.influence_simplification = !a.no_influence_simplification;
+  options.placement = !a.no_placement;
+  options.influence_exchange = a.influence_exchange;
+  options.max_levels = a.max_levels;
   options.max_normal_deviation_degrees = a.max_normal_deviation_degrees;
   options.progress = progress_bars("build-lod");
   const auto start = std::chrono::steady_clock::now();
-  auto pm = lod::build_progressive_mesh(*model, stored.metrics, options);
+  auto built = lod::build_levels(*model, stored.metrics, options);
   options.progress = nullptr;  // ends the bar's line before the report
-  if (!pm) return fail("build-lod", pm.error().message);
-  lod::LodLevels levels = lod::make_levels(*pm, a.max_levels);
-  if (!a.no_placement) {
-    if (auto placed = lod::fit_levels(levels, stored.metrics.P); !placed.ok()) {
-      return fail("build-lod", placed.error().message);
-    }
-  }
+  if (!built) return fail("build-lod", built.error().message);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const lod::LodLevels& levels = built->lods;
   lod::store_levels(levels, out);
-  out.metadata()["lod.influence_simplification"] = options.influence_simplification ? "true" : "false";
+  out.metadata()["lod.influence_simplification"] =
+      !options.influence_simplification ? "false"
+      : options.placement               ? "after placement, exchange " + format_number(options.influence_exchange)
+                                        : "true";
   out.metadata()["lod.placement"] = a.no_placement ? "none" : "fitted";
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("build-lod", written.error().message);
 
+  // Per level, the trade-off a user picks from: vertices, influences and error, and (placed) the
+  // same level with edge collapses only — what its influence simplification gave and cost.
+  const auto fit_of = [&](int l) -> const lod::LevelFit* {
+    return built->fits.empty() ? nullptr : &built->fits[static_cast<size_t>(l)];
+  };
   if (json) {
     nlohmann::json rows = nlohmann::json::array();
     for (int l = 0; l < levels.count(); ++l) {
       const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
-      rows.push_back({{"level", l},
-                      {"vertices", level.model.vertex_count()},
-                      {"faces", level.model.faces.rows()},
-                      {"influences", level.model.influences.influence_count()},
-                      {"epsilon", level.epsilon}});
+      nlohmann::json row = {{"level", l},
+                            {"vertices", level.model.vertex_count()},
+                            {"faces", level.model.faces.rows()},
+                            {"influences", level.model.influences.influence_count()},
+                            {"epsilon", level.epsilon}};
+      if (const lod::LevelFit* fit = fit_of(l)) {
+        row["rms_error"] = fit->rms;
+        row["collapses_only"] = {{"influences", fit->influences_before}, {"rms_error", fit->rms_before}};
+      }
+      rows.push_back(std::move(row));
     }
-    print_json({{"output", path.string()}, {"seconds", seconds}, {"steps", pm->steps.size()}, {"levels", rows}});
+    print_json({{"output", path.string()}, {"seconds", seconds}, {"steps", built->steps}, {"levels", rows}});
   } else {
-    std::printf("progressive mesh: %zu steps in %.2f s\n%6s %9s %9s %11s %12s\n", pm->steps.size(), seconds, "level",
-                "vertices", "faces", "influences", "ε^l");
+    std::printf("progressive mesh: %zu steps; levels built in %.2f s\n%6s %9s %9s %11s %12s %12s %26s\n", built->steps,
+                seconds, "level", "vertices", "faces", "influences", "ε^l", "RMS", "collapses only: infl, RMS");
     for (int l = 0; l < levels.count(); ++l) {
       const lod::LodLevel& level = levels.levels[static_cast<size_t>(l)];
-      std::printf("%6d %9d %9d %11d %12.4g\n", l, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
+      std::printf("%6d %9d %9d %11d %12.4g", l, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
                   level.model.influences.influence_count(), level.epsilon);
+      if (const lod::LevelFit* fit = fit_of(l)) {
+        std::printf(" %12.4g %13d %12.4g", fit->rms, fit->influences_before, fit->rms_before);
+      }
+      std::printf("\n");
     }
     std::printf("wrote %s\n", path.c_str());
   }
@@ -156,7 +178,8 @@ CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
 }
 
 int run_export_lod(const ExportLodArgs& a, bool json) {
-  if (const std::string bad = check_output_extension(a.output, {".obj", ".ply", ".glb", ".gltf"}, "export-lod writes a mesh");
+  if (const std::string bad =
+          check_output_extension(a.output, {".obj", ".ply", ".glb", ".gltf"}, "export-lod writes a mesh");
       !bad.empty()) {
     return fail("export-lod", bad);
   }
@@ -171,8 +194,8 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
   double tolerated = 0;
   if (a.level >= 0) {
     if (a.level >= levels->count()) {
-      return fail("export-lod", "--level: expected 0 … " + std::to_string(levels->count() - 1) + ", got " +
-                                    std::to_string(a.level));
+      return fail("export-lod",
+                  "--level: expected 0 … " + std::to_string(levels->count() - 1) + ", got " + std::to_string(a.level));
     }
     chosen = a.level;
   } else if (a.tolerance_px > 0) {
@@ -196,8 +219,8 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
     auto rows = in->double_matrix(container::sections::kSequenceBoneTransforms, 16 * model->bone_count());
     if (!rows) return fail("export-lod", rows.error().message);
     if (a.frame >= rows->rows()) {
-      return fail("export-lod", "--frame: expected 0 … " + std::to_string(rows->rows() - 1) + ", got " +
-                                    std::to_string(a.frame));
+      return fail("export-lod",
+                  "--frame: expected 0 … " + std::to_string(rows->rows() - 1) + ", got " + std::to_string(a.frame));
     }
     pose = as::pose_from_row(*rows, a.frame, model->bone_count());
   }
@@ -219,9 +242,9 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
   } else {
     char tolerated_text[48] = "";
     if (a.tolerance_px > 0) std::snprintf(tolerated_text, sizeof tolerated_text, ", tolerated %.4g", tolerated);
-    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(), level.epsilon,
-                tolerated_text,
-                level.model.vertex_count(), static_cast<int>(level.model.faces.rows()), a.output.c_str());
+    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(),
+                level.epsilon, tolerated_text, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
+                a.output.c_str());
   }
   return 0;
 }
@@ -314,25 +337,26 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
   const auto faces = static_cast<Eigen::Index>(h.face_count());
   mesh_io::PosedMesh mesh;
   mesh.points = Eigen::Map<const PointMatrix>(received.positions.data(), vertices, 3);
-  mesh.faces = Eigen::Map<const Eigen::Matrix<uint32_t, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-                   received.indices.data(), faces, 3)
-                   .cast<int32_t>();
+  mesh.faces =
+      Eigen::Map<const Eigen::Matrix<uint32_t, Eigen::Dynamic, 3, Eigen::RowMajor>>(received.indices.data(), faces, 3)
+          .cast<int32_t>();
   if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("lod", written.error().message);
   }
   if (json) {
-    print_json({{"output", a.output},
-                {"model", a.model},
-                {"version", h.model_version()},
-                {"level", h.level()},
-                {"level_count", h.level_count()},
-                {"epsilon", h.epsilon()},
-                // Only a level chosen for a view (eq. 7.2) has a tolerated error.
-                {"tolerated_error", request.has_pixel_tolerance() ? nlohmann::json(h.tolerated_error()) : nlohmann::json()},
-                {"vertices", h.vertex_count()},
-                {"faces", h.face_count()},
-                {"bytes_received", received.bytes_received},
-                {"chunks", received.chunk_count}});
+    print_json(
+        {{"output", a.output},
+         {"model", a.model},
+         {"version", h.model_version()},
+         {"level", h.level()},
+         {"level_count", h.level_count()},
+         {"epsilon", h.epsilon()},
+         // Only a level chosen for a view (eq. 7.2) has a tolerated error.
+         {"tolerated_error", request.has_pixel_tolerance() ? nlohmann::json(h.tolerated_error()) : nlohmann::json()},
+         {"vertices", h.vertex_count()},
+         {"faces", h.face_count()},
+         {"bytes_received", received.bytes_received},
+         {"chunks", received.chunk_count}});
   } else {
     std::printf("%s version %llu, level %u of %u (ε = %.4g", a.model.c_str(),
                 static_cast<unsigned long long>(h.model_version()), h.level(), h.level_count(),

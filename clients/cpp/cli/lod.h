@@ -18,6 +18,7 @@ struct BuildLodArgs {
   std::string input;  // model.anim of an animation-space model
   bool no_influence_simplification = false;
   bool no_placement = false;
+  double influence_exchange = 1;  // lod::LevelBuildOptions::influence_exchange
   int max_levels = 16;
   double max_normal_deviation_degrees = 90;
   // Metrics when the model stores none (an imported rig): P from random joint rotations.

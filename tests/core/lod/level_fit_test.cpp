@@ -2,6 +2,9 @@
 // least-squares optimum (against a dense solve done here), a level pushed off a flat input comes
 // back onto it, placement never raises the error it minimises, and a level's ε^l bounds the RMS
 // over the poses P was averaged from of every input vertex's distance to the posed level.
+// Influence simplification after placement removes what costs nothing when told to remove only
+// that, keeps the exchange rule (a level's RMS grows by at most x times the fraction of
+// influences it saves), and leaves ε^l a bound of the measured error.
 #include "core/lod/level_fit.h"
 
 #include <cmath>
@@ -136,6 +139,33 @@ TEST(LevelFit, ALevelPushedOffAFlatInputComesBackOntoIt) {
   for (int v = 0; v < 9; ++v) EXPECT_NEAR(level.positions(2, v), 0, 1e-4) << "vertex " << v;
 }
 
+Points3d posed(const as::AnimationSpaceModel& m, const as::TransformList& G) {
+  PointMatrix points;
+  as::evaluate(m, G, points);
+  return Points3d(points.cast<double>());
+}
+
+// Per input vertex of `input`, the RMS over `poses` of its distance to the posed `level`.
+std::vector<double> rms_over_poses(const as::AnimationSpaceModel& input, const as::AnimationSpaceModel& level,
+                                   const std::vector<as::TransformList>& poses) {
+  std::vector<double> sum(static_cast<size_t>(input.vertex_count()), 0.0);
+  for (const as::TransformList& G : poses) {
+    const Points3d original = posed(input, G);
+    const SurfaceDistance surface(posed(level, G), level.faces);
+    for (Eigen::Index o = 0; o < original.rows(); ++o) {
+      sum[static_cast<size_t>(o)] += distances_to_surface(original.row(o), surface).sum_of_squares;
+    }
+  }
+  for (double& s : sum) s = std::sqrt(s / static_cast<double>(poses.size()));
+  return sum;
+}
+
+double total_squares(const std::vector<double>& rms) {
+  double total = 0;
+  for (const double r : rms) total += r * r;
+  return total;
+}
+
 TEST(LevelFit, EveryLevelsEpsilonBoundsTheRmsOverThePosesOfEveryInputVertex) {
   const testing::LodCase c = testing::arm_lod_case();
   auto pm = build_progressive_mesh(c.model, c.metrics, {});
@@ -144,11 +174,6 @@ TEST(LevelFit, EveryLevelsEpsilonBoundsTheRmsOverThePosesOfEveryInputVertex) {
   const LodLevels unplaced = placed;
   ASSERT_GE(placed.count(), 3);
   ASSERT_TRUE(fit_levels(placed, c.metrics.P).ok());
-  const auto posed = [](const as::AnimationSpaceModel& m, const as::TransformList& G) {
-    PointMatrix points;
-    as::evaluate(m, G, points);
-    return Points3d(points.cast<double>());
-  };
   double previous = 0;
   for (int l = 1; l < placed.count(); ++l) {
     const LodLevel& level = placed.levels[static_cast<size_t>(l)];
@@ -156,27 +181,98 @@ TEST(LevelFit, EveryLevelsEpsilonBoundsTheRmsOverThePosesOfEveryInputVertex) {
     previous = level.epsilon;
     EXPECT_EQ(level.model.influences.bones, unplaced.levels[static_cast<size_t>(l)].model.influences.bones);
     ASSERT_TRUE(as::validate(level.model).ok()) << "level " << l;
-    // Per input vertex, the RMS over the poses of its distance to the posed level.
-    std::vector<double> sum(static_cast<size_t>(c.model.vertex_count()), 0.0);
-    double placed_total = 0, unplaced_total = 0;
-    for (const as::TransformList& G : c.poses) {
-      const Points3d original = posed(c.model, G);
-      const SurfaceDistance surface(posed(level.model, G), level.model.faces);
-      const SurfaceDistance before(posed(unplaced.levels[static_cast<size_t>(l)].model, G),
-                                   unplaced.levels[static_cast<size_t>(l)].model.faces);
-      for (Eigen::Index o = 0; o < original.rows(); ++o) {
-        const DistanceSummary s = distances_to_surface(original.row(o), surface);
-        sum[static_cast<size_t>(o)] += s.sum_of_squares;
-        placed_total += s.sum_of_squares;
-        unplaced_total += distances_to_surface(original.row(o), before).sum_of_squares;
-      }
+    const std::vector<double> error = rms_over_poses(c.model, level.model, c.poses);
+    for (size_t o = 0; o < error.size(); ++o) {
+      EXPECT_LE(error[o], level.epsilon * (1 + 1e-6) + 1e-9) << "level " << l << " vertex " << o;
     }
-    for (size_t o = 0; o < sum.size(); ++o) {
-      EXPECT_LE(std::sqrt(sum[o] / static_cast<double>(c.poses.size())), level.epsilon * (1 + 1e-6) + 1e-9)
-          << "level " << l << " vertex " << o;
-    }
-    EXPECT_LT(placed_total, unplaced_total) << "level " << l;
+    EXPECT_LT(total_squares(error),
+              total_squares(rms_over_poses(c.model, unplaced.levels[static_cast<size_t>(l)].model, c.poses)))
+        << "level " << l;
   }
+}
+
+TEST(LevelFit, InfluencesThatCarryNothingAreRemovedAtNoCost) {
+  // Two bones, P = I (y = p): every vertex of the level also names bone 1 with a zero vector, so
+  // removing bone 1 moves nothing (§6.3's least correction is s = 0) while removing bone 0 moves
+  // the vertex by its whole position. With exchange 0 exactly the bone-1 influences go.
+  Eigen::MatrixXd corners(3, 3);
+  corners << 0, 2, 0,  //
+      0, 0, 2,         //
+      0, 0, 0;
+  Eigen::MatrixXd input_points(3, 6);
+  input_points << corners, Eigen::MatrixXd(3, 3);
+  input_points.rightCols(3) << 0.5, 1, 0.3,  //
+      0.5, 0.3, 1,                           //
+      0.1, -0.2, 0.15;
+  FaceMatrix one(1, 3);
+  one << 0, 1, 2;
+  as::AnimationSpaceModel in = one_bone_model(input_points, FaceMatrix(0, 3));
+  as::AnimationSpaceModel level = one_bone_model(corners, one);
+  for (as::AnimationSpaceModel* m : {&in, &level}) {
+    m->skeleton.parents = {-1, 0};
+    m->skeleton.rest = {as::Transform::Identity(), as::Transform::Identity()};
+  }
+  as::InfluenceSets two;
+  as::InfluenceVectors positions(4, 6);
+  for (int v = 0; v < 3; ++v) {
+    two.bones.insert(two.bones.end(), {0, 1});
+    two.offsets.push_back(2 * (v + 1));
+    positions.col(2 * v) = level.positions.col(v);
+    positions.col(2 * v + 1).setZero();
+  }
+  level.influences = two;
+  level.positions = positions;
+  ASSERT_TRUE(as::validate(level).ok());
+  std::vector<int32_t> representative = {0, 1, 2, 0, 1, 2};
+  LevelFitOptions options;
+  options.influence_exchange = 0;
+  const LevelFit fit = fit_level(in, Eigen::MatrixXd::Identity(8, 8), representative, level, options).value();
+  EXPECT_EQ(fit.influences_before, 6);
+  EXPECT_EQ(fit.influences, 3);
+  EXPECT_EQ(level.influences.bones, (std::vector<int32_t>{0, 0, 0}));
+  EXPECT_LE(fit.rms, fit.rms_before * (1 + 1e-9) + 1e-12);
+  ASSERT_TRUE(as::validate(level).ok());
+}
+
+TEST(LevelFit, ServedLevelsKeepTheExchangeRuleAndTheirEpsilonBoundsTheError) {
+  const testing::LodCase c = testing::arm_lod_case();
+  LevelBuildOptions options;  // the served levels: placed, then influences simplified
+  ASSERT_GE(options.influence_exchange, 0);
+  auto built = build_levels(c.model, c.metrics, options);
+  ASSERT_TRUE(built.ok()) << built.error().message;
+  LevelBuildOptions collapses_only = options;
+  collapses_only.influence_simplification = false;
+  auto plain = build_levels(c.model, c.metrics, collapses_only);
+  ASSERT_TRUE(plain.ok()) << plain.error().message;
+  const LodLevels& lods = built->lods;
+  ASSERT_GE(lods.count(), 3);
+  ASSERT_EQ(built->fits.size(), static_cast<size_t>(lods.count()));
+  ASSERT_EQ(plain->lods.count(), lods.count());
+  int removed = 0;
+  for (int l = 1; l < lods.count(); ++l) {
+    const LodLevel& level = lods.levels[static_cast<size_t>(l)];
+    const LodLevel& same_cut = plain->lods.levels[static_cast<size_t>(l)];
+    const LevelFit& fit = built->fits[static_cast<size_t>(l)];
+    ASSERT_TRUE(as::validate(level.model).ok()) << "level " << l;
+    EXPECT_EQ(level.vertex_ids, same_cut.vertex_ids) << "level " << l;
+    // Before its removals, the level is the collapses-only level, placed the same way.
+    EXPECT_EQ(fit.influences_before, same_cut.model.influences.influence_count()) << "level " << l;
+    EXPECT_NEAR(fit.rms_before, plain->fits[static_cast<size_t>(l)].rms, 1e-12) << "level " << l;
+    EXPECT_EQ(fit.influences, level.model.influences.influence_count()) << "level " << l;
+    removed += fit.influences_before - fit.influences;
+    // The exchange rule: the fit's own RMS, and the error measured across the poses (which the
+    // fit's closest points bound from above), both within (1 + x · saved) of the level before.
+    const double saved = static_cast<double>(fit.influences_before - fit.influences) / fit.influences_before;
+    const double allowed = (1 + options.influence_exchange * saved) * fit.rms_before;
+    EXPECT_LE(fit.rms, allowed * (1 + 1e-9) + 1e-12) << "level " << l;
+    const std::vector<double> error = rms_over_poses(c.model, level.model, c.poses);
+    EXPECT_LE(std::sqrt(total_squares(error) / static_cast<double>(error.size())), allowed * (1 + 1e-6) + 1e-12)
+        << "level " << l;
+    for (size_t o = 0; o < error.size(); ++o) {
+      EXPECT_LE(error[o], level.epsilon * (1 + 1e-6) + 1e-9) << "level " << l << " vertex " << o;
+    }
+  }
+  EXPECT_GT(removed, 0);
 }
 
 }  // namespace
