@@ -2,7 +2,9 @@
 // between neighbours (Merry 2007 §7.3).
 //
 // Level 0 is the input; level l+1 is the first state of the sequence with at most half the
-// influences of level l (counted over live vertices), and so on down to the base mesh. Each level
+// influences of level l (counted over live vertices), and so on down to the base mesh. The served
+// levels (build_levels) are cut from a sequence of edge collapses alone, so the cuts halve the
+// influences the collapses leave; each level's influences are then simplified after placement. Each level
 // carries ε^l in model units. As cut, it is the largest cost of any step taken to reach it: a
 // bound on the RMS deviation any one step introduced (memoryless: the steps' deviations are not
 // summed, §8.5). fit_levels then places the vertices (level_fit.h) and makes ε^l a bound on the

@@ -153,6 +153,16 @@ struct BadCase {
 };
 
 TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
+  // The demo arm's level count, which the LOD refusal names: read from the demo's own container.
+  const int arm_levels = [] {
+    auto container = demo::make_demo_animation_space_container();
+    EXPECT_TRUE(container.ok());
+    auto model = animation_space::load(*container, "arm");
+    EXPECT_TRUE(model.ok());
+    auto levels = lod::load_levels(*container, *model, "arm");
+    EXPECT_TRUE(levels.ok());
+    return levels.ok() ? levels->count() : 0;
+  }();
   auto daemon = start({"--max-batch-poses", "4", "--max-message-bytes", "50000"});
   auto ch = channel(*daemon);
   auto poses = v1::PoseService::NewStub(ch);
@@ -316,7 +326,9 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
          v1::EvaluateSkeletonPoseResponse response;
          return skinning->EvaluateSkeletonPose(&context, request, &response);
        }},
-      {"LOD level out of range", grpc::StatusCode::INVALID_ARGUMENT, "lod_level: expected 0..9 (model 'arm-animspace' has 10 levels), got 99",
+      {"LOD level out of range", grpc::StatusCode::INVALID_ARGUMENT,
+       "lod_level: expected 0.." + std::to_string(arm_levels - 1) + " (model 'arm-animspace' has " +
+           std::to_string(arm_levels) + " levels), got 99",
        [&] {
          grpc::ClientContext context;
          v1::EvaluateSkeletonPoseRequest request;

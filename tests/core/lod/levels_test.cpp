@@ -50,9 +50,21 @@ TEST(LodLevels, HalveTheInfluencesWithNonDecreasingError) {
   }
 }
 
-TEST(LodLevels, GeomorphRunsFromOneLevelToTheNext) {
+// Geomorphs run from each level to the next: on the progressive mesh's own levels, and on the
+// served ones, whose vertices are placed and whose influences differ from the coarser level's.
+class GeomorphTest : public ::testing::TestWithParam<bool> {};
+
+TEST_P(GeomorphTest, RunsFromOneLevelToTheNext) {
   const LodCase c = arm_lod_case();
-  const LodLevels lods = arm_levels(c);
+  LodLevels lods;
+  if (GetParam()) {
+    auto built = build_levels(c.model, c.metrics);
+    ASSERT_TRUE(built.ok()) << built.error().message;
+    lods = std::move(built->lods);
+  } else {
+    lods = arm_levels(c);
+  }
+  ASSERT_GE(lods.count(), 3);
   const as::TransformList& G = c.poses[7];
   for (int l = 0; l + 1 < lods.count(); ++l) {
     const LodLevel& fine = lods.levels[static_cast<size_t>(l)];
@@ -76,6 +88,11 @@ TEST(LodLevels, GeomorphRunsFromOneLevelToTheNext) {
     }
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(LodLevels, GeomorphTest, ::testing::Values(false, true),
+                         [](const ::testing::TestParamInfo<bool>& param) {
+                           return param.param ? "ServedLevels" : "ProgressiveMeshLevels";
+                         });
 
 TEST(LodSelection, ToleratedErrorIsEquation72ByHand) {
   // p = 1.5 px, w = 1000 px, 2θ = 60° (sin θ = 1/2), d = 10: ε = 2·1.5·10·0.5/1000 = 0.015.
@@ -103,14 +120,30 @@ TEST(LodSelection, ToleratedErrorIsEquation72ByHand) {
   EXPECT_DOUBLE_EQ(select_level(lods, 0.01), 2);
 
   // Each field is checked, and named as the API names it, with the value as given.
-  for (const auto& [message, broken] : std::vector<std::pair<std::string, PixelTolerance>>{
-           {"tolerance_px: expected a finite value > 0, got 0", [&] { PixelTolerance v = view; v.tolerance_px = 0; return v; }()},
-           {"viewport_width_px: expected a finite value > 0, got -4",
-            [&] { PixelTolerance v = view; v.viewport_width_px = -4; return v; }()},
-           {"horizontal_fov_rad: expected a value in (0, π), got 4",
-            [&] { PixelTolerance v = view; v.horizontal_fov_rad = 4; return v; }()},
-           {"distance: expected a finite value > 0, got nan",
-            [&] { PixelTolerance v = view; v.distance = std::nan(""); return v; }()}}) {
+  for (const auto& [message, broken] :
+       std::vector<std::pair<std::string, PixelTolerance>>{{"tolerance_px: expected a finite value > 0, got 0",
+                                                            [&] {
+                                                              PixelTolerance v = view;
+                                                              v.tolerance_px = 0;
+                                                              return v;
+                                                            }()},
+                                                           {"viewport_width_px: expected a finite value > 0, got -4",
+                                                            [&] {
+                                                              PixelTolerance v = view;
+                                                              v.viewport_width_px = -4;
+                                                              return v;
+                                                            }()},
+                                                           {"horizontal_fov_rad: expected a value in (0, π), got 4",
+                                                            [&] {
+                                                              PixelTolerance v = view;
+                                                              v.horizontal_fov_rad = 4;
+                                                              return v;
+                                                            }()},
+                                                           {"distance: expected a finite value > 0, got nan", [&] {
+                                                              PixelTolerance v = view;
+                                                              v.distance = std::nan("");
+                                                              return v;
+                                                            }()}}) {
     auto r = tolerated_error(broken, 2);
     ASSERT_FALSE(r.ok()) << message;
     EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
