@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstddef>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -295,10 +296,18 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
         };
         // Later rounds: the vertices move little, so the faces around the previous closest face's
         // corners are searched (any face gives a valid bound; these hold the closest one in practice).
+        // A face around two or three of the corners is measured once (the corners' fans overlap).
         const int32_t previous = feet[static_cast<size_t>(o)].face;
         if (previous >= 0) {
+          std::array<int32_t, 48> seen;
+          size_t seen_count = 0;
           for (int k = 0; k < 3; ++k) {
-            for (const int32_t f : faces_of[static_cast<size_t>(level.faces(previous, k))]) consider(f);
+            for (const int32_t f : faces_of[static_cast<size_t>(level.faces(previous, k))]) {
+              const auto end = seen.begin() + static_cast<std::ptrdiff_t>(seen_count);
+              if (std::find(seen.begin(), end, f) != end) continue;
+              if (seen_count < seen.size()) seen[seen_count++] = f;
+              consider(f);
+            }
           }
         } else {
           for (const int32_t f : candidates[static_cast<size_t>(r)]) consider(f);
