@@ -80,34 +80,17 @@ as::AnimationSpaceModel MeshState::to_model(const as::Skeleton& skeleton, std::v
   std::vector<int32_t> compact(static_cast<size_t>(V), -1);
   std::vector<int32_t> ids;
   ids.reserve(static_cast<size_t>(live_vertices_));
-  bool tangents = false;
+  std::vector<VertexState> live;
+  live.reserve(static_cast<size_t>(live_vertices_));
   for (int v = 0; v < V; ++v) {
     if (!vertex_alive(v)) continue;
     compact[static_cast<size_t>(v)] = static_cast<int32_t>(ids.size());
     ids.push_back(v);
-    tangents = tangents || vertex(v).has_tangents();
+    live.push_back(vertex(v));
   }
-  model.influences.offsets.assign(1, 0);
-  model.influences.bones.reserve(static_cast<size_t>(live_influences_));
-  model.positions.resize(4, live_influences_);
-  if (tangents) {
-    model.tangent_s.resize(4, live_influences_);
-    model.tangent_t.resize(4, live_influences_);
-  }
-  int column = 0;
-  for (const int32_t v : ids) {
-    const VertexState& s = vertex(v);
-    const int k = s.influence_count();
-    model.influences.bones.insert(model.influences.bones.end(), s.bones.begin(), s.bones.end());
-    model.positions.middleCols(column, k) = s.position;
-    if (tangents) {
-      model.tangent_s.middleCols(column, k) = s.tangent_s;
-      model.tangent_t.middleCols(column, k) = s.tangent_t;
-    }
-    column += k;
-    model.influences.offsets.push_back(column);
-  }
-  assert(column == live_influences_);
+  model.influences.offsets.assign(live.size() + 1, 0);  // as many vertices as states
+  set_vertex_states(model, live);
+  assert(model.influences.influence_count() == live_influences_);
   std::vector<int32_t> faces;
   for (int f = 0; f < static_cast<int>(faces_.rows()); ++f) {
     if (face_alive(f)) faces.push_back(f);
