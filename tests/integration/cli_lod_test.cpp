@@ -13,6 +13,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
 #include "core/mesh_io/triangle_mesh_io.h"
+#include "tests/support/cli_run.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -102,6 +103,26 @@ TEST(CliLod, BuildsLevelsAndExportsTheCoresLevel) {
     EXPECT_LE(served.model.influences.influence_count(), a.model.influences.influence_count()) << "level " << l;
   }
   EXPECT_TRUE(moved);
+
+  // --json reports each level's trade-off: its influences and RMS error beside the same level with
+  // edge collapses only, within the exchange rule (x = 1 by default), and the influences are the
+  // file's.
+  const nlohmann::json report = testing::json_of(
+      testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " --json build-lod " + (dir / "arm.anim").string() +
+                               " --max-levels 5 -o " + (dir / "arm-report.anim").string(),
+                           dir / "report.err"));
+  ASSERT_EQ(report["levels"].size(), static_cast<size_t>(levels->count()));
+  for (int l = 1; l < levels->count(); ++l) {
+    const nlohmann::json& row = report["levels"][static_cast<size_t>(l)];
+    const double influences = row["influences"].get<double>();
+    const double before = row["collapses_only"]["influences"].get<double>();
+    EXPECT_EQ(row["influences"].get<int>(), levels->levels[static_cast<size_t>(l)].model.influences.influence_count());
+    EXPECT_LE(influences, before) << "level " << l;
+    EXPECT_LE(row["rms_error"].get<double>(),
+              (1 + (before - influences) / before) * row["collapses_only"]["rms_error"].get<double>() * (1 + 1e-9))
+        << "level " << l;
+    EXPECT_LE(row["rms_error"].get<double>(), row["epsilon"].get<double>() * (1 + 1e-12)) << "level " << l;
+  }
 
   // Refusals: a level that does not exist, a model without metrics and no --sample-poses.
   EXPECT_NE(run("export-lod " + (dir / "arm-lod.anim").string() + " --level 9 -o " + (dir / "x.obj").string()), 0);
