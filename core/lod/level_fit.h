@@ -6,8 +6,8 @@
 // mesh optimisation (1993) — alternate the closest point of every input vertex on the level and
 // the positions that minimise the distances to those points — carried out in normalised
 // animation space (y = C p, C = P^½, Merry 2007 §3.3.2), where a squared distance is the mean
-// squared distance across the poses P describes. Each level vertex keeps its own bones (its
-// influence count does not change) and its weight Σ p̲ = 1; positions are solved one vertex at a
+// squared distance across the poses P describes. While placed, each level vertex keeps its own
+// bones and its weight Σ p̲ = 1; positions are solved one vertex at a
 // time with its neighbours fixed (block Gauss–Seidel), a small dense system per vertex whose
 // matrix is P restricted to the vertex's bones (CᵀC = P).
 //
@@ -29,9 +29,10 @@
 //      influences and x = influence_exchange: the level is never worse than edge collapses
 //      alone by a larger fraction than the fraction of influences it saves (x = 1), and
 //   2. no input vertex gets farther from the level than the largest distance before removals
-//      (a removal that would do so is skipped): ε^l stays that of edge collapses.
+//      (a removal that would do so is skipped).
 // Then one more round of placement settles the surface on the remaining bones. Re-placement and
-// the closest-point search only lower the summed distance, so the rule holds after it as well.
+// the closest-point search only lower the summed distance, so rule 1 holds after it as well; the
+// largest distance is measured again after it (`bound` is always the measured one).
 #pragma once
 
 #include <cstdint>
