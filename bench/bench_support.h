@@ -62,7 +62,7 @@ struct SuiteOptions {
   // pmsc: key-selection bound and soft-cache tolerance, fractions of the bounding-box diagonal.
   double error_bound_diag = 0.0025;
   double tolerance_diag = 0.01;
-  std::vector<std::string> datasets{"crane", "horse-gallop"};
+  std::vector<std::string> datasets{"crane", "horse-gallop", "cow-rig"};
   SkinningSuiteOptions skinning;
   // lod: datasets (the horse is fitted with the skinning options above).
   std::vector<std::string> lod_datasets{"cow-rig", "horse-gallop", "horse-gallop-block"};

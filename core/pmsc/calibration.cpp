@@ -30,16 +30,16 @@ double conformal_error_ratio(const Eigen::Ref<const Eigen::VectorXd>& key_point_
 
 CalibratedEpsilon calibrate_epsilon_min(const Eigen::Ref<const Eigen::VectorXd>& key_point_errors,
                                         const Eigen::Ref<const Eigen::VectorXd>& max_errors,
-                                        const std::vector<char>& from_block_fold, double tolerance,
+                                        const std::vector<char>& fold_family, double tolerance,
                                         double false_hit_rate) {
   assert(key_point_errors.size() == max_errors.size());
-  assert(static_cast<Eigen::Index>(from_block_fold.size()) == key_point_errors.size());
+  assert(static_cast<Eigen::Index>(fold_family.size()) == key_point_errors.size());
   CalibratedEpsilon out;
   out.epsilon_min = tolerance;
-  for (char family : {0, 1}) {
+  for (char family : {kInterleavedFold, kBlockFold, kSparseFold}) {
     std::vector<double> bad;  // e_key of this family's held-out frames over the tolerance
     for (Eigen::Index i = 0; i < key_point_errors.size(); ++i) {
-      if (from_block_fold[static_cast<size_t>(i)] == family && max_errors(i) > tolerance) {
+      if (fold_family[static_cast<size_t>(i)] == family && max_errors(i) > tolerance) {
         bad.push_back(key_point_errors(i));
       }
     }
@@ -59,16 +59,93 @@ CalibratedEpsilon calibrate_epsilon_min(const Eigen::Ref<const Eigen::VectorXd>&
   return out;
 }
 
+Eigen::VectorXd CalibrationSamples::error_estimates(double key_weight, bool use_check) const {
+  if (!use_check || !checked()) return key_point_errors;
+  return (key_weight * key_point_errors).cwiseMax(check_point_errors);
+}
+
+Eigen::VectorXd CalibrationSamples::region_error_estimates(long region, double key_weight, bool use_check) const {
+  if (!use_check || region_check_point_errors.cols() == 0) return region_key_point_errors.col(region);
+  return (key_weight * region_key_point_errors.col(region)).cwiseMax(region_check_point_errors.col(region));
+}
+
+bool guarantee_holds(long bad_samples, double false_hit_rate) {
+  return bad_samples > 0 && std::floor(false_hit_rate * static_cast<double>(bad_samples + 1) + 1e-9) >= 1;
+}
+
+ExtrapolatedEpsilon calibrate_extrapolated(const Eigen::Ref<const Eigen::VectorXd>& error_estimates,
+                                           const Eigen::Ref<const Eigen::VectorXd>& max_errors, double tolerance,
+                                           double false_hit_rate) {
+  assert(error_estimates.size() == max_errors.size());
+  assert(false_hit_rate > 0 && false_hit_rate < 1 && tolerance > 0);
+  ExtrapolatedEpsilon out;
+  std::vector<double> bad;  // each residual's estimate, extrapolated to e_max = tolerance
+  bad.reserve(static_cast<size_t>(error_estimates.size()));
+  for (Eigen::Index i = 0; i < error_estimates.size(); ++i) {
+    out.over_tolerance += max_errors(i) > tolerance ? 1 : 0;
+    if (!(max_errors(i) >= kCalibrationNoiseFraction * tolerance) || !std::isfinite(error_estimates(i))) continue;
+    bad.push_back(error_estimates(i) * (tolerance / max_errors(i)));
+  }
+  out.bad_samples = static_cast<long>(bad.size());
+  if (bad.empty()) {
+    out.epsilon_min = 0;  // nothing to extrapolate: every held-out frame was reproduced exactly
+    return out;
+  }
+  std::sort(bad.begin(), bad.end());
+  const auto allowed = static_cast<size_t>(std::floor(false_hit_rate * static_cast<double>(bad.size() + 1) + 1e-9));
+  // r ≥ 1 bad samples may be HIT (e ≤ ε_min includes e_(r)); r = 0: strictly below the first.
+  out.epsilon_min = allowed >= 1 ? bad[std::min(allowed, bad.size()) - 1] : std::nextafter(bad[0], 0.0);
+  return out;
+}
+
+namespace {
+
+// Of the samples under the tolerance, those a calibrated ε calls HIT.
+long good_hits(const Eigen::VectorXd& estimates, const Eigen::VectorXd& max_errors, double tolerance, double epsilon) {
+  long hits = 0;
+  for (Eigen::Index i = 0; i < estimates.size(); ++i) hits += max_errors(i) <= tolerance && estimates(i) <= epsilon;
+  return hits;
+}
+
+}  // namespace
+
+double choose_key_weight(const CalibrationSamples& samples, double tolerance, double false_hit_rate) {
+  if (!samples.checked() || samples.size() == 0) return 1;
+  std::vector<double> ratios;
+  for (Eigen::Index i = 0; i < samples.size(); ++i) {
+    if (samples.key_point_errors(i) > 0 && samples.max_errors(i) >= kCalibrationNoiseFraction * tolerance) {
+      ratios.push_back(samples.check_point_errors(i) / samples.key_point_errors(i));
+    }
+  }
+  if (ratios.empty()) return 1;
+  std::nth_element(ratios.begin(), ratios.begin() + static_cast<long>(ratios.size() / 2), ratios.end());
+  const double base = std::max(ratios[ratios.size() / 2], 1e-12);
+  double best_weight = 0;
+  long best_hits = -1;
+  for (int k = -5; k <= 4; ++k) {
+    const double weight = k == -5 ? 0.0 : base * std::ldexp(1.0, k);  // first, check points alone
+    const Eigen::VectorXd estimates = samples.error_estimates(weight);
+    const double epsilon = calibrate_extrapolated(estimates, samples.max_errors, tolerance, false_hit_rate).epsilon_min;
+    const long hits = good_hits(estimates, samples.max_errors, tolerance, epsilon);
+    if (hits > best_hits) {
+      best_hits = hits;
+      best_weight = weight;
+    }
+  }
+  return best_weight;
+}
+
 OperatingPoint operating_point(const CalibrationSamples& samples, double false_hit_rate, double tolerance) {
   OperatingPoint point;
   point.false_hit_rate = false_hit_rate;
-  point.epsilon_min = calibrate_epsilon_min(samples.key_point_errors, samples.max_errors, samples.from_block_fold,
-                                            tolerance, false_hit_rate)
-                          .epsilon_min;
-  point.error_ratio = tolerance / point.epsilon_min;
+  const Eigen::VectorXd estimates = samples.error_estimates(choose_key_weight(samples, tolerance, false_hit_rate));
+  const ExtrapolatedEpsilon calibrated = calibrate_extrapolated(estimates, samples.max_errors, tolerance, false_hit_rate);
+  point.epsilon_min = calibrated.epsilon_min;
+  point.bad_samples = calibrated.bad_samples;
+  point.error_ratio = point.epsilon_min > 0 ? tolerance / point.epsilon_min : 0;
   long hits = 0, flagged_over = 0;
   for (Eigen::Index i = 0; i < samples.size(); ++i) {
-    const bool hit = samples.key_point_errors(i) <= point.epsilon_min;
+    const bool hit = estimates(i) <= point.epsilon_min;
     const bool over = samples.max_errors(i) > tolerance;
     hits += hit ? 1 : 0;
     point.over_tolerance += over ? 1 : 0;

@@ -126,14 +126,15 @@ Status check_region_weights(const PmscModel& m) {
   return Status::Ok();
 }
 
-LocalFailThrough local_fail_through(const PmscModel& m, double key_point_error,
-                                    const std::vector<double>& region_errors) {
+LocalFailThrough local_fail_through(const PmscModel& m, double error_estimate,
+                                    const std::vector<double>& region_errors, bool checked) {
   LocalFailThrough out;
   if (m.cross) return out;
   const long N = m.point_count;
-  if (m.region_count == 0) {
+  if (m.region_count == 0 || (!checked && !m.check_points.empty())) {
     // One region, the whole pose: the whole-pose α of eqs. 9–11 at every point.
-    const double alpha = decide(key_point_error, m.epsilon).alpha;
+    const double alpha =
+        decide(error_estimate, checked || m.check_points.empty() ? m.epsilon : m.key_only_epsilon).alpha;
     if (alpha > 0) {
       out.full_points.resize(static_cast<size_t>(N));
       std::iota(out.full_points.begin(), out.full_points.end(), 0);
@@ -202,11 +203,18 @@ void blend_partial(const PmscModel& m, const LocalFailThrough& local, const Eige
 Status evaluate_cached_local(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                              const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
                              const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local) {
+  return evaluate_cached_local(m, key_values, Eigen::VectorXf(), full_points, full_values, full_calculation, out, local);
+}
+
+Status evaluate_cached_local(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                             const Eigen::Ref<const Eigen::VectorXf>& check_values,
+                             const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
+                             const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local) {
   // The whole-pose verdict first: without f, a blend or miss leaves f̂ in out.points.
-  evaluate_cached(m, key_values, nullptr, out);
+  evaluate_cached(m, key_values, check_values, nullptr, FullCalculation(), out);
   local = LocalFailThrough();
   if (out.status == CacheStatus::kHit || m.cross) return Status::Ok();
-  local = local_fail_through(m, out.key_point_error, out.region_errors);
+  local = local_fail_through(m, out.error_estimate, out.region_errors, out.checked);
   if (full_values != nullptr) {
     ANIMSPACE_RETURN_IF_ERROR(check_covers(local, full_points));
     blend_partial(m, local, out.points, full_points, *full_values, out.points);

@@ -60,13 +60,16 @@ struct LocalFailThrough {
   std::vector<double> full_point_blend_weights;   // α_i ∈ (0, 1] of each, same order
 };
 
-// α_i for every point from a pose's region errors (PoseEstimate::region_errors, R values). A model
-// without regions has one region, the whole pose: every point takes decide(e_key, ε). A
-// cross-PMSC model has no full calculation: the result is empty.
-LocalFailThrough local_fail_through(const PmscModel& model, double key_point_error,
-                                    const std::vector<double>& region_errors);
+// α_i for every point from a pose's error estimate and region errors (PoseEstimate::
+// error_estimate and region_errors, R values; `checked`: the pose came with check values). A
+// model without regions has one region, the whole pose: every point takes the whole-pose α. So
+// does a pose without check values of a model with check points: its regions are calibrated for
+// estimates that include check points. A cross-PMSC model has no full calculation: the result is
+// empty.
+LocalFailThrough local_fail_through(const PmscModel& model, double error_estimate,
+                                    const std::vector<double>& region_errors, bool checked = false);
 inline LocalFailThrough local_fail_through(const PmscModel& model, const PoseEstimate& estimate) {
-  return local_fail_through(model, estimate.key_point_error, estimate.region_errors);
+  return local_fail_through(model, estimate.error_estimate, estimate.region_errors, estimate.checked);
 }
 
 // Error (kInvalidArgument) naming the first point of `needed.full_points` missing from
@@ -98,6 +101,11 @@ using PartialFullCalculation = std::function<bool(const std::vector<int>& points
 // `local` empty and never calls `full_calculation`.
 // Errors: kInvalidArgument from check_covers when `full_points` misses a point that needs f.
 Status evaluate_cached_local(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                             const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
+                             const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local);
+// The same for a pose sent with its check values (C·D; size 0: none).
+Status evaluate_cached_local(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                             const Eigen::Ref<const Eigen::VectorXf>& check_values,
                              const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
                              const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local);
 

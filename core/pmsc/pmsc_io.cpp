@@ -49,6 +49,7 @@ constexpr DoubleOption kDoubleOptions[] = {
     {"error_tolerance", &TrainingOptions::error_tolerance},
     {"blend_zone_ratio", &TrainingOptions::blend_zone_ratio},
     {"false_hit_rate", &TrainingOptions::false_hit_rate, true},
+    {"check_point_fraction", &TrainingOptions::check_point_fraction, true},  // issue #35
 };
 constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
@@ -81,10 +82,11 @@ void store_calibration(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()[kErrorRatioKey] = format_number(c.error_ratio);
   out.metadata()[kBlockFramesKey] = std::to_string(c.block_frames);
   out.metadata()[kOverToleranceKey] = std::to_string(c.over_tolerance);
+  out.metadata()[kBadSamplesKey] = std::to_string(c.bad_samples);
   const long n = c.samples.size();
   const long R = c.samples.region_key_point_errors.cols();
   Float64Matrix samples(n, 3 + 2 * R);
-  for (long i = 0; i < n; ++i) samples(i, 0) = c.samples.from_block_fold[static_cast<size_t>(i)];
+  for (long i = 0; i < n; ++i) samples(i, 0) = c.samples.fold_family[static_cast<size_t>(i)];
   samples.col(1) = c.samples.key_point_errors;
   samples.col(2) = c.samples.max_errors;
   if (R > 0) {
@@ -92,6 +94,13 @@ void store_calibration(const PmscModel& m, container::ModelContainer& out) {
     samples.middleCols(3 + R, R) = c.samples.region_max_errors;
   }
   out.set_matrix(kCalibrationSamplesSection, samples);
+  if (c.samples.checked()) {
+    const long check_regions = c.samples.region_check_point_errors.cols();
+    Float64Matrix check(n, 1 + check_regions);
+    check.col(0) = c.samples.check_point_errors;
+    if (check_regions > 0) check.rightCols(check_regions) = c.samples.region_check_point_errors;
+    out.set_matrix(kCalibrationCheckErrorsSection, check);
+  }
   if (!m.region_epsilon.empty()) {
     Float64Matrix region_epsilon(static_cast<long>(m.region_epsilon.size()), 2);
     for (size_t r = 0; r < m.region_epsilon.size(); ++r) {
@@ -120,12 +129,12 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
   PmscModel::Calibration& c = m.calibration;
   for (long i = 0; i < samples->rows(); ++i) {
     const double family = (*samples)(i, 0);
-    if (family != 0 && family != 1) {
+    if (family != kInterleavedFold && family != kBlockFold && family != kSparseFold) {
       return make_error(ErrorCode::kInvalidArgument, source + ": section '" + kCalibrationSamplesSection + "' row " +
-                                                         std::to_string(i) + ": fold family should be 0 or 1, got " +
+                                                         std::to_string(i) + ": fold family should be 0, 1 or 2, got " +
                                                          format_number(family));
     }
-    c.samples.from_block_fold.push_back(static_cast<char>(family));
+    c.samples.fold_family.push_back(static_cast<char>(family));
   }
   c.samples.key_point_errors = samples->col(1);
   c.samples.max_errors = samples->col(2);
@@ -145,6 +154,27 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
   }
   if (!parse_exactly(in.metadata_value(kOverToleranceKey), c.over_tolerance)) {
     return unparsable(source, kOverToleranceKey, "a decimal integer", in.metadata_value(kOverToleranceKey));
+  }
+  // Format 3 (issue #35): the extrapolated bad samples and the check points' errors.
+  if (!in.metadata_value(kBadSamplesKey).empty() && !parse_exactly(in.metadata_value(kBadSamplesKey), c.bad_samples)) {
+    return unparsable(source, kBadSamplesKey, "a decimal integer", in.metadata_value(kBadSamplesKey));
+  }
+  if (in.has_section(kCalibrationCheckErrorsSection)) {
+    auto check = in.double_matrix(kCalibrationCheckErrorsSection);
+    if (!check) return with_source(check.error(), source);
+    const long check_regions = c.samples.region_key_point_errors.cols();
+    if (check->rows() != samples->rows() || check->cols() != 1 + check_regions) {
+      return container::section_shape_error(source, kCalibrationCheckErrorsSection,
+                                            std::to_string(samples->rows()) + "×" + std::to_string(1 + check_regions) +
+                                                " (samples × e_check and one per region)",
+                                            check->rows(), check->cols());
+    }
+    if (!check->allFinite() || (check->size() > 0 && check->minCoeff() < 0)) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": section '" + kCalibrationCheckErrorsSection +
+                                                         "' holds negative, NaN or Inf errors");
+    }
+    c.samples.check_point_errors = check->col(0);
+    c.samples.region_check_point_errors = check->rightCols(check_regions);
   }
   if (in.has_section(kRegionEpsilonSection)) {
     auto region_epsilon = in.double_matrix(kRegionEpsilonSection, 2);
@@ -196,6 +226,14 @@ void store(const PmscModel& m, container::ModelContainer& out) {
   if (m.region_count > 0) {
     out.set_matrix("pmsc.point_regions", container::as_column(m.point_regions));
     out.set_matrix("pmsc.key_regions", container::as_column(m.key_regions));
+  }
+  if (!m.check_points.empty()) {
+    out.set_matrix(kCheckPointsSection, container::as_column(m.check_points));
+    if (!m.check_regions.empty()) out.set_matrix(kCheckRegionsSection, container::as_column(m.check_regions));
+    out.metadata()[kKeyWeightKey] = format_number(m.key_weight);
+    Float64Matrix key_only(1, 2);
+    key_only << m.key_only_epsilon.epsilon_min, m.key_only_epsilon.epsilon_max;
+    out.set_matrix(kKeyOnlyEpsilonSection, key_only);
   }
   store_calibration(m, out);
   store_region_weights(m, out);
@@ -250,6 +288,26 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
     if (!key_regions) return key_regions.error();
     m.point_regions.assign(point_regions->data(), point_regions->data() + point_regions->size());
     m.key_regions.assign(key_regions->data(), key_regions->data() + key_regions->size());
+  }
+  if (in.has_section(kCheckPointsSection)) {  // format 3 (issue #35)
+    auto check_points = in.int_matrix(kCheckPointsSection, 1);
+    if (!check_points) return with_source(check_points.error(), source);
+    m.check_points.assign(check_points->data(), check_points->data() + check_points->size());
+    if (in.has_section(kCheckRegionsSection)) {
+      auto check_regions = in.int_matrix(kCheckRegionsSection, 1);
+      if (!check_regions) return with_source(check_regions.error(), source);
+      m.check_regions.assign(check_regions->data(), check_regions->data() + check_regions->size());
+    }
+    const std::string weight = in.metadata_value(kKeyWeightKey);
+    if (!parse_exactly(weight, m.key_weight) || !std::isfinite(m.key_weight)) {
+      return unparsable(source, kKeyWeightKey, "a finite decimal number", weight);
+    }
+    auto key_only = in.double_matrix(kKeyOnlyEpsilonSection, 2);
+    if (!key_only) return with_source(key_only.error(), source);
+    if (key_only->rows() != 1) {
+      return container::section_shape_error(source, kKeyOnlyEpsilonSection, "1×2", key_only->rows(), key_only->cols());
+    }
+    m.key_only_epsilon = {(*key_only)(0, 0), (*key_only)(0, 1)};
   }
   if (auto calibration = load_calibration(in, source, m); !calibration.ok()) return calibration.error();
   ANIMSPACE_RETURN_IF_ERROR(load_region_weights(in, source, m));

@@ -11,7 +11,11 @@
 // error, then R region key errors and R region max errors of each held-out frame),
 // pmsc.region_epsilon (R × 2 f64) and metadata pmsc.calibration.false_hit_rate, .error_ratio,
 // .block_frames, .over_tolerance. A format 1 model loads with the ε it was written with and no
-// samples. The projection is not stored: it is recomputed
+// samples. From format 3 (issue #35) also the check points: pmsc.check_points (C × 1 i32),
+// pmsc.check_regions (C × 1 i32, with regions), pmsc.key_only_epsilon (1 × 2 f64), metadata
+// pmsc.key_weight; the calibration's fold family may be 2 (sparse), and
+// pmsc.calibration_check_errors (n × (1 + R) f64: e_check, then each region's) and metadata
+// pmsc.calibration.bad_samples join it. A format 2 model loads without check points. The projection is not stored: it is recomputed
 // (and its conditioning re-checked) at load, so there is one source of truth.
 //
 // Beside the model a container keeps what retraining needs ("train each night, better
@@ -32,8 +36,9 @@
 
 namespace animspace::pmsc {
 
-// The pmsc sections' format (docs/FORMATS.md): 1 before the stored calibration, 2 with it.
-inline constexpr int kFormatVersion = 2;
+// The pmsc sections' format (docs/FORMATS.md): 1 before the stored calibration, 2 with it, 3 with
+// check points and the extrapolated calibration (issue #35).
+inline constexpr int kFormatVersion = 3;
 inline constexpr const char* kFormatVersionKey = "pmsc.format_version";
 inline constexpr const char* kFalseHitRateKey = "pmsc.calibration.false_hit_rate";
 inline constexpr const char* kErrorRatioKey = "pmsc.calibration.error_ratio";
@@ -41,6 +46,12 @@ inline constexpr const char* kBlockFramesKey = "pmsc.calibration.block_frames";
 inline constexpr const char* kOverToleranceKey = "pmsc.calibration.over_tolerance";
 inline constexpr const char* kCalibrationSamplesSection = "pmsc.calibration_samples";
 inline constexpr const char* kRegionEpsilonSection = "pmsc.region_epsilon";
+inline constexpr const char* kBadSamplesKey = "pmsc.calibration.bad_samples";
+inline constexpr const char* kCalibrationCheckErrorsSection = "pmsc.calibration_check_errors";
+inline constexpr const char* kCheckPointsSection = "pmsc.check_points";
+inline constexpr const char* kCheckRegionsSection = "pmsc.check_regions";
+inline constexpr const char* kKeyOnlyEpsilonSection = "pmsc.key_only_epsilon";
+inline constexpr const char* kKeyWeightKey = "pmsc.key_weight";
 // The section of PmscModel::region_weights (read and written only here, hence not in sections.h).
 inline constexpr const char* kRegionWeightsSection = "pmsc.region_weights";
 

@@ -35,6 +35,57 @@ Eigen::Matrix3Xd as_points(const Eigen::VectorXd& rows) {
   return Eigen::Map<const Eigen::Matrix3Xd>(rows.data(), 3, rows.size() / 3);
 }
 
+// Check points (issue #35): in range, not key points, not repeated, regions in range; a cross
+// model has none (its output is not the control set the client poses). Copies their rows.
+Status prepare_check_rows(PmscModel& m) {
+  const long C = m.check_point_count();
+  const long D = m.channel_count;
+  m.check_mean.resize(0);
+  m.check_basis.resize(0, m.basis.cols());
+  if (C == 0) return Status::Ok();
+  if (m.cross) return make_error(ErrorCode::kInvalidArgument, "pmsc model: a cross-PMSC model has no check points");
+  std::vector<char> used(static_cast<size_t>(m.control_point_count), 0);
+  for (int k : m.key_points) used[static_cast<size_t>(k)] = 1;
+  for (long c = 0; c < C; ++c) {
+    const int point = m.check_points[static_cast<size_t>(c)];
+    if (point < 0 || point >= m.control_point_count) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "pmsc model: check point " + std::to_string(c) + " is " + std::to_string(point) +
+                            ", outside [0, " + std::to_string(m.control_point_count) + ")");
+    }
+    if (used[static_cast<size_t>(point)]) {
+      return make_error(ErrorCode::kInvalidArgument, "pmsc model: check point " + std::to_string(c) + " (point " +
+                                                         std::to_string(point) +
+                                                         ") is a key point or repeats another check point");
+    }
+    used[static_cast<size_t>(point)] = 1;
+  }
+  if (!m.check_regions.empty() &&
+      (static_cast<long>(m.check_regions.size()) != C ||
+       std::any_of(m.check_regions.begin(), m.check_regions.end(),
+                   [&](int r) { return r < 0 || r >= m.region_count; }))) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "pmsc model: check_regions should give one region in [0, " + std::to_string(m.region_count) +
+                          ") per check point (" + std::to_string(C) + ")");
+  }
+  if (m.region_count > 0 && m.check_regions.empty()) {
+    return make_error(ErrorCode::kInvalidArgument, "pmsc model: check_regions missing for a model with regions");
+  }
+  if (!(m.key_weight >= 0) || !std::isfinite(m.key_weight)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "pmsc model: key_weight must be finite and ≥ 0, got " + format_number(m.key_weight));
+  }
+  ANIMSPACE_RETURN_IF_ERROR(validate(m.key_only_epsilon));
+  m.check_mean.resize(C * D);
+  m.check_basis.resize(C * D, m.basis.cols());
+  for (long c = 0; c < C; ++c) {
+    const long row = static_cast<long>(m.check_points[static_cast<size_t>(c)]) * D;
+    m.check_mean.segment(c * D, D) = m.mean.segment(row, D).cast<double>();
+    m.check_basis.middleRows(c * D, D) = m.basis.middleRows(row, D).cast<double>();
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, double max_condition,
@@ -130,6 +181,7 @@ Status prepare_projection(PmscModel& m) {
                                                        std::to_string(m.region_epsilon.size()));
   }
   for (const SoftCacheThresholds& t : m.region_epsilon) ANIMSPACE_RETURN_IF_ERROR(validate(t));
+  ANIMSPACE_RETURN_IF_ERROR(prepare_check_rows(m));
 
   m.projection = least_squares_projection(m.key_basis, kMaxConditionNumber, &m.condition_number, &m.regularization,
                                           m.aligned ? &m.key_range : nullptr);
@@ -259,17 +311,43 @@ void to_world(const geometry::RigidTransform& t, int point_count, float* frame) 
 
 void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                           PoseEstimate& out) {
+  estimate_coordinates(m, key_values, Eigen::VectorXf(), out);
+}
+
+void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                          const Eigen::Ref<const Eigen::VectorXf>& check_values, PoseEstimate& out) {
   assert(key_values.size() == m.key_mean.size());
+  assert(check_values.size() == 0 || check_values.size() == m.check_mean.size());
   assert(m.projection.rows() == m.basis.cols());
   const Eigen::VectorXd key_residual = project_keys(m, key_values, out.coordinates, out.alignment);
   out.key_point_error = rms(key_residual);
   out.points.resize(0);
+  const long D = m.channel_count;
+  const long C = m.check_point_count();
+  out.checked = C > 0 && check_values.size() == C * D;
+  out.check_point_error = 0;
 
-  // Local fail-through: the same RMS, restricted to the key points of each region.
+  // e_check: the check rows of f̂, moved to the world like every point, against the values sent.
+  std::vector<double> check_errors;
+  if (out.checked) {
+    Eigen::VectorXd estimate = m.check_mean;
+    estimate.noalias() += m.check_basis * out.coordinates;
+    Eigen::Map<Eigen::Matrix3Xd> points(estimate.data(), D, C);
+    if (m.aligned) points = (out.alignment.rotation * points).colwise() + out.alignment.translation;
+    check_errors.resize(static_cast<size_t>(C));
+    for (long c = 0; c < C; ++c) {
+      check_errors[static_cast<size_t>(c)] =
+          (check_values.segment(c * D, D).cast<double>() - estimate.segment(c * D, D)).norm();
+      out.check_point_error = std::max(out.check_point_error, check_errors[static_cast<size_t>(c)]);
+    }
+  }
+  out.error_estimate = out.checked ? combined_error_estimate(m.key_weight, out.key_point_error, out.check_point_error)
+                                   : out.key_point_error;
+
+  // Local fail-through: the same estimate, restricted to the key (and check) points of each region.
   out.region_errors.assign(static_cast<size_t>(m.region_count), 0.0);
   if (m.region_count > 0) {
     std::vector<long> counts(static_cast<size_t>(m.region_count), 0);
-    const long D = m.channel_count;
     for (size_t k = 0; k < m.key_regions.size(); ++k) {
       const auto r = static_cast<size_t>(m.key_regions[k]);
       out.region_errors[r] += key_residual.segment(static_cast<long>(k) * D, D).squaredNorm();
@@ -277,6 +355,16 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
     }
     for (size_t r = 0; r < counts.size(); ++r) {
       out.region_errors[r] = counts[r] > 0 ? std::sqrt(out.region_errors[r] / static_cast<double>(counts[r])) : 0.0;
+    }
+    if (out.checked) {
+      std::vector<double> region_check(counts.size(), 0.0);
+      for (long c = 0; c < C; ++c) {
+        double& worst = region_check[static_cast<size_t>(m.check_regions[static_cast<size_t>(c)])];
+        worst = std::max(worst, check_errors[static_cast<size_t>(c)]);
+      }
+      for (size_t r = 0; r < counts.size(); ++r) {
+        out.region_errors[r] = combined_error_estimate(m.key_weight, out.region_errors[r], region_check[r]);
+      }
     }
   }
 }
@@ -351,10 +439,13 @@ void finish_cached(const PmscModel& m, const PoseEstimate& estimate, Eigen::Ref<
                    const Eigen::VectorXf* full_values, const FullCalculation& full_calculation, CachedPose& out) {
   assert(full_values == nullptr || full_values->size() == m.mean.size());
   assert(points.size() == m.mean.size());
-  const SoftCacheDecision decision = decide(estimate.key_point_error, m.epsilon);
+  const SoftCacheDecision decision = decide(estimate.error_estimate, verdict_thresholds(m, estimate));
   out.status = decision.status;
   out.alpha = decision.alpha;
   out.key_point_error = estimate.key_point_error;
+  out.check_point_error = estimate.check_point_error;
+  out.checked = estimate.checked;
+  out.error_estimate = estimate.error_estimate;
   out.region_errors = estimate.region_errors;
   out.full_evaluation_needed = false;
   out.computed_full_values.resize(0);
@@ -381,9 +472,19 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
 void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                      const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
                      CachedPose& out) {
+  evaluate_cached(m, key_values, Eigen::VectorXf(), full_values, full_calculation, out);
+}
+
+void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                     const Eigen::Ref<const Eigen::VectorXf>& check_values, const Eigen::VectorXf* full_values,
+                     const FullCalculation& full_calculation, CachedPose& out) {
   PoseEstimate estimate;
-  evaluate(m, key_values, estimate);
-  out.points = std::move(estimate.points);
+  estimate_coordinates(m, key_values, check_values, estimate);
+  Eigen::VectorXf points(m.mean.size());
+  const PoseEstimate* input = &estimate;
+  float* destination = points.data();
+  reconstruct(m, {&input, 1}, {&destination, 1});
+  out.points = std::move(points);
   finish_cached(m, estimate, out.points, full_values, full_calculation, out);
 }
 
@@ -411,22 +512,39 @@ Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio
                                                        " region columns, the model has " +
                                                        std::to_string(m.region_count) + " regions");
   }
-  if (static_cast<long>(samples.from_block_fold.size()) != samples.size()) {
+  if (static_cast<long>(samples.fold_family.size()) != samples.size()) {
     return make_error(ErrorCode::kInvalidArgument, "calibration samples: one fold family per sample expected");
   }
-  const auto thresholds = [&](const CalibratedEpsilon& c) {
-    return SoftCacheThresholds{c.epsilon_min, c.epsilon_min * blend_zone_ratio};
+  const bool checked = !m.check_points.empty();
+  if (checked != samples.checked() || (samples.checked() && samples.check_point_errors.size() != samples.size())) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "calibration samples: check point errors are " +
+                          std::string(samples.checked() ? "present" : "absent") + " but the model has " +
+                          std::to_string(m.check_point_count()) + " check points");
+  }
+  if (checked && R > 0 && samples.region_check_point_errors.cols() != R) {
+    return make_error(ErrorCode::kInvalidArgument, "calibration samples: " + std::to_string(R) +
+                                                       " region check columns expected, got " +
+                                                       std::to_string(samples.region_check_point_errors.cols()));
+  }
+  const auto thresholds = [&](double epsilon_min) {
+    return SoftCacheThresholds{epsilon_min, epsilon_min * blend_zone_ratio};
   };
-  const CalibratedEpsilon whole = calibrate_epsilon_min(samples.key_point_errors, samples.max_errors,
-                                                        samples.from_block_fold, tolerance, delta);
-  m.epsilon = thresholds(whole);
-  m.calibration.error_ratio = tolerance / whole.epsilon_min;
+  m.key_weight = checked ? choose_key_weight(samples, tolerance, delta) : 1.0;
+  const ExtrapolatedEpsilon whole =
+      calibrate_extrapolated(samples.error_estimates(m.key_weight), samples.max_errors, tolerance, delta);
+  m.epsilon = thresholds(whole.epsilon_min);
+  m.key_only_epsilon =
+      checked ? thresholds(calibrate_extrapolated(samples.key_point_errors, samples.max_errors, tolerance, delta).epsilon_min)
+              : SoftCacheThresholds{};
+  m.calibration.error_ratio = whole.epsilon_min > 0 ? tolerance / whole.epsilon_min : 0;
   m.calibration.over_tolerance = whole.over_tolerance;
+  m.calibration.bad_samples = whole.bad_samples;
   m.region_epsilon.clear();
   for (long r = 0; r < R; ++r) {
-    m.region_epsilon.push_back(thresholds(calibrate_epsilon_min(samples.region_key_point_errors.col(r),
-                                                                samples.region_max_errors.col(r),
-                                                                samples.from_block_fold, tolerance, delta)));
+    m.region_epsilon.push_back(thresholds(calibrate_extrapolated(samples.region_error_estimates(r, m.key_weight),
+                                                                 samples.region_max_errors.col(r), tolerance, delta)
+                                              .epsilon_min));
   }
   return Status::Ok();
 }
@@ -441,14 +559,50 @@ Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eig
   return keys;
 }
 
+Eigen::VectorXf gather_check_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
+  const long D = m.channel_count;
+  assert(control_frame.size() == m.control_point_count * D);
+  Eigen::VectorXf values(static_cast<long>(m.check_points.size()) * D);
+  for (size_t c = 0; c < m.check_points.size(); ++c) {
+    values.segment(static_cast<long>(c) * D, D) = control_frame.segment(static_cast<long>(m.check_points[c]) * D, D);
+  }
+  return values;
+}
+
+bool calibration_guarantee_holds(const PmscModel& m) {
+  const PmscModel::Calibration& c = m.calibration;
+  return c.bad_samples > 0 && std::floor(c.false_hit_rate * static_cast<double>(c.bad_samples + 1) + 1e-9) >= 1;
+}
+
+std::string calibration_statement(const PmscModel& m) {
+  const PmscModel::Calibration& c = m.calibration;
+  if (c.samples.size() == 0) {
+    return "no guarantee: ε was set before calibration was stored (the worst held-out ratio); retrain to state one";
+  }
+  if (c.bad_samples == 0) {
+    return "no guarantee: calibrated before check points and extrapolated bad samples (issue #35); retrain to state one";
+  }
+  const std::string checked = m.check_points.empty() ? "" : " sent with its " + std::to_string(m.check_point_count()) + " check points";
+  if (!calibration_guarantee_holds(m)) {
+    return "no guarantee: " + std::to_string(c.bad_samples) + " over-tolerance samples cannot state a false-hit rate of " +
+           format_number(c.false_hit_rate) + " (it needs at least " +
+           std::to_string(static_cast<long>(std::ceil(1.0 / c.false_hit_rate - 1.0 - 1e-9))) +
+           "); ε sits below every one of them";
+  }
+  return "a pose over the tolerance" + checked + " is called HIT with probability at most " +
+         format_number(c.false_hit_rate) + ", when its error is like the " + std::to_string(c.bad_samples) +
+         " over-tolerance held-out samples ε was calibrated on (held-out frames, blocks of motion, sparser training, "
+         "residuals extrapolated past the tolerance); void for motion unlike any of the training frames' folds";
+}
+
 double hit_rate(const PmscModel& m, const FrameMatrix& control_frames) {
   if (control_frames.rows() == 0) return 0;
   long hits = 0;
   PoseEstimate estimate;
   for (Eigen::Index f = 0; f < control_frames.rows(); ++f) {
     const Eigen::VectorXf frame = control_frames.row(f).transpose();
-    estimate_coordinates(m, gather_key_values(m, frame), estimate);  // e_key needs no f̂
-    hits += decide(estimate.key_point_error, m.epsilon).status == CacheStatus::kHit ? 1 : 0;
+    estimate_coordinates(m, gather_key_values(m, frame), gather_check_values(m, frame), estimate);  // no f̂ needed
+    hits += decide(estimate.error_estimate, verdict_thresholds(m, estimate)).status == CacheStatus::kHit ? 1 : 0;
   }
   return static_cast<double>(hits) / static_cast<double>(control_frames.rows());
 }

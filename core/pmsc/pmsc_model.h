@@ -21,6 +21,7 @@
 
 #include <functional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -60,13 +61,29 @@ struct PmscModel {
   // before per-region calibration). Read through region_thresholds().
   std::vector<SoftCacheThresholds> region_epsilon;
 
+  // Check points (issue #35): C control points, none of them a key point, that the projection
+  // never uses. The client poses them like key points; their worst residual e_check is a direct
+  // measurement of f − f̂ where the key points are blind, and joins e_key in the error estimate
+  // the verdict compares with ε (calibration.h):
+  //   e = max(key_weight · e_key, e_check)          (pose sent with check values)
+  //   e = e_key, compared with key_only_epsilon      (pose sent without: older clients)
+  // Empty (cross-PMSC models and models written before issue #35): e = e_key against `epsilon`.
+  std::vector<int> check_points;      // C indices into the control points, in the order sent
+  std::vector<int> check_regions;     // C, region of each check point (empty without regions)
+  double key_weight = 1;              // w ≥ 0 of e_key in the estimate
+  SoftCacheThresholds key_only_epsilon;  // ε for poses without check values (models with check points)
+
   // How `epsilon` and `region_epsilon` were calibrated (calibration.h). No samples: a model
   // written before issue #22, whose ε is the worst held-out ratio's and cannot be recalibrated.
   struct Calibration {
     double false_hit_rate = 0;  // δ
     double error_ratio = 0;     // tolerance / ε_min
     long over_tolerance = 0;    // held-out frames over the tolerance (0: the error-ratio fallback)
-    int block_frames = 0;       // frames per held-out block
+    int block_frames = 0;       // frames per held-out block (the shortest block family)
+    // Over-tolerance samples ε_min rests on (issue #35: held-out frames over the tolerance and
+    // every held-out residual extrapolated to just over it); the guarantee holds when
+    // ⌊δ (bad_samples + 1)⌋ ≥ 1 (calibration_guarantee_holds). 0: a model calibrated before.
+    long bad_samples = 0;
     CalibrationSamples samples;
   } calibration;
 
@@ -78,9 +95,13 @@ struct PmscModel {
   // (r × 3), the constant translation part of Uᵀ G in the rigid Gauss–Newton step.
   Eigen::MatrixXd key_range;
   Eigen::MatrixXd key_range_translation;
+  // The check rows of mean and basis (C·D and C·D × M, in the aligned frame when aligned).
+  Eigen::VectorXd check_mean;
+  Eigen::MatrixXd check_basis;
 
   int basis_size() const { return static_cast<int>(basis.cols()); }
   int key_point_count() const { return static_cast<int>(key_points.size()); }
+  int check_point_count() const { return static_cast<int>(check_points.size()); }
 };
 
 // Largest condition number of A_key accepted without regularisation.
@@ -105,7 +126,14 @@ struct PoseEstimate {
   Eigen::VectorXf points;            // N·D estimate f̂ (world frame when aligned)
   Eigen::VectorXd coordinates;       // M, subspace coordinates p
   double key_point_error = 0;        // e_key = rms(f_key − f̂_key), eq. 8
-  std::vector<double> region_errors; // per region RMS key error (empty without regions)
+  // e_check = max over check points of ‖f_c − f̂_c‖ (0 when `checked` is false).
+  double check_point_error = 0;
+  bool checked = false;              // the pose came with check values
+  // What the verdict compares with verdict_thresholds(): max(w·e_key, e_check) when checked,
+  // else e_key.
+  double error_estimate = 0;
+  // Per region, the same estimate over the region's key and check points (empty without regions).
+  std::vector<double> region_errors;
   geometry::RigidTransform alignment;          // aligned frame → world (identity unless aligned)
 };
 
@@ -122,6 +150,17 @@ struct PoseEstimate {
 // out.points empty.
 void estimate_coordinates(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                           PoseEstimate& out);
+// The same with the pose's check values (C·D in check_points order; size 0: none, as above).
+// With check values p is unchanged (the projection never uses them) and e_check, the error
+// estimate and the region errors include them.
+void estimate_coordinates(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                          const Eigen::Ref<const Eigen::VectorXf>& check_values, PoseEstimate& out);
+
+// The thresholds a pose's error estimate is compared with: `epsilon` when it was checked or the
+// model has no check points, else key_only_epsilon.
+inline const SoftCacheThresholds& verdict_thresholds(const PmscModel& model, const PoseEstimate& estimate) {
+  return estimate.checked || model.check_points.empty() ? model.epsilon : model.key_only_epsilon;
+}
 
 // Rows of the basis per block of a batched reconstruction: block × B floats of products stay in
 // cache (256 KB) while the mean is added on the way to each pose's destination.
@@ -157,6 +196,9 @@ struct CachedPose {
   Eigen::VectorXf points;  // N·D: f̂ (hit), α f + (1 − α) f̂ (blend), f (miss) — or f̂ when no f
   CacheStatus status = CacheStatus::kHit;
   double key_point_error = 0;
+  double check_point_error = 0;  // as PoseEstimate
+  bool checked = false;
+  double error_estimate = 0;     // what the verdict compared with verdict_thresholds
   double alpha = 0;
   // Blend or miss, but no full values were given: `points` is the estimate and the caller must
   // supply f (or accept f̂). Never set for cross-PMSC models, where no full calculation exists.
@@ -186,6 +228,10 @@ using FullCalculation = std::function<bool(Eigen::VectorXf& full_values)>;
 void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                      const Eigen::VectorXf* full_values, const FullCalculation& full_calculation,
                      CachedPose& out);
+// The same for a pose sent with its check values (C·D; size 0: none).
+void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                     const Eigen::Ref<const Eigen::VectorXf>& check_values, const Eigen::VectorXf* full_values,
+                     const FullCalculation& full_calculation, CachedPose& out);
 
 // The soft cache on a pose whose f̂ is already in `points` (N·D, from reconstruct): the verdict
 // and α of `estimate`, fail-through and blend as evaluate_cached does, with the answer written
@@ -229,6 +275,15 @@ Status apply_calibration(PmscModel& model, double tolerance, double blend_zone_r
 
 // Gathers the key rows (K·D) of a full control frame (control_point_count·D values).
 Eigen::VectorXf gather_key_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);
+// Gathers the check rows (C·D) of a full control frame (empty for a model without check points).
+Eigen::VectorXf gather_check_values(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& control_frame);
+
+// Whether the calibration can state its false-hit rate: ⌊δ (bad_samples + 1)⌋ ≥ 1, i.e. at
+// least 1/δ − 1 over-tolerance samples. False for models calibrated before issue #35.
+bool calibration_guarantee_holds(const PmscModel& model);
+// One sentence an operator reads (describe, train-pmsc, ModelVersion): what a HIT means for this
+// model, or why nothing is guaranteed.
+std::string calibration_statement(const PmscModel& model);
 
 // The fraction of `control_frames` (F × control_point_count·D, one frame per row) whose key
 // values the soft cache answers as a HIT (0 for F = 0): what an operator sees change when ε

@@ -8,6 +8,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "core/pmsc/check_points.h"
 #include "core/pmsc/key_points.h"
 #include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pca.h"
@@ -174,6 +175,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     return invalid("false_hit_rate must be in (0, 1), got " + std::to_string(o.false_hit_rate));
   }
   if (o.calibration_block_frames < 0) return invalid("calibration_block_frames must be ≥ 0 (0: automatic)");
+  if (!(o.check_point_fraction >= 0 && o.check_point_fraction <= 1)) {
+    return invalid("check_point_fraction must be in [0, 1], got " + std::to_string(o.check_point_fraction));
+  }
   if (!(o.max_basis_fraction > 0 && o.max_basis_fraction <= 1)) return invalid("max_basis_fraction must be in (0, 1]");
   const bool cross = output_frames != nullptr;
   const long control_points = control_frames.cols() / D;
@@ -243,72 +247,93 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
 
   // ε from held-out training frames only (calibration.h): retrain the subspace without each
   // fold (same keys, same M), evaluate its frames through the runtime, and keep (e_key, true max
-  // point error) of every held-out frame, overall and per region. Two fold families: every
-  // `folds`-th frame (poses between training poses) and blocks of consecutive frames dealt to
-  // the folds in turn (motion the rest of the training never saw).
+  // point error, each point's error) of every held-out frame, overall and per region. Three fold
+  // families: every `folds`-th frame (poses between training poses); blocks of consecutive frames
+  // at three lengths, dealt to the folds in turn (motion the rest of the training never saw); and
+  // sparse folds, trained on every other frame an interleaved fold keeps (a model that saw less).
   const auto calibration_start = std::chrono::steady_clock::now();
   const int folds = static_cast<int>(std::min<long>(std::max(o.calibration_folds, 2), F));
   const long block = o.calibration_block_frames > 0
                          ? o.calibration_block_frames
                          : std::max<long>(1, (F + 2 * folds - 1) / (2 * folds));  // two blocks per fold
-  std::vector<std::vector<long>> held_out_sets;
-  std::vector<char> held_out_is_block;
-  for (int fold = 0; fold < folds; ++fold) {
-    std::vector<long> interleaved, blocks;
+  struct HeldOutSet {
+    std::vector<long> held_out, train;
+    char family = kInterleavedFold;
+  };
+  std::vector<HeldOutSet> sets;
+  const auto add_set = [&](const std::vector<char>& is_held, char family, long stride) {
+    HeldOutSet set;
+    set.family = family;
+    long kept = 0;
     for (long f = 0; f < F; ++f) {
-      if (f % folds == fold) interleaved.push_back(f);
-      if ((f / block) % folds == fold) blocks.push_back(f);
+      if (is_held[static_cast<size_t>(f)]) {
+        set.held_out.push_back(f);
+      } else if (kept++ % stride == 0) {
+        set.train.push_back(f);
+      }
     }
-    held_out_sets.push_back(std::move(interleaved));
-    // With one-frame blocks the two families coincide: keep one.
-    if (block > 1) held_out_sets.push_back(std::move(blocks));
-    held_out_is_block.push_back(0);
-    if (block > 1) held_out_is_block.push_back(1);
+    if (!set.held_out.empty() && set.train.size() >= 2) sets.push_back(std::move(set));
+  };
+  for (int fold = 0; fold < folds; ++fold) {
+    std::vector<char> is_held(static_cast<size_t>(F));
+    for (long f = 0; f < F; ++f) is_held[static_cast<size_t>(f)] = f % folds == fold;
+    add_set(is_held, kInterleavedFold, 1);
+    add_set(is_held, kSparseFold, 2);
+  }
+  // Blocks of `block`, 2·block and 4·block frames (one-frame blocks would repeat the interleaved
+  // folds; a length that leaves fewer than two blocks holds nothing out that others keep).
+  for (long length = std::max<long>(block, 2); length <= 4 * std::max<long>(block, 1); length *= 2) {
+    const long blocks = (F + length - 1) / length;
+    const long block_folds = std::min<long>(folds, blocks);
+    if (block_folds < 2) break;
+    for (long fold = 0; fold < block_folds; ++fold) {
+      std::vector<char> is_held(static_cast<size_t>(F));
+      for (long f = 0; f < F; ++f) is_held[static_cast<size_t>(f)] = (f / length) % block_folds == fold;
+      add_set(is_held, kBlockFold, 1);
+    }
   }
   const long R_count = model.region_count;
+  const long N_out = model.point_count;
   const Eigen::MatrixXd gram = T.transpose() * T;
   std::vector<double> sample_key, sample_max;
-  std::vector<char> sample_from_block;
+  std::vector<char> sample_family;
   std::vector<Eigen::VectorXd> sample_region_key, sample_region_max;
-  for (size_t set = 0; set < held_out_sets.size(); ++set) {
-    const std::vector<long>& held_out = held_out_sets[set];
-    std::vector<char> is_held(static_cast<size_t>(F), 0);
-    for (long f : held_out) is_held[static_cast<size_t>(f)] = 1;
-    std::vector<long> train_columns;
-    for (long f = 0; f < F; ++f) {
-      if (!is_held[static_cast<size_t>(f)]) train_columns.push_back(f);
-    }
+  std::vector<Eigen::VectorXf> sample_point_errors;  // N each (check point selection; not cross)
+  for (size_t set = 0; set < sets.size(); ++set) {
+    const HeldOutSet& held = sets[set];
     // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
-    const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(train_columns.size()) - 1));
-    if (fold_basis < 1 || held_out.empty()) continue;
+    const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(held.train.size()) - 1));
+    if (fold_basis < 1) continue;
     PmscModel fold_model = model;
-    report_progress(o.progress, "calibration", static_cast<int>(set), static_cast<int>(held_out_sets.size()));
-    const Subspace fold = fold_subspace(T, gram, train_columns, fold_basis);
+    report_progress(o.progress, "calibration", static_cast<int>(set), static_cast<int>(sets.size()));
+    const Subspace fold = fold_subspace(T, gram, held.train, fold_basis);
     if (fold.basis.cols() < 1) continue;
     if (!assemble(fold, control_rows, cross, model.key_points, fold_model).ok()) continue;
     PoseEstimate estimate;
-    for (long f : held_out) {
+    for (long f : held.held_out) {
       // Held-out frames enter in the world frame, as at run time.
       const Eigen::VectorXf control = control_frames.row(f).transpose();
       const Eigen::VectorXf truth = cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : control;
       evaluate(fold_model, gather_key_values(fold_model, control), estimate);
       const Eigen::VectorXf residual = truth - estimate.points;
+      const Eigen::VectorXf point_errors =
+          Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, N_out).colwise().norm().transpose();
       sample_key.push_back(estimate.key_point_error);
-      sample_from_block.push_back(held_out_is_block[set]);
-      sample_max.push_back(max_point_error(residual.cast<double>(), D));
+      sample_family.push_back(held.family);
+      sample_max.push_back(static_cast<double>(point_errors.maxCoeff()));
+      if (!cross) sample_point_errors.push_back(point_errors);
       if (R_count > 0) {
         Eigen::VectorXd region_max = Eigen::VectorXd::Zero(R_count);
-        for (long i = 0; i < model.point_count; ++i) {
+        for (long i = 0; i < N_out; ++i) {
           double& m = region_max(model.point_regions[static_cast<size_t>(i)]);
-          m = std::max(m, static_cast<double>(residual.segment(i * D, D).norm()));
+          m = std::max(m, static_cast<double>(point_errors(i)));
         }
         sample_region_key.push_back(Eigen::Map<const Eigen::VectorXd>(estimate.region_errors.data(), R_count));
         sample_region_max.push_back(region_max);
       }
     }
   }
-  report_progress(o.progress, "calibration", static_cast<int>(held_out_sets.size()),
-                  static_cast<int>(held_out_sets.size()));
+  report_progress(o.progress, "calibration", static_cast<int>(sets.size()), static_cast<int>(sets.size()));
   CalibrationSamples& samples = model.calibration.samples;
   const long n = static_cast<long>(sample_key.size());
   samples.key_point_errors = Eigen::Map<const Eigen::VectorXd>(sample_key.data(), n);
@@ -319,10 +344,37 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     samples.region_key_point_errors.row(i) = sample_region_key[static_cast<size_t>(i)].transpose();
     samples.region_max_errors.row(i) = sample_region_max[static_cast<size_t>(i)].transpose();
   }
-  samples.from_block_fold = std::move(sample_from_block);
+  samples.fold_family = std::move(sample_family);
+
+  // Check points (check_points.h) from the held-out residuals, and each sample's e_check.
+  const int check_count =
+      cross ? 0 : static_cast<int>(std::ceil(o.check_point_fraction * static_cast<double>(model.key_point_count()) - 1e-9));
+  if (check_count > 0 && n > 0) {
+    Eigen::MatrixXf point_errors(n, N_out);
+    for (long i = 0; i < n; ++i) point_errors.row(i) = sample_point_errors[static_cast<size_t>(i)].transpose();
+    sample_point_errors.clear();
+    model.check_points = select_check_points(point_errors, samples.max_errors, model.key_points, model.point_regions,
+                                             model.region_count, check_count,
+                                             kCalibrationNoiseFraction * o.error_tolerance);
+    const long C = model.check_point_count();
+    samples.check_point_errors = Eigen::VectorXd::Zero(n);
+    samples.region_check_point_errors = Eigen::MatrixXd::Zero(R_count > 0 ? n : 0, R_count);
+    for (long c = 0; c < C; ++c) {
+      const int point = model.check_points[static_cast<size_t>(c)];
+      const Eigen::VectorXd column = point_errors.col(point).cast<double>();
+      samples.check_point_errors = samples.check_point_errors.cwiseMax(column);
+      if (R_count > 0) {
+        const int region = model.point_regions[static_cast<size_t>(point)];
+        model.check_regions.push_back(region);
+        samples.region_check_point_errors.col(region) = samples.region_check_point_errors.col(region).cwiseMax(column);
+      }
+    }
+    if (C == 0) samples.check_point_errors.resize(0);
+  }
   model.calibration.false_hit_rate = o.false_hit_rate;
   model.calibration.block_frames = static_cast<int>(block);
   ANIMSPACE_RETURN_IF_ERROR(apply_calibration(model, o.error_tolerance, o.blend_zone_ratio));
+  ANIMSPACE_RETURN_IF_ERROR(prepare_projection(model));  // the check rows
 
   if (report) {
     report->frames = static_cast<int>(F);
@@ -335,6 +387,8 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     report->regularization = model.regularization;
     report->error_ratio = model.calibration.error_ratio;
     report->calibration_frames = static_cast<int>(n);
+    report->check_points = model.check_point_count();
+    report->calibration_bad_samples = model.calibration.bad_samples;
     const auto now = std::chrono::steady_clock::now();
     report->seconds = std::chrono::duration<double>(now - start).count();
     report->calibration_seconds = std::chrono::duration<double>(now - calibration_start).count();

@@ -7,6 +7,7 @@
 #include "core/common/progress.h"
 #include "core/common/result.h"
 #include "core/common/types.h"
+#include "core/pmsc/check_points.h"
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::pmsc {
@@ -44,8 +45,13 @@ struct TrainingOptions {
   // Held-out folds for that calibration (each fold retrains the basis without its frames); every
   // fold is used twice, as every calibration_folds-th frame and as blocks of consecutive frames.
   int calibration_folds = 5;
-  // Frames per held-out block; 0: two blocks per fold, ⌈F / (2 · calibration_folds)⌉.
+  // Frames of the shortest held-out blocks (blocks of twice and four times as many are held out
+  // too); 0: two blocks per fold, ⌈F / (2 · calibration_folds)⌉.
   int calibration_block_frames = 0;
+  // Check points per key point (issue #35, check_points.h): ⌈fraction · K⌉ points the client
+  // poses besides the keys, chosen from the calibration folds' residuals; 0: none. Cross-PMSC
+  // models have none.
+  double check_point_fraction = kCheckPointFraction;
   // ε_max / ε_min (the papers' example uses [0.1, 0.15]).
   double blend_zone_ratio = 1.5;
   // Regions for local fail-through (0 = none; cross-PMSC models have none).
@@ -67,6 +73,8 @@ struct TrainingReport {
   // the number of held-out samples it came from.
   double error_ratio = 0;
   int calibration_frames = 0;
+  int check_points = 0;                // C
+  long calibration_bad_samples = 0;    // the over-tolerance samples ε rests on
   double seconds = 0;              // training in all
   double calibration_seconds = 0;  // of which the ε calibration
 };

@@ -39,9 +39,11 @@ std::vector<double> offered_false_hit_rates(const pmsc::PmscModel& model) {
 void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int folds) {
   const pmsc::CalibrationSamples& samples = model.calibration.samples;
   const long over = pmsc::operating_point(samples, model.calibration.false_hit_rate, tolerance).over_tolerance;
-  std::printf("operating curve on %ld held-out frames (every %dth frame and blocks of %d, each predicted by a model "
-              "trained without it; %ld over the tolerance; * = this model's δ):\n",
-              samples.size(), folds, model.calibration.block_frames, over);
+  std::printf("operating curve on %ld held-out frames (every %dth frame, sparser training, blocks of %d, %d and %d; "
+              "each predicted by a model trained without it; %ld over the tolerance on their own, every one "
+              "extrapolated past it; * = this model's δ):\n",
+              samples.size(), folds, model.calibration.block_frames, 2 * model.calibration.block_frames,
+              4 * model.calibration.block_frames, over);
   std::printf("  %8s %8s %11s %9s %12s %15s\n", "δ", "ratio q", "ε_min", "hit rate", "miss recall",
               "worst hit/tol");
   for (double rate : offered_false_hit_rates(model)) {

@@ -50,6 +50,11 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
   cmd->add_option("--grid", a.grid, "Sparse grid seeds: cells per axis (0 = off)")->capture_default_str();
   cmd->add_flag("--align", a.align, "Remove rigid motion before PCA (captured whole-body data)");
   cmd->add_option("--regions", a.regions, "Regions for local fail-through (0 = none)")->capture_default_str();
+  cmd->add_option("--check-point-fraction", a.check_point_fraction,
+                  "Check points per key point: points the client also poses, never used by the projection, whose "
+                  "error joins the verdict (0 = none)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--description", a.description, "One-line description stored in the model");
   add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
@@ -98,6 +103,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   options.grid_cells = a.grid;
   options.remove_rigid_motion = a.align;
   options.region_count = a.regions;
+  options.check_point_fraction = a.check_point_fraction;
   options.false_hit_rate = a.false_hit_rate;
   options.progress = progress_bars("train-pmsc");
 
@@ -132,6 +138,11 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 {"false_hit_rate", model->calibration.false_hit_rate},
                 {"error_ratio", model->calibration.error_ratio},
                 {"calibration_frames", report.calibration_frames},
+                {"check_points", report.check_points},
+                {"key_weight", model->key_weight},
+                {"calibration_bad_samples", report.calibration_bad_samples},
+                {"calibration_guarantee_holds", pmsc::calibration_guarantee_holds(*model)},
+                {"calibration_statement", pmsc::calibration_statement(*model)},
                 {"operating_curve", operating_curve_json(*model, options.error_tolerance)},
                 {"seconds", report.seconds}});
   } else {
@@ -141,9 +152,14 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 100 * report.max_training_error / diagonal, 100 * a.error_bound_diag);
     std::printf("A_key condition number %.3g%s\n", report.condition_number,
                 report.regularization > 0 ? " (regularised)" : "");
-    std::printf("soft cache ε = [%.4g, %.4g]: false-hit rate δ = %g, error ratio %.3g from %d held-out frames\n",
-                model->epsilon.epsilon_min, model->epsilon.epsilon_max, model->calibration.false_hit_rate,
-                report.error_ratio, report.calibration_frames);
+    std::printf("%d check points (the client poses %d points in all: %d keys + %d checks)\n", report.check_points,
+                report.key_points + report.check_points, report.key_points, report.check_points);
+    std::printf("soft cache ε = [%.4g, %.4g] on max(%.3g·e_key, e_check): false-hit rate δ = %g, error ratio %.3g "
+                "from %d held-out frames, %ld over-tolerance samples\n",
+                model->epsilon.epsilon_min, model->epsilon.epsilon_max, model->key_weight,
+                model->calibration.false_hit_rate, report.error_ratio, report.calibration_frames,
+                report.calibration_bad_samples);
+    std::printf("guarantee: %s\n", pmsc::calibration_statement(*model).c_str());
     print_operating_curve(*model, options.error_tolerance, options.calibration_folds);
     std::printf("wrote %s\n", path.c_str());
   }

@@ -27,6 +27,7 @@ struct TrainPmscArgs {
   int grid = 0;
   bool align = false;
   int regions = 8;
+  double check_point_fraction = pmsc::kCheckPointFraction;
   std::string description;
   std::string output;          // model.anim path, or a repository with --model
   std::string model;

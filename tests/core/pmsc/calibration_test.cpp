@@ -143,15 +143,92 @@ TEST(Calibration, OperatingPointCountsHitsAndMissesOnTheSamples) {
   CalibrationSamples s;
   s.key_point_errors = vector_of({1, 1, 1, 1, 2, 3});
   s.max_errors = vector_of({2, 3, 4, 5, 6, 30});
-  s.from_block_fold = {0, 0, 0, 0, 0, 0};
-  // Tolerance 10: one bad frame (e_key 3); δ = 0.3 → r = ⌊0.3·2⌋ = 0 → ε_min just below 3.
+  s.fold_family = {0, 0, 0, 0, 0, 0};
+  // Tolerance 10: every residual extrapolated to e_max = 10 has e_key 10·e_key/e_max = 5, 3.33,
+  // 2.5, 2, 3.33, 1 (m = 6). δ = 0.3 → r = ⌊0.3·7⌋ = 2 → ε_min the 2nd smallest, 2.
   const OperatingPoint p = operating_point(s, 0.3, 10.0);
-  EXPECT_EQ(p.epsilon_min, std::nextafter(3.0, 0.0));
+  EXPECT_DOUBLE_EQ(p.epsilon_min, 2.0);
+  EXPECT_EQ(p.bad_samples, 6);
   EXPECT_DOUBLE_EQ(p.error_ratio, 10.0 / p.epsilon_min);
-  EXPECT_DOUBLE_EQ(p.hit_rate, 5.0 / 6.0);  // every frame but the bad one
+  EXPECT_DOUBLE_EQ(p.hit_rate, 5.0 / 6.0);  // e_key ≤ 2: all but the bad frame (e_key 3)
   EXPECT_EQ(p.over_tolerance, 1);
   EXPECT_DOUBLE_EQ(p.miss_recall, 1.0);
   EXPECT_DOUBLE_EQ(p.worst_hit_error, 0.6);  // largest e_max among hits, 6, over 10
+}
+
+TEST(Calibration, ExtrapolatedRuleByHand) {
+  // Tolerance 4. Estimates 1, 1, 2, 0.5 with e_max 2, 8, 2, 1e-9 (the last reproduced to
+  // rounding: skipped). Extrapolated to e_max = 4: 2, 0.5, 4 → sorted 0.5, 2, 4 (m = 3).
+  const Eigen::VectorXd estimates = vector_of({1, 1, 2, 0.5});
+  const Eigen::VectorXd max = vector_of({2, 8, 2, 1e-9});
+  ExtrapolatedEpsilon c = calibrate_extrapolated(estimates, max, 4.0, 0.5);  // r = ⌊0.5·4⌋ = 2
+  EXPECT_DOUBLE_EQ(c.epsilon_min, 2.0);
+  EXPECT_EQ(c.bad_samples, 3);
+  EXPECT_EQ(c.over_tolerance, 1);
+  // δ = 0.2: r = ⌊0.8⌋ = 0: no rate can be stated, ε sits just below every bad sample.
+  c = calibrate_extrapolated(estimates, max, 4.0, 0.2);
+  EXPECT_EQ(c.epsilon_min, std::nextafter(0.5, 0.0));
+  EXPECT_FALSE(guarantee_holds(c.bad_samples, 0.2));
+  EXPECT_TRUE(guarantee_holds(c.bad_samples, 0.5));
+  EXPECT_TRUE(guarantee_holds(49, 0.02));
+  EXPECT_FALSE(guarantee_holds(48, 0.02));
+}
+
+// The statement of the extrapolated rule by Monte-Carlo: residual shapes are drawn with a random
+// ratio ρ = e_max / e and a random size; a fresh pose over the tolerance, of any size, is called
+// HIT with probability ≤ δ, over many independent calibration sets of mostly good frames.
+TEST(Calibration, ExtrapolatedCoverageHoldsForPosesOverTheTolerance) {
+  std::mt19937 rng(23);
+  std::lognormal_distribution<double> size(0.0, 0.8);
+  std::lognormal_distribution<double> ratio(1.2, 0.35);
+  const double tolerance = 3.0;
+  const int n = 150, trials = 800, fresh = 400;
+  for (double delta : {0.02, 0.05, 0.1}) {
+    double bad_seen = 0, bad_hit = 0;
+    for (int trial = 0; trial < trials; ++trial) {
+      Eigen::VectorXd estimate(n), max(n);
+      for (int i = 0; i < n; ++i) {
+        estimate(i) = size(rng);
+        max(i) = estimate(i) * ratio(rng);
+      }
+      const double epsilon = calibrate_extrapolated(estimate, max, tolerance, delta).epsilon_min;
+      for (int j = 0; j < fresh; ++j) {
+        const double e = size(rng), e_max = e * ratio(rng);
+        if (e_max <= tolerance) continue;
+        bad_seen += 1;
+        bad_hit += e <= epsilon ? 1 : 0;
+      }
+    }
+    EXPECT_GT(bad_seen, 1000);
+    EXPECT_LE(bad_hit / bad_seen, delta + 0.005) << "δ = " << delta;
+  }
+}
+
+TEST(Calibration, KeyWeightIsOneOfTheCandidatesAndCheckPointsAloneWhenKeysSeeNothing) {
+  // Check errors equal the max error, key errors are noise: w = 0 (check points alone) calls
+  // every good sample HIT at any δ, and no weighted e_key can do better.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> unit(0.1, 2.0);
+  CalibrationSamples s;
+  const int n = 200;
+  s.key_point_errors.resize(n);
+  s.check_point_errors.resize(n);
+  s.max_errors.resize(n);
+  s.fold_family.assign(n, kInterleavedFold);
+  for (int i = 0; i < n; ++i) {
+    s.max_errors(i) = unit(rng);
+    s.check_point_errors(i) = s.max_errors(i);
+    s.key_point_errors(i) = unit(rng);
+  }
+  EXPECT_EQ(choose_key_weight(s, 1.0, 0.05), 0.0);
+  const OperatingPoint p = operating_point(s, 0.05, 1.0);  // w = 0, as chosen
+  EXPECT_DOUBLE_EQ(p.miss_recall, 1.0);
+  long good = 0;
+  for (int i = 0; i < n; ++i) good += s.max_errors(i) <= 1.0;
+  EXPECT_NEAR(p.hit_rate, static_cast<double>(good) / n, 1.0 / n);  // the bad sample at rank r may hit
+  // Without check errors the weight is 1 (e_key alone).
+  s.check_point_errors.resize(0);
+  EXPECT_EQ(choose_key_weight(s, 1.0, 0.05), 1.0);
 }
 
 // Synthetic frames whose true error on a new pose is known: an exact rank-4 subspace plus, in each
@@ -208,11 +285,25 @@ TEST(Calibration, TrainingStoresHeldOutSamplesAndDerivesEpsilonFromThem) {
   auto model = train(data.frames, o, &report);
   ASSERT_TRUE(model.ok()) << model.error().message;
   const CalibrationSamples& s = model->calibration.samples;
-  // Blocks of ⌈40 / (2·4)⌉ = 5 frames, two families of four folds: every frame held out twice.
+  // Every frame is held out five times: by the interleaved and the sparse folds, and by blocks of
+  // ⌈40 / (2·4)⌉ = 5, 10 and 20 frames (the last dealt to two folds: there are only two blocks).
   EXPECT_EQ(model->calibration.block_frames, 5);
-  ASSERT_EQ(s.size(), 80);
-  EXPECT_EQ(report.calibration_frames, 80);
-  EXPECT_EQ(std::count(s.from_block_fold.begin(), s.from_block_fold.end(), 1), 40);
+  ASSERT_EQ(s.size(), 200);
+  EXPECT_EQ(report.calibration_frames, 200);
+  EXPECT_EQ(std::count(s.fold_family.begin(), s.fold_family.end(), kInterleavedFold), 40);
+  EXPECT_EQ(std::count(s.fold_family.begin(), s.fold_family.end(), kSparseFold), 40);
+  EXPECT_EQ(std::count(s.fold_family.begin(), s.fold_family.end(), kBlockFold), 120);
+  // ⌈0.2 · 12 keys⌉ = 3 check points, none of them a key point, one per region first (regions left
+  // without key points were merged away: count the regions that hold points).
+  ASSERT_EQ(model->check_point_count(), 3);
+  for (int c : model->check_points) {
+    EXPECT_EQ(std::count(model->key_points.begin(), model->key_points.end(), c), 0);
+  }
+  std::vector<int> regions = model->check_regions, occupied = model->point_regions;
+  std::sort(regions.begin(), regions.end());
+  std::sort(occupied.begin(), occupied.end());
+  const long occupied_count = std::unique(occupied.begin(), occupied.end()) - occupied.begin();
+  EXPECT_EQ(std::unique(regions.begin(), regions.end()) - regions.begin(), std::min(3L, occupied_count));
   EXPECT_EQ(s.region_key_point_errors.cols(), model->region_count);
 
   // The first interleaved fold holds out frames 0, 4, 8, …: rebuild its model from the
@@ -240,25 +331,25 @@ TEST(Calibration, TrainingStoresHeldOutSamplesAndDerivesEpsilonFromThem) {
   for (long p = 0; p < residual.size() / 3; ++p) e_max = std::max(e_max, residual.segment<3>(3 * p).norm());
   EXPECT_NEAR(s.key_point_errors(0), e_key, 1e-5 * e_key + 1e-7);
   EXPECT_NEAR(s.max_errors(0), e_max, 1e-4 * e_max + 1e-6);
+  double e_check = 0;
+  for (int c : model->check_points) e_check = std::max(e_check, residual.segment<3>(3 * c).norm());
+  EXPECT_NEAR(s.check_point_errors(0), e_check, 1e-4 * e_max + 1e-6);
 
-  // ε from the rule, recomputed: per family, the bad frames' e_key sorted, rank ⌊δ (m + 1)⌋.
-  double epsilon = o.error_tolerance;
-  long bad_total = 0;
-  for (char family : {0, 1}) {
-    std::vector<double> bad;
-    for (long i = 0; i < s.size(); ++i) {
-      if (s.from_block_fold[static_cast<size_t>(i)] == family && s.max_errors(i) > o.error_tolerance) {
-        bad.push_back(s.key_point_errors(i));
-      }
-    }
-    if (bad.empty()) continue;
-    bad_total += static_cast<long>(bad.size());
-    std::sort(bad.begin(), bad.end());
-    const auto r = static_cast<size_t>(std::floor(o.false_hit_rate * static_cast<double>(bad.size() + 1)));
-    epsilon = std::min(epsilon, r >= 1 ? bad[r - 1] : std::nextafter(bad[0], 0.0));
+  // ε from the rule, recomputed: every usable sample's estimate max(w·e_key, e_check) scaled to
+  // e_max = tolerance, sorted, rank ⌊δ (m + 1)⌋.
+  std::vector<double> bad;
+  for (long i = 0; i < s.size(); ++i) {
+    if (s.max_errors(i) < kCalibrationNoiseFraction * o.error_tolerance) continue;
+    const double e = std::max(model->key_weight * s.key_point_errors(i), s.check_point_errors(i));
+    bad.push_back(e * o.error_tolerance / s.max_errors(i));
   }
-  ASSERT_GT(bad_total, 0) << "the wobble should push some held-out frames over the tolerance";
-  EXPECT_EQ(model->calibration.over_tolerance, bad_total);
+  ASSERT_GT(bad.size(), 100u);
+  std::sort(bad.begin(), bad.end());
+  const auto r = static_cast<size_t>(std::floor(o.false_hit_rate * static_cast<double>(bad.size() + 1)));
+  ASSERT_GE(r, 1u);
+  const double epsilon = bad[r - 1];
+  EXPECT_EQ(model->calibration.bad_samples, static_cast<long>(bad.size()));
+  EXPECT_TRUE(calibration_guarantee_holds(*model));
   EXPECT_DOUBLE_EQ(model->epsilon.epsilon_min, epsilon);
   EXPECT_DOUBLE_EQ(model->epsilon.epsilon_max, o.blend_zone_ratio * epsilon);
   EXPECT_DOUBLE_EQ(model->calibration.error_ratio, o.error_tolerance / epsilon);
@@ -282,20 +373,59 @@ TEST(Calibration, FreshPosesKeepTheFalseHitRate) {
   PoseEstimate estimate;
   for (long f = 60; f < fresh.frames.rows(); ++f) {  // rows past the training ones are new poses
     const Eigen::VectorXf truth = fresh.frames.row(f).transpose();
-    evaluate(*model, gather_key_values(*model, truth), estimate);
-    const Eigen::VectorXf residual = truth - estimate.points;
+    CachedPose answer;
+    evaluate_cached(*model, gather_key_values(*model, truth), gather_check_values(*model, truth), nullptr,
+                    FullCalculation(), answer);
+    ASSERT_TRUE(answer.checked);
+    const Eigen::VectorXf residual = truth - answer.points;  // f̂: no full values were given
     const double e_max = max_point_error(residual.cast<double>(), 3);
-    const bool hit = estimate.key_point_error <= model->epsilon.epsilon_min;
+    const bool hit = answer.status == CacheStatus::kHit;
     hits += hit ? 1 : 0;
     bad += e_max > o.error_tolerance ? 1 : 0;
     false_hits += hit && e_max > o.error_tolerance ? 1 : 0;
-    looser_hits += estimate.key_point_error <= looser.epsilon.epsilon_min ? 1 : 0;
+    looser_hits += answer.error_estimate <= looser.epsilon.epsilon_min ? 1 : 0;
   }
   // Of the fresh poses over the tolerance, at most δ called HIT (with slack for ~hundreds of poses).
   ASSERT_GT(bad, 50);
   EXPECT_LE(static_cast<double>(false_hits) / bad, 0.05 + 0.05);
   EXPECT_GT(hits, 0);
   EXPECT_GE(looser_hits, hits);
+}
+
+// A HIT that the check points overturn (issue #35): key values the subspace reproduces exactly,
+// and one check point far off. With the check values the pose is a MISS; without them the verdict
+// is e_key's alone, against the key-only thresholds, and the pose is a HIT.
+TEST(Calibration, CheckPointsOverturnAHitTheKeyPointsCannotSee) {
+  const Wobbly data = wobbly_frames(90, 40, 3);
+  const TrainingOptions o = wobbly_options();
+  auto model = train(data.frames, o, nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  ASSERT_GT(model->check_point_count(), 0);
+  // A pose inside the subspace: f̂ of some training frame's keys.
+  PoseEstimate estimate;
+  evaluate(*model, gather_key_values(*model, data.frames.row(7).transpose()), estimate);
+  const Eigen::VectorXf inside = estimate.points;
+  CachedPose answer;
+  evaluate_cached(*model, gather_key_values(*model, inside), gather_check_values(*model, inside), nullptr,
+                  FullCalculation(), answer);
+  EXPECT_EQ(answer.status, CacheStatus::kHit);
+  EXPECT_TRUE(answer.checked);
+  EXPECT_LT(answer.check_point_error, 1e-4 * o.error_tolerance);
+
+  Eigen::VectorXf moved = inside;
+  const int point = model->check_points.back();
+  moved(3 * point + 1) += static_cast<float>(10 * o.error_tolerance);  // 10 tolerances off, at a check point only
+  evaluate_cached(*model, gather_key_values(*model, moved), gather_check_values(*model, moved), nullptr,
+                  FullCalculation(), answer);
+  EXPECT_EQ(answer.status, CacheStatus::kMiss);
+  EXPECT_NEAR(answer.check_point_error, 10 * o.error_tolerance, 1e-3 * o.error_tolerance);
+  EXPECT_GE(answer.error_estimate, answer.check_point_error);
+  EXPECT_TRUE(answer.full_evaluation_needed);
+  // The same key values without check values: nothing tells the cache, and it says HIT.
+  evaluate_cached(*model, gather_key_values(*model, moved), nullptr, answer);
+  EXPECT_EQ(answer.status, CacheStatus::kHit);
+  EXPECT_FALSE(answer.checked);
+  EXPECT_EQ(answer.error_estimate, answer.key_point_error);
 }
 
 TEST(Calibration, ApplyCalibrationRefusesBadInputAndModelsWithoutSamples) {
@@ -328,7 +458,7 @@ TEST(Calibration, StoredWithTheModelAndOldModelsKeepTheirEpsilon) {
   store_training_options(o, container);
   auto parsed = container::parse(container::serialize(container), "memory");
   ASSERT_TRUE(parsed.ok());
-  EXPECT_EQ(parsed->metadata_value(kFormatVersionKey), "2");
+  EXPECT_EQ(parsed->metadata_value(kFormatVersionKey), "3");
   auto loaded = load(*parsed, "memory");
   ASSERT_TRUE(loaded.ok()) << loaded.error().message;
   EXPECT_EQ(loaded->calibration.samples.max_errors, model->calibration.samples.max_errors);
@@ -337,6 +467,42 @@ TEST(Calibration, StoredWithTheModelAndOldModelsKeepTheirEpsilon) {
   EXPECT_EQ(loaded->calibration.error_ratio, model->calibration.error_ratio);
   ASSERT_EQ(loaded->region_epsilon.size(), model->region_epsilon.size());
   EXPECT_EQ(loaded->region_epsilon[0].epsilon_min, model->region_epsilon[0].epsilon_min);
+  EXPECT_EQ(loaded->check_points, model->check_points);
+  EXPECT_EQ(loaded->check_regions, model->check_regions);
+  EXPECT_EQ(loaded->key_weight, model->key_weight);
+  EXPECT_EQ(loaded->key_only_epsilon.epsilon_min, model->key_only_epsilon.epsilon_min);
+  EXPECT_EQ(loaded->calibration.bad_samples, model->calibration.bad_samples);
+  EXPECT_EQ(loaded->calibration.samples.check_point_errors, model->calibration.samples.check_point_errors);
+  EXPECT_EQ(loaded->calibration.samples.fold_family, model->calibration.samples.fold_family);
+
+  // Format 2: what the trainer wrote before check points — no check sections, two fold families.
+  // It loads without check points, keeps its ε, and its verdict is e_key's.
+  container::ModelContainer format2;
+  for (const auto& [key, value] : parsed->metadata()) {
+    if (key != kKeyWeightKey && key != kBadSamplesKey && key != "pmsc.options.check_point_fraction") {
+      format2.metadata()[key] = value;
+    }
+  }
+  format2.metadata()[kFormatVersionKey] = "2";
+  copy_sections(*parsed, [](const std::string& name) {
+    return name != kCheckPointsSection && name != kCheckRegionsSection && name != kKeyOnlyEpsilonSection &&
+           name != kCalibrationCheckErrorsSection && name != kCalibrationSamplesSection;
+  }, format2);
+  container::Float64Matrix two_families = *parsed->double_matrix(kCalibrationSamplesSection);
+  for (long i = 0; i < two_families.rows(); ++i) two_families(i, 0) = two_families(i, 0) == kSparseFold ? 0 : two_families(i, 0);
+  format2.set_matrix(kCalibrationSamplesSection, two_families);
+  auto format2_loaded = load(format2, "format2.anim");
+  ASSERT_TRUE(format2_loaded.ok()) << format2_loaded.error().message;
+  EXPECT_TRUE(format2_loaded->check_points.empty());
+  EXPECT_EQ(format2_loaded->epsilon.epsilon_min, model->epsilon.epsilon_min);
+  EXPECT_EQ(format2_loaded->calibration.bad_samples, 0);
+  EXPECT_FALSE(calibration_guarantee_holds(*format2_loaded));
+  EXPECT_NE(calibration_statement(*format2_loaded).find("no guarantee"), std::string::npos);
+  PoseEstimate estimate;
+  estimate_coordinates(*format2_loaded, gather_key_values(*format2_loaded, data.frames.row(3).transpose()),
+                       gather_check_values(*format2_loaded, data.frames.row(3).transpose()), estimate);
+  EXPECT_FALSE(estimate.checked);
+  EXPECT_EQ(estimate.error_estimate, estimate.key_point_error);
 
   // Format 1: what an earlier trainer wrote — the same model without the calibration.
   container::ModelContainer old;

@@ -238,12 +238,15 @@ TEST(PmscTrain, EpsilonComesFromHeldOutFramesAndTheZoneRatio) {
   auto model = train(frames, o, &report);
   ASSERT_TRUE(model.ok()) << model.error().message;
   EXPECT_GT(report.calibration_frames, 0);
-  // Every held-out frame of random data is far over the tolerance, so the class-conditional rule
-  // decides (calibration.h), and ε_min is below every such frame's e_key and never above the
-  // tolerance.
+  // Every held-out frame of random data is far over the tolerance; the rule extrapolates each to
+  // just over it (calibration.h), so every sample is a bad one and ε_min never exceeds the
+  // estimate of any sample scaled to the tolerance.
   EXPECT_EQ(model->calibration.over_tolerance, report.calibration_frames);
-  EXPECT_LE(model->epsilon.epsilon_min, 0.1);
-  EXPECT_LT(model->epsilon.epsilon_min, model->calibration.samples.key_point_errors.minCoeff());
+  EXPECT_EQ(model->calibration.bad_samples, report.calibration_frames);
+  const CalibrationSamples& s = model->calibration.samples;
+  const Eigen::VectorXd scaled = s.error_estimates(model->key_weight).cwiseProduct(s.max_errors.cwiseInverse()) * 0.1;
+  EXPECT_GE(model->epsilon.epsilon_min, scaled.minCoeff());
+  EXPECT_LT(model->epsilon.epsilon_min, scaled.maxCoeff());
   EXPECT_NEAR(model->epsilon.epsilon_min, 0.1 / report.error_ratio, 1e-12);
   EXPECT_NEAR(model->epsilon.epsilon_max, 1.5 * model->epsilon.epsilon_min, 1e-12);
 }
@@ -307,12 +310,16 @@ TEST(PmscTrain, ReportsProgressThroughKeySelectionAndCalibration) {
       keys_before = done;
     } else {
       ASSERT_EQ(stage, "calibration");
-      EXPECT_EQ(total, 8);  // four interleaved folds and four block folds (30 frames: blocks of 4)
+      // 30 frames, four folds: four interleaved, four sparse, and blocks of 4, 8 and 16 frames dealt
+      // to four, four and two folds.
+      EXPECT_EQ(total, 18);
       folds.push_back(done);
     }
   }
   EXPECT_EQ(keys_before, report.key_points);
-  EXPECT_EQ(folds, (std::vector<int64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8}));
+  std::vector<int64_t> expected(19);
+  std::iota(expected.begin(), expected.end(), 0);
+  EXPECT_EQ(folds, expected);
 }
 
 }  // namespace

@@ -1,0 +1,77 @@
+#include "core/pmsc/check_points.h"
+
+#include <algorithm>
+#include <cassert>
+#include <numeric>
+
+namespace animspace::pmsc {
+
+std::vector<int> select_check_points(const Eigen::MatrixXf& point_errors, const Eigen::VectorXd& max_errors,
+                                     const std::vector<int>& key_points, const std::vector<int>& point_regions,
+                                     int region_count, int count, double noise_floor) {
+  const long N = point_errors.cols();
+  assert(max_errors.size() == point_errors.rows());
+  assert(point_regions.empty() || static_cast<long>(point_regions.size()) == N);
+  std::vector<long> usable;
+  for (long i = 0; i < point_errors.rows(); ++i) {
+    if (max_errors(i) >= noise_floor && max_errors(i) > 0) usable.push_back(i);
+  }
+  std::vector<char> taken(static_cast<size_t>(N), 0);
+  for (int k : key_points) taken[static_cast<size_t>(k)] = 1;
+  const long free_points = N - static_cast<long>(std::count(taken.begin(), taken.end(), 1));
+  const long wanted = std::min<long>(count, free_points);
+  std::vector<int> chosen;
+  if (wanted <= 0 || usable.empty()) return chosen;
+
+  // u = e_ij / e_max,i, one row per usable sample (n × N, column-major: a point's column is contiguous).
+  const long n = static_cast<long>(usable.size());
+  Eigen::MatrixXf u(n, N);
+  for (long s = 0; s < n; ++s) {
+    u.row(s) = point_errors.row(usable[static_cast<size_t>(s)]) / static_cast<float>(max_errors(usable[static_cast<size_t>(s)]));
+  }
+  Eigen::VectorXf coverage = Eigen::VectorXf::Zero(n);
+  const auto take = [&](long j) {
+    chosen.push_back(static_cast<int>(j));
+    taken[static_cast<size_t>(j)] = 1;
+    coverage = coverage.cwiseMax(u.col(j));
+  };
+
+  // One per region, regions by their summed normalised error.
+  if (region_count > 0 && !point_regions.empty()) {
+    const Eigen::VectorXf column_sums = u.colwise().sum().transpose();
+    std::vector<double> region_sum(static_cast<size_t>(region_count), 0.0);
+    std::vector<long> region_best(static_cast<size_t>(region_count), -1);
+    for (long j = 0; j < N; ++j) {
+      if (taken[static_cast<size_t>(j)]) continue;
+      const auto r = static_cast<size_t>(point_regions[static_cast<size_t>(j)]);
+      region_sum[r] += column_sums(j);
+      if (region_best[r] < 0 || column_sums(j) > column_sums(region_best[r])) region_best[r] = j;
+    }
+    std::vector<int> order(static_cast<size_t>(region_count));
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int a, int b) { return region_sum[static_cast<size_t>(a)] > region_sum[static_cast<size_t>(b)]; });
+    for (int r : order) {
+      if (static_cast<long>(chosen.size()) >= wanted) break;
+      if (region_best[static_cast<size_t>(r)] >= 0) take(region_best[static_cast<size_t>(r)]);
+    }
+  }
+  // Then the largest gain in coverage.
+  while (static_cast<long>(chosen.size()) < wanted) {
+    long best = -1;
+    float best_gain = -1;
+    for (long j = 0; j < N; ++j) {
+      if (taken[static_cast<size_t>(j)]) continue;
+      const float gain = (u.col(j) - coverage).cwiseMax(0.0f).sum();
+      if (gain > best_gain) {
+        best_gain = gain;
+        best = j;
+      }
+    }
+    if (best < 0) break;
+    take(best);
+  }
+  return chosen;
+}
+
+}  // namespace animspace::pmsc
