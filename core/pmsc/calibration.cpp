@@ -120,10 +120,17 @@ double choose_key_weight(const CalibrationSamples& samples, double tolerance, do
   if (ratios.empty()) return 1;
   std::nth_element(ratios.begin(), ratios.begin() + static_cast<long>(ratios.size() / 2), ratios.end());
   const double base = std::max(ratios[ratios.size() / 2], 1e-12);
-  double best_weight = 0;
+  // Candidates in order of preference, so that a tie keeps the one that weighs both terms most
+  // evenly: w₀, w₀·2^±1, …, w₀·2^±4, and check points alone last.
+  std::vector<double> candidates = {base};
+  for (int k = 1; k <= 4; ++k) {
+    candidates.push_back(base * std::ldexp(1.0, -k));
+    candidates.push_back(base * std::ldexp(1.0, k));
+  }
+  candidates.push_back(0.0);
+  double best_weight = base;
   long best_hits = -1;
-  for (int k = -5; k <= 4; ++k) {
-    const double weight = k == -5 ? 0.0 : base * std::ldexp(1.0, k);  // first, check points alone
+  for (double weight : candidates) {
     const Eigen::VectorXd estimates = samples.error_estimates(weight);
     const double epsilon = calibrate_extrapolated(estimates, samples.max_errors, tolerance, false_hit_rate).epsilon_min;
     const long hits = good_hits(estimates, samples.max_errors, tolerance, epsilon);

@@ -33,7 +33,9 @@
 //
 // w is the weight of the candidates w₀·2^k (k = −4 … 4, w₀ the median e_check / e_key of the
 // samples) and 0 (check points alone) whose calibrated ε calls HIT the most held-out samples under
-// the tolerance: the guarantee holds for each candidate, and the choice only trades hits.
+// the tolerance: the guarantee holds for each candidate, and the choice only trades hits. Ties go
+// to the candidate nearest w₀, check points alone last: a weight that ignores e_key would pass a
+// pose whose keys are off wherever the check points happen to be right.
 //
 // Per region (local fail-through): the same rule on each region's estimate (its key points' RMS
 // error, its check points' worst) and the max error over that region's points.
