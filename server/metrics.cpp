@@ -42,6 +42,8 @@ Histogram::Histogram(std::vector<double> upper_bounds)
 void Histogram::observe(double value) {
   const auto it = std::lower_bound(bounds_.begin(), bounds_.end(), value);
   ++counts_[static_cast<size_t>(it - bounds_.begin())];
+  min_ = total_ == 0 ? value : std::min(min_, value);
+  max_ = total_ == 0 ? value : std::max(max_, value);
   ++total_;
   sum_ += value;
 }
@@ -54,13 +56,15 @@ double Histogram::quantile(double q) const {
     const uint64_t before = cumulative;
     cumulative += counts_[i];
     if (static_cast<double>(cumulative) >= rank && counts_[i] > 0) {
-      if (i == bounds_.size()) return bounds_.empty() ? 0 : bounds_.back();  // +Inf bucket
-      const double lower = i == 0 ? 0 : bounds_[i - 1];
+      // The bucket's range, narrowed to what was observed: the first bucket holding values starts
+      // at the smallest, the last one (+Inf included) ends at the largest.
+      const double lower = std::max(i == 0 ? min_ : bounds_[i - 1], min_);
+      const double upper = std::min(i == bounds_.size() ? max_ : bounds_[i], max_);
       const double fraction = (rank - static_cast<double>(before)) / static_cast<double>(counts_[i]);
-      return lower + (bounds_[i] - lower) * std::clamp(fraction, 0.0, 1.0);
+      return std::clamp(lower + (upper - lower) * std::clamp(fraction, 0.0, 1.0), min_, max_);
     }
   }
-  return bounds_.empty() ? 0 : bounds_.back();
+  return max_;
 }
 
 std::vector<double> latency_bounds_seconds() {

@@ -24,8 +24,12 @@ class Histogram {
   explicit Histogram(std::vector<double> upper_bounds);
   void observe(double value);
   // Linear interpolation inside the bucket that holds quantile q ∈ [0, 1] (as Prometheus's
-  // histogram_quantile does); 0 when empty.
+  // histogram_quantile does), over the part of the bucket that observations reached: never below
+  // the smallest value observed nor above the largest (one request of 101 ms is p50 = p99 =
+  // 101 ms, not a point inside its bucket). 0 when empty.
   double quantile(double q) const;
+  double min() const { return min_; }
+  double max() const { return max_; }
 
   const std::vector<double>& upper_bounds() const { return bounds_; }
   const std::vector<uint64_t>& counts() const { return counts_; }
@@ -37,6 +41,8 @@ class Histogram {
   std::vector<uint64_t> counts_;  // bounds_.size() + 1
   uint64_t total_ = 0;
   double sum_ = 0;
+  double min_ = 0;  // of the values observed (0 when none)
+  double max_ = 0;
 };
 
 // Latency buckets: 50 µs … 10 s, roughly ×2.5 apart.

@@ -1,5 +1,10 @@
 #include "server/metrics.h"
 
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
 #include <gtest/gtest.h>
 
 namespace animspace::server {
@@ -16,11 +21,50 @@ TEST(Histogram, BucketsFollowPrometheusUpperBounds) {
 
 TEST(Histogram, QuantileInterpolatesInsideTheBucket) {
   Histogram h({10.0, 20.0});
-  for (int i = 0; i < 4; ++i) h.observe(15.0);  // all in (10, 20]
-  // Rank 0.5·4 = 2 of 4 observations in the bucket: halfway from 10 to 20.
+  for (int i = 0; i < 4; ++i) h.observe(15.0);  // all in (10, 20], and all 15
+  // Every quantile of four equal values is that value: the bucket is narrowed to what was seen.
   EXPECT_DOUBLE_EQ(h.quantile(0.5), 15.0);
-  EXPECT_DOUBLE_EQ(h.quantile(1.0), 20.0);
-  EXPECT_DOUBLE_EQ(h.quantile(0.25), 12.5);
+  EXPECT_DOUBLE_EQ(h.quantile(1.0), 15.0);
+  EXPECT_DOUBLE_EQ(h.quantile(0.25), 15.0);
+  // 12 and 18 too: the bucket (10, 20] now holds 12 … 18; rank 0.5·6 = 3 of 6 → halfway, 15.
+  h.observe(12.0);
+  h.observe(18.0);
+  EXPECT_DOUBLE_EQ(h.quantile(0.5), 15.0);
+  EXPECT_DOUBLE_EQ(h.quantile(1.0), 18.0);
+  EXPECT_DOUBLE_EQ(h.quantile(0.0), 12.0);
+}
+
+// Issue #39: one request of 101 ms was reported as p50 175 ms and p99 248.5 ms.
+TEST(Histogram, OneObservationIsEveryQuantile) {
+  Histogram h(latency_bounds_seconds());
+  h.observe(0.101);
+  for (double q : {0.0, 0.5, 0.9, 0.99, 1.0}) EXPECT_DOUBLE_EQ(h.quantile(q), 0.101) << "q = " << q;
+}
+
+// Against exact quantiles of known samples: the estimate never leaves the observed range and lies
+// in the same bucket as the exact ⌈q·n⌉-th smallest value (the most a histogram can know).
+TEST(Histogram, QuantilesStayInTheObservedRangeAndTheExactValuesBucket) {
+  std::mt19937 rng(39);
+  std::lognormal_distribution<double> latency(std::log(0.02), 1.5);
+  const std::vector<double> bounds = latency_bounds_seconds();
+  for (int n : {1, 2, 3, 10, 101, 5000}) {
+    Histogram h(bounds);
+    std::vector<double> values;
+    for (int i = 0; i < n; ++i) {
+      values.push_back(latency(rng));
+      h.observe(values.back());
+    }
+    std::sort(values.begin(), values.end());
+    for (double q : {0.0, 0.1, 0.5, 0.9, 0.99, 1.0}) {
+      const double estimate = h.quantile(q);
+      const auto rank = std::max<size_t>(1, static_cast<size_t>(std::ceil(q * n)));
+      const double exact = values[rank - 1];
+      EXPECT_GE(estimate, values.front()) << "n = " << n << ", q = " << q;
+      EXPECT_LE(estimate, values.back()) << "n = " << n << ", q = " << q;
+      const auto bucket = [&](double v) { return std::lower_bound(bounds.begin(), bounds.end(), v) - bounds.begin(); };
+      EXPECT_EQ(bucket(estimate), bucket(exact)) << "n = " << n << ", q = " << q << ": " << estimate << " vs " << exact;
+    }
+  }
 }
 
 TEST(Histogram, EmptyQuantileIsZero) {
