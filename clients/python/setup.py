@@ -11,26 +11,59 @@ managed; README.md):
     /usr/bin/python3 -m venv --system-site-packages ~/.venvs/animspace
     ~/.venvs/animspace/bin/python -m pip install --no-build-isolation --no-deps clients/python
 
+The build is out of tree (issue #39): setuptools' ``build/`` and ``*.egg-info`` go under
+``$ANIMSPACE_PYTHON_BUILD_DIR`` (default: a folder of the system's temporary directory named after
+this checkout), never into the checkout pip installs from.
+
 The .proto files are found, in order, at ``$ANIMSPACE_PROTO_DIR``, ``./proto`` (an sdist: ``sdist``
 copies them in) and ``../../proto`` (the repository). ``$PROTOC`` and ``$GRPC_PYTHON_PLUGIN``
 override the tools.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import os
 import pathlib
 import shutil
 import subprocess
 import sys
+import tempfile
 from typing import List, Optional
 
 from setuptools import setup
+from setuptools.command.build import build
 from setuptools.command.build_py import build_py
+from setuptools.command.egg_info import egg_info
 from setuptools.command.sdist import sdist
 
 HERE = pathlib.Path(__file__).resolve().parent
 API = pathlib.PurePosixPath("animspace/v1")
+
+
+def out_of_tree() -> pathlib.Path:
+    """Where setuptools' intermediate files go: one folder per checkout, outside it."""
+    if os.environ.get("ANIMSPACE_PYTHON_BUILD_DIR"):
+        return pathlib.Path(os.environ["ANIMSPACE_PYTHON_BUILD_DIR"]).resolve()
+    key = hashlib.sha256(str(HERE).encode()).hexdigest()[:12]
+    return pathlib.Path(tempfile.gettempdir()) / f"animspace-python-{key}"
+
+
+class OutOfTreeBuild(build):
+    """build with its build_base outside the checkout (a command-line --build-base still wins)."""
+
+    def initialize_options(self) -> None:
+        super().initialize_options()
+        self.build_base = str(out_of_tree() / "build")
+
+
+class OutOfTreeEggInfo(egg_info):
+    """egg_info writing animspace.egg-info outside the checkout (--egg-base still wins)."""
+
+    def initialize_options(self) -> None:
+        super().initialize_options()
+        out_of_tree().mkdir(parents=True, exist_ok=True)
+        self.egg_base = str(out_of_tree())
 
 
 def proto_dir() -> pathlib.Path:
@@ -106,4 +139,5 @@ class SdistWithProtos(sdist):
 # The package is flat, as CMake copies it into <build>/python/animspace; animspace/v1 comes
 # from BuildPyWithStubs.
 setup(packages=["animspace"], package_data={"animspace": ["py.typed"]},
-      cmdclass={"build_py": BuildPyWithStubs, "sdist": SdistWithProtos})
+      cmdclass={"build": OutOfTreeBuild, "egg_info": OutOfTreeEggInfo, "build_py": BuildPyWithStubs,
+                "sdist": SdistWithProtos})

@@ -26,8 +26,8 @@ def _missing_tools():
 @pytest.mark.skipif(_missing_tools() is not None, reason=str(_missing_tools()))
 def test_pip_installs_the_package_with_generated_stubs(tmp_path):
     # A copy of the two folders the build reads, in the repository's layout (clients/python and
-    # proto/ two levels up), so that pip's in-tree build leaves no build/ or *.egg-info behind in
-    # the working tree.
+    # proto/ two levels up): pip builds in the folder it is given, and the copy shows what that
+    # build leaves there (issue #39: nothing; setup.py builds out of tree).
     source = tmp_path / "src"
     shutil.copytree(REPOSITORY / "clients" / "python", source / "clients" / "python",
                     ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__", "dist"))
@@ -38,6 +38,9 @@ def test_pip_installs_the_package_with_generated_stubs(tmp_path):
         [sys.executable, "-m", "pip", "install", "--no-build-isolation", "--no-deps", "--no-index", "--target",
          str(target), "clients/python"], cwd=source, capture_output=True, text=True, timeout=300, env=environment)
     assert install.returncode == 0, install.stdout + install.stderr
+    left = sorted(p.name for p in (source / "clients" / "python").iterdir()
+                  if p.name == "build" or p.name.endswith(".egg-info"))
+    assert left == [], f"pip install wrote {left} into the source folder"
 
     generated = sorted(p.name for p in (target / "animspace" / "v1").glob("*_pb2*.py"))
     protos = sorted((REPOSITORY / "proto" / "animspace" / "v1").glob("*.proto"))
