@@ -1,11 +1,44 @@
 #include "core/mesh_io/sequence_io.h"
 
+#include <cctype>
+#include <string>
+
 #include "core/mesh_io/obj_sequence.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 
 namespace animspace::mesh_io {
+namespace {
+
+// What a sequence can be read from, for every message that turns a file away.
+constexpr const char* kReadableSequences =
+    "a sequence is read from a folder with reference.obj + frames.pc2, a folder of OBJ frames, or a mesh "
+    "(OBJ, PLY, OFF) with its point cache (--pc2 FILE.pc2)";
+
+// Caches of other tools that are not read here, and how to bring them over (issue #39).
+const char* foreign_cache_name(const std::filesystem::path& path) {
+  std::string extension = path.extension().string();
+  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (extension == ".abc") return "an Alembic cache (.abc)";
+  if (extension == ".usd" || extension == ".usda" || extension == ".usdc" || extension == ".usdz") {
+    return "a USD stage";
+  }
+  if (extension == ".fbx") return "an FBX file";
+  if (extension == ".mdd") return "an MDD point cache";
+  if (extension == ".vdb") return "an OpenVDB volume";
+  return nullptr;
+}
+
+}  // namespace
 
 Result<LoadedSequence> load_sequence(const std::filesystem::path& path, const std::filesystem::path& pc2) {
+  for (const std::filesystem::path& given : {path, pc2}) {
+    if (const char* name = foreign_cache_name(given)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        given.string() + " is " + name + ", which is not read: " + kReadableSequences +
+                            ". To convert, import it in Blender (File › Import) and export the mesh as OBJ with its "
+                            "animation as a Point Cache (.pc2)");
+    }
+  }
   std::error_code ec;
   std::filesystem::path reference_path = path;
   std::filesystem::path cache_path = pc2;
@@ -27,7 +60,8 @@ Result<LoadedSequence> load_sequence(const std::filesystem::path& path, const st
   }
   if (cache_path.empty()) {
     return make_error(ErrorCode::kInvalidArgument,
-                      path.string() + ": a reference mesh needs a point cache (.pc2) to form a sequence");
+                      path.string() + ": a reference mesh needs a point cache (.pc2) to form a sequence; " +
+                          kReadableSequences);
   }
   auto reference = read_triangle_mesh(reference_path);
   if (!reference) return reference.error();
