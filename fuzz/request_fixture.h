@@ -15,6 +15,7 @@ enum Selector : uint8_t {
 };
 
 inline constexpr uint32_t kKeyPoints = 4;     // K
+inline constexpr uint32_t kCheckPoints = 2;   // C (issue #35)
 inline constexpr uint32_t kChannels = 3;      // D
 inline constexpr uint32_t kVertices = 11;     // N, for the response size
 inline constexpr uint32_t kMaxBatch = 8;      // --max-batch-poses

@@ -70,6 +70,18 @@ void validate(const v1::EvaluateKeyPointsRequest& request) {
     } else {
       check_refusal(s, field + ".key_values");
     }
+    if (pose.has_check_values()) {
+      Eigen::VectorXf check_values;
+      const grpc::Status c = server::decode_points(pose.check_values(), field + ".check_values",
+                                                   fixture::kCheckPoints, fixture::kChannels, "check points",
+                                                   check_values);
+      if (c.ok()) {
+        FUZZ_CHECK(check_values.size() == int64_t{fixture::kCheckPoints} * fixture::kChannels);
+        FUZZ_CHECK(check_values.allFinite());
+      } else {
+        check_refusal(c, field + ".check_values");
+      }
+    }
     if (pose.has_skeleton_pose()) check_skeleton_pose(pose.skeleton_pose(), field + ".skeleton_pose");
   }
 }

@@ -55,6 +55,11 @@ void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
   out->set_epsilon_max(info.epsilon_max);
   out->set_fail_through(to_proto(info.fail_through));
   out->set_server_engine(to_proto(info.server_engine));
+  out->set_check_point_count(static_cast<uint32_t>(info.check_point_count));
+  out->set_false_hit_rate(info.false_hit_rate);
+  out->set_calibration_bad_samples(static_cast<uint64_t>(info.calibration_bad_samples));
+  out->set_calibration_guarantee_holds(info.calibration_guarantee_holds);
+  out->set_calibration_statement(info.calibration_statement);
   out->set_file_size_bytes(m.file_size_bytes);
   out->set_loaded_at_unix_s(m.loaded_at_unix_s);
   for (const auto& [key, value] : m.container.metadata()) (*out->mutable_metadata())[key] = value;

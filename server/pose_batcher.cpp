@@ -97,7 +97,12 @@ void PoseBatcher::compute(std::unique_lock<std::mutex>& lock, const pmsc::PmscMo
   std::vector<const pmsc::PoseEstimate*> estimates(size);
   std::vector<float*> destinations(size);
   for (size_t i = 0; i < size; ++i) {
-    pmsc::estimate_coordinates(model, *batch[i].pose.key_values, *batch[i].pose.estimate);
+    const Pose& pose = batch[i].pose;
+    if (pose.check_values != nullptr) {
+      pmsc::estimate_coordinates(model, *pose.key_values, *pose.check_values, *pose.estimate);
+    } else {
+      pmsc::estimate_coordinates(model, *pose.key_values, *pose.estimate);
+    }
     estimates[i] = batch[i].pose.estimate;
     destinations[i] = batch[i].pose.points;
   }

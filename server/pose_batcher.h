@@ -14,7 +14,7 @@
 // `delay` lets an operator trade latency for throughput (Triton's max_queue_delay_microseconds):
 // the thread that takes a batch first waits up to `delay` for it to reach `max_batch`.
 //
-// Only f̂ is batched. Each pose's eq. 2 (its coordinates, e_key and so its verdict) is computed
+// Only f̂ is batched. Each pose's eq. 2 (its coordinates, e_key, e_check and so its verdict) is computed
 // alone, by the thread that takes the batch, so a verdict never depends on the batch; its points
 // differ from the one-pose path's by float rounding only (pmsc::reconstruction_rounding_bound).
 #pragma once
@@ -42,12 +42,15 @@ class PoseBatcher {
     size_t min_batch = static_cast<size_t>(kBlasGemmMinColumns);
   };
 
-  // One pose to estimate: its key values (K·D), where its estimate goes, and where f̂ goes
-  // (N·D floats). All three must stay valid until the group is awaited or withdrawn.
+  // One pose to estimate: its key values (K·D), where its estimate goes, where f̂ goes (N·D
+  // floats) and its check values (C·D; null or empty: none — they travel with the pose because
+  // its error estimate, and so its verdict, is computed with its coordinates). All must stay
+  // valid until the group is awaited or withdrawn.
   struct Pose {
     const Eigen::VectorXf* key_values = nullptr;
     pmsc::PoseEstimate* estimate = nullptr;
     float* points = nullptr;
+    const Eigen::VectorXf* check_values = nullptr;
   };
 
   // The poses one caller enqueued together. Await or withdraw it before its poses' memory goes:

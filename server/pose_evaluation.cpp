@@ -9,6 +9,7 @@
 #include "core/pmsc/pmsc_model.h"
 #include "server/convert.h"
 #include "server/model_lookup.h"
+#include "server/status_mapping.h"
 #include "server/validation.h"
 
 namespace animspace::server {
@@ -51,13 +52,24 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
   }
   if (!out.lights.empty() && !pose.has_key_values()) {
     // The server is the renderer here (Meyer & Anderson 2007 §3.2): it gathers the key points
-    // alone, and the soft cache judges them as it would judge a client's.
+    // and the check points alone, and the soft cache judges them as it would judge a client's.
+    if (pose.has_check_values()) {
+      return invalid_argument(field + ".check_values: sent without key_values; the server gathers both for the "
+                                      "light_set (send both, or neither)");
+    }
     model.illumination->engine->indirect(out.lights, model.illumination->gather, m.key_points, out.key_values);
+    if (m.check_point_count() > 0) {
+      model.illumination->engine->indirect(out.lights, model.illumination->gather, m.check_points, out.check_values);
+    }
   } else if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
                                             static_cast<uint32_t>(m.key_point_count()),
                                             static_cast<uint32_t>(m.channel_count), "key points", out.key_values);
              !s.ok()) {
     return s;
+  } else if (grpc::Status checks = decode_check_values(model, pose.has_check_values(), pose.check_values(),
+                                                       field + ".check_values", out.check_values);
+             !checks.ok()) {
+    return checks;
   }
   out.has_skeleton = pose.has_skeleton_pose();
   if (!out.has_skeleton) return grpc::Status::OK;
@@ -68,6 +80,21 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
   }
   return decode_skeleton_pose(pose.skeleton_pose(), field + ".skeleton_pose", model.animation_space->skeleton,
                               out.globals);
+}
+
+grpc::Status decode_check_values(const LoadedModel& model, bool present, const v1::PointArray& values,
+                                 const std::string& field, Eigen::VectorXf& out) {
+  const pmsc::PmscModel& m = *model.pmsc;
+  out.resize(0);
+  // An empty array is no check values, like an unset one: a client may always fill the field
+  // from DescribeKeyPoints' (possibly empty) check_point_indices.
+  if (!present || (values.point_count() == 0 && values.data().empty())) return grpc::Status::OK;
+  if (m.check_point_count() == 0) {
+    return invalid_argument(field + ": model '" + model.name + "' version " + std::to_string(model.version) +
+                            " has no check points (DescribeKeyPoints lists none); leave check_values unset");
+  }
+  return decode_points(values, field, static_cast<uint32_t>(m.check_point_count()),
+                       static_cast<uint32_t>(m.channel_count), "check points", out);
 }
 
 grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
@@ -138,6 +165,9 @@ grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, cons
   const bool local_path = options.local_fail_through || !input.full_points.empty();
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
+  out->set_check_point_error(static_cast<float>(cached.check_point_error));
+  out->set_error_estimate(static_cast<float>(cached.error_estimate));
+  out->set_checked(cached.checked);
   out->set_blend_weight(static_cast<float>(cached.alpha));
   out->set_model_version(model.version);
   out->set_full_evaluation_needed(cached.full_evaluation_needed);
@@ -161,9 +191,13 @@ grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, cons
       auto* region = out->add_region_errors();
       region->set_region(static_cast<uint32_t>(r));
       region->set_key_point_error(static_cast<float>(cached.region_errors[r]));
-      // The verdict local fail-through acts on: each region against its own thresholds.
+      // The verdict local fail-through acts on: each region against its own thresholds — or, for a
+      // pose without check values of a model with check points, the whole pose's (its regions are
+      // calibrated for estimates that include check points; local_fail_through.h).
       const auto& thresholds = pmsc::region_thresholds(m, static_cast<int>(r));
-      region->set_status(to_proto(pmsc::decide(cached.region_errors[r], thresholds).status));
+      const bool regional = cached.checked || m.check_points.empty();
+      region->set_status(regional ? to_proto(pmsc::decide(cached.region_errors[r], thresholds).status)
+                                  : to_proto(cached.status));
     }
   }
   if (options.count_in_statistics) {
@@ -230,7 +264,7 @@ PoseBatcher::Pose prepare_pose(const LoadedModel& model, const PoseInput& input,
     pending.scratch.resize(static_cast<long>(values));
     pending.points = pending.scratch.data();
   }
-  return {&input.key_values, &pending.estimate, pending.points};
+  return {&input.key_values, &pending.estimate, pending.points, &input.check_values};
 }
 
 grpc::Status finish_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
@@ -274,8 +308,8 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
   }
   pmsc::CachedPose cached;
   pmsc::LocalFailThrough local;
-  if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.full_points, client_full, engine,
-                                                 cached, local);
+  if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.check_values, input.full_points,
+                                                 client_full, engine, cached, local);
       !covered.ok()) {
     return {grpc::StatusCode::INVALID_ARGUMENT, "full_points: " + covered.error().message};
   }

@@ -24,6 +24,9 @@ namespace animspace::server {
 // A pose's inputs, decoded and checked.
 struct PoseInput {
   Eigen::VectorXf key_values;                // K·D
+  // C·D in check-point order (issue #35), or empty: the pose came without check values and its
+  // verdict rests on e_key alone (pmsc::verdict_thresholds).
+  Eigen::VectorXf check_values;
   bool has_skeleton = false;
   animation_space::TransformList globals;    // G_j, when has_skeleton
   std::vector<illumination::PointLight> lights;  // the frame's lights (illumination engine), else empty
@@ -40,9 +43,17 @@ grpc::Status require_pmsc(const LoadedModel& model, std::string_view why = {});
 inline bool gathers_keys(const v1::KeyPointPose& pose) { return pose.has_light_set() && !pose.has_key_values(); }
 
 // Decodes `pose` (named `field` in messages, e.g. "poses[3]"). A skeleton pose is accepted only
-// for a model with a posing engine, a light set only for one with an illumination engine.
+// for a model with a posing engine, a light set only for one with an illumination engine; check
+// values only for a model with check points (decode_check_values).
 grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
                          PoseInput& out);
+
+// Decodes a pose's check values `field` (e.g. "poses[3].check_values") into `out`: unset or empty
+// (point_count 0, no data) is no check values, `out` empty; else exactly C×D finite values
+// (decode_points' refusals, "expected 4 check points, got 3"). INVALID_ARGUMENT when the model
+// has no check points (C = 0: cross-PMSC, or trained before issue #35).
+grpc::Status decode_check_values(const LoadedModel& model, bool present, const v1::PointArray& values,
+                                 const std::string& field, Eigen::VectorXf& out);
 
 // Decodes the full values `field` of a pose whose key values are decoded (CompleteMiss, the
 // heat-map thumbnail) and checks that they are that pose: INVALID_ARGUMENT naming the field and

@@ -37,6 +37,14 @@ struct ModelInfo {
   float epsilon_max = 0;
   FailThrough fail_through = FailThrough::kNone;
   ServerEngine server_engine = ServerEngine::kNone;
+  // PMSC, from the loaded runtime (load_servable; describe reads shapes only and leaves them 0):
+  // C check points (issue #35), the calibration's false-hit rate δ and over-tolerance samples,
+  // whether they back δ, and the sentence an operator reads (pmsc::calibration_statement).
+  int check_point_count = 0;
+  double false_hit_rate = 0;
+  long calibration_bad_samples = 0;
+  bool calibration_guarantee_holds = false;
+  std::string calibration_statement;
 };
 
 // Reads and cross-checks the sections every kind shares. Errors: kInvalidArgument (or the

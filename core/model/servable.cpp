@@ -17,6 +17,12 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     auto runtime = pmsc::load(container, source);
     if (!runtime) return runtime.error();
     servable.pmsc = std::move(*runtime);
+    const pmsc::PmscModel& m = *servable.pmsc;
+    info->check_point_count = m.check_point_count();
+    info->false_hit_rate = m.calibration.false_hit_rate;
+    info->calibration_bad_samples = m.calibration.bad_samples;
+    info->calibration_guarantee_holds = pmsc::calibration_guarantee_holds(m);
+    info->calibration_statement = pmsc::calibration_statement(m);
   }
   if (info->kind == ModelKind::kAnimationSpace || info->server_engine == ServerEngine::kAnimationSpace) {
     auto runtime = animation_space::load(container, source);

@@ -549,24 +549,28 @@ Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio
   return Status::Ok();
 }
 
-Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
+namespace {
+
+// The rows of `points` (D values each) of a full control frame, in that order.
+Eigen::VectorXf gather_points(const PmscModel& m, const std::vector<int>& points,
+                              const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
   const long D = m.channel_count;
   assert(control_frame.size() == m.control_point_count * D);
-  Eigen::VectorXf keys(static_cast<long>(m.key_points.size()) * D);
-  for (size_t k = 0; k < m.key_points.size(); ++k) {
-    keys.segment(static_cast<long>(k) * D, D) = control_frame.segment(static_cast<long>(m.key_points[k]) * D, D);
+  Eigen::VectorXf values(static_cast<long>(points.size()) * D);
+  for (size_t k = 0; k < points.size(); ++k) {
+    values.segment(static_cast<long>(k) * D, D) = control_frame.segment(static_cast<long>(points[k]) * D, D);
   }
-  return keys;
+  return values;
+}
+
+}  // namespace
+
+Eigen::VectorXf gather_key_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
+  return gather_points(m, m.key_points, control_frame);
 }
 
 Eigen::VectorXf gather_check_values(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& control_frame) {
-  const long D = m.channel_count;
-  assert(control_frame.size() == m.control_point_count * D);
-  Eigen::VectorXf values(static_cast<long>(m.check_points.size()) * D);
-  for (size_t c = 0; c < m.check_points.size(); ++c) {
-    values.segment(static_cast<long>(c) * D, D) = control_frame.segment(static_cast<long>(m.check_points[c]) * D, D);
-  }
-  return values;
+  return gather_points(m, m.check_points, control_frame);
 }
 
 bool calibration_guarantee_holds(const PmscModel& m) {

@@ -28,6 +28,8 @@ grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServe
         response->set_control_point_count(static_cast<uint32_t>(m.control_point_count));
         for (int r : m.key_regions) response->add_key_point_regions(static_cast<uint32_t>(r));
         response->set_fail_through(to_proto(model->info.fail_through));
+        for (int c : m.check_points) response->add_check_point_indices(static_cast<uint32_t>(c));
+        for (int r : m.check_regions) response->add_check_point_regions(static_cast<uint32_t>(r));
         return grpc::Status::OK;
       });
 }
@@ -119,6 +121,12 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         if (grpc::Status s = decode_points(request->key_values(), "key_values",
                                            static_cast<uint32_t>(m.key_point_count()),
                                            static_cast<uint32_t>(m.channel_count), "key points", input.key_values);
+            !s.ok()) {
+          return s;
+        }
+        // The check values the evaluation sent, so that the verdict (and so α) repeats.
+        if (grpc::Status s = decode_check_values(*model, request->has_check_values(), request->check_values(),
+                                                 "check_values", input.check_values);
             !s.ok()) {
           return s;
         }
