@@ -102,7 +102,11 @@ void unary_call(const Workload& w, Client& client, size_t cursor, Clock::time_po
       return;
     }
     std::vector<KeyPointPose> poses;
-    for (uint32_t b = 0; b < w.batch; ++b) poses.push_back({w.key_frames[(cursor + b) % n], w.channel_count});
+    for (uint32_t b = 0; b < w.batch; ++b) {
+      KeyPointPose pose{w.key_frames[(cursor + b) % n], w.channel_count};
+      pose.check_values = w.check_frames[(cursor + b) % n];
+      poses.push_back(pose);
+    }
     EvaluateOptions options;
     options.version = w.version;
     options.omit_points = w.omit_points;
@@ -139,7 +143,8 @@ void stream_caller(const Workload& w, Client& client, const StepPlan& plan, size
           std::lock_guard lock(mutex);
           sent.push_back(Clock::now());
         }
-        const KeyPointPose pose{w.key_frames[cursor % w.frame_count()], w.channel_count};
+        KeyPointPose pose{w.key_frames[cursor % w.frame_count()], w.channel_count};
+        pose.check_values = w.check_frames[cursor % w.frame_count()];
         if (!stream->write(pose, sequence++)) break;
         ++written;
         ++cursor;

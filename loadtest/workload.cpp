@@ -68,7 +68,9 @@ Result<Workload> make_workload(Client& client, const WorkloadArgs& a) {
   w.version = keys.model_version;
   w.channel_count = keys.channel_count;
   for (int f : selected) {
-    w.key_frames.push_back(keys.gather({frames->row(f).data(), static_cast<size_t>(frames->cols())}));
+    const std::span<const float> frame(frames->row(f).data(), static_cast<size_t>(frames->cols()));
+    w.key_frames.push_back(keys.gather(frame));
+    w.check_frames.push_back(keys.gather_check_values(frame));  // a client sends its check points too
     w.frame_numbers.push_back(f);
   }
   return w;

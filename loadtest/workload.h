@@ -43,6 +43,7 @@ struct Workload {
   bool omit_points = true;
   uint32_t channel_count = 3;
   std::vector<std::vector<float>> key_frames;  // kEvaluate, kStream: K·D values per frame
+  std::vector<std::vector<float>> check_frames;  // the same frames' C·D check values (empty: C = 0)
   std::vector<SkeletonPose> skeleton_poses;    // kSkinning
   std::vector<int> frame_numbers;              // the sequence frame each entry came from
 

@@ -158,10 +158,16 @@ KeyPoints Client::describe_key_points(const std::string& model, uint64_t version
   out.control_point_count = response.control_point_count();
   out.regions.assign(response.key_point_regions().begin(), response.key_point_regions().end());
   out.fail_through = response.fail_through();
-  for (uint32_t index : out.indices) {
-    if (index >= out.control_point_count) {
-      throw std::runtime_error("malformed DescribeKeyPoints answer: key point index " + std::to_string(index) +
-                               " ≥ control_point_count " + std::to_string(out.control_point_count));
+  out.check_point_indices.assign(response.check_point_indices().begin(), response.check_point_indices().end());
+  out.check_point_regions.assign(response.check_point_regions().begin(), response.check_point_regions().end());
+  for (const auto& [what, indices] :
+       {std::pair{"key point", &out.indices}, std::pair{"check point", &out.check_point_indices}}) {
+    for (uint32_t index : *indices) {
+      if (index >= out.control_point_count) {
+        throw std::runtime_error(std::string("malformed DescribeKeyPoints answer: ") + what + " index " +
+                                 std::to_string(index) + " ≥ control_point_count " +
+                                 std::to_string(out.control_point_count));
+      }
     }
   }
   return out;
@@ -211,6 +217,8 @@ CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, 
   request.mutable_model()->set_version(version);
   v1::KeyPointPose encoded = encode_key_point_pose(pose);
   *request.mutable_key_values() = std::move(*encoded.mutable_key_values());
+  // The check values the evaluation sent, so that the server's verdict repeats.
+  if (encoded.has_check_values()) *request.mutable_check_values() = std::move(*encoded.mutable_check_values());
   const uint32_t channels = pose.channel_count;
   if (full_values.size() % channels != 0) {
     throw std::invalid_argument("complete_miss: full_values holds " + std::to_string(full_values.size()) +

@@ -19,20 +19,35 @@ const char* cache_status_name(v1::CacheStatus status) {
   }
 }
 
-std::vector<float> KeyPoints::gather(std::span<const float> frame) const {
-  const size_t needed = size_t{control_point_count} * channel_count;
+namespace {
+
+// The values of the points `indices` of a full frame, in that order; `what` names the caller in
+// the error for a frame of the wrong size.
+std::vector<float> gather_points(const KeyPoints& keys, const std::vector<uint32_t>& indices,
+                                 std::span<const float> frame, const char* what) {
+  const size_t needed = size_t{keys.control_point_count} * keys.channel_count;
   if (frame.size() != needed) {
-    throw std::invalid_argument("KeyPoints::gather: the frame holds " + std::to_string(frame.size()) +
-                                " values, expected " + std::to_string(control_point_count) + " points × " +
-                                std::to_string(channel_count) + " channels");
+    throw std::invalid_argument(std::string(what) + ": the frame holds " + std::to_string(frame.size()) +
+                                " values, expected " + std::to_string(keys.control_point_count) + " points × " +
+                                std::to_string(keys.channel_count) + " channels");
   }
   std::vector<float> out;
-  out.reserve(indices.size() * channel_count);
+  out.reserve(indices.size() * keys.channel_count);
   for (uint32_t index : indices) {
-    const float* point = frame.data() + size_t{index} * channel_count;
-    out.insert(out.end(), point, point + channel_count);
+    const float* point = frame.data() + size_t{index} * keys.channel_count;
+    out.insert(out.end(), point, point + keys.channel_count);
   }
   return out;
+}
+
+}  // namespace
+
+std::vector<float> KeyPoints::gather(std::span<const float> frame) const {
+  return gather_points(*this, indices, frame, "KeyPoints::gather");
+}
+
+std::vector<float> KeyPoints::gather_check_values(std::span<const float> frame) const {
+  return gather_points(*this, check_point_indices, frame, "KeyPoints::gather_check_values");
 }
 
 namespace {
@@ -106,6 +121,9 @@ PoseResult decode_pose_result(const v1::PoseResult& result) {
   if (result.has_points()) out.points = decode_points(result.points());
   out.status = result.status();
   out.key_point_error = result.key_point_error();
+  out.check_point_error = result.check_point_error();
+  out.error_estimate = result.error_estimate();
+  out.checked = result.checked();
   out.blend_weight = result.blend_weight();
   out.model_version = result.model_version();
   out.full_evaluation_needed = result.full_evaluation_needed();
@@ -141,6 +159,16 @@ v1::KeyPointPose encode_key_point_pose(const KeyPointPose& pose) {
   if (!pose.key_values.empty() || pose.lights.empty()) {
     *out.mutable_key_values() = make_point_array(
         pose.key_values.data(), static_cast<uint32_t>(pose.key_values.size() / pose.channel_count), pose.channel_count);
+  }
+  if (!pose.check_values.empty()) {
+    if (pose.check_values.size() % pose.channel_count != 0) {
+      throw std::invalid_argument("KeyPointPose.check_values holds " + std::to_string(pose.check_values.size()) +
+                                  " floats, not a whole number of " + std::to_string(pose.channel_count) +
+                                  "-channel points");
+    }
+    *out.mutable_check_values() =
+        make_point_array(pose.check_values.data(), static_cast<uint32_t>(pose.check_values.size() / pose.channel_count),
+                         pose.channel_count);
   }
   if (pose.skeleton_pose != nullptr) *out.mutable_skeleton_pose() = encode_skeleton_pose(*pose.skeleton_pose);
   for (const PointLight& light : pose.lights) {

@@ -46,9 +46,17 @@ struct KeyPoints {
   // Region of each key point for models with regions (local fail-through), else empty.
   std::vector<uint32_t> regions;
   v1::FailThrough fail_through = v1::FAIL_THROUGH_UNSPECIFIED;
+  // Check points (issue #35): C more indices into the same point set, computed like key points
+  // and sent as KeyPointPose::check_values in this order; the server measures the estimate's
+  // error there, and a HIT the key points alone would give can become BLEND or MISS. Empty for
+  // models without check points.
+  std::vector<uint32_t> check_point_indices;
+  std::vector<uint32_t> check_point_regions;  // region of each check point, when the model has regions
 
   // Gathers a frame's key values from its N×D point-major values (`frame` holds every point).
   std::vector<float> gather(std::span<const float> frame) const;
+  // The same for the check values (C×D; empty for a model without check points).
+  std::vector<float> gather_check_values(std::span<const float> frame) const;
 };
 
 // A skeleton pose: for each bone in model order, the top three rows of its 4×4 affine matrix,
@@ -68,17 +76,20 @@ struct PointLight {
 // One key-point pose to evaluate: K×D values in DescribeKeyPoints order, and optionally the
 // engine input it came from so that a server engine can complete a blend or miss — the skeleton
 // pose (animation space) or the lights (illumination). With lights and no key values, an
-// illumination model's server gathers the key values itself.
+// illumination model's server gathers the key values itself. `check_values` (C×D in
+// KeyPoints::check_point_indices order, KeyPoints::gather_check_values) lets the server check the
+// estimate where the key points are blind; empty: the verdict rests on e_key alone.
 struct KeyPointPose {
   std::span<const float> key_values;
   uint32_t channel_count = 3;
   const SkeletonPose* skeleton_pose = nullptr;
   std::span<const PointLight> lights = {};
+  std::span<const float> check_values = {};
 };
 
 struct RegionError {
   uint32_t region = 0;
-  float key_point_error = 0;
+  float key_point_error = 0;  // the region's error estimate (with its check points, when sent)
   v1::CacheStatus status = v1::CACHE_STATUS_UNSPECIFIED;
 };
 
@@ -87,6 +98,11 @@ struct PoseResult {
   Points points;  // empty when points were omitted
   v1::CacheStatus status = v1::CACHE_STATUS_UNSPECIFIED;
   float key_point_error = 0;  // e_key
+  // e_check = max over check points of ‖f_c − f̂_c‖ (0 unless `checked`), and the error estimate
+  // the verdict compared with ε: max(w·e_key, e_check) when checked, else e_key.
+  float check_point_error = 0;
+  float error_estimate = 0;
+  bool checked = false;       // the pose was sent with check values and the model has check points
   float blend_weight = 0;     // α
   uint64_t model_version = 0;
   bool full_evaluation_needed = false;

@@ -101,6 +101,8 @@ TEST_F(CliClientTest, JsonAnswersMatchTheClientLibrary) {
   const nlohmann::json keys = json_of(cli("--json keys arm-pmsc"));
   const KeyPoints expected = client_->describe_key_points("arm-pmsc");
   EXPECT_EQ(keys["key_point_indices"].get<std::vector<uint32_t>>(), expected.indices);
+  EXPECT_EQ(keys["check_point_indices"].get<std::vector<uint32_t>>(), expected.check_point_indices);
+  EXPECT_EQ(keys["check_point_regions"].get<std::vector<uint32_t>>(), expected.check_point_regions);
   EXPECT_EQ(keys["control_point_count"].get<uint32_t>(), expected.control_point_count);
   EXPECT_EQ(keys["fail_through"], "FAIL_THROUGH_CLIENT");
 
@@ -142,9 +144,14 @@ TEST_F(CliClientTest, EvaluateReportsEveryFramesVerdictAndTheErrorAgainstTheFram
     const nlohmann::json& row = report["results"][static_cast<size_t>(i)];
     EXPECT_EQ(row["frame"].get<int>(), f);
     const std::span<const float> frame(frames->row(f).data(), static_cast<size_t>(frames->cols()));
-    const std::vector<float> values = keys.gather(frame);
-    const PoseResult result = client_->evaluate_key_points("arm-pmsc", {values, 3});
+    const std::vector<float> values = keys.gather(frame), checks = keys.gather_check_values(frame);
+    // The CLI sends each frame's check values with its key values (issue #35).
+    const PoseResult result =
+        client_->evaluate_key_points("arm-pmsc", {.key_values = values, .channel_count = 3, .check_values = checks});
     EXPECT_EQ(row["status"], cache_status_name(result.status)) << "frame " << f;
+    EXPECT_EQ(row["checked"].get<bool>(), !checks.empty()) << "frame " << f;
+    EXPECT_NEAR(row["check_point_error"].get<double>(), result.check_point_error, 1e-6) << "frame " << f;
+    EXPECT_NEAR(row["error_estimate"].get<double>(), result.error_estimate, 1e-6) << "frame " << f;
     pmsc::PoseEstimate estimate;
     pmsc::estimate_coordinates(*served, Eigen::Map<const Eigen::VectorXf>(values.data(), static_cast<long>(values.size())),
                                estimate);
@@ -160,6 +167,31 @@ TEST_F(CliClientTest, EvaluateReportsEveryFramesVerdictAndTheErrorAgainstTheFram
     worst = std::max(worst, max_distance);
   }
   EXPECT_NEAR(report["max_point_error"].get<double>(), worst, 1e-6 + 1e-5 * worst);
+}
+
+TEST_F(CliClientTest, EvaluateWithoutCheckPointsSendsTheKeyValuesAlone) {
+  const KeyPoints keys = client_->describe_key_points("arm-pmsc");
+  ASSERT_FALSE(keys.check_point_indices.empty()) << "the demo's arm-pmsc is trained with check points";
+  const nlohmann::json checked = json_of(cli("--json evaluate arm-pmsc " + arm_frames() + " --select 1:9:2 -q"));
+  const nlohmann::json alone =
+      json_of(cli("--json evaluate arm-pmsc " + arm_frames() + " --select 1:9:2 -q --without-check-points"));
+  ASSERT_EQ(alone["results"].size(), 4u);
+  for (size_t i = 0; i < 4; ++i) {
+    const nlohmann::json& with = checked["results"][i];
+    const nlohmann::json& without = alone["results"][i];
+    EXPECT_TRUE(with["checked"].get<bool>());
+    EXPECT_FALSE(without["checked"].get<bool>());
+    EXPECT_EQ(without["check_point_error"].get<double>(), 0.0);
+    EXPECT_EQ(without["error_estimate"].get<double>(), without["key_point_error"].get<double>());
+    EXPECT_EQ(with["key_point_error"].get<double>(), without["key_point_error"].get<double>());
+  }
+  // Text output names e_check beside e_key for a checked pose.
+  const CliRun text = cli("evaluate arm-pmsc " + arm_frames() + " --select 1:3:2");
+  EXPECT_NE(text.out.find(" e_check "), std::string::npos) << text.out;
+  const CliRun described = cli("describe arm-pmsc");
+  EXPECT_NE(described.out.find("check points: " + std::to_string(keys.check_point_indices.size())), std::string::npos)
+      << described.out;
+  EXPECT_NE(described.out.find(" calibration: "), std::string::npos) << described.out;
 }
 
 TEST_F(CliClientTest, PlayStreamsTheSelectedFramesAndCountsThem) {

@@ -350,10 +350,13 @@ TEST_F(ClientTest, LocalFailThroughNamesTheFailingPointsAndCompletesThemAlone) {
   for (size_t i = 0; i < full.size() / 3; ++i) {
     if (pmsc_->point_regions[i] == moved_region) full[3 * i + 1] += 0.1f;
   }
-  const std::vector<float> v = keys.gather(full);
+  // Sent with its check values: regions are calibrated for estimates that include them (a pose
+  // without them takes the whole-pose α everywhere, local_fail_through.h).
+  const std::vector<float> v = keys.gather(full), checks = keys.gather_check_values(full);
+  const KeyPointPose pose{.key_values = v, .channel_count = 3, .check_values = checks};
   EvaluateOptions options;
   options.local_fail_through = true;
-  const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3}, options);
+  const PoseResult evaluated = client_->evaluate_key_points(kPmsc, pose, options);
   ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "e_key " << evaluated.key_point_error;
   ASSERT_GE(evaluated.full_points.size(), 2u);
   const size_t N = full.size() / 3;
@@ -362,7 +365,9 @@ TEST_F(ClientTest, LocalFailThroughNamesTheFailingPointsAndCompletesThemAlone) {
   // The points and weights, independently: each region's verdict (eqs. 9–11 on its own key
   // points' RMS error and thresholds), weighted by the stored memberships.
   pmsc::PoseEstimate estimate;
-  pmsc::evaluate(*pmsc_, Eigen::Map<const Eigen::VectorXf>(v.data(), static_cast<long>(v.size())), estimate);
+  pmsc::estimate_coordinates(*pmsc_, Eigen::Map<const Eigen::VectorXf>(v.data(), static_cast<long>(v.size())),
+                             Eigen::Map<const Eigen::VectorXf>(checks.data(), static_cast<long>(checks.size())),
+                             estimate);
   std::vector<uint32_t> expected_points;
   std::vector<double> expected_alpha;
   for (size_t i = 0; i < N; ++i) {
@@ -389,7 +394,7 @@ TEST_F(ClientTest, LocalFailThroughNamesTheFailingPointsAndCompletesThemAlone) {
   for (uint32_t i : evaluated.full_points) values.insert(values.end(), &full[3 * i], &full[3 * i] + 3);
   const auto log_path = work_->path() / (kPmsc + ".misses");
   const CompletedMiss completed =
-      client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, values, evaluated.full_points);
+      client_->complete_miss(kPmsc, evaluated.model_version, pose, values, evaluated.full_points);
   EXPECT_TRUE(completed.logged);
   EXPECT_FALSE(completed.result.full_evaluation_needed);
   EXPECT_EQ(completed.result.full_points, evaluated.full_points);
@@ -412,7 +417,7 @@ TEST_F(ClientTest, LocalFailThroughNamesTheFailingPointsAndCompletesThemAlone) {
   // Refusals name the field, with what was expected and what came.
   auto refusal = [&](std::vector<uint32_t> points, std::vector<float> wrong) {
     try {
-      client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, wrong, points);
+      client_->complete_miss(kPmsc, evaluated.model_version, pose, wrong, points);
     } catch (const RpcError& e) {
       EXPECT_EQ(e.code(), grpc::StatusCode::INVALID_ARGUMENT) << e.what();
       return e.server_message();
@@ -561,6 +566,13 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   // The unseen pose misses and is completed with the rig's real full pose, which the server accepts
   // (it refuses full values that do not repeat the key values) and logs.
   EXPECT_NE(output.find("completed: MISS, logged for retraining: yes"), std::string::npos) << output;
+  // Check points (issue #35): the dent the key points alone call a HIT is overturned.
+  const size_t dent = output.find("dent: HIT from the key points alone");
+  ASSERT_NE(dent, std::string::npos) << output;
+  const std::string dent_line = output.substr(dent, output.find('\n', dent) - dent);
+  EXPECT_TRUE(dent_line.find("MISS with its check points") != std::string::npos ||
+              dent_line.find("BLEND with its check points") != std::string::npos)
+      << dent_line;
   // Local fail-through completes a pose whose forearm alone left the training set.
   EXPECT_NE(output.find("local fail-through: "), std::string::npos) << output;
   EXPECT_EQ(output.find("local fail-through: 1154 of 1154"), std::string::npos) << "nothing was local: " << output;

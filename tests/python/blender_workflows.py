@@ -204,6 +204,7 @@ try:
         output = settings.output
         played.append(mesh_positions(output))
         verdicts.append({"status": settings.status, "key_point_error": settings.key_point_error,
+                         "check_point_error": settings.check_point_error, "checked": settings.checked,
                          "blend_weight": settings.blend_weight, "last_error": settings.last_error,
                          "attribute": vertex_colours(output, "animspace_verdict")})
     save("played", np.stack(played))

@@ -86,8 +86,9 @@ def blender_run(tmp_path_factory, request):
             run_animspaced(secure, *secure_flags) as token_address:
         client.wait_until_serving(deadline_s=60)
         # The sequence the Mesh Cache modifier plays: three of the demo's unseen frames (hits),
-        # an elbow bent past the training range (a blend) and one bent backwards (a miss).
-        transforms = [_demo_arm_transforms(f / 120) for f in (1, 31, 61)] + [_arm_transforms(2.4),
+        # an elbow bent past the training range (a blend, judged with its check points: the
+        # middle of arm-pmsc's blend zone) and one bent backwards (a miss).
+        transforms = [_demo_arm_transforms(f / 120) for f in (1, 31, 61)] + [_arm_transforms(2.5),
                                                                              _arm_transforms(math.radians(-60))]
         frames = np.stack([client.evaluate_skeleton_pose(SKINNED_MODEL, G).points for G in transforms])
         animspace.write_pc2(work / "sequence.pc2", frames)
@@ -220,10 +221,14 @@ def test_playback_writes_the_daemons_answer_for_each_frames_key_points(blender_r
     played = load(blender_run, "played")
     statuses = set()
     for i, shown in enumerate(blender_run["results"]["played"]):
-        expected = client.evaluate_key_points(PMSC_MODEL, keys.select(frames[i]))
+        # The add-on sends the frame's check values with its key values (issue #35).
+        expected = client.evaluate_key_points(PMSC_MODEL, keys.select(frames[i]),
+                                              check_values=keys.select_check_values(frames[i]))
         assert shown["last_error"] == ""
         assert shown["status"] == expected.status, f"frame {i + 1}"
         assert shown["key_point_error"] == pytest.approx(expected.key_point_error, rel=1e-5)
+        assert shown["checked"] == expected.checked == (keys.check_point_count > 0)
+        assert shown["check_point_error"] == pytest.approx(expected.check_point_error, rel=1e-5)
         assert shown["blend_weight"] == pytest.approx(expected.blend_weight, abs=1e-6)
         np.testing.assert_allclose(played[i], expected.points, rtol=0, atol=1e-6, err_msg=f"frame {i + 1}")
         # The verdict as a colour attribute on every point.
@@ -240,10 +245,12 @@ def test_blends_and_misses_are_completed_with_the_evaluated_mesh_and_logged(blen
     keys = client.describe_key_points(PMSC_MODEL)
     for completed in blender_run["results"]["completed"]:
         full = frames[completed["frame"] - 1]
-        estimate = client.evaluate_key_points(PMSC_MODEL, keys.select(full))
+        pose = keys.pose(full)
+        estimate = client.evaluate_key_points(PMSC_MODEL, pose.key_values, check_values=pose.check_values)
         assert completed["status"] == estimate.status and estimate.status in ("BLEND", "MISS")
         assert completed["logged"] is True
-        expected = client.complete_miss(PMSC_MODEL, keys.select(full), full, version=estimate.model_version).result
+        expected = client.complete_miss(PMSC_MODEL, pose.key_values, full, check_values=pose.check_values,
+                                        version=estimate.model_version).result
         np.testing.assert_allclose(load(blender_run, f"completed_{completed['frame']}"), expected.points,
                                    rtol=0, atol=1e-6)
     log = blender_run["misses"] / f"{PMSC_MODEL}.misses"
@@ -255,7 +262,7 @@ def test_a_baked_range_holds_the_streams_answers(blender_run):
     keys = client.describe_key_points(PMSC_MODEL)
     baked = animspace.read_pc2(blender_run["out"] / "soft_cache.pc2")
     assert (baked.frame_count, baked.point_count, baked.start_frame) == (len(frames), frames.shape[1], 1.0)
-    streamed = list(client.stream_key_points(PMSC_MODEL, keys.select(frames)))
+    streamed = list(client.stream_key_points(PMSC_MODEL, [keys.pose(frame) for frame in frames]))
     for i, result in enumerate(streamed):
         np.testing.assert_allclose(baked.frames[i], result.points, rtol=0, atol=1e-5, err_msg=f"frame {i + 1}")
 
@@ -290,10 +297,12 @@ def test_posing_from_the_armature_equals_evaluate_skeleton_pose(blender_run):
     # The soft cache, live on the posed arm, answered for the new pose (not the one before it).
     keys = client.describe_key_points(PMSC_MODEL)
     posed = client.evaluate_skeleton_pose(SKINNED_MODEL, _G(*POSES["handler"])).points
-    played = client.evaluate_key_points(PMSC_MODEL, keys.select(load(blender_run, "skinned_handler")))
+    handler = keys.pose(load(blender_run, "skinned_handler"))
+    played = client.evaluate_key_points(PMSC_MODEL, handler.key_values, check_values=handler.check_values)
     assert blender_run["results"]["chained"]["status"] == played.status
     np.testing.assert_allclose(load(blender_run, "chained"), played.points, rtol=0, atol=1e-6)
-    assert client.evaluate_key_points(PMSC_MODEL, keys.select(posed)).status == played.status
+    assert client.evaluate_key_points(PMSC_MODEL, keys.select(posed),
+                                      check_values=keys.select_check_values(posed)).status == played.status
     assert blender_run["results"]["skinned_handler_error"] == ""
     baked = animspace.read_pc2(blender_run["out"] / "skinned.pc2")
     assert baked.frame_count == 3 and baked.start_frame == 1.0

@@ -189,23 +189,27 @@ def test_blends_and_misses_follow_the_soft_cache_rule(client, arm_transforms):
     keys = client.describe_key_points("arm-pmsc-engine")
     found = {}
     # Elbow bends without the demo's shoulder swing and twist leave the training set: scan for a
-    # blend and a miss.
+    # blend and a miss. Each pose is sent as a client sends it, with its check values, so that the
+    # verdict is its error estimate against the model's ε (ModelVersion.epsilon_min/max).
     for elbow in np.linspace(0.1, 3.0, 30):
         G = arm_transforms(elbow)
         full = posed_arm(client, G)
-        estimate = client.evaluate_key_points("arm-pmsc-engine", full[keys.indices])
+        estimate = client.evaluate_key_points("arm-pmsc-engine", full[keys.indices],
+                                              check_values=full[keys.check_point_indices])
         found.setdefault(estimate.status, (G, full, estimate))
     assert {"BLEND", "MISS"} <= set(found)
     for status in ("BLEND", "MISS"):
         G, full, estimate = found[status]
         # Without a skeleton pose the server cannot run its engine: the estimate, flagged.
         assert estimate.full_evaluation_needed
-        e = estimate.key_point_error
+        e = estimate.error_estimate
+        assert e >= estimate.check_point_error * (1 - 1e-6)  # e = max(w·e_key, e_check)
         expected_alpha = 1.0 if status == "MISS" else (e - model.epsilon_min) / (model.epsilon_max - model.epsilon_min)
         assert estimate.blend_weight == pytest.approx(expected_alpha, rel=1e-4)
         assert (model.epsilon_min < e < model.epsilon_max) if status == "BLEND" else e >= model.epsilon_max
         # With the skeleton pose the server poses its engine and blends: α·full + (1−α)·estimate.
-        completed = client.evaluate_key_points("arm-pmsc-engine", full[keys.indices], skeleton_pose=G)
+        completed = client.evaluate_key_points("arm-pmsc-engine", full[keys.indices],
+                                               check_values=full[keys.check_point_indices], skeleton_pose=G)
         assert completed.status == status and not completed.full_evaluation_needed
         alpha = completed.blend_weight
         np.testing.assert_allclose(completed.points, alpha * full + (1 - alpha) * estimate.points, atol=2e-5)

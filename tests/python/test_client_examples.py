@@ -60,9 +60,11 @@ def test_replay_pc2_reports_every_frame_of_a_bending_arm(client, daemon, demo_ar
     report = json.loads(run_example("replay_pc2.py", str(path), "--model", "arm-pmsc-engine", "--server", daemon,
                                     "--json"))
     assert report["frames"] == len(frames) and report["hit"] + report["blend"] + report["miss"] == len(frames)
-    # The same key points through unary calls give the same verdicts.
+    # The same key points (and check points) through unary calls give the same verdicts.
     keys = client.describe_key_points("arm-pmsc-engine")
-    unary = client.evaluate_key_points("arm-pmsc-engine", frames[:, keys.indices])
+    unary = client.evaluate_key_points("arm-pmsc-engine", frames[:, keys.indices],
+                                       check_values=frames[:, keys.check_point_indices])
+    assert all(r.checked for r in unary)
     for status in ("HIT", "BLEND", "MISS"):
         assert report[status.lower()] == sum(r.status == status for r in unary)
     assert report["hit"] > 0 and report["miss"] > 0
@@ -155,6 +157,9 @@ def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path)
     lines = done.stdout.splitlines()
     assert lines[0] == "arm MESH_SEQUENCE 1154 points" and lines[5].startswith("cornell PMSC ")
     assert lines[6].startswith("HIT ")
+    # Check points overturn the dent's HIT (issue #35).
+    assert any(line.startswith("dent: HIT from the key points alone, ") and
+               (" MISS with e_check " in line or " BLEND with e_check " in line) for line in lines), lines
     assert any(line.split(" ")[:2] in (["cornell", "HIT"], ["cornell", "BLEND"], ["cornell", "MISS"])
                for line in lines), lines
     assert lines[-1].startswith("NOT_FOUND model 'no-such-model' is not loaded; models: arm, arm-animspace, ")

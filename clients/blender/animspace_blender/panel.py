@@ -82,7 +82,8 @@ class ANIMSPACE_PT_soft_cache(_SubPanel, bpy.types.Panel):
         box = layout.box()
         box.label(text=f"Verdict: {settings.status if settings.status != 'NONE' else '—'}"
                        + (" (logged)" if settings.logged else ""))
-        box.label(text=f"e_key: {settings.key_point_error:.6g}    α: {settings.blend_weight:.4g}")
+        check = f"{settings.check_point_error:.6g}" if settings.checked else "—"
+        box.label(text=f"e_key: {settings.key_point_error:.6g}    e_check: {check}    α: {settings.blend_weight:.4g}")
         box.label(text=f"Colour attribute: {mesh_data.VERDICT_ATTRIBUTE}")
 
 

@@ -15,9 +15,9 @@ ROLES = [
 
 STATUSES = [
     ("NONE", "—", "Not evaluated yet"),
-    ("HIT", "HIT", "e_key ≤ ε_min: the subspace estimate"),
-    ("BLEND", "BLEND", "ε_min < e_key < ε_max: α·full + (1−α)·estimate"),
-    ("MISS", "MISS", "e_key ≥ ε_max: the full values"),
+    ("HIT", "HIT", "error estimate e (e_key, joined by e_check) ≤ ε_min: the subspace estimate"),
+    ("BLEND", "BLEND", "ε_min < e < ε_max: α·full + (1−α)·estimate"),
+    ("MISS", "MISS", "e ≥ ε_max: the full values"),
 ]
 
 
@@ -83,6 +83,9 @@ class AnimspaceSceneSettings(bpy.types.PropertyGroup):
     status: EnumProperty(name="Verdict", items=STATUSES, default="NONE")
     key_point_error: FloatProperty(name="e_key", description="RMS key-point error of the last pose, model units",
                                    precision=6)
+    check_point_error: FloatProperty(name="e_check", description="Largest distance of the last pose's estimate "
+                                                                 "from its check points, model units", precision=6)
+    checked: BoolProperty(name="Checked", description="The last pose was judged with its check points")
     blend_weight: FloatProperty(name="α", description="Blend weight of the last pose", precision=4)
     logged: BoolProperty(name="Logged", description="The last completed miss went to the model's miss log")
 

@@ -2,10 +2,11 @@
 
 The source is a mesh whose vertices are the model's points in order (typically a sequence brought
 in with a Mesh Cache modifier reading a PC2 file). For a frame, the source's evaluated key points
-— K of its N vertices, ``describe_key_points`` order — go to the server (EvaluateKeyPoints; a
-range goes over one StreamKeyPoints call) and the whole answered pose is written into the output
-object, its vertices coloured by the verdict (HIT / BLEND / MISS, attribute ``animspace_verdict``)
-and e_key and α shown in the panel. On a BLEND or MISS the evaluated full mesh can be sent back
+— K of its N vertices, ``describe_key_points`` order — and its check points (issue #35: C more
+vertices the server checks the estimate at) go to the server (EvaluateKeyPoints; a range goes
+over one StreamKeyPoints call) and the whole answered pose is written into the output object, its
+vertices coloured by the verdict (HIT / BLEND / MISS, attribute ``animspace_verdict``) and e_key,
+e_check and α shown in the panel. On a BLEND or MISS the evaluated full mesh can be sent back
 (CompleteMiss): the answer is then α·full + (1−α)·estimate, and the server logs the pose for the
 next retrain ("train each night, better tomorrow").
 """
@@ -80,6 +81,8 @@ def _show(context, output: bpy.types.Object, result: animspace.PoseResult, logge
     settings = context.scene.animspace
     settings.status = result.status
     settings.key_point_error = result.key_point_error
+    settings.check_point_error = result.check_point_error
+    settings.checked = result.checked
     settings.blend_weight = result.blend_weight
     settings.logged = logged
 
@@ -90,11 +93,13 @@ def evaluate_frame(context, depsgraph) -> animspace.PoseResult:
     client = connection.client(context)
     keys = _keys(client, model)
     full = _full_pose(source, depsgraph, keys)
-    key_values = keys.select(full)
-    result = client.evaluate_key_points(model, key_values, version=keys.model_version)
+    pose = keys.pose(full)  # the key values and the check values: a HIT the check points overturn is none
+    result = client.evaluate_key_points(model, pose.key_values, check_values=pose.check_values,
+                                        version=keys.model_version)
     logged = False
     if result.full_evaluation_needed and context.scene.animspace.complete_misses:
-        completion = client.complete_miss(model, key_values, full, version=result.model_version)
+        completion = client.complete_miss(model, pose.key_values, full, check_values=pose.check_values,
+                                          version=result.model_version)
         result, logged = completion.result, completion.logged
     _show(context, _output(context, source, model), result, logged)
     return result
@@ -111,7 +116,8 @@ class ANIMSPACE_OT_soft_cache_frame(connection.ReportingOperator, bpy.types.Oper
         except animspace.RpcError:
             forget_key_points()  # a retrain or reload may have changed them: ask again next time
             raise
-        return f"{result.status}: e_key {result.key_point_error:.6g}, α {result.blend_weight:.4g}"
+        check = f", e_check {result.check_point_error:.6g}" if result.checked else ""
+        return f"{result.status}: e_key {result.key_point_error:.6g}{check}, α {result.blend_weight:.4g}"
 
 
 class ANIMSPACE_OT_soft_cache_bake(bake.range_bake("//soft_cache.pc2"), bpy.types.Operator):
@@ -128,23 +134,24 @@ class ANIMSPACE_OT_soft_cache_bake(bake.range_bake("//soft_cache.pc2"), bpy.type
         keys = _keys(client, model)
 
         # Blender's data is read on this thread only; the stream then sends what was collected.
-        def read() -> Tuple[np.ndarray, Optional[np.ndarray]]:
+        def read() -> Tuple[animspace.KeyPointPose, Optional[np.ndarray]]:
             full = _full_pose(source, context.evaluated_depsgraph_get(), keys)
-            return keys.select(full), (full if settings.complete_misses else None)
+            return keys.pose(full), (full if settings.complete_misses else None)
 
         # Live skinning keeps running: the source may be an animation-space mesh it poses.
         frames = bake.step_frames(scene, start, end, ("soft_cache",), read)
-        key_frames: List[np.ndarray] = [key_values for key_values, _ in frames]
+        poses: List[animspace.KeyPointPose] = [pose for pose, _ in frames]
         full_frames: List[Optional[np.ndarray]] = [full for _, full in frames]
 
         # The deadline bounds the whole stream: the per-call deadline, plus 50 ms a frame.
-        results = list(client.stream_key_points(model, key_frames, version=keys.model_version,
-                                                deadline_s=settings.deadline_s + 0.05 * len(key_frames)))
+        results = list(client.stream_key_points(model, poses, version=keys.model_version,
+                                                deadline_s=settings.deadline_s + 0.05 * len(poses)))
         points = []
         logged = 0
-        for key_values, full, result in zip(key_frames, full_frames, results):
+        for pose, full, result in zip(poses, full_frames, results):
             if result.full_evaluation_needed and full is not None:
-                completion = client.complete_miss(model, key_values, full, version=result.model_version)
+                completion = client.complete_miss(model, pose.key_values, full, check_values=pose.check_values,
+                                                  version=result.model_version)
                 result = completion.result
                 logged += completion.logged
             points.append(result.points)

@@ -32,6 +32,9 @@ CLI::App* add_evaluate(CLI::App& app, EvaluateArgs& a) {
   cmd->add_flag("--region-errors", a.region_errors, "Print per-region key-point errors (models with regions)");
   cmd->add_flag("--local-fail-through", a.local_fail_through,
                 "On a blend or miss, list the points that need the full calculation (those of the failing regions)");
+  cmd->add_flag("--without-check-points", a.without_check_points,
+                "Send the key values only, as a client from before check points: the verdict then rests on e_key "
+                "alone, against the model's key-only thresholds");
   cmd->add_flag("-q,--quiet", a.quiet, "Print the summary only, not one line per frame");
   cmd->add_flag("-v,--verbose", a.verbose, "One line per frame (the default; kept for older scripts)");
   cmd->add_option("-o,--output", a.output,
@@ -73,10 +76,19 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
   ProgressBar progress("evaluate " + a.model, selected.size());
   for (size_t first = 0; first < selected.size(); first += a.batch) {
     const size_t count = std::min<size_t>(a.batch, selected.size() - first);
-    std::vector<std::vector<float>> values;
+    // Check points are computed like key points (here: read from the frame) and sent beside them.
+    std::vector<std::vector<float>> values, checks;
     std::vector<KeyPointPose> poses;
-    for (size_t i = 0; i < count; ++i) values.push_back(keys.gather(frame_values(selected[first + i])));
-    for (const auto& v : values) poses.push_back({v, keys.channel_count});
+    for (size_t i = 0; i < count; ++i) {
+      values.push_back(keys.gather(frame_values(selected[first + i])));
+      checks.push_back(a.without_check_points ? std::vector<float>()
+                                              : keys.gather_check_values(frame_values(selected[first + i])));
+    }
+    for (size_t i = 0; i < count; ++i) {
+      KeyPointPose pose{values[i], keys.channel_count};
+      pose.check_values = checks[i];
+      poses.push_back(pose);
+    }
     const std::vector<PoseResult> results = client.evaluate_key_points_batch(a.model, poses, options);
     for (size_t i = 0; i < count; ++i) {
       const PoseResult& r = results[i];
@@ -100,6 +112,9 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
       nlohmann::json row = {{"frame", selected[first + i]},
                             {"status", cache_status_name(r.status)},
                             {"key_point_error", r.key_point_error},
+                            {"check_point_error", r.check_point_error},
+                            {"error_estimate", r.error_estimate},
+                            {"checked", r.checked},
                             {"blend_weight", r.blend_weight},
                             {"full_evaluation_needed", r.full_evaluation_needed},
                             {"max_point_error", comparable ? nlohmann::json(max_distance) : nlohmann::json()}};
@@ -118,8 +133,12 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
       if (!a.quiet && !json) {
         char error_text[32] = "n/a";
         if (comparable) std::snprintf(error_text, sizeof error_text, "%.6g", max_distance);
-        std::printf("frame %5d  %-5s  e_key %.6g  alpha %.3f  max point error %s%s\n", selected[first + i],
-                    cache_status_name(r.status), r.key_point_error, r.blend_weight, error_text,
+        char check_text[64] = "";
+        if (r.checked) {
+          std::snprintf(check_text, sizeof check_text, "  e_check %.6g  e %.6g", r.check_point_error, r.error_estimate);
+        }
+        std::printf("frame %5d  %-5s  e_key %.6g%s  alpha %.3f  max point error %s%s\n", selected[first + i],
+                    cache_status_name(r.status), r.key_point_error, check_text, r.blend_weight, error_text,
                     r.full_evaluation_needed ? "  (estimate: full values needed)" : "");
         if (a.local_fail_through && r.status != v1::CACHE_STATUS_HIT) {
           std::printf("         full points: %zu of %u\n", r.full_points.size(), r.points.point_count);

@@ -21,6 +21,7 @@ struct EvaluateArgs {
   uint32_t batch = 32;
   bool region_errors = false;
   bool local_fail_through = false;
+  bool without_check_points = false;  // key values only, as a client from before issue #35
   bool verbose = false;  // accepted for scripts written when one line per frame needed -v
   bool quiet = false;    // the summary only
   std::string output;    // .pc2 of the returned points, "" = none

@@ -145,13 +145,29 @@ int run_describe(const Globals& g, const std::string& name, uint64_t version) {
   for (const auto& v : model.versions()) {
     if (v.state() != animspace::v1::VERSION_STATE_AVAILABLE) continue;
     if (v.key_point_count() > 0) {
-      // What --json says too: the soft cache's thresholds on e_key and who computes a miss.
-      std::printf("  version %llu soft cache: ε_min %.6g, ε_max %.6g (RMS key-point error e_key, model units: hit "
-                  "below ε_min, miss above ε_max, blend between); fail-through %s\n",
+      // What --json says too: the soft cache's thresholds on the error estimate and who computes a miss.
+      const std::string estimate =
+          v.check_point_count() > 0
+              ? "error estimate max(w·e_key, e_check) of a pose sent with its " +
+                    std::to_string(v.check_point_count()) + " check points"
+              : std::string("RMS key-point error e_key");
+      std::printf("  version %llu soft cache: ε_min %.6g, ε_max %.6g (%s, model units: hit below ε_min, miss above "
+                  "ε_max, blend between); fail-through %s\n",
                   static_cast<unsigned long long>(v.version()), static_cast<double>(v.epsilon_min()),
-                  static_cast<double>(v.epsilon_max()), fail_through_label(v.fail_through(), v.server_engine()).c_str());
+                  static_cast<double>(v.epsilon_max()), estimate.c_str(),
+                  fail_through_label(v.fail_through(), v.server_engine()).c_str());
+      if (v.check_point_count() > 0) {
+        std::printf("  version %llu check points: %u (computed and sent like key points; a pose sent without them is "
+                    "judged on e_key against stricter key-only thresholds)\n",
+                    static_cast<unsigned long long>(v.version()), v.check_point_count());
+      }
+      // The server's own sentence; a server from before issue #35 sends none, and the model's
+      // metadata says what it can.
+      const std::string calibration = v.calibration_statement().empty()
+                                          ? animspace::cli::calibration_label(v.metadata())
+                                          : v.calibration_statement();
       std::printf("  version %llu calibration: %s\n", static_cast<unsigned long long>(v.version()),
-                  animspace::cli::calibration_label(v.metadata()).c_str());
+                  calibration.c_str());
     }
     std::printf("  version %llu metadata:\n", static_cast<unsigned long long>(v.version()));
     std::map<std::string, std::string> sorted(v.metadata().begin(), v.metadata().end());
@@ -244,6 +260,8 @@ int run_keys(const Globals& g, const std::string& model, uint64_t version) {
                                 {"model_version", keys.model_version},
                                 {"key_point_indices", keys.indices},
                                 {"key_point_regions", keys.regions},
+                                {"check_point_indices", keys.check_point_indices},
+                                {"check_point_regions", keys.check_point_regions},
                                 {"channel_count", keys.channel_count},
                                 {"control_point_count", keys.control_point_count},
                                 {"fail_through", fail_through}});
@@ -256,6 +274,14 @@ int run_keys(const Globals& g, const std::string& model, uint64_t version) {
     std::printf("%s%u", k == 0 ? "  " : (k % 16 == 0 ? "\n  " : " "), keys.indices[k]);
   }
   std::printf("\n");
+  if (!keys.check_point_indices.empty()) {
+    std::printf("%zu check points (computed and sent like key points; the projection never uses them):\n",
+                keys.check_point_indices.size());
+    for (size_t c = 0; c < keys.check_point_indices.size(); ++c) {
+      std::printf("%s%u", c == 0 ? "  " : (c % 16 == 0 ? "\n  " : " "), keys.check_point_indices[c]);
+    }
+    std::printf("\n");
+  }
   return 0;
 }
 

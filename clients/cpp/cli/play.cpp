@@ -57,7 +57,10 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   std::thread writer([&] {
     for (int frame : selected) {
       const std::vector<float> values = keys.gather(frame_values(frame));
-      if (!stream->write({values, keys.channel_count}, static_cast<uint64_t>(frame))) break;
+      const std::vector<float> checks = keys.gather_check_values(frame_values(frame));
+      KeyPointPose pose{values, keys.channel_count};
+      pose.check_values = checks;
+      if (!stream->write(pose, static_cast<uint64_t>(frame))) break;
     }
     stream->writes_done();
   });
@@ -72,8 +75,13 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       max_error = std::max(max_error, double(result->key_point_error));
       if (result->full_evaluation_needed) to_complete.push_back(result->sequence);
       if (a.verbose && !json) {
-        std::printf("frame %5llu  %-5s  e_key %.6g  alpha %.3f\n", static_cast<unsigned long long>(result->sequence),
-                    cache_status_name(result->status), result->key_point_error, result->blend_weight);
+        char check_text[64] = "";
+        if (result->checked) {
+          std::snprintf(check_text, sizeof check_text, "  e_check %.6g  e %.6g", result->check_point_error,
+                        result->error_estimate);
+        }
+        std::printf("frame %5llu  %-5s  e_key %.6g%s  alpha %.3f\n", static_cast<unsigned long long>(result->sequence),
+                    cache_status_name(result->status), result->key_point_error, check_text, result->blend_weight);
       }
       const uint64_t read = counts[1] + counts[2] + counts[3];
       progress.update(read, "hit rate " + std::to_string(100 * counts[1] / read) + "%");
@@ -94,7 +102,10 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
     for (uint64_t frame : to_complete) {
       const auto row = frame_values(static_cast<int>(frame));
       const std::vector<float> values = keys.gather(row);
-      completed += client.complete_miss(a.model, keys.model_version, {values, keys.channel_count}, row).logged ? 1 : 0;
+      const std::vector<float> checks = keys.gather_check_values(row);
+      KeyPointPose pose{values, keys.channel_count};
+      pose.check_values = checks;  // the same as evaluated, so the verdict repeats
+      completed += client.complete_miss(a.model, keys.model_version, pose, row).logged ? 1 : 0;
       completing.update(completed);
     }
   }

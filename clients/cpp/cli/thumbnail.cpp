@@ -107,6 +107,11 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
     const std::vector<float> values = keys.gather(frame);
     *request.mutable_key_points()->mutable_key_values() =
         make_point_array(values.data(), static_cast<uint32_t>(keys.indices.size()), D);
+    if (!keys.check_point_indices.empty()) {
+      const std::vector<float> checks = keys.gather_check_values(frame);
+      *request.mutable_key_points()->mutable_check_values() =
+          make_point_array(checks.data(), static_cast<uint32_t>(keys.check_point_indices.size()), D);
+    }
     request.mutable_model()->set_version(keys.model_version);
     if (a.heat) {
       *request.mutable_full_values() = make_point_array(frame.data(), keys.control_point_count, D);

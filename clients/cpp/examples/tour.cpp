@@ -1,12 +1,15 @@
 // The README's "Query it from C++", compiled and run by the tests against a real daemon so that
-// the snippet a newcomer pastes keeps working: key points in and the whole pose out, a miss
-// completed with the real full pose, then with the failing regions' points only, a sequence streamed with back-pressure, a skeleton pose, a LOD
-// mesh and a thumbnail. "Your posing engine" is the demo's expensive arm rig (core/demo), the one
+// the snippet a newcomer pastes keeps working: key points (and check points) in and the whole
+// pose out, a HIT of the key points alone overturned by the check points, a miss completed with
+// the real full pose, then with the failing regions' points only, a sequence streamed with
+// back-pressure, a skeleton pose, a LOD mesh and a thumbnail. "Your posing engine" is the demo's expensive arm rig (core/demo), the one
 // the demo's arm-pmsc model was trained on.
 //
 //   build/bin/animspace-client-tour [SERVER [PNG]]   (default server 127.0.0.1:50051; the
 //                                                     thumbnail is saved only when PNG is given)
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -62,11 +65,38 @@ int main(int argc, char** argv) try {
   unseen.elbow_angle_rad = 1.0;
   unseen.shoulder_angle_rad = 3 * animspace::demo::kDemoShoulderSwingRad;
   const std::vector<float> full = full_pose(rig, unseen);
-  // A real engine computes only the key points; the demo rig computes all and picks them.
+  // A real engine computes only the key points and the check points (keys.check_point_indices:
+  // points the projection never uses, where the server measures the estimate's error itself);
+  // the demo rig computes all and picks them.
   const std::vector<float> values = keys.gather(full);
-  const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", {values, keys.channel_count});
-  std::printf("%s e_key %.4g alpha %.3f: %u points\n", animspace::cache_status_name(result.status),
-              result.key_point_error, result.blend_weight, result.points.point_count);
+  const std::vector<float> checks = keys.gather_check_values(full);  // empty for a model without check points
+  const animspace::KeyPointPose posed_keys{.key_values = values, .channel_count = keys.channel_count,
+                                           .check_values = checks};
+  const animspace::PoseResult result = client.evaluate_key_points("arm-pmsc", posed_keys);
+  std::printf("%s e_key %.4g e_check %.4g alpha %.3f: %u points\n", animspace::cache_status_name(result.status),
+              result.key_point_error, result.check_point_error, result.blend_weight, result.points.point_count);
+
+  // What the check points are for: a dent the training never saw (a trained pose pressed in 0.05
+  // deep within 0.08 of the first check point, as a collision might) leaves the key points almost
+  // where the subspace puts them. From the key points alone (a client from before check points) it is a
+  // HIT; with its check values the server measures the dent and overturns it.
+  if (!keys.check_point_indices.empty()) {
+    const std::vector<float> trained = full_pose(rig, animspace::demo::demo_pose(14.0 / 120));  // an even frame
+    std::vector<float> dented = trained;
+    const float* centre = &trained[3 * size_t{keys.check_point_indices[0]}];
+    for (size_t i = 0; i < dented.size() / 3; ++i) {
+      const float d = std::hypot(trained[3 * i] - centre[0], trained[3 * i + 1] - centre[1],
+                                 trained[3 * i + 2] - centre[2]);
+      dented[3 * i + 2] -= 0.05f * std::max(0.0f, 1 - d / 0.08f);
+    }
+    const std::vector<float> dent_keys = keys.gather(dented), dent_checks = keys.gather_check_values(dented);
+    const animspace::PoseResult alone = client.evaluate_key_points("arm-pmsc", {dent_keys, keys.channel_count});
+    const animspace::PoseResult checked = client.evaluate_key_points(
+        "arm-pmsc", {.key_values = dent_keys, .channel_count = keys.channel_count, .check_values = dent_checks});
+    std::printf("dent: %s from the key points alone (e_key %.3g), %s with its check points (e_check %.3g)\n",
+                animspace::cache_status_name(alone.status), alone.key_point_error,
+                animspace::cache_status_name(checked.status), checked.check_point_error);
+  }
   // result.points.values is N×3 row-major float32, e.g.
   //   Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> v(
   //       result.points.values.data(), result.points.point_count, 3);
@@ -77,14 +107,15 @@ int main(int argc, char** argv) try {
   animspace::EvaluateOptions compact_options;
   compact_options.points_encoding = animspace::v1::POINT_ENCODING_FIXED16;
   const animspace::PoseResult compact =
-      client.evaluate_key_points("arm-pmsc", {values, keys.channel_count}, compact_options);
+      client.evaluate_key_points("arm-pmsc", posed_keys, compact_options);
   std::printf("fixed16: %s, %u points within %.3g of float32\n", animspace::cache_status_name(compact.status),
               compact.points.point_count, compact.points.max_error);
 
   // On a blend or miss the client's own engine supplies the full pose (client fail-through); the
-  // server checks it repeats the key values, answers with it and logs it for retraining.
+  // server checks it repeats the key values, answers with it and logs it for retraining. The pose
+  // repeats its check values, so the verdict (and α) is the one evaluated.
   if (result.full_evaluation_needed) {
-    const auto completed = client.complete_miss("arm-pmsc", result.model_version, {values, keys.channel_count}, full);
+    const auto completed = client.complete_miss("arm-pmsc", result.model_version, posed_keys, full);
     std::printf("completed: %s, logged for retraining: %s\n", animspace::cache_status_name(completed.result.status),
                 completed.logged ? "yes" : "no");
   }
@@ -97,17 +128,18 @@ int main(int argc, char** argv) try {
   twisted.forearm_twist_rad *= 1.5;
   const std::vector<float> bent = full_pose(rig, twisted);
   const std::vector<float> bent_keys = keys.gather(bent);
+  const std::vector<float> bent_checks = keys.gather_check_values(bent);
+  const animspace::KeyPointPose bent_pose{.key_values = bent_keys, .channel_count = keys.channel_count,
+                                          .check_values = bent_checks};
   animspace::EvaluateOptions local_options;
   local_options.local_fail_through = true;
-  const animspace::PoseResult local =
-      client.evaluate_key_points("arm-pmsc", {bent_keys, keys.channel_count}, local_options);
+  const animspace::PoseResult local = client.evaluate_key_points("arm-pmsc", bent_pose, local_options);
   if (!local.full_points.empty()) {
     std::vector<float> needed;  // a real engine evaluates just these points
     for (uint32_t i : local.full_points) {
       needed.insert(needed.end(), bent.begin() + 3 * i, bent.begin() + 3 * (i + 1));
     }
-    const auto completed = client.complete_miss("arm-pmsc", local.model_version, {bent_keys, keys.channel_count},
-                                                needed, local.full_points);
+    const auto completed = client.complete_miss("arm-pmsc", local.model_version, bent_pose, needed, local.full_points);
     std::printf("local fail-through: %zu of %u points computed, logged for retraining: %s\n",
                 local.full_points.size(), local.points.point_count, completed.logged ? "yes" : "no");
   }
@@ -121,7 +153,11 @@ int main(int argc, char** argv) try {
   std::thread writer([&] {
     for (uint64_t frame = 0; frame < 100; ++frame) {
       const auto posed = full_pose(rig, animspace::demo::demo_pose(static_cast<double>(frame) / 100));
-      if (!stream->write({keys.gather(posed), keys.channel_count}, frame)) break;
+      const std::vector<float> frame_keys = keys.gather(posed), frame_checks = keys.gather_check_values(posed);
+      if (!stream->write({.key_values = frame_keys, .channel_count = keys.channel_count, .check_values = frame_checks},
+                         frame)) {
+        break;
+      }
     }
     stream->writes_done();
   });

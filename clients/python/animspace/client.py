@@ -323,7 +323,8 @@ class Client:
 
     @_renamed_keywords(timeout="deadline_s")
     def describe_key_points(self, model: str, version: int = 0, *, deadline_s: Optional[float] = None) -> KeyPoints:
-        """The key points a posing engine must compute for a PMSC model, in request order.
+        """The key points (and check points) a posing engine must compute for a PMSC model, in
+        request order.
 
         Raises:
             FailedPrecondition: for a model without key points (not PMSC).
@@ -333,6 +334,7 @@ class Client:
 
     @_renamed_keywords(timeout="deadline_s")
     def evaluate_key_points(self, model: str, key_values: npt.ArrayLike, *, version: int = 0,
+                            check_values: Optional[npt.ArrayLike] = None,
                             skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
                             include_region_errors: bool = False, omit_points: bool = False,
                             local_fail_through: bool = False, points_encoding: str = "float32",
@@ -343,6 +345,11 @@ class Client:
             key_values: K×D key values in ``describe_key_points`` order for one pose (returns one
                 PoseResult), or P×K×D for a batch of P poses (returns a list, request order).
             version: pin the version the key points belong to (``KeyPoints.model_version``).
+            check_values: C×D check values in ``KeyPoints.check_point_indices`` order, computed like
+                the key values (P×C×D with a batch; ``KeyPoints.select_check_values`` gathers them
+                from full frames): the server measures the estimate's error there too, and a HIT the
+                key points alone give becomes BLEND or MISS when the check points disagree. None
+                (or C = 0): the verdict rests on e_key alone.
             skeleton_pose: the skeleton pose(s) the key values come from — B×3×4 / B×4×4 for one
                 pose, P×B×3×4 / P×B×4×4 for a batch — so that a model with a server posing engine
                 (fail-through "SERVER") completes blends and misses itself.
@@ -362,7 +369,8 @@ class Client:
             ValueError: for a wrong shape or an unknown ``points_encoding``, naming the argument
                 (nothing is sent).
             InvalidArgument: a key point count or channel count the model does not expect, or
-                non-finite values (the message names ``poses[i].key_values``).
+                non-finite values (the message names ``poses[i].key_values``); the same for
+                ``poses[i].check_values``, or check values for a model without check points.
             ResourceExhausted: a batch over the server's ``max_batch_poses``.
         """
         values = wire.as_float32("key_values", key_values)
@@ -382,6 +390,13 @@ class Client:
             transforms = transforms if batch else transforms[np.newaxis]
         if space not in wire.SPACES:
             raise ValueError(f"space: expected 'global' or 'local', got {space!r}")
+        checks: Optional[np.ndarray] = None
+        if check_values is not None:
+            checks = wire.as_points("check_values", check_values, ndim=3 if batch else 2, points_label="C")
+            if batch and checks.shape[0] != poses.shape[0]:
+                raise ValueError(f"check_values: expected {poses.shape[0]} poses like key_values, got shape "
+                                 f"{wire.shape_text(checks.shape)}")
+            checks = checks if batch else checks[np.newaxis]
         request = poses_pb2.EvaluateKeyPointsRequest(model=_model_ref(model, version),
                                                      include_region_errors=include_region_errors,
                                                      omit_points=omit_points,
@@ -391,6 +406,8 @@ class Client:
         for i in range(poses.shape[0]):
             pose = request.poses.add()
             pose.key_values.CopyFrom(_point_array(poses[i]))
+            if checks is not None and checks.shape[1] > 0:
+                pose.check_values.CopyFrom(_point_array(checks[i]))
             if transforms is not None:
                 pose.skeleton_pose.CopyFrom(wire.skeleton_pose(f"skeleton_pose[{i}]", transforms[i], space))
         response = self._unary("EvaluateKeyPoints", self._poses.EvaluateKeyPoints, request, deadline_s)
@@ -401,7 +418,8 @@ class Client:
         return results if batch else results[0]
 
     def relight(self, model: str, lights: Union[PointLight, Sequence[PointLight], npt.ArrayLike], *,
-                key_values: Optional[npt.ArrayLike] = None, version: int = 0, include_region_errors: bool = False,
+                key_values: Optional[npt.ArrayLike] = None, check_values: Optional[npt.ArrayLike] = None,
+                version: int = 0, include_region_errors: bool = False,
                 omit_points: bool = False, local_fail_through: bool = False,
                 deadline_s: Optional[float] = None) -> PoseResult:
         """One frame of an illumination model (``ModelVersion.server_engine`` "ILLUMINATION";
@@ -411,7 +429,10 @@ class Client:
             lights: a PointLight, a sequence of them, or an L×3 array of positions (the model's
                 training intensity).
             key_values: K×3 indirect radiance at the key points, if the caller gathered them; None
-                lets the server gather them (the cheap part of the full calculation).
+                lets the server gather them and the check points' (the cheap part of the full
+                calculation).
+            check_values: C×3 radiance at the check points, gathered with ``key_values`` (only
+                with them).
             Others as ``evaluate_key_points``. On a blend or miss the server gathers the full
                 values for ``lights`` itself (fail-through "SERVER").
 
@@ -428,6 +449,11 @@ class Client:
         pose.light_set.CopyFrom(messages.light_set("lights", lights))
         if key_values is not None:
             pose.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
+        elif check_values is not None:
+            raise ValueError("check_values: give them with key_values (without, the server gathers both)")
+        checks = messages.check_point_array("check_values", check_values)
+        if checks is not None:
+            pose.check_values.CopyFrom(checks)
         response = self._unary("EvaluateKeyPoints", self._poses.EvaluateKeyPoints, request, deadline_s)
         if len(response.results) != 1:
             raise ProtocolError("EvaluateKeyPoints", f"{len(response.results)} results for 1 pose")
@@ -444,7 +470,8 @@ class Client:
 
         Frames are sent as the server takes them (gRPC flow control), so ``frames`` may be a lazy
         generator reading a file or a live posing engine. Each frame is a K×D array of key
-        values, or a :class:`KeyPointPose` that also carries its skeleton pose. The stream is
+        values, or a :class:`KeyPointPose` that also carries its check values and its skeleton pose
+        (``KeyPoints.pose`` builds one from a full frame). The stream is
         pinned to the version its first frame resolves (a retrain never changes the key points
         under it); frame i is numbered ``first_sequence + i`` and every result's ``sequence`` is
         checked against it.
@@ -494,14 +521,15 @@ class Client:
 
     @_renamed_keywords(timeout="deadline_s")
     def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
-                      full_points: Optional[npt.ArrayLike] = None, points_encoding: str = "float32",
-                      deadline_s: Optional[float] = None) -> MissCompletion:
+                      check_values: Optional[npt.ArrayLike] = None, full_points: Optional[npt.ArrayLike] = None,
+                      points_encoding: str = "float32", deadline_s: Optional[float] = None) -> MissCompletion:
         """Completes a blend or miss with the full pose from the client's posing engine
         (fail-through "CLIENT"), and logs it for retraining.
 
-        Stateless: pass the same K×D ``key_values`` that were evaluated, the N×D ``full_values``,
-        and the ``version`` that produced the estimate (``PoseResult.model_version``). The answer
-        is α·full + (1−α)·estimate with the α of this pose.
+        Stateless: pass the same K×D ``key_values`` (and C×D ``check_values``, if any) that were
+        evaluated, the N×D ``full_values``, and the ``version`` that produced the estimate
+        (``PoseResult.model_version``). The answer is α·full + (1−α)·estimate with the α of this
+        pose.
 
         Local fail-through: with ``full_points`` (ascending point indices, at least the
         ``PoseResult.full_points`` of this pose), ``full_values`` holds only those points' values
@@ -529,9 +557,12 @@ class Client:
             if points.size > 0 and full.shape[0] != points.size:
                 raise ValueError(f"full_values: expected {points.size} rows, one per full_points entry, got "
                                  f"{full.shape[0]}")
+        checks = messages.check_point_array("check_values", check_values)
         request = poses_pb2.CompleteMissRequest(model=_model_ref(model, version), key_values=_point_array(keys),
                                                 full_values=_point_array(full),
                                                 full_points=[int(p) for p in points], points_encoding=encoding)
+        if checks is not None:
+            request.check_values.CopyFrom(checks)
         response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, deadline_s)
         with _decoding("CompleteMiss"):
             return MissCompletion(result=PoseResult.from_proto(response.result, "result.points"),
@@ -661,7 +692,8 @@ class Client:
     @_renamed_keywords(timeout="deadline_s", pixel_tolerance="tolerance_px")
     def render_thumbnail(self, model: str, width_px: int, height_px: int, *, version: int = 0,
                          key_values: Optional[npt.ArrayLike] = None, skeleton_pose: Optional[npt.ArrayLike] = None,
-                         space: str = "global", sequence_frame: Optional[int] = None, camera: Optional[Camera] = None,
+                         check_values: Optional[npt.ArrayLike] = None, space: str = "global",
+                         sequence_frame: Optional[int] = None, camera: Optional[Camera] = None,
                          background_rgba: Optional[Sequence[float]] = None, shading: Optional[str] = None,
                          samples: int = 0, show_key_points: bool = False, show_wireframe: bool = False,
                          full_values: Optional[npt.ArrayLike] = None, tolerance_px: float = 0.0,
@@ -673,7 +705,8 @@ class Client:
 
         What is drawn: the rest pose; or ``key_values`` (K×D) through the soft cache (PMSC; with
         ``skeleton_pose`` too for a server posing engine; the verdict comes back in
-        ``Thumbnail.pose``); or ``skeleton_pose`` alone through the animation-space model; or
+        ``Thumbnail.pose``, judged with ``check_values`` (C×D) when given); or ``skeleton_pose``
+        alone through the animation-space model; or
         stored frame ``sequence_frame``.
 
         Args:
@@ -700,6 +733,8 @@ class Client:
         """
         if sequence_frame is not None and (key_values is not None or skeleton_pose is not None):
             raise ValueError("sequence_frame: give it alone, not with key_values or skeleton_pose")
+        if check_values is not None and key_values is None:
+            raise ValueError("check_values: give them with the key_values they were posed with")
         request = render_pb2.RenderThumbnailRequest(model=_model_ref(model, version),
                                                     width_px=wire.as_uint("width_px", width_px),
                                                     height_px=wire.as_uint("height_px", height_px),
@@ -714,6 +749,9 @@ class Client:
             request.illumination.CopyFrom(illumination.to_proto())
         if key_values is not None:
             request.key_points.key_values.CopyFrom(wire.point_array("key_values", key_values, points_label="K"))
+            checks = messages.check_point_array("check_values", check_values)
+            if checks is not None:
+                request.key_points.check_values.CopyFrom(checks)
             if skeleton_pose is not None:
                 request.key_points.skeleton_pose.CopyFrom(wire.skeleton_pose("skeleton_pose", skeleton_pose, space))
         elif skeleton_pose is not None:
@@ -801,7 +839,8 @@ class _FrameRequests:
                                                   points_encoding=self._points_encoding)
                 if i == 0:
                     message.model.CopyFrom(self._model)  # later frames keep the stream's model
-                message.pose.CopyFrom(KeyPointPose(values, pose.skeleton_pose, pose.space).to_proto(f"frames[{i}]"))
+                message.pose.CopyFrom(
+                    KeyPointPose(values, pose.skeleton_pose, pose.space, pose.check_values).to_proto(f"frames[{i}]"))
                 self.sent += 1
                 yield message
         except Exception as error:  # noqa: BLE001 — re-raised on the caller's thread

@@ -146,11 +146,16 @@ class IlluminationView:
 
 @dataclass(frozen=True, eq=False)
 class KeyPointPose:
-    """One frame for the soft cache: K×D key values, and optionally the skeleton pose they came from.
+    """One frame for the soft cache: K×D key values, optionally its C×D check values and the
+    skeleton pose they came from.
 
-    The skeleton pose (B×3×4 or B×4×4, in ``space``) lets a model with a server posing engine
-    (fail-through ``SERVER``) complete a blend or miss itself (Meyer & Anderson 2007 §2: the
-    full calculation runs only when the cache cannot be trusted).
+    The check values (``KeyPoints.check_point_indices`` order, computed like the key values;
+    ``KeyPoints.pose`` gathers both from a full frame) let the server measure the estimate's error
+    where the key points are blind: a HIT the key points alone give can become BLEND or MISS.
+    None (or an empty array): the verdict rests on e_key alone. The skeleton pose (B×3×4 or
+    B×4×4, in ``space``) lets a model with a server posing engine (fail-through ``SERVER``)
+    complete a blend or miss itself (Meyer & Anderson 2007 §2: the full calculation runs only when
+    the cache cannot be trusted).
     """
 
     __repr__ = compact_repr
@@ -158,15 +163,30 @@ class KeyPointPose:
     key_values: npt.ArrayLike
     skeleton_pose: Optional[npt.ArrayLike] = None
     space: str = "global"
+    check_values: Optional[npt.ArrayLike] = None
 
     def to_proto(self, name: str) -> poses_pb2.KeyPointPose:
         """The pose as a message; ``name`` (e.g. "frames[3]") prefixes the argument names in
         shape errors."""
-        if self.skeleton_pose is None:
+        if self.skeleton_pose is None and self.check_values is None:
             return poses_pb2.KeyPointPose(key_values=wire.point_array(name, self.key_values, points_label="K"))
-        return poses_pb2.KeyPointPose(
-            key_values=wire.point_array(f"{name}.key_values", self.key_values, points_label="K"),
-            skeleton_pose=wire.skeleton_pose(f"{name}.skeleton_pose", self.skeleton_pose, self.space))
+        pose = poses_pb2.KeyPointPose(
+            key_values=wire.point_array(f"{name}.key_values", self.key_values, points_label="K"))
+        checks = check_point_array(f"{name}.check_values", self.check_values)
+        if checks is not None:
+            pose.check_values.CopyFrom(checks)
+        if self.skeleton_pose is not None:
+            pose.skeleton_pose.CopyFrom(wire.skeleton_pose(f"{name}.skeleton_pose", self.skeleton_pose, self.space))
+        return pose
+
+
+def check_point_array(name: str, check_values: Optional[npt.ArrayLike]) -> Optional[common_pb2.PointArray]:
+    """C×D check values as a ``PointArray``, or None for no check values (None, or no points: a
+    model without check points, whose ``KeyPoints.select_check_values`` is C = 0 rows)."""
+    if check_values is None:
+        return None
+    array = wire.as_points(name, check_values, points_label="C")
+    return None if array.shape[0] == 0 else wire.point_array(name, array, points_label="C")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -181,8 +201,15 @@ class ModelVersion:
     "CROSS_PMSC", "ANIMATION_SPACE" or "MESH_SEQUENCE"; ``fail_through`` is "SERVER", "CLIENT",
     "IMPOSSIBLE" or "UNSPECIFIED" (a model without a soft cache); with "SERVER", ``server_engine``
     says which full calculation the server runs: "ANIMATION_SPACE" (send skeleton poses) or
-    "ILLUMINATION" (send lights), else "UNSPECIFIED". ε_min ≤ ε_max bound the RMS key-point error
-    of a hit and of a blend (Meyer & Anderson 2006 §5), model units.
+    "ILLUMINATION" (send lights), else "UNSPECIFIED". ε_min ≤ ε_max bound the error estimate of a
+    hit and of a blend (Meyer & Anderson 2006 §5; ``PoseResult.error_estimate``), model units.
+
+    ``check_point_count`` is C, the check points a client sends beside the key points (0 for a
+    model without them). ``false_hit_rate`` is the δ ε was calibrated for (0: not calibrated),
+    ``calibration_bad_samples`` the over-tolerance samples it rests on,
+    ``calibration_guarantee_holds`` whether they back δ, and ``calibration_statement`` the
+    server's sentence for operators: what a HIT means for this model, or why nothing is
+    guaranteed.
     """
 
     version: int
@@ -206,6 +233,11 @@ class ModelVersion:
     metadata: Dict[str, str] = field(hash=False)
     sections: Tuple[str, ...]
     server_engine: str = "UNSPECIFIED"
+    check_point_count: int = 0
+    false_hit_rate: float = 0.0
+    calibration_bad_samples: int = 0
+    calibration_guarantee_holds: bool = False
+    calibration_statement: str = ""
 
     @classmethod
     def from_proto(cls, m: models_pb2.ModelVersion) -> "ModelVersion":
@@ -217,7 +249,11 @@ class ModelVersion:
                    epsilon_min=m.epsilon_min, epsilon_max=m.epsilon_max, fail_through=_fail_through(m.fail_through),
                    file_size_bytes=m.file_size_bytes, loaded_at_unix_s=m.loaded_at_unix_s,
                    metadata=dict(m.metadata), sections=tuple(m.sections),
-                   server_engine=enum_name(models_pb2.ServerEngine, m.server_engine, "SERVER_ENGINE_"))
+                   server_engine=enum_name(models_pb2.ServerEngine, m.server_engine, "SERVER_ENGINE_"),
+                   check_point_count=m.check_point_count, false_hit_rate=m.false_hit_rate,
+                   calibration_bad_samples=m.calibration_bad_samples,
+                   calibration_guarantee_holds=m.calibration_guarantee_holds,
+                   calibration_statement=m.calibration_statement)
 
 
 @dataclass(frozen=True)
@@ -334,6 +370,10 @@ class KeyPoints:
     ``indices`` (K,) uint32 index the model's full point set (for cross-PMSC, its control point
     set of ``control_point_count`` points); fiducial seeds come first (Meyer & Anderson 2007 §2.3).
     ``regions`` (K,) uint32 is empty unless the model has regions (local fail-through).
+    ``check_point_indices`` (C,) uint32 index the same point set: check points, computed like key
+    points and sent as ``check_values`` in this order (the projection never uses them; the server
+    measures the estimate's error there, and a HIT the key points alone give can become BLEND or
+    MISS); empty for a model without check points. ``check_point_regions`` (C,) as ``regions``.
     Pin ``model_version`` in later calls to keep using these indices across a retrain.
     """
 
@@ -345,11 +385,25 @@ class KeyPoints:
     control_point_count: int
     regions: np.ndarray
     fail_through: str
+    check_point_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
+    check_point_regions: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
 
     @property
     def count(self) -> int:
         """K, the number of key points."""
         return int(self.indices.shape[0])
+
+    @property
+    def check_point_count(self) -> int:
+        """C, the number of check points (0 for a model without them)."""
+        return int(self.check_point_indices.shape[0])
+
+    def _gather(self, points: npt.ArrayLike, indices: np.ndarray) -> np.ndarray:
+        array = np.asarray(points, dtype=np.float32)
+        if array.ndim not in (2, 3) or array.shape[-2] != self.control_point_count:
+            want = f"({self.control_point_count}, D) or (P, {self.control_point_count}, D)"
+            raise ValueError(f"points: expected shape {want}, got {wire.shape_text(array.shape)}")
+        return np.ascontiguousarray(array[..., indices.astype(np.intp), :])
 
     def select(self, points: npt.ArrayLike) -> np.ndarray:
         """The key values of full pose(s): ``points[..., indices, :]`` of N×D or P×N×D float32.
@@ -357,22 +411,31 @@ class KeyPoints:
         Raises:
             ValueError: when ``points`` does not hold ``control_point_count`` points.
         """
-        array = np.asarray(points, dtype=np.float32)
-        if array.ndim not in (2, 3) or array.shape[-2] != self.control_point_count:
-            want = f"({self.control_point_count}, D) or (P, {self.control_point_count}, D)"
-            raise ValueError(f"points: expected shape {want}, got {wire.shape_text(array.shape)}")
-        return np.ascontiguousarray(array[..., self.indices.astype(np.intp), :])
+        return self._gather(points, self.indices)
+
+    def select_check_values(self, points: npt.ArrayLike) -> np.ndarray:
+        """The check values of full pose(s): ``points[..., check_point_indices, :]`` (C×D or P×C×D
+        float32; C = 0 rows for a model without check points). Raises as ``select``."""
+        return self._gather(points, self.check_point_indices)
+
+    def pose(self, points: npt.ArrayLike, skeleton_pose: Optional[npt.ArrayLike] = None,
+             space: str = "global") -> KeyPointPose:
+        """One full frame (N×D) as the pose a client sends: its key values and its check values."""
+        return KeyPointPose(self.select(points), skeleton_pose, space, self.select_check_values(points))
 
     @classmethod
     def from_proto(cls, m: poses_pb2.DescribeKeyPointsResponse) -> "KeyPoints":
         return cls(model_version=m.model_version, indices=np.array(m.key_point_indices, dtype=np.uint32),
                    channel_count=m.channel_count, control_point_count=m.control_point_count,
-                   regions=np.array(m.key_point_regions, dtype=np.uint32), fail_through=_fail_through(m.fail_through))
+                   regions=np.array(m.key_point_regions, dtype=np.uint32), fail_through=_fail_through(m.fail_through),
+                   check_point_indices=np.array(m.check_point_indices, dtype=np.uint32),
+                   check_point_regions=np.array(m.check_point_regions, dtype=np.uint32))
 
 
 @dataclass(frozen=True)
 class RegionError:
-    """Key-point error of one region (local fail-through: only failing regions need the full pose)."""
+    """Error estimate of one region (local fail-through: only failing regions need the full pose):
+    e_key over the region's key points, joined by its check points' e_check when they were sent."""
 
     region: int
     key_point_error: float
@@ -391,8 +454,13 @@ class PoseResult:
         points: N×D float32: the subspace estimate for a hit, α·full + (1−α)·estimate for a blend,
             the full values for a miss — or the estimate with ``full_evaluation_needed`` when no
             full values were available. None when the request asked to omit points.
-        status: "HIT" (e_key ≤ ε_min), "BLEND" or "MISS" (e_key ≥ ε_max).
+        status: "HIT" (e ≤ ε_min), "BLEND" or "MISS" (e ≥ ε_max), e = ``error_estimate``.
         key_point_error: e_key, RMS over key points and channels of f_key − f̂_key, model units.
+        check_point_error: e_check, the largest distance ‖f_c − f̂_c‖ over the check points sent
+            (0 unless ``checked``), model units.
+        error_estimate: what the verdict compared with ε: max(w·e_key, e_check) when ``checked``,
+            else e_key (against the model's stricter key-only thresholds when it has check points).
+        checked: the pose was sent with check values (and the model has check points).
         blend_weight: α ∈ [0, 1]: 0 for a hit, 1 for a miss.
         model_version: the version that answered.
         full_evaluation_needed: a blend or miss whose points are still the estimate: compute the
@@ -422,6 +490,9 @@ class PoseResult:
     full_points: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
     full_point_blend_weights: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     points_max_error: float = 0.0
+    check_point_error: float = 0.0
+    error_estimate: float = 0.0
+    checked: bool = False
 
     @property
     def hit(self) -> bool:
@@ -436,7 +507,8 @@ class PoseResult:
                    region_errors=tuple(RegionError.from_proto(r) for r in m.region_errors), sequence=m.sequence,
                    full_points=np.array(m.full_points, dtype=np.uint32),
                    full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32),
-                   points_max_error=m.points.max_error)
+                   points_max_error=m.points.max_error, check_point_error=m.check_point_error,
+                   error_estimate=m.error_estimate, checked=m.checked)
 
 
 @dataclass(frozen=True, eq=False)

@@ -68,22 +68,24 @@ def main(argv: Optional[list] = None) -> int:
                   f"{keys.model_version} expects {keys.control_point_count}", file=sys.stderr)
             return 2
 
-        def key_values() -> Iterator[np.ndarray]:
-            # Lazy: one frame's K key points at a time, however long the cache.
+        def poses() -> Iterator[animspace.KeyPointPose]:
+            # Lazy: one frame's K key points and C check points at a time, however long the cache.
             for f in frame_numbers:
-                yield keys.select(cache.frames[f])
+                yield keys.pose(cache.frames[f])
 
         counts = {"HIT": 0, "BLEND": 0, "MISS": 0}
         errors = []
         needed = 0
         # Pin the version the key indices belong to; only the verdicts are needed here.
         for f, result in zip(frame_numbers, client.stream_key_points(
-                args.model, key_values(), version=keys.model_version, omit_points=True, deadline_s=args.deadline_s)):
+                args.model, poses(), version=keys.model_version, omit_points=True, deadline_s=args.deadline_s)):
             counts[result.status] = counts.get(result.status, 0) + 1
             errors.append(result.key_point_error)
             needed += result.full_evaluation_needed
             if args.verbose and not args.json:
-                print(f"frame {f}: {result.status} e_key {result.key_point_error:.6g} α {result.blend_weight:.3f}")
+                check = f" e_check {result.check_point_error:.6g}" if result.checked else ""
+                print(f"frame {f}: {result.status} e_key {result.key_point_error:.6g}{check} "
+                      f"α {result.blend_weight:.3f}")
 
     frames = len(errors)
     rate = {status: (count / frames if frames else 0.0) for status, count in counts.items()}
