@@ -98,7 +98,8 @@ grpc::Status decode_check_values(const LoadedModel& model, bool present, const v
 }
 
 grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
-                                const Eigen::VectorXf& key_values, Eigen::VectorXf& out) {
+                                const Eigen::VectorXf& key_values, const Eigen::VectorXf& check_values,
+                                Eigen::VectorXf& out) {
   const pmsc::PmscModel& m = *model.pmsc;
   if (grpc::Status s = decode_points(values, field, static_cast<uint32_t>(m.point_count),
                                      static_cast<uint32_t>(m.channel_count), "points", out);
@@ -110,13 +111,16 @@ grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& 
   if (auto consistent = pmsc::check_full_values_at_keys(m, key_values, out); !consistent.ok()) {
     return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
   }
+  if (auto consistent = pmsc::check_full_values_at_checks(m, check_values, out); !consistent.ok()) {
+    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
+  }
   return grpc::Status::OK;
 }
 
 grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
-                                const Eigen::VectorXf& key_values, const std::vector<int>& points,
-                                Eigen::VectorXf& out) {
-  if (points.empty()) return decode_full_values(model, values, field, key_values, out);
+                                const Eigen::VectorXf& key_values, const Eigen::VectorXf& check_values,
+                                const std::vector<int>& points, Eigen::VectorXf& out) {
+  if (points.empty()) return decode_full_values(model, values, field, key_values, check_values, out);
   const pmsc::PmscModel& m = *model.pmsc;
   if (grpc::Status s = decode_points(values, field, static_cast<uint32_t>(points.size()),
                                      static_cast<uint32_t>(m.channel_count), "points (one per full_points entry)", out);
@@ -125,6 +129,9 @@ grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& 
   }
   if (m.cross) return grpc::Status::OK;
   if (auto consistent = pmsc::check_full_values_at_keys(m, key_values, points, out); !consistent.ok()) {
+    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
+  }
+  if (auto consistent = pmsc::check_full_values_at_checks(m, check_values, points, out); !consistent.ok()) {
     return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
   }
   return grpc::Status::OK;

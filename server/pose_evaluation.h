@@ -55,17 +55,19 @@ grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose,
 grpc::Status decode_check_values(const LoadedModel& model, bool present, const v1::PointArray& values,
                                  const std::string& field, Eigen::VectorXf& out);
 
-// Decodes the full values `field` of a pose whose key values are decoded (CompleteMiss, the
-// heat-map thumbnail) and checks that they are that pose: INVALID_ARGUMENT naming the field and
-// the first key point where they differ (pmsc::check_full_values_at_keys). Not for cross-PMSC.
+// Decodes the full values `field` of a pose whose key (and check) values are decoded
+// (CompleteMiss, the heat-map thumbnail) and checks that they are that pose: INVALID_ARGUMENT
+// naming the field and the first key or check point where they differ
+// (pmsc::check_full_values_at_keys, check_full_values_at_checks). Not for cross-PMSC.
 grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
-                                const Eigen::VectorXf& key_values, Eigen::VectorXf& out);
+                                const Eigen::VectorXf& key_values, const Eigen::VectorXf& check_values,
+                                Eigen::VectorXf& out);
 
 // The same for partial full values (local fail-through): `points` (decoded, ascending) names the
-// points `values` holds, |points|×D; only the key points among them can be checked.
+// points `values` holds, |points|×D; only the key and check points among them can be checked.
 grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
-                                const Eigen::VectorXf& key_values, const std::vector<int>& points,
-                                Eigen::VectorXf& out);
+                                const Eigen::VectorXf& key_values, const Eigen::VectorXf& check_values,
+                                const std::vector<int>& points, Eigen::VectorXf& out);
 
 struct PoseOptions {
   bool include_region_errors = false;

@@ -628,19 +628,52 @@ std::string format_values(const float* values, long count) {
 
 namespace {
 
-// Key point k against the D full values at `full` (the values of its point).
-Status check_key_point(const PmscModel& m, long k, const float* key, const float* full) {
+// The values a pose was sent with at one of its points (a key point or a check point) against the
+// D full values of that point.
+Status check_sent_point(const PmscModel& m, const char* kind, long k, int point, const float* sent, const float* full) {
   const long D = m.channel_count;
-  const long point = m.key_points[static_cast<size_t>(k)];
   const double absolute = kKeyConsistencyAbsolute * m.epsilon.epsilon_min;
   for (long c = 0; c < D; ++c) {
-    const double allowed = kKeyConsistencyRelative * std::max(std::abs(key[c]), std::abs(full[c])) + absolute;
-    if (!(std::abs(static_cast<double>(full[c]) - key[c]) <= allowed)) {
+    const double allowed = kKeyConsistencyRelative * std::max(std::abs(sent[c]), std::abs(full[c])) + absolute;
+    if (!(std::abs(static_cast<double>(full[c]) - sent[c]) <= allowed)) {
       return make_error(ErrorCode::kInvalidArgument,
-                        "key point " + std::to_string(k) + " (point " + std::to_string(point) +
-                            "): the full values hold " + format_values(full, D) + " but the key values hold " +
-                            format_values(key, D) + "; full values must be the pose the key values were read from");
+                        std::string(kind) + " point " + std::to_string(k) + " (point " + std::to_string(point) +
+                            "): the full values hold " + format_values(full, D) + " but the " + kind +
+                            " values hold " + format_values(sent, D) +
+                            "; full values must be the pose the key values were read from");
     }
+  }
+  return Status::Ok();
+}
+
+// `sent` (|points|·D) against whole full values (control_point_count·D).
+Status check_sent_points(const PmscModel& m, const char* kind, const std::vector<int>& points,
+                         const Eigen::Ref<const Eigen::VectorXf>& sent, const Eigen::Ref<const Eigen::VectorXf>& full) {
+  const long D = m.channel_count;
+  assert(!m.cross);
+  assert(sent.size() == static_cast<long>(points.size()) * D && full.size() == m.control_point_count * D);
+  for (size_t k = 0; k < points.size(); ++k) {
+    const long offset = static_cast<long>(k) * D;
+    ANIMSPACE_RETURN_IF_ERROR(check_sent_point(m, kind, static_cast<long>(k), points[k], sent.data() + offset,
+                                               full.data() + static_cast<long>(points[k]) * D));
+  }
+  return Status::Ok();
+}
+
+// The same against partial full values of the sorted `full_points`: the sent points among them.
+Status check_sent_points(const PmscModel& m, const char* kind, const std::vector<int>& points,
+                         const Eigen::Ref<const Eigen::VectorXf>& sent, const std::vector<int>& full_points,
+                         const Eigen::Ref<const Eigen::VectorXf>& full) {
+  const long D = m.channel_count;
+  assert(!m.cross);
+  assert(std::is_sorted(full_points.begin(), full_points.end()));
+  assert(sent.size() == static_cast<long>(points.size()) * D && full.size() == static_cast<long>(full_points.size()) * D);
+  for (size_t k = 0; k < points.size(); ++k) {
+    const auto given = std::lower_bound(full_points.begin(), full_points.end(), points[k]);
+    if (given == full_points.end() || *given != points[k]) continue;
+    const long g = given - full_points.begin();
+    ANIMSPACE_RETURN_IF_ERROR(check_sent_point(m, kind, static_cast<long>(k), points[k],
+                                               sent.data() + static_cast<long>(k) * D, full.data() + g * D));
   }
   return Status::Ok();
 }
@@ -649,31 +682,26 @@ Status check_key_point(const PmscModel& m, long k, const float* key, const float
 
 Status check_full_values_at_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                                  const Eigen::Ref<const Eigen::VectorXf>& full_values) {
-  const long D = m.channel_count;
-  assert(!m.cross);
-  assert(key_values.size() == m.key_point_count() * D && full_values.size() == m.control_point_count * D);
-  for (long k = 0; k < m.key_point_count(); ++k) {
-    const long point = m.key_points[static_cast<size_t>(k)];
-    ANIMSPACE_RETURN_IF_ERROR(check_key_point(m, k, key_values.data() + k * D, full_values.data() + point * D));
-  }
-  return Status::Ok();
+  return check_sent_points(m, "key", m.key_points, key_values, full_values);
 }
 
 Status check_full_values_at_keys(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                                  const std::vector<int>& full_points,
                                  const Eigen::Ref<const Eigen::VectorXf>& full_values) {
-  const long D = m.channel_count;
-  assert(!m.cross);
-  assert(std::is_sorted(full_points.begin(), full_points.end()));
-  assert(key_values.size() == m.key_point_count() * D && full_values.size() == static_cast<long>(full_points.size()) * D);
-  for (long k = 0; k < m.key_point_count(); ++k) {
-    const int point = m.key_points[static_cast<size_t>(k)];
-    const auto given = std::lower_bound(full_points.begin(), full_points.end(), point);
-    if (given == full_points.end() || *given != point) continue;
-    const long g = given - full_points.begin();
-    ANIMSPACE_RETURN_IF_ERROR(check_key_point(m, k, key_values.data() + k * D, full_values.data() + g * D));
-  }
-  return Status::Ok();
+  return check_sent_points(m, "key", m.key_points, key_values, full_points, full_values);
+}
+
+Status check_full_values_at_checks(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& check_values,
+                                   const Eigen::Ref<const Eigen::VectorXf>& full_values) {
+  if (check_values.size() == 0) return Status::Ok();
+  return check_sent_points(m, "check", m.check_points, check_values, full_values);
+}
+
+Status check_full_values_at_checks(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& check_values,
+                                   const std::vector<int>& full_points,
+                                   const Eigen::Ref<const Eigen::VectorXf>& full_values) {
+  if (check_values.size() == 0) return Status::Ok();
+  return check_sent_points(m, "check", m.check_points, check_values, full_points, full_values);
 }
 
 }  // namespace animspace::pmsc

@@ -262,6 +262,16 @@ Status check_full_values_at_keys(const PmscModel& model, const Eigen::Ref<const 
                                  const std::vector<int>& full_points,
                                  const Eigen::Ref<const Eigen::VectorXf>& full_values);
 
+// The same at the check points (issue #35): the check values a pose was sent with (C·D; size 0:
+// none, nothing to check) must be repeated by its full values — whole, or partial for the sorted
+// `full_points` (the check points among them). Error: kInvalidArgument naming the first check point
+// that differs, its point index, and both values.
+Status check_full_values_at_checks(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& check_values,
+                                   const Eigen::Ref<const Eigen::VectorXf>& full_values);
+Status check_full_values_at_checks(const PmscModel& model, const Eigen::Ref<const Eigen::VectorXf>& check_values,
+                                   const std::vector<int>& full_points,
+                                   const Eigen::Ref<const Eigen::VectorXf>& full_values);
+
 // The thresholds region r's key-point error is compared with (local fail-through).
 inline const SoftCacheThresholds& region_thresholds(const PmscModel& model, int region) {
   return model.region_epsilon.empty() ? model.epsilon : model.region_epsilon[static_cast<size_t>(region)];

@@ -137,7 +137,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         }
         // Nothing inconsistent reaches the miss log: it is tomorrow's training data.
         if (grpc::Status s = decode_full_values(*model, request->full_values(), "full_values", input.key_values,
-                                                input.full_points, input.full_values);
+                                                input.check_values, input.full_points, input.full_values);
             !s.ok()) {
           return s;
         }

@@ -207,7 +207,7 @@ grpc::Status decode_key_points(const LoadedModel& model, const Request& request,
                                Eigen::VectorXf& full) {
   if (grpc::Status s = decode_pose(model, request.key_points(), "key_points", input); !s.ok()) return s;
   if (!request.has_full_values()) return grpc::Status::OK;
-  return decode_full_values(model, request.full_values(), "full_values", input.key_values, full);
+  return decode_full_values(model, request.full_values(), "full_values", input.key_values, input.check_values, full);
 }
 
 // Evaluates the decoded pose through the soft cache into response.pose (counted and logged as any

@@ -272,6 +272,31 @@ TEST_F(CheckPointsTest, CompleteMissWithTheSameCheckValuesRepeatsTheVerdict) {
   EXPECT_FALSE(completed.logged());
 }
 
+// Full values must be the pose its check values were read from, as they must repeat its key
+// values: a wrong "full pose" would teach the next retrain a wrong example.
+TEST_F(CheckPointsTest, CompleteMissRefusesFullValuesThatDoNotRepeatTheCheckValues) {
+  const Eigen::VectorXf blend = check_values(0.015);
+  v1::CompleteMissRequest request;
+  request.mutable_model()->set_name(kChecked);
+  *request.mutable_key_values() = point_array(key_values(), 3);
+  *request.mutable_check_values() = point_array(blend, 3);
+  *request.mutable_full_values() = point_array(*pose_, 3);  // f̂: 0.015 off every check point
+  v1::CompleteMissResponse completed;
+  grpc::ClientContext context;
+  const grpc::Status status = poses_->CompleteMiss(&context, request, &completed);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  const std::string expected = "full_values: check point 0 (point " + std::to_string(model().check_points[0]) + ")";
+  EXPECT_NE(status.error_message().find(expected), std::string::npos) << status.error_message();
+  // Partial full values are checked at the check points they hold.
+  const int point = model().check_points[0];
+  request.add_full_points(static_cast<uint32_t>(point));
+  *request.mutable_full_values() = point_array(pose_->segment(3 * point, 3), 3);
+  grpc::ClientContext partial_context;
+  const grpc::Status partial = poses_->CompleteMiss(&partial_context, request, &completed);
+  EXPECT_EQ(partial.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(partial.error_message().find("check point 0"), std::string::npos) << partial.error_message();
+}
+
 TEST_F(CheckPointsTest, BadCheckValuesAreRefusedNamingTheField) {
   const std::string C = std::to_string(kCheckPointCount);
   const Eigen::VectorXf good = check_values(0);
