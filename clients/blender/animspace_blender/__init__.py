@@ -52,7 +52,21 @@ from . import connection, frame_change, lod_import, panel, properties, skinning,
 _MODULES = (properties, connection, soft_cache, skinning, frame_change, lod_import, thumbnail, panel)
 
 
+def _let_gltf_import_run_on_this_numpy() -> None:
+    """Blender 3.4's own glTF importer (io_scene_gltf2) calls ``np.bool``, an alias numpy 1.24
+    removed; with Debian 12's numpy every .glb import — ours (rigs, levels of detail, poses) and
+    anyone's — fails in ``set_poly_smoothing``. Restores the alias to what it always meant, the
+    builtin ``bool``, and only where it is missing, so a Blender or numpy that has it (or a fixed
+    importer) is left as it is. Kept for the session: the importer may run after the add-on is
+    disabled, and the alias changes no numpy behaviour."""
+    import numpy
+
+    if "bool" not in vars(numpy):
+        numpy.bool = bool
+
+
 def register() -> None:
+    _let_gltf_import_run_on_this_numpy()
     for module in _MODULES:
         module.register()
 
