@@ -95,12 +95,18 @@ def test_streams_and_complete_miss_carry_the_check_values(client, trained_pose):
     streamed = list(client.stream_key_points(MODEL, frames, omit_points=True))
     assert [(r.status, r.checked) for r in streamed] == [("MISS", True), ("HIT", False)]
 
-    # CompleteMiss repeats the verdict of the check values it is sent: a MISS answers f itself.
-    completion = client.complete_miss(MODEL, pose.key_values, full, check_values=off)
+    # CompleteMiss repeats the verdict of the check values it is sent: a MISS answers f itself —
+    # the full pose those check values were read from (f moved at the check points).
+    moved = full.copy()
+    moved[keys.check_point_indices] = off
+    completion = client.complete_miss(MODEL, pose.key_values, moved, check_values=off)
     assert completion.result.status == "MISS" and completion.result.checked and completion.logged
-    np.testing.assert_allclose(completion.result.points, full, atol=1e-6)
+    np.testing.assert_allclose(completion.result.points, moved, atol=1e-6)
     unchecked = client.complete_miss(MODEL, pose.key_values, full)
     assert unchecked.result.status == "HIT" and not unchecked.logged
+    # Full values that are not the pose of the check values are refused, naming the check point.
+    with pytest.raises(animspace.InvalidArgument, match="full_values: check point 0"):
+        client.complete_miss(MODEL, pose.key_values, full, check_values=off)
 
 
 def test_a_wrong_check_value_count_is_invalid_argument_naming_the_field(client, trained_pose):
