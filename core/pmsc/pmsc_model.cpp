@@ -574,8 +574,7 @@ Eigen::VectorXf gather_check_values(const PmscModel& m, const Eigen::Ref<const E
 }
 
 bool calibration_guarantee_holds(const PmscModel& m) {
-  const PmscModel::Calibration& c = m.calibration;
-  return c.bad_samples > 0 && std::floor(c.false_hit_rate * static_cast<double>(c.bad_samples + 1) + 1e-9) >= 1;
+  return guarantee_holds(m.calibration.bad_samples, m.calibration.false_hit_rate);
 }
 
 std::string calibration_statement(const PmscModel& m) {
