@@ -44,7 +44,9 @@ bench: build
 # Every test under AddressSanitizer + UndefinedBehaviorSanitizer, leak checks included: each ctest
 # (core, server, loadtest, integration against the ASan-built daemon), then pytest against the
 # ASan-built daemon and CLI. Every report goes to a file under build-asan/reports (a daemon a test
-# started reports there too) and fails the target; ASan aborts the process that made it.
+# started reports there too) and fails the target; ASan aborts the process that made it. The tree
+# builds `all`, which with the bench off is exactly what ctest and pytest run: the test programs
+# and the daemon, CLI, load tester, tour and transport floor that the integration suite starts.
 ASAN_REPORTS := $(CURDIR)/build-asan/reports
 ASAN_OPTIONS_BASE := abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:log_path=$(ASAN_REPORTS)/asan
 ASAN_ENV := ASAN_OPTIONS=$(ASAN_OPTIONS_BASE):detect_leaks=1 \
@@ -63,7 +65,8 @@ asan: check-asan
 # ThreadSanitizer where the threads are: the server's units (work pool, admission, registry) built
 # with TSan, and the integration suite (the release build's test drivers, CLI and load tester)
 # against a TSan-built animspaced ($$ANIMSPACED). Races are reported to build-tsan/reports and
-# fail the target after the run.
+# fail the target after the run. The release tree it needs is `make test`'s, so after that (as in
+# .ci/run) `build` is a no-op and only the two TSan programs are built.
 TSAN_REPORTS := $(CURDIR)/build-tsan/reports
 TSAN_ENV := TSAN_OPTIONS=halt_on_error=0:ignore_noninstrumented_modules=1:second_deadlock_stack=1:history_size=4:suppressions=$(CURDIR)/tests/tsan.supp:log_path=$(TSAN_REPORTS)/tsan
 check-tsan: build
@@ -75,12 +78,13 @@ check-tsan: build
 	  ctest --preset release -j $(JOBS) --timeout 900 -L integration
 
 # libFuzzer targets (clang, build-fuzz/): replay fuzz/corpus and fuzz/regressions, then fuzz
-# each target for $(FUZZ_SECONDS) s; fails naming the target and the crash input.
+# each target for $(FUZZ_SECONDS) s, $(JOBS) targets at once (one libFuzzer process per core);
+# fails naming the target and the crash input.
 FUZZ_SECONDS ?= 20
 fuzz-smoke: deps
 	cmake --preset fuzz >/dev/null
 	cmake --build --preset fuzz -j $(JOBS)
-	FUZZ_SECONDS=$(FUZZ_SECONDS) bash scripts/fuzz-smoke.sh
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(JOBS) bash scripts/fuzz-smoke.sh
 
 clean:
 	rm -rf build build-debug build-asan build-tsan build-fuzz
