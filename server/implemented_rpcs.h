@@ -18,6 +18,7 @@ inline constexpr const char* kImplementedRpcs[] = {
     "animspace.v1.PoseService/EvaluateKeyPoints",
     "animspace.v1.PoseService/StreamKeyPoints",
     "animspace.v1.PoseService/CompleteMiss",
+    "animspace.v1.PoseService/GetBasis",
     "animspace.v1.SkinningService/EvaluateSkeletonPose",
     "animspace.v1.LodService/GetLod",
     "animspace.v1.TrainingService/Retrain",

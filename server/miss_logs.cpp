@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/misslog/miss_frames.h"
+
 namespace animspace::server {
 
 MissLogs::MissLogs(std::filesystem::path directory, misslog::FsyncPolicy policy,
@@ -41,16 +43,12 @@ int MissLogs::recover_existing() {
   return opened;
 }
 
-Result<uint64_t> MissLogs::append(const std::string& model, misslog::MissRecord& record) {
+Result<uint64_t> MissLogs::append(const std::string& model, const pmsc::PmscModel& evaluated,
+                                  misslog::MissRecord& record) {
   auto log = open(model);
   if (!log) return log.error();
+  misslog::fit_to_format(evaluated, (*log)->format_version(), record);
   return (*log)->append(record);
-}
-
-Result<uint32_t> MissLogs::format_version(const std::string& model) {
-  auto log = open(model);
-  if (!log) return log.error();
-  return (*log)->format_version();
 }
 
 void MissLogs::sync_all() {

@@ -11,6 +11,7 @@
 
 #include "core/common/result.h"
 #include "core/misslog/miss_log.h"
+#include "core/pmsc/pmsc_model.h"
 
 namespace animspace::server {
 
@@ -18,13 +19,10 @@ class MissLogs {
  public:
   MissLogs(std::filesystem::path directory, misslog::FsyncPolicy policy, std::chrono::milliseconds fsync_interval);
 
-  // Appends one record to `model`'s log (a validated model name), assigning its sequence.
-  // Errors: the log's (kIo, kDataLoss for a log whose header is not ours).
-  Result<uint64_t> append(const std::string& model, misslog::MissRecord& record);
-
-  // The format version `model`'s log is appended in (opening it if needed): a log created before
-  // misslog::kFirstPartialFormatVersion cannot hold partial frames. Errors: as append's.
-  Result<uint32_t> format_version(const std::string& model);
+  // Appends one record to `model`'s log (a validated model name), assigning its sequence, in
+  // the form the log's format version holds (misslog::fit_to_format with `evaluated`, the model
+  // version that judged it). Errors: the log's (kIo, kDataLoss for a log whose header is not ours).
+  Result<uint64_t> append(const std::string& model, const pmsc::PmscModel& evaluated, misslog::MissRecord& record);
 
   std::filesystem::path path_of(const std::string& model) const;
   // Opens every existing log in the directory at start-up, so a torn tail left by a crash is

@@ -9,7 +9,6 @@
 #include <spdlog/spdlog.h>
 
 #include "core/model/repository.h"
-#include "core/model/servable.h"
 
 namespace animspace::server {
 namespace {
@@ -47,16 +46,7 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
     return entry;
   }
   auto loaded = std::make_shared<LoadedModel>();
-  if (servable->pmsc) loaded->pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*servable->pmsc));
-  if (servable->animation_space) {
-    loaded->animation_space =
-        std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*servable->animation_space));
-    loaded->lod_levels = std::make_shared<const lod::LodLevels>(std::move(*servable->lod_levels));
-    loaded->bounding_sphere = servable->bounding_sphere;
-  }
-  if (servable->illumination) {
-    loaded->illumination = std::make_shared<const illumination::ServedIllumination>(std::move(*servable->illumination));
-  }
+  static_cast<model::Servable&>(*loaded) = std::move(*servable);
   loaded->name = name;
   loaded->version = version;
   loaded->path = path;
@@ -64,7 +54,6 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
   loaded->file_size_bytes = std::filesystem::file_size(path, ec);
   loaded->loaded_at_unix_s = unix_now_s();
   loaded->container = std::move(*container);
-  loaded->info = std::move(servable->info);
   entry.model = std::move(loaded);
   return entry;
 }

@@ -20,39 +20,22 @@
 
 #include "core/common/result.h"
 #include "core/container/model_container.h"
-#include "core/model/model_info.h"
 #include "core/model/repository.h"
-#include "core/animspace/metrics.h"
-#include "core/animspace/model.h"
-#include "core/illumination/illumination_io.h"
-#include "core/lod/levels.h"
-#include "core/pmsc/pmsc_model.h"
+#include "core/model/servable.h"
 
 namespace animspace::server {
 
 using model::kModelFileName;
 
-// One loaded, immutable model version.
-struct LoadedModel {
+// One loaded, immutable model version: the servable core made of its file (runtimes, engine,
+// info), and where and when it was loaded.
+struct LoadedModel : model::Servable {
   std::string name;
   uint64_t version = 0;
   std::filesystem::path path;
   uint64_t file_size_bytes = 0;
   int64_t loaded_at_unix_s = 0;
   container::ModelContainer container;
-  model::ModelInfo info;
-  // The prepared soft-cache runtime of a PMSC / cross-PMSC model (null for other kinds).
-  std::shared_ptr<const pmsc::PmscModel> pmsc;
-  // The validated skinning model of an animation-space model, or the posing engine a PMSC model
-  // carries for server fail-through (null otherwise).
-  std::shared_ptr<const animation_space::AnimationSpaceModel> animation_space;
-  // Its validated LOD levels (Merry 2007 §7.3); level 0 is the model itself (null for other kinds).
-  std::shared_ptr<const lod::LodLevels> lod_levels;
-  // The sphere eq. 7.2 measures depth to (lod::model_bounding_sphere), when lod_levels is set.
-  geometry::BoundingSphere bounding_sphere;
-  // The illumination engine a PMSC model of RGB radiance carries for server fail-through (null
-  // otherwise).
-  std::shared_ptr<const illumination::ServedIllumination> illumination;
 };
 
 struct VersionEntry {

@@ -1,15 +1,15 @@
 #include "server/pose_evaluation.h"
 
 #include <chrono>
+#include <vector>
 
 #include <spdlog/spdlog.h>
 
-#include "core/animspace/model.h"
+#include "core/pmsc/coordinates.h"
 #include "core/pmsc/local_fail_through.h"
-#include "core/pmsc/pmsc_model.h"
 #include "server/convert.h"
-#include "server/model_lookup.h"
 #include "server/status_mapping.h"
+#include "server/unary_call.h"
 #include "server/validation.h"
 
 namespace animspace::server {
@@ -20,156 +20,36 @@ int64_t unix_now_us() {
       .count();
 }
 
-}  // namespace
+bool local_path(const PoseJob& job) { return job.options.local_fail_through || !job.input.full_points.empty(); }
 
-grpc::Status require_pmsc(const LoadedModel& model, std::string_view why) {
-  if (model.pmsc) return grpc::Status::OK;
-  std::string reason(why);
-  if (reason.empty()) {
-    reason = "it has no key points to evaluate";
-    if (model.animation_space) reason += " (evaluate it with SkinningService.EvaluateSkeletonPose)";
-  }
-  return unsupported_by_kind(model, reason);
+bool wants_coordinates(const PoseOptions& options) {
+  return options.points_encoding == v1::POINT_ENCODING_COORDINATES;
 }
 
-grpc::Status decode_pose(const LoadedModel& model, const v1::KeyPointPose& pose, const std::string& field,
-                         PoseInput& out) {
-  const pmsc::PmscModel& m = *model.pmsc;
-  const std::string engine_note =
-      m.cross ? "is impossible" : (model.animation_space || model.illumination ? "takes another input"
-                                                                                 : "is by the client: send full values with CompleteMiss");
-  if (pose.has_light_set()) {
-    if (!model.illumination) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, field + ".light_set: model '" + model.name +
-                                                      "' has no illumination engine on the server (fail-through " +
-                                                      engine_note + "); leave light_set unset"};
-    }
-    if (grpc::Status s = decode_light_set(pose.light_set(), field + ".light_set",
-                                          model.illumination->default_intensity(), out.lights);
-        !s.ok()) {
-      return s;
-    }
-  }
-  if (!out.lights.empty() && !pose.has_key_values()) {
-    // The server is the renderer here (Meyer & Anderson 2007 §3.2): it gathers the key points
-    // and the check points alone, and the soft cache judges them as it would judge a client's.
-    if (pose.has_check_values()) {
-      return invalid_argument(field + ".check_values: sent without key_values; the server gathers both for the "
-                                      "light_set (send both, or neither)");
-    }
-    model.illumination->engine->indirect(out.lights, model.illumination->gather, m.key_points, out.key_values);
-    if (m.check_point_count() > 0) {
-      model.illumination->engine->indirect(out.lights, model.illumination->gather, m.check_points, out.check_values);
-    }
-  } else if (grpc::Status s = decode_points(pose.key_values(), field + ".key_values",
-                                            static_cast<uint32_t>(m.key_point_count()),
-                                            static_cast<uint32_t>(m.channel_count), "key points", out.key_values);
-             !s.ok()) {
-    return s;
-  } else if (grpc::Status checks = decode_check_values(model, pose.has_check_values(), pose.check_values(),
-                                                       field + ".check_values", out.check_values);
-             !checks.ok()) {
-    return checks;
-  }
-  out.has_skeleton = pose.has_skeleton_pose();
-  if (!out.has_skeleton) return grpc::Status::OK;
-  if (!model.animation_space) {
-    return {grpc::StatusCode::INVALID_ARGUMENT,
-            field + ".skeleton_pose: model '" + model.name + "' has no posing engine on the server (fail-through " +
-                engine_note + "); leave skeleton_pose unset"};
-  }
-  return decode_skeleton_pose(pose.skeleton_pose(), field + ".skeleton_pose", model.animation_space->skeleton,
-                              out.globals);
-}
-
-grpc::Status decode_check_values(const LoadedModel& model, bool present, const v1::PointArray& values,
-                                 const std::string& field, Eigen::VectorXf& out) {
-  const pmsc::PmscModel& m = *model.pmsc;
-  out.resize(0);
-  // An empty array is no check values, like an unset one: a client may always fill the field
-  // from DescribeKeyPoints' (possibly empty) check_point_indices.
-  if (!present || (values.point_count() == 0 && values.data().empty())) return grpc::Status::OK;
-  if (m.check_point_count() == 0) {
-    return invalid_argument(field + ": model '" + model.name + "' version " + std::to_string(model.version) +
-                            " has no check points (DescribeKeyPoints lists none); leave check_values unset");
-  }
-  return decode_points(values, field, static_cast<uint32_t>(m.check_point_count()),
-                       static_cast<uint32_t>(m.channel_count), "check points", out);
-}
-
-grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
-                                const Eigen::VectorXf& key_values, const Eigen::VectorXf& check_values,
-                                Eigen::VectorXf& out) {
-  const pmsc::PmscModel& m = *model.pmsc;
-  if (grpc::Status s = decode_points(values, field, static_cast<uint32_t>(m.point_count),
-                                     static_cast<uint32_t>(m.channel_count), "points", out);
-      !s.ok()) {
-    return s;
-  }
-  // A cross model's key points are another point set: nothing in the output repeats them.
-  if (m.cross) return grpc::Status::OK;
-  if (auto consistent = pmsc::check_full_values_at_keys(m, key_values, out); !consistent.ok()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
-  }
-  if (auto consistent = pmsc::check_full_values_at_checks(m, check_values, out); !consistent.ok()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
-  }
-  return grpc::Status::OK;
-}
-
-grpc::Status decode_full_values(const LoadedModel& model, const v1::PointArray& values, const std::string& field,
-                                const Eigen::VectorXf& key_values, const Eigen::VectorXf& check_values,
-                                const std::vector<int>& points, Eigen::VectorXf& out) {
-  if (points.empty()) return decode_full_values(model, values, field, key_values, check_values, out);
-  const pmsc::PmscModel& m = *model.pmsc;
-  if (grpc::Status s = decode_points(values, field, static_cast<uint32_t>(points.size()),
-                                     static_cast<uint32_t>(m.channel_count), "points (one per full_points entry)", out);
-      !s.ok()) {
-    return s;
-  }
-  if (m.cross) return grpc::Status::OK;
-  if (auto consistent = pmsc::check_full_values_at_keys(m, key_values, points, out); !consistent.ok()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
-  }
-  if (auto consistent = pmsc::check_full_values_at_checks(m, check_values, points, out); !consistent.ok()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + consistent.error().message};
-  }
-  return grpc::Status::OK;
-}
-
-namespace {
-
-// The server's full calculation of a whole pose (fail-through): the posing engine posed at the
-// request's skeleton, or the illumination engine gathering for its lights (decode_pose accepted
-// each input only for a model that has its engine); empty when the pose brought neither.
+// The model engine's full calculation of the pose (fail-through), when the pose carried the
+// engine's input (decode_pose accepted it only for a model whose engine takes it); else none.
 pmsc::FullCalculation full_calculation(const LoadedModel& model, const PoseInput& input) {
-  if (input.has_skeleton) {
-    return [engine = model.animation_space.get(), globals = &input.globals](Eigen::VectorXf& full) {
-      PointMatrix posed;
-      animation_space::evaluate(*engine, *globals, posed);
-      full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
-      return true;
-    };
-  }
-  if (!input.lights.empty()) {
-    return [served = model.illumination.get(), lights = &input.lights](Eigen::VectorXf& full) {
-      served->engine->indirect(*lights, served->gather, served->engine->all_points(), full);
-      return true;
-    };
-  }
-  return {};
+  if (!input.has_engine_input) return {};
+  return [engine = model.engine.get(), &input](Eigen::VectorXf& full) {
+    engine->frame(input, full);
+    return true;
+  };
 }
 
-// Writes the soft cache's answer into `out` and records it: statistics, and the miss log for a
-// blend or miss. `answer` is the answer (N·D); `in_response` says it already lies in out's
-// points.data. `local` is empty outside local fail-through.
-grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                         const PoseOptions& options, const pmsc::CachedPose& cached, const float* answer,
-                         bool in_response, const pmsc::LocalFailThrough& local, v1::PoseResult* out, bool* logged) {
-  if (logged != nullptr) *logged = false;
+// The same for some points (local fail-through): a point computed alone is the point of the
+// whole frame (core/model/engine.h).
+pmsc::PartialFullCalculation partial_calculation(const LoadedModel& model, const PoseInput& input) {
+  if (!input.has_engine_input) return {};
+  return [engine = model.engine.get(), &input](const std::vector<int>& points, Eigen::VectorXf& full) {
+    engine->points(input, points, full);
+    return true;
+  };
+}
+
+// The verdict and its numbers, as the wire names them.
+void write_verdict(const LoadedModel& model, const PoseOptions& options, const pmsc::CachedPose& cached,
+                   v1::PoseResult* out) {
   const pmsc::PmscModel& m = *model.pmsc;
-  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
-  const bool local_path = options.local_fail_through || !input.full_points.empty();
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
   out->set_check_point_error(static_cast<float>(cached.check_point_error));
@@ -178,12 +58,159 @@ grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, cons
   out->set_blend_weight(static_cast<float>(cached.alpha));
   out->set_model_version(model.version);
   out->set_full_evaluation_needed(cached.full_evaluation_needed);
-  if (in_response) {
+  if (!options.include_region_errors) return;
+  for (size_t r = 0; r < cached.region_errors.size(); ++r) {
+    auto* region = out->add_region_errors();
+    region->set_region(static_cast<uint32_t>(r));
+    region->set_key_point_error(static_cast<float>(cached.region_errors[r]));
+    // The verdict local fail-through acts on: each region against its own thresholds — or, for a
+    // pose without check values of a model with check points, the whole pose's (its regions are
+    // calibrated for estimates that include check points; local_fail_through.h).
+    const auto& thresholds = pmsc::region_thresholds(m, static_cast<int>(r));
+    const bool regional = cached.checked || m.check_points.empty();
+    region->set_status(regional ? to_proto(pmsc::decide(cached.region_errors[r], thresholds).status)
+                                : to_proto(cached.status));
+  }
+}
+
+// The answer as p and the alignment, for the client to reconstruct (pmsc/coordinates.h).
+void write_coordinates(const LoadedModel& model, const pmsc::PoseEstimate& estimate, v1::PoseResult* out) {
+  auto* coordinates = out->mutable_coordinates();
+  auto* p = coordinates->mutable_p();
+  p->Resize(static_cast<int>(estimate.coordinates.size()), 0.0f);
+  // float, as the server's own reconstruction uses them (pmsc::reconstruct).
+  Eigen::Map<Eigen::VectorXf>(p->mutable_data(), estimate.coordinates.size()) = estimate.coordinates.cast<float>();
+  coordinates->set_basis_checksum(model.basis_checksum);
+  if (!model.pmsc->aligned) return;
+  const pmsc::FloatAlignment alignment = pmsc::float_alignment(estimate.alignment);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) coordinates->add_rotation(alignment.rotation(r, c));
+    coordinates->add_translation(alignment.translation(r));
+  }
+}
+
+// Appends a blend or miss to the model's miss log: the key values, and the full values the
+// client sent or the engine computed (a partial frame on the local path). Returns whether it
+// was appended; a failed append leaves the answer right and is logged loudly.
+bool log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& job, const pmsc::CachedPose& cached,
+              const pmsc::LocalFailThrough& local) {
+  const PoseInput& input = job.input;
+  misslog::MissRecord record;
+  record.model_version = model.version;
+  record.unix_time_us = unix_now_us();
+  record.status = cached.status;
+  record.key_point_error = cached.key_point_error;
+  record.blend_weight = cached.alpha;
+  record.channel_count = static_cast<uint32_t>(model.pmsc->channel_count);
+  record.key_values.assign(input.key_values.data(), input.key_values.data() + input.key_values.size());
+  const bool client_full = input.full_values.size() > 0;
+  const Eigen::VectorXf* full = client_full ? &input.full_values
+                                            : (cached.computed_full_values.size() > 0 ? &cached.computed_full_values
+                                                                                      : nullptr);
+  if (full != nullptr) {
+    record.full_values.assign(full->data(), full->data() + full->size());
+    // A partial frame: the client's points, or those the engine computed.
+    const std::vector<int>& points = client_full ? input.full_points : local.full_points;
+    if (local_path(job)) record.full_points.assign(points.begin(), points.end());
+  }
+  auto appended = env.miss_logs.append(model.name, *model.pmsc, record);
+  if (!appended) {
+    // The answer is still right; only the retraining data is short. Say so loudly.
+    spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void PoseRun::start(ServiceEnvironment& env, const LoadedModel& model, std::span<PoseJob> jobs,
+                    std::span<v1::PoseResult* const> results) {
+  env_ = &env;
+  model_ = &model;
+  jobs_ = jobs;
+  results_ = results;
+  const auto values = static_cast<size_t>(model.pmsc->mean.size());
+  std::vector<PoseBatcher::Pose> batched;
+  for (size_t i = 0; i < jobs.size(); ++i) {
+    PoseJob& job = jobs[i];
+    // Local fail-through assembles its answer point by point; coordinates need no f̂ unless the
+    // verdict asks the server for the answer (finish_one).
+    job.batched_ = !local_path(job) && !wants_coordinates(job.options);
+    if (!job.batched_) continue;
+    // float32 goes out as computed: f̂ is reconstructed into the message itself, and the blend of
+    // a blend or miss happens there too. A 16-bit encoding is written from the scratch values.
+    job.in_response_ = !job.options.omit_points && bytes_per_value(job.options.points_encoding) == sizeof(float);
+    if (job.in_response_) {
+      std::string* data = results[i]->mutable_points()->mutable_data();
+      data->resize(values * sizeof(float));
+      job.points_ = reinterpret_cast<float*>(data->data());
+    } else {
+      job.scratch_.resize(static_cast<long>(values));
+      job.points_ = job.scratch_.data();
+    }
+    batched.push_back({&job.input.key_values, &job.estimate_, job.points_, &job.input.check_values});
+  }
+  env.batcher.enqueue(*model.pmsc, batched, group_);
+}
+
+grpc::Status PoseRun::finish(const CallControl* call) {
+  env_->batcher.await(group_);
+  for (size_t i = 0; i < jobs_.size(); ++i) {
+    if (call != nullptr) {
+      if (grpc::Status stop = call->stop_status(); !stop.ok()) return stop;
+    }
+    if (grpc::Status s = finish_one(jobs_[i], results_[i]); !s.ok()) return s;
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status PoseRun::finish_one(PoseJob& job, v1::PoseResult* out) {
+  const LoadedModel& model = *model_;
+  const pmsc::PmscModel& m = *model.pmsc;
+  const PoseInput& input = job.input;
+  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
+  pmsc::CachedPose cached;
+  pmsc::LocalFailThrough local;
+  const float* answer = nullptr;
+  bool coordinates = false;
+  if (job.batched_) {
+    Eigen::Map<Eigen::VectorXf> points(job.points_, m.mean.size());
+    pmsc::finish_cached(m, job.estimate_, points, client_full, full_calculation(model, input), cached);
+    answer = job.points_;
+  } else if (local_path(job)) {
+    if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.check_values, input.full_points,
+                                                   client_full, partial_calculation(model, input), cached, local);
+        !covered.ok()) {
+      return to_grpc_status(covered.error(), "full_points");
+    }
+    answer = cached.points.data();
+  } else {
+    // Coordinates: eq. 2 alone; f̂ only when the server itself must answer with points.
+    pmsc::estimate_coordinates(m, input.key_values, input.check_values, job.estimate_);
+    const bool needs_full = pmsc::judge(m, job.estimate_, cached);
+    if (needs_full && (client_full != nullptr || input.has_engine_input)) {
+      job.scratch_.resize(m.mean.size());
+      const pmsc::PoseEstimate* estimate = &job.estimate_;
+      float* destination = job.scratch_.data();
+      pmsc::reconstruct(m, {&estimate, 1}, {&destination, 1});
+      pmsc::finish_cached(m, job.estimate_, job.scratch_, client_full, full_calculation(model, input), cached);
+      answer = job.scratch_.data();
+    } else {
+      cached.full_evaluation_needed = needs_full;
+      coordinates = true;
+    }
+  }
+
+  write_verdict(model, job.options, cached, out);
+  if (coordinates) {
+    if (!job.options.omit_points) write_coordinates(model, job.estimate_, out);
+  } else if (job.in_response_) {
     out->mutable_points()->set_point_count(static_cast<uint32_t>(m.point_count));
     out->mutable_points()->set_channel_count(static_cast<uint32_t>(m.channel_count));
-  } else if (!options.omit_points) {
+  } else if (!job.options.omit_points) {
     if (grpc::Status s = encode_points(answer, static_cast<uint32_t>(m.point_count),
-                                       static_cast<uint32_t>(m.channel_count), options.points_encoding,
+                                       static_cast<uint32_t>(m.channel_count), job.options.points_encoding,
                                        out->mutable_points());
         !s.ok()) {
       return s;
@@ -193,134 +220,21 @@ grpc::Status record_pose(ServiceEnvironment& env, const LoadedModel& model, cons
     out->add_full_points(static_cast<uint32_t>(local.full_points[j]));
     out->add_full_point_blend_weights(static_cast<float>(local.full_point_blend_weights[j]));
   }
-  if (options.include_region_errors) {
-    for (size_t r = 0; r < cached.region_errors.size(); ++r) {
-      auto* region = out->add_region_errors();
-      region->set_region(static_cast<uint32_t>(r));
-      region->set_key_point_error(static_cast<float>(cached.region_errors[r]));
-      // The verdict local fail-through acts on: each region against its own thresholds — or, for a
-      // pose without check values of a model with check points, the whole pose's (its regions are
-      // calibrated for estimates that include check points; local_fail_through.h).
-      const auto& thresholds = pmsc::region_thresholds(m, static_cast<int>(r));
-      const bool regional = cached.checked || m.check_points.empty();
-      region->set_status(regional ? to_proto(pmsc::decide(cached.region_errors[r], thresholds).status)
-                                  : to_proto(cached.status));
-    }
-  }
-  if (options.count_in_statistics) {
-    env.metrics.record_pose(model.name, cached.status, cached.key_point_error);
-  }
-  if (cached.status == pmsc::CacheStatus::kHit) return grpc::Status::OK;
-
-  misslog::MissRecord record;
-  record.model_version = model.version;
-  record.unix_time_us = unix_now_us();
-  record.status = cached.status;
-  record.key_point_error = cached.key_point_error;
-  record.blend_weight = cached.alpha;
-  record.channel_count = static_cast<uint32_t>(m.channel_count);
-  record.key_values.assign(input.key_values.data(), input.key_values.data() + input.key_values.size());
-  const Eigen::VectorXf* full =
-      client_full != nullptr ? client_full
-                             : (cached.computed_full_values.size() > 0 ? &cached.computed_full_values : nullptr);
-  // A partial frame: the client's points, or those the engine computed.
-  const std::vector<int>& points = client_full != nullptr ? input.full_points : local.full_points;
-  if (full != nullptr && local_path && !points.empty()) {
-    auto version = env.miss_logs.format_version(model.name);
-    if (version && *version < misslog::kFirstPartialFormatVersion) {
-      // A log created before partial frames: append the frame retraining would complete anyway.
-      const Eigen::VectorXf frame = pmsc::complete_partial_frame(m, input.key_values, points, *full);
-      record.full_values.assign(frame.data(), frame.data() + frame.size());
-    } else {
-      record.full_points.assign(points.begin(), points.end());
-      record.full_values.assign(full->data(), full->data() + full->size());
-    }
-  } else if (full != nullptr) {
-    record.full_values.assign(full->data(), full->data() + full->size());
-  }
-  auto appended = env.miss_logs.append(model.name, record);
-  if (!appended) {
-    // The answer is still right; only the retraining data is short. Say so loudly.
-    spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
-    return grpc::Status::OK;
-  }
-  if (logged != nullptr) *logged = true;
+  if (job.options.count_in_statistics) env_->metrics.record_pose(model.name, cached.status, cached.key_point_error);
+  if (cached.status != pmsc::CacheStatus::kHit) job.logged_ = log_miss(*env_, model, job, cached, local);
   return grpc::Status::OK;
-}
-
-
-}  // namespace
-
-bool batchable(const PoseInput& input, const PoseOptions& options) {
-  return !options.local_fail_through && input.full_points.empty();
-}
-
-PoseBatcher::Pose prepare_pose(const LoadedModel& model, const PoseInput& input, const PoseOptions& options,
-                               v1::PoseResult* out, PendingPose& pending) {
-  const pmsc::PmscModel& m = *model.pmsc;
-  const auto values = static_cast<size_t>(m.point_count) * static_cast<size_t>(m.channel_count);
-  // float32 goes out as computed; a 16-bit encoding is written from the scratch values.
-  pending.in_response = !options.omit_points && bytes_per_value(options.points_encoding) == sizeof(float);
-  if (pending.in_response) {
-    // f̂ is reconstructed into the message itself, and the blend of a blend or miss happens
-    // there too: no copy of the points between the evaluation and serialisation.
-    std::string* data = out->mutable_points()->mutable_data();
-    data->resize(values * sizeof(float));
-    pending.points = reinterpret_cast<float*>(data->data());
-  } else {
-    pending.scratch.resize(static_cast<long>(values));
-    pending.points = pending.scratch.data();
-  }
-  return {&input.key_values, &pending.estimate, pending.points, &input.check_values};
-}
-
-grpc::Status finish_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                         const PoseOptions& options, PendingPose& pending, v1::PoseResult* out, bool* logged) {
-  const pmsc::PmscModel& m = *model.pmsc;
-  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
-  Eigen::Map<Eigen::VectorXf> points(pending.points, m.mean.size());
-  pmsc::CachedPose cached;
-  pmsc::finish_cached(m, pending.estimate, points, client_full, full_calculation(model, input), cached);
-  return record_pose(env, model, input, options, cached, pending.points, pending.in_response, {}, out, logged);
 }
 
 grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
                            const PoseOptions& options, v1::PoseResult* out, bool* logged) {
-  if (batchable(input, options)) {
-    PendingPose pending;
-    const PoseBatcher::Pose pose = prepare_pose(model, input, options, out, pending);
-    PoseBatcher::Group group;
-    env.batcher.enqueue(*model.pmsc, {&pose, 1}, group);
-    env.batcher.await(group);
-    return finish_pose(env, model, input, options, pending, out, logged);
-  }
-  // Local fail-through: the engine computes only the points that need it. Animation space is
-  // evaluated vertex by vertex (eq. 3.1), and the gather is per point and deterministic, so a
-  // point computed alone is the point of the whole frame.
-  const pmsc::PmscModel& m = *model.pmsc;
-  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
-  pmsc::PartialFullCalculation engine;
-  if (input.has_skeleton) {
-    engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
-      PointMatrix posed;
-      animation_space::evaluate_vertices(*model.animation_space, input.globals, points, posed);
-      full = Eigen::Map<const Eigen::VectorXf>(posed.data(), posed.size());
-      return true;
-    };
-  } else if (!input.lights.empty()) {
-    engine = [&](const std::vector<int>& points, Eigen::VectorXf& full) {
-      model.illumination->engine->indirect(input.lights, model.illumination->gather, points, full);
-      return true;
-    };
-  }
-  pmsc::CachedPose cached;
-  pmsc::LocalFailThrough local;
-  if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.check_values, input.full_points,
-                                                 client_full, engine, cached, local);
-      !covered.ok()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, "full_points: " + covered.error().message};
-  }
-  return record_pose(env, model, input, options, cached, cached.points.data(), false, local, out, logged);
+  PoseJob job;
+  job.input = input;
+  job.options = options;
+  PoseRun run;
+  run.start(env, model, {&job, 1}, {&out, 1});
+  grpc::Status status = run.finish();
+  if (logged != nullptr) *logged = job.logged();
+  return status;
 }
 
 }  // namespace animspace::server

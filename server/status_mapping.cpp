@@ -20,6 +20,10 @@ grpc::StatusCode to_grpc_code(ErrorCode code) {
 
 grpc::Status to_grpc_status(const Error& error) { return {to_grpc_code(error.code), error.message}; }
 
+grpc::Status to_grpc_status(const Error& error, std::string_view field) {
+  return {to_grpc_code(error.code), std::string(field) + ": " + error.message};
+}
+
 grpc::Status invalid_argument(const std::string& message) {
   return {grpc::StatusCode::INVALID_ARGUMENT, message};
 }

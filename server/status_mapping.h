@@ -13,6 +13,8 @@ namespace animspace::server {
 
 grpc::StatusCode to_grpc_code(ErrorCode code);
 grpc::Status to_grpc_status(const Error& error);
+// A core error about the request value named `field`: its code, the message after "<field>: ".
+grpc::Status to_grpc_status(const Error& error, std::string_view field);
 
 // Shorthands for the statuses the validation layer produces itself.
 grpc::Status invalid_argument(const std::string& message);

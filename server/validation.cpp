@@ -74,6 +74,10 @@ grpc::Status decode_points(const v1::PointArray& array, std::string_view field, 
   }
   if (grpc::Status s = check_points_encoding(array.encoding(), join(field, "encoding")); !s.ok()) return s;
   const v1::PointEncoding encoding = array.encoding();
+  if (encoding == v1::POINT_ENCODING_COORDINATES) {
+    return invalid_argument(join(field, "encoding") +
+                            ": POINT_ENCODING_COORDINATES is for answers only; send FLOAT32, FLOAT16 or FIXED16 values");
+  }
   const bool fixed16 = encoding == v1::POINT_ENCODING_FIXED16;
   // scale and offset belong to FIXED16 alone: on another array they mean the encoding was forgotten.
   for (const auto& [member, parameters] : {std::pair{"scale", &array.scale()}, std::pair{"offset", &array.offset()}}) {
@@ -224,6 +228,12 @@ void encode_points(const float* values, uint32_t points, uint32_t channels, v1::
 
 grpc::Status encode_points(const float* values, uint32_t points, uint32_t channels, v1::PointEncoding encoding,
                            v1::PointArray* out) {
+  if (encoding == v1::POINT_ENCODING_COORDINATES) {
+    // Points the server computed itself, asked for as coordinates: they go out as float32.
+    encode_points(values, points, channels, out);
+    out->set_encoding(v1::POINT_ENCODING_FLOAT32);
+    return grpc::Status::OK;
+  }
   if (encoding == v1::POINT_ENCODING_UNSPECIFIED || encoding == v1::POINT_ENCODING_FLOAT32) {
     encode_points(values, points, channels, out);
     out->set_encoding(encoding);
@@ -270,6 +280,7 @@ const char* encoding_name(v1::PointEncoding encoding) {
     case v1::POINT_ENCODING_FLOAT32: return "FLOAT32";
     case v1::POINT_ENCODING_FLOAT16: return "FLOAT16";
     case v1::POINT_ENCODING_FIXED16: return "FIXED16";
+    case v1::POINT_ENCODING_COORDINATES: return "COORDINATES";
     default: return "an unknown encoding";
   }
 }
@@ -278,8 +289,8 @@ grpc::Status check_points_encoding(v1::PointEncoding encoding, std::string_view 
   // proto3 enums are open: a newer client's value arrives as a plain number.
   if (v1::PointEncoding_IsValid(encoding)) return grpc::Status::OK;
   return invalid_argument(std::string(field) + ": unknown PointEncoding " + std::to_string(static_cast<int>(encoding)) +
-                          "; expected POINT_ENCODING_FLOAT32 (or unset), POINT_ENCODING_FLOAT16 or "
-                          "POINT_ENCODING_FIXED16");
+                          "; expected POINT_ENCODING_FLOAT32 (or unset), POINT_ENCODING_FLOAT16, "
+                          "POINT_ENCODING_FIXED16 or POINT_ENCODING_COORDINATES");
 }
 
 }  // namespace animspace::server

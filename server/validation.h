@@ -69,7 +69,8 @@ grpc::Status encode_points(const float* values, uint32_t points, uint32_t channe
 // value this server does not know (proto3 enums are open).
 grpc::Status check_points_encoding(v1::PointEncoding encoding, std::string_view field);
 
-// Bytes per value on the wire: 4 for float32, 2 for the 16-bit encodings.
+// Bytes per value on the wire: 4 for float32 (and for coordinates, whose answers may be points the
+// server computed), 2 for the 16-bit encodings.
 uint64_t bytes_per_value(v1::PointEncoding encoding);
 
 // "FLOAT16", … for messages.

@@ -74,4 +74,16 @@ Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t 
   return out;
 }
 
+void fit_to_format(const pmsc::PmscModel& model, uint32_t format_version, MissRecord& record) {
+  if (record.full_points.empty() || format_version >= kFirstPartialFormatVersion) return;
+  const std::vector<int> points(record.full_points.begin(), record.full_points.end());
+  const Eigen::Map<const Eigen::VectorXf> key_values(record.key_values.data(),
+                                                     static_cast<long>(record.key_values.size()));
+  const Eigen::Map<const Eigen::VectorXf> full_values(record.full_values.data(),
+                                                      static_cast<long>(record.full_values.size()));
+  const Eigen::VectorXf frame = pmsc::complete_partial_frame(model, key_values, points, full_values);
+  record.full_values.assign(frame.data(), frame.data() + frame.size());
+  record.full_points.clear();
+}
+
 }  // namespace animspace::misslog

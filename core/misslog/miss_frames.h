@@ -8,6 +8,7 @@
 
 #include "core/common/result.h"
 #include "core/common/types.h"
+#include "core/misslog/miss_log.h"
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::misslog {
@@ -37,5 +38,12 @@ struct MissFrames {
 };
 Result<MissFrames> read_miss_frames(const std::filesystem::path& path, uint64_t after_sequence,
                                     const pmsc::PmscModel& model, uint64_t model_version);
+
+// The record as a log of `format_version` can hold it: a partial frame (full_points) in a log
+// created before kFirstPartialFormatVersion becomes the whole frame retraining would complete
+// from it anyway (pmsc::complete_partial_frame with the record's key values, as above), so a
+// server never refuses a miss for the age of its log. `model` is the version that evaluated the
+// record (not cross-PMSC when it is partial). Any other record is left as it is.
+void fit_to_format(const pmsc::PmscModel& model, uint32_t format_version, MissRecord& record);
 
 }  // namespace animspace::misslog

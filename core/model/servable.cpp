@@ -5,6 +5,7 @@
 #include "core/animspace/animspace_io.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
+#include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::model {
@@ -16,7 +17,8 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
   if (info->kind == ModelKind::kPmsc || info->kind == ModelKind::kCrossPmsc) {
     auto runtime = pmsc::load(container, source);
     if (!runtime) return runtime.error();
-    servable.pmsc = std::move(*runtime);
+    servable.pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
+    servable.basis_checksum = pmsc::basis_checksum(servable.pmsc->mean, servable.pmsc->basis);
     const pmsc::PmscModel& m = *servable.pmsc;
     info->check_point_count = m.check_point_count();
     info->false_hit_rate = m.calibration.false_hit_rate;
@@ -31,8 +33,9 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     if (!levels) return levels.error();
     auto sphere = lod::model_bounding_sphere(container, *runtime, source);
     if (!sphere) return sphere.error();
-    servable.animation_space = std::move(*runtime);
-    servable.lod_levels = std::move(*levels);
+    servable.animation_space = std::make_shared<const animation_space::AnimationSpaceModel>(std::move(*runtime));
+    servable.lod_levels = std::make_shared<const lod::LodLevels>(std::move(*levels));
+    if (servable.pmsc) servable.engine = make_animation_space_engine(servable.animation_space);
     servable.bounding_sphere = *sphere;
   }
   if (info->server_engine == ServerEngine::kIllumination) {
@@ -43,7 +46,8 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
                                             std::to_string(info->point_count) + "×3 (pmsc.mean's points)",
                                             served->engine->point_count(), 3);
     }
-    servable.illumination = std::move(*served);
+    servable.illumination = std::make_shared<const illumination::ServedIllumination>(std::move(*served));
+    servable.engine = make_illumination_engine(servable.illumination);
   }
   servable.info = std::move(*info);
   return servable;

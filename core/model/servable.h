@@ -3,7 +3,6 @@
 #pragma once
 
 #include <memory>
-#include <optional>
 #include <vector>
 #include <string>
 
@@ -13,23 +12,32 @@
 #include "core/container/model_container.h"
 #include "core/illumination/illumination_io.h"
 #include "core/lod/levels.h"
+#include "core/model/engine.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::model {
 
+// Immutable once loaded: its runtimes are shared, so that the registry's LoadedModel is this
+// servable (not a copy of it field by field) and a call in flight keeps what it uses alive.
 struct Servable {
   ModelInfo info;
-  // The soft-cache runtime of a PMSC or cross-PMSC model.
-  std::optional<pmsc::PmscModel> pmsc;
+  // The soft-cache runtime of a PMSC or cross-PMSC model (null for other kinds).
+  std::shared_ptr<const pmsc::PmscModel> pmsc;
+  // Its mean and basis named exactly (pmsc::basis_checksum), for clients that reconstruct
+  // answers sent as coordinates; 0 for other kinds.
+  uint64_t basis_checksum = 0;
   // The skinning model of an animation-space model, or the posing engine a PMSC model carries
   // for server fail-through (SPEC "Fail-through"), with its LOD levels (Merry 2007 §7.3; level 0
-  // is the model itself) and the sphere eq. 7.2 measures depth to.
-  std::optional<animation_space::AnimationSpaceModel> animation_space;
-  std::optional<lod::LodLevels> lod_levels;
+  // is the model itself) and the sphere eq. 7.2 measures depth to (null otherwise).
+  std::shared_ptr<const animation_space::AnimationSpaceModel> animation_space;
+  std::shared_ptr<const lod::LodLevels> lod_levels;
   geometry::BoundingSphere bounding_sphere;
   // The illumination engine a PMSC model of RGB radiance carries for server fail-through.
-  std::optional<illumination::ServedIllumination> illumination;
+  std::shared_ptr<const illumination::ServedIllumination> illumination;
+  // The full calculation of a PMSC model with a server engine (either runtime above, behind one
+  // interface: engine.h); null when fail-through is the client's or impossible.
+  std::shared_ptr<const Engine> engine;
 };
 
 // describe → pmsc::load and/or animation_space::load → lod::load_levels →

@@ -14,6 +14,7 @@
 
 #include "core/common/format.h"
 #include "core/common/kernels.h"
+#include "core/pmsc/coordinates.h"
 #include "core/pmsc/local_fail_through.h"
 
 namespace animspace::pmsc {
@@ -379,25 +380,27 @@ void reconstruct(const PmscModel& m, std::span<const PoseEstimate* const> estima
   Eigen::MatrixXf coordinates(M, B);
   for (long b = 0; b < B; ++b) coordinates.col(b) = estimates[static_cast<size_t>(b)]->coordinates.cast<float>();
   if (B < kBlasGemmMinColumns) {
-    // Alone (or nearly): one matrix–vector product per pose, straight into its destination.
+    // Alone (or nearly): one matrix–vector product per pose, straight into its destination —
+    // the reconstruction a client holding the basis does (coordinates.h).
     for (long b = 0; b < B; ++b) {
-      float* out = destinations[static_cast<size_t>(b)];
-      std::copy(m.mean.data(), m.mean.data() + rows, out);
-      gemm(rows, M, 1, m.basis.data(), rows, coordinates.col(b).data(), M, 1.0f, out, rows);
+      const PoseEstimate& estimate = *estimates[static_cast<size_t>(b)];
+      const FloatAlignment alignment = float_alignment(estimate.alignment);
+      reconstruct_coordinates(m.mean, m.basis, coordinates.col(b).data(), m.aligned ? &alignment : nullptr,
+                              destinations[static_cast<size_t>(b)]);
     }
-  } else {
-    // One product for the batch, a block of rows at a time: the block's B columns stay in cache
-    // while the mean is added on the way to each pose's destination, so every answer is written
-    // once, and the basis is read once per batch instead of once per pose.
-    const long block = std::max(kReconstructionBlockValues / B, 256L);
-    Eigen::MatrixXf scratch(std::min(block, rows), B);
-    for (long r0 = 0; r0 < rows; r0 += block) {
-      const long n = std::min(block, rows - r0);
-      gemm(n, M, B, m.basis.data() + r0, rows, coordinates.data(), M, 0.0f, scratch.data(), scratch.rows());
-      for (long b = 0; b < B; ++b) {
-        Eigen::Map<Eigen::VectorXf>(destinations[static_cast<size_t>(b)] + r0, n) =
-            m.mean.segment(r0, n) + scratch.col(b).head(n);
-      }
+    return;
+  }
+  // One product for the batch, a block of rows at a time: the block's B columns stay in cache
+  // while the mean is added on the way to each pose's destination, so every answer is written
+  // once, and the basis is read once per batch instead of once per pose.
+  const long block = std::max(kReconstructionBlockValues / B, 256L);
+  Eigen::MatrixXf scratch(std::min(block, rows), B);
+  for (long r0 = 0; r0 < rows; r0 += block) {
+    const long n = std::min(block, rows - r0);
+    gemm(n, M, B, m.basis.data() + r0, rows, coordinates.data(), M, 0.0f, scratch.data(), scratch.rows());
+    for (long b = 0; b < B; ++b) {
+      Eigen::Map<Eigen::VectorXf>(destinations[static_cast<size_t>(b)] + r0, n) =
+          m.mean.segment(r0, n) + scratch.col(b).head(n);
     }
   }
   if (m.aligned) {
@@ -435,10 +438,7 @@ void evaluate_batch(const PmscModel& m, const Eigen::Ref<const Eigen::MatrixXf>&
   reconstruct(m, inputs, destinations);
 }
 
-void finish_cached(const PmscModel& m, const PoseEstimate& estimate, Eigen::Ref<Eigen::VectorXf> points,
-                   const Eigen::VectorXf* full_values, const FullCalculation& full_calculation, CachedPose& out) {
-  assert(full_values == nullptr || full_values->size() == m.mean.size());
-  assert(points.size() == m.mean.size());
+bool judge(const PmscModel& m, const PoseEstimate& estimate, CachedPose& out) {
   const SoftCacheDecision decision = decide(estimate.error_estimate, verdict_thresholds(m, estimate));
   out.status = decision.status;
   out.alpha = decision.alpha;
@@ -449,16 +449,23 @@ void finish_cached(const PmscModel& m, const PoseEstimate& estimate, Eigen::Ref<
   out.region_errors = estimate.region_errors;
   out.full_evaluation_needed = false;
   out.computed_full_values.resize(0);
-  if (decision.status == CacheStatus::kHit || m.cross) return;
+  return decision.status != CacheStatus::kHit && !m.cross;
+}
+
+void finish_cached(const PmscModel& m, const PoseEstimate& estimate, Eigen::Ref<Eigen::VectorXf> points,
+                   const Eigen::VectorXf* full_values, const FullCalculation& full_calculation, CachedPose& out) {
+  assert(full_values == nullptr || full_values->size() == m.mean.size());
+  assert(points.size() == m.mean.size());
+  if (!judge(m, estimate, out)) return;
   // Step 5: the full calculation, when the caller brought none and holds an engine.
   if (full_values == nullptr && full_calculation && full_calculation(out.computed_full_values)) {
     assert(out.computed_full_values.size() == m.mean.size());
     full_values = &out.computed_full_values;
   }
-  if (full_values != nullptr && decision.status == CacheStatus::kMiss) {
+  if (full_values != nullptr && out.status == CacheStatus::kMiss) {
     points = *full_values;  // eq. 9: f itself, not 1·f + 0·f̂ (which an overflowed f̂ would spoil)
   } else if (full_values != nullptr) {
-    blend(points, *full_values, decision.alpha, points);
+    blend(points, *full_values, out.alpha, points);
   } else {
     out.full_evaluation_needed = true;
   }

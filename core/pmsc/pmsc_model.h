@@ -233,6 +233,12 @@ void evaluate_cached(const PmscModel& model, const Eigen::Ref<const Eigen::Vecto
                      const Eigen::Ref<const Eigen::VectorXf>& check_values, const Eigen::VectorXf* full_values,
                      const FullCalculation& full_calculation, CachedPose& out);
 
+// The verdict of `estimate` (eqs. 8–11) into `out`: status, α and the errors, with
+// full_evaluation_needed false and `points` untouched — all an answer sent as coordinates needs.
+// Returns whether the answer needs the full values f: a blend or miss of a model that has them
+// (not cross-PMSC).
+bool judge(const PmscModel& model, const PoseEstimate& estimate, CachedPose& out);
+
 // The soft cache on a pose whose f̂ is already in `points` (N·D, from reconstruct): the verdict
 // and α of `estimate`, fail-through and blend as evaluate_cached does, with the answer written
 // over f̂ in place. Fills every member of `out` but `points`.

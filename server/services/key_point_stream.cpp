@@ -57,9 +57,9 @@ void KeyPointStream::OnReadDone(bool ok) {
   auto pose = std::make_shared<Pose>();
   pose->model = model_;
   pose->frame = std::move(frame);
-  pose->options.omit_points = pose->frame.omit_points();
-  pose->options.local_fail_through = pose->frame.local_fail_through();
-  pose->options.points_encoding = pose->frame.points_encoding();
+  pose->job.options.omit_points = pose->frame.omit_points();
+  pose->job.options.local_fail_through = pose->frame.local_fail_through();
+  pose->job.options.points_encoding = pose->frame.points_encoding();
   // Decoded here, in order, so that the frames read ahead wait in the batcher together and the
   // first pool thread to await reconstructs them as one product. A frame whose key values the
   // server gathers is decoded on the pool: the gather takes milliseconds.
@@ -76,20 +76,13 @@ void KeyPointStream::OnReadDone(bool ok) {
 
 grpc::Status KeyPointStream::decode(Pose& pose) {
   const LoadedModel& model = *pose.model;
-  if (grpc::Status s = check_points_encoding(pose.options.points_encoding,
-                                             frame_field(pose.frame.sequence()) + ".points_encoding");
-      !s.ok()) {
+  const std::string field = frame_field(pose.frame.sequence());
+  if (grpc::Status s = check_points_encoding(pose.job.options.points_encoding, field + ".points_encoding"); !s.ok()) {
     return s;
   }
-  if (grpc::Status s = decode_pose(model, pose.frame.pose(), frame_field(pose.frame.sequence()) + ".pose", pose.input);
-      !s.ok()) {
-    return s;
-  }
+  if (grpc::Status s = decode_pose(model, pose.frame.pose(), field + ".pose", pose.job.input); !s.ok()) return s;
   pose.decoded = true;
-  if (batchable(pose.input, pose.options)) {
-    const PoseBatcher::Pose batched = prepare_pose(model, pose.input, pose.options, &pose.result, pose.pending);
-    env_.batcher.enqueue(*model.pmsc, {&batched, 1}, pose.group);
-  }
+  pose.run.start(env_, model, {&pose.job, 1}, {&pose.result_pointer, 1});
   return grpc::Status::OK;
 }
 
@@ -97,15 +90,7 @@ KeyPointStream::Outcome KeyPointStream::evaluate(Pose& pose) {
   if (!pose.decoded) {
     if (grpc::Status s = decode(pose); !s.ok()) return Outcome::end(std::move(s));
   }
-  const LoadedModel& model = *pose.model;
-  grpc::Status evaluated;
-  if (batchable(pose.input, pose.options)) {
-    env_.batcher.await(pose.group);
-    evaluated = finish_pose(env_, model, pose.input, pose.options, pose.pending, &pose.result);
-  } else {
-    evaluated = evaluate_pose(env_, model, pose.input, pose.options, &pose.result);
-  }
-  if (!evaluated.ok()) return Outcome::end(std::move(evaluated));
+  if (grpc::Status s = pose.run.finish(); !s.ok()) return Outcome::end(std::move(s));
   pose.result.set_sequence(pose.frame.sequence());
   grpc::ByteBuffer bytes;
   if (grpc::Status s = serialize_message(pose.result, bytes); !s.ok()) return Outcome::end(std::move(s));

@@ -46,16 +46,16 @@ class KeyPointStream final
   struct Pose {
     std::shared_ptr<const LoadedModel> model;
     v1::KeyPointFrame frame;
-    PoseOptions options;
     bool decoded = false;
-    PoseInput input;
+    PoseJob job;
     v1::PoseResult result;
-    PendingPose pending;
+    v1::PoseResult* result_pointer = &result;
     // Last: destroyed first, taking the pose out of the batcher before the memory it writes goes
-    // (a frame skipped because the stream stopped is never awaited).
-    PoseBatcher::Group group;
+    // (a frame skipped because the stream stopped is never finished).
+    PoseRun run;
   };
-  // Decodes the frame's pose and, on the batched path, enqueues it.
+  // Decodes the frame's pose and starts it through the pipeline (on the batched path, it waits in
+  // the batcher).
   grpc::Status decode(Pose& pose);
   // One frame through the soft cache, on the request pool.
   Outcome evaluate(Pose& pose);

@@ -3,6 +3,7 @@
 #include "server/convert.h"
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
+#include "server/services/basis_stream.h"
 #include "server/services/key_point_stream.h"
 #include "server/unary_call.h"
 #include "server/validation.h"
@@ -61,40 +62,26 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
           return s;
         }
         // Every pose is checked before any is evaluated: a bad batch logs no misses and counts no poses.
-        std::vector<PoseInput> inputs(static_cast<size_t>(request->poses_size()));
+        std::vector<PoseJob> jobs(static_cast<size_t>(request->poses_size()));
+        std::vector<v1::PoseResult*> results;
+        results.reserve(jobs.size());
         for (int i = 0; i < request->poses_size(); ++i) {
-          if (grpc::Status s = decode_pose(*model, request->poses(i), "poses[" + std::to_string(i) + "]",
-                                           inputs[static_cast<size_t>(i)]);
+          PoseJob& job = jobs[static_cast<size_t>(i)];
+          if (grpc::Status s = decode_pose(*model, request->poses(i), "poses[" + std::to_string(i) + "]", job.input);
               !s.ok()) {
             return s;
           }
+          job.options.include_region_errors = request->include_region_errors();
+          job.options.omit_points = request->omit_points();
+          job.options.points_encoding = request->points_encoding();
+          job.options.local_fail_through = request->local_fail_through();
+          results.push_back(response->add_results());
         }
-        PoseOptions options;
-        options.include_region_errors = request->include_region_errors();
-        options.omit_points = request->omit_points();
-        options.points_encoding = request->points_encoding();
-        options.local_fail_through = request->local_fail_through();
         // The request's poses wait in the batcher together (with any other call's for this model):
         // their f̂ is one matrix product.
-        const size_t count = inputs.size();
-        std::vector<v1::PoseResult*> results(count);
-        std::vector<PendingPose> pending(count);
-        std::vector<PoseBatcher::Pose> batched;
-        for (size_t i = 0; i < count; ++i) {
-          results[i] = response->add_results();
-          if (batchable(inputs[i], options)) batched.push_back(prepare_pose(*model, inputs[i], options, results[i], pending[i]));
-        }
-        PoseBatcher::Group group;
-        env_.batcher.enqueue(*model->pmsc, batched, group);
-        env_.batcher.await(group);
-        for (size_t i = 0; i < count; ++i) {
-          if (grpc::Status stop = call.stop_status(); !stop.ok()) return stop;
-          grpc::Status s = batchable(inputs[i], options)
-                               ? finish_pose(env_, *model, inputs[i], options, pending[i], results[i])
-                               : evaluate_pose(env_, *model, inputs[i], options, results[i]);
-          if (!s.ok()) return s;
-        }
-        return grpc::Status::OK;
+        PoseRun run;
+        run.start(env_, *model, jobs, results);
+        return run.finish(&call);
       });
 }
 
@@ -151,6 +138,11 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         response->set_logged(logged);
         return grpc::Status::OK;
       });
+}
+
+grpc::ServerWriteReactor<grpc::ByteBuffer>* PoseServiceImpl::GetBasis(grpc::CallbackServerContext* context,
+                                                                      const grpc::ByteBuffer* request_bytes) {
+  return start_basis_stream(env_, context, request_bytes);
 }
 
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* PoseServiceImpl::StreamKeyPoints(

@@ -9,7 +9,8 @@ namespace animspace::server {
 // Every method raw: requests arrive as bytes (server/raw_messages.h).
 using RawPoseService = v1::PoseService::WithRawCallbackMethod_DescribeKeyPoints<
     v1::PoseService::WithRawCallbackMethod_EvaluateKeyPoints<v1::PoseService::WithRawCallbackMethod_StreamKeyPoints<
-        v1::PoseService::WithRawCallbackMethod_CompleteMiss<v1::PoseService::Service>>>>;
+        v1::PoseService::WithRawCallbackMethod_CompleteMiss<
+            v1::PoseService::WithRawCallbackMethod_GetBasis<v1::PoseService::Service>>>>>;
 
 class PoseServiceImpl final : public RawPoseService {
  public:
@@ -25,6 +26,8 @@ class PoseServiceImpl final : public RawPoseService {
       grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* CompleteMiss(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
                                          grpc::ByteBuffer* response_bytes) override;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* GetBasis(grpc::CallbackServerContext* context,
+                                                       const grpc::ByteBuffer* request_bytes) override;
 
  private:
   ServiceEnvironment& env_;

@@ -5,7 +5,7 @@
 #include "core/misslog/miss_frames.h"
 #include "core/pmsc/retrain.h"
 #include "server/model_lookup.h"
-#include "server/pose_evaluation.h"
+#include "server/pose_input.h"
 #include "server/status_mapping.h"
 #include "server/unary_call.h"
 

@@ -38,9 +38,9 @@ TEST_P(ReleaseContainerTest, LoadsAsTheServableItWasWrittenAs) {
   ASSERT_TRUE(servable.ok()) << servable.error().message;
   EXPECT_EQ(servable->info.kind, c.kind);
   EXPECT_EQ(servable->info.fail_through, c.fail_through);
-  EXPECT_EQ(servable->pmsc.has_value(), c.pmsc);
-  EXPECT_EQ(servable->animation_space.has_value(), c.skeleton);
-  EXPECT_EQ(servable->lod_levels.has_value(), c.skeleton);
+  EXPECT_EQ(servable->pmsc != nullptr, c.pmsc);
+  EXPECT_EQ(servable->animation_space != nullptr, c.skeleton);
+  EXPECT_EQ(servable->lod_levels != nullptr, c.skeleton);
   EXPECT_GT(servable->info.point_count, 0);
 }
 

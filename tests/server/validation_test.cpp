@@ -91,7 +91,12 @@ TEST(Validation, Bad16BitArraysAreRefusedNamingTheMember) {
   a.set_encoding(static_cast<v1::PointEncoding>(9));
   expect_refusal(decode_points(a, "poses[0].key_values", 2, 3, "key points", out), grpc::StatusCode::INVALID_ARGUMENT,
                  "poses[0].key_values.encoding: unknown PointEncoding 9; expected POINT_ENCODING_FLOAT32 (or unset), "
-                 "POINT_ENCODING_FLOAT16 or POINT_ENCODING_FIXED16");
+                 "POINT_ENCODING_FLOAT16, POINT_ENCODING_FIXED16 or POINT_ENCODING_COORDINATES");
+  a = good;
+  a.set_encoding(v1::POINT_ENCODING_COORDINATES);
+  expect_refusal(decode_points(a, "poses[0].key_values", 2, 3, "key points", out), grpc::StatusCode::INVALID_ARGUMENT,
+                 "poses[0].key_values.encoding: POINT_ENCODING_COORDINATES is for answers only; send FLOAT32, "
+                 "FLOAT16 or FIXED16 values");
   a = good;
   a.set_encoding(v1::POINT_ENCODING_FIXED16);
   a.add_scale(1.0f);
@@ -137,7 +142,7 @@ TEST(Validation, EncodingRefusesWhatFloat16CannotCarry) {
   expect_refusal(check_points_encoding(static_cast<v1::PointEncoding>(7), "points_encoding"),
                  grpc::StatusCode::INVALID_ARGUMENT,
                  "points_encoding: unknown PointEncoding 7; expected POINT_ENCODING_FLOAT32 (or unset), "
-                 "POINT_ENCODING_FLOAT16 or POINT_ENCODING_FIXED16");
+                 "POINT_ENCODING_FLOAT16, POINT_ENCODING_FIXED16 or POINT_ENCODING_COORDINATES");
 }
 
 TEST(Validation, ABogusPointCountNeverAllocates) {

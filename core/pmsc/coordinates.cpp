@@ -1,0 +1,40 @@
+#include "core/pmsc/coordinates.h"
+
+#include <algorithm>
+#include <cassert>
+#include <span>
+
+#include "core/common/kernels.h"
+#include "core/container/crc32.h"
+
+namespace animspace::pmsc {
+namespace {
+
+uint32_t crc_of(const float* values, long count) {
+  return container::crc32_update(
+      0, std::span<const std::byte>(reinterpret_cast<const std::byte*>(values), static_cast<size_t>(count) * sizeof(float)));
+}
+
+}  // namespace
+
+uint64_t basis_checksum(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis) {
+  return (uint64_t{crc_of(mean.data(), mean.size())} << 32) | crc_of(basis.data(), basis.size());
+}
+
+FloatAlignment float_alignment(const geometry::RigidTransform& alignment) {
+  return {alignment.rotation.cast<float>(), alignment.translation.cast<float>()};
+}
+
+void reconstruct_coordinates(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis, const float* p,
+                             const FloatAlignment* alignment, float* out) {
+  const long rows = mean.size();
+  assert(basis.rows() == rows);
+  std::copy(mean.data(), mean.data() + rows, out);
+  if (basis.cols() > 0) gemm(rows, basis.cols(), 1, basis.data(), rows, p, basis.cols(), 1.0f, out, rows);
+  if (alignment != nullptr) {
+    Eigen::Map<Eigen::Matrix3Xf> points(out, 3, rows / 3);
+    points = (alignment->rotation * points).colwise() + alignment->translation;
+  }
+}
+
+}  // namespace animspace::pmsc

@@ -1,0 +1,43 @@
+// Point multiplication on the client (issue #36): a pose answered as its subspace coordinates p
+// (Meyer & Anderson 2007 eq. 1, f̂ = mean + A p) instead of its N·D points, reconstructed by
+// whoever holds the basis. The server's one-pose reconstruction and a client's are this one
+// function, so that the two differ by nothing but the kernel a build links.
+#pragma once
+
+#include <cstdint>
+
+#include <Eigen/Core>
+
+#include "core/pmsc/pmsc_model.h"
+
+namespace animspace::pmsc {
+
+// Names a subspace exactly: crc32 (zlib's) of the mean's float32 bytes in the high 32 bits, of
+// the basis's (column by column) in the low 32. A client checks a cached basis with it.
+uint64_t basis_checksum(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis);
+
+// The alignment of one pose as it travels: R and t in float32 (what reconstruct applies).
+struct FloatAlignment {
+  Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();
+  Eigen::Vector3f translation = Eigen::Vector3f::Zero();
+};
+FloatAlignment float_alignment(const geometry::RigidTransform& alignment);
+
+// f̂ = R (mean + A p) + t for one pose, into `out` (mean.size() floats): the mean copied, one
+// matrix–vector product through the active kernel (core/common/kernels.h), then, when `alignment`
+// is given (aligned models: 3 channels), every point moved to the world. `p` holds M values.
+void reconstruct_coordinates(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis, const float* p,
+                             const FloatAlignment* alignment, float* out);
+
+// How far two float32 reconstructions of the same p (different kernels, or one pose alone and in
+// a batch) may differ in value i: both are within γ_{M+2} of the exact sum, so at most
+//   coordinates_rounding_bound(M) · (|mean_i| + Σ_j |A_ij p_j|)
+// before alignment; an aligned model's rotation keeps that error's size and adds at most
+// 2·γ_3·‖x‖ per coordinate of a point x (aligned_rounding_bound).
+inline double coordinates_rounding_bound(long basis_size) { return reconstruction_rounding_bound(basis_size); }
+inline double aligned_rounding_bound() {
+  const double gamma3 = 3 * 0x1p-24 / (1 - 3 * 0x1p-24);
+  return 2 * gamma3;
+}
+
+}  // namespace animspace::pmsc

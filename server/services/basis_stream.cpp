@@ -1,0 +1,106 @@
+#include "server/services/basis_stream.h"
+
+#include <algorithm>
+#include <cstring>
+#include <memory>
+
+#include "animspace/v1/poses.pb.h"
+#include "server/model_lookup.h"
+#include "server/pose_input.h"
+#include "server/raw_messages.h"
+#include "server/stream_reactor.h"
+
+namespace animspace::server {
+namespace {
+
+constexpr const char* kRpc = "PoseService/GetBasis";
+constexpr int64_t kMaxChunkBytes = int64_t{4} << 20;
+
+class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::ByteBuffer>, grpc::ByteBuffer> {
+ public:
+  static BasisStream* start(ServiceEnvironment& env, grpc::CallbackServerContext* context,
+                            const grpc::ByteBuffer* request) {
+    auto* stream = new BasisStream(env, context);
+    if (grpc::Status unread = parse_message(*request, "the request", stream->request_); !unread.ok()) {
+      stream->finish_early(std::move(unread));
+      return stream;
+    }
+    if (stream->admit(env, Access::kUser)) stream->pump();  // starts the first build
+    return stream;
+  }
+
+ private:
+  BasisStream(ServiceEnvironment& env, grpc::CallbackServerContext* context)
+      : StreamReactor(context, env.request_pool, env.metrics, kRpc), env_(env) {}
+
+  // One chunk built ahead of the one on the wire, one build at a time.
+  bool want_more(size_t unwritten, size_t producing) const override { return producing == 0 && unwritten < 2; }
+  void request_more() override {
+    submit([this] { return build_next(); });
+  }
+
+  Outcome build_next() {
+    if (!model_) {
+      if (grpc::Status s = find_model(env_.registry, request_.model(), "model", model_); !s.ok()) {
+        return Outcome::end(std::move(s));
+      }
+      set_model(model_->name);
+      if (grpc::Status s = require_pmsc(*model_, "it has no subspace to send"); !s.ok()) {
+        return Outcome::end(std::move(s));
+      }
+      const pmsc::PmscModel& m = *model_->pmsc;
+      total_ = static_cast<uint64_t>(m.mean.size()) * static_cast<uint64_t>(m.basis_size() + 1);
+      chunk_values_ = static_cast<uint64_t>(
+          std::max<int64_t>(1, std::min(kMaxChunkBytes, env_.options.max_message_bytes / 4)) /
+          static_cast<int64_t>(sizeof(float)));
+    }
+    if (sent_ == total_ && sent_any_) return Outcome::end(grpc::Status::OK);
+    const pmsc::PmscModel& m = *model_->pmsc;
+    v1::BasisChunk chunk;
+    chunk.set_model_version(model_->version);
+    chunk.set_basis_checksum(model_->basis_checksum);
+    chunk.set_point_count(static_cast<uint32_t>(m.point_count));
+    chunk.set_channel_count(static_cast<uint32_t>(m.channel_count));
+    chunk.set_basis_size(static_cast<uint32_t>(m.basis_size()));
+    chunk.set_aligned(m.aligned);
+    chunk.set_total_values(total_);
+    chunk.set_offset(sent_);
+    const uint64_t count = std::min(chunk_values_, total_ - sent_);
+    std::string* data = chunk.mutable_data();
+    data->resize(count * sizeof(float));
+    // The mean, then the basis column by column: one span of values, cut anywhere.
+    const auto mean_values = static_cast<uint64_t>(m.mean.size());
+    uint64_t written = 0;
+    while (written < count) {
+      const uint64_t at = sent_ + written;
+      const float* source = at < mean_values ? m.mean.data() + at : m.basis.data() + (at - mean_values);
+      const uint64_t run = std::min(count - written, at < mean_values ? mean_values - at : total_ - at);
+      std::memcpy(data->data() + written * sizeof(float), source, run * sizeof(float));
+      written += run;
+    }
+    sent_ += count;
+    sent_any_ = true;
+    grpc::ByteBuffer bytes;
+    if (grpc::Status s = serialize_message(chunk, bytes); !s.ok()) return Outcome::end(std::move(s));
+    return Outcome::write(std::move(bytes));
+  }
+
+  ServiceEnvironment& env_;
+  v1::GetBasisRequest request_;  // a copy: builds may run after gRPC has freed its own
+  // Read by one build at a time, each ordered after the previous by the reactor's lock.
+  std::shared_ptr<const LoadedModel> model_;  // pins the version for the whole download
+  uint64_t total_ = 0;
+  uint64_t chunk_values_ = 0;
+  uint64_t sent_ = 0;
+  bool sent_any_ = false;
+};
+
+}  // namespace
+
+grpc::ServerWriteReactor<grpc::ByteBuffer>* start_basis_stream(ServiceEnvironment& env,
+                                                               grpc::CallbackServerContext* context,
+                                                               const grpc::ByteBuffer* request) {
+  return BasisStream::start(env, context, request);
+}
+
+}  // namespace animspace::server
