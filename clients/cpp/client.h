@@ -73,6 +73,20 @@ struct Thumbnail {
   bool heat_legend_drawn = false;
 };
 
+// A model version's subspace as PoseService.GetBasis sends it, reassembled and checked
+// (clients/cpp/basis.cpp): the N·D mean followed by the N·D × M basis column by column.
+struct BasisData {
+  uint64_t model_version = 0;
+  uint64_t basis_checksum = 0;  // as the server named it (coordinates.h verifies it)
+  uint32_t point_count = 0;     // N
+  uint32_t channel_count = 0;   // D
+  uint32_t basis_size = 0;      // M
+  bool aligned = false;
+  std::vector<float> values;    // N·D·(M + 1)
+  uint64_t chunk_count = 0;
+  uint64_t bytes_received = 0;
+};
+
 struct ClientOptions {
   // Deadline applied to every call.
   std::chrono::milliseconds deadline{10000};
@@ -130,6 +144,10 @@ class Client {
   // Streams one level and reassembles it, checking that the blocks arrive in order and add up to
   // the header's counts (std::runtime_error otherwise). `deadline` 0 = the client's default.
   LodMesh get_lod(const v1::GetLodRequest& request, std::chrono::milliseconds deadline = {});
+  // The subspace answers sent as coordinates are reconstructed with (once per model version;
+  // clients/cpp/coordinates.h caches it). Throws std::runtime_error for chunks out of order or
+  // inconsistent with each other. `deadline` 0 = the client's default.
+  BasisData get_basis(const std::string& model, uint64_t version = 0, std::chrono::milliseconds deadline = {});
   // A render waits behind others on the daemon's render thread: `deadline` 0 = the client's default.
   Thumbnail render_thumbnail(const v1::RenderThumbnailRequest& request, std::chrono::milliseconds deadline = {});
 

@@ -135,6 +135,14 @@ PoseResult decode_pose_result(const v1::PoseResult& result) {
   for (const auto& region : result.region_errors()) {
     out.region_errors.push_back({region.region(), region.key_point_error(), region.status()});
   }
+  if (result.has_coordinates()) {
+    const v1::SubspaceCoordinates& c = result.coordinates();
+    out.coordinates.present = true;
+    out.coordinates.p.assign(c.p().begin(), c.p().end());
+    out.coordinates.basis_checksum = c.basis_checksum();
+    out.coordinates.rotation.assign(c.rotation().begin(), c.rotation().end());
+    out.coordinates.translation.assign(c.translation().begin(), c.translation().end());
+  }
   return out;
 }
 

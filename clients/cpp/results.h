@@ -93,6 +93,17 @@ struct RegionError {
   v1::CacheStatus status = v1::CACHE_STATUS_UNSPECIFIED;
 };
 
+// An answer as subspace coordinates (points_encoding POINT_ENCODING_COORDINATES, poses.proto
+// SubspaceCoordinates): f̂_i = R (mean_i + Σ_j A_ij p_j) + t with the basis PoseService.GetBasis
+// sends; clients/cpp/coordinates.h reconstructs it.
+struct SubspaceCoordinates {
+  bool present = false;
+  std::vector<float> p;         // M
+  uint64_t basis_checksum = 0;  // the basis p belongs to (BasisData::basis_checksum)
+  std::vector<float> rotation;  // aligned models: R row-major (9), else empty
+  std::vector<float> translation;  // aligned models: t (3), else empty
+};
+
 // The soft cache's answer for one pose (Meyer & Anderson 2006 §5).
 struct PoseResult {
   Points points;  // empty when points were omitted
@@ -113,6 +124,9 @@ struct PoseResult {
   // each. Empty when every region is within tolerance: `points` is the answer.
   std::vector<uint32_t> full_points;
   std::vector<float> full_point_blend_weights;
+  // Asked for as coordinates and reconstructible by the client (a HIT, or a blend or miss with
+  // full_evaluation_needed): `points` stays empty until reconstructed.
+  SubspaceCoordinates coordinates;
 };
 
 struct CompletedMiss {
@@ -139,7 +153,8 @@ struct EvaluateOptions {
   // the full calculation (those of the failing regions); the rest of the answer is already right.
   bool local_fail_through = false;
   // How the answers' points travel: float32 (unset), FLOAT16 or FIXED16 — half the bytes, decoded
-  // to float32 by decode_points, Points::max_error saying what was lost (common.proto).
+  // to float32 by decode_points, Points::max_error saying what was lost (common.proto) — or
+  // COORDINATES: M values instead of N·D, reconstructed by the caller (clients/cpp/coordinates.h).
   v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
 };
 

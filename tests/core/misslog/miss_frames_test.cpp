@@ -113,5 +113,32 @@ TEST(MissFrames, CompletesPartialFramesWithKeyValuesAndTheEstimate) {
   EXPECT_EQ(frames->frames.row(1), (Eigen::RowVectorXf(3) << 1, 1, estimate.points(2)).finished());
 }
 
+// A log created before partial frames holds the whole frame retraining would complete anyway;
+// a newer log and a whole-frame record are left as they are.
+TEST(MissFrames, FitToFormatCompletesPartialFramesOnlyForLogsBeforeThem) {
+  pmsc::PmscModel model = three_point_model();
+  ASSERT_TRUE(pmsc::prepare_projection(model).ok());
+  MissRecord old_log = partial_record(1, {2}, {5});
+  fit_to_format(model, kFirstPartialFormatVersion - 1, old_log);
+  EXPECT_TRUE(old_log.full_points.empty());
+  // Keys (1, 1) at points 0 and 1, point 2 computed as 5 (hand-worked: nothing of f̂ is left).
+  EXPECT_EQ(old_log.full_values, (std::vector<float>{1, 1, 5}));
+  MissRecord partial_from_keys = partial_record(1, {0}, {1});
+  fit_to_format(model, kFirstPartialFormatVersion - 1, partial_from_keys);
+  // Point 2 takes the estimate f̂_2 = 1.8 · 2/3 = 1.2 (by hand).
+  ASSERT_EQ(partial_from_keys.full_values.size(), 3u);
+  EXPECT_EQ(partial_from_keys.full_values[0], 1.0f);
+  EXPECT_NEAR(partial_from_keys.full_values[2], 1.2, 1e-6);
+
+  MissRecord current = partial_record(1, {2}, {5});
+  fit_to_format(model, kFirstPartialFormatVersion, current);
+  EXPECT_EQ(current.full_points, (std::vector<uint32_t>{2}));
+  EXPECT_EQ(current.full_values, (std::vector<float>{5}));
+  MissRecord whole = record(1, {1, 1}, {1, 1, 1});
+  whole.channel_count = 1;
+  fit_to_format(model, 1, whole);
+  EXPECT_EQ(whole.full_values, (std::vector<float>{1, 1, 1}));
+}
+
 }  // namespace
 }  // namespace animspace::misslog

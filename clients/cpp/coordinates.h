@@ -1,0 +1,91 @@
+// Point multiplication on the client (issue #36): answers asked for as POINT_ENCODING_COORDINATES
+// carry p (M values) instead of N·D points, and the client reconstructs
+//   f̂_i = R (mean_i + Σ_j A_ij p_j) + t
+// with the basis PoseService.GetBasis sent once — with the project's own one-pose reconstruction
+// (pmsc::reconstruct_coordinates, core/pmsc/coordinates.h), so this library links the core
+// library beside the stub-only animspace_client.
+//
+// Bound (tested): a reconstruction here and the server's float32 answer for the same pose differ
+// in value i by at most
+//   pmsc::coordinates_rounding_bound(M) · (|mean_i| + Σ_j |A_ij p_j|)
+// (both sums within γ_{M+2} of the exact one; 0 when both run the same kernel on one pose) and,
+// for an aligned model, pmsc::aligned_rounding_bound() · ‖x‖ more per coordinate of a point x.
+//
+// Never silently wrong: every answer names its basis (basis_checksum). A basis is looked up by
+// model, the answer's version and that checksum — in memory, then on disk (verified), then with
+// GetBasis for exactly that version (verified, then stored). A server whose basis for that
+// version has another checksum (the version was replaced), or a result whose shape differs from
+// its basis, is refused with std::runtime_error; the points are never reconstructed with a basis
+// the answer did not name.
+//
+// The disk cache is shared with the Python client (docs/FORMATS.md, "basis cache"):
+// <directory>/<model>/<version>-<checksum, 16 hex digits>.basis.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <tuple>
+
+#include <Eigen/Core>
+
+#include "clients/cpp/client.h"
+#include "clients/cpp/results.h"
+
+namespace animspace {
+
+// A model version's subspace, ready to reconstruct with.
+struct Basis {
+  std::string model;
+  uint64_t model_version = 0;
+  uint64_t basis_checksum = 0;
+  uint32_t channel_count = 0;
+  bool aligned = false;
+  Eigen::VectorXf mean;   // N·D
+  Eigen::MatrixXf basis;  // N·D × M
+};
+
+// `data` (from Client::get_basis) as a Basis, after checking that its values have the checksum
+// the server named (pmsc::basis_checksum). std::runtime_error naming both when they differ.
+Basis make_basis(const std::string& model, BasisData data);
+
+// The points of `result` (its coordinates) reconstructed with `basis` into `out` (N×D float32).
+// std::runtime_error when the coordinates name another basis, or their sizes do not fit it.
+void reconstruct(const Basis& basis, const PoseResult& result, Points& out);
+
+// $ANIMSPACE_BASIS_CACHE, else $XDG_CACHE_HOME/animspace/bases, else ~/.cache/animspace/bases
+// (else a folder under the temporary directory when HOME is unset).
+std::filesystem::path default_basis_cache_directory();
+
+// The bases of the models a client takes coordinates from, in memory and on disk. Thread-safe:
+// one cache may serve every caller of a client.
+class BasisCache {
+ public:
+  // An empty `directory` keeps bases in memory only.
+  explicit BasisCache(std::filesystem::path directory = default_basis_cache_directory());
+
+  // The basis of `model` version `version` named `checksum` (see the header comment).
+  std::shared_ptr<const Basis> get(Client& client, const std::string& model, uint64_t version, uint64_t checksum);
+  // Fills result.points from result.coordinates (false, untouched, when it has none).
+  bool reconstruct(Client& client, const std::string& model, PoseResult& result);
+
+  // Where the basis named so lies on disk.
+  std::filesystem::path file_of(const std::string& model, uint64_t version, uint64_t checksum) const;
+  // GetBasis calls this cache made (a basis found in memory or on disk makes none).
+  uint64_t fetch_count() const { return fetches_.load(); }
+
+ private:
+  std::shared_ptr<const Basis> read_file(const std::string& model, uint64_t version, uint64_t checksum) const;
+  void write_file(const Basis& basis) const;
+
+  const std::filesystem::path directory_;
+  std::mutex mutex_;
+  std::map<std::tuple<std::string, uint64_t, uint64_t>, std::shared_ptr<const Basis>> bases_;
+  std::atomic<uint64_t> fetches_{0};
+};
+
+}  // namespace animspace
