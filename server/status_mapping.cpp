@@ -30,6 +30,12 @@ grpc::Status invalid_argument(const std::string& message) {
 
 grpc::Status not_found(const std::string& message) { return {grpc::StatusCode::NOT_FOUND, message}; }
 
+grpc::Status resource_exhausted(const std::string& message) {
+  return {grpc::StatusCode::RESOURCE_EXHAUSTED, message};
+}
+
+grpc::Status unavailable(const std::string& message) { return {grpc::StatusCode::UNAVAILABLE, message}; }
+
 grpc::Status unimplemented(const std::string& rpc, const std::string& why) {
   return {grpc::StatusCode::UNIMPLEMENTED, rpc + " is not implemented in this build: " + why};
 }

@@ -1,5 +1,7 @@
 #include "server/unary_call.h"
 
+#include "server/status_mapping.h"
+
 namespace animspace::server {
 
 grpc::Status CallControl::stop_status() const {
@@ -18,9 +20,8 @@ grpc::Status admit(ServiceEnvironment& env, const grpc::CallbackServerContext* c
   }
   *ticket = env.admission.try_admit();
   if (!*ticket) {
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-            "server busy: " + std::to_string(env.admission.limit()) +
-                " calls are already in progress (--max-concurrent-calls); retry with backoff"};
+    return resource_exhausted("server busy: " + std::to_string(env.admission.limit()) +
+                              " calls are already in progress (--max-concurrent-calls); retry with backoff");
   }
   return grpc::Status::OK;
 }

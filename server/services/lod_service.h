@@ -7,7 +7,7 @@
 // slow client holds back the server (flow control) and at most two chunks exist beyond the level
 // itself. The level is already in memory (the registry's LoadedModel); the posed form evaluates it
 // once at the start, as SkinningService does, and include_geomorph builds lod::geomorph's aligned
-// set once (§7.3); the blocks are cut from those.
+// set once (§7.3); lod::LevelBlocks (core/lod/level_blocks.h) lays these out and cuts the blocks.
 #pragma once
 
 #include "animspace/v1/lod.grpc.pb.h"

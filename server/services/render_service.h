@@ -1,4 +1,6 @@
 // RenderService: thumbnails of a posed model drawn headless through EGL on the render thread.
+// The request's view is read by server/thumbnail_view.h, the scene built by
+// server/thumbnail_scene.h (core/thumbnail/ below it); the service submits the draw and answers.
 #pragma once
 
 #include "animspace/v1/render.grpc.pb.h"

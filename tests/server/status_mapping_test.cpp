@@ -24,5 +24,18 @@ TEST(StatusMapping, EveryCoreCodeHasOneGrpcCode) {
   }
 }
 
+TEST(StatusMapping, ShorthandsCarryTheirCodeAndTheMessageAsGiven) {
+  const std::pair<grpc::Status, grpc::StatusCode> table[] = {
+      {invalid_argument("m"), grpc::StatusCode::INVALID_ARGUMENT},
+      {not_found("m"), grpc::StatusCode::NOT_FOUND},
+      {resource_exhausted("m"), grpc::StatusCode::RESOURCE_EXHAUSTED},
+      {unavailable("m"), grpc::StatusCode::UNAVAILABLE},
+  };
+  for (const auto& [status, code] : table) {
+    EXPECT_EQ(status.error_code(), code);
+    EXPECT_EQ(status.error_message(), "m");
+  }
+}
+
 }  // namespace
 }  // namespace animspace::server
