@@ -1,0 +1,316 @@
+// Issue #36, coordinates on the wire, over real gRPC against the real animspaced: answers asked for
+// as POINT_ENCODING_COORDINATES, reconstructed by the C++ client (clients/cpp/coordinates.h), are
+// the float32 answers within the bound the header states — computed here, in double, from the
+// model file read independently — with the same verdicts; GetBasis reassembles the file's mean and
+// basis; the basis cache never reconstructs with a basis the answer did not name.
+#include <cmath>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "animspace/v1/poses.grpc.pb.h"
+#include "clients/cpp/client.h"
+#include "clients/cpp/coordinates.h"
+#include "core/animspace/animspace_io.h"
+#include "core/animspace/model.h"
+#include "core/container/model_container.h"
+#include "core/demo/bending_arm.h"
+#include "core/demo/demo_repository.h"
+#include "core/pmsc/coordinates.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/train.h"
+#include "harness/daemon_process.h"
+#include "tests/support/integration_support.h"
+#include "tests/support/test_support.h"
+
+namespace animspace {
+namespace {
+
+using harness::DaemonProcess;
+using testing::TempDir;
+
+// The arm over elbow 0–50° (the narrow range the soft cache is trained on), with or without the
+// rigid alignment (remove_rigid_motion: the model moves each estimate to the world).
+container::ModelContainer arm_model(bool aligned, double elbow_step_deg) {
+  const demo::ArmRig rig = demo::make_arm_rig();
+  std::vector<Eigen::VectorXf> frames;
+  for (double elbow = 0; elbow <= 50; elbow += elbow_step_deg) {
+    for (double shoulder : {-20.0, 0.0, 20.0}) frames.push_back(testing::expensive_arm_frame(rig, elbow, shoulder));
+  }
+  FrameMatrix training(static_cast<Eigen::Index>(frames.size()), frames[0].size());
+  for (size_t f = 0; f < frames.size(); ++f) training.row(static_cast<Eigen::Index>(f)) = frames[f].transpose();
+  const double diagonal = pmsc::bounding_box_diagonal(frames[0]);
+  pmsc::TrainingOptions options;
+  options.error_bound = 0.0025 * diagonal;
+  options.error_tolerance = 0.01 * diagonal;
+  options.max_key_points = 60;
+  options.region_count = 0;
+  options.remove_rigid_motion = aligned;
+  pmsc::TrainingReport report;
+  auto model = pmsc::train(training, options, &report);
+  EXPECT_TRUE(model.ok()) << model.error().message;
+  auto out = pmsc::make_container(rig.rest, training, nullptr, *model, report, "arm, elbow 0-50 degrees");
+  pmsc::store_training_options(options, out);
+  return out;
+}
+
+class CoordinatesTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    template_repo_ = new TempDir();
+    ASSERT_TRUE(demo::write_demo_repository(template_repo_->path()).ok());
+    testing::write_model(template_repo_->path(), "bend", 1, arm_model(false, 5));
+    testing::write_model(template_repo_->path(), "bend-aligned", 1, arm_model(true, 5));
+  }
+  static void TearDownTestSuite() {
+    delete template_repo_;
+    template_repo_ = nullptr;
+  }
+
+  void SetUp() override {
+    repo_ = work_.path() / "repo";
+    std::filesystem::copy(template_repo_->path(), repo_, std::filesystem::copy_options::recursive);
+    // 256 KiB messages: GetBasis cuts the arm's basis (~150 KiB of values) into 64 KiB chunks.
+    daemon_ = std::make_unique<DaemonProcess>(
+        std::vector<std::string>{"--model-repository", repo_.string(), "--max-message-bytes", "262144"}, work_.path());
+    client_ = std::make_unique<Client>(daemon_->address());
+    ASSERT_TRUE(testing::wait_until_serving(*client_));
+  }
+
+  // The served file's model, read here rather than asked of the daemon.
+  pmsc::PmscModel model_file(const std::string& name, int version = 1) const {
+    auto file = container::read_file(repo_ / name / std::to_string(version) / "model.anim");
+    EXPECT_TRUE(file.ok());
+    auto model = pmsc::load(*file, name);
+    EXPECT_TRUE(model.ok()) << model.error().message;
+    return std::move(*model);
+  }
+
+  // Key values of the arm posed by the expensive rig, in the model's key order.
+  static std::vector<float> key_values(const KeyPoints& keys, double elbow_deg, double shoulder_deg) {
+    static const demo::ArmRig rig = demo::make_arm_rig();
+    const Eigen::VectorXf frame = testing::expensive_arm_frame(rig, elbow_deg, shoulder_deg);
+    return keys.gather({frame.data(), static_cast<size_t>(frame.size())});
+  }
+
+  static inline TempDir* template_repo_ = nullptr;
+  TempDir work_;
+  std::filesystem::path repo_;
+  std::unique_ptr<DaemonProcess> daemon_;
+  std::unique_ptr<Client> client_;
+};
+
+// The header's bound between a client reconstruction and the float32 answer, value by value.
+void expect_within_bound(const pmsc::PmscModel& m, const SubspaceCoordinates& c, const std::vector<float>& client,
+                         const std::vector<float>& server, const std::string& what) {
+  ASSERT_EQ(client.size(), server.size()) << what;
+  const Eigen::VectorXd p = Eigen::Map<const Eigen::VectorXf>(c.p.data(), static_cast<long>(c.p.size())).cast<double>();
+  const Eigen::VectorXd size = m.mean.cast<double>().cwiseAbs() + m.basis.cast<double>().cwiseAbs() * p.cwiseAbs();
+  const double gamma = pmsc::coordinates_rounding_bound(m.basis_size());
+  for (size_t i = 0; i < client.size(); ++i) {
+    double allowed = gamma * size(static_cast<long>(i));
+    if (m.aligned) {
+      const long point = static_cast<long>(i) / 3;
+      const Eigen::Vector3d x(server[3 * point], server[3 * point + 1], server[3 * point + 2]);
+      allowed = gamma * size.segment(3 * point, 3).norm() + pmsc::aligned_rounding_bound() * x.norm();
+    }
+    ASSERT_LE(std::abs(static_cast<double>(client[i]) - server[i]), allowed) << what << ", value " << i;
+  }
+}
+
+TEST_F(CoordinatesTest, ReconstructedAnswersAreTheFloat32AnswersWithinTheStatedBound) {
+  BasisCache cache(work_.path() / "bases");
+  for (const std::string name : {"bend", "bend-aligned"}) {
+    const pmsc::PmscModel m = model_file(name);
+    ASSERT_EQ(m.aligned, name == "bend-aligned");
+    const KeyPoints keys = client_->describe_key_points(name);
+    // Inside the trained range (hits), past it, and poses no arm makes — key points moved by a
+    // tenth of the arm's length — which the client must complete (blends and misses).
+    std::vector<std::vector<float>> values;
+    for (double elbow : {3.0, 17.0, 31.0, 44.0, 70.0, 95.0}) values.push_back(key_values(keys, elbow, 10));
+    for (float moved : {0.05f, 0.2f}) {
+      values.push_back(key_values(keys, 25, 0));
+      for (size_t k = 0; k < values.back().size(); k += 7) values.back()[k] += moved;
+    }
+    std::vector<KeyPointPose> poses;
+    for (const auto& v : values) poses.push_back({v, keys.channel_count});
+    EvaluateOptions float32;
+    EvaluateOptions coordinates;
+    coordinates.points_encoding = v1::POINT_ENCODING_COORDINATES;
+    const auto expected = client_->evaluate_key_points_batch(name, poses, float32);
+    auto answered = client_->evaluate_key_points_batch(name, poses, coordinates);
+    // A stream answers the same.
+    StreamOptions stream_options;
+    stream_options.points_encoding = v1::POINT_ENCODING_COORDINATES;
+    auto stream = client_->open_stream(name, stream_options);
+    for (size_t i = 0; i < poses.size(); ++i) ASSERT_TRUE(stream->write(poses[i], i));
+    stream->writes_done();
+    std::vector<PoseResult> streamed;
+    while (auto result = stream->read()) streamed.push_back(std::move(*result));
+    stream->finish();
+    ASSERT_EQ(streamed.size(), poses.size());
+
+    bool saw_hit = false;
+    bool saw_completion = false;
+    for (size_t i = 0; i < poses.size(); ++i) {
+      for (PoseResult* result : {&answered[i], &streamed[i]}) {
+        const std::string what = name + " pose " + std::to_string(i);
+        EXPECT_EQ(result->status, expected[i].status) << what;
+        EXPECT_EQ(result->key_point_error, expected[i].key_point_error) << what;
+        EXPECT_EQ(result->full_evaluation_needed, expected[i].full_evaluation_needed) << what;
+        // No server engine here: every answer is the client's to reconstruct, and carries no points.
+        ASSERT_TRUE(result->coordinates.present) << what;
+        EXPECT_TRUE(result->points.empty()) << what;
+        EXPECT_EQ(result->coordinates.p.size(), static_cast<size_t>(m.basis_size())) << what;
+        EXPECT_EQ(result->coordinates.rotation.size(), m.aligned ? 9u : 0u) << what;
+        ASSERT_TRUE(cache.reconstruct(*client_, name, *result)) << what;
+        expect_within_bound(m, result->coordinates, result->points.values, expected[i].points.values, what);
+      }
+      saw_hit = saw_hit || expected[i].status == v1::CACHE_STATUS_HIT;
+      saw_completion = saw_completion || expected[i].full_evaluation_needed;
+    }
+    EXPECT_TRUE(saw_hit) << name << ": no pose hit";
+    EXPECT_TRUE(saw_completion) << name << ": no pose needed the client's completion";
+  }
+  // One download per model, whatever the number of answers.
+  EXPECT_EQ(cache.fetch_count(), 2u);
+}
+
+TEST_F(CoordinatesTest, AnswersTheServerComputesStillComeAsPoints) {
+  // arm-pmsc-engine fails through to its animation-space engine: a pose far outside the demo
+  // animation, sent with its skeleton pose, is answered with the engine's points.
+  const std::string name(demo::kDemoPmscEngineModelName);
+  auto file = container::read_file(repo_ / name / "1" / "model.anim");
+  ASSERT_TRUE(file.ok());
+  auto engine = animation_space::load(*file, name);
+  ASSERT_TRUE(engine.ok()) << engine.error().message;
+  const demo::ArmRig rig = demo::make_arm_rig();
+  demo::ArmPose far;
+  far.elbow_angle_rad = 2.8;
+  far.shoulder_angle_rad = 1.7;
+  far.forearm_twist_rad = 1.0;
+  const auto G = demo::bone_transforms(far, rig.options);
+  const animation_space::TransformList globals{animation_space::Transform::Identity(), G[demo::kUpperArm],
+                                               G[demo::kForearm]};
+  PointMatrix posed;
+  animation_space::evaluate(*engine, globals, posed);
+  const KeyPoints keys = client_->describe_key_points(name);
+  const std::vector<float> values = keys.gather({posed.data(), static_cast<size_t>(posed.size())});
+  const SkeletonPose skeleton = testing::client_skeleton_pose(globals);
+  EvaluateOptions coordinates;
+  coordinates.points_encoding = v1::POINT_ENCODING_COORDINATES;
+  const PoseResult result = client_->evaluate_key_points(name, {values, keys.channel_count, &skeleton}, coordinates);
+  ASSERT_EQ(result.status, v1::CACHE_STATUS_MISS) << "e_key " << result.key_point_error;
+  EXPECT_FALSE(result.full_evaluation_needed);
+  EXPECT_FALSE(result.coordinates.present);
+  // A miss is the engine's pose itself (float transforms on the wire: float tolerance).
+  ASSERT_EQ(result.points.values.size(), static_cast<size_t>(posed.size()));
+  for (long i = 0; i < posed.size(); ++i) {
+    ASSERT_NEAR(result.points.values[static_cast<size_t>(i)], posed.data()[i], 1e-4f) << "value " << i;
+  }
+}
+
+TEST_F(CoordinatesTest, GetBasisSendsTheFilesMeanAndBasisInChunks) {
+  const pmsc::PmscModel m = model_file("bend");
+  const BasisData data = client_->get_basis("bend");
+  EXPECT_GT(data.chunk_count, 1u) << "256 KiB messages should cut the basis";
+  EXPECT_EQ(data.model_version, 1u);
+  EXPECT_EQ(data.basis_size, static_cast<uint32_t>(m.basis_size()));
+  ASSERT_EQ(data.values.size(), static_cast<size_t>(m.mean.size() * (m.basis_size() + 1)));
+  EXPECT_EQ(Eigen::Map<const Eigen::VectorXf>(data.values.data(), m.mean.size()), m.mean);
+  EXPECT_EQ(Eigen::Map<const Eigen::MatrixXf>(data.values.data() + m.mean.size(), m.mean.size(), m.basis_size()),
+            m.basis);
+  EXPECT_EQ(data.basis_checksum, pmsc::basis_checksum(m.mean, m.basis));
+  EXPECT_NO_THROW(make_basis("bend", data));
+
+  EXPECT_EQ(testing::code_of([&] { client_->get_basis("absent"); }), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(testing::code_of([&] { client_->get_basis("bend", 9); }), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(testing::code_of([&] { client_->get_basis(std::string(demo::kDemoModelName)); }),
+            grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+TEST_F(CoordinatesTest, TheCacheReusesVerifiedFilesAndNeverReconstructsWithAnotherBasis) {
+  const KeyPoints keys = client_->describe_key_points("bend");
+  const std::vector<float> values = key_values(keys, 20, 0);
+  EvaluateOptions coordinates;
+  coordinates.points_encoding = v1::POINT_ENCODING_COORDINATES;
+  const PoseResult answer = client_->evaluate_key_points("bend", {values, keys.channel_count}, coordinates);
+  ASSERT_TRUE(answer.coordinates.present);
+  const auto directory = work_.path() / "bases";
+  {
+    BasisCache cache(directory);
+    PoseResult result = answer;
+    ASSERT_TRUE(cache.reconstruct(*client_, "bend", result));
+    ASSERT_TRUE(cache.reconstruct(*client_, "bend", result));
+    EXPECT_EQ(cache.fetch_count(), 1u);
+  }
+  const auto file = BasisCache(directory).file_of("bend", 1, answer.coordinates.basis_checksum);
+  ASSERT_TRUE(std::filesystem::exists(file));
+  {
+    BasisCache cache(directory);  // a new process: the file, verified, is enough
+    PoseResult result = answer;
+    ASSERT_TRUE(cache.reconstruct(*client_, "bend", result));
+    EXPECT_EQ(cache.fetch_count(), 0u);
+  }
+  {
+    // One flipped byte of the basis: the file is refused, and fetched again.
+    std::fstream bytes(file, std::ios::in | std::ios::out | std::ios::binary);
+    bytes.seekp(static_cast<std::streamoff>(std::filesystem::file_size(file) - 5));
+    bytes.put('\x5a');
+  }
+  {
+    BasisCache cache(directory);
+    PoseResult result = answer;
+    ASSERT_TRUE(cache.reconstruct(*client_, "bend", result));
+    EXPECT_EQ(cache.fetch_count(), 1u);
+  }
+  {
+    // An answer naming a basis its version does not have is refused, not reconstructed.
+    BasisCache cache(directory);
+    PoseResult result = answer;
+    result.coordinates.basis_checksum ^= 1;
+    EXPECT_THROW(cache.reconstruct(*client_, "bend", result), std::runtime_error);
+    EXPECT_TRUE(result.points.empty());
+    // And a basis given by hand for the wrong answer is refused too.
+    const auto basis = cache.get(*client_, "bend", 1, answer.coordinates.basis_checksum);
+    Points points;
+    EXPECT_THROW(reconstruct(*basis, result, points), std::runtime_error);
+  }
+}
+
+TEST_F(CoordinatesTest, AVersionSwapIsFollowedNotMixed) {
+  BasisCache cache(work_.path() / "bases");
+  const KeyPoints keys = client_->describe_key_points("bend");
+  const std::vector<float> values = key_values(keys, 20, 0);
+  EvaluateOptions coordinates;
+  coordinates.points_encoding = v1::POINT_ENCODING_COORDINATES;
+  PoseResult before = client_->evaluate_key_points("bend", {values, keys.channel_count}, coordinates);
+  ASSERT_EQ(before.model_version, 1u);
+
+  // Version 2 trained on other frames: another basis, served from now on.
+  testing::write_model(repo_, "bend", 2, arm_model(false, 2.5));
+  client_->load_model("bend", 2);
+  const KeyPoints keys2 = client_->describe_key_points("bend");
+  const std::vector<float> values2 = key_values(keys2, 20, 0);
+  PoseResult after = client_->evaluate_key_points("bend", {values2, keys2.channel_count}, coordinates);
+  ASSERT_EQ(after.model_version, 2u);
+  ASSERT_NE(after.coordinates.basis_checksum, before.coordinates.basis_checksum);
+  ASSERT_TRUE(cache.reconstruct(*client_, "bend", after));
+  ASSERT_TRUE(cache.reconstruct(*client_, "bend", before));  // version 1 is still served: its own basis
+  EXPECT_EQ(cache.fetch_count(), 2u);
+  const EvaluateOptions float32;
+  const PoseResult expected = client_->evaluate_key_points("bend", {values2, keys2.channel_count}, float32);
+  expect_within_bound(model_file("bend", 2), after.coordinates, after.points.values, expected.points.values,
+                      "version 2");
+
+  // Version 1 unloaded: an old answer can no longer be reconstructed by a cache without it.
+  client_->unload_model("bend", 1);
+  BasisCache empty(std::filesystem::path{});
+  PoseResult old = before;
+  old.points = {};
+  EXPECT_EQ(testing::code_of([&] { empty.reconstruct(*client_, "bend", old); }), grpc::StatusCode::NOT_FOUND);
+  EXPECT_TRUE(old.points.empty());
+}
+
+}  // namespace
+}  // namespace animspace
