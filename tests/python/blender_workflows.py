@@ -194,7 +194,8 @@ try:
     settings.pmsc_model = config["bad_model"]
     results["bad_model_report"] = report_of(bpy.ops.animspace.soft_cache_frame)
 
-    # 4. Live playback: the frame-change handler answers every frame.
+    # 4. Live playback: the frame-change handler answers every frame (as coordinates: the default).
+    results["answers_as_coordinates"] = settings.answers_as_coordinates
     settings.pmsc_model = config["pmsc_model"]
     settings.live_soft_cache = True
     frames = config["frame_count"]

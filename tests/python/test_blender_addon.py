@@ -22,6 +22,7 @@ import pytest
 import animspace
 
 from conftest import BUILD
+from test_coordinates import raw_basis, stated_bound
 
 HERE = pathlib.Path(__file__).resolve().parent
 ZIP = BUILD / "clients" / "blender" / "animspace_blender.zip"
@@ -107,7 +108,7 @@ def blender_run(tmp_path_factory, request):
         (work / "config.json").write_text(json.dumps(config))
         # Blender's user folders in the test's tree: installing the add-on must not touch $HOME.
         environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(work / "user-scripts"),
-                           BLENDER_USER_CONFIG=str(work / "user-config"))
+                           BLENDER_USER_CONFIG=str(work / "user-config"), ANIMSPACE_BASIS_CACHE=str(work / "bases"))
         done = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                                str(HERE / "blender_workflows.py"), "--", str(work / "config.json")],
                               capture_output=True, text=True, timeout=300, env=environment)
@@ -215,11 +216,29 @@ def test_bad_input_is_a_report_with_the_servers_message_not_a_traceback(blender_
         assert "Traceback" not in report
 
 
+def expect_answer(client, shown, key_values, check_values):
+    """``shown`` is the soft cache's float32 answer for these values, within the rounding bound of
+    a reconstruction from coordinates (test_coordinates.stated_bound) where the answer is one."""
+    expected = client.evaluate_key_points(PMSC_MODEL, key_values, check_values=check_values)
+    as_coordinates = client.evaluate_key_points(PMSC_MODEL, key_values, check_values=check_values,
+                                                points_encoding="coordinates")
+    bound = 0.0
+    if as_coordinates.coordinates is not None:
+        _, mean, A = raw_basis(client.channel, PMSC_MODEL, as_coordinates.model_version)
+        bound = stated_bound(mean, A, as_coordinates.coordinates.p)
+    # (+ the 1e-6 this test always allowed the float32 answer on its way through Blender)
+    assert np.all(np.abs(shown.astype(np.float64) - expected.points) <= bound + 1e-6)
+    return expected
+
+
 def test_playback_writes_the_daemons_answer_for_each_frames_key_points(blender_run):
     client, frames = blender_run["client"], blender_run["frames"]
     keys = client.describe_key_points(PMSC_MODEL)
     played = load(blender_run, "played")
     statuses = set()
+    # Answers came as coordinates (the default), rebuilt with the basis the add-on cached.
+    assert blender_run["results"]["answers_as_coordinates"] is True
+    assert [p.parent.name for p in (blender_run["work"] / "bases").rglob("*.basis")] == [PMSC_MODEL]
     for i, shown in enumerate(blender_run["results"]["played"]):
         # The add-on sends the frame's check values with its key values (issue #35).
         expected = client.evaluate_key_points(PMSC_MODEL, keys.select(frames[i]),
@@ -230,7 +249,7 @@ def test_playback_writes_the_daemons_answer_for_each_frames_key_points(blender_r
         assert shown["checked"] == expected.checked == (keys.check_point_count > 0)
         assert shown["check_point_error"] == pytest.approx(expected.check_point_error, rel=1e-5)
         assert shown["blend_weight"] == pytest.approx(expected.blend_weight, abs=1e-6)
-        np.testing.assert_allclose(played[i], expected.points, rtol=0, atol=1e-6, err_msg=f"frame {i + 1}")
+        expect_answer(client, played[i], keys.select(frames[i]), keys.select_check_values(frames[i]))
         # The verdict as a colour attribute on every point.
         attribute = shown["attribute"]
         assert attribute["domain"] == "POINT"
@@ -300,7 +319,7 @@ def test_posing_from_the_armature_equals_evaluate_skeleton_pose(blender_run):
     handler = keys.pose(load(blender_run, "skinned_handler"))
     played = client.evaluate_key_points(PMSC_MODEL, handler.key_values, check_values=handler.check_values)
     assert blender_run["results"]["chained"]["status"] == played.status
-    np.testing.assert_allclose(load(blender_run, "chained"), played.points, rtol=0, atol=1e-6)
+    expect_answer(client, load(blender_run, "chained"), handler.key_values, handler.check_values)
     assert client.evaluate_key_points(PMSC_MODEL, keys.select(posed),
                                       check_values=keys.select_check_values(posed)).status == played.status
     assert blender_run["results"]["skinned_handler_error"] == ""
@@ -373,7 +392,7 @@ def test_the_readmes_blender_snippet_runs(daemon, tmp_path):
     script = tmp_path / "snippet.py"
     script.write_text(prelude + snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/'))
     environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "user-scripts"),
-                       BLENDER_USER_CONFIG=str(tmp_path / "user-config"))
+                       BLENDER_USER_CONFIG=str(tmp_path / "user-config"), ANIMSPACE_BASIS_CACHE=str(tmp_path / "bases"))
     done = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script)],
                           capture_output=True, text=True, timeout=300, env=environment)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]

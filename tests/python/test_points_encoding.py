@@ -93,7 +93,8 @@ def test_16_bit_answers_are_two_bytes_a_value(channel, client, poses, encoding, 
 
 def test_unknown_encodings_are_refused(client, channel, poses):
     keys, values = poses
-    with pytest.raises(ValueError, match="points_encoding: expected one of 'float32', 'float16', 'fixed16', got 'half'"):
+    with pytest.raises(ValueError, match="points_encoding: expected one of 'float32', 'float16', 'fixed16', "
+                                         "'coordinates', got 'half'"):
         client.evaluate_key_points("arm-pmsc", values[0], points_encoding="half")
     with pytest.raises(ValueError, match="points_encoding"):
         client.stream_key_points("arm-pmsc", values, points_encoding="f16")

@@ -76,6 +76,7 @@ class ANIMSPACE_PT_soft_cache(_SubPanel, bpy.types.Panel):
         layout.prop_search(settings, "pmsc_model", settings, "models")
         _props(layout, settings, "source", "output")
         _props(layout.row(), settings, "live_soft_cache", "complete_misses")
+        _props(layout, settings, "answers_as_coordinates")
         row = layout.row()
         row.operator("animspace.soft_cache_frame")
         row.operator("animspace.soft_cache_bake")

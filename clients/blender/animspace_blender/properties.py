@@ -80,6 +80,11 @@ class AnimspaceSceneSettings(bpy.types.PropertyGroup):
     complete_misses: BoolProperty(name="Complete misses", default=False,
                                   description="On a BLEND or MISS send the evaluated full mesh back (CompleteMiss): "
                                               "the answer blends it in and the server logs it for retraining")
+    answers_as_coordinates: BoolProperty(
+        name="Answers as coordinates", default=True,
+        description="Take answers the client can rebuild as subspace coordinates (M numbers instead of every "
+                    "point) and rebuild them here with the model's basis, fetched once and cached on disk "
+                    "($ANIMSPACE_BASIS_CACHE, else ~/.cache/animspace/bases); off: every point as float32")
     status: EnumProperty(name="Verdict", items=STATUSES, default="NONE")
     key_point_error: FloatProperty(name="e_key", description="RMS key-point error of the last pose, model units",
                                    precision=6)

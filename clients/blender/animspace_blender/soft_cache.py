@@ -6,7 +6,10 @@ in with a Mesh Cache modifier reading a PC2 file). For a frame, the source's eva
 vertices the server checks the estimate at) go to the server (EvaluateKeyPoints; a range goes
 over one StreamKeyPoints call) and the whole answered pose is written into the output object, its
 vertices coloured by the verdict (HIT / BLEND / MISS, attribute ``animspace_verdict``) and e_key,
-e_check and α shown in the panel. On a BLEND or MISS the evaluated full mesh can be sent back
+e_check and α shown in the panel. With "Answers as coordinates" (the default) an answer the client
+can rebuild comes as its M subspace coordinates and the Python client rebuilds the points with the
+model's basis, fetched once and kept in its cache on disk (issue #36): a 100k-point pose then costs
+a few hundred bytes on the wire instead of 1.2 MB. On a BLEND or MISS the evaluated full mesh can be sent back
 (CompleteMiss): the answer is then α·full + (1−α)·estimate, and the server logs the pose for the
 next retrain ("train each night, better tomorrow").
 """
@@ -71,6 +74,13 @@ def _output(context, source: bpy.types.Object, model: str) -> bpy.types.Object:
     return output
 
 
+def _answers(context) -> Dict[str, object]:
+    """The answer encoding keywords of the client's calls, as the scene asks."""
+    if context.scene.animspace.answers_as_coordinates:
+        return {"points_encoding": "coordinates", "reconstruct": True}
+    return {}
+
+
 def _show(context, output: bpy.types.Object, result: animspace.PoseResult, logged: bool) -> None:
     if result.points is None or result.points.shape != (len(output.data.vertices), 3):
         raise SetupError(f"Output: '{output.name}' has {len(output.data.vertices)} vertices, the answer "
@@ -95,11 +105,11 @@ def evaluate_frame(context, depsgraph) -> animspace.PoseResult:
     full = _full_pose(source, depsgraph, keys)
     pose = keys.pose(full)  # the key values and the check values: a HIT the check points overturn is none
     result = client.evaluate_key_points(model, pose.key_values, check_values=pose.check_values,
-                                        version=keys.model_version)
+                                        version=keys.model_version, **_answers(context))
     logged = False
     if result.full_evaluation_needed and context.scene.animspace.complete_misses:
         completion = client.complete_miss(model, pose.key_values, full, check_values=pose.check_values,
-                                          version=result.model_version)
+                                          version=result.model_version, **_answers(context))
         result, logged = completion.result, completion.logged
     _show(context, _output(context, source, model), result, logged)
     return result
@@ -113,7 +123,7 @@ class ANIMSPACE_OT_soft_cache_frame(connection.ReportingOperator, bpy.types.Oper
     def run(self, context):
         try:
             result = evaluate_frame(context, context.evaluated_depsgraph_get())
-        except animspace.RpcError:
+        except (animspace.RpcError, animspace.BasisMismatch):
             forget_key_points()  # a retrain or reload may have changed them: ask again next time
             raise
         check = f", e_check {result.check_point_error:.6g}" if result.checked else ""
@@ -145,13 +155,14 @@ class ANIMSPACE_OT_soft_cache_bake(bake.range_bake("//soft_cache.pc2"), bpy.type
 
         # The deadline bounds the whole stream: the per-call deadline, plus 50 ms a frame.
         results = list(client.stream_key_points(model, poses, version=keys.model_version,
-                                                deadline_s=settings.deadline_s + 0.05 * len(poses)))
+                                                deadline_s=settings.deadline_s + 0.05 * len(poses),
+                                                **_answers(context)))
         points = []
         logged = 0
         for pose, full, result in zip(poses, full_frames, results):
             if result.full_evaluation_needed and full is not None:
                 completion = client.complete_miss(model, pose.key_values, full, check_values=pose.check_values,
-                                                  version=result.model_version)
+                                                  version=result.model_version, **_answers(context))
                 result = completion.result
                 logged += completion.logged
             points.append(result.points)

@@ -39,9 +39,10 @@ except ImportError as _error:
         "(clients/python/README.md)") from _error
 
 from animspace.client import DEFAULT_DEADLINE_S, DEFAULT_MAX_RECEIVE_MESSAGE_BYTES, Client
-from animspace.errors import (Aborted, AlreadyExists, Cancelled, DataLoss, DeadlineExceeded, Error, FailedPrecondition,
-                              Internal, InvalidArgument, NotFound, OutOfRange, PermissionDenied, ProtocolError,
-                              ResourceExhausted, RpcError, Unauthenticated, Unavailable, Unimplemented,
+from animspace.coordinates import Basis, BasisCache, SubspaceCoordinates
+from animspace.errors import (Aborted, AlreadyExists, BasisMismatch, Cancelled, DataLoss, DeadlineExceeded, Error,
+                              FailedPrecondition, Internal, InvalidArgument, NotFound, OutOfRange, PermissionDenied,
+                              ProtocolError, ResourceExhausted, RpcError, Unauthenticated, Unavailable, Unimplemented,
                               error_from_grpc)
 from animspace.lod import LodHeader, LodMesh, Skeleton
 from animspace.messages import (Camera, HistogramData, IlluminationView, KeyPointPose, KeyPoints, MissCompletion,
@@ -59,6 +60,7 @@ __all__ = [
     "Error",
     "RpcError",
     "ProtocolError",
+    "BasisMismatch",
     "Aborted",
     "AlreadyExists",
     "Cancelled",
@@ -76,6 +78,8 @@ __all__ = [
     "Unimplemented",
     "error_from_grpc",
     # results and inputs
+    "Basis",
+    "BasisCache",
     "Camera",
     "HistogramData",
     "IlluminationView",
@@ -95,6 +99,7 @@ __all__ = [
     "Skeleton",
     "SkinnedPose",
     "Stats",
+    "SubspaceCoordinates",
     "Thumbnail",
     # point caches
     "PointCache",

@@ -16,8 +16,10 @@ What the calls are for (Meyer & Anderson 2006, 2007; Merry 2007):
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import math
+import os
 import time
 import warnings
 from typing import Any, Callable, Iterable, Iterator, List, Optional, Sequence, Tuple, TypeVar, Union
@@ -28,7 +30,9 @@ import numpy.typing as npt
 
 from animspace import health as health_messages
 from animspace import messages, wire
-from animspace.errors import DeadlineExceeded, ProtocolError, Unavailable, error_from_grpc
+from animspace.coordinates import Basis, BasisAssembler, BasisCache
+from animspace.coordinates import reconstruct as reconstruct_coordinates
+from animspace.errors import BasisMismatch, DeadlineExceeded, ProtocolError, Unavailable, error_from_grpc
 from animspace.lod import FORMS, LodAssembler, LodMesh
 from animspace.messages import (Camera, IlluminationView, KeyPointPose, KeyPoints, MissCompletion, ModelSummary,
                                 PointLight, PoseResult, RetrainResult, ServerInfo, SkinnedPose, Stats, Thumbnail)
@@ -124,9 +128,13 @@ class Client:
         server_name: the name the server's certificate must carry, when it differs from the
             target's host (``grpc.ssl_target_name_override``).
         channel_options: further ``grpc`` channel arguments, e.g. ``[("grpc.enable_retries", 0)]``.
+        basis_cache: where :meth:`reconstruct` keeps the bases it fetches: a :class:`BasisCache`
+            (share one between clients), a folder, or None for the default folder
+            ($ANIMSPACE_BASIS_CACHE, else $XDG_CACHE_HOME/animspace/bases, else
+            ~/.cache/animspace/bases — the C++ client's too).
 
-    A client may be shared by threads: gRPC channels and stubs are thread-safe, and the client
-    keeps no per-call state.
+    A client may be shared by threads: gRPC channels and stubs are thread-safe, the basis cache
+    takes a lock, and the client keeps no per-call state.
     """
 
     def __init__(self, target: Optional[str] = None, *, channel: Optional[grpc.Channel] = None,
@@ -134,7 +142,8 @@ class Client:
                  max_receive_message_bytes: int = DEFAULT_MAX_RECEIVE_MESSAGE_BYTES, tls: bool = False,
                  root_certificates: Optional[Pem] = None, client_certificate: Optional[Pem] = None,
                  client_key: Optional[Pem] = None, server_name: Optional[str] = None,
-                 channel_options: Sequence[Tuple[str, Any]] = ()) -> None:
+                 channel_options: Sequence[Tuple[str, Any]] = (),
+                 basis_cache: Union[BasisCache, str, "os.PathLike[str]", None] = None) -> None:
         if (target is None) == (channel is None):
             raise ValueError("Client: give exactly one of target and channel")
         if deadline_s is not None and not deadline_s > 0:
@@ -146,6 +155,7 @@ class Client:
             raise ValueError("token: expected printable ASCII without spaces")
         self._target = target
         self._deadline_s = deadline_s
+        self._basis_cache = basis_cache if isinstance(basis_cache, BasisCache) else BasisCache(basis_cache)
         self._metadata: Optional[Tuple[Tuple[str, str], ...]] = (
             (("authorization", f"Bearer {token}"),) if token is not None else None)
         self._owns_channel = channel is None
@@ -210,6 +220,11 @@ class Client:
     def metadata(self) -> Optional[Tuple[Tuple[str, str], ...]]:
         """The metadata sent with every call (the bearer token), or None."""
         return self._metadata
+
+    @property
+    def basis_cache(self) -> BasisCache:
+        """The bases :meth:`reconstruct` uses, by model, version and checksum."""
+        return self._basis_cache
 
     # ------------------------------------------------------------------------------------------
     # Plumbing: every call goes through _unary or _stream_call, and every failure through
@@ -338,6 +353,7 @@ class Client:
                             skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
                             include_region_errors: bool = False, omit_points: bool = False,
                             local_fail_through: bool = False, points_encoding: str = "float32",
+                            reconstruct: bool = False,
                             deadline_s: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
         """Key points in, the whole pose out, through the soft cache.
 
@@ -364,15 +380,24 @@ class Client:
                 a pose with a value beyond ±65504) or "fixed16" (per-channel 16-bit fixed point:
                 half the bytes, error ≤ half the channel's range / 65535). Points always decode
                 to float32; ``PoseResult.points_max_error`` says what the encoding lost.
+                "coordinates": an answer the client can reconstruct (a HIT, or a BLEND/MISS with
+                ``full_evaluation_needed``) comes as ``PoseResult.coordinates`` — M values instead
+                of N·D — and no points; points the server computed itself come as float32.
+            reconstruct: with "coordinates", fill ``points`` of such answers from their
+                coordinates (:meth:`reconstruct`, through the basis cache), keeping
+                ``coordinates``.
 
         Raises:
             ValueError: for a wrong shape or an unknown ``points_encoding``, naming the argument
-                (nothing is sent).
+                (nothing is sent); ``reconstruct`` without "coordinates".
+            BasisMismatch: (``reconstruct``) the answer's version was replaced under it.
             InvalidArgument: a key point count or channel count the model does not expect, or
                 non-finite values (the message names ``poses[i].key_values``); the same for
                 ``poses[i].check_values``, or check values for a model without check points.
             ResourceExhausted: a batch over the server's ``max_batch_poses``.
         """
+        encoding = wire.points_encoding("points_encoding", points_encoding)
+        _check_reconstruct(reconstruct, encoding)
         values = wire.as_float32("key_values", key_values)
         if values.ndim not in (2, 3):
             raise ValueError(f"key_values: expected shape (K, D) or (P, K, D), got {wire.shape_text(values.shape)}")
@@ -401,8 +426,7 @@ class Client:
                                                      include_region_errors=include_region_errors,
                                                      omit_points=omit_points,
                                                      local_fail_through=local_fail_through,
-                                                     points_encoding=wire.points_encoding("points_encoding",
-                                                                                          points_encoding))
+                                                     points_encoding=encoding)
         for i in range(poses.shape[0]):
             pose = request.poses.add()
             pose.key_values.CopyFrom(_point_array(poses[i]))
@@ -415,13 +439,15 @@ class Client:
             raise ProtocolError("EvaluateKeyPoints", f"{len(response.results)} results for {poses.shape[0]} poses")
         with _decoding("EvaluateKeyPoints"):
             results = [PoseResult.from_proto(r, f"results[{i}].points") for i, r in enumerate(response.results)]
+        if reconstruct:
+            results = [self._with_points(model, r, deadline_s) for r in results]
         return results if batch else results[0]
 
     def relight(self, model: str, lights: Union[PointLight, Sequence[PointLight], npt.ArrayLike], *,
                 key_values: Optional[npt.ArrayLike] = None, check_values: Optional[npt.ArrayLike] = None,
                 version: int = 0, include_region_errors: bool = False,
-                omit_points: bool = False, local_fail_through: bool = False,
-                deadline_s: Optional[float] = None) -> PoseResult:
+                omit_points: bool = False, local_fail_through: bool = False, points_encoding: str = "float32",
+                reconstruct: bool = False, deadline_s: Optional[float] = None) -> PoseResult:
         """One frame of an illumination model (``ModelVersion.server_engine`` "ILLUMINATION";
         Meyer & Anderson 2007 §3.2): the RGB radiance of every point for ``lights``.
 
@@ -441,10 +467,13 @@ class Client:
             InvalidArgument: a model without an illumination engine (naming ``poses[0].light_set``),
                 or a light the server refuses (position or intensity not finite, intensity < 0).
         """
+        encoding = wire.points_encoding("points_encoding", points_encoding)
+        _check_reconstruct(reconstruct, encoding)
         request = poses_pb2.EvaluateKeyPointsRequest(model=_model_ref(model, version),
                                                      include_region_errors=include_region_errors,
                                                      omit_points=omit_points,
-                                                     local_fail_through=local_fail_through)
+                                                     local_fail_through=local_fail_through,
+                                                     points_encoding=encoding)
         pose = request.poses.add()
         pose.light_set.CopyFrom(messages.light_set("lights", lights))
         if key_values is not None:
@@ -458,13 +487,14 @@ class Client:
         if len(response.results) != 1:
             raise ProtocolError("EvaluateKeyPoints", f"{len(response.results)} results for 1 pose")
         with _decoding("EvaluateKeyPoints"):
-            return PoseResult.from_proto(response.results[0], "results[0].points")
+            result = PoseResult.from_proto(response.results[0], "results[0].points")
+        return self._with_points(model, result, deadline_s) if reconstruct else result
 
     @_renamed_keywords(timeout="deadline_s")
     def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
                           version: int = 0, omit_points: bool = False, first_sequence: int = 0,
                           local_fail_through: bool = False, points_encoding: str = "float32",
-                          deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
+                          reconstruct: bool = False, deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
         """Plays a sequence through the soft cache over one StreamKeyPoints call: one result per
         frame, yielded in frame order as they arrive.
 
@@ -478,8 +508,9 @@ class Client:
 
         The call starts when iteration starts; ``deadline_s`` (or the client's deadline) bounds the
         whole stream — pass a generous one for a long sequence. Stopping the iteration early
-        cancels the call. ``local_fail_through`` and ``points_encoding`` are
-        ``evaluate_key_points``' for every frame.
+        cancels the call. ``local_fail_through``, ``points_encoding`` and ``reconstruct`` are
+        ``evaluate_key_points``' for every frame (the basis is fetched, once, when the first
+        answer as coordinates arrives).
 
         Raises:
             ValueError: a frame of the wrong shape — after the results of every frame before it.
@@ -488,13 +519,15 @@ class Client:
             InvalidArgument etc.: a frame the server refused (the message names its sequence).
         """
         # Arguments are checked now; the call starts with the iteration.
+        encoding = wire.points_encoding("points_encoding", points_encoding)
+        _check_reconstruct(reconstruct, encoding)
         requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence, local_fail_through,
-                                  wire.points_encoding("points_encoding", points_encoding))
+                                  encoding)
         self._deadline(deadline_s)
-        return self._stream_key_points(requests, first_sequence, deadline_s)
+        return self._stream_key_points(requests, first_sequence, deadline_s, model if reconstruct else None)
 
-    def _stream_key_points(self, requests: "_FrameRequests", first_sequence: int,
-                           deadline_s: Optional[float]) -> Iterator[PoseResult]:
+    def _stream_key_points(self, requests: "_FrameRequests", first_sequence: int, deadline_s: Optional[float],
+                           reconstruct_model: Optional[str]) -> Iterator[PoseResult]:
         call = self._poses.StreamKeyPoints(iter(requests), timeout=self._deadline(deadline_s), metadata=self._metadata)
         expected = first_sequence
         try:
@@ -505,6 +538,8 @@ class Client:
                                                                f"sequence {response.sequence}")
                     with _decoding("StreamKeyPoints"):
                         result = PoseResult.from_proto(response, f"frame {expected}: points")
+                    if reconstruct_model is not None:
+                        result = self._with_points(reconstruct_model, result, deadline_s)
                     yield result
                     expected += 1
             except grpc.RpcError as error:
@@ -522,7 +557,8 @@ class Client:
     @_renamed_keywords(timeout="deadline_s")
     def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
                       check_values: Optional[npt.ArrayLike] = None, full_points: Optional[npt.ArrayLike] = None,
-                      points_encoding: str = "float32", deadline_s: Optional[float] = None) -> MissCompletion:
+                      points_encoding: str = "float32", reconstruct: bool = False,
+                      deadline_s: Optional[float] = None) -> MissCompletion:
         """Completes a blend or miss with the full pose from the client's posing engine
         (fail-through "CLIENT"), and logs it for retraining.
 
@@ -536,7 +572,8 @@ class Client:
         (len(full_points)×D, same order); the answer is blended point by point and the miss log
         keeps a partial frame.
 
-        ``points_encoding`` is ``evaluate_key_points``' for the answer's points.
+        ``points_encoding`` and ``reconstruct`` are ``evaluate_key_points``' for the answer's points
+        (with "coordinates" only a HIT comes as coordinates: the server blends a blend or miss).
 
         Raises:
             ValueError: ``full_values`` rows differ from ``full_points``, or an unknown
@@ -546,6 +583,7 @@ class Client:
             FailedPrecondition: for a cross-PMSC model (no full calculation exists).
         """
         encoding = wire.points_encoding("points_encoding", points_encoding)
+        _check_reconstruct(reconstruct, encoding)
         keys = wire.as_points("key_values", key_values, points_label="K")
         full = wire.as_points("full_values", full_values)
         points = np.zeros(0, np.uint32)
@@ -565,8 +603,90 @@ class Client:
             request.check_values.CopyFrom(checks)
         response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, deadline_s)
         with _decoding("CompleteMiss"):
-            return MissCompletion(result=PoseResult.from_proto(response.result, "result.points"),
-                                  logged=response.logged)
+            result = PoseResult.from_proto(response.result, "result.points")
+        if reconstruct:
+            result = self._with_points(model, result, deadline_s)
+        return MissCompletion(result=result, logged=response.logged)
+
+    # ------------------------------------------------------------------------------------------
+    # Answers as coordinates (issue #36): the basis, its cache, the reconstruction
+
+    def get_basis(self, model: str, version: int = 0, *, deadline_s: Optional[float] = None) -> Basis:
+        """The subspace of a PMSC model version — N·D mean and N·D × M basis, float32 — streamed in
+        chunks by GetBasis, assembled and checked (order, shape, checksum), and kept in
+        :attr:`basis_cache` for :meth:`reconstruct`. Always asks the server (version 0: the
+        version served now; ``Basis.model_version`` says which).
+
+        Raises:
+            NotFound: an unknown model or version. FailedPrecondition: a model without key points
+                (not PMSC).
+            ProtocolError: chunks out of order, overlapping, short, changing shape, version or
+                checksum mid-stream, values whose checksum is not the one they carry, or another
+                version than the one asked for.
+        """
+        request = poses_pb2.GetBasisRequest(model=_model_ref(model, version))
+        call = self._poses.GetBasis(request, timeout=self._deadline(deadline_s), metadata=self._metadata)
+        assembler = BasisAssembler()
+        try:
+            for chunk in call:
+                problem = assembler.take(chunk)
+                if problem:
+                    call.cancel()  # the rest of the stream is of no use
+                    raise ProtocolError("GetBasis", problem)
+        except grpc.RpcError as error:
+            raise error_from_grpc("GetBasis", error) from error
+        problem = assembler.complete()
+        if problem:
+            raise ProtocolError("GetBasis", problem)
+        basis = assembler.basis(model)
+        if version != 0 and basis.model_version != version:
+            raise ProtocolError("GetBasis", f"asked for version {version}, the chunks are of version "
+                                            f"{basis.model_version}")
+        self._basis_cache.put(basis)
+        return basis
+
+    def reconstruct(self, model: str, result: PoseResult, *, deadline_s: Optional[float] = None) -> np.ndarray:
+        """The N×D float32 points of an answer that came as coordinates:
+        f̂_i = R (mean_i + Σ_j A_ij p_j) + t, in float32 (R = I, t = 0 unless the model is aligned).
+
+        The basis is (model, ``result.model_version``, ``result.coordinates.basis_checksum``) from
+        :attr:`basis_cache` — memory, then disk — else fetched with GetBasis for that exact version
+        and cached. An answer whose points the server sent gives those points.
+
+        The points differ from the server's float32 answer by rounding only: per value i at most
+            2·(M + 2)·2⁻²⁴·(|mean_i| + Σ_j |A_ij p_j|)
+        (+ 2·3·2⁻²⁴·‖x‖ per coordinate of a point x = mean_i + A_i p of an aligned model, whose
+        rotation moves that error without lengthening it, and 2⁻²⁴·|f̂| twice for the sum with t;
+        ``animspace.coordinates.rounding_bound`` computes it).
+
+        Raises:
+            ValueError: a result with neither coordinates nor points (``omit_points``).
+            BasisMismatch: the server's basis of that version is another one (the version was
+                replaced since the answer): never reconstructed with a wrong basis.
+            NotFound: the version is no longer served (and its basis is not cached).
+            ProtocolError: coordinates that do not fit their basis (M, alignment).
+        """
+        coordinates = result.coordinates
+        if coordinates is None:
+            if result.points is None:
+                raise ValueError("result: it carries neither coordinates nor points (asked with omit_points?)")
+            return result.points
+        version, checksum = result.model_version, coordinates.basis_checksum
+        basis = self._basis_cache.get(model, version, checksum)
+        if basis is None:
+            basis = self.get_basis(model, version, deadline_s=deadline_s)
+            if basis.basis_checksum != checksum:
+                raise BasisMismatch(model, version, checksum, basis.basis_checksum)
+        try:
+            return reconstruct_coordinates(basis, coordinates)
+        except ValueError as error:
+            raise ProtocolError("reconstruct", str(error)) from error
+
+    def _with_points(self, model: str, result: PoseResult, deadline_s: Optional[float]) -> PoseResult:
+        """``result`` with its coordinates reconstructed into ``points`` (unchanged without any)."""
+        if result.coordinates is None:
+            return result
+        return dataclasses.replace(result, points=self.reconstruct(model, result, deadline_s=deadline_s))
 
     # ------------------------------------------------------------------------------------------
     # Animation space (skinning.proto, lod.proto; Merry 2007)
@@ -799,6 +919,12 @@ class Client:
                                               max_key_points=wire.as_uint("max_key_points", max_key_points),
                                               dry_run=dry_run)
         return RetrainResult.from_proto(self._unary("Retrain", self._training.Retrain, request, deadline_s))
+
+
+def _check_reconstruct(reconstruct: bool, encoding: int) -> None:
+    if reconstruct and encoding != common_pb2.POINT_ENCODING_COORDINATES:
+        raise ValueError("reconstruct: only answers as coordinates are reconstructed; pass "
+                         "points_encoding='coordinates' with it")
 
 
 class _FrameRequests:

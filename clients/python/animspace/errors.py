@@ -21,6 +21,7 @@ __all__ = [
     "Error",
     "RpcError",
     "ProtocolError",
+    "BasisMismatch",
     "Cancelled",
     "InvalidArgument",
     "DeadlineExceeded",
@@ -74,6 +75,30 @@ class ProtocolError(Error):
     def __init__(self, rpc: str, problem: str) -> None:
         super().__init__(f"{rpc}: {problem}")
         self.rpc = rpc
+
+
+class BasisMismatch(Error):
+    """An answer's coordinates name a basis the server no longer serves under their version (the
+    version was replaced: unloaded and published again with another subspace). Reconstructing them
+    with the basis served now would give wrong points, so nothing is reconstructed.
+
+    Attributes:
+        model, model_version: the answer's model and version.
+        expected_checksum: the answer's ``coordinates.basis_checksum``.
+        served_checksum: the ``basis_checksum`` GetBasis sent for that version.
+    """
+
+    def __init__(self, model: str, model_version: int, expected_checksum: int, served_checksum: int) -> None:
+        super().__init__(f"coordinates of '{model}' version {model_version} belong to basis {expected_checksum:016x}, "
+                         f"but the server's basis of that version is {served_checksum:016x} (the version was "
+                         "replaced); evaluate the pose again")
+        self.model = model
+        self.model_version = model_version
+        self.expected_checksum = expected_checksum
+        self.served_checksum = served_checksum
+
+    def __reduce__(self) -> Tuple[Any, ...]:
+        return (BasisMismatch, (self.model, self.model_version, self.expected_checksum, self.served_checksum))
 
 
 class Cancelled(RpcError):

@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from animspace import wire
+from animspace.coordinates import SubspaceCoordinates
 from animspace.display import compact_repr
 from animspace.v1 import common_pb2, models_pb2, poses_pb2, render_pb2, stats_pb2, training_pb2
 
@@ -453,7 +454,8 @@ class PoseResult:
     Attributes:
         points: N×D float32: the subspace estimate for a hit, α·full + (1−α)·estimate for a blend,
             the full values for a miss — or the estimate with ``full_evaluation_needed`` when no
-            full values were available. None when the request asked to omit points.
+            full values were available. None when the request asked to omit points, and when the
+            answer came as ``coordinates`` (unless the call reconstructed them: ``reconstruct=True``).
         status: "HIT" (e ≤ ε_min), "BLEND" or "MISS" (e ≥ ε_max), e = ``error_estimate``.
         key_point_error: e_key, RMS over key points and channels of f_key − f̂_key, model units.
         check_point_error: e_check, the largest distance ‖f_c − f̂_c‖ over the check points sent
@@ -475,6 +477,10 @@ class PoseResult:
             answer is α_i·f_i + (1 − α_i)·f̂_i.
         points_max_error: with ``points_encoding`` "float16" or "fixed16": the largest
             |decoded − float32 value| over ``points``, measured by the server; 0 for float32.
+        coordinates: with ``points_encoding="coordinates"``, for an answer the client can
+            reconstruct (a HIT, or a BLEND/MISS with ``full_evaluation_needed``): p and, for an
+            aligned model, R and t (``Client.reconstruct`` turns them into the points). None when
+            the server sent ``points`` (it computed them itself: fail-through on the server).
     """
 
     __repr__ = compact_repr
@@ -493,6 +499,7 @@ class PoseResult:
     check_point_error: float = 0.0
     error_estimate: float = 0.0
     checked: bool = False
+    coordinates: Optional[SubspaceCoordinates] = None
 
     @property
     def hit(self) -> bool:
@@ -501,6 +508,9 @@ class PoseResult:
     @classmethod
     def from_proto(cls, m: poses_pb2.PoseResult, what: str = "points") -> "PoseResult":
         points = wire.points_from(m.points, what) if m.HasField("points") else None
+        coordinates = None
+        if m.HasField("coordinates"):  # "results[0].points" → "results[0].coordinates"
+            coordinates = SubspaceCoordinates.from_proto(m.coordinates, what.rsplit("points", 1)[0] + "coordinates")
         return cls(points=points, status=_status(m.status), key_point_error=m.key_point_error,
                    blend_weight=m.blend_weight, model_version=m.model_version,
                    full_evaluation_needed=m.full_evaluation_needed,
@@ -508,7 +518,7 @@ class PoseResult:
                    full_points=np.array(m.full_points, dtype=np.uint32),
                    full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32),
                    points_max_error=m.points.max_error, check_point_error=m.check_point_error,
-                   error_estimate=m.error_estimate, checked=m.checked)
+                   error_estimate=m.error_estimate, checked=m.checked, coordinates=coordinates)
 
 
 @dataclass(frozen=True, eq=False)

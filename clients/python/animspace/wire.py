@@ -49,6 +49,9 @@ POINT_ENCODINGS = {
     "float32": common_pb2.POINT_ENCODING_UNSPECIFIED,
     "float16": common_pb2.POINT_ENCODING_FLOAT16,
     "fixed16": common_pb2.POINT_ENCODING_FIXED16,
+    # Answers only: a HIT (or a BLEND/MISS the client completes) as subspace coordinates p, which
+    # the client reconstructs with the model's basis (animspace.coordinates).
+    "coordinates": common_pb2.POINT_ENCODING_COORDINATES,
 }
 WIRE_INT32 = np.dtype("<i4")
 
@@ -151,8 +154,9 @@ def point_array(name: str, values: npt.ArrayLike, *, channels: Optional[int] = N
 
 
 def points_encoding(name: str, encoding: str) -> int:
-    """A ``points_encoding=`` keyword ("float32", "float16" or "fixed16") as the PointEncoding value
-    a request carries ("float32" is sent as the unset default, which every server reads as float32).
+    """A ``points_encoding=`` keyword ("float32", "float16", "fixed16" or "coordinates") as the
+    PointEncoding value a request carries ("float32" is sent as the unset default, which every
+    server reads as float32).
 
     Raises:
         ValueError: for another value, naming the argument.

@@ -1,0 +1,536 @@
+"""Answers as subspace coordinates (issue #36 item 2) through the Python client and a real daemon:
+GetBasis and its checksum, reconstruction within the bound poses.proto states, the basis cache
+on disk (the format the C++ client shares), and every way a basis can be the wrong one.
+
+Expected values come from independent computations here — zlib over the raw chunks, the bound in
+float64 from the basis and p, the file parsed with struct — never from the client under test."""
+import collections
+import dataclasses
+import math
+import socket
+import struct
+import subprocess
+import zlib
+from concurrent import futures
+
+import grpc
+import numpy as np
+import pytest
+
+import animspace
+from animspace import coordinates, wire
+from animspace.v1 import common_pb2, poses_pb2, poses_pb2_grpc
+
+from conftest import BUILD
+from test_client import posed_arm
+
+U = 2.0 ** -24  # float32's unit roundoff
+GET_BASIS = "/animspace.v1.PoseService/GetBasis"
+
+
+# ----------------------------------------------------------------------------------------------
+# Independent computations
+
+
+def raw_basis(channel, model, version=0):
+    """GetBasis on a raw stub: the chunks, and the mean (N·D) and basis (N·D × M) they hold,
+    assembled here by offset, float64."""
+    request = poses_pb2.GetBasisRequest()
+    request.model.name, request.model.version = model, version
+    chunks = list(poses_pb2_grpc.PoseServiceStub(channel).GetBasis(request, timeout=30))
+    first = chunks[0]
+    n, d, m = first.point_count, first.channel_count, first.basis_size
+    values = np.full(first.total_values, np.nan)
+    for chunk in chunks:
+        part = np.frombuffer(chunk.data, "<f4")
+        values[chunk.offset:chunk.offset + part.size] = part
+    return chunks, values[:n * d], values[n * d:].reshape(m, n * d).T
+
+
+def stated_bound(mean, A, p, rotation=None, translation=None):
+    """poses.proto's bound on |f_client − f_server| per value, float64, shape (N, D): both float32
+    sums mean_i + Σ_j A_ij p_j are within γ_{M+2} of the exact one; an aligned model's R keeps
+    each point's error's length, its two products R x differ by 2·γ_3·‖x‖ at most, and the sum
+    with t rounds once on each side."""
+    M = A.shape[1]
+    gamma = (M + 2) * U / (1 - (M + 2) * U)
+    p = np.asarray(p, np.float64)
+    bound = 2 * gamma * (np.abs(mean) + np.abs(A) @ np.abs(p))
+    if rotation is None:
+        return bound.reshape(-1, 3)
+    x = (mean + A @ p).reshape(-1, 3)
+    gamma3 = 3 * U / (1 - 3 * U)
+    R, t = np.asarray(rotation, np.float64), np.asarray(translation, np.float64)
+    return (np.linalg.norm(bound.reshape(-1, 3), axis=1, keepdims=True)
+            + 2 * gamma3 * np.linalg.norm(x, axis=1, keepdims=True) + 2 * U * np.abs(x @ R.T + t))
+
+
+def expect_within_bound(reconstructed, exact, mean, A, result):
+    """``reconstructed`` (from coordinates) is the float32 answer ``exact`` within the bound, and
+    the bound is tight enough to mean something (far below the points' own size)."""
+    c = result.coordinates
+    bound = stated_bound(mean, A, c.p, c.rotation, c.translation)
+    assert reconstructed.dtype == np.float32 and reconstructed.shape == exact.shape
+    error = np.abs(reconstructed.astype(np.float64) - exact.astype(np.float64))
+    assert np.all(error <= bound), float((error - bound).max())
+    assert bound.max() < 1e-4 * np.abs(exact).max()
+
+
+class CountingInterceptor(grpc.UnaryStreamClientInterceptor):
+    """Counts the server-streaming calls a client makes, by method."""
+
+    def __init__(self):
+        self.calls = collections.Counter()
+
+    def intercept_unary_stream(self, continuation, details, request):
+        self.calls[details.method] += 1
+        return continuation(details, request)
+
+
+@pytest.fixture()
+def counted(daemon, tmp_path):
+    """A client whose GetBasis calls are counted, with its own basis cache in tmp_path/bases."""
+    counter = CountingInterceptor()
+    with grpc.insecure_channel(daemon) as channel:
+        with animspace.Client(channel=grpc.intercept_channel(channel, counter),
+                              basis_cache=tmp_path / "bases") as client:
+            client.wait_until_serving(deadline_s=30)
+            yield client, counter
+
+
+def closed_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def arm_poses(client, arm_transforms, demo_arm_transforms):
+    """Key values and check values of arm-pmsc: two demo frames its subspace reproduces (HIT), one
+    far outside it (MISS)."""
+    keys = client.describe_key_points("arm-pmsc")
+    frames = [posed_arm(client, G) for G in (demo_arm_transforms(14 / 120), demo_arm_transforms(31 / 120),
+                                             arm_transforms(2.9))]
+    return keys, np.stack([keys.select(f) for f in frames]), np.stack([keys.select_check_values(f) for f in frames])
+
+
+# ----------------------------------------------------------------------------------------------
+# GetBasis
+
+
+def test_get_basis_assembles_the_chunks_and_its_checksum_is_zlibs(counted, channel):
+    client, _ = counted
+    chunks, mean, A = raw_basis(channel, "arm-pmsc")
+    version = client.describe_model("arm-pmsc").default
+    basis = client.get_basis("arm-pmsc")
+    assert (basis.model, basis.model_version) == ("arm-pmsc", version.version)
+    assert (basis.point_count, basis.channel_count, basis.basis_size) == (version.point_count,
+                                                                          version.channel_count, version.basis_size)
+    assert not basis.aligned
+    assert basis.mean.dtype == basis.basis.dtype == np.float32
+    assert basis.mean.shape == (version.point_count * 3,) and basis.basis.shape == (version.point_count * 3,
+                                                                                     version.basis_size)
+    np.testing.assert_array_equal(basis.mean, mean)
+    np.testing.assert_array_equal(basis.basis, A)
+    # crc32 of the mean's bytes, high; of the basis column by column, low — over the raw bytes.
+    raw = b"".join(c.data for c in chunks)
+    split = 4 * mean.size
+    assert basis.basis_checksum == (zlib.crc32(raw[:split]) << 32) | zlib.crc32(raw[split:])
+    assert all(c.basis_checksum == basis.basis_checksum for c in chunks)
+    assert basis.mean.flags.writeable is False and basis.basis.flags.writeable is False
+    # Pinned to that version, the same basis.
+    assert client.get_basis("arm-pmsc", version.version).basis_checksum == basis.basis_checksum
+
+
+def test_bad_basis_requests_name_their_status(client, channel, arm_poses):
+    with pytest.raises(animspace.NotFound):
+        client.get_basis("no-such-model")
+    with pytest.raises(animspace.NotFound):
+        client.get_basis("arm-pmsc", 99)
+    with pytest.raises(animspace.FailedPrecondition) as refused:
+        client.get_basis("arm-animspace")
+    assert refused.value.rpc == "GetBasis"
+    # Coordinates are for answers only: key values sent "as coordinates" are refused.
+    keys, values, _ = arm_poses
+    request = poses_pb2.EvaluateKeyPointsRequest(points_encoding=common_pb2.POINT_ENCODING_COORDINATES)
+    request.model.name = "arm-pmsc"
+    pose = request.poses.add()
+    pose.key_values.CopyFrom(wire.point_array("key_values", values[0]))
+    pose.key_values.encoding = common_pb2.POINT_ENCODING_COORDINATES
+    with pytest.raises(grpc.RpcError) as invalid:
+        poses_pb2_grpc.PoseServiceStub(channel).EvaluateKeyPoints(request, timeout=10)
+    assert invalid.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+    assert "poses[0].key_values.encoding" in invalid.value.details()
+
+
+# ----------------------------------------------------------------------------------------------
+# Reconstruction against the server's float32 answer
+
+
+def test_a_batch_as_coordinates_reconstructs_the_float32_answer_within_the_bound(counted, channel, arm_poses):
+    client, counter = counted
+    keys, values, checks = arm_poses
+    _, mean, A = raw_basis(channel, "arm-pmsc")
+    exact = client.evaluate_key_points("arm-pmsc", values, check_values=checks, version=keys.model_version)
+    answers = client.evaluate_key_points("arm-pmsc", values, check_values=checks, version=keys.model_version,
+                                         points_encoding="coordinates")
+    assert [r.status for r in answers] == [r.status for r in exact]
+    assert {r.status for r in answers} == {"HIT", "MISS"}
+    for a, b in zip(exact, answers):
+        assert (b.key_point_error, b.blend_weight, b.full_evaluation_needed) == (a.key_point_error, a.blend_weight,
+                                                                                 a.full_evaluation_needed)
+        assert b.points is None and b.coordinates.p.dtype == np.float32 and b.coordinates.p.shape == (A.shape[1],)
+        assert b.coordinates.rotation is None and b.coordinates.translation is None
+        expect_within_bound(client.reconstruct("arm-pmsc", b), a.points, mean, A, b)
+    assert counter.calls[GET_BASIS] == 1  # fetched once for the three
+    # reconstruct=True fills the points and keeps the coordinates.
+    filled = client.evaluate_key_points("arm-pmsc", values[0], check_values=checks[0], points_encoding="coordinates",
+                                        reconstruct=True)
+    assert filled.coordinates is not None
+    expect_within_bound(filled.points, exact[0].points, mean, A, filled)
+    assert counter.calls[GET_BASIS] == 1
+
+
+def test_a_stream_as_coordinates_reconstructs_the_float32_answer_within_the_bound(counted, channel, arm_poses):
+    client, counter = counted
+    keys, values, checks = arm_poses
+    _, mean, A = raw_basis(channel, "arm-pmsc")
+    frames = [animspace.KeyPointPose(v + np.float32(shift), check_values=c + np.float32(shift))
+              for shift in (0, 0.003) for v, c in zip(values, checks)]
+    exact = list(client.stream_key_points("arm-pmsc", frames))
+    answers = list(client.stream_key_points("arm-pmsc", frames, points_encoding="coordinates", reconstruct=True,
+                                            first_sequence=5))
+    assert [r.sequence for r in answers] == list(range(5, 5 + len(frames)))
+    assert {r.status for r in answers} == {"HIT", "MISS"}
+    for a, b in zip(exact, answers, strict=True):
+        assert b.status == a.status and b.coordinates is not None
+        expect_within_bound(b.points, a.points, mean, A, b)
+    assert counter.calls[GET_BASIS] == 1
+
+
+def test_relight_answers_as_coordinates_within_the_bound(client, channel, tmp_path):
+    # The Cornell box: M = 100, 2990 RGB points; the server gathers the key values itself.
+    _, mean, A = raw_basis(channel, "cornell")
+    light = [0.3, 0.44, 0.45]
+    exact = client.relight("cornell", light)
+    with animspace.Client(channel=client.channel, basis_cache=tmp_path) as own:
+        answer = own.relight("cornell", light, points_encoding="coordinates", reconstruct=True)
+    assert answer.status == exact.status == "HIT"
+    expect_within_bound(answer.points, exact.points, mean, A, answer)
+
+
+def test_points_the_server_computes_still_come_as_float32(client, arm_transforms):
+    # arm-pmsc-engine completes a miss itself from the skeleton pose: those are points, not p.
+    keys = client.describe_key_points("arm-pmsc-engine")
+    G = arm_transforms(math.radians(-60))
+    full = posed_arm(client, G)
+    exact = client.evaluate_key_points("arm-pmsc-engine", keys.select(full), skeleton_pose=G)
+    answer = client.evaluate_key_points("arm-pmsc-engine", keys.select(full), skeleton_pose=G,
+                                        points_encoding="coordinates")
+    assert answer.status == exact.status == "MISS" and not answer.full_evaluation_needed
+    assert answer.coordinates is None
+    np.testing.assert_array_equal(answer.points, exact.points)
+    # reconstruct hands such points back as they are.
+    assert client.reconstruct("arm-pmsc-engine", answer) is answer.points
+    # CompleteMiss: the server blends, so points again.
+    keys = client.describe_key_points("arm-pmsc")
+    full = posed_arm(client, arm_transforms(2.9))
+    done = client.complete_miss("arm-pmsc", keys.select(full), full, points_encoding="coordinates",
+                                reconstruct=True).result
+    assert done.coordinates is None
+    np.testing.assert_array_equal(done.points, client.complete_miss("arm-pmsc", keys.select(full), full).result.points)
+    # Verdicts only: neither points nor coordinates.
+    probe = client.evaluate_key_points("arm-pmsc", keys.select(full), points_encoding="coordinates", omit_points=True)
+    assert probe.points is None and probe.coordinates is None
+    with pytest.raises(ValueError, match="neither coordinates nor points"):
+        client.reconstruct("arm-pmsc", probe)
+
+
+def test_reconstruct_is_asked_for_with_coordinates_only(client, arm_poses):
+    _, values, _ = arm_poses
+    with pytest.raises(ValueError, match="reconstruct: .* points_encoding='coordinates'"):
+        client.evaluate_key_points("arm-pmsc", values[0], reconstruct=True)
+    with pytest.raises(ValueError, match="reconstruct"):
+        client.stream_key_points("arm-pmsc", values, points_encoding="float16", reconstruct=True)
+
+
+def train(client, demo_arm_transforms, folder, *flags, move=lambda points: points):
+    """``animspace train-pmsc`` on the demo arm's even frames (each through ``move``), writing a
+    model version under ``-o``/``--model`` in ``flags``."""
+    sequence = folder.parent / (folder.name + "-sequence")
+    if not sequence.exists():
+        sequence.mkdir()
+        frames = np.stack([move(posed_arm(client, demo_arm_transforms(f / 120))) for f in range(0, 120, 2)])
+        animspace.write_pc2(sequence / "frames.pc2", frames)
+        with open(sequence / "reference.obj", "w") as obj:
+            obj.writelines("v %r %r %r\n" % tuple(float(c) for c in v) for v in frames[0])
+            obj.writelines("f %d %d %d\n" % tuple(int(i) + 1 for i in f)
+                           for f in client.get_lod("arm-animspace", level=0).indices)
+    trained = subprocess.run([str(BUILD / "bin" / "animspace"), "train-pmsc", str(sequence), *flags],
+                             capture_output=True, text=True, timeout=120)
+    assert trained.returncode == 0, trained.stderr
+
+
+def test_an_aligned_model_reconstructs_with_its_rotation_and_translation(client, spawn_daemon, tmp_path,
+                                                                         demo_arm_transforms):
+    # The demo arm carried around by a rigid motion per frame, trained with --align (rigid
+    # motion removed before PCA): answers carry R and t, f̂ = R (mean + A p) + t.
+    rng = np.random.default_rng(7)
+
+    def rigid(points):
+        axis = rng.normal(size=3)
+        K = np.cross(np.eye(3), axis / np.linalg.norm(axis))
+        angle = rng.uniform(0.2, 1.0)
+        R = np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+        return (points.astype(np.float64) @ R.T + rng.normal(size=3) * 3).astype(np.float32)
+
+    repository = tmp_path / "repository"
+    train(client, demo_arm_transforms, repository, "-o", str(repository), "--model", "arm-aligned", "--align",
+          move=rigid)
+    address = spawn_daemon("--model-repository", str(repository))
+    with grpc.insecure_channel(address) as channel, \
+            animspace.Client(address, basis_cache=tmp_path / "bases") as aligned:
+        aligned.wait_until_serving(deadline_s=60)
+        keys = aligned.describe_key_points("arm-aligned")
+        _, mean, A = raw_basis(channel, "arm-aligned")
+        frames = [keys.pose(rigid(posed_arm(client, demo_arm_transforms(f / 120)))) for f in (3, 41, 77)]
+        exact = [aligned.evaluate_key_points("arm-aligned", f.key_values, check_values=f.check_values)
+                 for f in frames]
+        answers = list(aligned.stream_key_points("arm-aligned", frames, points_encoding="coordinates",
+                                                 reconstruct=True))
+        assert aligned.get_basis("arm-aligned").aligned
+        assert "HIT" in {r.status for r in answers}
+        for a, b in zip(exact, answers):
+            assert b.status == a.status and b.coordinates is not None
+            R = b.coordinates.rotation.astype(np.float64)
+            assert R.shape == (3, 3) and b.coordinates.translation.shape == (3,)
+            np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-5)
+            assert np.abs(b.coordinates.translation).max() > 0.1  # a real move, not the identity
+            expect_within_bound(b.points, a.points, mean, A, b)
+
+
+# ----------------------------------------------------------------------------------------------
+# The cache
+
+
+def parse_cache_file(path):
+    data = path.read_bytes()
+    magic, n, d, m, aligned, version, checksum = struct.unpack_from("<8sIIIIQQ", data)
+    values = np.frombuffer(data, "<f4", offset=40)
+    return magic, (n, d, m, aligned, version, checksum), values
+
+
+def test_the_cache_file_is_the_shared_format_and_spares_the_next_fetch(counted, channel, arm_poses, tmp_path):
+    client, counter = counted
+    keys, values, _ = arm_poses
+    answer = client.evaluate_key_points("arm-pmsc", values[0], points_encoding="coordinates")
+    first = client.reconstruct("arm-pmsc", answer)
+    assert counter.calls[GET_BASIS] == 1
+    checksum = answer.coordinates.basis_checksum
+    path = tmp_path / "bases" / "arm-pmsc" / f"{answer.model_version}-{checksum:016x}.basis"
+    assert sorted(p.name for p in (tmp_path / "bases" / "arm-pmsc").iterdir()) == [path.name]  # no temporaries
+    magic, header, stored = parse_cache_file(path)
+    chunks, mean, A = raw_basis(channel, "arm-pmsc")
+    N, M = chunks[0].point_count, chunks[0].basis_size
+    assert magic == b"ASBASIS1" and header == (N, 3, M, 0, answer.model_version, checksum)
+    assert stored.tobytes() == b"".join(c.data for c in chunks)  # the mean, then A column by column
+    # The same client: from memory. A new one: from the file — even with no server to ask.
+    np.testing.assert_array_equal(client.reconstruct("arm-pmsc", answer), first)
+    assert counter.calls[GET_BASIS] == 1
+    with animspace.Client(f"127.0.0.1:{closed_port()}", basis_cache=tmp_path / "bases", deadline_s=2) as offline:
+        np.testing.assert_array_equal(offline.reconstruct("arm-pmsc", answer), first)
+        with pytest.raises(animspace.Unavailable):  # what an uncached basis meets there
+            offline.get_basis("arm-pmsc")
+
+
+def _flip_a_value(data):
+    data[40 + 4 * 17 + 1] ^= 0x40
+    return data
+
+
+@pytest.mark.parametrize("damage", [
+    _flip_a_value,
+    lambda data: data[:-4],  # truncated
+    lambda data: data[:8] + struct.pack("<I", 1153) + data[12:],  # another N in the header
+    lambda data: b"ASBASIS0" + data[8:],  # another magic
+    lambda data: data[:32] + struct.pack("<Q", 12345) + data[40:],  # another checksum in the header
+], ids=["value", "truncated", "point_count", "magic", "header_checksum"])
+def test_a_corrupt_cache_file_is_deleted_and_fetched_again(daemon, arm_poses, tmp_path, damage):
+    keys, values, _ = arm_poses
+    with animspace.Client(daemon, basis_cache=tmp_path / "bases") as client:
+        answer = client.evaluate_key_points("arm-pmsc", values[0], points_encoding="coordinates")
+        good = client.reconstruct("arm-pmsc", answer)
+    path = next((tmp_path / "bases" / "arm-pmsc").iterdir())
+    original = path.read_bytes()
+    path.write_bytes(bytes(damage(bytearray(original))))
+    counter = CountingInterceptor()
+    with grpc.insecure_channel(daemon) as channel, \
+            animspace.Client(channel=grpc.intercept_channel(channel, counter), basis_cache=tmp_path / "bases") as fresh:
+        np.testing.assert_array_equal(fresh.reconstruct("arm-pmsc", answer), good)
+        assert counter.calls[GET_BASIS] == 1
+    assert path.read_bytes() == original  # written again, whole
+
+
+def test_the_cache_directory_follows_the_environment(monkeypatch, tmp_path):
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("ANIMSPACE_BASIS_CACHE", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    assert animspace.BasisCache().directory == tmp_path / "home" / ".cache" / "animspace" / "bases"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert animspace.BasisCache().directory == tmp_path / "xdg" / "animspace" / "bases"
+    monkeypatch.setenv("ANIMSPACE_BASIS_CACHE", str(tmp_path / "mine"))
+    assert animspace.BasisCache().directory == tmp_path / "mine"
+    assert animspace.BasisCache(disk=False).directory is None
+    assert animspace.BasisCache(disk=False).path("m", 1, 2) is None
+    cache = animspace.BasisCache(tmp_path / "given")
+    assert cache.path("arm-pmsc", 3, 0xAB) == tmp_path / "given" / "arm-pmsc" / "3-00000000000000ab.basis"
+    assert cache.path("../escape", 3, 0xAB) is None  # not one path component: memory only
+
+
+# ----------------------------------------------------------------------------------------------
+# The wrong basis is never used
+
+
+def test_coordinates_of_no_basis_of_their_version_raise(counted, arm_poses, tmp_path):
+    client, counter = counted
+    _, values, _ = arm_poses
+    answer = client.evaluate_key_points("arm-pmsc", values[0], points_encoding="coordinates")
+    served = answer.coordinates.basis_checksum
+    stranger = dataclasses.replace(answer, coordinates=dataclasses.replace(answer.coordinates,
+                                                                           basis_checksum=served ^ 1))
+    with pytest.raises(animspace.BasisMismatch) as refused:
+        client.reconstruct("arm-pmsc", stranger)
+    assert (refused.value.expected_checksum, refused.value.served_checksum) == (served ^ 1, served)
+    assert refused.value.model_version == answer.model_version and isinstance(refused.value, animspace.Error)
+    # The basis fetched is cached under its own checksum only; asking again asks the server again.
+    assert [p.name for p in (tmp_path / "bases" / "arm-pmsc").iterdir()] == [
+        f"{answer.model_version}-{served:016x}.basis"]
+    with pytest.raises(animspace.BasisMismatch):
+        client.reconstruct("arm-pmsc", stranger)
+    assert counter.calls[GET_BASIS] == 2
+    # An answer of a version the server never had.
+    unknown = dataclasses.replace(answer, model_version=77)
+    with pytest.raises(animspace.NotFound):
+        client.reconstruct("arm-pmsc", unknown)
+
+
+def test_a_version_swap_fetches_each_versions_basis_and_a_replaced_version_raises(client, spawn_daemon, tmp_path,
+                                                                                  demo_arm_transforms):
+    # Versions of one model with different subspaces: the demo arm trained with M = 5 and M = 8.
+    repository = tmp_path / "repository"
+    train(client, demo_arm_transforms, repository, "-o", str(repository), "--model", "swap", "--version", "1",
+          "--basis", "5")
+    address = spawn_daemon("--model-repository", str(repository))
+    with animspace.Client(address, basis_cache=tmp_path / "bases") as c, grpc.insecure_channel(address) as channel:
+        c.wait_until_serving(deadline_s=60)
+        keys = c.describe_key_points("swap")
+        pose = keys.pose(posed_arm(client, demo_arm_transforms(31 / 120)))
+        old = c.evaluate_key_points("swap", pose.key_values, check_values=pose.check_values, version=1,
+                                    points_encoding="coordinates")
+        assert old.model_version == 1 and old.coordinates.p.shape == (5,)
+        old_float32 = c.evaluate_key_points("swap", pose.key_values, check_values=pose.check_values, version=1).points
+        _, mean, A = raw_basis(channel, "swap", 1)
+
+        # Version 2 is published and becomes the default; the answer of version 1 still
+        # reconstructs, with version 1's basis, fetched by its version.
+        train(client, demo_arm_transforms, repository, "-o", str(repository), "--model", "swap", "--version", "2",
+              "--basis", "8")
+        assert c.load_model("swap", 2).default_version == 2
+        assert c.get_basis("swap").basis_size == 8  # cached beside version 1's
+        expect_within_bound(c.reconstruct("swap", old), old_float32, mean, A, old)
+        names = sorted(p.name for p in (tmp_path / "bases" / "swap").iterdir())
+        assert [n.split("-")[0] for n in names] == ["1", "2"]
+
+        # Version 1 replaced by another subspace: a cache that holds its old basis still answers
+        # rightly; one that does not refuses rather than use the new basis.
+        c.unload_model("swap", 1)
+        train(client, demo_arm_transforms, repository, "-o", str(repository), "--model", "swap", "--version", "1",
+              "--basis", "8")
+        c.load_model("swap", 1)
+        assert c.get_basis("swap", 1).basis_size == 8
+        expect_within_bound(c.reconstruct("swap", old), old_float32, mean, A, old)
+        with animspace.Client(address, basis_cache=tmp_path / "empty") as fresh:
+            with pytest.raises(animspace.BasisMismatch):
+                fresh.reconstruct("swap", old)
+
+
+# ----------------------------------------------------------------------------------------------
+# Streams that break BasisChunk's contract (an in-process server)
+
+
+def _chunks(n=4, d=3, m=2, split=(0, 7, 20), **changes):
+    rng = np.random.default_rng(1)
+    mean = rng.normal(size=n * d).astype("<f4")
+    A = rng.normal(size=(n * d, m)).astype("<f4")
+    raw = mean.tobytes() + A.tobytes(order="F")
+    checksum = (zlib.crc32(mean.tobytes()) << 32) | zlib.crc32(A.tobytes(order="F"))
+    bounds = list(split) + [n * d * (m + 1)]
+    chunks = [poses_pb2.BasisChunk(model_version=3, basis_checksum=checksum, point_count=n, channel_count=d,
+                                   basis_size=m, total_values=n * d * (m + 1), offset=a, data=raw[4 * a:4 * b])
+              for a, b in zip(bounds, bounds[1:])]
+    for index, fields in changes.items():
+        for name, value in fields.items():
+            setattr(chunks[int(index[1:])], name, value)
+    return chunks, mean, A
+
+
+class ScriptedPoses(poses_pb2_grpc.PoseServiceServicer):
+    script = []
+
+    def GetBasis(self, request, context):
+        yield from self.script
+
+
+@pytest.fixture()
+def scripted_server():
+    server = grpc.server(futures.ThreadPoolExecutor(max_workers=2))
+    poses_pb2_grpc.add_PoseServiceServicer_to_server(ScriptedPoses(), server)
+    port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    yield f"127.0.0.1:{port}"
+    server.stop(grace=None)
+
+
+def test_a_well_formed_stream_assembles(scripted_server, tmp_path):
+    ScriptedPoses.script, mean, A = _chunks()
+    with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
+        basis = client.get_basis("m", 3)
+    np.testing.assert_array_equal(basis.mean, mean)
+    np.testing.assert_array_equal(basis.basis, A)
+    p = np.float32([0.5, -2.0])
+    got = coordinates.reconstruct(basis, animspace.SubspaceCoordinates(p=p, basis_checksum=basis.basis_checksum))
+    np.testing.assert_allclose(got, (mean.astype(np.float64) + A.astype(np.float64) @ p).reshape(4, 3), rtol=1e-6)
+
+
+@pytest.mark.parametrize("changes, problem", [
+    ({"c1": {"offset": 8}}, "chunk 1: offset 8, expected 7"),  # a gap
+    ({"c1": {"offset": 6}}, "chunk 1: offset 6, expected 7"),  # an overlap
+    ({"c2": {"basis_size": 3}}, "chunk 2: basis_size 3 differs from chunk 0's 2"),
+    ({"c1": {"model_version": 4}}, "chunk 1: model_version 4 differs from chunk 0's 3"),
+    ({"c2": {"basis_checksum": 5}}, "chunk 2: basis_checksum 5 differs"),
+    ({"c0": {"total_values": 35}}, "total_values 35, but N·D·(M+1)"),
+    ({"c2": {"data": b"\0" * 68}}, "run past total_values 36"),
+    ({"c0": {"basis_checksum": 5}, "c1": {"basis_checksum": 5}, "c2": {"basis_checksum": 5}},
+     "is not the basis_checksum 0000000000000005"),
+], ids=["gap", "overlap", "shape", "version", "checksum_changes", "total", "overrun", "checksum_wrong"])
+def test_broken_basis_streams_are_protocol_errors(scripted_server, tmp_path, changes, problem):
+    ScriptedPoses.script, _, _ = _chunks(**changes)
+    with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
+        with pytest.raises(animspace.ProtocolError, match="GetBasis: .*" + problem.replace("(", r"\(")
+                           .replace(")", r"\)").replace("+", r"\+")):
+            client.get_basis("m", 3)
+    assert not any(tmp_path.rglob("*.basis"))  # nothing cached
+
+
+def test_a_short_stream_and_another_version_are_protocol_errors(scripted_server, tmp_path):
+    chunks, _, _ = _chunks()
+    with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
+        ScriptedPoses.script = chunks[:-1]
+        with pytest.raises(animspace.ProtocolError, match="the stream ended after 20 of 36 values"):
+            client.get_basis("m", 3)
+        ScriptedPoses.script = []
+        with pytest.raises(animspace.ProtocolError, match="without a chunk"):
+            client.get_basis("m", 3)
+        ScriptedPoses.script = chunks
+        with pytest.raises(animspace.ProtocolError, match="asked for version 2, the chunks are of version 3"):
+            client.get_basis("m", 2)
