@@ -225,6 +225,11 @@ grpc::Status PoseRun::finish_one(PoseJob& job, v1::PoseResult* out) {
   return grpc::Status::OK;
 }
 
+bool evaluated_in_place(v1::PointEncoding points_encoding, bool local_fail_through, const v1::KeyPointPose& pose) {
+  return points_encoding == v1::POINT_ENCODING_COORDINATES && !local_fail_through && !pose.has_skeleton_pose() &&
+         !pose.has_light_set();
+}
+
 grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
                            const PoseOptions& options, v1::PoseResult* out, bool* logged) {
   PoseJob job;

@@ -93,6 +93,13 @@ class PoseRun {
   PoseBatcher::Group group_;
 };
 
+// Whether a pose's whole evaluation is smaller than a hand-off to the pool (a request or stream
+// frame may then be evaluated on the gRPC thread that received it): an answer as coordinates — no
+// f̂ to reconstruct — without an engine input (no full calculation on a miss) and without local
+// fail-through (which assembles points). A blend or miss still appends to the miss log there: one
+// write (and an fsync with --miss-log-fsync always).
+bool evaluated_in_place(v1::PointEncoding points_encoding, bool local_fail_through, const v1::KeyPointPose& pose);
+
 // One pose alone through the pipeline (CompleteMiss, thumbnails); `logged` (optional) says
 // whether it was appended to the miss log. Errors: PoseRun::finish's.
 grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,

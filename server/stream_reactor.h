@@ -133,6 +133,24 @@ class StreamReactor : public Base {
     }
   }
 
+  // As submit(), but runs `work` here, on the reaction thread, before returning: for work smaller
+  // than a hand-off to the pool and back (a pose answered as coordinates is one projection —
+  // microseconds — where the hand-off's wake-ups cost as much again). Call from a reaction, then
+  // pump().
+  void run_here(const std::function<Outcome()>& work) {
+    Slot* slot = nullptr;
+    {
+      std::lock_guard lock(mutex_);
+      requesting_ = false;
+      if (finished_ || ended_ || cancelled_) return;
+      slots_.push_back(std::make_unique<Slot>());
+      slot = slots_.back().get();
+      ++producing_;
+    }
+    grpc::Status stop = stop_status();
+    complete(slot, stop.ok() ? work() : Outcome::end(std::move(stop)));
+  }
+
   // The stream ends with `status` once everything submitted before is written (the end of the
   // input, or an error found on the reaction thread). Ignored once the stream has ended.
   void end(grpc::Status status) {
@@ -161,7 +179,14 @@ class StreamReactor : public Base {
         return;  // OnDone may run from here on; only holds keep this reactor alive
       }
       if (next.write == nullptr && !next.request) return;
-      if (next.write != nullptr) Base::StartWrite(next.write);
+      if (next.write != nullptr) {
+        // More answers ready behind this one: let gRPC hold this write for them and send them
+        // together (one HTTP/2 flush and one syscall for a run of small answers, such as poses
+        // sent as coordinates); the last of the run is flushed at once.
+        grpc::WriteOptions options;
+        if (next.more) options.set_buffer_hint();
+        Base::StartWrite(next.write, options);
+      }
       if (next.request) request_more();
       std::lock_guard lock(mutex_);
       --starting_;
@@ -203,6 +228,7 @@ class StreamReactor : public Base {
   };
   struct Actions {
     const Response* write = nullptr;
+    bool more = false;  // another response is ready behind `write`
     bool request = false;
     bool finish = false;
     grpc::Status status;
@@ -224,6 +250,7 @@ class StreamReactor : public Base {
         if (front.response) {
           writing_ = true;
           next.write = &*front.response;
+          next.more = slots_.size() > 1 && slots_[1]->ready && slots_[1]->response.has_value();
         } else if (quiet) {
           next.finish = true;
           next.status = front.status;

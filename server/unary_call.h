@@ -103,10 +103,13 @@ Access access_for(const AccessRule& rule, const Request& request) {
 // For bodies that hand the rest of their work to another thread (the render thread): the body
 // runs on `pool` as in serve_unary, as body(call, request, response, finish), and must make
 // `finish(status)` happen exactly once — itself, or later from wherever the work ends. `request`
-// and `response` live until then.
+// and `response` live until then. When `here` says so for a request, the body runs at once on
+// the gRPC thread that received it instead: for work smaller than the hand-off to the pool and
+// back (answers as coordinates: microseconds per pose).
 template <typename Request, typename Response, typename AccessRule, typename Body>
 grpc::ServerUnaryReactor* serve_unary_deferred(ServiceEnvironment& env, UnaryBytes bytes, const char* rpc,
-                                               AccessRule access, WorkPool& pool, Body body) {
+                                               AccessRule access, WorkPool& pool, Body body,
+                                               bool (*here)(const Request&) = nullptr) {
   grpc::CallbackServerContext* context = bytes.context;
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   auto scope = std::make_shared<CallScope>(env.metrics, rpc);
@@ -127,6 +130,11 @@ grpc::ServerUnaryReactor* serve_unary_deferred(ServiceEnvironment& env, UnaryByt
   const CallFinisher finish(reactor, scope, ticket,
                             std::shared_ptr<const google::protobuf::Message>(messages, &messages->response),
                             bytes.response);
+  if (here != nullptr && here(messages->request)) {
+    const CallControl call(context, scope.get());
+    body(call, &messages->request, &messages->response, finish);
+    return reactor;
+  }
   const bool queued = pool.submit([context, scope, finish, messages, body = std::move(body)]() mutable {
     const CallControl call(context, scope.get());
     if (grpc::Status stop = call.stop_status(); !stop.ok()) {
@@ -139,14 +147,15 @@ grpc::ServerUnaryReactor* serve_unary_deferred(ServiceEnvironment& env, UnaryByt
   return reactor;
 }
 
-// body(call, request, response) returns the call's status.
+// body(call, request, response) returns the call's status; `here` as in serve_unary_deferred.
 template <typename Request, typename Response, typename AccessRule, typename Body>
 grpc::ServerUnaryReactor* serve_unary(ServiceEnvironment& env, UnaryBytes bytes, const char* rpc, AccessRule access,
-                                      WorkPool& pool, Body body) {
+                                      WorkPool& pool, Body body, bool (*here)(const Request&) = nullptr) {
   return serve_unary_deferred<Request, Response>(
       env, bytes, rpc, access, pool,
       [body = std::move(body)](const CallControl& call, const Request* request, Response* response,
-                               const CallFinisher& finish) mutable { finish(body(call, request, response)); });
+                               const CallFinisher& finish) mutable { finish(body(call, request, response)); },
+      here);
 }
 
 }  // namespace animspace::server

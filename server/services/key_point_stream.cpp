@@ -60,6 +60,14 @@ void KeyPointStream::OnReadDone(bool ok) {
   pose->job.options.omit_points = pose->frame.omit_points();
   pose->job.options.local_fail_through = pose->frame.local_fail_through();
   pose->job.options.points_encoding = pose->frame.points_encoding();
+  // An answer as coordinates with no engine input is one projection (no f̂, no full calculation):
+  // evaluated right here, as the frame arrives.
+  if (evaluated_in_place(pose->job.options.points_encoding, pose->job.options.local_fail_through,
+                         pose->frame.pose())) {
+    run_here([this, pose] { return evaluate(*pose); });
+    pump();
+    return;
+  }
   // Decoded here, in order, so that the frames read ahead wait in the batcher together and the
   // first pool thread to await reconstructs them as one product. A frame whose key values the
   // server gathers is decoded on the pool: the gather takes milliseconds.

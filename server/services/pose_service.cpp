@@ -9,6 +9,14 @@
 #include "server/validation.h"
 
 namespace animspace::server {
+namespace {
+
+// Most poses of one EvaluateKeyPoints call evaluated on the gRPC thread (evaluated_in_place): tens
+// of microseconds; a larger batch goes to the request pool, where a long one cannot hold up the
+// transport.
+constexpr int kPosesEvaluatedInPlace = 16;
+
+}  // namespace
 
 grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServerContext* context,
                                                              const grpc::ByteBuffer* request_bytes,
@@ -82,6 +90,14 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
         PoseRun run;
         run.start(env_, *model, jobs, results);
         return run.finish(&call);
+      },
+      // A few poses answered as coordinates: evaluated where the call arrived.
+      +[](const v1::EvaluateKeyPointsRequest& request) {
+        if (request.poses_size() > kPosesEvaluatedInPlace) return false;
+        for (const auto& pose : request.poses()) {
+          if (!evaluated_in_place(request.points_encoding(), request.local_fail_through(), pose)) return false;
+        }
+        return true;
       });
 }
 
