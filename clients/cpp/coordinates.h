@@ -9,7 +9,8 @@
 // in value i by at most
 //   pmsc::coordinates_rounding_bound(M) · (|mean_i| + Σ_j |A_ij p_j|)
 // (both sums within γ_{M+2} of the exact one; 0 when both run the same kernel on one pose) and,
-// for an aligned model, pmsc::aligned_rounding_bound() · ‖x‖ more per coordinate of a point x.
+// for an aligned model, that error's norm over the point plus pmsc::aligned_rounding_bound() · ‖x‖
+// + pmsc::translation_rounding_bound() · |f̂_c| per coordinate c of a point x (aligned frame).
 //
 // Never silently wrong: every answer names its basis (basis_checksum). A basis is looked up by
 // model, the answer's version and that checksum — in memory, then on disk (verified), then with

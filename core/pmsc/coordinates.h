@@ -32,12 +32,15 @@ void reconstruct_coordinates(const Eigen::VectorXf& mean, const Eigen::MatrixXf&
 // How far two float32 reconstructions of the same p (different kernels, or one pose alone and in
 // a batch) may differ in value i: both are within γ_{M+2} of the exact sum, so at most
 //   coordinates_rounding_bound(M) · (|mean_i| + Σ_j |A_ij p_j|)
-// before alignment; an aligned model's rotation keeps that error's size and adds at most
-// 2·γ_3·‖x‖ per coordinate of a point x (aligned_rounding_bound).
+// before alignment. An aligned model's rotation keeps that error's size (the point's whole error
+// moves into each coordinate, at most its norm) and adds, per coordinate c of a point x with
+// answer f̂, both sides' roundings of R x (γ_3‖x‖ each) and of the final + t (2⁻²⁴|f̂_c| each):
+//   aligned_rounding_bound() · ‖x‖ + translation_rounding_bound() · |f̂_c|.
 inline double coordinates_rounding_bound(long basis_size) { return reconstruction_rounding_bound(basis_size); }
 inline double aligned_rounding_bound() {
   const double gamma3 = 3 * 0x1p-24 / (1 - 3 * 0x1p-24);
   return 2 * gamma3;
 }
+inline double translation_rounding_bound() { return 2 * 0x1p-24; }
 
 }  // namespace animspace::pmsc

@@ -111,8 +111,11 @@ void expect_within_bound(const pmsc::PmscModel& m, const SubspaceCoordinates& c,
     double allowed = gamma * size(static_cast<long>(i));
     if (m.aligned) {
       const long point = static_cast<long>(i) / 3;
-      const Eigen::Vector3d x(server[3 * point], server[3 * point + 1], server[3 * point + 2]);
-      allowed = gamma * size.segment(3 * point, 3).norm() + pmsc::aligned_rounding_bound() * x.norm();
+      // x, the point in the aligned frame: the answer less the translation (R keeps its norm).
+      const Eigen::Vector3d x = Eigen::Vector3d(server[3 * point], server[3 * point + 1], server[3 * point + 2]) -
+                                Eigen::Vector3d(c.translation[0], c.translation[1], c.translation[2]);
+      allowed = gamma * size.segment(3 * point, 3).norm() + pmsc::aligned_rounding_bound() * x.norm() +
+                pmsc::translation_rounding_bound() * std::abs(static_cast<double>(server[i]));
     }
     ASSERT_LE(std::abs(static_cast<double>(client[i]) - server[i]), allowed) << what << ", value " << i;
   }

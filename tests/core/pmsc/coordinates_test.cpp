@@ -63,7 +63,9 @@ TEST_P(CoordinatesTest, AClientReconstructionIsTheServersAnswerWithinTheStatedBo
           // The rotation keeps the error's size: the point's whole error, plus both rotations' rounding.
           const long point = i / 3;
           allowed = tolerance.segment(3 * point, 3).norm() +
-                    aligned_rounding_bound() * batched[b].segment(3 * point, 3).cast<double>().norm();
+                    aligned_rounding_bound() *
+                        (batched[b].segment(3 * point, 3).cast<double>() - estimates[b].alignment.translation).norm() +
+                    translation_rounding_bound() * std::abs(static_cast<double>(batched[b](i)));
         }
         ASSERT_LE(std::abs(static_cast<double>(client(i)) - batched[b](i)), allowed)
             << "pose " << b << " value " << i << (aligned ? " (aligned)" : "");
