@@ -113,6 +113,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--batch", workload_args.batch, "Poses per unary call")->check(CLI::Range(1u, 1024u))->capture_default_str();
   app.add_flag("--with-points", with_points, "Ask for the reconstructed points too (default: verdicts only)");
+  app.add_flag("--coordinates", workload_args.coordinates,
+               "Ask for the answers as subspace coordinates (M values each, reconstructed by clients; issue #36)");
   app.add_option("--concurrency", concurrency, "Closed loop: callers per step, e.g. 1,2,4,8,16,32")
       ->capture_default_str();
   app.add_option("--rate", rate, "Open loop: target requests/s per step, e.g. 50,100,200 (replaces --concurrency)");

@@ -33,7 +33,11 @@ Result<Workload> make_workload(Client& client, const WorkloadArgs& a) {
   w.model = a.model;
   w.rpc = a.rpc;
   w.batch = a.batch;
-  w.omit_points = a.omit_points;
+  w.omit_points = a.omit_points && !a.coordinates;
+  if (a.coordinates) {
+    if (a.rpc == Rpc::kSkinning) return invalid("--coordinates: skeleton poses are answered as points; leave it out");
+    w.points_encoding = v1::POINT_ENCODING_COORDINATES;
+  }
 
   if (a.rpc == Rpc::kSkinning) {
     if (a.pose_file.empty()) return invalid("--rpc skinning replays skeleton poses: give --pose-file");

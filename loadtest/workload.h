@@ -33,6 +33,10 @@ struct WorkloadArgs {
   std::string pose_space = "global";
   uint32_t batch = 1;
   bool omit_points = true;  // verdicts only: the load is the evaluation, not the transfer
+  // Answers as subspace coordinates (POINT_ENCODING_COORDINATES, issue #36): M values per answer
+  // instead of N·D points; the load tester does not reconstruct them (`animspace play
+  // --coordinates` measures the client's side).
+  bool coordinates = false;
 };
 
 struct Workload {
@@ -41,6 +45,7 @@ struct Workload {
   Rpc rpc = Rpc::kEvaluate;
   uint32_t batch = 1;
   bool omit_points = true;
+  v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
   uint32_t channel_count = 3;
   std::vector<std::vector<float>> key_frames;  // kEvaluate, kStream: K·D values per frame
   std::vector<std::vector<float>> check_frames;  // the same frames' C·D check values (empty: C = 0)

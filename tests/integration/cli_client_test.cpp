@@ -202,6 +202,24 @@ TEST_F(CliClientTest, PlayStreamsTheSelectedFramesAndCountsThem) {
   EXPECT_LE(report["hit_rate"].get<double>(), 1.0);
 }
 
+TEST_F(CliClientTest, PlayWithCoordinatesReconstructsEveryAnswerFromOneCachedBasis) {
+  const TempDir cache;
+  const std::string bases = (cache.path() / "bases").string();
+  const std::string command = "--json play arm-pmsc " + arm_frames() + " --select 0:60 --coordinates --basis-cache " + bases;
+  const nlohmann::json first = json_of(cli(command));
+  EXPECT_EQ(first["frames"].get<int>(), 60);
+  // arm-pmsc has no server engine: every answer is the client's to reconstruct.
+  EXPECT_EQ(first["coordinates"]["reconstructed"].get<int>(), 60);
+  EXPECT_EQ(first["coordinates"]["bases_fetched"].get<int>(), 1);
+  // Reconstructed with the right basis, every pose lies near its frame (the arm is 2 long; a wrong
+  // basis would scatter it).
+  EXPECT_LT(first["coordinates"]["max_point_distance"].get<double>(), 0.05);
+  const nlohmann::json second = json_of(cli(command));  // the cached file: no download
+  EXPECT_EQ(second["coordinates"]["bases_fetched"].get<int>(), 0);
+  EXPECT_EQ(second["coordinates"]["max_point_distance"].get<double>(),
+            first["coordinates"]["max_point_distance"].get<double>());
+}
+
 TEST_F(CliClientTest, PoseWritesTheSkinnedSequenceAsAPointCache) {
   auto file = container::read_file(repo_->path() / "arm-animspace" / "1" / "model.anim");
   ASSERT_TRUE(file.ok());

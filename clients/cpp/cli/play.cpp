@@ -1,12 +1,15 @@
 #include "clients/cpp/cli/play.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <thread>
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/coordinates.h"
 #include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/quantile.h"
 #include "clients/cpp/tools/sequence_frames.h"
 
 namespace animspace::cli {
@@ -25,6 +28,11 @@ CLI::App* add_play(CLI::App& app, PlayArgs& a) {
       ->capture_default_str();
   cmd->add_flag("--complete", a.complete,
                 "Complete every blend or miss with the frame's full values (logs it for retraining)");
+  cmd->add_flag("--coordinates", a.coordinates,
+                "Take the answers as subspace coordinates and reconstruct every pose here (the basis is fetched "
+                "once and cached on disk)");
+  cmd->add_option("--basis-cache", a.basis_cache,
+                  "Folder of cached bases (default: $ANIMSPACE_BASIS_CACHE, else ~/.cache/animspace/bases)");
   cmd->add_flag("-v,--verbose", a.verbose, "One line per frame");
   return cmd;
 }
@@ -51,7 +59,13 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   // even if a retrain publishes a new version mid-sequence.
   StreamOptions options;
   options.version = keys.model_version;
-  options.omit_points = true;
+  options.omit_points = !a.coordinates;
+  if (a.coordinates) options.points_encoding = v1::POINT_ENCODING_COORDINATES;
+  BasisCache bases(a.basis_cache.empty() ? default_basis_cache_directory() : std::filesystem::path(a.basis_cache));
+  // With coordinates: the client's reconstruction, µs per pose, and each answer's largest
+  // distance from the frame it was played from (what a renderer would draw against the truth).
+  std::vector<double> reconstruct_us;
+  double max_distance = 0;
   auto stream = client.open_stream(a.model, options);
   const auto start = std::chrono::steady_clock::now();
   std::thread writer([&] {
@@ -74,6 +88,22 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       sum_error += result->key_point_error;
       max_error = std::max(max_error, double(result->key_point_error));
       if (result->full_evaluation_needed) to_complete.push_back(result->sequence);
+      if (a.coordinates && result->coordinates.present) {
+        const auto t0 = std::chrono::steady_clock::now();
+        bases.reconstruct(client, a.model, *result);
+        reconstruct_us.push_back(
+            1e6 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        const auto frame = frame_values(static_cast<int>(result->sequence));
+        for (uint32_t i = 0; i < result->points.point_count; ++i) {
+          double squared = 0;
+          for (long c = 0; c < D; ++c) {
+            const double d = result->points.values[i * static_cast<size_t>(D) + static_cast<size_t>(c)] -
+                             frame[i * static_cast<size_t>(D) + static_cast<size_t>(c)];
+            squared += d * d;
+          }
+          max_distance = std::max(max_distance, std::sqrt(squared));
+        }
+      }
       if (a.verbose && !json) {
         char check_text[64] = "";
         if (result->checked) {
@@ -112,8 +142,17 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   const uint64_t played = counts[1] + counts[2] + counts[3];
   const double hit_rate = played == 0 ? 0.0 : double(counts[1]) / double(played);
   const double mean_error = played ? sum_error / double(played) : 0.0;
+  const double reconstruct_p50_us = reconstruct_us.empty() ? 0.0 : tools::quantile(reconstruct_us, 0.5);
   if (json) {
+    nlohmann::json coordinates;
+    if (a.coordinates) {
+      coordinates = {{"reconstructed", reconstruct_us.size()},
+                     {"client_reconstruct_us", reconstruct_p50_us},
+                     {"max_point_distance", max_distance},
+                     {"bases_fetched", bases.fetch_count()}};
+    }
     print_json({{"model", a.model},
+                {"coordinates", coordinates},
                 {"version", keys.model_version},
                 {"frames", played},
                 {"hits", counts[1]},
@@ -132,6 +171,12 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   std::printf("  hits %llu, blends %llu, misses %llu: hit rate %.1f%%; e_key mean %.4g, max %.4g\n",
               static_cast<unsigned long long>(counts[1]), static_cast<unsigned long long>(counts[2]),
               static_cast<unsigned long long>(counts[3]), 100.0 * hit_rate, mean_error, max_error);
+  if (a.coordinates) {
+    std::printf("  reconstructed %zu answers from coordinates here: %.1f us per pose (median), %llu bases fetched; "
+                "largest distance from the played frames %.4g\n",
+                reconstruct_us.size(), reconstruct_p50_us, static_cast<unsigned long long>(bases.fetch_count()),
+                max_distance);
+  }
   if (a.complete) {
     std::printf("  completed %llu blends/misses with full values (logged for `animspace retrain %s`)\n",
                 static_cast<unsigned long long>(completed), a.model.c_str());

@@ -1,7 +1,9 @@
 // `animspace play`: stream a sequence's key points to a PMSC model (PoseService.StreamKeyPoints)
 // and report hits, blends and misses — the soft cache seen from a posing engine's side. With
 // --complete, every blend or miss is completed with the frame's full values (client fail-through,
-// CompleteMiss), which logs it for the next `animspace retrain`.
+// CompleteMiss), which logs it for the next `animspace retrain`. With --coordinates the answers come
+// as subspace coordinates and the client reconstructs every pose (clients/cpp/coordinates.h,
+// the basis cached on disk), reporting its cost and each pose's largest distance from the frame.
 #pragma once
 
 #include <string>
@@ -19,6 +21,8 @@ struct PlayArgs {
   std::string pc2;
   std::string select = "::";
   bool complete = false;
+  bool coordinates = false;
+  std::string basis_cache;  // empty: coordinates.h's default directory
   bool verbose = false;
 };
 
