@@ -77,6 +77,8 @@
 
 #include "animspace/v1/poses.grpc.pb.h"
 #include "bench/crane_split.h"
+#include "clients/cpp/client.h"
+#include "clients/cpp/coordinates.h"
 #include "bench/suites.h"
 #include "clients/cpp/tools/quantile.h"
 #include "core/container/model_container.h"
@@ -116,6 +118,11 @@ struct Encoding {
 constexpr Encoding kEncodings[] = {{"float32", 4, v1::POINT_ENCODING_FLOAT32},
                                    {"float16", 2, v1::POINT_ENCODING_FLOAT16},
                                    {"fixed16", 2, v1::POINT_ENCODING_FIXED16}};
+// Answers as subspace coordinates (issue #36): M values per answer, reconstructed by the client.
+// No floor (the floor's canned answers are points); its rows pair with float32's.
+constexpr Encoding kCoordinates{"coordinates", 0, v1::POINT_ENCODING_COORDINATES};
+// Answers a coordinates row keeps to reconstruct after the measurement (client_reconstruct_us).
+constexpr size_t kReconstructionSamples = 256;
 
 // Where served rows send their calls: a daemon, or the transport floor, whose answers are canned
 // (no soft-cache verdicts to check).
@@ -214,6 +221,10 @@ struct Row {
   std::optional<double> baseline_us;  // in-process µs per pose measured around this row
   Outcomes outcomes;
   std::optional<double> daemon_cpu_seconds, client_cpu_seconds;
+  // Coordinates rows: the client's reconstruction of the sampled answers (µs per pose, median),
+  // and the largest |reconstructed − in-process float32| value over them.
+  std::optional<double> client_reconstruct_us, client_reconstruct_max_difference;
+  std::vector<std::pair<size_t, v1::PoseResult>> samples;  // (frame, answer), coordinates rows only
   double load_average = 0;
   std::string error;  // first failure, if any
   bool in_order = true;
@@ -224,6 +235,7 @@ struct Row {
 struct Workload {
   int point_count = 0;  // N
   int key_count = 0;    // K
+  int basis_size = 0;   // M
   std::vector<Eigen::VectorXf> keys;
   std::vector<std::string> packed_keys;  // K·3 little-endian float32
   std::vector<pmsc::CacheStatus> expected;
@@ -464,6 +476,16 @@ size_t point_bytes(const Workload& work, const Encoding& encoding, bool omit_poi
   return omit_points ? 0 : static_cast<size_t>(encoding.bytes_per_value) * 3 * static_cast<size_t>(work.point_count);
 }
 
+// Whether `result` is an answer of the row's shape: `expected_bytes` of points, or — coordinates —
+// M coordinates and no points (crane's model has no server engine: every answer is the client's).
+bool answer_shape_ok(const v1::PoseResult& result, const Encoding& encoding, size_t expected_bytes,
+                     const Workload& work) {
+  if (encoding.wire == v1::POINT_ENCODING_COORDINATES) {
+    return result.coordinates().p_size() == work.basis_size && result.points().data().empty();
+  }
+  return result.points().data().size() == expected_bytes;
+}
+
 // `concurrency` threads, each with its own stub (on one shared channel or on its own), calling
 // EvaluateKeyPoints back to back for kMeasureSeconds after a warm-up.
 Row measure_unary(const Endpoint& server, const Workload& work, const Encoding& encoding, int concurrency,
@@ -481,6 +503,7 @@ Row measure_unary(const Endpoint& server, const Workload& work, const Encoding& 
     Outcomes outcomes;
     long response_bytes = 0;
     double max_error = 0;  // largest PointArray.max_error received (16-bit encodings)
+    std::vector<std::pair<size_t, v1::PoseResult>> samples;
     std::string error;
   };
   std::vector<Worker> workers(static_cast<size_t>(concurrency));
@@ -501,7 +524,7 @@ Row measure_unary(const Endpoint& server, const Workload& work, const Encoding& 
         me.error = "EvaluateKeyPoints: " + std::to_string(status.error_code()) + " " + status.error_message();
         return false;
       }
-      if (response.results_size() != 1 || response.results(0).points().data().size() != expected_bytes) {
+      if (response.results_size() != 1 || !answer_shape_ok(response.results(0), encoding, expected_bytes, work)) {
         me.error = "EvaluateKeyPoints: unexpected response shape";
         return false;
       }
@@ -522,6 +545,9 @@ Row measure_unary(const Endpoint& server, const Workload& work, const Encoding& 
       me.response_bytes += static_cast<long>(response.ByteSizeLong());
       if (!server.floor) me.outcomes.add(response.results(0).status(), work.expected[frame]);
       me.max_error = std::max(me.max_error, static_cast<double>(response.results(0).points().max_error()));
+      if (response.results(0).has_coordinates() && me.samples.size() < kReconstructionSamples / 8 + 1) {
+        me.samples.emplace_back(frame, response.results(0));
+      }
     }
   };
 
@@ -543,6 +569,7 @@ Row measure_unary(const Endpoint& server, const Workload& work, const Encoding& 
     row.outcomes.merge(w.outcomes);
     row.response_bytes += w.response_bytes;
     row.max_error = std::max(row.max_error, w.max_error);
+    row.samples.insert(row.samples.end(), w.samples.begin(), w.samples.end());
     if (row.error.empty()) row.error = w.error;
   }
   row.poses = static_cast<long>(row.latency_us.size());
@@ -612,6 +639,7 @@ Row measure_stream(const Endpoint& server, const Workload& work, const Encoding&
     long received = 0;
     long response_bytes = 0;
     double max_error = 0;
+    std::vector<std::pair<size_t, v1::PoseResult>> samples;
     std::string error;
   };
   std::vector<std::unique_ptr<StreamState>> states;
@@ -643,7 +671,7 @@ Row measure_stream(const Endpoint& server, const Workload& work, const Encoding&
       while (state->call->Read(&result)) {
         const auto expected_sequence = static_cast<uint64_t>(state->received);
         if (result.sequence() != expected_sequence) state->in_order = false;
-        if (result.points().data().size() != expected_bytes && state->error.empty()) {
+        if (!answer_shape_ok(result, encoding, expected_bytes, work) && state->error.empty()) {
           state->error = "stream: unexpected result shape";
         }
         const size_t index = static_cast<size_t>(result.sequence() % static_cast<uint64_t>(kStreamFrames));
@@ -652,6 +680,9 @@ Row measure_stream(const Endpoint& server, const Workload& work, const Encoding&
         if (!server.floor) state->outcomes.add(result.status(), work.expected[index % work.expected.size()]);
         state->response_bytes += static_cast<long>(result.ByteSizeLong());
         state->max_error = std::max(state->max_error, static_cast<double>(result.points().max_error()));
+        if (result.has_coordinates() && state->samples.size() < kReconstructionSamples) {
+          state->samples.emplace_back(index % work.expected.size(), result);
+        }
         ++state->received;
       }
     });
@@ -676,8 +707,41 @@ Row measure_stream(const Endpoint& server, const Workload& work, const Encoding&
     row.poses += state->received;
     row.response_bytes += state->response_bytes;
     row.max_error = std::max(row.max_error, state->max_error);
+    row.samples.insert(row.samples.end(), state->samples.begin(), state->samples.end());
   }
   return row;
+}
+
+// The client's half of a coordinates row, measured after it: the basis fetched once (GetBasis),
+// then every sampled answer reconstructed as the C++ client does (clients/cpp/coordinates.h),
+// timed one by one and compared with the in-process float32 answer of its frame.
+void reconstruct_samples(const std::string& address, const Workload& work, Row& row) {
+  if (row.samples.empty()) return;
+  try {
+    Client client(address);
+    const Basis basis = make_basis(std::string(kModelName), client.get_basis(std::string(kModelName)));
+    std::vector<double> us;
+    double max_difference = 0;
+    Points points;
+    for (const auto& [frame, answer] : row.samples) {
+      const PoseResult result = decode_pose_result(answer);
+      const auto start = Clock::now();
+      reconstruct(basis, result, points);
+      us.push_back(1e6 * seconds_since(start));
+      const Eigen::VectorXf& expected = work.expected_points[frame];
+      const Eigen::Map<const Eigen::VectorXf> got(points.values.data(), static_cast<long>(points.values.size()));
+      if (got.size() != expected.size()) {
+        row.error = "client reconstruction: " + std::to_string(got.size()) + " values, expected " +
+                    std::to_string(expected.size());
+        return;
+      }
+      max_difference = std::max(max_difference, static_cast<double>((got - expected).cwiseAbs().maxCoeff()));
+    }
+    row.client_reconstruct_us = tools::quantile(us, 0.5);
+    row.client_reconstruct_max_difference = max_difference;
+  } catch (const std::exception& e) {
+    row.error = std::string("client reconstruction: ") + e.what();
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -720,6 +784,11 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
     std::snprintf(bytes_per_pose, sizeof bytes_per_pose, "%.0f", json["bytes_per_pose"].get<double>());
   }
   if (row.sgemm_poses_per_second) json["openblas_sgemm_poses_per_second"] = *row.sgemm_poses_per_second;
+  if (row.client_reconstruct_us) {
+    json["client_reconstruct_us"] = *row.client_reconstruct_us;
+    json["client_reconstruct_max_difference"] = *row.client_reconstruct_max_difference;
+    json["client_reconstruct_samples"] = row.samples.size();
+  }
   const long total = row.outcomes.total();
   char hit[16] = "-", mismatched[16] = "-";
   if (total > 0) {
@@ -751,6 +820,11 @@ void report(const Row& row, double run_baseline_us, std::vector<nlohmann::json>&
               row.concurrency, variant.empty() ? "-" : variant.c_str(),
               row.encoding.empty() ? "-" : row.encoding.c_str(), bytes_per_pose, pps, p50, p99, baseline, daemon_ratio, daemon_cpu, client_cpu, hit, mismatched,
               row.load_average, error.c_str());
+  if (row.client_reconstruct_us) {
+    std::printf("  client reconstruction of %zu sampled answers: %.1f us per pose (median); largest difference from "
+                "the in-process float32 answer %.3g\n",
+                row.samples.size(), *row.client_reconstruct_us, *row.client_reconstruct_max_difference);
+  }
   if (row.sgemm_poses_per_second) {
     std::printf("  openblas cblas_sgemm on the same products (N·D × M times M × %d): %.0f poses/s; this row / sgemm "
                 "= %.2f\n",
@@ -931,12 +1005,33 @@ nlohmann::json print_targets(const std::vector<nlohmann::json>& rows, double dia
                        ratio(unary1, "poses_per_second", nullptr, nullptr, unary32, "poses_per_second"), 1.0, false,
                        true});
   }
+  {
+    // Issue #36: answers as coordinates against float32's rows of the same run.
+    const nlohmann::json* stream = find_row(rows, "stream", 1, kCoordinates.name);
+    const nlohmann::json* unary1 = find_row(rows, "unary", 1, kCoordinates.name);
+    const nlohmann::json* unary8 = find_row(rows, "unary", 8, kCoordinates.name);
+    const nlohmann::json* stream32 = find_row(rows, "stream", 1, kEncodings[0].name);
+    const nlohmann::json* unary8_32 = find_row(rows, "unary", 8, kEncodings[0].name);
+    targets.push_back({"daemon CPU per streamed pose / in-process float32 pose", kCoordinates.name,
+                       ratio(stream, "daemon_cpu_us_per_pose", nullptr, nullptr, stream, "in_process_us_per_pose"),
+                       0.15, true});
+    targets.push_back({"daemon CPU per unary pose (1 caller) / in-process pose", kCoordinates.name,
+                       ratio(unary1, "daemon_cpu_us_per_pose", nullptr, nullptr, unary1, "in_process_us_per_pose"),
+                       0.15, true});
+    targets.push_back({"1 stream poses/s / float32 1 stream poses/s", kCoordinates.name,
+                       ratio(stream, "poses_per_second", nullptr, nullptr, stream32, "poses_per_second"), 10, false});
+    targets.push_back({"unary c8 poses/s / float32 unary c8 poses/s", kCoordinates.name,
+                       ratio(unary8, "poses_per_second", nullptr, nullptr, unary8_32, "poses_per_second"), 5, false});
+    targets.push_back({"client reconstruction us per pose / in-process pose", kCoordinates.name,
+                       ratio(stream, "client_reconstruct_us", nullptr, nullptr, stream, "in_process_us_per_pose"), 0,
+                       false, true});
+  }
   const nlohmann::json* batch = find_row(rows, "in_process_batch" + std::to_string(kGemmBatchPoses), 1);
   targets.push_back({"in_process_batch64 poses/s / openblas sgemm poses/s", "",
                      ratio(batch, "poses_per_second", nullptr, nullptr, batch, "openblas_sgemm_poses_per_second"), 0.8,
                      false});
 
-  std::printf("\ntargets (issue #25):\n");
+  std::printf("\ntargets (issues #25 and #36):\n");
   nlohmann::json list = nlohmann::json::array();
   for (const Target& t : targets) {
     const bool met = t.measured && (t.at_most ? *t.measured <= t.limit : *t.measured >= t.limit);
@@ -972,6 +1067,7 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
   Workload work;
   work.point_count = model.point_count;
   work.key_count = model.key_point_count();
+  work.basis_size = model.basis_size();
   pmsc::CachedPose cached;
   for (int f : odd) {
     const Eigen::VectorXf frame = all.row(f).transpose();
@@ -1045,12 +1141,22 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
     if (!daemon) return results;
     const Endpoint endpoint{daemon->address(), daemon->pid(), false};
     auto unary = [&](const Endpoint& server, const Encoding& encoding, int concurrency, bool per_thread, bool omit) {
-      served([&] { return measure_unary(server, work, encoding, concurrency, per_thread, omit); },
-             server.floor ? std::nullopt : std::optional<int>(work_threads));
+      served(
+          [&] {
+            Row row = measure_unary(server, work, encoding, concurrency, per_thread, omit);
+            reconstruct_samples(server.address, work, row);
+            return row;
+          },
+          server.floor ? std::nullopt : std::optional<int>(work_threads));
     };
     auto stream = [&](const Endpoint& server, const Encoding& encoding, int streams, bool omit) {
-      served([&] { return measure_stream(server, work, encoding, streams, omit); },
-             server.floor ? std::nullopt : std::optional<int>(work_threads));
+      served(
+          [&] {
+            Row row = measure_stream(server, work, encoding, streams, omit);
+            reconstruct_samples(server.address, work, row);
+            return row;
+          },
+          server.floor ? std::nullopt : std::optional<int>(work_threads));
     };
     const Encoding& float32 = kEncodings[0];
     if (work_threads == 1) {
@@ -1082,6 +1188,10 @@ nlohmann::json run_serve_suite(const SuiteOptions& options) {
       if (e == 0) {
         stream(endpoint, encoding, 2, false);
         stream(endpoint, encoding, 1, true);
+        // Coordinates (issue #36) right after the float32 rows they are set against.
+        unary(endpoint, kCoordinates, 1, false, false);
+        unary(endpoint, kCoordinates, 8, false, false);
+        stream(endpoint, kCoordinates, 1, false);
       }
     }
   }
