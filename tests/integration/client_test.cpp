@@ -547,7 +547,9 @@ TEST_F(ClientTest, EveryCallHasADeadline) {
 }
 
 TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
-  const std::string command = std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + daemon_->address() + " " +
+  // The tour's basis cache goes to the test's folder, not the home folder.
+  const std::string command = "ANIMSPACE_BASIS_CACHE=" + (work_->path() / "bases").string() + " " +
+                              std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + daemon_->address() + " " +
                               (work_->path() / "tour.png").string() + " 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
   ASSERT_NE(pipe, nullptr);
@@ -557,6 +559,9 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   ASSERT_EQ(pclose(pipe), 0) << output;
   const auto lod_levels = client_->describe_model(kAnimationSpace).versions(0).lod_level_count();
   EXPECT_NE(output.find("streamed 100 frames"), std::string::npos) << output;
+  // Answers as coordinates (issue #36), reconstructed by the client from the cached basis.
+  EXPECT_NE(output.find(" values reconstructed into 1154 points, within "), std::string::npos) << output;
+  EXPECT_FALSE(std::filesystem::is_empty(work_->path() / "bases" / "arm-pmsc")) << "no basis cached";
   EXPECT_NE(output.find("skinned "), std::string::npos) << output;
   EXPECT_NE(output.find("LOD level "), std::string::npos) << output;
   EXPECT_NE(output.find("relit by a light at (0.45, 0.44, 0.45): HIT, "), std::string::npos) << output;

@@ -143,6 +143,7 @@ def test_save_thumbnail_writes_a_png_of_the_requested_size(daemon, tmp_path):
 
 @pytest.mark.parametrize("readme", ["clients/python/README.md", "README.md"])
 def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path):
+    tour = readme == "README.md"
     readme = (EXAMPLES.parents[2] / readme).read_text()
     section = readme[readme.index("## Query it from Python"):]
     start = section.index("```python\n") + len("```python\n")
@@ -152,7 +153,8 @@ def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path)
     # Every file the snippet writes ("/tmp/…", f"/tmp/…") goes to the test's folder.
     script.write_text(snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/'))
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
-                          env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
+                          env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p),
+                                   ANIMSPACE_BASIS_CACHE=str(tmp_path / "bases")))
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     assert lines[0] == "arm MESH_SEQUENCE 1154 points" and lines[5].startswith("cornell PMSC ")
@@ -163,5 +165,9 @@ def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path)
     assert any(line.split(" ")[:2] in (["cornell", "HIT"], ["cornell", "BLEND"], ["cornell", "MISS"])
                for line in lines), lines
     assert lines[-1].startswith("NOT_FOUND model 'no-such-model' is not loaded; models: arm, arm-animspace, ")
+    if tour:
+        # Answers as coordinates (issue #36): p reconstructed into every point, the basis cached.
+        assert any(line.endswith("coordinates -> (1154, 3)") for line in lines), lines
+        assert list((tmp_path / "bases" / "arm-pmsc-engine").glob("1-*.basis")), "no basis cached"
     assert (tmp_path / "arm.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (tmp_path / "cornell-3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

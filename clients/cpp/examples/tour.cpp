@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "clients/cpp/client.h"
+#include "clients/cpp/coordinates.h"
 #include "core/demo/bending_arm.h"
 
 namespace {
@@ -110,6 +111,24 @@ int main(int argc, char** argv) try {
       client.evaluate_key_points("arm-pmsc", posed_keys, compact_options);
   std::printf("fixed16: %s, %u points within %.3g of float32\n", animspace::cache_status_name(compact.status),
               compact.points.point_count, compact.points.max_error);
+
+  // Ten times the poses per core: the answer as its subspace coordinates p (M values instead of
+  // N·D points), reconstructed here (clients/cpp/coordinates.h) from the basis GetBasis sent once
+  // and the cache keeps on disk by model, version and checksum ($ANIMSPACE_BASIS_CACHE, else
+  // ~/.cache/animspace/bases): the float32 answer within float rounding.
+  animspace::BasisCache bases;
+  animspace::EvaluateOptions coordinate_options;
+  coordinate_options.points_encoding = animspace::v1::POINT_ENCODING_COORDINATES;
+  animspace::PoseResult answer = client.evaluate_key_points("arm-pmsc", posed_keys, coordinate_options);
+  const size_t sent = answer.coordinates.p.size();
+  bases.reconstruct(client, "arm-pmsc", answer);
+  const animspace::PoseResult float32 = client.evaluate_key_points("arm-pmsc", posed_keys);
+  float largest = 0;
+  for (size_t i = 0; i < answer.points.values.size(); ++i) {
+    largest = std::max(largest, std::abs(answer.points.values[i] - float32.points.values[i]));
+  }
+  std::printf("coordinates: %s, %zu values reconstructed into %u points, within %.3g of float32\n",
+              animspace::cache_status_name(answer.status), sent, answer.points.point_count, largest);
 
   // On a blend or miss the client's own engine supplies the full pose (client fail-through); the
   // server checks it repeats the key values, answers with it and logs it for retraining. The pose
