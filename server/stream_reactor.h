@@ -128,27 +128,39 @@ class StreamReactor : public Base {
       release();
     });
     if (!queued) {
-      complete(slot, Outcome::end({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"}));
+      complete(slot, Outcome::end(unavailable("the server is shutting down")));
       release();
     }
   }
 
   // As submit(), but runs `work` here, on the reaction thread, before returning: for work smaller
   // than a hand-off to the pool and back (a pose answered as coordinates is one projection —
-  // microseconds — where the hand-off's wake-ups cost as much again). Call from a reaction, then
-  // pump().
+  // microseconds — where the hand-off's wake-ups cost as much again). The slot is reserved first
+  // and the next input asked for (pump) before the work starts, so the next read arrives, on
+  // another gRPC thread, while this one computes; the work holds the reactor as a pool task does
+  // (the call may finish meanwhile). Call from a reaction, as its last step: it pumps itself, and
+  // the reactor may be gone when it returns.
   void run_here(const std::function<Outcome()>& work) {
     Slot* slot = nullptr;
     {
       std::lock_guard lock(mutex_);
       requesting_ = false;
-      if (finished_ || ended_ || cancelled_) return;
-      slots_.push_back(std::make_unique<Slot>());
-      slot = slots_.back().get();
-      ++producing_;
+      if (!finished_ && !ended_ && !cancelled_) {
+        slots_.push_back(std::make_unique<Slot>());
+        slot = slots_.back().get();
+        ++producing_;
+      }
     }
+    if (slot == nullptr) {
+      pump();
+      return;
+    }
+    holds_.fetch_add(1, std::memory_order_relaxed);
+    pump();
     grpc::Status stop = stop_status();
     complete(slot, stop.ok() ? work() : Outcome::end(std::move(stop)));
+    pump();
+    release();
   }
 
   // The stream ends with `status` once everything submitted before is written (the end of the

@@ -29,6 +29,7 @@
 #include "server/call_scope.h"
 #include "server/raw_messages.h"
 #include "server/service_environment.h"
+#include "server/status_mapping.h"
 
 namespace animspace::server {
 
@@ -143,7 +144,7 @@ grpc::ServerUnaryReactor* serve_unary_deferred(ServiceEnvironment& env, UnaryByt
     }
     body(call, &messages->request, &messages->response, finish);
   });
-  if (!queued) finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+  if (!queued) finish(unavailable("the server is shutting down"));
   return reactor;
 }
 

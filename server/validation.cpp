@@ -41,9 +41,8 @@ grpc::Status check_batch_size(int size, uint32_t max_batch, std::string_view fie
                             " entries");
   }
   if (static_cast<uint64_t>(size) > max_batch) {
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-            std::string(field) + ": " + std::to_string(size) + " entries, the limit is " + std::to_string(max_batch) +
-                " (--max-batch-poses); split the batch"};
+    return resource_exhausted(std::string(field) + ": " + std::to_string(size) + " entries, the limit is " +
+                              std::to_string(max_batch) + " (--max-batch-poses); split the batch");
   }
   return grpc::Status::OK;
 }
@@ -54,10 +53,9 @@ grpc::Status check_response_size(int count, uint64_t bytes_per_entry, int64_t ma
   constexpr uint64_t kOverheadPerEntry = 64;
   const uint64_t bytes = static_cast<uint64_t>(count) * (bytes_per_entry + kOverheadPerEntry);
   if (bytes > static_cast<uint64_t>(max_message_bytes)) {
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-            std::string(field) + ": the response to " + std::to_string(count) + " entries would be about " +
-                std::to_string(bytes) + " bytes, the limit is " + std::to_string(max_message_bytes) +
-                " (--max-message-bytes); send fewer per request"};
+    return resource_exhausted(std::string(field) + ": the response to " + std::to_string(count) +
+                              " entries would be about " + std::to_string(bytes) + " bytes, the limit is " +
+                              std::to_string(max_message_bytes) + " (--max-message-bytes); send fewer per request");
   }
   return grpc::Status::OK;
 }

@@ -5,6 +5,7 @@
 #include "server/model_lookup.h"
 #include "server/pose_evaluation.h"
 #include "server/raw_messages.h"
+#include "server/status_mapping.h"
 #include "server/validation.h"
 
 namespace animspace::server {
@@ -46,8 +47,7 @@ void KeyPointStream::OnReadDone(bool ok) {
       if (index == 0 && model_) set_model(model_->name);
     }
   } else if (resolved.ok() && !model_) {
-    resolved = {grpc::StatusCode::INVALID_ARGUMENT,
-                frame_field(frame.sequence()) + ".model.name: the first frame must name the model"};
+    resolved = invalid_argument(frame_field(frame.sequence()) + ".model.name: the first frame must name the model");
   }
   if (!resolved.ok()) {
     end(std::move(resolved));
@@ -64,8 +64,7 @@ void KeyPointStream::OnReadDone(bool ok) {
   // evaluated right here, as the frame arrives.
   if (evaluated_in_place(pose->job.options.points_encoding, pose->job.options.local_fail_through,
                          pose->frame.pose())) {
-    run_here([this, pose] { return evaluate(*pose); });
-    pump();
+    run_here([this, pose] { return evaluate(*pose); });  // pumps; `this` may be gone after it
     return;
   }
   // Decoded here, in order, so that the frames read ahead wait in the batcher together and the
