@@ -343,6 +343,31 @@ def test_the_cache_file_is_the_shared_format_and_spares_the_next_fetch(counted, 
             offline.get_basis("arm-pmsc")
 
 
+def test_a_basis_the_cpp_client_cached_is_read_by_the_python_client(daemon, arm_poses, tmp_path):
+    """One cache for both clients: `animspace play --coordinates` (the C++ client) writes the file,
+    and a Python client with no server to ask reconstructs from it."""
+    keys, values, _ = arm_poses
+    demo = tmp_path / "demo"
+    subprocess.run([str(BUILD / "bin" / "animspace"), "demo-repository", str(demo)], check=True,
+                   capture_output=True, timeout=300)
+    played = subprocess.run([str(BUILD / "bin" / "animspace"), "-s", daemon, "--json", "play", "arm-pmsc",
+                             str(demo / "arm" / "1" / "model.anim"), "--select", "0:4", "--coordinates",
+                             "--basis-cache", str(tmp_path / "bases")], capture_output=True, text=True, timeout=120)
+    assert played.returncode == 0, played.stderr
+    with animspace.Client(daemon) as online:
+        answer = online.evaluate_key_points("arm-pmsc", values[0], points_encoding="coordinates")
+        expected = online.evaluate_key_points("arm-pmsc", values[0]).points
+    files = list((tmp_path / "bases" / "arm-pmsc").glob(f"{answer.model_version}-*.basis"))
+    assert [f.name for f in files] == [f"{answer.model_version}-{answer.coordinates.basis_checksum:016x}.basis"]
+    with animspace.Client(f"127.0.0.1:{closed_port()}", basis_cache=tmp_path / "bases", deadline_s=2) as offline:
+        reconstructed = offline.reconstruct("arm-pmsc", answer)
+    # The stated bound, from the C++-written file's own values: the float32 answer within it.
+    _, (n, d, m, _, _, _), stored = parse_cache_file(files[0])
+    stored = stored.astype(np.float64)
+    mean, A = stored[:n * d], stored[n * d:].reshape(m, n * d).T
+    expect_within_bound(reconstructed, expected, mean, A, answer)
+
+
 def _flip_a_value(data):
     data[40 + 4 * 17 + 1] ^= 0x40
     return data
