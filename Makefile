@@ -43,39 +43,51 @@ bench: build
 
 # Every test under AddressSanitizer + UndefinedBehaviorSanitizer, leak checks included: each ctest
 # (core, server, loadtest, integration against the ASan-built daemon), then pytest against the
-# ASan-built daemon and CLI. Every report goes to a file under build-asan/reports (a daemon a test
-# started reports there too) and fails the target; ASan aborts the process that made it. The tree
+# ASan-built daemon and CLI. Every report goes to a file under build-asan/reports/<suite> (a daemon a
+# test started reports there too) and fails the target; ASan aborts the process that made it. Both
+# suites run even when the first fails, and the target then fails naming each one that did. The tree
 # builds `all`, which with the bench off is exactly what ctest and pytest run: the test programs
 # and the daemon, CLI, load tester, tour and transport floor that the integration suite starts.
 ASAN_REPORTS := $(CURDIR)/build-asan/reports
-ASAN_OPTIONS_BASE := abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:log_path=$(ASAN_REPORTS)/asan
-ASAN_ENV := ASAN_OPTIONS=$(ASAN_OPTIONS_BASE):detect_leaks=1 \
+# $(call asan_env,SUITE): the sanitizers' options, reports under $(ASAN_REPORTS)/SUITE.
+asan_env = ASAN_OPTIONS=abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:detect_leaks=1:log_path=$(ASAN_REPORTS)/$(1)/asan \
   LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
-  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(ASAN_REPORTS)/ubsan
+  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(ASAN_REPORTS)/$(1)/ubsan
 check-asan: deps
 	cmake --preset asan >/dev/null
 	cmake --build --preset asan -j $(JOBS)
 	rm -rf $(ASAN_REPORTS)
-	$(ASAN_ENV) scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) ctest --preset asan -j $(JOBS) --timeout 900
-	# The Python suite against ASan-built daemons and CLI (the interpreter itself is not instrumented).
-	$(ASAN_ENV) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=$(CURDIR)/build-asan scripts/with-sanitizer-reports.sh $(ASAN_REPORTS) \
-	  /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python
+	status=0; \
+	$(call asan_env,ctest) scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/ctest \
+	  ctest --preset asan -j $(JOBS) --timeout 900 \
+	  || { status=1; echo "check-asan: FAILED: ctest under ASan"; }; \
+	$(call asan_env,pytest) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=$(CURDIR)/build-asan \
+	  scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/pytest /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python \
+	  || { status=1; echo "check-asan: FAILED: pytest against the ASan-built daemon and CLI"; }; \
+	exit $$status
 asan: check-asan
 
 # ThreadSanitizer where the threads are: the server's units (work pool, admission, registry) built
 # with TSan, and the integration suite (the release build's test drivers, CLI and load tester)
-# against a TSan-built animspaced ($$ANIMSPACED). Races are reported to build-tsan/reports and
-# fail the target after the run. The release tree it needs is `make test`'s, so after that (as in
-# .ci/run) `build` is a no-op and only the two TSan programs are built.
+# against a TSan-built animspaced ($$ANIMSPACED). Races are reported to build-tsan/reports/<suite>
+# and fail the target after the run; both suites run even when the first fails. The release tree
+# it needs is `make test`'s, so after that (as in .ci/run) `build` is a no-op and only the two
+# TSan programs are built.
 TSAN_REPORTS := $(CURDIR)/build-tsan/reports
-TSAN_ENV := TSAN_OPTIONS=halt_on_error=0:ignore_noninstrumented_modules=1:second_deadlock_stack=1:history_size=4:suppressions=$(CURDIR)/tests/tsan.supp:log_path=$(TSAN_REPORTS)/tsan
+# $(call tsan_env,SUITE): TSan's options, reports under $(TSAN_REPORTS)/SUITE.
+tsan_env = TSAN_OPTIONS=halt_on_error=0:ignore_noninstrumented_modules=1:second_deadlock_stack=1:history_size=4:suppressions=$(CURDIR)/tests/tsan.supp:log_path=$(TSAN_REPORTS)/$(1)/tsan
 check-tsan: build
 	cmake --preset tsan >/dev/null
 	cmake --build --preset tsan -j $(JOBS) --target animspaced server_tests
 	rm -rf $(TSAN_REPORTS)
-	$(TSAN_ENV) scripts/with-sanitizer-reports.sh $(TSAN_REPORTS) ctest --preset tsan -j $(JOBS) --timeout 900 -L server
-	$(TSAN_ENV) ANIMSPACED=$(CURDIR)/build-tsan/bin/animspaced scripts/with-sanitizer-reports.sh $(TSAN_REPORTS) \
-	  ctest --preset release -j $(JOBS) --timeout 900 -L integration
+	status=0; \
+	$(call tsan_env,server) scripts/with-sanitizer-reports.sh $(TSAN_REPORTS)/server \
+	  ctest --preset tsan -j $(JOBS) --timeout 900 -L server \
+	  || { status=1; echo "check-tsan: FAILED: the server's units under TSan"; }; \
+	$(call tsan_env,integration) ANIMSPACED=$(CURDIR)/build-tsan/bin/animspaced \
+	  scripts/with-sanitizer-reports.sh $(TSAN_REPORTS)/integration ctest --preset release -j $(JOBS) --timeout 900 -L integration \
+	  || { status=1; echo "check-tsan: FAILED: the integration suite against the TSan-built animspaced"; }; \
+	exit $$status
 
 # libFuzzer targets (clang, build-fuzz/): replay fuzz/corpus and fuzz/regressions, then fuzz
 # each target for $(FUZZ_SECONDS) s, $(JOBS) targets at once (one libFuzzer process per core);
