@@ -244,6 +244,9 @@ Result<TriangleMesh> parse_ply(std::string_view bytes, std::string_view source) 
   MeshBuilder mesh;
   std::vector<int32_t> polygon;
   for (const Element& element : header->elements) {
+    // An element without properties holds nothing in any encoding: its instances are not walked
+    // one by one (a header may declare two billion of them).
+    if (element.properties.empty()) continue;
     for (int instance = 0; instance < element.count; ++instance) {
       const size_t start = body.offset();
       double xyz[3] = {0, 0, 0};

@@ -125,6 +125,27 @@ TEST(FuzzRegression, EmptyDmatWithTwoBillionColumns) {
   EXPECT_EQ(binary->cols(), 2020202022);
 }
 
+// ply_fuzzer (timeout): a header declaring an element of 128 812 929 instances and no properties;
+// the reader walked the instances one by one to read nothing (35 s per file under the fuzzer). An
+// element without properties holds nothing in any encoding and is now skipped whole; the mesh
+// around such an element reads as before.
+TEST(FuzzRegression, PlyElementOfManyInstancesWithoutProperties) {
+  const std::string saved =
+      read_bytes(regressions_dir() / "ply" / "element_of_128_million_instances_without_properties.ply");
+  ASSERT_FALSE(saved.empty());
+  EXPECT_FALSE(mesh_io::parse_ply(saved, "saved.ply").ok());  // no vertex element: refused, at once
+  const std::string_view tidy =
+      "ply\nformat ascii 1.0\nelement nothing 2000000000\nelement vertex 3\nproperty float x\n"
+      "property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+      "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  const auto mesh = mesh_io::parse_ply(tidy, "tidy.ply");
+  ASSERT_TRUE(mesh.ok()) << mesh.error().message;
+  EXPECT_EQ(mesh->V.rows(), 3);
+  EXPECT_EQ(mesh->F.rows(), 1);
+  EXPECT_EQ(mesh->V(1, 0), 1.0);
+  EXPECT_EQ(mesh->F(0, 2), 2);
+}
+
 // model_container_fuzzer: a PMSC container (checksums intact) whose pmsc.key_mean holds 2e307,
 // finite but far beyond the float32 frames training computes it from, loaded; the first pose
 // served then had e_key = Inf, which the soft cache asserts against. pmsc::load now refuses it.
