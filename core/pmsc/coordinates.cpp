@@ -25,16 +25,18 @@ FloatAlignment float_alignment(const geometry::RigidTransform& alignment) {
   return {alignment.rotation.cast<float>(), alignment.translation.cast<float>()};
 }
 
+void to_world(const FloatAlignment& alignment, long point_count, float* points) {
+  Eigen::Map<Eigen::Matrix3Xf> world(points, 3, point_count);
+  world = (alignment.rotation * world).colwise() + alignment.translation;
+}
+
 void reconstruct_coordinates(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis, const float* p,
                              const FloatAlignment* alignment, float* out) {
   const long rows = mean.size();
   assert(basis.rows() == rows);
   std::copy(mean.data(), mean.data() + rows, out);
   if (basis.cols() > 0) gemm(rows, basis.cols(), 1, basis.data(), rows, p, basis.cols(), 1.0f, out, rows);
-  if (alignment != nullptr) {
-    Eigen::Map<Eigen::Matrix3Xf> points(out, 3, rows / 3);
-    points = (alignment->rotation * points).colwise() + alignment->translation;
-  }
+  if (alignment != nullptr) to_world(*alignment, rows / 3, out);
 }
 
 }  // namespace animspace::pmsc

@@ -23,6 +23,10 @@ struct FloatAlignment {
 };
 FloatAlignment float_alignment(const geometry::RigidTransform& alignment);
 
+// Moves `point_count` 3-D points (point-major floats) from the aligned frame to the world,
+// x ← R x + t in float32: every reconstruction, alone or batched, ends with it.
+void to_world(const FloatAlignment& alignment, long point_count, float* points);
+
 // f̂ = R (mean + A p) + t for one pose, into `out` (mean.size() floats): the mean copied, one
 // matrix–vector product through the active kernel (core/common/kernels.h), then, when `alignment`
 // is given (aligned models: 3 channels), every point moved to the world. `p` holds M values.

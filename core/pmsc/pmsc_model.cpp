@@ -302,12 +302,6 @@ double rms(const Eigen::VectorXd& residual) {
   return std::sqrt(residual.squaredNorm() / static_cast<double>(residual.size()));
 }
 
-// Moves the N points of `frame` (3N values) from the aligned frame to the world.
-void to_world(const geometry::RigidTransform& t, int point_count, float* frame) {
-  Eigen::Map<Eigen::Matrix3Xf> points(frame, 3, point_count);
-  points = (t.rotation.cast<float>() * points).colwise() + t.translation.cast<float>();
-}
-
 }  // namespace
 
 void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
@@ -405,7 +399,8 @@ void reconstruct(const PmscModel& m, std::span<const PoseEstimate* const> estima
   }
   if (m.aligned) {
     for (long b = 0; b < B; ++b) {
-      to_world(estimates[static_cast<size_t>(b)]->alignment, m.point_count, destinations[static_cast<size_t>(b)]);
+      to_world(float_alignment(estimates[static_cast<size_t>(b)]->alignment), m.point_count,
+               destinations[static_cast<size_t>(b)]);
     }
   }
 }
