@@ -18,7 +18,6 @@
 #include "core/demo/demo_repository.h"
 #include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_io.h"
-#include "core/pmsc/train.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
@@ -30,28 +29,9 @@ using harness::DaemonProcess;
 using testing::TempDir;
 
 // The arm over elbow 0–50° (the narrow range the soft cache is trained on), with or without the
-// rigid alignment (remove_rigid_motion: the model moves each estimate to the world).
+// rigid alignment (the model then moves each estimate to the world).
 container::ModelContainer arm_model(bool aligned, double elbow_step_deg) {
-  const demo::ArmRig rig = demo::make_arm_rig();
-  std::vector<Eigen::VectorXf> frames;
-  for (double elbow = 0; elbow <= 50; elbow += elbow_step_deg) {
-    for (double shoulder : {-20.0, 0.0, 20.0}) frames.push_back(testing::expensive_arm_frame(rig, elbow, shoulder));
-  }
-  FrameMatrix training(static_cast<Eigen::Index>(frames.size()), frames[0].size());
-  for (size_t f = 0; f < frames.size(); ++f) training.row(static_cast<Eigen::Index>(f)) = frames[f].transpose();
-  const double diagonal = pmsc::bounding_box_diagonal(frames[0]);
-  pmsc::TrainingOptions options;
-  options.error_bound = 0.0025 * diagonal;
-  options.error_tolerance = 0.01 * diagonal;
-  options.max_key_points = 60;
-  options.region_count = 0;
-  options.remove_rigid_motion = aligned;
-  pmsc::TrainingReport report;
-  auto model = pmsc::train(training, options, &report);
-  EXPECT_TRUE(model.ok()) << model.error().message;
-  auto out = pmsc::make_container(rig.rest, training, nullptr, *model, report, "arm, elbow 0-50 degrees");
-  pmsc::store_training_options(options, out);
-  return out;
+  return testing::narrow_arm_model({}, elbow_step_deg, aligned);
 }
 
 class CoordinatesTest : public ::testing::Test {

@@ -95,8 +95,9 @@ inline Eigen::VectorXf expensive_arm_frame(const demo::ArmRig& rig, double elbow
 // A PMSC model of the arm trained only on elbow angles 0°–50° (every `elbow_step_deg`, shoulder
 // −20°, 0°, 20°): a bent elbow at 120° is a pose it has never seen (a miss) until it is retrained
 // with that pose. A finer `arm` mesh or a smaller step makes a bigger model that trains longer.
+// With `remove_rigid_motion` the model is aligned (its answers carry a rigid transform).
 inline container::ModelContainer narrow_arm_model(const demo::BendingArmOptions& arm = {},
-                                                  double elbow_step_deg = 5) {
+                                                  double elbow_step_deg = 5, bool remove_rigid_motion = false) {
   const demo::ArmRig rig = demo::make_arm_rig(arm);
   std::vector<Eigen::VectorXf> frames;
   for (double elbow = 0; elbow <= 50; elbow += elbow_step_deg) {
@@ -110,6 +111,7 @@ inline container::ModelContainer narrow_arm_model(const demo::BendingArmOptions&
   options.error_tolerance = 0.01 * diagonal;
   options.max_key_points = 60;
   options.region_count = 0;
+  options.remove_rigid_motion = remove_rigid_motion;
   pmsc::TrainingReport report;
   auto model = pmsc::train(training, options, &report);
   EXPECT_TRUE(model.ok()) << model.error().message;
