@@ -98,6 +98,23 @@ def _decoding(rpc: str) -> Iterator[None]:
         raise ProtocolError(rpc, str(error)) from error
 
 
+def _assemble(rpc: str, call: Any, assembler: Any) -> Any:
+    """Feeds a server stream's chunks to ``assembler`` (``take`` and ``complete`` name a problem or
+    return None): a problem cancels the rest of the stream and raises ProtocolError."""
+    try:
+        for chunk in call:
+            problem = assembler.take(chunk)
+            if problem:
+                call.cancel()  # the rest of the stream is of no use
+                raise ProtocolError(rpc, problem)
+    except grpc.RpcError as error:
+        raise error_from_grpc(rpc, error) from error
+    problem = assembler.complete()
+    if problem:
+        raise ProtocolError(rpc, problem)
+    return assembler
+
+
 def _point_array(array: np.ndarray) -> common_pb2.PointArray:
     """An N×D float32 array already checked by wire.as_points, packed as a PointArray."""
     return common_pb2.PointArray(point_count=array.shape[0], channel_count=array.shape[1],
@@ -626,18 +643,7 @@ class Client:
         """
         request = poses_pb2.GetBasisRequest(model=_model_ref(model, version))
         call = self._poses.GetBasis(request, timeout=self._deadline(deadline_s), metadata=self._metadata)
-        assembler = BasisAssembler()
-        try:
-            for chunk in call:
-                problem = assembler.take(chunk)
-                if problem:
-                    call.cancel()  # the rest of the stream is of no use
-                    raise ProtocolError("GetBasis", problem)
-        except grpc.RpcError as error:
-            raise error_from_grpc("GetBasis", error) from error
-        problem = assembler.complete()
-        if problem:
-            raise ProtocolError("GetBasis", problem)
+        assembler = _assemble("GetBasis", call, BasisAssembler())
         basis = assembler.basis(model)
         if version != 0 and basis.model_version != version:
             raise ProtocolError("GetBasis", f"asked for version {version}, the chunks are of version "
@@ -791,18 +797,7 @@ class Client:
         if pose is not None:
             request.pose.CopyFrom(wire.skeleton_pose("pose", pose, space))
         call = self._lod.GetLod(request, timeout=self._deadline(deadline_s), metadata=self._metadata)
-        assembler = LodAssembler()
-        try:
-            for chunk in call:
-                problem = assembler.take(chunk)
-                if problem:
-                    call.cancel()  # the rest of the stream is of no use
-                    raise ProtocolError("GetLod", problem)
-        except grpc.RpcError as error:
-            raise error_from_grpc("GetLod", error) from error
-        problem = assembler.complete()
-        if problem:
-            raise ProtocolError("GetLod", problem)
+        assembler = _assemble("GetLod", call, LodAssembler())
         with _decoding("GetLod"):
             return assembler.mesh()
 
