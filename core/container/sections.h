@@ -30,6 +30,9 @@ inline constexpr const char* kSkeletonRest = "skeleton.rest_transforms";  // B×
 inline constexpr const char* kSkinningWeights = "skinning.weights";       // N×B float32
 inline constexpr const char* kSequenceFrames = "sequence.frames";         // F×(N·D) float32
 inline constexpr const char* kSequenceBoneTransforms = "sequence.bone_transforms";  // F×(B·16) f64
+// A texture atlas (core/atlas/atlas_io.h): chart of each face, UV of each face corner.
+inline constexpr const char* kAtlasChartIds = "atlas.chart_ids";  // #F×1 int32
+inline constexpr const char* kAtlasUvs = "atlas.uvs";             // #F×6 float64 (u0 v0 u1 v1 u2 v2)
 }  // namespace sections
 
 // The error every reader gives for a section of the wrong shape: kInvalidArgument
