@@ -212,7 +212,8 @@ Result<container::ModelContainer> subdivide_container(const container::ModelCont
 
   // 5. Metadata: the input's, minus what described the dropped levels, plus what was done.
   for (const auto& [key, value] : in.metadata()) {
-    if (key.rfind("lod.", 0) != 0 && !out.metadata().contains(key)) out.metadata()[key] = value;
+    const bool about_levels = key == "lod_levels" || key.rfind("lod.", 0) == 0;
+    if (!about_levels && !out.metadata().contains(key)) out.metadata()[key] = value;
   }
   const std::string what = std::to_string(options.levels) + (options.levels == 1 ? " step" : " steps") + " of " +
                            scheme_name(matrices->scheme) + " subdivision in animation space";

@@ -73,7 +73,7 @@ struct SubdivisionReport {
 // vertex is then a convex combination of control vertices, so it stays in their hull); the
 // training poses (sequence.bone_transforms) and the training frames subdivided (S applied to
 // each frame's points, which is exactly the refined frame); metadata, with "generator",
-// "description" and the subdivision.* keys set and lod.* dropped. Everything else (levels of
+// "description" and the subdivision.* keys set, and lod_levels and lod.* dropped. Everything else (levels of
 // detail, anything tied to the control vertices) is dropped and listed in the report.
 // Errors name `source`: a container of another kind (kFailedPrecondition), a model that does not
 // load, and those of subdivision_matrices.

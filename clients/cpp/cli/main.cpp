@@ -15,6 +15,7 @@
 #include "clients/cpp/cli/play.h"
 #include "clients/cpp/cli/pose.h"
 #include "clients/cpp/cli/retrain_offline.h"
+#include "clients/cpp/cli/subdivide.h"
 #include "clients/cpp/cli/calibrate.h"
 #include "clients/cpp/cli/relight.h"
 #include "clients/cpp/cli/thumbnail.h"
@@ -530,6 +531,8 @@ int main(int argc, char** argv) {
   auto* retrain_offline = animspace::cli::add_retrain_offline(app, retrain_offline_args);
   animspace::cli::CalibrateArgs calibrate_args;
   auto* calibrate = animspace::cli::add_calibrate(app, calibrate_args);
+  animspace::cli::SubdivideArgs subdivide_args;
+  auto* subdivide = animspace::cli::add_subdivide(app, subdivide_args);
 
   // Extras at the top level only (set after the subcommands, which would inherit it): a word
   // that is no subcommand lands in remaining() and is named below instead of CLI11's "A
@@ -546,6 +549,7 @@ int main(int argc, char** argv) {
     if (*export_lod) return animspace::cli::run_export_lod(export_lod_args, g.json);
     if (*retrain_offline) return animspace::cli::run_retrain_offline(retrain_offline_args, g.json);
     if (*calibrate) return animspace::cli::run_calibrate(calibrate_args, g.json);
+    if (*subdivide) return animspace::cli::run_subdivide(subdivide_args, g.json);
     if (*list) return run_list(g);
     if (*health) return run_health(g);
     if (*info) return run_server_info(g);

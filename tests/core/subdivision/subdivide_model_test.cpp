@@ -302,6 +302,7 @@ TEST(SubdivideModel, ContainerKeepsMetricsAndPosesAndDropsTheLevels) {
   EXPECT_TRUE(report.metrics_kept);
   EXPECT_TRUE(as::load_metrics(*out, model->bone_count(), "subdivided").ok());
   for (const std::string& name : out->section_names()) EXPECT_NE(name.rfind("lod.", 0), 0u) << name;
+  EXPECT_FALSE(out->metadata().contains("lod_levels"));
   // The stored frames, if any, are the control frames refined (S applied), row by row.
   if (demo->has_section(container::sections::kSequenceFrames)) {
     auto frames = demo->float_matrix(container::sections::kSequenceFrames);
