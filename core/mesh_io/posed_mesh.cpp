@@ -62,6 +62,16 @@ Status check_mesh(const PosedMesh& mesh, const std::string& destination) {
       }
     }
   }
+  if (mesh.uvs.rows() != 0) {
+    if (mesh.uvs.rows() != vertex_count) {
+      return make_error(ErrorCode::kInvalidArgument, destination + ": " + std::to_string(mesh.uvs.rows()) +
+                                                         " texture coordinates for " + std::to_string(vertex_count) +
+                                                         " vertices");
+    }
+    if (!mesh.uvs.allFinite()) {
+      return make_error(ErrorCode::kInvalidArgument, destination + ": a texture coordinate is not finite");
+    }
+  }
   return Status::Ok();
 }
 
@@ -74,7 +84,9 @@ Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) 
   const size_t position_bytes = 3 * sizeof(float) * vertex_count;
   const size_t normal_bytes = has_normals ? position_bytes : 0;
   const size_t index_bytes = sizeof(uint32_t) * index_count;
-  if (position_bytes + normal_bytes + index_bytes > gltf_writing::kMaxBufferBytes) {
+  const bool has_uvs = mesh.uvs.rows() != 0;
+  const size_t uv_bytes = has_uvs ? 2 * sizeof(float) * vertex_count : 0;
+  if (position_bytes + normal_bytes + uv_bytes + index_bytes > gltf_writing::kMaxBufferBytes) {
     return make_error(ErrorCode::kInvalidArgument,
                       kind + ": mesh of " + std::to_string(vertex_count) + " vertices and " +
                           std::to_string(index_count / 3) + " faces is too large for a glTF buffer");
@@ -99,6 +111,14 @@ Result<std::string> serialize_gltf_document(const PosedMesh& mesh, bool binary) 
       primitive.attributes["NORMAL"] =
           gltf_writing::append_accessor(model, mesh.normals.data(), normal_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
                                         TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
+    }
+    if (has_uvs) {
+      // glTF's texture origin is the top-left corner: (u, 1 − v).
+      UvMatrix flipped = mesh.uvs;
+      flipped.col(1).array() = 1 - flipped.col(1).array();
+      primitive.attributes["TEXCOORD_0"] =
+          gltf_writing::append_accessor(model, flipped.data(), uv_bytes, TINYGLTF_TARGET_ARRAY_BUFFER,
+                                        TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, vertex_count);
     }
     // int32 indices in [0, #V): the same bytes as uint32.
     primitive.indices =
@@ -135,14 +155,26 @@ std::string serialize_posed_obj(const PosedMesh& mesh) {
       }
     }
   };
+  const bool has_uvs = mesh.uvs.rows() != 0;
   append_rows(mesh.points, "v ");
   if (has_normals) append_rows(mesh.normals, "vn ");
+  for (Eigen::Index v = 0; v < mesh.uvs.rows(); ++v) {
+    out += "vt ";
+    append_number(out, mesh.uvs(v, 0));
+    out += ' ';
+    append_number(out, mesh.uvs(v, 1));
+    out += '\n';
+  }
   for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
     out += "f ";
     for (int corner = 0; corner < 3; ++corner) {
       append_number(out, mesh.faces(f, corner) + 1);
+      if (has_uvs) {
+        out += '/';
+        append_number(out, mesh.faces(f, corner) + 1);
+      }
       if (has_normals) {
-        out += "//";
+        out += has_uvs ? "/" : "//";
         append_number(out, mesh.faces(f, corner) + 1);
       }
       out += corner < 2 ? ' ' : '\n';
@@ -161,10 +193,13 @@ std::string serialize_posed_ply(const PosedMesh& mesh) {
   std::string out = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(mesh.points.rows()) +
                     "\nproperty float x\nproperty float y\nproperty float z\n";
   if (has_normals) out += "property float nx\nproperty float ny\nproperty float nz\n";
+  const bool has_uvs = mesh.uvs.rows() != 0;
+  if (has_uvs) out += "property float s\nproperty float t\n";
   out += "element face " + std::to_string(mesh.faces.rows()) + "\nproperty list uchar int vertex_indices\nend_header\n";
   for (Eigen::Index v = 0; v < mesh.points.rows(); ++v) {
     out.append(reinterpret_cast<const char*>(mesh.points.row(v).data()), 3 * sizeof(float));
     if (has_normals) out.append(reinterpret_cast<const char*>(mesh.normals.row(v).data()), 3 * sizeof(float));
+    if (has_uvs) out.append(reinterpret_cast<const char*>(mesh.uvs.row(v).data()), 2 * sizeof(float));
   }
   for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
     out += static_cast<char>(3);
@@ -187,6 +222,7 @@ PosedMesh optimise_for_rendering(const PosedMesh& mesh) {
     out.points.resize(0, 3);
     out.faces.resize(0, 3);
     out.normals.resize(0, 3);
+    out.uvs.resize(0, 2);
     return out;
   }
   std::vector<unsigned int> indices(index_count);
@@ -209,6 +245,50 @@ PosedMesh optimise_for_rendering(const PosedMesh& mesh) {
                               remap.data());
   } else {
     out.normals.resize(0, 3);
+  }
+  if (mesh.uvs.rows() != 0) {
+    out.uvs.resize(static_cast<Eigen::Index>(used), 2);
+    meshopt_remapVertexBuffer(out.uvs.data(), mesh.uvs.data(), vertex_count, 2 * sizeof(float), remap.data());
+  } else {
+    out.uvs.resize(0, 2);
+  }
+  return out;
+}
+
+PosedMesh split_seams(const PosedMesh& mesh, const UvMatrix& corner_uvs) {
+  assert(mesh.uvs.rows() == 0);
+  assert(corner_uvs.rows() == 3 * mesh.faces.rows());
+  PosedMesh out;
+  out.faces.resize(mesh.faces.rows(), 3);
+  std::vector<int32_t> source;  // the input vertex of each output vertex
+  std::vector<Eigen::RowVector2f> uv;
+  // Per input vertex, the output vertices made for it so far (few: one per chart it borders).
+  std::vector<std::vector<int32_t>> made(static_cast<size_t>(mesh.points.rows()));
+  for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int32_t v = mesh.faces(f, k);
+      const Eigen::RowVector2f t = corner_uvs.row(3 * f + k);
+      int32_t found = -1;
+      for (int32_t o : made[static_cast<size_t>(v)]) {
+        if (uv[static_cast<size_t>(o)] == t) found = o;
+      }
+      if (found < 0) {
+        found = static_cast<int32_t>(source.size());
+        source.push_back(v);
+        uv.push_back(t);
+        made[static_cast<size_t>(v)].push_back(found);
+      }
+      out.faces(f, k) = found;
+    }
+  }
+  const auto n = static_cast<Eigen::Index>(source.size());
+  out.points.resize(n, 3);
+  out.uvs.resize(n, 2);
+  out.normals.resize(mesh.normals.rows() != 0 ? n : 0, 3);
+  for (Eigen::Index o = 0; o < n; ++o) {
+    out.points.row(o) = mesh.points.row(source[static_cast<size_t>(o)]);
+    out.uvs.row(o) = uv[static_cast<size_t>(o)];
+    if (mesh.normals.rows() != 0) out.normals.row(o) = mesh.normals.row(source[static_cast<size_t>(o)]);
   }
   return out;
 }

@@ -12,6 +12,7 @@
 #include "clients/cpp/cli/output.h"
 #include "clients/cpp/tools/pose_file.h"
 #include "core/animspace/animspace_io.h"
+#include "core/atlas/atlas_io.h"
 #include "core/common/atomic_file.h"
 #include "core/common/format.h"
 #include "core/mesh_io/posed_mesh.h"
@@ -228,6 +229,16 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
   as::evaluate(level.model, pose, mesh.points);
   mesh.faces = level.model.faces;
   if (level.model.has_tangents()) as::evaluate_normals(level.model, pose, mesh.normals);
+  // The atlas (animspace atlas) belongs to the full mesh: level 0 carries its UVs, seams split.
+  bool with_uvs = false;
+  if (chosen == 0) {
+    auto stored = atlas::load_atlas(*in, model->faces.rows(), a.input);
+    if (!stored) return fail("export-lod", stored.error().message);
+    if (*stored) {
+      mesh = mesh_io::split_seams(mesh, (*stored)->uvs.cast<float>());
+      with_uvs = true;
+    }
+  }
   if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("export-lod", written.error().message);
   }
@@ -238,13 +249,14 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
                 // Only a level chosen for a view (eq. 7.2) has a tolerated error.
                 {"tolerated_error", a.tolerance_px > 0 ? nlohmann::json(tolerated) : nlohmann::json()},
                 {"vertices", level.model.vertex_count()},
-                {"faces", level.model.faces.rows()}});
+                {"faces", level.model.faces.rows()},
+                {"texture_coordinates", with_uvs}});
   } else {
     char tolerated_text[48] = "";
     if (a.tolerance_px > 0) std::snprintf(tolerated_text, sizeof tolerated_text, ", tolerated %.4g", tolerated);
-    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces\nwrote %s\n", chosen, levels->count(),
+    std::printf("level %d of %d (ε = %.4g%s): %d vertices, %d faces%s\nwrote %s\n", chosen, levels->count(),
                 level.epsilon, tolerated_text, level.model.vertex_count(), static_cast<int>(level.model.faces.rows()),
-                a.output.c_str());
+                with_uvs ? ", with the atlas's texture coordinates" : "", a.output.c_str());
   }
   return 0;
 }

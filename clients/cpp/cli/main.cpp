@@ -16,6 +16,7 @@
 #include "clients/cpp/cli/pose.h"
 #include "clients/cpp/cli/retrain_offline.h"
 #include "clients/cpp/cli/subdivide.h"
+#include "clients/cpp/cli/atlas.h"
 #include "clients/cpp/cli/calibrate.h"
 #include "clients/cpp/cli/relight.h"
 #include "clients/cpp/cli/thumbnail.h"
@@ -527,6 +528,8 @@ int main(int argc, char** argv) {
   auto* build_lod = animspace::cli::add_build_lod(app, build_lod_args);
   animspace::cli::ExportLodArgs export_lod_args;
   auto* export_lod = animspace::cli::add_export_lod(app, export_lod_args);
+  animspace::cli::AtlasArgs atlas_args;
+  auto* atlas = animspace::cli::add_atlas(app, atlas_args);
   animspace::cli::RetrainOfflineArgs retrain_offline_args;
   auto* retrain_offline = animspace::cli::add_retrain_offline(app, retrain_offline_args);
   animspace::cli::CalibrateArgs calibrate_args;
@@ -547,6 +550,7 @@ int main(int argc, char** argv) {
     if (*import_rig) return animspace::cli::run_import_rig(import_rig_args, g.json);
     if (*build_lod) return animspace::cli::run_build_lod(build_lod_args, g.json);
     if (*export_lod) return animspace::cli::run_export_lod(export_lod_args, g.json);
+    if (*atlas) return animspace::cli::run_atlas(atlas_args, g.json);
     if (*retrain_offline) return animspace::cli::run_retrain_offline(retrain_offline_args, g.json);
     if (*calibrate) return animspace::cli::run_calibrate(calibrate_args, g.json);
     if (*subdivide) return animspace::cli::run_subdivide(subdivide_args, g.json);
