@@ -36,6 +36,10 @@ grpc::Status resource_exhausted(const std::string& message) {
 
 grpc::Status unavailable(const std::string& message) { return {grpc::StatusCode::UNAVAILABLE, message}; }
 
+grpc::Status failed_precondition(const std::string& message) {
+  return {grpc::StatusCode::FAILED_PRECONDITION, message};
+}
+
 grpc::Status unimplemented(const std::string& rpc, const std::string& why) {
   return {grpc::StatusCode::UNIMPLEMENTED, rpc + " is not implemented in this build: " + why};
 }

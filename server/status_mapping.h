@@ -25,6 +25,8 @@ grpc::Status resource_exhausted(const std::string& message);
 // Not possible on this server now but maybe elsewhere or later (no renderer, shutting down).
 grpc::Status unavailable(const std::string& message);
 grpc::Status unimplemented(const std::string& rpc, const std::string& why);
+// Valid, but the model's state does not allow it (a retrain with nothing new to train on).
+grpc::Status failed_precondition(const std::string& message);
 // Bytes that are not the method's message: "<what> could not be parsed as animspace.v1.<Type>".
 grpc::Status unparsable(std::string_view what, std::string_view message_type);
 

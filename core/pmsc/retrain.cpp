@@ -37,6 +37,15 @@ void advance_misses_through_log(container::ModelContainer& out, const std::strin
   out.metadata()[kMissesThroughLogPrefix + log] = std::to_string(std::max(sequence, misses_through_log(out, log)));
 }
 
+Result<bool> retrain_changes_anything(const container::ModelContainer& current, long miss_rows,
+                                      const RetrainOptions& options, const std::string& source) {
+  if (miss_rows > 0) return true;
+  auto stored = load_training_options(current, source);
+  if (!stored) return stored.error();
+  return (options.error_bound > 0 && options.error_bound != stored->error_bound) ||
+         (options.max_key_points > 0 && options.max_key_points != stored->max_key_points);
+}
+
 Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t current_version,
                               const FrameMatrix& miss_frames, uint64_t last_miss_sequence,
                               const RetrainOptions& options, const std::string& source) {

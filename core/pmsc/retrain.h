@@ -77,6 +77,15 @@ void advance_misses_through_log(container::ModelContainer& out, const std::strin
 // sequence.frames or without stored options (load_training_options); kInvalidArgument when
 // miss_frames has the wrong width ("expected N·D = …, got …") or a row with NaN/Inf, or the
 // stored options disagree with pmsc.channels; the trainer's errors.
+// Whether retrain() of `current` with `miss_rows` miss frames and `options` would train on
+// anything but exactly the frames and options `current` was trained with. When it would not, its
+// result is `current` again (training is deterministic: the same frames and options give the same
+// basis, keys and ε), and there is nothing to publish — a nightly retrain that finds no completed
+// miss must say so rather than serve a copy under a new version number. Errors: those of
+// load_training_options.
+Result<bool> retrain_changes_anything(const container::ModelContainer& current, long miss_rows,
+                                      const RetrainOptions& options, const std::string& source);
+
 Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t current_version,
                               const FrameMatrix& miss_frames, uint64_t last_miss_sequence,
                               const RetrainOptions& options, const std::string& source);

@@ -44,12 +44,14 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         const long width = static_cast<long>(model->pmsc->point_count) * model->pmsc->channel_count;
         FrameMatrix misses(0, width);
         uint64_t last_sequence = pmsc::misses_through(model->container);
+        uint64_t without_full_values = 0;
         if (!request->exclude_misses()) {
           auto read = misslog::read_miss_frames(env_.miss_logs.path_of(model->name), last_sequence, *model->pmsc,
                                                 model->version);
           if (!read) return to_grpc_status(read.error());
           misses = std::move(read->frames);
           last_sequence = read->last_sequence;
+          without_full_values = read->skipped;
           response->set_misses_inconsistent(static_cast<uint32_t>(read->inconsistent));
           if (read->inconsistent > 0) {
             spdlog::warn("model {}: {} logged miss(es) left out of the retrain: their full values do not repeat "
@@ -61,6 +63,20 @@ grpc::ServerUnaryReactor* TrainingServiceImpl::Retrain(grpc::CallbackServerConte
         pmsc::RetrainOptions options;
         options.error_bound = request->error_bound();
         options.max_key_points = static_cast<int>(request->max_key_points());
+        auto changes = pmsc::retrain_changes_anything(model->container, misses.rows(), options, model->path.string());
+        if (!changes) return to_grpc_status(changes.error());
+        response->set_unchanged(!*changes);
+        if (!*changes && !request->dry_run()) {
+          return failed_precondition(
+              "model '" + model->name + "' version " + std::to_string(model->version) +
+              ": nothing new to train on — " +
+              (request->exclude_misses()
+                   ? std::string("misses excluded")
+                   : "no logged miss with full values since its training (" + std::to_string(without_full_values) +
+                         " logged without them: a client completes a miss with CompleteMiss, e.g. `animspace play "
+                         "--complete`)") +
+              " and no option changed, so a retrain would publish a copy of this version; nothing was published");
+        }
         auto result = pmsc::retrain(model->container, model->version, misses, last_sequence, options,
                                     model->path.string());
         if (!result) return to_grpc_status(result.error());

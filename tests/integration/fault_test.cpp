@@ -555,8 +555,20 @@ TEST_F(FaultTest, KillNineDuringRetrainLeavesNoPartialVersionAndLosesNoMiss) {
   EXPECT_EQ(hit.status, v1::CACHE_STATUS_HIT);
   EXPECT_EQ(hit.model_version, bend.default_version());
 
-  // And it retrains.
+  // The default version has folded in every logged miss (a version published before a kill is
+  // whole): with nothing new to train on, a retrain would publish a copy of it, and is refused.
+  ASSERT_GT(dirs.versions.size(), 1u);
+  EXPECT_EQ(code_of([&] { client.retrain(retrain, std::chrono::seconds(120)); }),
+            grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(version_dirs(repo / "bend").versions, dirs.versions) << "a refused retrain published a version";
+
+  // One more completed miss, and it retrains.
+  const Eigen::VectorXf fresh = testing::expensive_arm_frame(rig, 121, 35);
+  const std::span<const float> fresh_values(fresh.data(), static_cast<size_t>(fresh.size()));
+  ASSERT_TRUE(client.complete_miss("bend", keys.model_version, {keys.gather(fresh_values), 3, nullptr}, fresh_values)
+                  .logged);
   const auto retrained = client.retrain(retrain, std::chrono::seconds(120));
+  EXPECT_EQ(retrained.misses_used(), 1u);
   EXPECT_EQ(retrained.new_version(), *dirs.versions.rbegin() + 1);
   const auto published = container::read_file(repo / "bend" / std::to_string(retrained.new_version()) / "model.anim");
   EXPECT_TRUE(published.ok()) << published.error().message;

@@ -38,10 +38,10 @@ struct Replica {
 };
 
 nlohmann::json retrain_offline(const std::filesystem::path& repo, const std::filesystem::path& logs,
-                               const std::filesystem::path& scratch) {
+                               const std::filesystem::path& scratch, const std::string& flags = "") {
   const auto out = scratch / "retrain.json";
   const std::string command = std::string(ANIMSPACE_CLI_PATH) + " --json retrain-offline --repository " +
-                              repo.string() + " --model " + kModel + " --miss-logs " + logs.string() + " > " +
+                              repo.string() + " --model " + kModel + " --miss-logs " + logs.string() + flags + " > " +
                               out.string() + " 2>&1";
   const int status = std::system(command.c_str());
   std::ifstream in(out);
@@ -123,6 +123,12 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
   nlohmann::json second = retrain_offline(repo.path(), logs.path(), scratch.path());
   EXPECT_EQ(second["misses"].get<int>(), 0);
   EXPECT_TRUE(second["published_version"].is_null());
+  EXPECT_FALSE(std::filesystem::exists(repo.path() / kModel / "3"));
+  // Not even when any number of misses will do: with the options version 2 was trained with, a
+  // retrain would train on its own frames again and publish a copy of it.
+  nlohmann::json forced = retrain_offline(repo.path(), logs.path(), scratch.path(), " --min-misses 0");
+  EXPECT_TRUE(forced["published_version"].is_null()) << forced;
+  EXPECT_NE(forced.value("reason", "").find("would publish a copy"), std::string::npos) << forced;
   EXPECT_FALSE(std::filesystem::exists(repo.path() / kModel / "3"));
 
   // One more miss on replica b (against version 2 now): folded in once, on top of version 2.

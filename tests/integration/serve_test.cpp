@@ -529,6 +529,31 @@ TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
   EXPECT_EQ(again.misses_used(), 0u);
   EXPECT_EQ(again.training_frames(), 34u);
   EXPECT_EQ(again.new_version(), 0u);  // dry run
+  // Nothing new and no option changed: the dry run says so, and what it trained is version 2
+  // again — the same thresholds and the same hit rate on the same frames.
+  EXPECT_TRUE(again.unchanged());
+  EXPECT_EQ(again.epsilon_min(), again.previous_epsilon_min());
+  EXPECT_EQ(again.epsilon_max(), again.previous_epsilon_max());
+  EXPECT_EQ(again.hit_rate(), again.previous_hit_rate());
+  // So a retrain that would publish it is refused, saying why, and no version 3 appears.
+  const auto refused = retrain(*training, "bend", false, &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << status.error_message();
+  EXPECT_NE(status.error_message().find("version 2: nothing new to train on"), std::string::npos)
+      << status.error_message();
+  EXPECT_NE(status.error_message().find("(1 logged without them"), std::string::npos) << status.error_message();
+  EXPECT_FALSE(std::filesystem::exists(repo_ / "bend" / "3"));
+  EXPECT_EQ(describe_keys(*poses, "bend").model_version(), 2u);
+  // A changed option is something new.
+  {
+    grpc::ClientContext context;
+    v1::RetrainRequest other_budget;
+    other_budget.mutable_model()->set_name("bend");
+    other_budget.set_dry_run(true);
+    other_budget.set_max_key_points(static_cast<uint32_t>(keys.key_point_indices_size()) + 5);
+    v1::RetrainResponse reported;
+    ASSERT_TRUE(training->Retrain(&context, other_budget, &reported).ok());
+    EXPECT_FALSE(reported.unchanged());
+  }
 }
 
 // ---------------------------------------------------------------------------------------------

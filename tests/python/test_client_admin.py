@@ -26,6 +26,11 @@ def test_unload_load_and_retrain_with_a_logged_miss(spawn_daemon, arm_transforms
         assert dry.new_version == 0 and dry.misses_used == 0
         assert dry.training_frames == client.describe_model("arm-pmsc").default.frame_count
         assert dry.basis_size >= 1 and dry.key_point_count >= 1 and dry.condition_number >= 1
+        # Nothing logged yet: the dry run says a retrain would change nothing, and a real one is refused.
+        assert dry.unchanged and (dry.epsilon_min, dry.hit_rate) == (dry.previous_epsilon_min, dry.previous_hit_rate)
+        with pytest.raises(animspace.FailedPrecondition, match="nothing new to train on"):
+            client.retrain("arm-pmsc", deadline_s=120)
+        assert client.describe_model("arm-pmsc").default_version == 1
 
         # A miss completed by the client is logged, and the next retrain folds it in.
         full = client.evaluate_skeleton_pose("arm-animspace", arm_transforms(2.9)).points
@@ -33,7 +38,7 @@ def test_unload_load_and_retrain_with_a_logged_miss(spawn_daemon, arm_transforms
         assert verdict.full_evaluation_needed
         assert client.complete_miss("arm-pmsc", full[keys.indices], full, version=verdict.model_version).logged
         retrained = client.retrain("arm-pmsc", deadline_s=120)
-        assert retrained.new_version == 2 and retrained.misses_used >= 1
+        assert retrained.new_version == 2 and retrained.misses_used >= 1 and not retrained.unchanged
 
         assert client.describe_model("arm-pmsc").default_version == 2
         assert client.describe_key_points("arm-pmsc").model_version == 2

@@ -295,7 +295,10 @@ int run_retrain(const Globals& g, const animspace::v1::RetrainRequest& request, 
     return 0;
   }
   if (request.dry_run()) {
-    std::printf("dry run: nothing written\n");
+    std::printf("dry run: nothing written%s\n",
+                result.unchanged() ? " (and nothing would change: no new completed miss and no option changed — "
+                                     "a retrain would be refused)"
+                                   : "");
   } else {
     std::printf("%s: version %llu published and serving\n", request.model().name().c_str(),
                 static_cast<unsigned long long>(result.new_version()));

@@ -101,6 +101,20 @@ int run_retrain_offline(const RetrainOfflineArgs& a, bool json) {
   pmsc::RetrainOptions options;
   options.error_bound = a.error_bound;
   options.max_key_points = a.max_key_points;
+  // --min-misses 0 with the options the version was trained with would publish a copy of it.
+  auto changes = pmsc::retrain_changes_anything(*current, rows, options, path.string());
+  if (!changes) return fail(command, changes.error().message);
+  if (!*changes && !a.dry_run) {
+    if (json) {
+      report["reason"] = "no new completed miss and no option changed: a retrain would publish a copy";
+      print_json(report);
+    } else {
+      std::printf("%s version %llu: no new completed miss and no option changed, so a retrain would publish a copy "
+                  "of it: nothing to publish\n",
+                  a.model.c_str(), static_cast<unsigned long long>(start));
+    }
+    return 0;
+  }
   auto result = pmsc::retrain(*current, start, misses, pmsc::misses_through(*current), options, path.string());
   if (!result) return fail(command, result.error().message);
   for (const auto& [name, log] : logs) pmsc::advance_misses_through_log(result->container, name, log.last_sequence);

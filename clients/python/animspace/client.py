@@ -906,7 +906,9 @@ class Client:
             dry_run: train and report without writing or serving (``new_version`` is 0).
 
         Raises:
-            FailedPrecondition: a model that cannot be retrained. Aborted: a retrain of the same
+            FailedPrecondition: a model that cannot be retrained, or nothing new to train on (no
+            completed miss since its training and no option changed: the retrain would publish a
+            copy; a dry run reports it as ``unchanged``). Aborted: a retrain of the same
             model is running. PermissionDenied: admin RPCs are locked.
         """
         request = training_pb2.RetrainRequest(model=_model_ref(model, version), exclude_misses=exclude_misses,

@@ -592,7 +592,9 @@ class RetrainResult:
     """What a retrain built: ``new_version`` is 0 for a dry run.
 
     ε is recalibrated on every retrain, so the ``previous_*`` thresholds and hit rate (the version
-    retrained from, on the same new training frames) show why the hit rate moved.
+    retrained from, on the same new training frames) show why the hit rate moved. ``unchanged``:
+    no miss was folded in and no option changed, so the retrain reproduces the version it started
+    from — reported by a dry run; a retrain that would publish it is refused (FailedPrecondition).
     """
 
     new_version: int
@@ -610,6 +612,7 @@ class RetrainResult:
     previous_hit_rate: float = 0.0
     hit_rate: float = 0.0
     misses_inconsistent: int = 0
+    unchanged: bool = False
 
     @classmethod
     def from_proto(cls, m: training_pb2.RetrainResponse) -> "RetrainResult":
@@ -619,5 +622,5 @@ class RetrainResult:
                    training_seconds=m.training_seconds, previous_epsilon_min=m.previous_epsilon_min,
                    previous_epsilon_max=m.previous_epsilon_max, epsilon_min=m.epsilon_min,
                    epsilon_max=m.epsilon_max, previous_hit_rate=m.previous_hit_rate, hit_rate=m.hit_rate,
-                   misses_inconsistent=m.misses_inconsistent)
+                   misses_inconsistent=m.misses_inconsistent, unchanged=m.unchanged)
 
