@@ -210,6 +210,8 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   const int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols()))
                                  : choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
   Subspace subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
+  const double projection_error =
+      max_point_error(centred - subspace.basis * (subspace.basis.transpose() * centred), D);
 
   // Key points (2007 §2.2), seeded with fiducials and the optional sparse grid.
   KeyPointOptions key_options;
@@ -383,6 +385,8 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     report->max_residual_per_iteration = selection->max_residual;
     report->max_training_error = selection->max_residual.empty() ? 0 : selection->max_residual.back();
     report->converged = selection->converged;
+    report->projection_error = projection_error;
+    report->basis_capped = o.basis_size <= 0 && M == chosen_cap && projection_error > 0.5 * o.error_bound;
     report->condition_number = model.condition_number;
     report->regularization = model.regularization;
     report->error_ratio = model.calibration.error_ratio;

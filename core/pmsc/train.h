@@ -67,6 +67,13 @@ struct TrainingReport {
   double max_training_error = 0;          // per-point, after key reconstruction, model units
   std::vector<double> max_residual_per_iteration;
   bool converged = false;                 // key selection reached error_bound
+  // The training frames' largest per-point error after orthogonal projection onto the M basis
+  // vectors: the keys estimate the coordinates of that projection, so as the key budget grows
+  // the reconstruction tends to it. Above error_bound, the basis, not the keys, missed the bound.
+  double projection_error = 0;
+  // M was cut by max_basis_fraction · F (or F − 1) before it projected within error_bound / 2:
+  // the training set has too few frames for the bound.
+  bool basis_capped = false;
   double condition_number = 0;
   double regularization = 0;
   // ε calibration on held-out frames: the conformal error ratio q (ε_min = tolerance / q) and

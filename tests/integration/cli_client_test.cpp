@@ -636,16 +636,35 @@ TEST_F(CliClientTest, TrainingThatSpendsItsKeyBudgetSaysWhatToChange) {
   const auto folder = write_arm_sequence(arm_frames(), work_->path() / "arm-sequence");
 
   const auto out = work_->path() / "starved.anim";
-  // Two key points (6 equations) for a 4-vector basis: far too few to bring every point within
-  // the default bound.
-  const CliRun run = cli("train-pmsc " + folder.string() + " --select ::8 --basis 4 --max-key-points 2 --regions 0 -o " +
+  // A basis chosen to project the training frames within half the default bound, and four key
+  // points (12 equations) to estimate its 9 coordinates: far too few to bring every point within it.
+  const CliRun run = cli("train-pmsc " + folder.string() + " --select ::4 --max-key-points 4 --regions 0 -o " +
                          out.string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
   EXPECT_TRUE(std::filesystem::exists(out)) << "the model is still written";
-  EXPECT_NE(run.err.find("warning: the key point budget (--max-key-points 2) was spent"), std::string::npos)
+  EXPECT_NE(run.err.find("warning: the key point budget (--max-key-points 4) was spent"), std::string::npos)
       << run.err;
   EXPECT_NE(run.err.find("raise --max-key-points"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("loosen --error-bound-diag"), std::string::npos) << run.err;
+}
+
+TEST_F(CliClientTest, TrainingWhoseBasisMissesTheBoundSaysMoreKeysWillNotHelp) {
+  const auto folder = write_arm_sequence(arm_frames(), work_->path() / "arm-sequence-capped");
+
+  const auto out = work_->path() / "capped.anim";
+  // Twelve frames cap M at 8 (0.7 F); no 8-vector basis projects the bending arm within 10⁻⁵ of
+  // its diagonal, so raising the key budget — what the key-budget warning advises — cannot help.
+  const CliRun run = cli("--json train-pmsc " + folder.string() +
+                         " --select ::10 --error-bound-diag 0.00001 --regions 0 -o " + out.string());
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_TRUE(std::filesystem::exists(out)) << "the model is still written";
+  EXPECT_NE(run.err.find("warning: the basis (M = 8, the most 12 training frames allow"), std::string::npos)
+      << run.err;
+  EXPECT_NE(run.err.find("train on more frames"), std::string::npos) << run.err;
+  EXPECT_EQ(run.err.find("raise --max-key-points"), std::string::npos) << run.err;
+  const auto report = nlohmann::json::parse(run.out);
+  EXPECT_TRUE(report.at("basis_capped").get<bool>()) << run.out;
+  EXPECT_GT(report.at("projection_error").get<double>(), 0.0) << run.out;
 }
 
 TEST_F(CliClientTest, RpcFailuresExitWithTheStatusAndTheServersMessage) {

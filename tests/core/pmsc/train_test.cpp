@@ -1,5 +1,6 @@
 #include "core/pmsc/train.h"
 
+#include <algorithm>
 #include <random>
 #include <set>
 #include <string_view>
@@ -7,6 +8,7 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <gtest/gtest.h>
 
 #include "core/container/model_container.h"
@@ -67,6 +69,50 @@ TEST(PmscTrain, ExactSubspaceReconstructsToRounding) {
   EXPECT_LT(max_abs(estimate.points - truth), 1e-4 * max_abs(truth));
   EXPECT_LT(estimate.key_point_error, 1e-4);
   EXPECT_EQ(decide(estimate.key_point_error, model->epsilon).status, CacheStatus::kHit);
+}
+
+// Frames in general position (rank F − 1 after centring) with M capped at half of them: the
+// basis cannot project the training set within the bound, and the report says so. With every
+// point a key, the keys' least squares is the orthogonal projection itself, so the training error
+// equals the projection error computed here independently, by SVD of the centred frames.
+TEST(PmscTrain, ABasisCappedByTheFramesReportsItsProjectionError) {
+  const int points = 40, frames = 20;
+  const auto data = exact_subspace(points, frames, frames, 1.0, 11);
+  auto o = options_for(1.0);
+  o.max_basis_fraction = 0.5;
+  o.max_key_points = points;
+  o.region_count = 0;
+  TrainingReport report;
+  auto model = train(data.frames, o, &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  const int M = frames / 2;
+  ASSERT_EQ(report.basis_size, M);
+  EXPECT_TRUE(report.basis_capped);
+  EXPECT_FALSE(report.converged);
+
+  const Eigen::MatrixXd T = data.frames.cast<double>().transpose();  // N·3 × F
+  const Eigen::MatrixXd centred = T.colwise() - T.rowwise().mean();
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(centred, Eigen::ComputeThinU);
+  const Eigen::MatrixXd U = svd.matrixU().leftCols(M);
+  const Eigen::MatrixXd residual = centred - U * (U.transpose() * centred);
+  double expected = 0;
+  for (long f = 0; f < residual.cols(); ++f) {
+    for (int i = 0; i < points; ++i) expected = std::max(expected, residual.col(f).segment<3>(3 * i).norm());
+  }
+  ASSERT_GT(expected, o.error_bound);
+  EXPECT_NEAR(report.projection_error, expected, 1e-9 * expected + 1e-12);
+  ASSERT_EQ(report.key_points, points);
+  EXPECT_NEAR(report.max_training_error, expected, 1e-6 * expected);
+}
+
+// The same frames with M free to grow: not capped, and the projection meets half the bound.
+TEST(PmscTrain, AnUncappedBasisProjectsWithinHalfTheBound) {
+  const auto data = exact_subspace(40, 20, 6, 1.0, 12);
+  TrainingReport report;
+  auto model = train(data.frames, options_for(1.0), &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  EXPECT_FALSE(report.basis_capped);
+  EXPECT_LE(report.projection_error, 0.5 * options_for(1.0).error_bound);
 }
 
 TEST(PmscTrain, KeyPointsAreDistinctAndFiducialsComeFirst) {
