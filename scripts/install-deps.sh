@@ -13,6 +13,8 @@ packages=(
   libeigen3-dev libopenblas-serial-dev libopenmesh-dev libmeshoptimizer-dev libtinygltf-dev nlohmann-json3-dev libstb-dev
   # indirect illumination (core/illumination): Embree 3 ray tracing
   libembree-dev
+  # subdivision in animation space (core/subdivision): OpenSubdiv builds the stencils S of P' = P S
+  libosd-dev
   # server and command line
   libspdlog-dev libfmt-dev libcli11-dev libcpp-httplib-dev
   # headless rendering (Mesa's surfaceless EGL, llvmpipe) and PNG
