@@ -17,11 +17,11 @@ int main(int argc, char** argv) {
   CLI::App app{"animspace-bench — benchmark suites with same-run baselines"};
   app.add_option("suite", suite, "io: file parsing; pmsc: PMSC training, accuracy and speed on real sequences; skinning: animation "
                   "space vs linear blend skinning (fit, accuracy, evaluation speed); lod: animation-space level of detail vs rest-pose "
-                  "simplifiers (error across poses); atlas: a texture atlas balanced across poses vs the rest-pose atlas and Blender's unwrappers (stretch on held-out poses); serve: a real animspaced on loopback (unary and streamed PMSC "
+                  "simplifiers (error across poses); subdivide: subdivision in animation space vs refining each posed mesh at run time (exactness, the linear blend alternative, posing cost); atlas: a texture atlas balanced across poses vs the rest-pose atlas and Blender's unwrappers (stretch on held-out poses); serve: a real animspaced on loopback (unary and streamed PMSC "
                   "poses against in-process evaluation); render: thumbnails and LOD streaming from a real animspaced against "
                   "in-process drawing; loadtest: animspace-loadtest's concurrency sweep and hit rates on crane against in-process evaluation; illumination: the Cornell box's indirect illumination from key points against the full final "
                   "gather (accuracy on novel lights, soft-cache flags, speed-up in process and served)")
-      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "atlas", "serve", "render", "loadtest", "illumination"}))
+      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "subdivide", "atlas", "serve", "render", "loadtest", "illumination"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -84,6 +84,7 @@ int main(int argc, char** argv) {
   nlohmann::json results = suite == "io"      ? animspace::bench::run_io_suite(options)
                            : suite == "pmsc"  ? animspace::bench::run_pmsc_suite(options)
                            : suite == "lod"   ? animspace::bench::run_lod_suite(options)
+                           : suite == "subdivide" ? animspace::bench::run_subdivision_suite(options)
                            : suite == "atlas" ? animspace::bench::run_atlas_suite(options)
                            : suite == "serve" ? animspace::bench::run_serve_suite(options)
                            : suite == "render" ? animspace::bench::run_render_suite(options)

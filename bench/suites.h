@@ -11,6 +11,7 @@ nlohmann::json run_io_suite(const SuiteOptions& options);
 nlohmann::json run_pmsc_suite(const SuiteOptions& options);
 nlohmann::json run_skinning_suite(const SuiteOptions& options);
 nlohmann::json run_lod_suite(const SuiteOptions& options);
+nlohmann::json run_subdivision_suite(const SuiteOptions& options);
 nlohmann::json run_atlas_suite(const SuiteOptions& options);
 nlohmann::json run_serve_suite(const SuiteOptions& options);
 nlohmann::json run_render_suite(const SuiteOptions& options);
