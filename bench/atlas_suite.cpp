@@ -14,6 +14,8 @@
 // Methods:
 //   animspace-atlas            ours: charts, flattening and balance under P (core/atlas)
 //   rest-pose-atlas            the same code with the rest pose's P (what a static unwrap gives)
+//   rest-pose-flattening-our-charts   our charts, flattened and balanced with the rest pose's P
+//                              (isolates the flattening: the same charts as animspace-atlas)
 //   blender-smart-project      Blender's bpy.ops.uv.smart_project (its own charts), rest pose
 //   blender-abf-our-charts     Blender's bpy.ops.uv.unwrap(method='ANGLE_BASED') with our charts'
 //                              borders marked as seams (same charts, Blender's flattening and packing)
@@ -288,6 +290,25 @@ nlohmann::json run_dataset(const Dataset& d) {
     if (poses) our_charts = built->atlas.chart_of_face;
     measure(row, built->atlas.uvs);
   }
+  if (our_charts) {
+    // The same charts as ours, flattened for the rest pose only.
+    const auto start = std::chrono::steady_clock::now();
+    auto rest_metrics = atlas::rest_pose_metrics(d.model.skeleton);
+    auto g = rest_metrics ? atlas::face_metrics(d.model, *rest_metrics) : Result<atlas::FaceMetrics>(rest_metrics.error());
+    atlas::AtlasOptions options;
+    options.pack.gutter = kGutter;
+    auto built = g ? atlas::flatten_and_pack(d.model.faces, *g, *our_charts, options) : Result<atlas::AtlasReport>(g.error());
+    if (built) {
+      Row row;
+      row.method = "rest-pose-flattening-our-charts";
+      row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      row.charts = built->atlas.chart_count;
+      row.utilisation = built->utilisation;
+      measure(row, built->atlas.uvs);
+    } else {
+      std::printf("%s: %s\n", d.name.c_str(), built.error().message.c_str());
+    }
+  }
   const auto blender_row = [&](const std::string& name, const std::string& method, const std::vector<int32_t>* charts) {
     Row row;
     row.method = name;
@@ -300,12 +321,12 @@ nlohmann::json run_dataset(const Dataset& d) {
   blender_row("blender-smart-project", "smart", nullptr);
   if (our_charts) blender_row("blender-abf-our-charts", "angle", &*our_charts);
 
-  std::printf("%-24s %10s %10s %10s %8s %7s %12s %11s %9s\n", "method", "L2 poses", "Linf poses", "L2 rest", "flipped",
+  std::printf("%-32s %10s %10s %10s %8s %7s %12s %11s %9s\n", "method", "L2 poses", "Linf poses", "L2 rest", "flipped",
               "charts", "utilisation", "efficiency", "seconds");
   nlohmann::json out = nlohmann::json::array();
   for (const Row& r : rows) {
     const double efficiency = r.utilisation / (r.poses.l2 * r.poses.l2);  // thesis Table 8.6's texture efficiency
-    std::printf("%-24s %10.4f %10.3f %10.4f %8ld %7d %12.3f %11.3f %9.2f\n", r.method.c_str(), r.poses.l2, r.poses.linf,
+    std::printf("%-32s %10.4f %10.3f %10.4f %8ld %7d %12.3f %11.3f %9.2f\n", r.method.c_str(), r.poses.l2, r.poses.linf,
                 r.rest.l2, static_cast<long>(r.poses.flipped), r.charts, r.utilisation, efficiency, r.seconds);
     out.push_back({{"method", r.method},
                    {"dataset", d.name},

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <string>
 
@@ -78,29 +79,37 @@ struct Segment {
   double x, width, y;
 };
 
-// Skyline bottom-left placement of rectangles (already in order) into a strip of width `width`;
-// returns the height used, and each rectangle's corner in `at`.
+// Skyline placement of rectangles (in the given order) into a strip of width `width`: each at
+// the lowest top it can reach, in either orientation (then lowest bottom, then leftmost). Returns
+// the height used; each rectangle's corner in `at` and whether it was turned in `turned`.
 double skyline(const std::vector<Eigen::Vector2d>& sizes, const std::vector<size_t>& order, double width,
-               std::vector<Eigen::Vector2d>& at) {
+               std::vector<Eigen::Vector2d>& at, std::vector<char>& turned) {
   std::vector<Segment> sky{{0, width, 0}};
   double top = 0;
   for (size_t r : order) {
-    const double w = sizes[r].x(), h = sizes[r].y();
-    double best_y = std::numeric_limits<double>::infinity(), best_x = 0;
-    for (size_t i = 0; i < sky.size(); ++i) {
-      const double x = sky[i].x;
-      if (x + w > width + 1e-12) break;
-      double y = 0;
-      for (size_t j = i; j < sky.size() && sky[j].x < x + w - 1e-15; ++j) y = std::max(y, sky[j].y);
-      if (y < best_y) {
-        best_y = y;
-        best_x = x;
+    double best_top = std::numeric_limits<double>::infinity(), best_y = 0, best_x = 0;
+    bool best_turned = false;
+    for (const bool turn : {false, true}) {
+      const double w = turn ? sizes[r].y() : sizes[r].x(), h = turn ? sizes[r].x() : sizes[r].y();
+      for (size_t i = 0; i < sky.size(); ++i) {
+        const double x = sky[i].x;
+        if (x + w > width + 1e-12) break;
+        double y = 0;
+        for (size_t j = i; j < sky.size() && sky[j].x < x + w - 1e-15; ++j) y = std::max(y, sky[j].y);
+        if (y + h < best_top || (y + h == best_top && y < best_y)) {
+          best_top = y + h;
+          best_y = y;
+          best_x = x;
+          best_turned = turn;
+        }
       }
     }
-    if (!std::isfinite(best_y)) return std::numeric_limits<double>::infinity();  // wider than the strip
+    if (!std::isfinite(best_top)) return std::numeric_limits<double>::infinity();  // wider than the strip
     at[r] = {best_x, best_y};
-    top = std::max(top, best_y + h);
-    // Raise the skyline over [best_x, best_x + w] to best_y + h.
+    turned[r] = best_turned ? 1 : 0;
+    top = std::max(top, best_top);
+    const double w = best_turned ? sizes[r].y() : sizes[r].x();
+    // Raise the skyline over [best_x, best_x + w] to best_top.
     std::vector<Segment> next;
     const double x0 = best_x, x1 = best_x + w;
     for (const Segment& s : sky) {
@@ -112,7 +121,7 @@ double skyline(const std::vector<Eigen::Vector2d>& sizes, const std::vector<size
       if (s0 < x0) next.push_back({s0, x0 - s0, s.y});
       if (s1 > x1) next.push_back({x1, s1 - x1, s.y});
     }
-    next.push_back({x0, w, best_y + h});
+    next.push_back({x0, w, best_top});
     std::sort(next.begin(), next.end(), [](const Segment& a, const Segment& b) { return a.x < b.x; });
     sky.clear();
     for (const Segment& s : next) {  // merge neighbours of equal height
@@ -149,24 +158,46 @@ Result<PackResult> pack_charts(std::vector<ChartUv>& charts, const std::vector<F
       uv_area += 0.5 * ((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
     }
   }
-  std::vector<size_t> order(charts.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return sizes[a].y() > sizes[b].y(); });
+  // Three orders (tallest, largest, longest first); the one that fits the largest scale wins.
+  std::vector<std::vector<size_t>> orders(3, std::vector<size_t>(charts.size()));
+  const auto key = [&](int which, size_t i) {
+    return which == 0 ? sizes[i].y() : which == 1 ? sizes[i].prod() : sizes[i].maxCoeff();
+  };
+  for (int which = 0; which < 3; ++which) {
+    auto& order = orders[static_cast<size_t>(which)];
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key(which, a) > key(which, b); });
+  }
   const double g = options.gutter;
   std::vector<Eigen::Vector2d> at(charts.size()), padded(charts.size());
-  const auto fits = [&](double s) {
+  std::vector<char> turned(charts.size(), 0);
+  const auto fits = [&](double s, const std::vector<size_t>& order) {
     for (size_t i = 0; i < charts.size(); ++i) padded[i] = s * sizes[i] + Eigen::Vector2d::Constant(g);
-    return skyline(padded, order, 1 - g, at) <= 1 - g;
+    return skyline(padded, order, 1 - g, at, turned) <= 1 - g;
   };
-  double lo = 0, hi = std::sqrt(1 / std::max(box_area, 1e-300));  // no packing beats the boxes' area
-  for (int it = 0; it < 50; ++it) {
-    const double mid = 0.5 * (lo + hi);
-    (fits(mid) ? lo : hi) = mid;
+  double s = 0;
+  size_t best_order = 0;
+  for (size_t o = 0; o < orders.size(); ++o) {
+    double lo = 0, hi = std::sqrt(1 / std::max(box_area, 1e-300));  // no packing beats the boxes' area
+    for (int it = 0; it < 50; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (fits(mid, orders[o]) ? lo : hi) = mid;
+    }
+    if (lo > s) {
+      s = lo;
+      best_order = o;
+    }
   }
-  const double s = lo;
-  fits(s);
+  fits(s, orders[best_order]);
   for (size_t i = 0; i < charts.size(); ++i) {
     charts[i] *= s;
+    if (turned[i]) {  // a quarter turn (orientation kept), back to the corner at 0
+      for (Eigen::Index v = 0; v < charts[i].rows(); ++v) {
+        const double x = charts[i](v, 0);
+        charts[i](v, 0) = s * sizes[i].y() - charts[i](v, 1);
+        charts[i](v, 1) = x;
+      }
+    }
     charts[i].rowwise() += (at[i] + Eigen::Vector2d::Constant(g)).transpose();
   }
   PackResult out;

@@ -2,10 +2,12 @@
 //
 // Each chart is rotated to its minimum-area bounding rectangle (exactly: the rectangle has a side
 // on an edge of the convex hull, so every hull edge is tried — the thesis sampled orientations)
-// and laid landscape (width ≥ height). The rectangles, tallest first, go into a skyline
-// bottom-left packer (each at the lowest place where it fits, then leftmost); the largest common
-// scale at which they all fit, `gutter` apart and `gutter` from the square's sides, is found by
-// bisection. Charts keep their relative sizes (the caller balances them, atlas.h).
+// and laid landscape (width ≥ height). The rectangles go into a skyline packer (each, in either
+// orientation, where its top is lowest, then its bottom, then leftmost) in three orders — tallest,
+// largest, longest side first (Sander 2001 and the thesis sort by height; the others sometimes
+// fit more) — and the largest common scale at which they all fit, `gutter` apart and `gutter` from
+// the square's sides, is found by bisection for each order; the best order wins. Charts keep
+// their relative sizes (the caller balances them, atlas.h).
 #pragma once
 
 #include <vector>
