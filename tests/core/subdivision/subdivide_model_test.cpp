@@ -4,6 +4,7 @@
 #include "core/subdivision/subdivide_model.h"
 
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <numbers>
 #include <random>
@@ -22,6 +23,7 @@
 #include "core/geometry/normals.h"
 #include "tests/support/animspace_fixtures.h"
 #include "tests/support/articulated_tube.h"
+#include "tests/support/test_support.h"
 
 namespace animspace::subdivision {
 namespace {
@@ -37,11 +39,13 @@ struct Point {
   void AddWithWeight(const Point& source, double weight) { x += weight * source.x; }
 };
 
-// The reference: `points` (a posed control mesh) refined `levels` times by a Loop refiner built
-// here, with the boundary rule core/subdivision documents (smooth boundary, corners kept).
+// The reference: `points` (a posed control mesh) refined `levels` times by a refiner built here
+// (Loop unless told), with the boundary rule core/subdivision documents (smooth boundary, corners
+// kept).
 class Reference {
  public:
-  Reference(const FaceMatrix& faces, int vertex_count, int levels) : levels_(levels), faces_(faces) {
+  Reference(const FaceMatrix& faces, int vertex_count, int levels, Sdc::SchemeType scheme = Sdc::SCHEME_LOOP)
+      : levels_(levels), faces_(faces) {
     sizes_.assign(static_cast<size_t>(faces.rows()), 3);
     Far::TopologyDescriptor descriptor;
     descriptor.numVertices = vertex_count;
@@ -51,7 +55,7 @@ class Reference {
     Sdc::Options sdc;
     sdc.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER);
     using Factory = Far::TopologyRefinerFactory<Far::TopologyDescriptor>;
-    refiner_.reset(Factory::Create(descriptor, Factory::Options(Sdc::SCHEME_LOOP, sdc)));
+    refiner_.reset(Factory::Create(descriptor, Factory::Options(scheme, sdc)));
     Far::TopologyRefiner::UniformOptions uniform(levels);
     uniform.fullTopologyInLastLevel = true;
     refiner_->RefineUniform(uniform);
@@ -79,7 +83,7 @@ class Reference {
     return normals;
   }
 
-  // The finest level's triangles.
+  // The finest level's triangles (Loop).
   FaceMatrix faces() const {
     const Far::TopologyLevel& level = refiner_->GetLevel(levels_);
     FaceMatrix out(level.GetNumFaces(), 3);
@@ -204,6 +208,51 @@ TEST(SubdivideModel, PosingTheSubdividedModelEqualsRefiningThePosedMesh) {
       }
       EXPECT_LT(worst, 1e-5) << "levels " << levels << ", pose " << k;
     }
+  }
+}
+
+TEST(SubdivideModel, CatmullClarkOnTrianglesIsExactToo) {
+  // Catmull–Clark on the model's triangles (the first step makes quads; stored as two triangles
+  // each, which moves no vertex): posed against OpenSubdiv's Catmull–Clark of the posed mesh.
+  const testing::ArticulatedTube tube = testing::make_tube(2, 4, 1, 5);
+  const as::Skeleton skeleton = testing::random_skeleton(4, 23);
+  as::AnimationSpaceModel model = testing::random_model(skeleton, static_cast<int>(tube.rest.rows()), 29);
+  model.faces = tube.faces;
+  SubdivisionOptions options;
+  options.levels = 2;
+  options.scheme = Scheme::kCatmullClark;
+  auto refined = subdivide(model, options);
+  ASSERT_TRUE(refined.ok()) << refined.error().message;
+  ASSERT_TRUE(as::validate(*refined).ok());
+  const Reference reference(model.faces, model.vertex_count(), 2, Sdc::SCHEME_CATMARK);
+  std::mt19937_64 engine(31);
+  for (int k = 0; k < 5; ++k) {
+    const as::TransformList pose = testing::random_pose(skeleton, engine, std::numbers::pi);
+    PointMatrix control, posed;
+    as::evaluate(model, pose, control);
+    as::evaluate(*refined, pose, posed);
+    EXPECT_LE(max_distance(posed, reference.refine(control)), rounding_tolerance(control)) << "pose " << k;
+  }
+}
+
+TEST(SubdivideModel, TheCowRigPosesExactlyWhenSubdivided) {
+  // The real rig of ../shared/data (11 666 vertices, up to 15 weights per vertex), one Loop step,
+  // posed by random joint rotations (it poses exactly for any).
+  const auto data = testing::shared_data_dir();
+  if (!data) GTEST_SKIP() << "shared data folder (../shared/data) is absent; skipping the cow-rig test";
+  const std::filesystem::path dir = *data / "cow-rig";
+  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << dir.string() << " is absent; skipping";
+  auto rig = as::read_libigl_rig(dir / "cow.obj", dir / "cow.tgf", dir / "cow.DMAT");
+  ASSERT_TRUE(rig.ok()) << rig.error().message;
+  const as::AnimationSpaceModel model = as::from_linear_blend(rig->model);
+  auto refined = subdivide(model, SubdivisionOptions{});
+  ASSERT_TRUE(refined.ok()) << refined.error().message;
+  const Reference reference(model.faces, model.vertex_count(), 1);
+  for (const as::TransformList& pose : as::random_joint_rotation_poses(model.skeleton, 3, 35.0 * std::numbers::pi / 180, 7)) {
+    PointMatrix control, posed;
+    as::evaluate(model, pose, control);
+    as::evaluate(*refined, pose, posed);
+    EXPECT_LE(max_distance(posed, reference.refine(control)), rounding_tolerance(control));
   }
 }
 
