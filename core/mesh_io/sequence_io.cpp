@@ -35,8 +35,11 @@ Result<LoadedSequence> load_sequence(const std::filesystem::path& path, const st
     if (const char* name = foreign_cache_name(given)) {
       return make_error(ErrorCode::kInvalidArgument,
                         given.string() + " is " + name + ", which is not read: " + kReadableSequences +
-                            ". To convert, import it in Blender (File › Import) and export the mesh as OBJ with its "
-                            "animation as a Point Cache (.pc2)");
+                            ". To convert, play it on the mesh in Blender (File › Import, or a Mesh Cache or Mesh "
+                            "Sequence Cache modifier; Alembic and USD need a Blender built with them, which Debian's "
+                            "is not) and send it with the animspace add-on's Train from animation (sidebar › "
+                            "animspace), which runs this command on its evaluated animation; or export the mesh as "
+                            "OBJ with its animation as a Point Cache (.pc2)");
     }
   }
   std::error_code ec;

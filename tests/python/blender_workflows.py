@@ -113,6 +113,7 @@ class CheckedLayout:
         group, name = idname.split(".")
         assert hasattr(getattr(bpy.ops, group), name) and getattr(getattr(bpy.ops, group), name).idname(), idname
         self.drawn["operators"].append(idname)
+        return OperatorSettings(getattr(getattr(bpy.ops, group), name).get_rna_type())
 
     def label(self, text="", **kwargs):
         self.drawn["labels"].append(text)
@@ -121,6 +122,16 @@ class CheckedLayout:
         assert hasattr(bpy.types, list_type), list_type
         self.prop(data, name)
         self.prop(active_data, active_name)
+
+
+class OperatorSettings:
+    """What ``layout.operator`` returns: the button's operator properties, which must exist."""
+
+    def __init__(self, rna):
+        object.__setattr__(self, "_rna", rna)
+
+    def __setattr__(self, name, value):
+        assert name in self._rna.properties, f"{self._rna.identifier} has no property {name!r}"
 
 
 def draw_panels():
@@ -357,6 +368,64 @@ try:
         scene.render.filepath = screenshot["path"]
         bpy.ops.render.render(write_still=True)
         results["screenshot"] = screenshot["path"]
+    # 8b. Train from animation: caches Blender writes itself, played back as a user would play a
+    # cache from another tool, sent to train-pmsc and to fit. MDD always (Blender's own exporter,
+    # io_shape_mdd, read back by a Mesh Cache modifier); Alembic through the Mesh Sequence Cache its
+    # importer sets up, where this Blender is built with Alembic (Debian's 3.4 is not:
+    # bpy.app.alembic.supported is False, and there is no USD either).
+    import addon_utils
+
+    train = config["train"]
+    exported = bpy.data.objects.new("arm to export", bpy.data.meshes.new("arm to export"))
+    exported.data.from_pydata(rest.tolist(), [], faces.tolist())
+    scene.collection.objects.link(exported)
+    replay = exported.modifiers.new("frames", "MESH_CACHE")
+    replay.cache_format = "PC2"
+    replay.filepath = train["pc2"]
+    replay.frame_start = 1.0
+    for obj in scene.objects:
+        obj.select_set(obj == exported)
+    bpy.context.view_layer.objects.active = exported
+    scene.frame_start, scene.frame_end = 1, train["frames"]
+    addon_utils.enable("io_shape_mdd", default_set=False)
+    bpy.ops.export_shape.mdd(filepath=train["mdd"], frame_start=1, frame_end=train["frames"])
+    from_mdd = bpy.data.objects.new("arm from MDD", bpy.data.meshes.new("arm from MDD"))
+    from_mdd.data.from_pydata(rest.tolist(), [], faces.tolist())
+    scene.collection.objects.link(from_mdd)
+    mdd = from_mdd.modifiers.new("MDD", "MESH_CACHE")
+    mdd.cache_format = "MDD"
+    mdd.filepath = train["mdd"]
+    mdd.frame_start = 1.0
+    sources = {"mdd": from_mdd}
+    results["train"] = {"alembic_supported": bool(bpy.app.alembic.supported)}
+    if bpy.app.alembic.supported:
+        bpy.ops.wm.alembic_export(filepath=train["abc"], start=1, end=train["frames"], selected=True)
+        before = set(scene.objects.keys())
+        bpy.ops.wm.alembic_import(filepath=train["abc"])
+        sources["alembic"] = next(scene.objects[name] for name in scene.objects.keys() if name not in before)
+    settings.train_command = train["command"]
+    settings.train_repository = train["repository"]
+    for name, obj in sources.items():
+        bpy.context.view_layer.objects.active = obj
+        results["train"][name] = {"modifiers": [m.type for m in obj.modifiers]}
+        settings.train_sequence_folder = f"{train['sequence_folder']}/{name}"
+        settings.train_model = f"arm-pmsc-from-{name}"
+        bpy.ops.animspace.train_from_animation(tool="TRAIN_PMSC")
+    bpy.context.view_layer.objects.active = from_mdd
+    settings.train_sequence_folder = ""
+    settings.train_model = "arm-fit-from-mdd"
+    settings.train_bones = 2
+    bpy.ops.animspace.train_from_animation(tool="FIT", frame_start=1, frame_end=train["frames"])
+    # What the user can get wrong: too few frames, no trainer at that path, an empty model name.
+    results["train"]["short_range_report"] = report_of(bpy.ops.animspace.train_from_animation, frame_start=1,
+                                                       frame_end=2)
+    settings.train_command = train["missing_command"]
+    results["train"]["missing_command_report"] = report_of(bpy.ops.animspace.train_from_animation)
+    settings.train_command = train["command"]
+    settings.train_model = ""
+    results["train"]["no_model_report"] = report_of(bpy.ops.animspace.train_from_animation)
+    scene.frame_start, scene.frame_end = 1, frames
+
     # 9. The sidebar draws (with a LOD object active, and the verdict set), and the add-on leaves
     # nothing behind when disabled.
     bpy.context.view_layer.objects.active = bpy.data.objects[lods["level"]["object"]]

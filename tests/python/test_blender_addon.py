@@ -93,6 +93,11 @@ def blender_run(tmp_path_factory, request):
                                                                              _arm_transforms(math.radians(-60))]
         frames = np.stack([client.evaluate_skeleton_pose(SKINNED_MODEL, G).points for G in transforms])
         animspace.write_pc2(work / "sequence.pc2", frames)
+        # The animation Blender writes to Alembic and sends to the trainers: the demo arm's motion
+        # over 16 frames.
+        train_frames = np.stack([client.evaluate_skeleton_pose(SKINNED_MODEL, _demo_arm_transforms(f / 16)).points
+                                 for f in range(16)])
+        animspace.write_pc2(work / "train.pc2", train_frames)
         level0 = client.get_lod(SKINNED_MODEL, level=0)
         np.save(work / "rest.npy", level0.positions)
         np.save(work / "faces.npy", level0.indices.astype(np.int64))
@@ -103,6 +108,10 @@ def blender_run(tmp_path_factory, request):
             "sequence_pc2": str(work / "sequence.pc2"), "frame_count": len(frames), "complete_frames": [4, 5],
             "pmsc_model": PMSC_MODEL, "bad_model": "no-such-model", "skinned_model": SKINNED_MODEL,
             "poses": POSES, "lod_level": LOD_LEVEL, "max_vertices": MAX_VERTICES, "view": VIEW,
+            "train": {"pc2": str(work / "train.pc2"), "frames": len(train_frames), "abc": str(work / "arm.abc"),
+                      "mdd": str(work / "arm.mdd"),
+                      "command": str(BUILD / "bin" / "animspace"), "missing_command": str(work / "no-such-animspace"),
+                      "repository": str(work / "trained"), "sequence_folder": str(work / "sent")},
             "thumbnail": THUMBNAIL, "screenshot": {"path": str(out / "workflows.png"), "resolution": [1200, 520]},
         }
         (work / "config.json").write_text(json.dumps(config))
@@ -119,7 +128,8 @@ def blender_run(tmp_path_factory, request):
         assert "script_error" not in results, results["script_error"] + "\n" + done.stdout[-3000:]
         if SCREENSHOT:
             shutil.copyfile(out / "workflows.png", SCREENSHOT)
-        yield {"client": client, "out": out, "results": results, "frames": frames, "work": work, "misses": misses}
+        yield {"client": client, "out": out, "results": results, "frames": frames, "work": work, "misses": misses,
+               "train_frames": train_frames}
 
 
 def test_the_zip_holds_the_add_on_and_the_client_it_carries_and_builds_reproducibly(tmp_path):
@@ -195,13 +205,57 @@ def test_tls_options_reach_the_client(blender_run):
 def test_the_sidebar_draws_every_workflow_and_disabling_leaves_nothing_behind(blender_run):
     results = blender_run["results"]
     drawn = results["panels"]
-    assert len(drawn["panels"]) == 5
+    assert len(drawn["panels"]) == 6
     assert set(drawn["operators"]) == set(results["operators"])  # every operator has its button
     assert {"address", "token_file", "root_certificates_file", "pmsc_model", "source", "model", "lod_selection"} \
         <= set(drawn["props"])
     assert not any("animspace" in name for name in results["after_disable"]["handlers"])
     assert results["after_disable"]["scene_settings"] is False
     assert results["after_disable"]["panels"] == []
+
+
+def test_caches_blender_wrote_are_sent_to_train_pmsc_and_fit(blender_run, tmp_path):
+    from conftest import run_animspaced
+
+    results, work = blender_run["results"]["train"], blender_run["work"]
+    sent = blender_run["train_frames"]
+    # MDD always; Alembic where this Blender can write and read it (Debian's 3.4 cannot).
+    caches = {"mdd": "MESH_CACHE"}
+    if results["alembic_supported"]:
+        caches["alembic"] = "MESH_SEQUENCE_CACHE"
+    repository = work / "trained"
+    for name, modifier in caches.items():
+        assert results[name]["modifiers"] == [modifier]
+        # What reached the trainer is the animation that went into the cache, frame by frame and
+        # vertex by vertex (both formats keep float32 positions; Alembic's Y-up is converted back).
+        cache = animspace.read_pc2(work / "sent" / name / "frames.pc2").frames
+        assert cache.shape == sent.shape
+        np.testing.assert_allclose(cache, sent, rtol=0, atol=1e-5 * np.abs(sent).max())
+        reference = (work / "sent" / name / "reference.obj").read_text().splitlines()
+        assert sum(line.startswith("f ") for line in reference) == np.load(work / "faces.npy").shape[0]
+        assert (repository / f"arm-pmsc-from-{name}" / "1" / "model.anim").is_file()
+    assert (repository / "arm-fit-from-mdd" / "1" / "model.anim").is_file()
+    # A daemon serving the repository loads each model as what it is, trained on every frame.
+    with run_animspaced(tmp_path, "--model-repository", str(repository), "--renderer", "none") as address, \
+            animspace.Client(address) as client:
+        client.wait_until_serving(deadline_s=60)
+        fitted = client.describe_model("arm-fit-from-mdd").default
+        assert (fitted.kind, fitted.point_count, fitted.bone_count) == ("ANIMATION_SPACE", sent.shape[1], 3)
+        diagonal = np.linalg.norm(sent[0].max(axis=0) - sent[0].min(axis=0))
+        for name in caches:
+            model = f"arm-pmsc-from-{name}"
+            pmsc = client.describe_model(model).default
+            assert (pmsc.kind, pmsc.point_count, pmsc.frame_count) == ("PMSC", sent.shape[1], len(sent))
+            # A training frame's key points give back that frame: the model learned these positions.
+            keys = client.describe_key_points(model)
+            answer = client.evaluate_key_points(model, sent[5][keys.indices])
+            assert answer.status == "HIT"
+            assert np.linalg.norm(answer.points - sent[5], axis=1).max() < 0.01 * diagonal
+    assert "at least 3 frames" in results["short_range_report"]
+    assert "cannot run" in results["missing_command_report"] and "no-such-animspace" in results["missing_command_report"]
+    assert "Model name" in results["no_model_report"]
+    for report in (results["short_range_report"], results["missing_command_report"], results["no_model_report"]):
+        assert "Traceback" not in report
 
 
 def test_bad_input_is_a_report_with_the_servers_message_not_a_traceback(blender_run):
@@ -390,7 +444,8 @@ def test_the_readmes_blender_snippet_runs(daemon, tmp_path):
     prelude = (f"import bpy\nbpy.ops.preferences.addon_install(filepath={str(ZIP)!r})\n"
                "bpy.ops.preferences.addon_enable(module='animspace_blender')\n")
     script = tmp_path / "snippet.py"
-    script.write_text(prelude + snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/'))
+    script.write_text(prelude + snippet.replace("127.0.0.1:50051", daemon).replace('"/tmp/', f'"{tmp_path}/')
+                      .replace('"build/bin/animspace"', repr(str(BUILD / "bin" / "animspace"))))
     environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "user-scripts"),
                        BLENDER_USER_CONFIG=str(tmp_path / "user-config"), ANIMSPACE_BASIS_CACHE=str(tmp_path / "bases"))
     done = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script)],
@@ -404,3 +459,4 @@ def test_the_readmes_blender_snippet_runs(daemon, tmp_path):
     assert "(256, 256)" in lines
     baked = animspace.read_pc2(tmp_path / "arm-pmsc.pc2")
     assert (baked.frame_count, baked.point_count) == (24, 1154)
+    assert (tmp_path / "blender-repo" / "arm-from-blender" / "1" / "model.anim").is_file()

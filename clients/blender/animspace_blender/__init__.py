@@ -8,7 +8,9 @@ frame-change handler:
 - animation-space models (``skinning.py``): the model as a mesh plus an armature, posed by the
   server from the armature's pose;
 - levels of detail (``lod_import.py``) by index, vertex budget or eq. 7.2 from the active camera;
-- thumbnails (``thumbnail.py``) into an image datablock.
+- thumbnails (``thumbnail.py``) into an image datablock;
+- training from animation (``training.py``): the active object's evaluated animation (Alembic and
+  USD caches included) sent to the command line's ``fit`` or ``train-pmsc``.
 
 Every RPC goes through the project's Python client, ``animspace``, which this add-on carries in
 ``vendor/`` (see ``_use_vendored_client``).
@@ -47,9 +49,10 @@ def _use_vendored_client() -> None:
 
 _use_vendored_client()
 
-from . import connection, frame_change, lod_import, panel, properties, skinning, soft_cache, thumbnail  # noqa: E402
+from . import (connection, frame_change, lod_import, panel, properties, skinning, soft_cache, thumbnail,  # noqa: E402
+               training)
 
-_MODULES = (properties, connection, soft_cache, skinning, frame_change, lod_import, thumbnail, panel)
+_MODULES = (properties, connection, soft_cache, skinning, frame_change, lod_import, thumbnail, training, panel)
 
 
 def _let_gltf_import_run_on_this_numpy() -> None:

@@ -117,6 +117,19 @@ class ANIMSPACE_PT_lod(_SubPanel, bpy.types.Panel):
             layout.label(text=f"Level {obj.animspace.lod_level}: ε^l {obj.animspace.epsilon:.6g}")
 
 
+class ANIMSPACE_PT_training(_SubPanel, bpy.types.Panel):
+    bl_label = "Train from animation"
+
+    @_settings_draw
+    def draw(context, layout, settings):
+        _props(layout, settings, "train_command", "train_repository", "train_model", "train_sequence_folder")
+        _props(layout.row(), settings, "train_bones", "train_align")
+        layout.prop(settings, "train_load")
+        row = layout.row()
+        row.operator("animspace.train_from_animation", text="fit").tool = "FIT"
+        row.operator("animspace.train_from_animation", text="train-pmsc").tool = "TRAIN_PMSC"
+
+
 class ANIMSPACE_PT_thumbnail(_SubPanel, bpy.types.Panel):
     bl_label = "Thumbnail"
 
@@ -128,6 +141,6 @@ class ANIMSPACE_PT_thumbnail(_SubPanel, bpy.types.Panel):
 
 
 _CLASSES = (ANIMSPACE_UL_models, ANIMSPACE_PT_connection, ANIMSPACE_PT_soft_cache, ANIMSPACE_PT_skinning,
-            ANIMSPACE_PT_lod, ANIMSPACE_PT_thumbnail)
+            ANIMSPACE_PT_lod, ANIMSPACE_PT_training, ANIMSPACE_PT_thumbnail)
 
 register, unregister = registry.for_classes(_CLASSES)

@@ -110,6 +110,24 @@ class AnimspaceSceneSettings(bpy.types.PropertyGroup):
     max_vertices: IntProperty(name="Max vertices", min=1, default=300)
     tolerance_px: FloatProperty(name="Tolerance (px)", min=0.001, default=1.0)
 
+    # Train from animation (training.py): the offline trainers of the command line.
+    train_command: StringProperty(name="animspace command", default="animspace", subtype="FILE_PATH",
+                                  description="The animspace command line (build/bin/animspace), or its name on PATH")
+    train_repository: StringProperty(name="Repository", subtype="DIR_PATH",
+                                     description="Model repository the new version is written into (the daemon's "
+                                                 "--model-repository)")
+    train_model: StringProperty(name="Model name", description="The model the new version is written under")
+    train_bones: IntProperty(name="Bones", min=1, max=500, default=20,
+                             description="fit: rigid parts to find (bones besides the fixed root)")
+    train_align: BoolProperty(name="Remove rigid motion",
+                              description="train-pmsc: remove each frame's rigid motion before the subspace (--align)")
+    train_sequence_folder: StringProperty(name="Sequence folder", subtype="DIR_PATH",
+                                          description="Keep the sequence sent (reference.obj + frames.pc2) here; "
+                                                      "empty: a temporary folder, removed after")
+    train_load: BoolProperty(name="Load into the server",
+                             description="Ask the connected daemon to load the new version (LoadModel, an admin "
+                                         "RPC) — when it serves that repository")
+
     # Thumbnails.
     width_px: IntProperty(name="Width", min=1, default=256)
     height_px: IntProperty(name="Height", min=1, default=256)

@@ -17,6 +17,7 @@ TEST(SequenceIo, CachesOfOtherToolsAreNamedWithTheWayToConvert) {
     EXPECT_NE(message.find("is not read"), std::string::npos) << message;
     EXPECT_NE(message.find("reference.obj + frames.pc2"), std::string::npos) << message;
     EXPECT_NE(message.find("Blender"), std::string::npos) << message;
+    EXPECT_NE(message.find("Train from animation"), std::string::npos) << message;
   }
   // As a point cache too.
   auto loaded = load_sequence("reference.obj", "frames.abc");
