@@ -38,6 +38,7 @@ bench: build
 	$(BUILD_DIR)/bin/animspace-bench pmsc --data ../shared/data --json $(BUILD_DIR)/bench-pmsc.json
 	$(BUILD_DIR)/bin/animspace-bench skinning --data ../shared/data --json $(BUILD_DIR)/bench-skinning.json
 	$(BUILD_DIR)/bin/animspace-bench lod --data ../shared/data --json $(BUILD_DIR)/bench-lod.json
+	$(BUILD_DIR)/bin/animspace-bench subdivide --data ../shared/data --json $(BUILD_DIR)/bench-subdivide.json
 	$(BUILD_DIR)/bin/animspace-bench serve --data ../shared/data --json $(BUILD_DIR)/bench-serve.json
 	$(BUILD_DIR)/bin/animspace-bench loadtest --data ../shared/data --json $(BUILD_DIR)/bench-loadtest.json
 
