@@ -10,7 +10,9 @@
 // surface of the refined mesh at refined vertex i has tangents ∂u = Σ_c U_ic v_c and
 // ∂v = Σ_c W_ic v_c, so a model posed as V = G P (eq. 3.1) gets its limit normal ∂u × ∂v from the
 // animation-space tangents P U and P W in every pose — tangent planes (§3.5) that are exact, not
-// fitted (§4.3.1).
+// fitted (§4.3.1). A refined vertex where OpenSubdiv takes no limit (an isolated vertex, or one
+// whose neighbourhood is not a manifold fan) gets zero tangent rows, so its posed normal is 0
+// (model.h's degenerate case).
 //
 // No stencil weight is written here: the rows are OpenSubdiv's own, obtained by running its
 // PrimvarRefiner on rows of the identity instead of on points (each "primvar" is a sparse row).
