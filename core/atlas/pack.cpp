@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <random>
 #include <string>
 
 namespace animspace::atlas {
@@ -158,7 +159,9 @@ Result<PackResult> pack_charts(std::vector<ChartUv>& charts, const std::vector<F
       uv_area += 0.5 * ((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
     }
   }
-  // Three orders (tallest, largest, longest first); the one that fits the largest scale wins.
+  // Three orders (tallest, largest, longest first) and shuffles of the tallest-first order in
+  // which each chart moves by a few places (a fixed seed: the result is deterministic); the one
+  // that fits the largest scale wins.
   std::vector<std::vector<size_t>> orders(3, std::vector<size_t>(charts.size()));
   const auto key = [&](int which, size_t i) {
     return which == 0 ? sizes[i].y() : which == 1 ? sizes[i].prod() : sizes[i].maxCoeff();
@@ -167,6 +170,15 @@ Result<PackResult> pack_charts(std::vector<ChartUv>& charts, const std::vector<F
     auto& order = orders[static_cast<size_t>(which)];
     std::iota(order.begin(), order.end(), 0);
     std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key(which, a) > key(which, b); });
+  }
+  std::mt19937_64 random(1);
+  for (int shuffle = 0; shuffle < options.shuffled_orders; ++shuffle) {
+    std::normal_distribution<double> jitter(0, 2);
+    std::vector<double> rank(charts.size());
+    for (size_t i = 0; i < charts.size(); ++i) rank[orders[0][i]] = static_cast<double>(i) + jitter(random);
+    std::vector<size_t> order = orders[0];
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rank[a] < rank[b]; });
+    orders.push_back(std::move(order));
   }
   const double g = options.gutter;
   std::vector<Eigen::Vector2d> at(charts.size()), padded(charts.size());

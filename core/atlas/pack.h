@@ -5,7 +5,7 @@
 // and laid landscape (width ≥ height). The rectangles go into a skyline packer (each, in either
 // orientation, where its top is lowest, then its bottom, then leftmost) in three orders — tallest,
 // largest, longest side first (Sander 2001 and the thesis sort by height; the others sometimes
-// fit more) — and the largest common scale at which they all fit, `gutter` apart and `gutter` from
+// fit more) and perturbations of the first — and the largest common scale at which they all fit, `gutter` apart and `gutter` from
 // the square's sides, is found by bisection for each order; the best order wins. Charts keep
 // their relative sizes (the caller balances them, atlas.h).
 #pragma once
@@ -23,6 +23,7 @@ using ChartUv = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
 
 struct PackOptions {
   double gutter = 1.0 / 512;  // UV units between charts and from the square's sides (2 texels at 1024²)
+  int shuffled_orders = 29;   // orders tried besides the three sorted ones (perturbed tallest-first)
 };
 
 struct PackResult {
