@@ -33,6 +33,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "bench/skinning_anchors.h"
 #include "bench/suites.h"
 #include "core/animspace/bone_motions.h"
 #include "core/animspace/fit_sequence.h"
@@ -333,6 +334,7 @@ nlohmann::json run_skinning_suite(const SuiteOptions& suite) {
               "units, §4.1.2); K = %d, candidates within %d parts.\n",
               options.edge_regularisation, options.vertex_regularisation, suite.skinning.max_influences,
               suite.skinning.candidate_hops);
+  if (has("horse-gallop") || has("crane")) print_anchor_table(compare_with_anchors(results));
   if (has("cow-rig")) {
     std::printf("%-13s %-9s %5s %5s %5s %8s %8s %10s %10s %10s %12s %12s\n", "dataset", "method", "bones", "train",
                 "test", "fit_s", "solve_s", "rmse%d_tr", "rmse%d_te", "max%d_te", "eval_v/s", "lbs_eval_v/s");
