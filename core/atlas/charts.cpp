@@ -87,6 +87,7 @@ class Segmenter {
       const double aa = nf_.edge1.col(f).squaredNorm(), bb = nf_.edge2.col(f).squaredNorm();
       const double ab = nf_.edge1.col(f).dot(nf_.edge2.col(f));
       bivector_norm_[static_cast<size_t>(f)] = std::sqrt(std::max(0.0, aa * bb - ab * ab));
+      for (int k = 0; k < 3; ++k) edge_faces_[edge_key(faces(f, k), faces(f, (k + 1) % 3))] = static_cast<int32_t>(f);
     }
   }
 
@@ -105,6 +106,10 @@ class Segmenter {
     }
     smooth(chart, seeds);
     make_discs(chart);
+    renumber(chart);
+    for (int pass = 0; pass < options_.straightening_passes; ++pass) {
+      if (straighten(chart) == 0) break;
+    }
     renumber(chart);
     return chart;
   }
@@ -223,6 +228,232 @@ class Segmenter {
     return next;
   }
 
+  // ---- Edge straightening (§5.2.3) ------------------------------------------------------------
+
+  // The thesis's E_combined of a chart (eq. 5.4) in normalised animation space:
+  // (Σ|B_f| + ρ perimeter²/4π) / |Σ B_f|, with ρ = 0.2 (its §8.4 value); +∞ for |Σ B_f| = 0.
+  double combined_metric(const std::vector<int32_t>& chart, int32_t c) const {
+    const Eigen::Index n = nf_.edge1.rows();
+    Eigen::MatrixXd S = Eigen::MatrixXd::Zero(n, n);
+    double area = 0, perimeter = 0;
+    for (Eigen::Index f = 0; f < faces_.rows(); ++f) {
+      if (chart[static_cast<size_t>(f)] != c) continue;
+      const auto a = nf_.edge1.col(f), b = nf_.edge2.col(f);
+      S.noalias() += a * b.transpose();
+      S.noalias() -= b * a.transpose();
+      area += bivector_norm_[static_cast<size_t>(f)];
+      for (int k = 0; k < 3; ++k) {
+        const int32_t g = adjacency_(f, k);
+        if (g < 0 || chart[static_cast<size_t>(g)] != c) perimeter += edge_length(f, k);
+      }
+    }
+    const double projected = S.norm() / std::sqrt(2.0);
+    if (!(projected > 0)) return kInf;
+    // |B_f| is twice the triangle's area; so is |Σ B_f| of the projected area: the ratio holds.
+    return (area + 0.2 * 2 * perimeter * perimeter / (4 * M_PI)) / projected;
+  }
+
+  // L2,2 length of edge k (corners k, k+1) of face f.
+  double edge_length(Eigen::Index f, int k) const {
+    if (k == 0) return nf_.edge1.col(f).norm();
+    if (k == 2) return nf_.edge2.col(f).norm();
+    return (nf_.edge2.col(f) - nf_.edge1.col(f)).norm();
+  }
+
+  // One pass over the borders between two charts: each chain of border edges between two corners
+  // (vertices where three or more charts meet, or on the mesh's own border) is replaced by the
+  // shortest path between the corners through the two charts' union — accepted only if both
+  // charts stay discs and neither one's E_combined grows by more than 1.2× (the thesis's ratio;
+  // where it would, the thesis retries a path over the original vertices, which is not done
+  // here: the border is kept). Returns the borders straightened.
+  int straighten(std::vector<int32_t>& chart) const {
+    const auto F = static_cast<int32_t>(faces_.rows());
+    const auto V = faces_.maxCoeff() + 1;
+    // Charts around each vertex, and which vertices lie on the mesh's border.
+    std::vector<std::vector<int32_t>> around(static_cast<size_t>(V));
+    std::vector<char> mesh_border(static_cast<size_t>(V), 0);
+    for (int32_t f = 0; f < F; ++f) {
+      for (int k = 0; k < 3; ++k) {
+        auto& list = around[static_cast<size_t>(faces_(f, k))];
+        if (std::find(list.begin(), list.end(), chart[static_cast<size_t>(f)]) == list.end()) list.push_back(chart[static_cast<size_t>(f)]);
+        if (adjacency_(f, k) < 0) {
+          mesh_border[static_cast<size_t>(faces_(f, k))] = 1;
+          mesh_border[static_cast<size_t>(faces_(f, (k + 1) % 3))] = 1;
+        }
+      }
+    }
+    const auto is_corner = [&](int32_t v) { return around[static_cast<size_t>(v)].size() >= 3 || mesh_border[static_cast<size_t>(v)]; };
+    // Border edges between two charts, by vertex.
+    struct BorderEdge {
+      int32_t other;   // the other vertex
+      int32_t a, b;    // the two charts (a < b)
+    };
+    std::vector<std::vector<BorderEdge>> border(static_cast<size_t>(V));
+    for (int32_t f = 0; f < F; ++f) {
+      for (int k = 0; k < 3; ++k) {
+        const int32_t g = adjacency_(f, k);
+        if (g < f) continue;  // each edge once; mesh-border edges are not chart borders
+        const int32_t cf = chart[static_cast<size_t>(f)], cg = chart[static_cast<size_t>(g)];
+        if (cf == cg) continue;
+        const int32_t u = faces_(f, k), w = faces_(f, (k + 1) % 3);
+        border[static_cast<size_t>(u)].push_back({w, std::min(cf, cg), std::max(cf, cg)});
+        border[static_cast<size_t>(w)].push_back({u, std::min(cf, cg), std::max(cf, cg)});
+      }
+    }
+    // Chains: walk from each corner along each border edge until the next corner.
+    struct Chain {
+      int32_t from, to, a, b;
+      std::vector<int32_t> vertices;  // from … to
+    };
+    std::vector<Chain> chains;
+    for (int32_t v = 0; v < V; ++v) {
+      if (!is_corner(v)) continue;
+      for (const BorderEdge& start : border[static_cast<size_t>(v)]) {
+        Chain ch{v, -1, start.a, start.b, {v}};
+        int32_t prev = v, cur = start.other;
+        while (true) {
+          ch.vertices.push_back(cur);
+          if (is_corner(cur) || ch.vertices.size() > static_cast<size_t>(V)) break;
+          int32_t next = -1;
+          for (const BorderEdge& e : border[static_cast<size_t>(cur)]) {
+            if (e.a == ch.a && e.b == ch.b && e.other != prev) next = e.other;
+          }
+          if (next < 0) break;
+          prev = cur;
+          cur = next;
+        }
+        ch.to = ch.vertices.back();
+        if (is_corner(ch.to) && ch.to != v && v < ch.to && ch.vertices.size() > 2) chains.push_back(std::move(ch));
+      }
+    }
+    // Edge lengths by vertex pair.
+    std::unordered_map<uint64_t, double> length;
+    for (int32_t f = 0; f < F; ++f) {
+      for (int k = 0; k < 3; ++k) length[edge_key(faces_(f, k), faces_(f, (k + 1) % 3))] = edge_length(f, k);
+    }
+    int straightened = 0;
+    std::vector<double> dist(static_cast<size_t>(V), kInf);
+    std::vector<int32_t> parent(static_cast<size_t>(V), -1);
+    for (const Chain& ch : chains) {
+      // Still a border of the same two charts (an earlier straightening may have moved it)?
+      bool valid = true;
+      for (size_t i = 0; i + 1 < ch.vertices.size() && valid; ++i) {
+        bool found = false;
+        for (int32_t f : faces_around_edge(ch.vertices[i], ch.vertices[i + 1])) found = found || chart[static_cast<size_t>(f)] == ch.a;
+        bool found_b = false;
+        for (int32_t f : faces_around_edge(ch.vertices[i], ch.vertices[i + 1])) found_b = found_b || chart[static_cast<size_t>(f)] == ch.b;
+        valid = found && found_b;
+      }
+      if (!valid) continue;
+      // Faces of the union, and vertices a path may use: the corners, and vertices whose faces
+      // all lie in the union and that are no corner.
+      std::vector<int32_t> union_faces;
+      for (int32_t f = 0; f < F; ++f) {
+        const int32_t c = chart[static_cast<size_t>(f)];
+        if (c == ch.a || c == ch.b) union_faces.push_back(f);
+      }
+      std::unordered_map<int32_t, char> usable;
+      for (int32_t f : union_faces) {
+        for (int k = 0; k < 3; ++k) usable[faces_(f, k)] = 1;
+      }
+      for (int32_t f = 0; f < F; ++f) {
+        const int32_t c = chart[static_cast<size_t>(f)];
+        if (c == ch.a || c == ch.b) continue;
+        for (int k = 0; k < 3; ++k) {
+          const auto it = usable.find(faces_(f, k));
+          if (it != usable.end()) it->second = 0;
+        }
+      }
+      for (auto& [v, ok] : usable) {
+        if (mesh_border[static_cast<size_t>(v)]) ok = 0;
+      }
+      usable[ch.from] = usable[ch.to] = 1;
+      // Dijkstra over the union's interior edges.
+      std::unordered_map<int32_t, std::vector<std::pair<int32_t, double>>> graph;
+      for (int32_t f : union_faces) {
+        for (int k = 0; k < 3; ++k) {
+          const int32_t u = faces_(f, k), w = faces_(f, (k + 1) % 3);
+          if (usable[u] && usable[w]) graph[u].emplace_back(w, length[edge_key(u, w)]);
+        }
+      }
+      for (const auto& [v, unused] : usable) {
+        dist[static_cast<size_t>(v)] = kInf;
+        parent[static_cast<size_t>(v)] = -1;
+      }
+      using Entry = std::pair<double, int32_t>;
+      std::priority_queue<Entry, std::vector<Entry>, std::greater<>> queue;
+      dist[static_cast<size_t>(ch.from)] = 0;
+      queue.emplace(0.0, ch.from);
+      while (!queue.empty()) {
+        const auto [d, u] = queue.top();
+        queue.pop();
+        if (d > dist[static_cast<size_t>(u)] || u == ch.to) continue;
+        for (const auto& [w, l] : graph[u]) {
+          if (w != ch.to && w != ch.from && !usable[w]) continue;
+          if (d + l < dist[static_cast<size_t>(w)]) {
+            dist[static_cast<size_t>(w)] = d + l;
+            parent[static_cast<size_t>(w)] = u;
+            queue.emplace(d + l, w);
+          }
+        }
+      }
+      if (!std::isfinite(dist[static_cast<size_t>(ch.to)])) continue;
+      std::vector<int32_t> path{ch.to};
+      while (path.back() != ch.from) path.push_back(parent[static_cast<size_t>(path.back())]);
+      std::unordered_set<uint64_t> cut;
+      for (size_t i = 0; i + 1 < path.size(); ++i) {
+        cut.insert(edge_key(path[i], path[i + 1]));
+        cut.insert(edge_key(path[i + 1], path[i]));
+      }
+      // The union cut along the new path: two components, labelled by their overlap with a.
+      std::unordered_map<int32_t, int> component;
+      for (int32_t f : union_faces) component[f] = -1;
+      int components = 0;
+      for (int32_t f : union_faces) {
+        if (component[f] >= 0) continue;
+        std::vector<int32_t> stack{f};
+        component[f] = components;
+        while (!stack.empty()) {
+          const int32_t g = stack.back();
+          stack.pop_back();
+          for (int k = 0; k < 3; ++k) {
+            const int32_t h = adjacency_(g, k);
+            if (h < 0 || cut.count(edge_key(faces_(g, k), faces_(g, (k + 1) % 3)))) continue;
+            const auto it = component.find(h);
+            if (it == component.end() || it->second >= 0) continue;
+            it->second = components;
+            stack.push_back(h);
+          }
+        }
+        ++components;
+      }
+      if (components != 2) continue;
+      double overlap[2] = {0, 0};
+      for (int32_t f : union_faces) {
+        if (chart[static_cast<size_t>(f)] == ch.a) overlap[component[f]] += bivector_norm_[static_cast<size_t>(f)];
+      }
+      const int side_a = overlap[0] >= overlap[1] ? 0 : 1;
+      const double before_a = combined_metric(chart, ch.a), before_b = combined_metric(chart, ch.b);
+      std::vector<int32_t> trial = chart;
+      for (int32_t f : union_faces) trial[static_cast<size_t>(f)] = component[f] == side_a ? ch.a : ch.b;
+      if (trial == chart) continue;
+      if (!is_disc(faces_, trial, ch.a) || !is_disc(faces_, trial, ch.b)) continue;
+      if (combined_metric(trial, ch.a) > 1.2 * before_a || combined_metric(trial, ch.b) > 1.2 * before_b) continue;
+      chart = std::move(trial);
+      ++straightened;
+    }
+    return straightened;
+  }
+
+  std::vector<int32_t> faces_around_edge(int32_t u, int32_t w) const {
+    std::vector<int32_t> out;
+    const auto it = edge_faces_.find(edge_key(u, w));
+    if (it != edge_faces_.end()) out.push_back(it->second);
+    const auto jt = edge_faces_.find(edge_key(w, u));
+    if (jt != edge_faces_.end()) out.push_back(jt->second);
+    return out;
+  }
+
   void smooth(std::vector<int32_t>& chart, const std::vector<int32_t>& seeds) const {
     std::vector<char> is_seed(chart.size(), 0);
     for (int32_t s : seeds) is_seed[static_cast<size_t>(s)] = 1;
@@ -330,6 +561,7 @@ class Segmenter {
   Adjacency adjacency_;
   Eigen::MatrixXd weight_;
   std::vector<double> bivector_norm_;
+  std::unordered_map<uint64_t, int32_t> edge_faces_;  // directed edge → its face
 };
 
 }  // namespace

@@ -19,10 +19,14 @@
 // closed part, two boundary loops meeting at a vertex) is split in two by growing from its two
 // mutually farthest faces, until every chart is a disc.
 //
-// Edge straightening: §5.2.3's shortest-path straightening is not implemented; ragged borders are
-// smoothed instead — a face whose two or three neighbours lie in one other chart moves to that
-// chart (a few passes before the disc repair), which removes the one-triangle notches that
-// straight UV borders cannot follow.
+// Borders: first smoothed — a face whose two or three neighbours lie in one other chart moves to
+// that chart (a few passes before the disc repair), removing one-triangle notches. Then §5.2.3's
+// edge straightening: each border between two charts, from corner to corner (where three charts
+// meet, or on the mesh's border), is replaced by the shortest path (L2,2 edge lengths) between
+// its corners through the two charts' union, kept only if both charts stay discs and neither
+// one's E_combined (eq. 5.4, ρ = 0.2, in normalised animation space) grows by more than 1.2×
+// (§8.4). Where it would, the thesis retries with a path over the original border's vertices
+// (Figure 5.3c); that constrained form is not implemented — the ragged border is kept.
 #pragma once
 
 #include <cstdint>
@@ -48,6 +52,7 @@ struct ChartOptions {
   int lloyd_iterations = 8;    // re-seedings at most
   double compactness = 0.05;   // ρ above (dimensionless: a fraction of the largest 1 − cos, which is 2)
   int smoothing_passes = 3;    // border smoothing passes (0: none)
+  int straightening_passes = 2;  // §5.2.3 edge straightening passes (0: none)
 };
 
 // Face adjacency across edges: #F × 3, entry k the face sharing edge (v_k, v_{k+1}) with the
