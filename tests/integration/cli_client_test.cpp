@@ -667,6 +667,13 @@ TEST_F(CliClientTest, TrainingWhoseBasisMissesTheBoundSaysMoreKeysWillNotHelp) {
   EXPECT_GT(report.at("projection_error").get<double>(), 0.0) << run.out;
 }
 
+TEST_F(CliClientTest, RelightRefusesAHeatScaleWithoutTheHeatMap) {
+  const CliRun alone = cli("relight cornell --from 0.2 0.44 0.3 --heat-max 0.5 -o " +
+                           (work_->path() / "heat.png").string());
+  EXPECT_NE(alone.exit_code, 0);
+  EXPECT_NE(alone.err.find("--heat-max requires --heat"), std::string::npos) << alone.err;
+}
+
 TEST_F(CliClientTest, RpcFailuresExitWithTheStatusAndTheServersMessage) {
   const CliRun run = cli("keys no-such-model");
   EXPECT_EQ(run.exit_code, 3);

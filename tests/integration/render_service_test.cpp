@@ -14,6 +14,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "clients/cpp/client.h"
 #include "core/animspace/animspace_io.h"
@@ -274,6 +275,56 @@ TEST_F(RenderServiceTest, TheThumbnailCommandSaysTheHeatScaleAndDrawsItsLegend) 
   const uint8_t* bottom = image->pixel(x, legend.bar_y1 - 1);
   EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0})) << "red at the top of the scale";
   EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255})) << "blue at 0";
+}
+
+// issue #39: `relight --heat` had no scale. The scale asked for is the one reported and drawn:
+// the legend's bar runs from blue at 0 to red at --heat-max; without one, the scale the server
+// chose is printed beside the largest error.
+TEST_F(RenderServiceTest, RelightHeatStatesItsScaleAndDrawsItsLegend) {
+  TempDir room;  // the demo's Cornell box alone (the suite's repository holds the arm's models)
+  ASSERT_TRUE(demo::write_demo_illumination(room.path()).ok());
+  auto daemon = std::make_unique<DaemonProcess>(
+      std::vector<std::string>{"--model-repository", room.path().string(), "--renderer", "surfaceless"}, work_.path());
+  {
+    Client client(daemon->address());
+    ASSERT_TRUE(testing::wait_until_serving(client)) << daemon->log();
+  }
+  const auto png = work_.path() / "relight-heat.png";
+  const std::string cli = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon->address();
+  const std::string relight = " relight cornell --from 0.2 0.44 0.3 --heat --width 256 --height 256 -o " + png.string();
+  const auto run = [](const std::string& command) {
+    std::string out;
+    FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+    EXPECT_NE(pipe, nullptr);
+    if (pipe == nullptr) return std::make_pair(-1, out);
+    char buffer[4096];
+    size_t n = 0;
+    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) out.append(buffer, n);
+    return std::make_pair(pclose(pipe), out);
+  };
+  const auto [status, out] = run(cli + " --json" + relight + " --heat-max 0.5 --heat-legend");
+  ASSERT_EQ(status, 0) << out;
+  const auto report = nlohmann::json::parse(out);
+  const auto& frame = report.at("frames").at(0);
+  EXPECT_FLOAT_EQ(frame.at("heat_scale_max").get<float>(), 0.5f) << out;
+  EXPECT_TRUE(frame.at("heat_legend_drawn").get<bool>()) << out;
+  EXPECT_GE(frame.at("heat_max_error").get<double>(), 0.0) << out;
+  const auto bytes = read_whole_file(png);
+  ASSERT_TRUE(bytes.ok());
+  auto image = render::decode_png(*bytes, "relight-heat.png");
+  ASSERT_TRUE(image.ok()) << image.error().message;
+  const render::HeatLegendLayout legend = render::heat_legend_layout(256, 256, 0.5);
+  ASSERT_TRUE(legend.fits);
+  const int x = (legend.bar_x0 + legend.bar_x1) / 2;
+  const uint8_t* top = image->pixel(x, legend.bar_y0);
+  const uint8_t* bottom = image->pixel(x, legend.bar_y1 - 1);
+  EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0})) << "red at the top of the scale";
+  EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255})) << "blue at 0";
+
+  const auto [plain_status, plain] = run(cli + relight);
+  ASSERT_EQ(plain_status, 0) << plain;
+  EXPECT_NE(plain.find("heat map: largest |full − served| "), std::string::npos) << plain;
+  EXPECT_NE(plain.find(", red at "), std::string::npos) << plain;
 }
 
 TEST_F(RenderServiceTest, PixelToleranceDrawsTheLevelEquation72Allows) {

@@ -32,9 +32,10 @@ CLI::App* add_relight(CLI::App& app, RelightArgs& a) {
   cmd->add_option("--white", a.white, "Radiance drawn white (0: the 99th percentile of each frame)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  cmd->add_flag("--heat", a.heat,
-                "Draw |full − served| instead, the full indirect illumination gathered by the server (as slow as "
-                "the full calculation; blue 0 → red at the model's error tolerance)");
+  auto* heat = cmd->add_flag("--heat", a.heat,
+                             "Draw |full − served| instead, the full indirect illumination gathered by the server "
+                             "(as slow as the full calculation; blue 0 → red at the scale, which each frame prints)");
+  add_heat_scale_options(cmd, a.heat_scale, heat);
   return cmd;
 }
 
@@ -64,6 +65,7 @@ int run_relight(const RelightArgs& a, Client& client, bool json) {
                                                 : v1::IlluminationView::RADIANCE_TOTAL);
     view->set_white_radiance(a.white);
     view->set_heat_from_full_gather(a.heat);
+    if (a.heat) set_heat_scale(a.heat_scale, request);
     const Thumbnail thumbnail = client.render_thumbnail(request);
     std::string path = a.output;
     if (pattern) {
@@ -83,12 +85,12 @@ int run_relight(const RelightArgs& a, Client& client, bool json) {
                             {"cache_status", status},
                             {"key_point_error", e_key},
                             {"render_ms", thumbnail.render_ms}};
-      if (a.heat) row["heat_max_error"] = thumbnail.heat_max_error;
+      if (a.heat) add_heat_scale_json(a.heat_scale, thumbnail, row);
       rows.push_back(row);
     } else {
       std::printf("frame %d: light (%.3f, %.3f, %.3f): %s, e_key %.4g%s → %s\n", f, light->position(0),
                   light->position(1), light->position(2), status, e_key,
-                  a.heat ? (", largest |full − served| " + std::to_string(thumbnail.heat_max_error)).c_str() : "",
+                  a.heat ? ("; heat map: " + heat_scale_text(a.heat_scale, thumbnail, "|full − served|")).c_str() : "",
                   path.c_str());
     }
   }

@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "clients/cpp/cli/heat_scale.h"
 #include "clients/cpp/client.h"
 
 namespace animspace::cli {
@@ -24,6 +25,7 @@ struct RelightArgs {
   std::string radiance = "total";  // total | indirect
   float white = 0;                 // radiance drawn white (0: the server's default)
   bool heat = false;               // heat map of |full − served| with the server's full gather
+  HeatScaleArgs heat_scale;
 };
 
 CLI::App* add_relight(CLI::App& app, RelightArgs& args);

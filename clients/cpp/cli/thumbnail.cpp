@@ -34,13 +34,7 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
                              "Colour each point by |full − returned| (blue 0 → red at the scale): the soft cache's "
                              "error, from --sequence's full frame; prints the largest error and the scale")
                    ->needs(sequence);
-  cmd->add_option("--heat-max", a.heat_max,
-                  "With --heat: the error drawn red, model units (default: the model's error tolerance, the "
-                  "per-point error its soft cache was calibrated to flag; else the frame's largest error)")
-      ->check(CLI::NonNegativeNumber)
-      ->needs(heat);
-  cmd->add_flag("--heat-legend", a.heat_legend, "With --heat: draw the scale as a colour bar with its numbers")
-      ->needs(heat);
+  add_heat_scale_options(cmd, a.heat_scale, heat);
   cmd->add_flag("--wireframe", a.wireframe, "Draw the triangle edges");
   cmd->add_flag("--lambert", a.lambert, "Lambert shading instead of Blinn-Phong");
   cmd->add_option("--samples", a.samples, "Multisampling: 1, 2, 4 or 8")->capture_default_str();
@@ -115,8 +109,7 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
     request.mutable_model()->set_version(keys.model_version);
     if (a.heat) {
       *request.mutable_full_values() = make_point_array(frame.data(), keys.control_point_count, D);
-      request.set_heat_max(a.heat_max);
-      request.set_show_heat_legend(a.heat_legend);
+      set_heat_scale(a.heat_scale, request);
     }
   }
 
@@ -136,11 +129,7 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
       out["cache_status"] = cache_status_name(thumbnail.pose->status);
       out["key_point_error"] = thumbnail.pose->key_point_error;
     }
-    if (a.heat) {
-      out["heat_max_error"] = thumbnail.heat_max_error;
-      out["heat_scale_max"] = thumbnail.heat_scale_max;
-      if (a.heat_legend) out["heat_legend_drawn"] = thumbnail.heat_legend_drawn;
-    }
+    if (a.heat) add_heat_scale_json(a.heat_scale, thumbnail, out);
     print_json(out);
     return 0;
   }
@@ -155,12 +144,7 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
               a.model.c_str(), static_cast<unsigned long long>(thumbnail.model_version), thumbnail.width_px,
               thumbnail.height_px, thumbnail.lod_level, thumbnail.render_ms, verdict.c_str(), a.output.c_str(),
               thumbnail.png.size());
-  if (a.heat) {
-    std::printf("heat map: largest |full − returned| %.4g, red at %.4g (%s; model units)%s\n",
-                thumbnail.heat_max_error, thumbnail.heat_scale_max,
-                a.heat_max > 0 ? "--heat-max" : "the model's error tolerance, or the largest error when it has none",
-                a.heat_legend && !thumbnail.heat_legend_drawn ? "; the image is too small for the legend" : "");
-  }
+  if (a.heat) std::printf("heat map: %s\n", heat_scale_text(a.heat_scale, thumbnail, "|full − returned|").c_str());
   return 0;
 }
 

@@ -8,6 +8,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "clients/cpp/cli/heat_scale.h"
 #include "clients/cpp/client.h"
 
 namespace animspace::cli {
@@ -24,8 +25,7 @@ struct ThumbnailArgs {
   int sequence_frame = 0;
   bool key_points = false;   // draw the key points
   bool heat = false;         // heat map of |full − returned| (needs --sequence)
-  float heat_max = 0;        // the error drawn red, model units (0: the server's default)
-  bool heat_legend = false;  // draw the scale's colour bar with its numbers
+  HeatScaleArgs heat_scale;
   bool wireframe = false;
   bool lambert = false;
   uint32_t samples = 4;
