@@ -1,10 +1,50 @@
 #include "core/animspace/rig_export.h"
 
+#include <algorithm>
 #include <string>
 
 #include "core/geometry/normals.h"
 
 namespace animspace::animation_space {
+
+Result<LinearBlendRig> linear_blend_rig(const AnimationSpaceModel& model) {
+  LinearBlendRig out;
+  LinearBlendModel& rig = out.model;
+  rig.skeleton = model.skeleton;
+  rig.faces = model.faces;
+  const int vertices = model.vertex_count();
+  rig.rest_points.resize(3, vertices);
+  std::vector<double> weights;
+  for (int i = 0; i < vertices; ++i) {
+    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
+    const size_t first = weights.size();
+    double kept = 0;
+    for (int k = model.influences.begin(i); k < model.influences.end(i); ++k) {
+      const int bone = model.influences.bones[static_cast<size_t>(k)];
+      const Eigen::Vector4d p = model.positions.col(k);
+      rest += (model.skeleton.rest[static_cast<size_t>(bone)] * p).head<3>();
+      if (p(3) < 0) {
+        ++out.negative_weights_dropped;
+        out.most_negative_weight = std::min(out.most_negative_weight, p(3));
+      }
+      if (p(3) <= 0) continue;
+      rig.influences.bones.push_back(bone);
+      weights.push_back(p(3));
+      kept += p(3);
+    }
+    if (weights.size() == first) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        "vertex " + std::to_string(i) + ": no bone has a positive weight, so no linear blend (glTF) "
+                                                        "skin can carry it");
+    }
+    for (size_t k = first; k < weights.size(); ++k) weights[k] /= kept;
+    rig.influences.offsets.push_back(static_cast<int32_t>(rig.influences.bones.size()));
+    rig.rest_points.col(i) = rest;
+  }
+  rig.weights = Eigen::Map<const Eigen::VectorXd>(weights.data(), static_cast<Eigen::Index>(weights.size()));
+  ANIMSPACE_RETURN_IF_ERROR(validate(rig));
+  return out;
+}
 
 Result<mesh_io::SkinnedCharacter> skinned_character(const LinearBlendModel& model,
                                                     const std::vector<TransformList>& poses,

@@ -4,6 +4,8 @@
 // progress bars never reach a pipe.
 #include <sys/wait.h>
 
+#include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -13,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -20,6 +23,8 @@
 #include "core/animspace/animspace_io.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
+#include "core/lod/lod_io.h"
+#include "core/mesh_io/gltf_skin.h"
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/container/sections.h"
@@ -84,7 +89,7 @@ TEST_F(CliClientTest, EveryCommandExplainsItselfInHelp) {
   const std::vector<std::string> commands = {
       "list", "health", "server-info", "describe", "stats", "keys", "evaluate", "play", "pose", "retrain",
       "load", "unload", "lod", "thumbnail", "relight", "inspect", "demo-repository", "train-pmsc", "train-illumination", "fit", "import-rig",
-      "build-lod", "export-lod", "calibrate"};
+      "build-lod", "export-lod", "export-rig", "calibrate"};
   const CliRun top = cli("--help");
   ASSERT_EQ(top.exit_code, 0);
   for (const std::string& command : commands) {
@@ -672,6 +677,88 @@ TEST_F(CliClientTest, RelightRefusesAHeatScaleWithoutTheHeatMap) {
                            (work_->path() / "heat.png").string());
   EXPECT_NE(alone.exit_code, 0);
   EXPECT_NE(alone.err.find("--heat-max requires --heat"), std::string::npos) << alone.err;
+}
+
+// issue #39: a level of detail exported with its skin, and any animation-space model — not only a
+// fresh fit — as a rig; exported levels carry normals.
+TEST_F(CliClientTest, ExportRigWritesALevelAsASkinnedCharacterAndExportLodCarriesNormals) {
+  const auto model_file = repo_->path() / "arm-animspace" / "1" / "model.anim";
+  auto file = container::read_file(model_file);
+  ASSERT_TRUE(file.ok());
+  auto model = as::load(*file, "arm-animspace");
+  ASSERT_TRUE(model.ok());
+  auto levels = lod::load_levels(*file, *model, "arm-animspace");
+  ASSERT_TRUE(levels.ok());
+  ASSERT_GT(levels->count(), 2);
+  auto stored_poses = file->double_matrix(container::sections::kSequenceBoneTransforms, 16 * model->bone_count());
+  ASSERT_TRUE(stored_poses.ok());
+
+  const auto glb = work_->path() / "arm-level2.glb";
+  const nlohmann::json report = json_of(cli("--json export-rig " + model_file.string() + " --level 2 -o " + glb.string()));
+  EXPECT_EQ(report.at("vertices").get<int>(), levels->levels[2].model.vertex_count()) << report;
+  EXPECT_EQ(report.at("frames").get<long>(), stored_poses->rows()) << report;
+  EXPECT_GE(report.at("max_deviation").get<double>(), 0.0) << report;
+  auto skin = mesh_io::read_gltf_skin(glb);
+  ASSERT_TRUE(skin.ok()) << skin.error().message;
+  EXPECT_EQ(skin->points.rows(), levels->levels[2].model.vertex_count());
+  EXPECT_EQ(static_cast<int>(skin->joint_parents.size()), model->bone_count());
+  EXPECT_EQ(skin->faces.rows(), levels->levels[2].model.faces.rows());
+  EXPECT_EQ(skin->normals.rows(), skin->points.rows()) << "the bind pose has its normals";
+  // Every vertex's weights sum to 1 (a skin, not a posed mesh).
+  for (size_t v = 0; v + 1 < skin->slot_offsets.size(); ++v) {
+    double sum = 0;
+    for (int64_t k = skin->slot_offsets[v]; k < skin->slot_offsets[v + 1]; ++k) sum += skin->slot_weights[static_cast<size_t>(k)];
+    ASSERT_NEAR(sum, 1.0, 1e-5) << "vertex " << v;
+  }
+  const CliRun too_far = cli("export-rig " + model_file.string() + " --level 99 -o " + glb.string());
+  EXPECT_EQ(too_far.exit_code, 2);
+  EXPECT_NE(too_far.err.find("--level: expected 0 … "), std::string::npos) << too_far.err;
+
+  // export-lod (offline) and lod (GetLod's posed form): one unit vn per vertex, on the side of the
+  // surface its faces face: the sum of the vertex's face normals weighted by area, computed here
+  // from the file's own v and f lines. The served level comes without normals, so lod writes those
+  // very ones (`alignment` ≈ 1); export-lod poses the level's tangent planes (§3.5), which a coarse
+  // level's facets only roughly follow.
+  const auto check_normals = [](const std::filesystem::path& path, double alignment) {
+    std::ifstream in(path);
+    std::vector<Eigen::Vector3d> v, vn;
+    std::vector<std::array<int, 3>> f;
+    for (std::string line; std::getline(in, line);) {
+      std::istringstream values(line.substr(line.find(' ') + 1));
+      if (line.rfind("v ", 0) == 0 || line.rfind("vn ", 0) == 0) {
+        Eigen::Vector3d x;
+        values >> x.x() >> x.y() >> x.z();
+        (line[1] == 'n' ? vn : v).push_back(x);
+      } else if (line.rfind("f ", 0) == 0) {
+        std::array<int, 3> face{};
+        for (int& index : face) {
+          std::string corner;
+          values >> corner;
+          index = std::stoi(corner) - 1;  // "a", "a//n" or "a/t/n": the position comes first
+        }
+        f.push_back(face);
+      }
+    }
+    ASSERT_GT(v.size(), 0u) << path;
+    ASSERT_EQ(vn.size(), v.size()) << path;
+    std::vector<Eigen::Vector3d> summed(v.size(), Eigen::Vector3d::Zero());
+    for (const auto& face : f) {
+      const Eigen::Vector3d n = (v[face[1]] - v[face[0]]).cross(v[face[2]] - v[face[0]]);  // 2 × area
+      for (int corner : face) summed[static_cast<size_t>(corner)] += n;
+    }
+    for (size_t i = 0; i < v.size(); ++i) {
+      EXPECT_NEAR(vn[i].norm(), 1.0, 1e-4) << path << " vertex " << i;
+      if (summed[i].norm() > 0) {
+        EXPECT_GT(vn[i].dot(summed[i].normalized()), alignment) << path << " vertex " << i;
+      }
+    }
+  };
+  const auto obj = work_->path() / "arm-level2.obj";
+  ASSERT_EQ(cli("export-lod " + model_file.string() + " --level 2 -o " + obj.string()).exit_code, 0);
+  check_normals(obj, 0.0);
+  const auto served = work_->path() / "arm-served.obj";
+  ASSERT_EQ(cli("lod arm-animspace --max-vertices 300 -o " + served.string()).exit_code, 0);
+  check_normals(served, 0.9999);
 }
 
 TEST_F(CliClientTest, RpcFailuresExitWithTheStatusAndTheServersMessage) {

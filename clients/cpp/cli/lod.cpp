@@ -20,6 +20,7 @@
 #include "core/lod/selection.h"
 #include "core/lod/levels.h"
 #include "core/container/sections.h"
+#include "core/geometry/normals.h"
 
 namespace animspace::cli {
 
@@ -228,7 +229,12 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
   mesh_io::PosedMesh mesh;
   as::evaluate(level.model, pose, mesh.points);
   mesh.faces = level.model.faces;
-  if (level.model.has_tangents()) as::evaluate_normals(level.model, pose, mesh.normals);
+  // Normals from the level's tangent planes (§3.5) when it has them, else of the posed faces.
+  if (level.model.has_tangents()) {
+    as::evaluate_normals(level.model, pose, mesh.normals);
+  } else if (mesh.faces.rows() > 0) {
+    mesh.normals = geometry::area_weighted_normals(mesh.points, mesh.faces);
+  }
   // The atlas (animspace atlas) belongs to the full mesh: level 0 carries its UVs, seams split.
   bool with_uvs = false;
   if (chosen == 0) {
@@ -352,6 +358,8 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
   mesh.faces =
       Eigen::Map<const Eigen::Matrix<uint32_t, Eigen::Dynamic, 3, Eigen::RowMajor>>(received.indices.data(), faces, 3)
           .cast<int32_t>();
+  // GetLod's posed form carries positions only: the normals of the posed faces go with them.
+  if (faces > 0) mesh.normals = geometry::area_weighted_normals(mesh.points, mesh.faces);
   if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("lod", written.error().message);
   }

@@ -10,6 +10,7 @@
 
 #include "clients/cpp/cli/fit.h"
 #include "clients/cpp/cli/evaluate.h"
+#include "clients/cpp/cli/export_rig.h"
 #include "clients/cpp/cli/lod.h"
 #include "clients/cpp/cli/output.h"
 #include "clients/cpp/cli/play.h"
@@ -531,6 +532,8 @@ int main(int argc, char** argv) {
   auto* build_lod = animspace::cli::add_build_lod(app, build_lod_args);
   animspace::cli::ExportLodArgs export_lod_args;
   auto* export_lod = animspace::cli::add_export_lod(app, export_lod_args);
+  animspace::cli::ExportRigArgs export_rig_args;
+  auto* export_rig = animspace::cli::add_export_rig(app, export_rig_args);
   animspace::cli::AtlasArgs atlas_args;
   auto* atlas = animspace::cli::add_atlas(app, atlas_args);
   animspace::cli::RetrainOfflineArgs retrain_offline_args;
@@ -553,6 +556,7 @@ int main(int argc, char** argv) {
     if (*import_rig) return animspace::cli::run_import_rig(import_rig_args, g.json);
     if (*build_lod) return animspace::cli::run_build_lod(build_lod_args, g.json);
     if (*export_lod) return animspace::cli::run_export_lod(export_lod_args, g.json);
+    if (*export_rig) return animspace::cli::run_export_rig(export_rig_args, g.json);
     if (*atlas) return animspace::cli::run_atlas(atlas_args, g.json);
     if (*retrain_offline) return animspace::cli::run_retrain_offline(retrain_offline_args, g.json);
     if (*calibrate) return animspace::cli::run_calibrate(calibrate_args, g.json);

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "core/animspace/fit_sequence.h"
+#include "core/animspace/import.h"
 #include "core/animspace/model.h"
 #include "core/mesh_io/gltf_skin_writer.h"
 #include "tests/support/articulated_tube.h"
@@ -149,6 +150,105 @@ TEST_F(RigExportTest, TheGlbReproducesTheFittedFramesToTheModelsOwnError) {
   EXPECT_LE(file_max, model_max + tolerance);
   // A fit that missed the tube would make the comparison above hollow.
   EXPECT_LT(model_rms, 5e-4 * kLength);
+}
+
+// An animation-space model imported from a linear blend rig (p_j = w_j Ĝ_j⁻¹ v̂, §3.1 — what
+// import-rig makes) exports as that very rig: the same weights and bind pose, and the file posed
+// from the glTF alone is the animation-space model in every pose (issue #39: import-rig and
+// build-lod models could not be exported as a rig).
+TEST_F(RigExportTest, AModelImportedFromARigExportsAsThatRig) {
+  const AnimationSpaceModel imported = from_linear_blend(*lbs_);
+  auto converted = linear_blend_rig(imported);
+  ASSERT_TRUE(converted) << converted.error().message;
+  EXPECT_EQ(converted->negative_weights_dropped, 0);
+  const LinearBlendModel* rig = &converted->model;
+  ASSERT_EQ(rig->vertex_count(), lbs_->vertex_count());
+  EXPECT_LE(max_distance(rig->rest_points.transpose(), lbs_->rest_points.transpose()), 1e-9 * kLength);
+  for (int i = 0; i < lbs_->vertex_count(); ++i) {
+    // The imported influences are the rig's less its exact-zero weights, in the same order.
+    std::vector<std::pair<int, double>> expected, got;
+    for (int k = lbs_->influences.begin(i); k < lbs_->influences.end(i); ++k) {
+      if (lbs_->weights(k) != 0) expected.emplace_back(lbs_->influences.bones[static_cast<size_t>(k)], lbs_->weights(k));
+    }
+    for (int k = rig->influences.begin(i); k < rig->influences.end(i); ++k) {
+      got.emplace_back(rig->influences.bones[static_cast<size_t>(k)], rig->weights(k));
+    }
+    ASSERT_EQ(got.size(), expected.size()) << "vertex " << i;
+    for (size_t k = 0; k < got.size(); ++k) {
+      EXPECT_EQ(got[k].first, expected[k].first) << "vertex " << i;
+      EXPECT_NEAR(got[k].second, expected[k].second, 1e-12) << "vertex " << i;
+    }
+  }
+  auto character = skinned_character(*rig, skeleton_->training_poses, kFps);
+  ASSERT_TRUE(character) << character.error().message;
+  const auto bytes = mesh_io::serialize_skinned_glb(*character);
+  ASSERT_TRUE(bytes) << bytes.error().message;
+  const testing::LoadedGltf loaded = testing::load_gltf(*bytes, /*binary=*/true);
+  ASSERT_TRUE(loaded.ok) << loaded.error;
+  const tinygltf::Animation* animation = testing::only_animation(loaded.model);
+  ASSERT_NE(animation, nullptr);
+  const std::vector<float> times = testing::keyframe_times(loaded.model, *animation);
+  PointMatrix evaluated;
+  for (size_t k = 0; k < times.size(); ++k) {
+    const Eigen::MatrixX3d posed = testing::skin_from_file(
+        loaded.model, testing::node_globals(loaded.model, animation, times[k], Rotations::kSpecSlerp));
+    evaluate(imported, skeleton_->training_poses[k], evaluated);
+    EXPECT_LE(max_distance(posed, to_double(evaluated)), 1e-5 * kLength) << "frame " << k;
+  }
+}
+
+// A model with what linear blend skinning cannot express (a p_j not along Ĝ_j⁻¹ v̂): its rig keeps
+// the weights and the rest pose — equal to the model at rest. A negative weight, which no glTF
+// skin holds, is dropped and counted; a vertex with no positive weight is refused.
+TEST_F(RigExportTest, AModelBeyondLinearBlendKeepsItsRestPoseAndNegativeWeightsAreDroppedAndCounted) {
+  AnimationSpaceModel model = from_linear_blend(*lbs_);
+  const int vertex = model.vertex_count() / 2;
+  const int first = model.influences.begin(vertex);
+  model.positions.col(first).head<3>() += Eigen::Vector3d(0.3, -0.2, 0.1);  // weight unchanged
+  auto converted = linear_blend_rig(model);
+  ASSERT_TRUE(converted) << converted.error().message;
+  const LinearBlendModel* rig = &converted->model;
+  PointMatrix at_rest;
+  evaluate(model, model.skeleton.rest, at_rest);
+  EXPECT_LE(max_distance(rig->rest_points.transpose(), to_double(at_rest)), 1e-6 * kLength);  // evaluate is float32
+
+  AnimationSpaceModel negative = from_linear_blend(*lbs_);
+  int v = 0;
+  while (v < negative.vertex_count() && negative.influences.end(v) - negative.influences.begin(v) < 2) ++v;
+  ASSERT_LT(v, negative.vertex_count()) << "a vertex with two influences";
+  const int k0 = negative.influences.begin(v);
+  // Move weight between two influences so that one goes below 0 and the sum stays 1.
+  const double shift = negative.positions(3, k0) + 0.25;
+  negative.positions.col(k0) *= (negative.positions(3, k0) - shift) / negative.positions(3, k0);
+  negative.positions.col(k0 + 1) *= (negative.positions(3, k0 + 1) + shift) / negative.positions(3, k0 + 1);
+  const double dropped = negative.positions(3, k0);
+  auto kept = linear_blend_rig(negative);
+  ASSERT_TRUE(kept) << kept.error().message;
+  EXPECT_EQ(kept->negative_weights_dropped, 1);
+  EXPECT_DOUBLE_EQ(kept->most_negative_weight, dropped);
+  // The vertex keeps its other weights, rescaled to sum to 1, so the rig is still exact at rest.
+  double sum = 0;
+  for (int k = kept->model.influences.begin(v); k < kept->model.influences.end(v); ++k) {
+    EXPECT_NE(kept->model.influences.bones[static_cast<size_t>(k)], negative.influences.bones[static_cast<size_t>(k0)]);
+    EXPECT_GT(kept->model.weights(k), 0);
+    sum += kept->model.weights(k);
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-12);
+  PointMatrix model_rest, rig_rest;
+  evaluate(negative, negative.skeleton.rest, model_rest);
+  evaluate(kept->model, negative.skeleton.rest, rig_rest);
+  EXPECT_LE(max_distance(to_double(rig_rest), to_double(model_rest)), 1e-6 * kLength);  // float32 evaluation
+  // A vertex without any positive weight cannot be skinned at all: refused, naming it.
+  AnimationSpaceModel none = from_linear_blend(*lbs_);
+  for (int k = none.influences.begin(v); k < none.influences.end(v); ++k) none.positions(3, k) = 0;
+  none.positions(3, none.influences.begin(v)) = -1;
+  none.positions(3, none.influences.begin(v) + 1) = 2;
+  none.positions(3, none.influences.begin(v) + 1) *= -1;  // −2: every weight ≤ 0
+  auto refused = linear_blend_rig(none);
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_NE(refused.error().message.find("vertex " + std::to_string(v) + ":"), std::string::npos)
+      << refused.error().message;
 }
 
 TEST_F(RigExportTest, APoseWithTheWrongBoneCountIsRejectedNamingIt) {
