@@ -263,6 +263,16 @@ grpc::Status build_thumbnail_scene(ServiceEnvironment& env, const LoadedModel& m
   }
   scene.wireframe = request.show_wireframe();
   if (request.show_key_points()) scene.key_points.assign(model.pmsc->key_points.begin(), model.pmsc->key_points.end());
+  if (request.show_heat_legend()) {
+    // The legend takes the image's right edge: a camera the renderer would choose frames the
+    // model left of it instead (an illumination model keeps its room's stored camera, above).
+    if (Status framed = thumbnail::frame_beside_heat_legend(scene, static_cast<int>(request.width_px()),
+                                                            static_cast<int>(request.height_px()),
+                                                            response->heat_scale_max());
+        !framed.ok()) {
+      return to_grpc_status(framed.error());
+    }
+  }
   response->set_lod_level(level);
   return grpc::Status::OK;
 }

@@ -113,6 +113,27 @@ Result<Camera> frame_bounding_box(const PointMatrix& points, double aspect) {
   return camera;
 }
 
+Result<Camera> frame_in_columns(const PointMatrix& points, int width, int height, int columns) {
+  if (width <= 0 || height <= 0 || columns <= 0 || columns > width) {
+    return make_error(ErrorCode::kInvalidArgument, "columns: expected 1.." + std::to_string(std::max(width, 0)) +
+                                                       " of a " + std::to_string(width) + " × " +
+                                                       std::to_string(height) + " image, got " +
+                                                       std::to_string(columns));
+  }
+  auto camera = frame_bounding_box(points, static_cast<double>(columns) / height);
+  if (!camera) return camera.error();
+  // A point at lateral offset X and depth d lands X · f / d pixels right of the image's centre,
+  // f = (height / 2) / tan(fov / 2): moving the camera right by s = Δ · d / f puts the sphere's
+  // centre Δ pixels left of it, in the middle of the columns.
+  const double shift_px = 0.5 * (width - columns);
+  const double depth = (camera->eye - camera->target).norm();
+  const double focal_px = 0.5 * height / std::tan(camera->vertical_fov_rad / 2);
+  const Eigen::Vector3d right = Eigen::Vector3d::UnitX();  // frame_bounding_box looks down −z, up +y
+  camera->eye += shift_px * depth / focal_px * right;
+  camera->target += shift_px * depth / focal_px * right;
+  return camera;
+}
+
 Status validate_camera(const Camera& camera, const std::string& field) {
   const auto invalid = [&](const std::string& member, const std::string& what) {
     return Status(make_error(ErrorCode::kInvalidArgument, field + "." + member + ": " + what));

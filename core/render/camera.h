@@ -34,6 +34,13 @@ double horizontal_fov(const Camera& camera, double aspect);
 // Errors: kInvalidArgument for no points or non-finite points.
 Result<Camera> frame_bounding_box(const PointMatrix& points, double aspect);
 
+// The same framing into the left `columns` pixel columns of a width × height image (0 < columns
+// ≤ width), the rest left to something drawn over the picture (the heat legend): the sphere fits
+// the fields of view of a columns × height image, and the camera is moved along its right axis
+// so that the sphere's centre projects to the middle of those columns. Errors: as above, and
+// kInvalidArgument for sizes out of range.
+Result<Camera> frame_in_columns(const PointMatrix& points, int width, int height, int columns);
+
 // Near and far clip distances for drawing `sphere` from `camera`: tight around the sphere so the
 // 24-bit depth buffer keeps its precision, with a floor on `near` for an eye inside the sphere.
 struct ClipRange {

@@ -4,6 +4,9 @@
 #include <cmath>
 #include <string>
 
+#include "core/render/camera.h"
+#include "core/render/heat_legend.h"
+
 namespace animspace::thumbnail {
 
 Result<HeatScale> heat_map(const Eigen::Ref<const PointMatrix>& truth, const Eigen::Ref<const PointMatrix>& estimate,
@@ -24,6 +27,16 @@ Result<HeatScale> heat_map(const Eigen::Ref<const PointMatrix>& truth, const Eig
   if (scale.scale_max == 0) scale.scale_max = scale.largest_error;
   scene.heat_max = static_cast<float>(scale.scale_max);
   return scale;
+}
+
+Status frame_beside_heat_legend(render::Scene& scene, int width, int height, double heat_max) {
+  if (scene.camera) return {};
+  const render::HeatLegendLayout legend = render::heat_legend_layout(width, height, heat_max);
+  if (!legend.fits) return {};
+  auto camera = render::frame_in_columns(scene.points, width, height, legend.panel_x0);
+  if (!camera) return camera.error();
+  scene.camera = *camera;
+  return {};
 }
 
 }  // namespace animspace::thumbnail

@@ -27,4 +27,10 @@ struct HeatScale {
 Result<HeatScale> heat_map(const Eigen::Ref<const PointMatrix>& truth, const Eigen::Ref<const PointMatrix>& estimate,
                            double requested_max, double error_tolerance, std::string_view field, render::Scene& scene);
 
+// A thumbnail whose heat legend is drawn at the image's right edge (render/heat_legend.h) and
+// whose camera is not given: its points framed in the columns left of the legend's panel, so that
+// the legend covers none of the model. A scene with a camera, or a legend that does not fit the
+// image, is left as it is. Errors: render::frame_in_columns's.
+Status frame_beside_heat_legend(render::Scene& scene, int width, int height, double heat_max);
+
 }  // namespace animspace::thumbnail

@@ -7,6 +7,7 @@
 #include <numbers>
 #include <random>
 #include <string>
+#include <tuple>
 #include <utility>
 
 #include <gtest/gtest.h>
@@ -120,6 +121,38 @@ TEST(CameraTest, FrameBoundingBoxKeepsEveryPointInsideTheImage) {
     }
     EXPECT_GT(margin, 0);
   }
+}
+
+// Framed into the left columns of the image (the heat legend takes the rest): every point lands
+// in those columns and inside the image, checked with the independent pinhole of the tests, and
+// the sphere's centre in the middle of the columns.
+TEST(CameraTest, FrameInColumnsKeepsEveryPointLeftOfTheReservedColumns) {
+  std::mt19937 engine(11);
+  std::uniform_real_distribution<float> coordinate(-3, 5);
+  PointMatrix points(500, 3);
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    points.row(i) << coordinate(engine), 2 * coordinate(engine), 0.5f * coordinate(engine);
+  }
+  for (const auto& [width, height, columns] : {std::tuple(256, 256, 200), std::tuple(400, 100, 300),
+                                               std::tuple(90, 300, 60), std::tuple(256, 256, 256)}) {
+    SCOPED_TRACE(std::to_string(width) + " × " + std::to_string(height) + ", " + std::to_string(columns));
+    Result<Camera> camera = frame_in_columns(points, width, height, columns);
+    ASSERT_TRUE(camera.ok()) << camera.error().message;
+    EXPECT_TRUE(validate_camera(*camera, "camera").ok());
+    const testing::Pinhole pinhole(camera->eye, camera->target, camera->up, camera->vertical_fov_rad, width,
+                                   height);
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+      const Eigen::Vector2d pixel = pinhole.project(points.row(i).cast<double>().transpose());
+      ASSERT_GT(pixel.x(), 0) << i;
+      ASSERT_LT(pixel.x(), columns) << i;
+      ASSERT_GT(pixel.y(), 0) << i;
+      ASSERT_LT(pixel.y(), height) << i;
+    }
+    const geometry::BoundingSphere sphere = geometry::bounding_sphere(points);
+    EXPECT_NEAR(pinhole.project(sphere.centre).x(), columns / 2.0, 1e-6 * width);
+  }
+  EXPECT_FALSE(frame_in_columns(points, 256, 256, 0).ok());
+  EXPECT_FALSE(frame_in_columns(points, 256, 256, 257).ok());
 }
 
 TEST(CameraTest, FrameBoundingBoxRefusesNoPointsAndNonFinitePoints) {

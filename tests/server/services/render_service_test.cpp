@@ -19,6 +19,7 @@
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/model/model_info.h"
+#include "core/render/camera.h"
 #include "core/render/heat_legend.h"
 #include "core/render/png.h"
 #include "server/implemented_rpcs.h"
@@ -259,6 +260,18 @@ TEST_F(RenderServiceInProcessTest, TheHeatMapIsScaledToTheModelsToleranceAndItsL
   const auto fake = FakeRenderer::fake_pixel(3, 3);
   const uint8_t* outside = image->pixel(3, 3);
   EXPECT_EQ(std::vector<uint8_t>(outside, outside + 4), std::vector<uint8_t>(fake.begin(), fake.end()));
+
+  // The legend covers none of the model (issue #39): with no camera given, every point projects
+  // into the columns left of the legend's panel, and inside the image.
+  ASSERT_TRUE(scenes[0].camera.has_value()) << "the model is framed beside the legend";
+  for (Eigen::Index i = 0; i < scenes[0].points.rows(); ++i) {
+    const Eigen::Vector3d point = scenes[0].points.row(i).transpose().cast<double>();
+    const Eigen::Vector2d pixel = render::project_to_pixel(*scenes[0].camera, 256, 256, point).pixel;
+    ASSERT_GE(pixel.x(), 0.0) << "point " << i;
+    ASSERT_LT(pixel.x(), legend.panel_x0) << "point " << i << " lies under the legend";
+    ASSERT_GE(pixel.y(), 0.0) << "point " << i;
+    ASSERT_LT(pixel.y(), 256.0) << "point " << i;
+  }
 
   // A scale the caller names is the one drawn; no legend unless asked.
   r.set_heat_max(0.5f);
