@@ -29,6 +29,7 @@
 #include "core/render/heat_legend.h"
 #include "core/render/png.h"
 #include "harness/daemon_process.h"
+#include "tests/support/cli_run.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -102,6 +103,17 @@ void expect_refused(const std::function<void()>& call, grpc::StatusCode code, co
     EXPECT_EQ(e.code(), code) << status_text(e);
     EXPECT_NE(e.server_message().find(part), std::string::npos) << status_text(e);
   }
+}
+
+// The heat legend's bar on a drawn image: red at the top of the scale, blue at 0.
+void expect_legend_bar(const render::Image& image, double scale_max) {
+  const render::HeatLegendLayout legend = render::heat_legend_layout(image.width, image.height, scale_max);
+  ASSERT_TRUE(legend.fits);
+  const int x = (legend.bar_x0 + legend.bar_x1) / 2;
+  const uint8_t* top = image.pixel(x, legend.bar_y0);
+  const uint8_t* bottom = image.pixel(x, legend.bar_y1 - 1);
+  EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0})) << "red at the top of the scale";
+  EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255})) << "blue at 0";
 }
 
 TEST_F(RenderServiceTest, DrawsTheRestPoseAtTheRequestedSizeOnTheRequestedBackground) {
@@ -267,14 +279,7 @@ TEST_F(RenderServiceTest, TheThumbnailCommandSaysTheHeatScaleAndDrawsItsLegend) 
   ASSERT_TRUE(bytes.ok());
   auto image = render::decode_png(*bytes, "heat.png");
   ASSERT_TRUE(image.ok()) << image.error().message;
-  const render::HeatLegendLayout legend =
-      render::heat_legend_layout(256, 256, tolerance);
-  ASSERT_TRUE(legend.fits);
-  const int x = (legend.bar_x0 + legend.bar_x1) / 2;
-  const uint8_t* top = image->pixel(x, legend.bar_y0);
-  const uint8_t* bottom = image->pixel(x, legend.bar_y1 - 1);
-  EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0})) << "red at the top of the scale";
-  EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255})) << "blue at 0";
+  expect_legend_bar(*image, tolerance);
 }
 
 // issue #39: `relight --heat` had no scale. The scale asked for is the one reported and drawn:
@@ -292,20 +297,11 @@ TEST_F(RenderServiceTest, RelightHeatStatesItsScaleAndDrawsItsLegend) {
   const auto png = work_.path() / "relight-heat.png";
   const std::string cli = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon->address();
   const std::string relight = " relight cornell --from 0.2 0.44 0.3 --heat --width 256 --height 256 -o " + png.string();
-  const auto run = [](const std::string& command) {
-    std::string out;
-    FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-    EXPECT_NE(pipe, nullptr);
-    if (pipe == nullptr) return std::make_pair(-1, out);
-    char buffer[4096];
-    size_t n = 0;
-    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) out.append(buffer, n);
-    return std::make_pair(pclose(pipe), out);
-  };
-  const auto [status, out] = run(cli + " --json" + relight + " --heat-max 0.5 --heat-legend");
-  ASSERT_EQ(status, 0) << out;
-  const auto report = nlohmann::json::parse(out);
+  const auto err = work_.path() / "relight.err";
+  const nlohmann::json report =
+      testing::json_of(testing::run_command(cli + " --json" + relight + " --heat-max 0.5 --heat-legend", err));
   const auto& frame = report.at("frames").at(0);
+  const std::string out = report.dump();
   EXPECT_FLOAT_EQ(frame.at("heat_scale_max").get<float>(), 0.5f) << out;
   EXPECT_TRUE(frame.at("heat_legend_drawn").get<bool>()) << out;
   EXPECT_GE(frame.at("heat_max_error").get<double>(), 0.0) << out;
@@ -313,16 +309,11 @@ TEST_F(RenderServiceTest, RelightHeatStatesItsScaleAndDrawsItsLegend) {
   ASSERT_TRUE(bytes.ok());
   auto image = render::decode_png(*bytes, "relight-heat.png");
   ASSERT_TRUE(image.ok()) << image.error().message;
-  const render::HeatLegendLayout legend = render::heat_legend_layout(256, 256, 0.5);
-  ASSERT_TRUE(legend.fits);
-  const int x = (legend.bar_x0 + legend.bar_x1) / 2;
-  const uint8_t* top = image->pixel(x, legend.bar_y0);
-  const uint8_t* bottom = image->pixel(x, legend.bar_y1 - 1);
-  EXPECT_EQ(std::vector<uint8_t>(top, top + 3), (std::vector<uint8_t>{255, 0, 0})) << "red at the top of the scale";
-  EXPECT_EQ(std::vector<uint8_t>(bottom, bottom + 3), (std::vector<uint8_t>{0, 0, 255})) << "blue at 0";
+  expect_legend_bar(*image, 0.5);
 
-  const auto [plain_status, plain] = run(cli + relight);
-  ASSERT_EQ(plain_status, 0) << plain;
+  const testing::CliRun run = testing::run_command(cli + relight, err);
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const std::string& plain = run.out;
   EXPECT_NE(plain.find("heat map: largest |full − served| "), std::string::npos) << plain;
   EXPECT_NE(plain.find(", red at "), std::string::npos) << plain;
 }

@@ -61,6 +61,21 @@ def vertex_normals(obj):
     return sums / np.linalg.norm(sums, axis=1, keepdims=True)
 
 
+def cached_mesh(name, rest, faces, cache_format, path):
+    """A smooth mesh of ``rest`` and ``faces`` linked to the scene, played by a Mesh Cache modifier
+    reading ``path`` (PC2 or MDD) from frame 1: a sequence as a user brings one in."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(rest.tolist(), [], faces.tolist())
+    mesh.polygons.foreach_set("use_smooth", [True] * len(mesh.polygons))
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    cache = obj.modifiers.new(cache_format, "MESH_CACHE")
+    cache.cache_format = cache_format
+    cache.filepath = path
+    cache.frame_start = 1.0
+    return obj
+
+
 def report_of(operator, **arguments):
     """Runs an operator that is expected to fail; returns the text Blender reported (bpy.ops
     raises RuntimeError with the ERROR report's text)."""
@@ -190,15 +205,7 @@ try:
     # 3. The source: the arm's mesh with a Mesh Cache modifier playing the test's PC2 from frame 1.
     rest = np.load(config["rest_points"])
     faces = np.load(config["faces"])
-    mesh = bpy.data.meshes.new("arm sequence")
-    mesh.from_pydata(rest.tolist(), [], faces.tolist())
-    mesh.polygons.foreach_set("use_smooth", [True] * len(mesh.polygons))
-    source = bpy.data.objects.new("arm sequence", mesh)
-    scene.collection.objects.link(source)
-    cache = source.modifiers.new("sequence", "MESH_CACHE")
-    cache.cache_format = "PC2"
-    cache.filepath = config["sequence_pc2"]
-    cache.frame_start = 1.0
+    source = cached_mesh("arm sequence", rest, faces, "PC2", config["sequence_pc2"])
     settings.source = source
 
     # A bad model name: a report with the server's message, not a traceback.
@@ -376,26 +383,14 @@ try:
     import addon_utils
 
     train = config["train"]
-    exported = bpy.data.objects.new("arm to export", bpy.data.meshes.new("arm to export"))
-    exported.data.from_pydata(rest.tolist(), [], faces.tolist())
-    scene.collection.objects.link(exported)
-    replay = exported.modifiers.new("frames", "MESH_CACHE")
-    replay.cache_format = "PC2"
-    replay.filepath = train["pc2"]
-    replay.frame_start = 1.0
+    exported = cached_mesh("arm to export", rest, faces, "PC2", train["pc2"])
     for obj in scene.objects:
         obj.select_set(obj == exported)
     bpy.context.view_layer.objects.active = exported
     scene.frame_start, scene.frame_end = 1, train["frames"]
     addon_utils.enable("io_shape_mdd", default_set=False)
     bpy.ops.export_shape.mdd(filepath=train["mdd"], frame_start=1, frame_end=train["frames"])
-    from_mdd = bpy.data.objects.new("arm from MDD", bpy.data.meshes.new("arm from MDD"))
-    from_mdd.data.from_pydata(rest.tolist(), [], faces.tolist())
-    scene.collection.objects.link(from_mdd)
-    mdd = from_mdd.modifiers.new("MDD", "MESH_CACHE")
-    mdd.cache_format = "MDD"
-    mdd.filepath = train["mdd"]
-    mdd.frame_start = 1.0
+    from_mdd = cached_mesh("arm from MDD", rest, faces, "MDD", train["mdd"])
     sources = {"mdd": from_mdd}
     results["train"] = {"alembic_supported": bool(bpy.app.alembic.supported)}
     if bpy.app.alembic.supported:

@@ -73,6 +73,22 @@ Eigen::MatrixX3d captured_frame(const FrameMatrix& frames, Eigen::Index k) {
   return points.cast<double>();
 }
 
+// A rig's character as a reader sees it: written as .glb and parsed back with tinygltf.
+testing::LoadedGltf exported_glb(const LinearBlendModel& rig, const std::vector<TransformList>& poses) {
+  testing::LoadedGltf failed;
+  auto character = skinned_character(rig, poses, kFps);
+  if (!character) {
+    failed.error = character.error().message;
+    return failed;
+  }
+  const auto bytes = mesh_io::serialize_skinned_glb(*character);
+  if (!bytes) {
+    failed.error = bytes.error().message;
+    return failed;
+  }
+  return testing::load_gltf(*bytes, /*binary=*/true);
+}
+
 TEST_F(RigExportTest, TheGlbPosedFromTheFileIsTheModelInEveryTrainingPose) {
   const std::vector<TransformList>& poses = skeleton_->training_poses;
   ASSERT_EQ(poses.size(), static_cast<size_t>(kFrames));
@@ -115,11 +131,7 @@ TEST_F(RigExportTest, TheGlbPosedFromTheFileIsTheModelInEveryTrainingPose) {
 // the exported animation is the sequence.
 TEST_F(RigExportTest, TheGlbReproducesTheFittedFramesToTheModelsOwnError) {
   const std::vector<TransformList>& poses = skeleton_->training_poses;
-  auto character = skinned_character(*lbs_, poses, kFps);
-  ASSERT_TRUE(character) << character.error().message;
-  const auto bytes = mesh_io::serialize_skinned_glb(*character);
-  ASSERT_TRUE(bytes) << bytes.error().message;
-  const testing::LoadedGltf loaded = testing::load_gltf(*bytes, /*binary=*/true);
+  const testing::LoadedGltf loaded = exported_glb(*lbs_, poses);
   ASSERT_TRUE(loaded.ok) << loaded.error;
   const tinygltf::Animation* animation = testing::only_animation(loaded.model);
   ASSERT_NE(animation, nullptr);
@@ -179,11 +191,7 @@ TEST_F(RigExportTest, AModelImportedFromARigExportsAsThatRig) {
       EXPECT_NEAR(got[k].second, expected[k].second, 1e-12) << "vertex " << i;
     }
   }
-  auto character = skinned_character(*rig, skeleton_->training_poses, kFps);
-  ASSERT_TRUE(character) << character.error().message;
-  const auto bytes = mesh_io::serialize_skinned_glb(*character);
-  ASSERT_TRUE(bytes) << bytes.error().message;
-  const testing::LoadedGltf loaded = testing::load_gltf(*bytes, /*binary=*/true);
+  const testing::LoadedGltf loaded = exported_glb(*rig, skeleton_->training_poses);
   ASSERT_TRUE(loaded.ok) << loaded.error;
   const tinygltf::Animation* animation = testing::only_animation(loaded.model);
   ASSERT_NE(animation, nullptr);
