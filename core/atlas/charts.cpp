@@ -96,7 +96,13 @@ class Segmenter {
     std::vector<int32_t> seeds = farthest_seeds();
     std::vector<int32_t> chart(static_cast<size_t>(F), -1);
     std::vector<Eigen::MatrixXd> proxies;
-    for (int32_t s : seeds) proxies.push_back(bivector(s));
+    for (int32_t s : seeds) {
+      // A unit proxy, as fit_proxies makes them: the cosine must not depend on the model's units.
+      Eigen::MatrixXd B = bivector(s);
+      const double norm = B.norm() / std::sqrt(2.0);
+      if (norm > 0) B /= norm;
+      proxies.push_back(std::move(B));
+    }
     for (int it = 0; it <= options_.lloyd_iterations; ++it) {
       grow(seeds, proxies, chart);
       fit_proxies(chart, static_cast<int32_t>(seeds.size()), proxies);
