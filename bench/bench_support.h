@@ -54,6 +54,15 @@ struct IlluminationSuiteOptions {
   int outside = 12;      // novel lights well outside it (walls, floor level)
   double drop = 0;       // the training grid's drop below the ceiling (0: LightGrid's default)
   std::string figure;    // when set: a PNG of full / subspace / error for a few novel lights
+  // The gather the model is trained on and judged against (issue #38; the defaults are the
+  // original gather): "hammersley" or "stratified", the light's radius in metres, shadow rays.
+  std::string sampling = "hammersley";
+  double light_radius = 0;
+  int shadow_rays = 1;
+  // 0: no gather study; 1: the gather study (noise by two seeds, error against a 4096-ray
+  // reference, roughness in the light's position, per candidate gather) and then the suite;
+  // 2: the study only.
+  int gather_study = 0;
 };
 
 struct SuiteOptions {

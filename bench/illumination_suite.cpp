@@ -32,6 +32,7 @@
 #include "clients/cpp/client.h"
 #include "clients/cpp/tools/quantile.h"
 #include "core/container/model_container.h"
+#include "core/illumination/gather_noise.h"
 #include "core/illumination/illumination_model.h"
 #include "core/common/atomic_file.h"
 #include "core/pmsc/pmsc_io.h"
@@ -190,6 +191,137 @@ void write_figure(const std::string& path, const illumination::IlluminationEngin
               "largest indirect radiance) written to %s\n", path.c_str());
 }
 
+// Issue #38, the gather study: for one novel light inside the hull and each candidate gather, the
+// full frame gathered with two seeds (their relative RMS difference: √2 × one gather's noise), the
+// error of seed 0 against a reference of kReferenceRays rays (same light model, another seed) at
+// kReferencePoints spread points, and the roughness in the light's position (light_roughness: 9
+// positions 5 mm apart along x) at kRoughnessPoints spread points, beside the reference's own.
+// The candidates cost about the same per point: S hemisphere rays and S·J shadow rays.
+constexpr int kReferenceRays = 4096;
+constexpr int kReferencePoints = 200;
+constexpr int kRoughnessPoints = 400;
+
+struct GatherCandidate {
+  std::string name;
+  illumination::GatherOptions gather;
+};
+
+nlohmann::json gather_study(const illumination::IlluminationEngine& scene, const PointLight& light, int samples) {
+  using illumination::HemisphereSampling;
+  const auto make = [&](const char* name, HemisphereSampling sampling, int s, double radius, int rays) {
+    illumination::GatherOptions g;
+    g.samples = s;
+    g.sampling = sampling;
+    g.light_radius = radius;
+    g.shadow_rays = rays;
+    return GatherCandidate{name, g};
+  };
+  const int half = std::max(1, samples / 2);
+  const std::vector<GatherCandidate> candidates = {
+      make("hammersley S, point (original)", HemisphereSampling::kHammersley, samples, 0, 1),
+      make("stratified S, point", HemisphereSampling::kStratified, samples, 0, 1),
+      make("hammersley S, r 1 cm x1", HemisphereSampling::kHammersley, samples, 0.01, 1),
+      make("hammersley S/2, r 1 cm x3", HemisphereSampling::kHammersley, half, 0.01, 3),
+      make("stratified S/2, r 1 cm x3", HemisphereSampling::kStratified, half, 0.01, 3),
+      make("hammersley S, r 2 cm x1", HemisphereSampling::kHammersley, samples, 0.02, 1),
+      make("hammersley S/2, r 2 cm x3", HemisphereSampling::kHammersley, half, 0.02, 3),
+  };
+  const std::vector<int> all = scene.all_points();
+  const std::vector<int> reference_points = illumination::spread_points(scene.point_count(), kReferencePoints);
+  const std::vector<int> roughness_points = illumination::spread_points(scene.point_count(), kRoughnessPoints);
+  const Eigen::Vector3d step(0.005, 0, 0);
+  const int positions = 9;
+  // The references, one per light radius (the shadow rays of a 4096-ray reference: 4 per hit).
+  struct Reference {
+    double radius;
+    Eigen::VectorXf values;
+    double roughness;
+  };
+  std::vector<Reference> references;
+  references.reserve(8);  // at most one per radius: references returned stay valid
+  const auto reference_for = [&](double radius) -> const Reference& {
+    for (const Reference& r : references) {
+      if (r.radius == radius) return r;
+    }
+    illumination::GatherOptions g;
+    g.samples = kReferenceRays;
+    g.sampling = HemisphereSampling::kStratified;
+    g.seed = 7777;
+    g.light_radius = radius;
+    g.shadow_rays = radius > 0 ? 4 : 1;
+    Reference r{radius, {}, 0};
+    scene.indirect({light}, g, reference_points, r.values);
+    r.roughness = illumination::light_roughness(scene, light, step, positions, g, roughness_points);
+    references.push_back(std::move(r));
+    return references.back();
+  };
+  const Reference& point_reference = reference_for(0);
+  std::printf("\nillumination gather study (issue #38): light at (%.3f, %.3f, %.3f); reference %d rays (stratified, "
+              "4 shadow rays per hit for r > 0) at %d spread points; roughness: 9 light positions 5 mm apart along x "
+              "at %d points\n",
+              light.position.x(), light.position.y(), light.position.z(), kReferenceRays, kReferencePoints,
+              kRoughnessPoints);
+  std::printf("%-30s %7s %10s %10s %10s %11s %10s %10s %9s\n", "gather", "full_s", "2seeds_rms", "ref_rms",
+              "ref_max", "vs_point_ref", "roughness", "ref_rough", "ray_cost");
+  nlohmann::json rows = nlohmann::json::array();
+  for (const GatherCandidate& c : candidates) {
+    illumination::GatherOptions first = c.gather, second = c.gather;
+    first.seed = 0;
+    second.seed = 1;
+    Eigen::VectorXf a, b, a_sampled;
+    const auto start = Clock::now();
+    scene.indirect({light}, first, all, a);
+    const double full_seconds = since(start);
+    scene.indirect({light}, second, all, b);
+    const double seeds = illumination::relative_rms_difference(a, b);
+    scene.indirect({light}, first, reference_points, a_sampled);
+    const Reference& reference = reference_for(c.gather.light_radius);
+    const double reference_rms = illumination::relative_rms_difference(a_sampled, reference.values);
+    const double reference_max = illumination::max_error_over_max(a_sampled, reference.values);
+    const double vs_point = illumination::relative_rms_difference(a_sampled, point_reference.values);
+    const double roughness = illumination::light_roughness(scene, light, step, positions, first, roughness_points);
+    const int ray_cost = c.gather.samples * (1 + (c.gather.light_radius > 0 ? c.gather.shadow_rays : 1));
+    std::printf("%-30s %7.3f %9.3f%% %9.3f%% %9.3f%% %10.3f%% %9.3f%% %9.3f%% %9d\n", c.name.c_str(), full_seconds,
+                100 * seeds, 100 * reference_rms, 100 * reference_max, 100 * vs_point, 100 * roughness,
+                100 * reference.roughness, ray_cost);
+    rows.push_back({{"gather_study", true},
+                    {"gather", c.name},
+                    {"samples", c.gather.samples},
+                    {"sampling", c.gather.sampling == HemisphereSampling::kStratified ? "stratified" : "hammersley"},
+                    {"light_radius", c.gather.light_radius},
+                    {"shadow_rays", c.gather.shadow_rays},
+                    {"full_gather_seconds", full_seconds},
+                    {"two_seed_relative_rms_difference", seeds},
+                    {"reference_relative_rms_error", reference_rms},
+                    {"reference_max_error_over_max", reference_max},
+                    {"point_reference_relative_rms_error", vs_point},
+                    {"roughness", roughness},
+                    {"reference_roughness", reference.roughness}});
+  }
+  // How the original gather converges with its ray count, at the reference points only.
+  std::printf("original gather (hammersley, point light) by ray count, at the %d reference points:\n%-8s %10s %10s %10s\n",
+              kReferencePoints, "rays", "2seeds_rms", "ref_rms", "ref_max");
+  for (const int rays : {samples, 4 * samples, 16 * samples}) {
+    illumination::GatherOptions first;
+    first.samples = rays;
+    illumination::GatherOptions second = first;
+    second.seed = 1;
+    Eigen::VectorXf a, b;
+    scene.indirect({light}, first, reference_points, a);
+    scene.indirect({light}, second, reference_points, b);
+    const double seeds = illumination::relative_rms_difference(a, b);
+    const double reference_rms = illumination::relative_rms_difference(a, point_reference.values);
+    const double reference_max = illumination::max_error_over_max(a, point_reference.values);
+    std::printf("%-8d %9.3f%% %9.3f%% %9.3f%%\n", rays, 100 * seeds, 100 * reference_rms, 100 * reference_max);
+    rows.push_back({{"gather_convergence", true},
+                    {"samples", rays},
+                    {"two_seed_relative_rms_difference", seeds},
+                    {"reference_relative_rms_error", reference_rms},
+                    {"reference_max_error_over_max", reference_max}});
+  }
+  return rows;
+}
+
 }  // namespace
 
 nlohmann::json run_illumination_suite(const SuiteOptions& options) {
@@ -207,8 +339,19 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   illumination::IlluminationTrainingOptions training;
   for (const Eigen::Vector3d& p : illumination::light_grid(room, grid)) training.lights.push_back({p, Eigen::Vector3d::Ones()});
   training.gather.samples = o.samples;
-  std::printf("illumination: Cornell box, %d points, %d gather rays per point; training on %zu lights (%d × %d grid)\n",
-              scene.point_count(), o.samples, training.lights.size(), grid.nx, grid.nz);
+  training.gather.sampling = o.sampling == "stratified" ? illumination::HemisphereSampling::kStratified
+                                                         : illumination::HemisphereSampling::kHammersley;
+  training.gather.light_radius = o.light_radius;
+  training.gather.shadow_rays = o.shadow_rays;
+  if (o.gather_study > 0) {
+    const std::vector<NovelLight> probe = novel_lights(room, grid, 1, 0);
+    for (auto& row : gather_study(scene, probe[0].light, o.samples)) results.push_back(row);
+    if (o.gather_study == 2) return results;
+  }
+  std::printf("illumination: Cornell box, %d points, %d gather rays per point (%s, light radius %g m, %d shadow rays); "
+              "training on %zu lights (%d × %d grid)\n",
+              scene.point_count(), o.samples, o.sampling.c_str(), o.light_radius, o.shadow_rays, training.lights.size(),
+              grid.nx, grid.nz);
 
   illumination::IlluminationTrainingReport report;
   const auto train_start = Clock::now();

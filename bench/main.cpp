@@ -74,6 +74,22 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--illumination-figure", options.illumination.figure,
                  "illumination: write a PNG of full / subspace / error for novel lights");
+  app.add_option("--illumination-sampling", options.illumination.sampling,
+                 "illumination: hemisphere sampling of the gather (issue #38)")
+      ->check(CLI::IsMember({"hammersley", "stratified"}))
+      ->capture_default_str();
+  app.add_option("--illumination-light-radius", options.illumination.light_radius,
+                 "illumination: the lights' radius in metres for the gather's shadow rays (0: point lights)")
+      ->check(CLI::Range(0.0, 0.1))
+      ->capture_default_str();
+  app.add_option("--illumination-shadow-rays", options.illumination.shadow_rays,
+                 "illumination: shadow rays per hit and light when the light radius is > 0")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  app.add_option("--illumination-gather-study", options.illumination.gather_study,
+                 "illumination: 1: measure candidate gathers' noise and smoothness first; 2: only that")
+      ->check(CLI::Range(0, 2))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   if (std::filesystem::is_directory(data_dir)) {

@@ -71,6 +71,8 @@ double radical_inverse_base2(uint32_t s) {
 
 double fractional(double x) { return x - std::floor(x); }
 
+constexpr double kGoldenFraction = 0.6180339887498949;  // (√5 − 1)/2: spreads the shadow rays' angles
+
 // Duff et al. 2017, Listing 3: t, b with (t, b, n) right-handed and orthonormal.
 void orthonormal_basis(const Eigen::Vector3d& n, Eigen::Vector3d& t, Eigen::Vector3d& b) {
   const double sign = std::copysign(1.0, n.z());
@@ -136,6 +138,13 @@ void record_embree_error(void* user, RTCError, const char* message) {
 
 Status check_gather_options(const GatherOptions& options) {
   if (options.samples < 1) return invalid("samples must be ≥ 1, got " + std::to_string(options.samples));
+  if (options.shadow_rays < 1) return invalid("shadow_rays must be ≥ 1, got " + std::to_string(options.shadow_rays));
+  if (!std::isfinite(options.light_radius) || options.light_radius < 0) {
+    return invalid("light_radius must be finite and ≥ 0, got " + format_number(options.light_radius));
+  }
+  if (options.sampling != HemisphereSampling::kHammersley && options.sampling != HemisphereSampling::kStratified) {
+    return invalid("sampling " + std::to_string(static_cast<int>(options.sampling)) + " is not a known sampling");
+  }
   return Status::Ok();
 }
 
@@ -198,33 +207,60 @@ struct IlluminationEngine::Embree {
 
   // add_irradiance for the hits of one packet (`lit` marks the hits that count): per light, one
   // packet of shadow rays from each hit moved off its surface. irradiance[k] gains what hit k
-  // receives, lights in order, as add_irradiance would add it.
+  // receives, lights in order, as add_irradiance would add it. With radius > 0 each light is a
+  // disc of that radius facing the hit: `shadow_rays` packets, ray j of hit k aimed at the disc
+  // point (r, φ) = (radius·√((j + u)/J), 2π(j·φ_golden + v)) with (u, v) drawn from jitter[k]
+  // and j, and the hit receives the fraction of them that arrive.
   void add_irradiance_packet(const Eigen::Vector3d* x, const Eigen::Vector3d* n, const bool* lit, int count,
-                             const std::vector<PointLight>& lights, RTCIntersectContext& context,
-                             Eigen::Vector3d* irradiance) const {
+                             const std::vector<PointLight>& lights, double radius, int shadow_rays,
+                             const uint64_t* jitter, RTCIntersectContext& context, Eigen::Vector3d* irradiance) const {
+    const int rays = radius > 0 ? shadow_rays : 1;
     for (const PointLight& light : lights) {
-      alignas(64) int valid[kPacket];
-      alignas(64) RTCRay16 shadow;
       double received[kPacket];
-      for (int k = 0; k < kPacket; ++k) {
-        valid[k] = 0;
-        if (k >= count || !lit[k]) continue;
+      int arrived[kPacket] = {};
+      bool facing[kPacket] = {};
+      Eigen::Vector3d origins[kPacket], across_1[kPacket], across_2[kPacket];
+      for (int k = 0; k < count; ++k) {
+        if (!lit[k]) continue;
         const Eigen::Vector3d to_light = light.position - x[k];
         const double n_dot = n[k].dot(to_light);
         if (!(n_dot > 0)) continue;
         const double r2 = to_light.squaredNorm();
-        const Eigen::Vector3d origin = x[k] + offset * n[k];
-        const Eigen::Vector3d to = light.position - origin;
-        const double distance = to.norm();
-        if (!(distance > 0)) continue;
-        set_ray(shadow, k, origin, to / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
         received[k] = n_dot / (std::sqrt(r2) * r2);
-        valid[k] = -1;
+        origins[k] = x[k] + offset * n[k];
+        if (radius > 0) {
+          const Eigen::Vector3d axis = to_light / std::sqrt(r2);
+          orthonormal_basis(axis, across_1[k], across_2[k]);
+        }
+        facing[k] = true;
       }
-      rtcOccluded16(valid, scene, &context, &shadow);
+      for (int j = 0; j < rays; ++j) {
+        alignas(64) int valid[kPacket];
+        alignas(64) RTCRay16 shadow;
+        for (int k = 0; k < kPacket; ++k) {
+          valid[k] = 0;
+          if (k >= count || !facing[k]) continue;
+          Eigen::Vector3d target = light.position;
+          if (radius > 0) {
+            const uint64_t bits = splitmix64(jitter[k] ^ (0xA5A5A5A5ull + static_cast<uint64_t>(j)));
+            const double r = radius * std::sqrt((j + unit_interval(bits)) / rays);
+            const double phi = 2.0 * kPi * fractional(j * kGoldenFraction + unit_interval(splitmix64(bits)));
+            target += (r * std::cos(phi)) * across_1[k] + (r * std::sin(phi)) * across_2[k];
+          }
+          const Eigen::Vector3d to = target - origins[k];
+          const double distance = to.norm();
+          if (!(distance > 0)) continue;
+          set_ray(shadow, k, origins[k], to / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
+          valid[k] = -1;
+        }
+        rtcOccluded16(valid, scene, &context, &shadow);
+        for (int k = 0; k < count; ++k) {
+          // Embree sets tfar to −∞ when the ray is blocked.
+          if (valid[k] != 0 && shadow.tfar[k] >= 0) ++arrived[k];
+        }
+      }
       for (int k = 0; k < count; ++k) {
-        // Embree sets tfar to −∞ when the ray is blocked.
-        if (valid[k] != 0 && shadow.tfar[k] >= 0) irradiance[k] += light.intensity * received[k];
+        if (arrived[k] > 0) irradiance[k] += light.intensity * (received[k] * arrived[k] / rays);
       }
     }
   }
@@ -349,6 +385,8 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
   out.resize(3 * static_cast<Eigen::Index>(points.size()));
   const Embree& e = *embree_;
   const int samples = options.samples;
+  const bool stratified = options.sampling == HemisphereSampling::kStratified;
+  const int rows = std::max(1, static_cast<int>(std::floor(std::sqrt(static_cast<double>(samples)))));
   parallel_for_chunks(static_cast<int64_t>(points.size()), kIndirectPointsPerThread, [&](int64_t begin, int64_t end) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
@@ -383,8 +421,21 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
           const int s = first + k;
           // Cosine-weighted direction (pdf cos θ / π): r = √u₁ on the unit disc, lifted to the
           // hemisphere.
-          const double u1 = fractional(static_cast<double>(s) / samples + rotation_1);
-          const double u2 = fractional(radical_inverse_base2(static_cast<uint32_t>(s)) + rotation_2);
+          double u1, u2;
+          if (stratified) {
+            // Cell s of `rows` rows; row i holds the cells s ∈ [a, b) = [⌈i·S/rows⌉, ⌈(i+1)·S/rows⌉)
+            // (so s is in row ⌊s·rows/S⌋) and spans u₁ ∈ [a/S, b/S): every cell has area 1/S,
+            // which the plain average over samples needs to be unbiased when rows differ in count.
+            const int row = static_cast<int>(static_cast<int64_t>(s) * rows / samples);
+            const int row_first = static_cast<int>((static_cast<int64_t>(row) * samples + rows - 1) / rows);
+            const int row_end = static_cast<int>((static_cast<int64_t>(row + 1) * samples + rows - 1) / rows);
+            const uint64_t bits = splitmix64(hash ^ (0x5bd1e995ull * static_cast<uint64_t>(s + 1)));
+            u1 = (row_first + unit_interval(bits) * (row_end - row_first)) / samples;
+            u2 = (s - row_first + unit_interval(splitmix64(bits))) / (row_end - row_first);
+          } else {
+            u1 = fractional(static_cast<double>(s) / samples + rotation_1);
+            u2 = fractional(radical_inverse_base2(static_cast<uint32_t>(s)) + rotation_2);
+          }
           const double radius = std::sqrt(u1);
           const double phi = 2.0 * kPi * u2;
           directions[k] = (radius * std::cos(phi)) * tangent + (radius * std::sin(phi)) * bitangent +
@@ -396,6 +447,7 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
         // Each hit's point, normal and albedo (Embree: p = (1−u−v)·v₀ + u·v₁ + v·v₂); hits on
         // the unlit side (or a degenerate triangle) and rays that left the scene add nothing.
         bool lit[kPacket] = {};
+        uint64_t jitter[kPacket];
         Eigen::Vector3d hits[kPacket], hit_normals[kPacket], albedos[kPacket], irradiance[kPacket];
         for (int k = 0; k < count; ++k) {
           if (packet.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) continue;
@@ -413,9 +465,11 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
           albedos[k] = bw * surface_.albedo.row(i0).cast<double>() + bu * surface_.albedo.row(i1).cast<double>() +
                        bv * surface_.albedo.row(i2).cast<double>();
           irradiance[k].setZero();
+          jitter[k] = splitmix64(hash + static_cast<uint64_t>(first + k));
           lit[k] = true;
         }
-        e.add_irradiance_packet(hits, hit_normals, lit, count, lights, context, irradiance);
+        e.add_irradiance_packet(hits, hit_normals, lit, count, lights, options.light_radius, options.shadow_rays, jitter,
+                                context, irradiance);
         for (int k = 0; k < count; ++k) {
           if (lit[k]) sum += albedos[k].cwiseProduct(irradiance[k]) / kPi;
         }

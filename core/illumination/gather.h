@@ -13,11 +13,13 @@
 // L_d(y) at a hit is evaluated at the hit itself with the triangle's interpolated albedo and
 // its geometric normal, not interpolated from vertices.
 //
-// Determinism: the S directions of point i depend only on (seed, i, S) — a per-point rotation of
-// one low-discrepancy set — never on which other points are computed, the thread count or the
-// light. So a key point's value computed alone equals its value in the full gather bit for bit,
-// and the gather at a point is a smooth function of the light's position (the same rays each
-// time), which is what the subspace has to learn.
+// Determinism: the S directions of point i depend only on (seed, i, S, sampling) — a per-point
+// rotation of one low-discrepancy set, or per-point jittered strata — never on which other points are computed, the thread count or the
+// light. So a key point's value computed alone equals its value in the full gather bit for bit.
+// With the same rays each time, the gather at a point is a smooth function of the light's
+// position except where a shadow ray's visibility steps (a hit crossing a shadow's edge); a
+// light_radius > 0 with several shadow rays turns each step into several smaller ones across a
+// penumbra (issue #38: the steps are what the subspace cannot span).
 #pragma once
 
 #include <cstdint>
@@ -31,12 +33,31 @@
 
 namespace animspace::illumination {
 
-struct GatherOptions {
-  int samples = 64;        // S, hemisphere rays per point, ≥ 1
-  uint64_t seed = 0;       // picks the per-point rotations
+// How a point's S hemisphere directions are drawn (issue #38 compares them by measurement).
+enum class HemisphereSampling {
+  // One Hammersley set of S points rotated per point (Cranley–Patterson): the original gather.
+  kHammersley,
+  // Jittered strata: S cells of equal area 1/S in m = ⌊√S⌋ rows (⌈S/m⌉ or ⌊S/m⌋ cells each, a
+  // row's height in proportion), one uniform jitter per cell drawn from (seed, point, cell).
+  kStratified,
 };
 
-// Checks samples ≥ 1. Error: kInvalidArgument naming `samples`.
+struct GatherOptions {
+  int samples = 64;        // S, hemisphere rays per point, ≥ 1
+  uint64_t seed = 0;       // picks the per-point rotations / jitters
+  HemisphereSampling sampling = HemisphereSampling::kHammersley;
+  // The light's radius in metres (issue #38): 0 treats it as a point (one shadow ray per hit and
+  // light: visibility is a step function of the light's position). > 0 treats each light as a
+  // disc of this radius facing the hit, its visibility the fraction of `shadow_rays` rays to
+  // points on the disc (stratified in radius, jittered per (seed, point, sample)) that reach it;
+  // the irradiance still uses the centre's distance and angle. Used by the indirect gather only
+  // (direct() stays a point light).
+  double light_radius = 0;
+  int shadow_rays = 1;     // per hit and light when light_radius > 0, ≥ 1
+};
+
+// Checks samples ≥ 1, shadow_rays ≥ 1, light_radius finite and ≥ 0. Error: kInvalidArgument
+// naming the field.
 Status check_gather_options(const GatherOptions& options);
 
 // Checks 1 ≤ |lights| ≤ max_lights, finite positions, finite intensities ≥ 0. Errors:

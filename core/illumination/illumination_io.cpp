@@ -15,6 +15,11 @@ namespace {
 constexpr const char* kSamplesKey = "illumination.samples";
 constexpr const char* kSeedKey = "illumination.seed";
 constexpr const char* kQuantityKey = "illumination.quantity";
+// Issue #38; absent in older files, which then load as the original gather (Hammersley, point
+// light). Written only when they differ from that, so older readers see unchanged files.
+constexpr const char* kSamplingKey = "illumination.sampling";
+constexpr const char* kLightRadiusKey = "illumination.light_radius";
+constexpr const char* kShadowRaysKey = "illumination.shadow_rays";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
@@ -49,6 +54,11 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
   out.metadata()[kSamplesKey] = std::to_string(setup.gather.samples);
   out.metadata()[kSeedKey] = std::to_string(setup.gather.seed);
   out.metadata()[kQuantityKey] = setup.quantity;
+  if (setup.gather.sampling == HemisphereSampling::kStratified) out.metadata()[kSamplingKey] = "stratified";
+  if (setup.gather.light_radius > 0) {
+    out.metadata()[kLightRadiusKey] = format_number(setup.gather.light_radius);
+    out.metadata()[kShadowRaysKey] = std::to_string(setup.gather.shadow_rays);
+  }
 }
 
 bool has_illumination(const container::ModelContainer& in) { return in.has_section(sections::kAlbedo); }
@@ -101,6 +111,25 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
     if (used != seed.size()) throw std::invalid_argument(seed);
   } catch (const std::exception&) {
     return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kSeedKey + " should be an unsigned integer, got '" + seed + "'");
+  }
+  const std::string sampling = in.metadata_value(kSamplingKey, "hammersley");
+  if (sampling == "stratified") {
+    setup.gather.sampling = HemisphereSampling::kStratified;
+  } else if (sampling != "hammersley") {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kSamplingKey +
+                                                       " should be 'hammersley' or 'stratified', got '" + sampling + "'");
+  }
+  if (in.metadata().count(kLightRadiusKey) != 0) {
+    const std::string radius = in.metadata_value(kLightRadiusKey);
+    char* end = nullptr;
+    setup.gather.light_radius = std::strtod(radius.c_str(), &end);
+    if (radius.empty() || end != radius.c_str() + radius.size()) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata " + kLightRadiusKey + " should be a number, got '" + radius + "'");
+    }
+    auto rays = in.metadata_int(kShadowRaysKey);
+    if (!rays) return named(rays.error(), source);
+    setup.gather.shadow_rays = *rays;
   }
   Status gather = check_gather_options(setup.gather);
   if (!gather.ok()) return named(gather.error(), source);

@@ -1,4 +1,5 @@
 #include "core/illumination/gather.h"
+#include "core/illumination/gather_noise.h"
 
 #include <algorithm>
 #include <cmath>
@@ -197,6 +198,104 @@ TEST(IlluminationIndirect, ParallelPlanesMatchQuadratureWithinStandardError) {
   }
 }
 
+// Issue #38: jittered strata (one jitter per cell from (seed, point, cell)) are unbiased — the mean
+// over independent seeds matches the quadrature of the parallel planes — and, like any
+// stratification, no noisier per seed than independent samples. S = 50 has uneven rows (7 rows
+// of 7 or 8 cells).
+TEST(IlluminationIndirect, StratifiedSamplingIsUnbiasedOnParallelPlanes) {
+  const ParallelPlanes scene;
+  auto engine = make_engine(scene.mesh);
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  for (const int samples : {64, 50}) {
+    SCOPED_TRACE("samples " + std::to_string(samples));
+    const int seeds = 24;
+    std::vector<Eigen::VectorXf> estimates(seeds);
+    for (int seed = 0; seed < seeds; ++seed) {
+      GatherOptions options;
+      options.samples = samples;
+      options.seed = static_cast<uint64_t>(seed);
+      options.sampling = HemisphereSampling::kStratified;
+      engine->indirect({scene.light}, options, ceiling, estimates[static_cast<size_t>(seed)]);
+    }
+    for (int p = 0; p < scene.ceiling_count; ++p) {
+      const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
+      const PlaneMoments m = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
+      for (int k = 0; k < 3; ++k) {
+        const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
+        const double exact = scale * m.mean;
+        const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
+        double sum = 0, sum2 = 0;
+        for (const Eigen::VectorXf& estimate : estimates) {
+          const double value = estimate[3 * p + k];
+          EXPECT_NEAR(value, exact, 4 * iid_sigma) << "ceiling vertex " << p << " channel " << k;
+          sum += value;
+          sum2 += value * value;
+        }
+        const double mean = sum / seeds;
+        const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
+        EXPECT_GT(spread, 0.0);
+        // 4 standard errors of the mean, plus the ray origins' offset (see the test above).
+        EXPECT_NEAR(mean, exact, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * exact)
+            << "ceiling vertex " << p << " channel " << k;
+      }
+    }
+  }
+}
+
+// With nothing between the hits and the light, every shadow ray to the light's disc arrives: a
+// light of any radius gives the point light's value (the irradiance uses the centre).
+TEST(IlluminationIndirect, AnUnoccludedDiscLightEqualsThePointLight) {
+  const ParallelPlanes scene;  // the light 0.5 m above the floor, the ceiling 0.5 m above it
+  auto engine = make_engine(scene.mesh);
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  GatherOptions point;
+  point.samples = 64;
+  Eigen::VectorXf expected, disc;
+  engine->indirect({scene.light}, point, ceiling, expected);
+  ASSERT_GT(expected.minCoeff(), 0.0f);
+  for (const int rays : {1, 3, 8}) {
+    GatherOptions options = point;
+    options.light_radius = 0.05;
+    options.shadow_rays = rays;
+    engine->indirect({scene.light}, options, ceiling, disc);
+    for (Eigen::Index i = 0; i < expected.size(); ++i) {
+      EXPECT_NEAR(disc[i], expected[i], 1e-6 * expected[i]) << "shadow rays " << rays << " value " << i;
+    }
+  }
+}
+
+// A disc light partly hidden by a blocker whose edge lies right below the light's centre: each
+// hit's visibility is a fraction in [0, 1], so the gathered value lies between 0 and the same
+// gather with the blocker taken away (the ceiling's rays that meet the blocker meet its unlit
+// top and add nothing either way); and the disc's soft shadow differs from the point's hard one.
+TEST(IlluminationIndirect, APartlyHiddenDiscLightIsBetweenDarkAndUnblocked) {
+  ParallelPlanes scene;
+  // A blocker between the floor and the light, lit side down, over x ∈ [−2, 0.1].
+  add_rectangle(scene.mesh, {-2, 0.25, -2}, {2.1, 0, 0}, {0, 0, 4}, 4, 4, {0, -1, 0}, {0.0, 0.0, 0.0});
+  auto engine = make_engine(scene.mesh);
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  const ParallelPlanes open;
+  auto open_engine = make_engine(open.mesh);
+  GatherOptions options;
+  options.samples = 64;
+  options.light_radius = 0.05;
+  options.shadow_rays = 4;
+  Eigen::VectorXf hidden, unblocked, point;
+  engine->indirect({scene.light}, options, ceiling, hidden);
+  open_engine->indirect({scene.light}, options, ceiling, unblocked);
+  GatherOptions point_options = options;
+  point_options.light_radius = 0;
+  engine->indirect({scene.light}, point_options, ceiling, point);
+  for (Eigen::Index i = 0; i < hidden.size(); ++i) {
+    EXPECT_GE(hidden[i], 0.0f);
+    EXPECT_LE(hidden[i], unblocked[i] * (1 + 1e-6f)) << i;
+  }
+  // The blocker does hide part of the floor's light, and the disc's penumbra differs from the
+  // point light's hard shadow somewhere.
+  EXPECT_LT(hidden.sum(), 0.99f * unblocked.sum());
+  EXPECT_GT((hidden - point).cwiseAbs().maxCoeff(), 0.0f);
+}
+
 // A closed unit cube, each wall an n × n grid lit on the inside, albedo ρ, a point light inside.
 // All of the light's flux 4πI lands on the walls, so ∫ E_d dA = 4πI and ∫ L_d dA = 4ρI; all the
 // flux the walls reflect, π ∫ L_d dA, lands on the walls again, so ∫ L_i dA = ρ/π · π ∫ L_d dA
@@ -317,6 +416,56 @@ TEST(IlluminationGather, APointsValueDoesNotDependOnTheBatch) {
   EXPECT_GT(differ, part.size() / 2);
 }
 
+// Issue #38: every gather (stratified, disc lights) is deterministic per point and per seed — a
+// point's value alone equals its value in the full gather bit for bit, the same seed repeats,
+// another seed draws other directions.
+TEST(IlluminationGather, EveryGatherIsDeterministicPerPointAndPerSeed) {
+  auto engine = make_engine(cornell_box({2000}));
+  const int n = engine->point_count();
+  const std::vector<PointLight> lights = {{{0.3, 0.45, 0.25}, {1, 1, 1}}};
+  std::vector<GatherOptions> gathers(3);
+  gathers[0].sampling = HemisphereSampling::kStratified;
+  gathers[1].light_radius = 0.02;
+  gathers[1].shadow_rays = 3;
+  gathers[2].sampling = HemisphereSampling::kStratified;
+  gathers[2].light_radius = 0.01;
+  for (size_t g = 0; g < gathers.size(); ++g) {
+    SCOPED_TRACE("gather " + std::to_string(g));
+    GatherOptions options = gathers[g];
+    options.samples = 24;
+    options.seed = 9;
+    Eigen::VectorXf full, again, part;
+    engine->indirect(lights, options, engine->all_points(), full);
+    EXPECT_GT(full.maxCoeff(), 0.0f);
+    engine->indirect(lights, options, engine->all_points(), again);
+    expect_bitwise_equal(full, engine->all_points(), again, "same seed");
+    const std::vector<int> subset = {n - 1, 0, 17, n / 2, 5};
+    engine->indirect(lights, options, subset, part);
+    expect_bitwise_equal(full, subset, part, "subset");
+    for (int v : subset) {
+      engine->indirect(lights, options, {v}, part);
+      expect_bitwise_equal(full, {v}, part, "single point");
+    }
+    options.seed = 10;
+    engine->indirect(lights, options, engine->all_points(), part);
+    int differ = 0;
+    for (Eigen::Index i = 0; i < part.size(); ++i) differ += part[i] != full[i];
+    EXPECT_GT(differ, part.size() / 2);
+  }
+}
+
+TEST(IlluminationGatherNoise, SpreadPointsAndRelativeErrorsByHand) {
+  // ⌊(2k + 1)·N / (2·count)⌋ for N = 10, count = 4: ⌊10/8⌋, ⌊30/8⌋, ⌊50/8⌋, ⌊70/8⌋.
+  EXPECT_EQ(spread_points(10, 4), (std::vector<int>{1, 3, 6, 8}));
+  EXPECT_EQ(spread_points(3, 5), (std::vector<int>{0, 1, 2}));
+  EXPECT_TRUE(spread_points(0, 5).empty());
+  Eigen::VectorXf reference(6), estimate(6);
+  reference << 1, 1, 1, 3, 3, 3;  // mean 2; largest point norm 3√3
+  estimate << 2, 1, 1, 3, 3, 2;    // errors (1, 0, 0) and (0, 0, −1)
+  EXPECT_NEAR(relative_rms_difference(estimate, reference), std::sqrt(2.0 / 6.0) / 2.0, 1e-7);
+  EXPECT_NEAR(max_error_over_max(estimate, reference), 1.0 / (3.0 * std::sqrt(3.0)), 1e-7);
+}
+
 TEST(IlluminationGather, LinearInTheLights) {
   auto engine = make_engine(cornell_box({2000}));
   const PointLight a{{0.2, 0.5, 0.3}, {1.0, 0.5, 0.25}};
@@ -360,6 +509,12 @@ TEST(IlluminationValidation, ErrorsNameTheField) {
   EXPECT_TRUE(check_gather_options({1, 0}).ok());
   expect_invalid(check_gather_options({0, 0}), {"samples", "0"});
   expect_invalid(check_gather_options({-3, 0}), {"samples", "-3"});
+  GatherOptions bad_gather;
+  bad_gather.shadow_rays = 0;
+  expect_invalid(check_gather_options(bad_gather), {"shadow_rays", "0"});
+  bad_gather = GatherOptions{};
+  bad_gather.light_radius = -0.5;
+  expect_invalid(check_gather_options(bad_gather), {"light_radius", "-0.5"});
 
   const PointLight good{{0.1, 0.2, 0.3}, {1, 1, 1}};
   EXPECT_TRUE(check_lights({good}, "lights").ok());

@@ -46,6 +46,39 @@ TEST(IlluminationIoTest, SetupRoundTripsThroughAContainer) {
   EXPECT_EQ(loaded->view->vertical_fov_rad, setup.view->vertical_fov_rad);
 }
 
+// Issue #38: the gather's sampling and disc lights round-trip; a file without them (every file
+// written before) loads as the original gather, Hammersley with point lights.
+TEST(IlluminationIoTest, GatherChoicesRoundTripAndOlderFilesLoadAsTheOriginalGather) {
+  IlluminationSetup setup = small_setup();
+  container::ModelContainer original;
+  attach_illumination(original, setup);
+  EXPECT_EQ(original.metadata().count("illumination.sampling"), 0u);
+  EXPECT_EQ(original.metadata().count("illumination.light_radius"), 0u);
+  auto loaded = load_illumination(original, "mem");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->gather.sampling, HemisphereSampling::kHammersley);
+  EXPECT_EQ(loaded->gather.light_radius, 0.0);
+  EXPECT_EQ(loaded->gather.shadow_rays, 1);
+
+  setup.gather.sampling = HemisphereSampling::kStratified;
+  setup.gather.light_radius = 0.015;
+  setup.gather.shadow_rays = 3;
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  auto parsed = container::parse(container::serialize(out), "mem");
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  loaded = load_illumination(*parsed, "mem");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->gather.sampling, HemisphereSampling::kStratified);
+  EXPECT_EQ(loaded->gather.light_radius, 0.015);
+  EXPECT_EQ(loaded->gather.shadow_rays, 3);
+
+  out.metadata()["illumination.sampling"] = "sobol";
+  auto refused = load_illumination(out, "mem");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("illumination.sampling"), std::string::npos) << refused.error().message;
+}
+
 TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
   const IlluminationSetup setup = small_setup();
   container::ModelContainer out;
