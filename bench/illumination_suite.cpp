@@ -193,7 +193,8 @@ void write_figure(const std::string& path, const illumination::IlluminationEngin
 
 // Issue #38, the gather study: for one novel light inside the hull and each candidate gather, the
 // full frame gathered with two seeds (their relative RMS difference: √2 × one gather's noise), the
-// error of seed 0 against a reference of kReferenceRays rays (same light model, another seed) at
+// error of seed 0 against a reference of kReferenceRays Hammersley rays (same light model, another
+// seed; its own noise reported by a second reference seed) at
 // kReferencePoints spread points, and the roughness in the light's position (light_roughness: 9
 // positions 5 mm apart along x) at kRoughnessPoints spread points, beside the reference's own.
 // The candidates cost about the same per point: S hemisphere rays and S·J shadow rays.
@@ -236,6 +237,7 @@ nlohmann::json gather_study(const illumination::IlluminationEngine& scene, const
     double radius;
     Eigen::VectorXf values;
     double roughness;
+    double two_seeds;  // the reference's own relative RMS difference from another seed
   };
   std::vector<Reference> references;
   references.reserve(8);  // at most one per radius: references returned stay valid
@@ -245,18 +247,24 @@ nlohmann::json gather_study(const illumination::IlluminationEngine& scene, const
     }
     illumination::GatherOptions g;
     g.samples = kReferenceRays;
-    g.sampling = HemisphereSampling::kStratified;
     g.seed = 7777;
     g.light_radius = radius;
     g.shadow_rays = radius > 0 ? 4 : 1;
-    Reference r{radius, {}, 0};
+    Reference r{radius, {}, 0, 0};
     scene.indirect({light}, g, reference_points, r.values);
+    Eigen::VectorXf other;
+    g.seed = 7778;
+    scene.indirect({light}, g, reference_points, other);
+    r.two_seeds = illumination::relative_rms_difference(other, r.values);
+    g.seed = 7777;
     r.roughness = illumination::light_roughness(scene, light, step, positions, g, roughness_points);
     references.push_back(std::move(r));
     return references.back();
   };
   const Reference& point_reference = reference_for(0);
-  std::printf("\nillumination gather study (issue #38): light at (%.3f, %.3f, %.3f); reference %d rays (stratified, "
+  std::printf("\nillumination gather study: the point-light reference's own two-seed relative RMS difference %.3f%%\n",
+              100 * point_reference.two_seeds);
+  std::printf("\nillumination gather study (issue #38): light at (%.3f, %.3f, %.3f); reference %d rays (hammersley, "
               "4 shadow rays per hit for r > 0) at %d spread points; roughness: 9 light positions 5 mm apart along x "
               "at %d points\n",
               light.position.x(), light.position.y(), light.position.z(), kReferenceRays, kReferencePoints,
@@ -296,7 +304,8 @@ nlohmann::json gather_study(const illumination::IlluminationEngine& scene, const
                     {"reference_max_error_over_max", reference_max},
                     {"point_reference_relative_rms_error", vs_point},
                     {"roughness", roughness},
-                    {"reference_roughness", reference.roughness}});
+                    {"reference_roughness", reference.roughness},
+                    {"reference_two_seed_relative_rms_difference", reference.two_seeds}});
   }
   // How the original gather converges with its ray count, at the reference points only.
   std::printf("original gather (hammersley, point light) by ray count, at the %d reference points:\n%-8s %10s %10s %10s\n",
@@ -375,9 +384,17 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
 
   const std::vector<int> all = scene.all_points();
   const std::vector<NovelLight> lights = novel_lights(room, grid, o.inside, o.outside);
-  std::printf("\n%-4s %-18s %-7s %9s %9s %9s %7s %9s %9s %9s\n", "#", "where", "inside", "rel_rms", "floor", "max/max",
-              "status", "full_s", "keys_ms", "recon_ms");
-  std::vector<double> full_s, keys_s, recon_s, rms_inside, max_inside;
+  // Issue #38: both the subspace's estimate and the full gather against a converged reference
+  // (kReferenceRays rays, the training gather's light model, another seed) at kReferencePoints
+  // spread points: ref_rms columns, relative RMS as rel_rms.
+  const std::vector<int> reference_points = illumination::spread_points(scene.point_count(), kReferencePoints);
+  illumination::GatherOptions reference_gather = training.gather;
+  reference_gather.samples = kReferenceRays;
+  reference_gather.seed = 7777;
+  if (reference_gather.light_radius > 0) reference_gather.shadow_rays = std::max(reference_gather.shadow_rays, 4);
+  std::printf("\n%-4s %-18s %-7s %9s %9s %9s %7s %9s %9s %9s %9s %9s\n", "#", "where", "inside", "rel_rms", "floor",
+              "max/max", "status", "full_s", "keys_ms", "recon_ms", "est_ref", "full_ref");
+  std::vector<double> full_s, keys_s, recon_s, rms_inside, max_inside, est_ref_inside, full_ref_inside;
   int hits_inside = 0, flagged_outside = 0, n_inside = 0, n_outside = 0;
   std::vector<Eigen::VectorXf> inside_keys;
   std::vector<Eigen::VectorXf> inside_estimates;
@@ -405,6 +422,14 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
     const Eigen::VectorXf centred = full - model.mean;
     const Eigen::VectorXf projected = model.mean + model.basis * (model.basis.transpose() * centred);
     const Accuracy floor = accuracy(projected, full);
+    Eigen::VectorXf reference, estimate_sampled(3 * reference_points.size()), full_sampled(3 * reference_points.size());
+    scene.indirect({novel.light}, reference_gather, reference_points, reference);
+    for (size_t p = 0; p < reference_points.size(); ++p) {
+      estimate_sampled.segment<3>(3 * static_cast<long>(p)) = cached.points.segment<3>(3 * reference_points[p]);
+      full_sampled.segment<3>(3 * static_cast<long>(p)) = full.segment<3>(3 * reference_points[p]);
+    }
+    const double estimate_vs_reference = illumination::relative_rms_difference(estimate_sampled, reference);
+    const double full_vs_reference = illumination::relative_rms_difference(full_sampled, reference);
     nlohmann::json row{{"light", l},
                        {"position", {novel.light.position.x(), novel.light.position.y(), novel.light.position.z()}},
                        {"where", novel.where},
@@ -416,17 +441,22 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                        {"key_point_error", cached.key_point_error},
                        {"full_gather_seconds", full_seconds},
                        {"key_gather_seconds", median(key_times)},
-                       {"reconstruct_seconds", median(recon_times)}};
-    std::printf("%-4zu %-18s %-7s %8.3f%% %8.3f%% %8.2f%% %7s %9.3f %9.3f %9.3f\n", l, novel.where.c_str(),
-                novel.inside ? "yes" : "no", 100 * a.relative_rms_error, 100 * floor.relative_rms_error,
-                100 * a.max_error_over_frame_max,
-                status_name(cached.status), full_seconds, 1e3 * median(key_times), 1e3 * median(recon_times));
+                       {"reconstruct_seconds", median(recon_times)},
+                       {"estimate_reference_relative_rms_error", estimate_vs_reference},
+                       {"full_reference_relative_rms_error", full_vs_reference}};
+    std::printf("%-4zu %-18s %-7s %8.3f%% %8.3f%% %8.2f%% %7s %9.3f %9.3f %9.3f %8.3f%% %8.3f%%\n", l,
+                novel.where.c_str(), novel.inside ? "yes" : "no", 100 * a.relative_rms_error,
+                100 * floor.relative_rms_error, 100 * a.max_error_over_frame_max, status_name(cached.status),
+                full_seconds, 1e3 * median(key_times), 1e3 * median(recon_times), 100 * estimate_vs_reference,
+                100 * full_vs_reference);
     results.push_back(row);
     if (novel.inside) {
       ++n_inside;
       hits_inside += cached.status == pmsc::CacheStatus::kHit ? 1 : 0;
       rms_inside.push_back(a.relative_rms_error);
       max_inside.push_back(a.max_error_over_frame_max);
+      est_ref_inside.push_back(estimate_vs_reference);
+      full_ref_inside.push_back(full_vs_reference);
       full_s.push_back(full_seconds);
       keys_s.push_back(median(key_times));
       recon_s.push_back(median(recon_times));
@@ -526,6 +556,8 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"speedup_served_light_set", speedup_served_light},
                          {"served_max_difference", served_difference},
                          {"median_relative_rms_error_inside", median(rms_inside)},
+                         {"median_estimate_reference_relative_rms_error_inside", median(est_ref_inside)},
+                         {"median_full_reference_relative_rms_error_inside", median(full_ref_inside)},
                          {"p95_max_error_over_frame_max_inside", max_inside.empty() ? 0.0 : tools::quantile(max_inside, 0.95)},
                          {"hit_rate_inside", hit_rate_inside},
                          {"recall_outside", recall_outside},
@@ -538,6 +570,9 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "the frame max, hit rate %.2f\n",
               n_inside, 100 * median(rms_inside), 100 * summary["p95_max_error_over_frame_max_inside"].get<double>(),
               hit_rate_inside);
+  std::printf("against a %d-ray reference at %d points (inside, medians): subspace estimate %.3f%%, full gather %.3f%% "
+              "of the mean radiance\n",
+              kReferenceRays, kReferencePoints, 100 * median(est_ref_inside), 100 * median(full_ref_inside));
   std::printf("outside (%d lights): flagged (blend or miss) %.2f\n", n_outside, recall_outside);
   std::printf("full gather %.3f s; keys %.3f ms + reconstruction %.3f ms: %.0f× in process\n", full_gather,
               1e3 * key_gather, 1e3 * reconstruct, speedup_in_process);
