@@ -51,6 +51,9 @@ struct LodMesh {
   std::vector<float> animation_positions;   // 4 per influence (p_j, Σ_j p_j.w = 1)
   std::vector<float> geomorph_delta;        // 4 per influence, when requested
   std::vector<uint32_t> indices;            // face_count × 3
+  // With include_texture_coordinates (header.texture_coordinates()): face_count × 3 × 2, (u, v)
+  // of each face's corners in `indices` order, the model's texture atlas.
+  std::vector<float> corner_uvs;
   v1::Skeleton skeleton;                    // FORM_ANIMATION_SPACE
   // What the stream took: chunks read and their serialized bytes (for transfer reports).
   uint64_t chunk_count = 0;

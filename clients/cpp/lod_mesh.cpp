@@ -75,6 +75,7 @@ class Assembler {
     const uint64_t vertices = std::min<uint64_t>(h.vertex_count(), kMaxReserve);
     const uint64_t influences = std::min<uint64_t>(h.influence_count(), kMaxReserve);
     mesh_.indices.reserve(3 * std::min<uint64_t>(h.face_count(), kMaxReserve));
+    if (h.texture_coordinates()) mesh_.corner_uvs.reserve(6 * std::min<uint64_t>(h.face_count(), kMaxReserve));
     if (animation_space()) {
       mesh_.influence_offsets.reserve(vertices + 1);
       mesh_.influence_offsets.push_back(0);
@@ -167,6 +168,11 @@ class Assembler {
       return at + ": indices must be " + std::to_string(size_t{b.face_count()} * 12) + " bytes, got " +
              std::to_string(b.indices().size());
     }
+    const size_t uv_bytes = h.texture_coordinates() ? size_t{b.face_count()} * 24 : 0;
+    if (b.texture_coordinates().size() != uv_bytes) {
+      return at + ": texture_coordinates must be " + std::to_string(uv_bytes) + " bytes (header.texture_coordinates " +
+             (h.texture_coordinates() ? "set" : "unset") + "), got " + std::to_string(b.texture_coordinates().size());
+    }
     const size_t first = mesh_.indices.size();
     append(mesh_.indices, b.indices());
     for (size_t k = first; k < mesh_.indices.size(); ++k) {
@@ -175,6 +181,7 @@ class Assembler {
                std::to_string(h.vertex_count());
       }
     }
+    append(mesh_.corner_uvs, b.texture_coordinates());
     faces_ += b.face_count();
     return "";
   }

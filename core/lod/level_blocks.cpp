@@ -40,6 +40,7 @@ LevelBlocks::LevelBlocks(const LodLevels& lods, int level, const LevelBlockOptio
     // replaces the level's own; p_j = 0 where only the coarser vertex has bone j.
     morph_ = lod::geomorph(lods, level);
   }
+  assert(options.corner_uvs == nullptr || options.corner_uvs->rows() == 3 * model.faces.rows());
   options_.pose = nullptr;  // read once, above; the caller's pose need not outlive this
 }
 
@@ -77,7 +78,8 @@ uint32_t LevelBlocks::block_vertex_count(uint32_t first) const {
 }
 
 uint32_t LevelBlocks::faces_per_block() const {
-  return static_cast<uint32_t>(std::clamp<int64_t>(options_.max_block_bytes / kFaceBytes, 1,
+  const int64_t per_face = kFaceBytes + (options_.corner_uvs ? kFaceUvBytes : 0);
+  return static_cast<uint32_t>(std::clamp<int64_t>(options_.max_block_bytes / per_face, 1,
                                                    static_cast<int64_t>(options_.max_block_vertices)));
 }
 
@@ -130,6 +132,25 @@ std::string pack_rest_transforms(const as::Skeleton& skeleton) {
         store_le(out, at, static_cast<float>(G(r, c)));
         at += sizeof(float);
       }
+    }
+  }
+  return out;
+}
+
+}  // namespace animspace::lod
+
+namespace animspace::lod {
+
+std::string LevelBlocks::face_uv_block(uint32_t first, uint32_t count) const {
+  assert(options_.corner_uvs != nullptr);
+  assert(first <= face_count() && count <= face_count() - first);
+  const auto& uvs = *options_.corner_uvs;
+  std::string out(size_t{count} * kFaceUvBytes, '\0');
+  size_t at = 0;
+  for (Eigen::Index r = Eigen::Index{first} * 3; r < (Eigen::Index{first} + count) * 3; ++r) {
+    for (int k = 0; k < 2; ++k) {
+      store_le(out, at, static_cast<float>(uvs(r, k)));
+      at += sizeof(float);
     }
   }
   return out;

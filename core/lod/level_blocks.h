@@ -9,6 +9,7 @@
 //   4-vectors          p_j or Δp, 4 float32 per influence: float32 is the wire precision of every
 //                      position the API sends; the core keeps doubles for simplification (§6)
 //   faces              3 uint32 per face
+//   corner UVs         6 float32 per face: (u, v) of corners 0, 1, 2 (a texture atlas's)
 //   rest transforms    Ĝ_j as the top three rows of each 4 × 4, row-major, 12 float32 per bone
 #pragma once
 
@@ -28,6 +29,7 @@ inline constexpr int64_t kBoneBytes = 4;         // a bone index
 inline constexpr int64_t kVectorBytes = 16;      // a 4-vector, p_j or Δp
 inline constexpr int64_t kPosedVertexBytes = 12;  // a posed vertex
 inline constexpr int64_t kFaceBytes = 12;        // a face
+inline constexpr int64_t kFaceUvBytes = 24;      // a face's corner UVs
 
 enum class LevelForm {
   kAnimationSpace,  // influences and p_j: the consumer poses the mesh itself (v = Σ G_j p_j)
@@ -41,6 +43,10 @@ struct LevelBlockOptions {
   // kAnimationSpace only (asserted): carry Δp to the next coarser level on the aligned influences
   // (lod::geomorph); at the coarsest level Δp = 0 on the level's own influences.
   bool geomorph = false;
+  // Per-corner UVs of the level's faces (3·#F × 2, corner c of face f in row 3f + c; asserted),
+  // or null: face blocks then also cost kFaceUvBytes per face. Read by face_uv_block, so they
+  // must outlive the result.
+  const Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>* corner_uvs = nullptr;
   uint32_t max_block_vertices = 65536;  // ≥ 1
   // Payload bytes per block, ≥ 1: a vertex block holds as many vertices as fit (at least one,
   // whatever its influences cost); a face block as many faces as fit, at most max_block_vertices.
@@ -77,7 +83,8 @@ class LevelBlocks {
   // kOffsetBytes and kBoneBytes + kVectorBytes per influence, another kVectorBytes with a geomorph,
   // plus the block's leading offset); always at least one.
   uint32_t block_vertex_count(uint32_t first) const;
-  // Faces per face block: max_block_bytes / kFaceBytes, within [1, max_block_vertices].
+  // Faces per face block: max_block_bytes / kFaceBytes (kFaceBytes + kFaceUvBytes with corner
+  // UVs), within [1, max_block_vertices].
   uint32_t faces_per_block() const;
 
   // kPosed: the level at the pose, #V × 3 float32 (rows [first, first + count) are one block).
@@ -86,6 +93,9 @@ class LevelBlocks {
   InfluenceBlock influence_block(uint32_t first, uint32_t count) const;
   // Faces [first, first + count) (asserted within the level).
   std::string face_block(uint32_t first, uint32_t count) const;
+  bool has_corner_uvs() const { return options_.corner_uvs != nullptr; }
+  // The corner UVs of faces [first, first + count), as float32 (asserted: has_corner_uvs()).
+  std::string face_uv_block(uint32_t first, uint32_t count) const;
 
  private:
   const animation_space::InfluenceSets& influences() const;

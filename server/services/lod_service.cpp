@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/animspace/model.h"
+#include "core/atlas/atlas_io.h"
 #include "core/lod/level_blocks.h"
 #include "server/lod_selection.h"
 #include "server/model_lookup.h"
@@ -69,6 +70,7 @@ class LodStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::Byte
   std::shared_ptr<const LoadedModel> model_;  // keeps the level alive across a hot swap
   LodChoice choice_;
   std::optional<lod::LevelBlocks> blocks_;
+  std::optional<atlas::Atlas> atlas_;  // include_texture_coordinates: the model's, level 0's faces
   bool prepared_ = false;
   Phase phase_ = Phase::kHeader;
   uint32_t next_vertex_ = 0;
@@ -103,6 +105,10 @@ grpc::Status LodStream::prepare() {
     return invalid_argument(
         "include_geomorph: expected FORM_ANIMATION_SPACE (Δp is per influence, §7.3), got FORM_POSED");
   }
+  if (r.include_texture_coordinates() && r.form() != Request::FORM_POSED) {
+    return invalid_argument(
+        "include_texture_coordinates: expected FORM_POSED (UVs go with the drawn mesh), got FORM_ANIMATION_SPACE");
+  }
   if (r.vertices_per_chunk() > kMaxVerticesPerChunk) {
     return invalid_argument("vertices_per_chunk: expected 0 (the default, " + std::to_string(kDefaultVerticesPerChunk) +
                             ") or 1.." + std::to_string(kMaxVerticesPerChunk) + ", got " +
@@ -111,6 +117,22 @@ grpc::Status LodStream::prepare() {
   if (grpc::Status s = find_model(env_.registry, r.model(), "model", model_); !s.ok()) return s;
   set_model(model_->name);
   if (grpc::Status s = select_lod_level(*model_, r, &choice_); !s.ok()) return s;
+  if (r.include_texture_coordinates()) {
+    // The atlas (animspace atlas) belongs to the full mesh: coarser levels have other faces.
+    if (choice_.level != 0) {
+      return invalid_argument("include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level " +
+                              std::to_string(choice_.level) + " of " + std::to_string(model_->lod_levels->count()));
+    }
+    const long faces = choice_.lod->model.faces.rows();
+    auto stored = atlas::load_atlas(model_->container, faces, model_->path.string());
+    if (!stored) return to_grpc_status(stored.error());
+    if (!*stored) {
+      return failed_precondition("include_texture_coordinates: model '" + model_->name + "' version " +
+                                 std::to_string(model_->version) +
+                                 " stores no texture atlas (expected atlas sections; `animspace atlas` adds them)");
+    }
+    atlas_ = std::move(**stored);
+  }
 
   lod::LevelBlockOptions options;
   as::TransformList globals;
@@ -125,6 +147,7 @@ grpc::Status LodStream::prepare() {
     options.form = lod::LevelForm::kAnimationSpace;
     options.geomorph = r.include_geomorph();
   }
+  if (atlas_) options.corner_uvs = &atlas_->uvs;
   options.max_block_vertices = r.vertices_per_chunk() != 0 ? r.vertices_per_chunk() : kDefaultVerticesPerChunk;
   options.max_block_bytes = std::max<int64_t>(1, std::min(kMaxBlockBytes, env_.options.max_message_bytes / 4));
   blocks_.emplace(*model_->lod_levels, choice_.level, options);
@@ -143,6 +166,7 @@ void LodStream::fill_header(v1::LodHeader* header) const {
   header->set_influence_count(blocks_->influence_count());
   header->set_form(request_.form());
   header->set_tolerated_error(static_cast<float>(choice_.tolerated_error));
+  header->set_texture_coordinates(blocks_->has_corner_uvs());
 }
 
 void LodStream::fill_vertices(uint32_t first, uint32_t count, v1::VertexBlock* block) const {
@@ -191,6 +215,7 @@ bool LodStream::next_chunk(v1::LodChunk* chunk, grpc::Status* status) {
       block->set_first_face(next_face_);
       block->set_face_count(count);
       block->set_indices(blocks_->face_block(next_face_, count));
+      if (blocks_->has_corner_uvs()) block->set_texture_coordinates(blocks_->face_uv_block(next_face_, count));
       what = "face " + std::to_string(next_face_);
       next_face_ += count;
       if (next_face_ == faces) phase_ = Phase::kSkeleton;

@@ -27,6 +27,7 @@
 #include "clients/cpp/client.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
+#include "core/atlas/atlas_io.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/lod/levels.h"
@@ -162,6 +163,25 @@ class LodServiceTest : public ::testing::Test {
     container::ModelContainer sheet;
     as::store(*sheet_, sheet);
     testing::write_model(repo_, "sheet", 1, sheet);
+    // The demo arm with an atlas (issue #37): per-corner UVs made up here, a different UV for
+    // every corner, so each shared vertex is a seam; one chart (load_atlas wants them dense).
+    {
+      auto arm = container::read_file(repo_ / kModel / "1" / "model.anim");
+      ASSERT_TRUE(arm.ok()) << arm.error().message;
+      auto faces = arm->int_matrix(container::sections::kFaces, 3);
+      ASSERT_TRUE(faces.ok()) << faces.error().message;
+      atlas_ = new atlas::Atlas();
+      const Eigen::Index F = faces->rows();
+      atlas_->chart_count = 1;
+      atlas_->chart_of_face.assign(static_cast<size_t>(F), 0);
+      atlas_->uvs.resize(3 * F, 2);
+      for (Eigen::Index r = 0; r < 3 * F; ++r) {
+        atlas_->uvs(r, 0) = static_cast<double>(r) / static_cast<double>(3 * F);
+        atlas_->uvs(r, 1) = 0.5 + 0.45 * std::sin(0.37 * static_cast<double>(r));
+      }
+      atlas::store_atlas(*atlas_, "rest_pose", *arm);
+      testing::write_model(repo_, kAtlasModel, 1, *arm);
+    }
     daemon_ = new DaemonProcess({"--model-repository", repo_.string(), "--log-level", "info"}, work_->path());
     client_ = new Client(daemon_->address());
     ASSERT_TRUE(testing::wait_until_serving(*client_)) << "never SERVING";
@@ -188,6 +208,7 @@ class LodServiceTest : public ::testing::Test {
     delete model_;
     delete container_;
     delete sheet_;
+    delete atlas_;
     delete work_;
     client_ = nullptr;
     daemon_ = nullptr;
@@ -195,6 +216,7 @@ class LodServiceTest : public ::testing::Test {
     model_ = nullptr;
     container_ = nullptr;
     sheet_ = nullptr;
+    atlas_ = nullptr;
     work_ = nullptr;
   }
 
@@ -236,6 +258,8 @@ class LodServiceTest : public ::testing::Test {
   static inline double radius_ = 0;
   static constexpr int kSheetSize = 400;  // 401² vertices, 2·400² faces
   static inline as::AnimationSpaceModel* sheet_ = nullptr;
+  static constexpr const char* kAtlasModel = "arm-atlas";  // arm-animspace with atlas_
+  static inline atlas::Atlas* atlas_ = nullptr;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -808,6 +832,182 @@ TEST_F(LodServiceTest, CliPosesTheLevelAndReportsRefusals) {
                     &code);
   EXPECT_NE(code, 0) << printed;
   EXPECT_FALSE(std::filesystem::exists(refused));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The texture atlas (issue #37): per-corner UVs of level 0, the stored float64 rounded to float32.
+
+TEST_F(LodServiceTest, TextureCoordinatesAreTheStoredAtlasPerCorner) {
+  std::vector<float> want(static_cast<size_t>(atlas_->uvs.size()));
+  for (size_t i = 0; i < want.size(); ++i) want[i] = static_cast<float>(atlas_->uvs.data()[i]);  // row-major: u, v
+  v1::GetLodRequest request = level_request(0, v1::GetLodRequest::FORM_POSED, kAtlasModel);
+  const LodMesh plain = client_->get_lod(request);
+  EXPECT_FALSE(plain.header.texture_coordinates());
+  EXPECT_TRUE(plain.corner_uvs.empty()) << "UVs only when asked for";
+
+  request.set_include_texture_coordinates(true);
+  const LodMesh with = client_->get_lod(request);
+  EXPECT_TRUE(with.header.texture_coordinates());
+  EXPECT_TRUE(same_bytes(with.corner_uvs, want));
+  // The mesh itself is unchanged: same vertices, same faces (UVs are per corner, not per vertex).
+  EXPECT_TRUE(same_bytes(with.positions, plain.positions));
+  EXPECT_TRUE(same_bytes(with.indices, plain.indices));
+  EXPECT_TRUE(same_bytes(with.indices, faces_u32(model_->faces)));
+
+  // Small blocks: each face block carries its faces' UVs, reassembled to the same.
+  request.set_vertices_per_chunk(7);
+  const RawStream raw = raw_stream(channel(), request);
+  ASSERT_TRUE(raw.status.ok()) << raw.status.error_message();
+  int face_blocks = 0;
+  for (const v1::LodChunk& chunk : raw.chunks) {
+    if (chunk.payload_case() != v1::LodChunk::kFaces) continue;
+    ++face_blocks;
+    EXPECT_LE(chunk.faces().face_count(), 7u);
+    EXPECT_EQ(chunk.faces().texture_coordinates().size(), size_t{chunk.faces().face_count()} * 24);
+  }
+  EXPECT_EQ(face_blocks, static_cast<int>((model_->faces.rows() + 6) / 7));
+  const LodMesh small = client_->get_lod(request);
+  EXPECT_TRUE(same_bytes(small.corner_uvs, want));
+}
+
+// With UVs a face costs 36 bytes: blocks under a small --max-message-bytes hold fewer faces.
+TEST_F(LodServiceTest, TextureCoordinatesKeepFaceBlocksInTheByteBudget) {
+  TempDir work;
+  const auto repo = work.path() / "repo";
+  std::filesystem::create_directories(repo);
+  std::filesystem::copy(repo_ / kAtlasModel, repo / kAtlasModel, std::filesystem::copy_options::recursive);
+  const int64_t limit = 4096;  // blocks get a quarter: 1024 bytes, 28 faces with UVs (85 without)
+  DaemonProcess daemon({"--model-repository", repo.string(), "--max-message-bytes", std::to_string(limit)},
+                       work.path());
+  Client client(daemon.address());
+  ASSERT_TRUE(testing::wait_until_serving(client));
+  v1::GetLodRequest request = level_request(0, v1::GetLodRequest::FORM_POSED, kAtlasModel);
+  request.set_include_texture_coordinates(true);
+  const RawStream raw = raw_stream(client.channel(), request);
+  ASSERT_TRUE(raw.status.ok()) << raw.status.error_message();
+  uint32_t most = 0;
+  for (const v1::LodChunk& chunk : raw.chunks) {
+    EXPECT_LE(chunk.ByteSizeLong(), static_cast<size_t>(limit));
+    if (chunk.payload_case() == v1::LodChunk::kFaces) most = std::max(most, chunk.faces().face_count());
+  }
+  EXPECT_EQ(most, static_cast<uint32_t>(std::min<int64_t>(limit / 4 / 36, model_->faces.rows())));
+}
+
+TEST_F(LodServiceTest, TextureCoordinatesRefusalsNameTheField) {
+  const std::vector<BadCase> cases = {
+      {"a coarser level", grpc::StatusCode::INVALID_ARGUMENT,
+       "include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level 1 of " +
+           std::to_string(levels_->count()),
+       [](auto& r) { r.set_level(1); }},
+      {"a budget that picks a coarser level", grpc::StatusCode::INVALID_ARGUMENT,
+       "include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level " +
+           std::to_string(levels_->count() - 1),
+       [&](auto& r) {
+         r.mutable_budget()->set_max_vertices(static_cast<uint32_t>(level(levels_->count() - 1).model.vertex_count()));
+       }},
+      {"the animation-space form", grpc::StatusCode::INVALID_ARGUMENT,
+       "include_texture_coordinates: expected FORM_POSED (UVs go with the drawn mesh), got FORM_ANIMATION_SPACE",
+       [](auto& r) { r.set_form(v1::GetLodRequest::FORM_ANIMATION_SPACE); }},
+      {"a model without an atlas", grpc::StatusCode::FAILED_PRECONDITION,
+       "include_texture_coordinates: model 'arm-animspace' version 1 stores no texture atlas",
+       [](auto& r) { r.mutable_model()->set_name(kModel); }},
+  };
+  for (const BadCase& c : cases) {
+    SCOPED_TRACE(c.name);
+    v1::GetLodRequest request = level_request(0, v1::GetLodRequest::FORM_POSED, kAtlasModel);
+    request.set_include_texture_coordinates(true);
+    c.edit(request);
+    const RawStream raw = raw_stream(channel(), request);
+    EXPECT_EQ(raw.status.error_code(), c.code) << raw.status.error_message();
+    EXPECT_NE(raw.status.error_message().find(c.message_part), std::string::npos)
+        << "message: " << raw.status.error_message() << "\nexpected to contain: " << c.message_part;
+    EXPECT_TRUE(raw.chunks.empty()) << "a refused call streams nothing";
+  }
+}
+
+// `animspace lod --texture-coordinates`: a glTF whose every corner has its position and the
+// atlas's UV for that corner (seams split: one vertex per distinct UV).
+TEST_F(LodServiceTest, CliWritesTheAtlasAsTexcoord0) {
+  TempDir out;
+  const auto glb = out / "arm.glb";
+  int code = 0;
+  std::string errors;
+  const std::string printed = run_cli("--server " + daemon_->address() + " --json lod " + kAtlasModel +
+                                          " --level 0 --texture-coordinates -o " + glb.string(),
+                                      &code, &errors);
+  ASSERT_EQ(code, 0) << printed << errors;
+  EXPECT_TRUE(nlohmann::json::parse(printed)["texture_coordinates"].get<bool>());
+
+  // Every corner of the model, at the rest pose: (float position, UV).
+  PointMatrix rest;
+  as::evaluate(*model_, model_->skeleton.rest, rest);
+  std::vector<std::array<float, 5>> corners;
+  for (Eigen::Index f = 0; f < model_->faces.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const auto v = model_->faces(f, k);
+      corners.push_back({static_cast<float>(rest(v, 0)), static_cast<float>(rest(v, 1)),
+                         static_cast<float>(rest(v, 2)), static_cast<float>(atlas_->uvs(3 * f + k, 0)),
+                         static_cast<float>(atlas_->uvs(3 * f + k, 1))});
+    }
+  }
+  std::sort(corners.begin(), corners.end());
+
+  tinygltf::TinyGLTF loader;
+  tinygltf::Model gltf;
+  std::string error, warning;
+  ASSERT_TRUE(loader.LoadBinaryFromFile(&gltf, &error, &warning, glb.string())) << error;
+  const tinygltf::Primitive& primitive = gltf.meshes.at(0).primitives.at(0);
+  ASSERT_TRUE(primitive.attributes.count("TEXCOORD_0"));
+  auto floats = [&](int index, int width) {
+    const tinygltf::Accessor& a = gltf.accessors[static_cast<size_t>(index)];
+    const tinygltf::BufferView& view = gltf.bufferViews[static_cast<size_t>(a.bufferView)];
+    const size_t stride = view.byteStride != 0 ? view.byteStride : sizeof(float) * static_cast<size_t>(width);
+    std::vector<float> values;
+    for (size_t i = 0; i < a.count; ++i) {
+      for (int c = 0; c < width; ++c) {
+        float x;
+        std::memcpy(&x, gltf.buffers[static_cast<size_t>(view.buffer)].data.data() + view.byteOffset + a.byteOffset +
+                            i * stride + sizeof(float) * static_cast<size_t>(c),
+                    sizeof x);
+        values.push_back(x);
+      }
+    }
+    return values;
+  };
+  const std::vector<float> positions = floats(primitive.attributes.at("POSITION"), 3);
+  const std::vector<float> uvs = floats(primitive.attributes.at("TEXCOORD_0"), 2);
+  ASSERT_EQ(uvs.size() / 2, positions.size() / 3);
+  // Every corner has its own UV here, so every corner is its own vertex.
+  EXPECT_EQ(positions.size() / 3, corners.size());
+  const tinygltf::Accessor& indices = gltf.accessors[static_cast<size_t>(primitive.indices)];
+  const tinygltf::BufferView& view = gltf.bufferViews[static_cast<size_t>(indices.bufferView)];
+  ASSERT_EQ(indices.count, corners.size());
+  size_t matched = 0;
+  for (size_t i = 0; i < indices.count; ++i) {
+    const unsigned char* at =
+        gltf.buffers[static_cast<size_t>(view.buffer)].data.data() + view.byteOffset + indices.byteOffset;
+    size_t v = 0;
+    if (indices.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) {
+      uint32_t x;
+      std::memcpy(&x, at + 4 * i, 4);
+      v = x;
+    } else {
+      ASSERT_EQ(indices.componentType, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
+      uint16_t x;
+      std::memcpy(&x, at + 2 * i, 2);
+      v = x;
+    }
+    // glTF's v runs down: the file holds 1 − v.
+    const std::array<float, 3> p = {positions[3 * v], positions[3 * v + 1], positions[3 * v + 2]};
+    const float u = uvs[2 * v], w = 1.0f - uvs[2 * v + 1];
+    auto first = std::lower_bound(corners.begin(), corners.end(), std::array<float, 5>{p[0], p[1], p[2], -1.f, -1.f});
+    bool found = false;
+    for (auto it = first; it != corners.end() && (*it)[0] == p[0] && (*it)[1] == p[1] && (*it)[2] == p[2]; ++it) {
+      if (std::abs((*it)[3] - u) <= 1e-6f && std::abs((*it)[4] - w) <= 1e-6f) found = true;
+    }
+    if (found) ++matched;
+  }
+  EXPECT_EQ(matched, corners.size()) << "every corner of the file is a corner of the model with its atlas UV";
 }
 
 }  // namespace

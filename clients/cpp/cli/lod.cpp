@@ -307,6 +307,9 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
       ->check(CLI::IsMember({"global", "local"}))
       ->capture_default_str();
   cmd->add_option("--vertices-per-chunk", a.vertices_per_chunk, "Vertices per streamed block (default: the server's)");
+  cmd->add_flag("--texture-coordinates", a.texture_coordinates,
+                "Level 0 only: fetch the model's texture atlas (animspace atlas) and write it as UVs, the vertices "
+                "split along its seams (OBJ vt, PLY s t, glTF TEXCOORD_0)");
   cmd->add_option("--deadline-s", a.deadline_s, "Deadline for the whole stream")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -325,6 +328,7 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
   // A render-farm node that writes a file wants the mesh as drawn: posed, not animation space.
   request.set_form(v1::GetLodRequest::FORM_POSED);
   request.set_vertices_per_chunk(a.vertices_per_chunk);
+  request.set_include_texture_coordinates(a.texture_coordinates);
   if (a.level >= 0) {
     request.set_level(static_cast<uint32_t>(a.level));
   } else if (a.max_vertices > 0) {
@@ -360,6 +364,10 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
           .cast<int32_t>();
   // GetLod's posed form carries positions only: the normals of the posed faces go with them.
   if (faces > 0) mesh.normals = geometry::area_weighted_normals(mesh.points, mesh.faces);
+  if (h.texture_coordinates()) {
+    mesh = mesh_io::split_seams(
+        mesh, Eigen::Map<const mesh_io::UvMatrix>(received.corner_uvs.data(), 3 * faces, 2));
+  }
   if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("lod", written.error().message);
   }
@@ -375,6 +383,7 @@ int run_lod(const LodArgs& a, Client& client, bool json) {
          {"tolerated_error", request.has_pixel_tolerance() ? nlohmann::json(h.tolerated_error()) : nlohmann::json()},
          {"vertices", h.vertex_count()},
          {"faces", h.face_count()},
+         {"texture_coordinates", h.texture_coordinates()},
          {"bytes_received", received.bytes_received},
          {"chunks", received.chunk_count}});
   } else {

@@ -245,6 +245,34 @@ TEST_F(LevelBlocksTest, FaceBlocksAreTheFacesInOrder) {
   EXPECT_EQ(LevelBlocks(*lods_, 0, options).faces_per_block(), 1u);
 }
 
+// Per-corner UVs (a texture atlas): 24 more bytes per face, so fewer faces per block, and each
+// block the corners' (u, v) rounded to float32, in the faces' order.
+TEST_F(LevelBlocksTest, CornerUvBlocksAreTheUvsInFaceOrder) {
+  const Eigen::Index F = lods_->levels[0].model.faces.rows();
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> uvs(3 * F, 2);
+  for (Eigen::Index r = 0; r < 3 * F; ++r) uvs.row(r) << 1.0 / static_cast<double>(r + 3), 0.1 + 1e-9 * static_cast<double>(r);
+  LevelBlockOptions options;
+  options.max_block_vertices = 1000;
+  options.max_block_bytes = 36 * 9 + 35;
+  EXPECT_FALSE(LevelBlocks(*lods_, 0, options).has_corner_uvs());
+  options.corner_uvs = &uvs;
+  const LevelBlocks blocks(*lods_, 0, options);
+  EXPECT_TRUE(blocks.has_corner_uvs());
+  EXPECT_EQ(blocks.faces_per_block(), 9u);
+  std::vector<float> all;
+  for (uint32_t first = 0; first < blocks.face_count(); first += blocks.faces_per_block()) {
+    const uint32_t count = std::min(blocks.faces_per_block(), blocks.face_count() - first);
+    const std::string bytes = blocks.face_uv_block(first, count);
+    EXPECT_EQ(bytes.size(), size_t{count} * 24);
+    for (float x : decode<float>(bytes)) all.push_back(x);
+  }
+  ASSERT_EQ(all.size(), static_cast<size_t>(6 * F));
+  for (Eigen::Index r = 0; r < 3 * F; ++r) {
+    EXPECT_EQ(all[static_cast<size_t>(2 * r)], static_cast<float>(uvs(r, 0)));
+    EXPECT_EQ(all[static_cast<size_t>(2 * r + 1)], static_cast<float>(uvs(r, 1)));
+  }
+}
+
 TEST_F(LevelBlocksTest, RestTransformsAreTheTopThreeRowsRowMajor) {
   const as::Skeleton& skeleton = lods_->levels[0].model.skeleton;
   const auto values = decode<float>(pack_rest_transforms(skeleton));
