@@ -9,6 +9,7 @@
 #include "core/mesh_io/gltf_skin_writer.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstdint>
 #include <exception>
@@ -98,6 +99,16 @@ Status check_character(const SkinnedCharacter& c, const std::string& destination
         return invalid(destination, "normals row " + std::to_string(v) + " has length " + format_number(length) +
                                         ", expected a unit vector (within 1e-3)");
       }
+    }
+  }
+
+  if (c.uvs.rows() != 0) {
+    if (c.uvs.rows() != vertex_count) {
+      return invalid(destination, "uvs has " + std::to_string(c.uvs.rows()) + " rows, expected 0 or #V = " +
+                                      std::to_string(vertex_count));
+    }
+    for (Eigen::Index v = 0; v < vertex_count; ++v) {
+      if (!c.uvs.row(v).allFinite()) return invalid(destination, "uvs row " + std::to_string(v) + " is not finite");
     }
   }
 
@@ -280,7 +291,7 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
   const size_t set_count = std::max<size_t>(1, (max_influences + 3) / 4);
   // The buffer's size, in double so that the estimate itself cannot overflow (padding to 4 bytes
   // adds at most 3 per accessor).
-  const double bytes = static_cast<double>(vertex_count) * (2 * 12 + static_cast<double>(set_count) * (8 + 16)) +
+  const double bytes = static_cast<double>(vertex_count) * (2 * 12 + (c.uvs.rows() != 0 ? 8 : 0) + static_cast<double>(set_count) * (8 + 16)) +
                        static_cast<double>(face_count) * 12 + static_cast<double>(joint_count) * 64 +
                        static_cast<double>(frame_count) * (4 + static_cast<double>(joint_count) * (12 + 16)) +
                        4.0 * (6 + static_cast<double>(set_count) * 2 + static_cast<double>(joint_count) * 2);
@@ -322,6 +333,14 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
       primitive.attributes["NORMAL"] = gltf_writing::append_accessor(
           model, normals.data(), sizeof(float) * 3 * vertex_count, TINYGLTF_TARGET_ARRAY_BUFFER,
           TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_count);
+    }
+    if (c.uvs.rows() != 0) {
+      // glTF's texture origin is the top-left corner: (u, 1 − v).
+      UvMatrix flipped = c.uvs;
+      flipped.col(1).array() = 1 - flipped.col(1).array();
+      primitive.attributes["TEXCOORD_0"] = gltf_writing::append_accessor(
+          model, flipped.data(), sizeof(float) * 2 * vertex_count, TINYGLTF_TARGET_ARRAY_BUFFER,
+          TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, vertex_count);
     }
     // int32 indices in [0, #V): the same bytes as uint32.
     primitive.indices = gltf_writing::append_accessor(
@@ -477,6 +496,38 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
 }
 
 }  // namespace
+
+SkinnedCharacter split_seams(const SkinnedCharacter& character, const UvMatrix& corner_uvs) {
+  assert(character.uvs.rows() == 0);
+  assert(corner_uvs.rows() == 3 * character.faces.rows());
+  const Eigen::Index vertex_count = character.bind_points.rows();
+  SeamSplit split = split_seam_vertices(character.faces, vertex_count, corner_uvs);
+  Eigen::MatrixX3d normals = character.normals;
+  if (normals.rows() == 0 && character.faces.rows() > 0) {
+    normals = geometry::area_weighted_normals(character.bind_points, character.faces);
+    if ((normals.rowwise().squaredNorm().array() == 0).any()) normals.resize(0, 3);  // left to the writer
+  }
+  SkinnedCharacter out = character;
+  const auto n = static_cast<Eigen::Index>(split.source.size());
+  out.faces = std::move(split.faces);
+  out.uvs = std::move(split.uvs);
+  out.bind_points.resize(n, 3);
+  out.normals.resize(normals.rows() != 0 ? n : 0, 3);
+  out.offsets.assign(1, 0);
+  out.joints.clear();
+  out.weights.clear();
+  for (Eigen::Index o = 0; o < n; ++o) {
+    const int32_t v = split.source[static_cast<size_t>(o)];
+    out.bind_points.row(o) = character.bind_points.row(v);
+    if (normals.rows() != 0) out.normals.row(o) = normals.row(v);
+    for (int32_t i = character.offsets[static_cast<size_t>(v)]; i < character.offsets[static_cast<size_t>(v) + 1]; ++i) {
+      out.joints.push_back(character.joints[static_cast<size_t>(i)]);
+      out.weights.push_back(character.weights[static_cast<size_t>(i)]);
+    }
+    out.offsets.push_back(static_cast<int32_t>(out.joints.size()));
+  }
+  return out;
+}
 
 Result<std::string> serialize_skinned_glb(const SkinnedCharacter& character) {
   return serialize_character(character, true, "glb");

@@ -20,6 +20,7 @@
 #include "core/common/result.h"
 #include "core/common/types.h"
 #include "core/mesh_io/gltf_skin.h"  // Matrix4dList
+#include "core/mesh_io/posed_mesh.h"  // UvMatrix
 
 namespace animspace::mesh_io {
 
@@ -35,6 +36,9 @@ struct SkinnedCharacter {
   // some vertex is in no non-degenerate face, in which case NORMAL is omitted (§3.7.2.1 wants
   // normalized normals, and readers of a mesh without them compute flat ones).
   Eigen::MatrixX3d normals;
+  // #V × 2 texture coordinates (u, v with v up, finite), or empty: written as TEXCOORD_0
+  // (u, 1 − v). One per vertex: a texture atlas's seams are split first (split_seams below).
+  UvMatrix uvs;
   std::vector<int32_t> joint_parents;    // J ≥ 1 entries, parents[j] < j or -1 (a forest, parents first)
   std::vector<std::string> joint_names;  // J names, or empty; an empty name is written "joint_<j>"
   Matrix4dList bind_globals;             // J: joint j's global transform in the bind pose (rigid)
@@ -51,9 +55,17 @@ struct SkinnedCharacter {
   std::string animation_name = "sequence";
 };
 
+// The character with a UV per vertex from UVs per face corner (3·#F × 2, row 3f + k corner k of
+// face f): a vertex whose corners carry different UVs (an atlas's seam) becomes one vertex per
+// distinct UV, with the same bind position, normal, joints and weights, so it poses exactly as
+// the original. Without given normals, the original's area-weighted bind-pose normals are given
+// to the copies (so that the split does not crease the shading along seams), when every vertex
+// has one. `character` must have no UVs yet and corner_uvs 3·#F rows (asserted).
+SkinnedCharacter split_seams(const SkinnedCharacter& character, const UvMatrix& corner_uvs);
+
 // The character as .glb bytes / as .gltf JSON with an embedded base64 buffer.
 //
-// Written as: POSITION (float32, with min/max) and NORMAL as above; indices uint32; JOINTS_n
+// Written as: POSITION (float32, with min/max), NORMAL and TEXCOORD_0 as above; indices uint32; JOINTS_n
 // (UNSIGNED_SHORT) / WEIGHTS_n (FLOAT) in sets of four slots, as many sets as the vertex with the
 // most influences needs, influences in the order given (slot s of vertex v is influence
 // offsets[v] + s), unused slots and zero weights written as joint 0 weight 0; the skin's

@@ -255,40 +255,48 @@ PosedMesh optimise_for_rendering(const PosedMesh& mesh) {
   return out;
 }
 
-PosedMesh split_seams(const PosedMesh& mesh, const UvMatrix& corner_uvs) {
-  assert(mesh.uvs.rows() == 0);
-  assert(corner_uvs.rows() == 3 * mesh.faces.rows());
-  PosedMesh out;
-  out.faces.resize(mesh.faces.rows(), 3);
-  std::vector<int32_t> source;  // the input vertex of each output vertex
+SeamSplit split_seam_vertices(const FaceMatrix& faces, Eigen::Index vertex_count, const UvMatrix& corner_uvs) {
+  assert(corner_uvs.rows() == 3 * faces.rows());
+  SeamSplit out;
+  out.faces.resize(faces.rows(), 3);
   std::vector<Eigen::RowVector2f> uv;
   // Per input vertex, the output vertices made for it so far (few: one per chart it borders).
-  std::vector<std::vector<int32_t>> made(static_cast<size_t>(mesh.points.rows()));
-  for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
+  std::vector<std::vector<int32_t>> made(static_cast<size_t>(vertex_count));
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
     for (int k = 0; k < 3; ++k) {
-      const int32_t v = mesh.faces(f, k);
+      const int32_t v = faces(f, k);
       const Eigen::RowVector2f t = corner_uvs.row(3 * f + k);
       int32_t found = -1;
       for (int32_t o : made[static_cast<size_t>(v)]) {
         if (uv[static_cast<size_t>(o)] == t) found = o;
       }
       if (found < 0) {
-        found = static_cast<int32_t>(source.size());
-        source.push_back(v);
+        found = static_cast<int32_t>(out.source.size());
+        out.source.push_back(v);
         uv.push_back(t);
         made[static_cast<size_t>(v)].push_back(found);
       }
       out.faces(f, k) = found;
     }
   }
-  const auto n = static_cast<Eigen::Index>(source.size());
+  out.uvs.resize(static_cast<Eigen::Index>(uv.size()), 2);
+  for (size_t o = 0; o < uv.size(); ++o) out.uvs.row(static_cast<Eigen::Index>(o)) = uv[o];
+  return out;
+}
+
+PosedMesh split_seams(const PosedMesh& mesh, const UvMatrix& corner_uvs) {
+  assert(mesh.uvs.rows() == 0);
+  assert(corner_uvs.rows() == 3 * mesh.faces.rows());
+  SeamSplit split = split_seam_vertices(mesh.faces, mesh.points.rows(), corner_uvs);
+  PosedMesh out;
+  const auto n = static_cast<Eigen::Index>(split.source.size());
+  out.faces = std::move(split.faces);
+  out.uvs = std::move(split.uvs);
   out.points.resize(n, 3);
-  out.uvs.resize(n, 2);
   out.normals.resize(mesh.normals.rows() != 0 ? n : 0, 3);
   for (Eigen::Index o = 0; o < n; ++o) {
-    out.points.row(o) = mesh.points.row(source[static_cast<size_t>(o)]);
-    out.uvs.row(o) = uv[static_cast<size_t>(o)];
-    if (mesh.normals.rows() != 0) out.normals.row(o) = mesh.normals.row(source[static_cast<size_t>(o)]);
+    out.points.row(o) = mesh.points.row(split.source[static_cast<size_t>(o)]);
+    if (mesh.normals.rows() != 0) out.normals.row(o) = mesh.normals.row(split.source[static_cast<size_t>(o)]);
   }
   return out;
 }

@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "core/common/result.h"
 #include "core/common/types.h"
@@ -31,6 +32,16 @@ struct PosedMesh {
 // atlas) becomes one vertex per distinct UV, with the same position and normal. `mesh` must have
 // no UVs yet (asserted), and corner_uvs 3·#F rows (asserted).
 PosedMesh split_seams(const PosedMesh& mesh, const UvMatrix& corner_uvs);
+
+// The vertex split behind split_seams, for any per-vertex data (a skinned character's weights):
+// `faces` over the new vertices, `source[o]` the input vertex of new vertex o, `uvs` its UV.
+// New vertices are numbered in order of first use by the faces; a vertex no face uses is dropped.
+struct SeamSplit {
+  FaceMatrix faces;
+  std::vector<int32_t> source;
+  UvMatrix uvs;
+};
+SeamSplit split_seam_vertices(const FaceMatrix& faces, Eigen::Index vertex_count, const UvMatrix& corner_uvs);
 
 // The same mesh with faces in meshopt_optimizeVertexCache order and vertices in
 // meshopt_optimizeVertexFetch order (normals follow their vertices). Vertices no face uses are

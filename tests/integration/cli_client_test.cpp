@@ -11,8 +11,10 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <set>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -21,6 +23,7 @@
 
 #include "clients/cpp/client.h"
 #include "core/animspace/animspace_io.h"
+#include "core/atlas/atlas_io.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
@@ -33,6 +36,7 @@
 #include "harness/daemon_process.h"
 #include "tests/support/pmsc_fixtures.h"
 #include "tests/support/cli_run.h"
+#include "tests/support/gltf_posing.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -766,6 +770,101 @@ TEST_F(CliClientTest, RpcFailuresExitWithTheStatusAndTheServersMessage) {
   EXPECT_EQ(run.exit_code, 3);
   EXPECT_NE(run.err.find("NOT_FOUND"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("no-such-model"), std::string::npos) << run.err;
+}
+
+// export-rig at level 0 of a model with an atlas: TEXCOORD_0 per vertex, the vertices split along
+// the seams, each copy with its original's joints and weights, so the file poses as the unsplit one.
+TEST_F(CliClientTest, ExportRigWritesTheAtlasWithSeamsSplit) {
+  const auto original = repo_->path() / "arm-animspace" / "1" / "model.anim";
+  auto file = container::read_file(original);
+  ASSERT_TRUE(file.ok());
+  auto model = as::load(*file, "arm-animspace");
+  ASSERT_TRUE(model.ok());
+  // An atlas made up here: UVs from each vertex's index, except that a face in five takes its
+  // own (so its vertices are on seams).
+  const Eigen::Index F = model->faces.rows(), V = model->vertex_count();
+  atlas::Atlas made;
+  made.chart_count = 1;
+  made.chart_of_face.assign(static_cast<size_t>(F), 0);
+  made.uvs.resize(3 * F, 2);
+  for (Eigen::Index f = 0; f < F; ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const double v = static_cast<double>(model->faces(f, k));
+      made.uvs(3 * f + k, 0) = f % 5 == 0 ? 0.9 * static_cast<double>(f) / static_cast<double>(F) : v / static_cast<double>(V);
+      made.uvs(3 * f + k, 1) = f % 5 == 0 ? 0.25 + 0.5 * k / 2.0 : 0.5 + 0.4 * std::cos(v);
+    }
+  }
+  container::ModelContainer with_atlas = *file;
+  atlas::store_atlas(made, "rest_pose", with_atlas);
+  const auto atlas_file = work_->path() / "arm-atlas.anim";
+  ASSERT_TRUE(container::write_file(atlas_file, with_atlas).ok());
+
+  const auto plain_glb = work_->path() / "arm-plain.glb";
+  const auto split_glb = work_->path() / "arm-uv.glb";
+  const nlohmann::json plain_report =
+      json_of(cli("--json export-rig " + original.string() + " --level 0 -o " + plain_glb.string()));
+  EXPECT_FALSE(plain_report.at("texture_coordinates").get<bool>()) << plain_report;
+  const nlohmann::json report =
+      json_of(cli("--json export-rig " + atlas_file.string() + " --level 0 -o " + split_glb.string()));
+  EXPECT_TRUE(report.at("texture_coordinates").get<bool>()) << report;
+
+  auto read = [](const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return testing::load_gltf(std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()), true);
+  };
+  const testing::LoadedGltf plain = read(plain_glb), split = read(split_glb);
+  ASSERT_TRUE(plain.ok) << plain.error;
+  ASSERT_TRUE(split.ok) << split.error;
+  const tinygltf::Primitive& p0 = plain.model.meshes.at(0).primitives.at(0);
+  const tinygltf::Primitive& p1 = split.model.meshes.at(0).primitives.at(0);
+  EXPECT_EQ(p0.attributes.count("TEXCOORD_0"), 0u);
+  ASSERT_EQ(p1.attributes.count("TEXCOORD_0"), 1u);
+  const auto uint_values = [](const tinygltf::Model& m, int index) {
+    return testing::accessor_values<uint32_t>(m, index, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR);
+  };
+  const std::vector<uint32_t> i0 = uint_values(plain.model, p0.indices), i1 = uint_values(split.model, p1.indices);
+  const std::vector<float> uvs = testing::accessor_values<float>(split.model, p1.attributes.at("TEXCOORD_0"),
+                                                                  TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2);
+  const auto positions = [](const tinygltf::Model& m, const tinygltf::Primitive& p) {
+    return testing::accessor_values<float>(m, p.attributes.at("POSITION"), TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                           TINYGLTF_TYPE_VEC3);
+  };
+  const std::vector<float> x0 = positions(plain.model, p0), x1 = positions(split.model, p1);
+  ASSERT_EQ(i0.size(), static_cast<size_t>(3 * F));
+  ASSERT_EQ(i1.size(), i0.size());
+  // Vertices: one per (vertex, distinct UV), counted here.
+  std::set<std::tuple<uint32_t, float, float>> distinct;
+  for (size_t c = 0; c < i0.size(); ++c) {
+    distinct.insert({i0[c], static_cast<float>(made.uvs(static_cast<Eigen::Index>(c), 0)),
+                     static_cast<float>(made.uvs(static_cast<Eigen::Index>(c), 1))});
+  }
+  EXPECT_EQ(uvs.size() / 2, distinct.size());
+  EXPECT_GT(distinct.size(), static_cast<size_t>(V)) << "the made-up atlas has seams";
+  EXPECT_EQ(report.at("written_vertices").get<size_t>(), distinct.size());
+  for (size_t c = 0; c < i0.size(); ++c) {
+    const auto r = static_cast<Eigen::Index>(c);
+    // Each corner's UV is the atlas's (glTF stores 1 − v) and its position the unsplit vertex's.
+    ASSERT_NEAR(uvs[2 * i1[c]], made.uvs(r, 0), 1e-6) << "corner " << c;
+    ASSERT_NEAR(1.0f - uvs[2 * i1[c] + 1], made.uvs(r, 1), 1e-6) << "corner " << c;
+    for (int d = 0; d < 3; ++d) ASSERT_EQ(x1[3 * i1[c] + static_cast<size_t>(d)], x0[3 * i0[c] + static_cast<size_t>(d)]);
+  }
+  // Posed by the file alone (§3.7.3.3) at every keyframe, each corner where the unsplit one is.
+  const tinygltf::Animation* a0 = testing::only_animation(plain.model);
+  const tinygltf::Animation* a1 = testing::only_animation(split.model);
+  ASSERT_TRUE(a0 != nullptr && a1 != nullptr);
+  const std::vector<float> times = testing::keyframe_times(plain.model, *a0);
+  ASSERT_GT(times.size(), 1u);
+  for (float t : {times.front(), times[times.size() / 2], times.back()}) {
+    const Eigen::MatrixX3d posed0 = testing::skin_from_file(
+        plain.model, testing::node_globals(plain.model, a0, t, testing::Rotations::kSpecSlerp));
+    const Eigen::MatrixX3d posed1 = testing::skin_from_file(
+        split.model, testing::node_globals(split.model, a1, t, testing::Rotations::kSpecSlerp));
+    double most = 0;
+    for (size_t c = 0; c < i0.size(); ++c) {
+      most = std::max(most, (posed1.row(i1[c]) - posed0.row(i0[c])).norm());
+    }
+    EXPECT_EQ(most, 0.0) << "the same joints, weights and bind position pose identically, t = " << t;
+  }
 }
 
 }  // namespace

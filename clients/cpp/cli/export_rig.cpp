@@ -8,6 +8,7 @@
 #include "clients/cpp/cli/output.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/rig_export.h"
+#include "core/atlas/atlas_io.h"
 #include "core/container/sections.h"
 #include "core/lod/lod_io.h"
 #include "core/mesh_io/gltf_skin_writer.h"
@@ -21,7 +22,8 @@ CLI::App* add_export_rig(CLI::App& app, ExportRigArgs& a) {
       "export-rig",
       "Offline: write an animation-space model (fitted, import-rig, subdivided, or a level of detail of build-lod) "
       "as a glTF 2.0 skinned character: its linear blend rig (weights p̲_j, bind pose the rest pose), the stored "
-      "training poses as its animation; prints how far the rig is from the model over those poses");
+      "training poses as its animation, at level 0 the atlas's UVs (TEXCOORD_0, seams split); prints how far the rig is "
+      "from the model over those poses");
   cmd->add_option("input", a.input, "An animation-space model.anim")->required()->check(CLI::ExistingFile);
   cmd->add_option("--level", a.level, "Level of detail to write (0 = full detail)")
       ->check(CLI::NonNegativeNumber)
@@ -86,6 +88,17 @@ int run_export_rig(const ExportRigArgs& a, bool json) {
 
   auto character = as::skinned_character(*rig, poses, a.frames_per_second);
   if (!character) return fail(command, character.error().message);
+  // The atlas (animspace atlas) belongs to the full mesh: level 0 carries its UVs, the vertices
+  // split along its seams with their joints and weights.
+  bool with_uvs = false;
+  if (a.level == 0) {
+    auto stored = atlas::load_atlas(*in, model->faces.rows(), a.input);
+    if (!stored) return fail(command, stored.error().message);
+    if (*stored) {
+      *character = mesh_io::split_seams(*character, (*stored)->uvs.cast<float>());
+      with_uvs = true;
+    }
+  }
   if (auto written = mesh_io::write_skinned_character(a.output, *character); !written.ok()) {
     return fail(command, written.error().message);
   }
@@ -99,7 +112,9 @@ int run_export_rig(const ExportRigArgs& a, bool json) {
                 {"negative_weights_dropped", converted->negative_weights_dropped},
                 {"most_negative_weight", converted->most_negative_weight},
                 {"max_deviation", deviation},
-                {"max_deviation_over_diagonal", diagonal > 0 ? deviation / diagonal : 0.0}});
+                {"max_deviation_over_diagonal", diagonal > 0 ? deviation / diagonal : 0.0},
+                {"texture_coordinates", with_uvs},
+                {"written_vertices", character->bind_points.rows()}});
   } else {
     std::printf("level %d: %d vertices, %d joints, %.2f influences per vertex, %zu frames\n", a.level,
                 rig->vertex_count(), rig->skeleton.bone_count(),
@@ -108,6 +123,10 @@ int run_export_rig(const ExportRigArgs& a, bool json) {
       std::printf("%d negative weights (down to %.3g), which a glTF skin cannot hold, dropped and their vertices' "
                   "other weights rescaled\n",
                   converted->negative_weights_dropped, converted->most_negative_weight);
+    }
+    if (with_uvs) {
+      std::printf("with the atlas's texture coordinates: %lld vertices once split along its seams\n",
+                  static_cast<long long>(character->bind_points.rows()));
     }
     std::printf("the linear blend rig poses within %.4g of the model (%.3g%% of the diagonal) over %zu poses: the "
                 "animation and %d random ones, joints turned up to 30°\nwrote %s\n",
