@@ -20,12 +20,8 @@ std::filesystem::path make_demo_repository() {
   const auto dir = std::filesystem::temp_directory_path() / ("animspaced-demo-" + std::to_string(::getpid()));
   std::error_code ignored;
   std::filesystem::remove_all(dir, ignored);
-  if (auto status = animspace::demo::write_demo_repository(dir); !status.ok()) {
+  if (auto status = animspace::demo::write_bundled_demo(dir); !status.ok()) {
     spdlog::critical("cannot write the demo repository: {}", status.error().message);
-    std::exit(EXIT_FAILURE);
-  }
-  if (auto status = animspace::demo::write_demo_illumination(dir); !status.ok()) {
-    spdlog::critical("cannot write the demo repository's illumination model: {}", status.error().message);
     std::exit(EXIT_FAILURE);
   }
   spdlog::info("no --model-repository given: serving the bundled demo repository generated in {}", dir.string());

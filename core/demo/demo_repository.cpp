@@ -3,12 +3,15 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit.h"
 #include "core/animspace/tangents.h"
+#include "core/atlas/atlas.h"
+#include "core/atlas/atlas_io.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/simplify.h"
 #include "core/container/sections.h"
 #include "core/illumination/illumination_model.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/train.h"
+#include "core/subdivision/subdivide_model.h"
 
 #include <cassert>
 #include <string>
@@ -290,6 +293,41 @@ Result<container::ModelContainer> make_demo_pmsc_engine_container(
   container.metadata()["units"] = "arbitrary (arm length 2)";
   container.metadata()["up_axis"] = "y";
   return container;
+}
+
+Result<container::ModelContainer> make_demo_smooth_container(const container::ModelContainer& animation_space_demo) {
+  const std::string source(kDemoSmoothModelName);
+  subdivision::SubdivisionOptions options;
+  options.levels = 1;
+  auto smooth = subdivision::subdivide_container(animation_space_demo, source, options);
+  if (!smooth) return smooth.error();
+  auto model = animation_space::load(*smooth, source);
+  if (!model) return model.error();
+  auto metrics = animation_space::load_metrics(*smooth, model->bone_count(), source);
+  if (!metrics) return metrics.error();
+  auto built = atlas::build_atlas(*model, metrics->metrics, atlas::AtlasOptions{});
+  if (!built) return built.error();
+  atlas::store_atlas(built->atlas, "poses", *smooth);
+  smooth->metadata()["description"] =
+      "The arm's animation-space model subdivided once in animation space (Loop), with a texture atlas balanced "
+      "across its poses.";
+  return std::move(*smooth);
+}
+
+Status write_demo_smooth(const std::filesystem::path& repository) {
+  const auto source = repository / std::string(kDemoAnimationSpaceModelName) / std::to_string(kDemoModelVersion) /
+                      std::string(kDemoModelFileName);
+  auto animation_space_demo = container::read_file(source);
+  if (!animation_space_demo) return animation_space_demo.error();
+  auto smooth = make_demo_smooth_container(*animation_space_demo);
+  if (!smooth) return smooth.error();
+  return write_model(repository, kDemoSmoothModelName, *smooth);
+}
+
+Status write_bundled_demo(const std::filesystem::path& repository) {
+  ANIMSPACE_RETURN_IF_ERROR(write_demo_repository(repository));
+  ANIMSPACE_RETURN_IF_ERROR(write_demo_illumination(repository));
+  return write_demo_smooth(repository);
 }
 
 std::filesystem::path demo_model_path(const std::filesystem::path& repository) {

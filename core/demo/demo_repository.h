@@ -97,6 +97,23 @@ Result<container::ModelContainer> make_demo_illumination_container(const DemoIll
 // tests call often: only the daemon's and the CLI's demo repositories carry it.
 Status write_demo_illumination(const std::filesystem::path& repository, const DemoIlluminationOptions& options = {});
 
+inline constexpr std::string_view kDemoSmoothModelName = "arm-smooth";
+
+// The thesis's two systems on the demo arm: arm-animspace subdivided once in animation space
+// (Merry 2007 §4.2, Loop: P' = P S, so it poses exactly as the posed arm subdivided, with limit
+// normals), carrying a texture atlas balanced across its poses (ch. 5: charts under the L2,2
+// metric of its stored P, flattened minimising L2 stretch across the poses, packed). Errors: the
+// subdivision's and the atlas's (none expected).
+Result<container::ModelContainer> make_demo_smooth_container(const container::ModelContainer& animation_space_demo);
+
+// Writes `arm-smooth` (version 1), made from the `arm-animspace` already in `repository`. Kept apart
+// from write_demo_repository, like the illumination model, for the tests that call that often.
+Status write_demo_smooth(const std::filesystem::path& repository);
+
+// What `animspaced` serves without --model-repository and `animspace demo-repository` writes:
+// write_demo_repository, write_demo_illumination and write_demo_smooth.
+Status write_bundled_demo(const std::filesystem::path& repository);
+
 // The path of the demo model's file inside `repository`.
 std::filesystem::path demo_model_path(const std::filesystem::path& repository);
 

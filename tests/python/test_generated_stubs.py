@@ -13,7 +13,7 @@ def wait_until_loaded(stub):
     deadline = time.time() + 30
     while time.time() < deadline:
         models = stub.ListModels(models_pb2.ListModelsRequest(), timeout=5).models
-        if len(models) == 6:
+        if len(models) == 7:
             return models
         time.sleep(0.05)
     pytest.fail("the demo repository never finished loading")
@@ -22,7 +22,8 @@ def wait_until_loaded(stub):
 def test_demo_models_are_listed_with_their_kinds(channel):
     stub = models_pb2_grpc.ModelServiceStub(channel)
     models = {m.name: m for m in wait_until_loaded(stub)}
-    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine", "cornell"]
+    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine", "arm-smooth",
+                              "cornell"]
     animspace = models["arm-animspace"].versions[0]
     assert animspace.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE
     assert animspace.bone_count == 3 and animspace.point_count > 0
@@ -34,6 +35,9 @@ def test_demo_models_are_listed_with_their_kinds(channel):
     assert cross.fail_through == common_pb2.FAIL_THROUGH_IMPOSSIBLE
     engine = models["arm-pmsc-engine"].versions[0]
     assert engine.fail_through == common_pb2.FAIL_THROUGH_SERVER and engine.bone_count == 3
+    smooth = models["arm-smooth"].versions[0]  # arm-animspace subdivided once: V + E vertices, 4F faces
+    assert smooth.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE and smooth.bone_count == 3
+    assert smooth.point_count > animspace.point_count and smooth.face_count == 4 * animspace.face_count
 
 
 def test_unknown_model_is_not_found_with_its_name(channel):

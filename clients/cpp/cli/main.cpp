@@ -372,11 +372,7 @@ int run_inspect(const Globals& g, const std::string& path) {
 }
 
 int run_demo_repository(const std::string& dir) {
-  if (auto status = animspace::demo::write_demo_repository(dir); !status.ok()) {
-    std::fprintf(stderr, "animspace demo-repository: %s\n", status.error().message.c_str());
-    return 2;
-  }
-  if (auto status = animspace::demo::write_demo_illumination(dir); !status.ok()) {
+  if (auto status = animspace::demo::write_bundled_demo(dir); !status.ok()) {
     std::fprintf(stderr, "animspace demo-repository: %s\n", status.error().message.c_str());
     return 2;
   }
