@@ -747,7 +747,8 @@ class Client:
                 distance: Optional[float] = None, viewport_width_px: int = 1920,
                 horizontal_fov_rad: float = math.radians(45), form: str = "posed",
                 pose: Optional[npt.ArrayLike] = None, space: str = "global", include_geomorph: bool = False,
-                vertices_per_chunk: int = 0, deadline_s: Optional[float] = None) -> LodMesh:
+                vertices_per_chunk: int = 0, texture_coordinates: bool = False,
+                deadline_s: Optional[float] = None) -> LodMesh:
         """One level of detail, streamed in chunks and reassembled (Merry 2007 ch. 6, §7.3).
 
         Choose the level with exactly one of:
@@ -765,11 +766,17 @@ class Client:
             pose: FORM_POSED's skeleton pose, B×3×4 or B×4×4 in ``space``.
             include_geomorph: animation-space form: Δp towards the next coarser level (eq. 7.1).
             vertices_per_chunk: most vertices per block (0 = server default).
+            texture_coordinates: "posed" form at level 0 only: also the model's texture atlas
+                (``animspace atlas``), ``LodMesh.texture_coordinates``, F×3×2 float32 per face
+                corner.
 
         Raises:
             ValueError: not exactly one selection, or a distance without a tolerance.
+            InvalidArgument: ``texture_coordinates`` with the animation-space form or a level
+                above 0 (the message names include_texture_coordinates).
             OutOfRange: ``max_vertices`` below the coarsest level's vertex count.
-            FailedPrecondition: a model without levels.
+            FailedPrecondition: a model without levels, or ``texture_coordinates`` for a model
+                without an atlas.
             ProtocolError: blocks out of order or not adding up to the header.
         """
         chosen = [name for name, value in (("level", level), ("max_vertices", max_vertices),
@@ -783,6 +790,7 @@ class Client:
             raise ValueError(f"form: expected 'posed' or 'animation_space', got {form!r}")
         request = lod_pb2.GetLodRequest(model=_model_ref(model, version), form=FORMS[form],
                                         include_geomorph=include_geomorph,
+                                        include_texture_coordinates=bool(texture_coordinates),
                                         vertices_per_chunk=wire.as_uint("vertices_per_chunk", vertices_per_chunk))
         if level is not None:
             request.level = wire.as_uint("level", level)

@@ -48,6 +48,7 @@ class LodHeader:
     ``epsilon`` is ε^l, the L2,2 deviation bound of the level in model units; with a pixel
     tolerance ``tolerated_error`` is eq. 7.2's ε for the request's view (``epsilon ≤
     tolerated_error``), else 0. ``form`` is "posed" or "animation_space".
+    ``texture_coordinates``: the face blocks carry the model's atlas UVs (asked for, level 0).
     """
 
     model_version: int
@@ -60,12 +61,14 @@ class LodHeader:
     influence_count: int
     form: str
     tolerated_error: float
+    texture_coordinates: bool = False
 
     @classmethod
     def from_proto(cls, m: lod_pb2.LodHeader) -> "LodHeader":
         return cls(model_version=m.model_version, level=m.level, level_count=m.level_count, epsilon=m.epsilon,
                    vertex_count=m.vertex_count, face_count=m.face_count, bone_count=m.bone_count,
-                   influence_count=m.influence_count, form=_form_name(m.form), tolerated_error=m.tolerated_error)
+                   influence_count=m.influence_count, form=_form_name(m.form), tolerated_error=m.tolerated_error,
+                   texture_coordinates=m.texture_coordinates)
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +131,10 @@ class LodMesh:
         indices: F×3 uint32 vertex indices, counter-clockwise seen from outside.
         skeleton: animation-space form: the skeleton; None for the posed form.
         chunk_count, bytes_received: what the stream took (for transfer reports).
+        texture_coordinates: with ``get_lod(..., texture_coordinates=True)`` (posed, level 0 of a
+            model with an atlas): F×3×2 float32, ``[f, k]`` the (u, v) of corner k of face f
+            (vertex ``indices[f, k]``), in [0, 1]², v up; per corner because a seam gives one
+            vertex several UVs. None otherwise.
     """
 
     __repr__ = compact_repr
@@ -142,6 +149,7 @@ class LodMesh:
     skeleton: Optional[Skeleton]
     chunk_count: int = 0
     bytes_received: int = 0
+    texture_coordinates: Optional[np.ndarray] = None
 
     @property
     def vertex_count(self) -> int:
@@ -246,6 +254,7 @@ class LodAssembler:
         self._animation_positions: List[bytes] = []
         self._geomorph: List[bytes] = []
         self._indices: List[np.ndarray] = []
+        self._uvs: List[bytes] = []
         self.chunk_count = 0
         self.bytes_received = 0
 
@@ -344,11 +353,18 @@ class LodAssembler:
             return f"{at}: face_count {b.face_count} does not fit in the header's {h.face_count} faces"
         if len(b.indices) != b.face_count * 12:
             return f"{at}: indices must be {b.face_count * 12} bytes, got {len(b.indices)}"
+        uv_bytes = b.face_count * 24 if h.texture_coordinates else 0
+        if len(b.texture_coordinates) != uv_bytes:
+            state = "set" if h.texture_coordinates else "unset"
+            return (f"{at}: texture_coordinates must be {uv_bytes} bytes (header.texture_coordinates {state}), "
+                    f"got {len(b.texture_coordinates)}")
         indices = np.frombuffer(b.indices, dtype=wire.WIRE_UINT32).astype(np.uint32)
         bad = np.flatnonzero(indices >= h.vertex_count)
         if bad.size:
             return f"{at}: vertex index {int(indices[bad[0]])} is not below vertex_count {h.vertex_count}"
         self._indices.append(indices)
+        if h.texture_coordinates:
+            self._uvs.append(b.texture_coordinates)
         self._faces += b.face_count
         return ""
 
@@ -390,9 +406,13 @@ class LodAssembler:
         indices = (np.concatenate(self._indices) if self._indices else np.zeros(0, dtype=np.uint32)).reshape(-1, 3)
         if not self._animation_space():
             positions = np.frombuffer(b"".join(self._positions), dtype=wire.WIRE_FLOAT).astype(np.float32)
+            uvs = None
+            if h.texture_coordinates:
+                uvs = np.frombuffer(b"".join(self._uvs), dtype=wire.WIRE_FLOAT).astype(np.float32).reshape(-1, 3, 2)
             return LodMesh(header=LodHeader.from_proto(h), positions=positions.reshape(-1, 3), influence_offsets=None,
                            bone_indices=None, animation_positions=None, geomorph_delta=None, indices=indices,
-                           skeleton=None, chunk_count=self.chunk_count, bytes_received=self.bytes_received)
+                           skeleton=None, chunk_count=self.chunk_count, bytes_received=self.bytes_received,
+                           texture_coordinates=uvs)
         assert self._skeleton is not None
         s = self._skeleton
         skeleton = Skeleton(parents=np.array(s.parents, dtype=np.int32),
