@@ -324,6 +324,25 @@ try:
     settings.lod_level = 10_000
     results["bad_level_report"] = report_of(bpy.ops.animspace.import_lod)
 
+    # 6b. Level 0 of a model with a texture atlas arrives with its UV map (a second daemon serves
+    #     the atlas'd copy under the same name); the demo's own, without an atlas, has none.
+    bpy.context.view_layer.objects.active = None
+    settings.lod_level = 0
+    import_lod("plain_level0")
+    results["lods"]["plain_level0"]["uv_layers"] = [layer.name for layer in bpy.data.objects[
+        lods["plain_level0"]["object"]].data.uv_layers]
+    settings.address = config["atlas"]["address"]
+    bpy.ops.animspace.connect()
+    import_lod("atlas_level0")
+    atlas_mesh = bpy.data.objects[lods["atlas_level0"]["object"]].data
+    results["lods"]["atlas_level0"]["uv_layers"] = [layer.name for layer in atlas_mesh.uv_layers]
+    if atlas_mesh.uv_layers:
+        loop_uvs = np.empty(len(atlas_mesh.loops) * 2, dtype=np.float32)
+        atlas_mesh.uv_layers[0].data.foreach_get("uv", loop_uvs)
+        save("lod_atlas_level0_uvs", loop_uvs.reshape(-1, 2))
+    settings.address = config["address"]
+    bpy.ops.animspace.connect()
+
     # 7. A thumbnail into an image datablock (rest pose: no animation-space mesh active).
     settings.width_px, settings.height_px = config["thumbnail"]
     bpy.ops.animspace.thumbnail()

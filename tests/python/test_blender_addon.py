@@ -83,8 +83,19 @@ def blender_run(tmp_path_factory, request):
                          "--tls-client-ca", str(secure / "ca.pem")]
         tls = {"root_certificates_file": str(secure / "ca.pem"), "client_certificate_file": str(secure / "client.pem"),
                "client_key_file": str(secure / "client.key"), "server_name": "animspace.test"}
+    # A third daemon serving the demo arm with a texture atlas (`animspace atlas`), under its own name.
+    atlas_work = work / "atlas"
+    atlas_repository = atlas_work / "repository"
+    (atlas_repository / SKINNED_MODEL / "1").mkdir(parents=True)
+    for arguments in (["demo-repository", atlas_work / "demo"],
+                      ["atlas", atlas_work / "demo" / SKINNED_MODEL / "1" / "model.anim", "-o",
+                       atlas_repository / SKINNED_MODEL / "1" / "model.anim"]):
+        made = subprocess.run([str(BUILD / "bin" / "animspace"), *map(str, arguments)], capture_output=True,
+                              text=True, timeout=600)
+        assert made.returncode == 0, made.stdout + made.stderr
     with run_animspaced(work, "--miss-log-dir", str(misses)) as address, animspace.Client(address) as client, \
-            run_animspaced(secure, *secure_flags) as token_address:
+            run_animspaced(secure, *secure_flags) as token_address, \
+            run_animspaced(atlas_work, "--model-repository", str(atlas_repository)) as atlas_address:
         client.wait_until_serving(deadline_s=60)
         # The sequence the Mesh Cache modifier plays: three of the demo's unseen frames (hits),
         # an elbow bent past the training range (a blend, judged with its check points: the
@@ -112,6 +123,7 @@ def blender_run(tmp_path_factory, request):
                       "mdd": str(work / "arm.mdd"),
                       "command": str(BUILD / "bin" / "animspace"), "missing_command": str(work / "no-such-animspace"),
                       "repository": str(work / "trained"), "sequence_folder": str(work / "sent")},
+            "atlas": {"address": atlas_address},
             "thumbnail": THUMBNAIL, "screenshot": {"path": str(out / "workflows.png"), "resolution": [1200, 520]},
         }
         (work / "config.json").write_text(json.dumps(config))
@@ -129,7 +141,7 @@ def blender_run(tmp_path_factory, request):
         if SCREENSHOT:
             shutil.copyfile(out / "workflows.png", SCREENSHOT)
         yield {"client": client, "out": out, "results": results, "frames": frames, "work": work, "misses": misses,
-               "train_frames": train_frames}
+               "train_frames": train_frames, "atlas_address": atlas_address}
 
 
 def test_the_zip_holds_the_add_on_and_the_client_it_carries_and_builds_reproducibly(tmp_path):
@@ -414,6 +426,22 @@ def test_imported_levels_have_the_levels_counts_and_positions(blender_run):
     assert 0 < expected.header.level < info.lod_level_count - 1  # the view picks a level between the ends
     shown = _check_lod(blender_run, "view", expected)
     assert shown["tolerated_error"] == pytest.approx(expected.header.tolerated_error, rel=1e-4)
+
+
+def test_level_0_of_a_model_with_an_atlas_gets_its_uv_map(blender_run):
+    results, out = blender_run["results"], blender_run["out"]
+    # The demo's own arm has no atlas: no UV map.
+    assert results["lods"]["plain_level0"]["level"] == 0
+    assert results["lods"]["plain_level0"]["uv_layers"] == []
+    # The atlas'd copy: one UV map, one UV per loop, each triangle's loops its corners, equal to the
+    # per-corner UVs the Python client receives for the same level (float32, as sent).
+    shown = results["lods"]["atlas_level0"]
+    assert shown["level"] == 0 and shown["uv_layers"] == ["animspace atlas"]
+    with animspace.Client(blender_run["atlas_address"]) as client:
+        expected = client.get_lod(SKINNED_MODEL, level=0, texture_coordinates=True)
+    np.testing.assert_array_equal(np.load(out / "lod_atlas_level0_faces.npy"), expected.indices.astype(np.int64))
+    np.testing.assert_array_equal(np.load(out / "lod_atlas_level0_uvs.npy"),
+                                  expected.texture_coordinates.reshape(-1, 2))
 
 
 def test_the_thumbnail_is_the_servers_png_in_an_image_datablock(blender_run):

@@ -11,6 +11,10 @@ which coincides with it for a symmetric model and is close otherwise.
 
 When the active object is an animation-space mesh built by the add-on, the level is placed where
 that mesh is and posed at its armature's pose; otherwise it is placed at the origin, at rest.
+
+Level 0 of a model that stores a texture atlas (``animspace atlas``) arrives with it: the mesh
+gets a UV map, "animspace atlas", one UV per loop (the server sends them per face corner, and
+each triangle's three loops are its corners). Coarser levels have no atlas.
 """
 import math
 from typing import Optional, Tuple
@@ -22,6 +26,9 @@ import animspace
 
 from . import connection, mesh_data, registry, skinning
 from .connection import SetupError
+
+# The UV map level 0 of a model with a texture atlas gets.
+ATLAS_UV_MAP = "animspace atlas"
 
 
 def view_of(scene: bpy.types.Scene, camera: Optional[bpy.types.Object]) -> Tuple[int, float]:
@@ -62,6 +69,20 @@ def camera_distance(client: animspace.Client, model: str, camera: bpy.types.Obje
     return float(np.linalg.norm(eye - centre))
 
 
+def atlas_of(client: animspace.Client, model: str, header, pose) -> Optional[np.ndarray]:
+    """Level 0's per-corner UVs (F×3×2) of the version ``header`` names, or None when the model
+    stores no atlas (the server's FAILED_PRECONDITION naming include_texture_coordinates). Asked
+    for after the level is chosen, since a budget or a view may choose level 0 too; UVs are not
+    posed, so this second call only costs the transfer."""
+    try:
+        mesh = client.get_lod(model, version=header.model_version, level=0, pose=pose, texture_coordinates=True)
+    except animspace.FailedPrecondition as error:
+        if "include_texture_coordinates" not in str(error):
+            raise
+        return None
+    return mesh.texture_coordinates
+
+
 class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
     """Import one level of detail of the model as a new mesh object"""
     bl_idname = "animspace.import_lod"
@@ -86,7 +107,11 @@ class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
                              distance=camera_distance(client, model, scene.camera, placement))
         level = client.get_lod(model, pose=pose, **selection)
         header = level.header
+        uvs = atlas_of(client, model, header, pose) if header.level == 0 else None
         mesh = mesh_data.new_mesh(f"{model} LOD {header.level}", level.positions, level.indices)
+        if uvs is not None:
+            layer = mesh.uv_layers.new(name=ATLAS_UV_MAP)
+            layer.data.foreach_set("uv", np.ascontiguousarray(uvs, dtype=np.float32).ravel())
         obj = bpy.data.objects.new(f"{model} LOD {header.level}", mesh)
         if placement is not None:
             obj.matrix_world = placement.matrix_world
@@ -99,8 +124,9 @@ class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
         obj.animspace.tolerated_error = header.tolerated_error
         view = (f", tolerated error {header.tolerated_error:.6g} at distance {selection['distance']:.6g}"
                 if "distance" in selection else "")
+        atlas = f", UV map '{ATLAS_UV_MAP}'" if uvs is not None else ""
         return (f"level {header.level} of {header.level_count}: {header.vertex_count} vertices, "
-                f"{header.face_count} faces, ε^l {header.epsilon:.6g}{view}")
+                f"{header.face_count} faces, ε^l {header.epsilon:.6g}{view}{atlas}")
 
 
 _CLASSES = (ANIMSPACE_OT_import_lod,)
