@@ -29,13 +29,7 @@ CLI::App* add_atlas(CLI::App& app, AtlasArgs& a) {
       ->check(CLI::Range(1, 1000000));
   cmd->add_flag("--rest-pose", a.rest_pose,
                 "Measure stretch in the rest pose only, as a static unwrap does (the baseline; no metrics needed)");
-  cmd->add_option("--sample-poses", a.sample_poses,
-                  "For a model without stored metrics: estimate P = E[GᵀG] from this many random poses")
-      ->check(CLI::Range(0, 100000));
-  cmd->add_option("--max-joint-angle", a.max_joint_angle_degrees, "Random poses: largest joint rotation, degrees")
-      ->check(CLI::Range(0.0, 180.0))
-      ->capture_default_str();
-  cmd->add_option("--seed", a.seed, "Random poses: seed")->capture_default_str();
+  add_sample_pose_options(cmd, a.poses);
   add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
@@ -54,22 +48,10 @@ int run_atlas(const AtlasArgs& a, bool json) {
     if (!rest) return fail("atlas", rest.error().message);
     metrics = std::move(*rest);
     metric_name = "rest_pose";
-  } else if (a.sample_poses > 0) {
-    auto sampled = as::stored_metrics_from_poses(
-        *model, as::random_joint_rotation_poses(model->skeleton, a.sample_poses,
-                                                a.max_joint_angle_degrees * std::numbers::pi / 180, a.seed));
-    if (!sampled) return fail("atlas", "--sample-poses: " + sampled.error().message);
-    as::store_metrics(*sampled, out);
-    out.metadata()["animspace.metrics"] = "sampled: " + std::to_string(a.sample_poses) + " random poses up to " +
-                                          std::to_string(a.max_joint_angle_degrees) + " degrees per joint";
-    metrics = std::move(sampled->metrics);
   } else {
-    auto loaded = as::load_metrics(*in, model->bone_count(), a.input);
-    if (!loaded) {
-      return fail("atlas", loaded.error().message +
-                               "; give --sample-poses N to estimate them from random poses, or --rest-pose");
-    }
-    metrics = std::move(loaded->metrics);
+    auto stored = model_metrics(*in, *model, a.poses, a.input, out, "--rest-pose");
+    if (!stored) return fail("atlas", stored.error().message);
+    metrics = std::move(stored->metrics);
   }
   atlas::AtlasOptions options;
   options.chart_count = a.charts;

@@ -9,16 +9,15 @@
 
 #include <CLI/CLI.hpp>
 
+#include "clients/cpp/cli/sampled_metrics.h"
+
 namespace animspace::cli {
 
 struct AtlasArgs {
   std::string input;      // model.anim of an animation-space model with faces
   int charts = 0;         // seeds; 0: two per moving bone (atlas::default_chart_count)
   bool rest_pose = false; // stretch measured in the rest pose only (the static-unwrap baseline)
-  // Metrics when the model stores none (an imported rig): P from random joint rotations.
-  int sample_poses = 0;
-  double max_joint_angle_degrees = 35;
-  unsigned seed = 1;
+  SamplePoseArgs poses;  // metrics when the model stores none (an imported rig)
   std::string output;
   std::string model;
   unsigned version = 0;

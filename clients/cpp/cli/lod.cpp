@@ -53,13 +53,7 @@ CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
                   "Refuse collapses that turn a face by more than this (degrees, rest pose)")
       ->check(CLI::Range(1.0, 180.0))
       ->capture_default_str();
-  cmd->add_option("--sample-poses", a.sample_poses,
-                  "For a model without stored metrics: estimate P = E[GᵀG] from this many random poses")
-      ->check(CLI::Range(0, 100000));
-  cmd->add_option("--max-joint-angle", a.max_joint_angle_degrees, "Random poses: largest joint rotation, degrees")
-      ->check(CLI::Range(0.0, 180.0))
-      ->capture_default_str();
-  cmd->add_option("--seed", a.seed, "Random poses: seed")->capture_default_str();
+  add_sample_pose_options(cmd, a.poses);
   add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
@@ -70,23 +64,8 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
   auto model = as::load(*in, a.input);
   if (!model) return fail("build-lod", model.error().message);
   container::ModelContainer out = *in;
-  as::StoredMetrics stored;
-  if (a.sample_poses > 0) {
-    auto sampled = as::stored_metrics_from_poses(
-        *model, as::random_joint_rotation_poses(model->skeleton, a.sample_poses,
-                                                a.max_joint_angle_degrees * std::numbers::pi / 180, a.seed));
-    if (!sampled) return fail("build-lod", sampled.error().message);
-    stored = std::move(*sampled);
-    as::store_metrics(stored, out);
-    out.metadata()["animspace.metrics"] = "sampled: " + std::to_string(a.sample_poses) + " random poses up to " +
-                                          std::to_string(a.max_joint_angle_degrees) + " degrees per joint";
-  } else {
-    auto loaded = as::load_metrics(*in, model->bone_count(), a.input);
-    if (!loaded) {
-      return fail("build-lod", loaded.error().message + "; give --sample-poses N to estimate them from random poses");
-    }
-    stored = std::move(*loaded);
-  }
+  auto stored = model_metrics(*in, *model, a.poses, a.input, out);
+  if (!stored) return fail("build-lod", stored.error().message);
   lod::LevelBuildOptions options;
   options.influence_simplification = !a.no_influence_simplification;
   options.placement = !a.no_placement;
@@ -95,7 +74,7 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
   options.max_normal_deviation_degrees = a.max_normal_deviation_degrees;
   options.progress = progress_bars("build-lod");
   const auto start = std::chrono::steady_clock::now();
-  auto built = lod::build_levels(*model, stored.metrics, options);
+  auto built = lod::build_levels(*model, stored->metrics, options);
   options.progress = nullptr;  // ends the bar's line before the report
   if (!built) return fail("build-lod", built.error().message);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

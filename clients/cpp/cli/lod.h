@@ -10,6 +10,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "clients/cpp/cli/sampled_metrics.h"
 #include "clients/cpp/client.h"
 
 namespace animspace::cli {
@@ -21,10 +22,7 @@ struct BuildLodArgs {
   double influence_exchange = 1;  // lod::LevelBuildOptions::influence_exchange
   int max_levels = 16;
   double max_normal_deviation_degrees = 90;
-  // Metrics when the model stores none (an imported rig): P from random joint rotations.
-  int sample_poses = 0;
-  double max_joint_angle_degrees = 35;
-  unsigned seed = 1;
+  SamplePoseArgs poses;  // metrics when the model stores none (an imported rig)
   std::string output;
   std::string model;
   unsigned version = 0;
