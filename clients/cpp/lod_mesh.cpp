@@ -19,6 +19,7 @@ constexpr uint64_t kMaxReserve = uint64_t{1} << 24;
 
 template <typename T>
 void append(std::vector<T>& out, const std::string& bytes) {
+  if (bytes.empty()) return;  // memcpy into an empty vector's null data() is undefined, even for 0 bytes
   const size_t old = out.size();
   out.resize(old + bytes.size() / sizeof(T));
   std::memcpy(out.data() + old, bytes.data(), bytes.size());
