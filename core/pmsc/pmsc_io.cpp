@@ -53,6 +53,8 @@ constexpr DoubleOption kDoubleOptions[] = {
 };
 constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
+constexpr const char* kRelativeTolerance = "relative_tolerance";  // absent before issue #38: 0
+constexpr const char* kRelativeToleranceKey = "pmsc.relative_tolerance";
 
 std::string option_key(const char* name) { return std::string(kOptionsPrefix) + name; }
 
@@ -213,6 +215,7 @@ void store(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()["pmsc.channels"] = std::to_string(m.channel_count);
   out.metadata()["pmsc.cross"] = m.cross ? "1" : "0";
   out.metadata()["pmsc.aligned"] = m.aligned ? "1" : "0";
+  out.metadata()[kRelativeToleranceKey] = m.relative_tolerance ? "1" : "0";
   out.metadata()["pmsc.control_point_count"] = std::to_string(m.control_point_count);
   out.metadata()["pmsc.region_count"] = std::to_string(m.region_count);
   out.set_matrix("pmsc.mean", FrameMatrix(m.mean.transpose()));
@@ -252,6 +255,15 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
   m.region_count = *regions;
   m.cross = in.metadata_value("pmsc.cross") == "1";
   m.aligned = in.metadata_value("pmsc.aligned") == "1";
+  // Absent in models written before issue #38: errors in model units.
+  if (in.metadata().contains(kRelativeToleranceKey)) {
+    const std::string relative = in.metadata_value(kRelativeToleranceKey);
+    if (relative != "0" && relative != "1") {
+      return make_error(ErrorCode::kInvalidArgument, source + ": metadata '" + std::string(kRelativeToleranceKey) +
+                                                         "' should be 0 or 1, got '" + relative + "'");
+    }
+    m.relative_tolerance = relative == "1";
+  }
   if (m.channel_count < 1) return make_error(ErrorCode::kInvalidArgument, source + ": pmsc.channels must be ≥ 1");
 
   auto mean = in.float_matrix("pmsc.mean");
@@ -352,6 +364,7 @@ void store_training_options(const TrainingOptions& options, container::ModelCont
   }
   metadata[option_key(kFiducialPoints)] = fiducials;
   metadata[option_key(kRemoveRigidMotion)] = options.remove_rigid_motion ? "1" : "0";
+  metadata[option_key(kRelativeTolerance)] = options.relative_tolerance ? "1" : "0";
 }
 
 Result<TrainingOptions> load_training_options(const container::ModelContainer& in, const std::string& source) {
@@ -416,6 +429,14 @@ Result<TrainingOptions> load_training_options(const container::ModelContainer& i
   if (!rigid) return rigid.error();
   if (*rigid != "0" && *rigid != "1") return unparsable(source, option_key(kRemoveRigidMotion), "0 or 1", *rigid);
   options.remove_rigid_motion = *rigid == "1";
+  if (!absent(kRelativeTolerance, true)) {
+    auto relative = value_of(kRelativeTolerance);
+    if (!relative) return relative.error();
+    if (*relative != "0" && *relative != "1") {
+      return unparsable(source, option_key(kRelativeTolerance), "0 or 1", *relative);
+    }
+    options.relative_tolerance = *relative == "1";
+  }
 
   for (auto it = first; it != metadata.end() && it->first.compare(0, prefix.size(), prefix) == 0; ++it) {
     if (!known.contains(it->first)) {

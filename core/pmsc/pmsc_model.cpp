@@ -183,6 +183,20 @@ Status prepare_projection(PmscModel& m) {
   }
   for (const SoftCacheThresholds& t : m.region_epsilon) ANIMSPACE_RETURN_IF_ERROR(validate(t));
   ANIMSPACE_RETURN_IF_ERROR(prepare_check_rows(m));
+  if (m.relative_tolerance) {
+    if (m.aligned) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "pmsc model: a relative tolerance needs a model without rigid alignment");
+    }
+    if (m.mean.cwiseAbs().maxCoeff() != 0 || m.key_mean.cwiseAbs().maxCoeff() != 0) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "pmsc model: a relative-tolerance model is linear: its mean and key_mean must be 0");
+    }
+    const Eigen::MatrixXd basis = m.basis.cast<double>();
+    m.basis_gram.noalias() = basis.transpose() * basis;
+  } else {
+    m.basis_gram.resize(0, 0);
+  }
 
   m.projection = least_squares_projection(m.key_basis, kMaxConditionNumber, &m.condition_number, &m.regularization,
                                           m.aligned ? &m.key_range : nullptr);
@@ -304,6 +318,12 @@ double rms(const Eigen::VectorXd& residual) {
 
 }  // namespace
 
+double pose_scale(const PmscModel& m, const Eigen::VectorXd& coordinates) {
+  assert(m.relative_tolerance && m.basis_gram.rows() == coordinates.size());
+  const double squared = coordinates.dot(m.basis_gram * coordinates);
+  return std::sqrt(std::max(squared, 0.0) / static_cast<double>(m.point_count));
+}
+
 void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                           PoseEstimate& out) {
   estimate_coordinates(m, key_values, Eigen::VectorXf(), out);
@@ -315,7 +335,12 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
   assert(check_values.size() == 0 || check_values.size() == m.check_mean.size());
   assert(m.projection.rows() == m.basis.cols());
   const Eigen::VectorXd key_residual = project_keys(m, key_values, out.coordinates, out.alignment);
-  out.key_point_error = rms(key_residual);
+  // Errors in model units, or as fractions of the pose's scale S (relative_tolerance).
+  out.scale = m.relative_tolerance ? pose_scale(m, out.coordinates) : 1.0;
+  const auto measured = [scale = out.scale](double error) {
+    return scale > 0 ? error / scale : std::numeric_limits<double>::infinity();
+  };
+  out.key_point_error = measured(rms(key_residual));
   out.points.resize(0);
   const long D = m.channel_count;
   const long C = m.check_point_count();
@@ -332,7 +357,7 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
     check_errors.resize(static_cast<size_t>(C));
     for (long c = 0; c < C; ++c) {
       check_errors[static_cast<size_t>(c)] =
-          (check_values.segment(c * D, D).cast<double>() - estimate.segment(c * D, D)).norm();
+          measured((check_values.segment(c * D, D).cast<double>() - estimate.segment(c * D, D)).norm());
       out.check_point_error = std::max(out.check_point_error, check_errors[static_cast<size_t>(c)]);
     }
   }
@@ -349,7 +374,8 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
       counts[r] += D;
     }
     for (size_t r = 0; r < counts.size(); ++r) {
-      out.region_errors[r] = counts[r] > 0 ? std::sqrt(out.region_errors[r] / static_cast<double>(counts[r])) : 0.0;
+      out.region_errors[r] =
+          counts[r] > 0 ? measured(std::sqrt(out.region_errors[r] / static_cast<double>(counts[r]))) : 0.0;
     }
     if (out.checked) {
       std::vector<double> region_check(counts.size(), 0.0);

@@ -73,6 +73,16 @@ struct PmscModel {
   double key_weight = 1;              // w ≥ 0 of e_key in the estimate
   SoftCacheThresholds key_only_epsilon;  // ε for poses without check values (models with check points)
 
+  // A tolerance relative to each pose (issue #38: a HIT must mean the same for a dim and a bright
+  // light). Every error the soft cache measures — e_key, e_check, the region errors, and the
+  // calibration samples' max point errors — is divided by the pose's own scale
+  //   S = RMS over the output points of ‖f̂_i‖ = sqrt(pᵀ (AᵀA) p / N),
+  // so ε and the training tolerance are fractions of S. Such a model is linear (mean 0: training
+  // makes the frames' mean a basis direction), so keys s·f_key give s·f̂ and s·S, and every verdict
+  // is the same at any intensity. Not with `aligned` (a position has no intensity). False: errors
+  // in model units (every model before issue #38).
+  bool relative_tolerance = false;
+
   // How `epsilon` and `region_epsilon` were calibrated (calibration.h). No samples: a model
   // written before issue #22, whose ε is the worst held-out ratio's and cannot be recalibrated.
   struct Calibration {
@@ -98,6 +108,8 @@ struct PmscModel {
   // The check rows of mean and basis (C·D and C·D × M, in the aligned frame when aligned).
   Eigen::VectorXd check_mean;
   Eigen::MatrixXd check_basis;
+  // Relative-tolerance models only: AᵀA (M × M), so that S costs M² and not a reconstruction.
+  Eigen::MatrixXd basis_gram;
 
   int basis_size() const { return static_cast<int>(basis.cols()); }
   int key_point_count() const { return static_cast<int>(key_points.size()); }
@@ -134,6 +146,9 @@ struct PoseEstimate {
   double error_estimate = 0;
   // Per region, the same estimate over the region's key and check points (empty without regions).
   std::vector<double> region_errors;
+  // S, the pose's scale every error above is a fraction of (relative_tolerance; +Inf errors when
+  // S is 0: nothing to be relative to, a miss); 1 for a model with errors in model units.
+  double scale = 1;
   geometry::RigidTransform alignment;          // aligned frame → world (identity unless aligned)
 };
 
@@ -161,6 +176,10 @@ void estimate_coordinates(const PmscModel& model, const Eigen::Ref<const Eigen::
 inline const SoftCacheThresholds& verdict_thresholds(const PmscModel& model, const PoseEstimate& estimate) {
   return estimate.checked || model.check_points.empty() ? model.epsilon : model.key_only_epsilon;
 }
+
+// S of a relative-tolerance model's pose with coordinates p: sqrt(pᵀ (AᵀA) p / N), the RMS point
+// norm of f̂ = A p without reconstructing it. The model must be prepared and relative.
+double pose_scale(const PmscModel& model, const Eigen::VectorXd& coordinates);
 
 // Rows of the basis per block of a batched reconstruction: block × B floats of products stay in
 // cache (256 KB) while the mean is added on the way to each pose's destination.

@@ -7,6 +7,7 @@
 #include <string>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 
 #include "core/pmsc/check_points.h"
 #include "core/pmsc/key_points.h"
@@ -122,8 +123,26 @@ Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const
   return out;
 }
 
-// Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
-Status assemble(const Subspace& s, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
+// The linear subspace spanned by an affine one's mean and basis: an orthonormal basis of [mean,
+// basis] (the mean's direction first; a mean already in the span adds nothing) and mean 0. What a
+// relative-tolerance model serves (PmscModel::relative_tolerance): it reproduces everything the
+// affine subspace does with one more direction, and s·keys then give exactly s·f̂.
+Subspace linear_subspace(const Subspace& s) {
+  Eigen::MatrixXd columns(s.mean.size(), s.basis.cols() + 1);
+  columns << s.mean, s.basis;
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(columns);
+  const long rank = qr.rank();
+  Subspace out;
+  out.mean = Eigen::VectorXd::Zero(s.mean.size());
+  out.basis = qr.householderQ() * Eigen::MatrixXd::Identity(s.mean.size(), rank);
+  out.sigma = s.sigma;
+  return out;
+}
+
+// Copies the output rows and the key rows of a subspace into a runtime model and prepares it
+// (made linear first for a relative-tolerance model).
+Status assemble(const Subspace& affine, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
+  const Subspace s = m.relative_tolerance ? linear_subspace(affine) : affine;
   const long D = m.channel_count;
   const long output_first = cross ? control_rows : 0;
   const long output_rows = s.mean.size() - output_first;
@@ -170,6 +189,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   }
   if (o.block_size < 1 || o.max_key_points < 1) return invalid("block_size and max_key_points must be ≥ 1");
   if (o.remove_rigid_motion && D != 3) return invalid("remove_rigid_motion needs 3 channels (positions)");
+  if (o.relative_tolerance && o.remove_rigid_motion) {
+    return invalid("relative_tolerance needs remove_rigid_motion off: a position has no intensity to be relative to");
+  }
   if (o.blend_zone_ratio < 1) return invalid("blend_zone_ratio must be ≥ 1");
   if (!(o.false_hit_rate > 0 && o.false_hit_rate < 1)) {
     return invalid("false_hit_rate must be in (0, 1), got " + std::to_string(o.false_hit_rate));
@@ -195,6 +217,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   model.control_point_count = static_cast<int>(control_points);
   model.point_count = static_cast<int>((rows - (cross ? control_rows : 0)) / D);
   model.aligned = o.remove_rigid_motion;
+  model.relative_tolerance = o.relative_tolerance;
   if (o.remove_rigid_motion) {
     const auto transforms = rigid_motion_per_frame(T, control_points);
     for (long f = 0; f < F; ++f) apply_inverse(transforms[static_cast<size_t>(f)], T.col(f));
@@ -318,8 +341,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
       const Eigen::VectorXf truth = cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : control;
       evaluate(fold_model, gather_key_values(fold_model, control), estimate);
       const Eigen::VectorXf residual = truth - estimate.points;
+      // In the units of the estimate's errors: fractions of the pose's scale S when relative.
       const Eigen::VectorXf point_errors =
-          Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, N_out).colwise().norm().transpose();
+          Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, N_out).colwise().norm().transpose() /
+          static_cast<float>(estimate.scale);
       sample_key.push_back(estimate.key_point_error);
       sample_family.push_back(held.family);
       sample_max.push_back(static_cast<double>(point_errors.maxCoeff()));

@@ -40,6 +40,11 @@ struct TrainingOptions {
   // training frames so that at most a fraction false_hit_rate of poses like them are called HIT
   // with a max point error above it (calibration.h).
   double error_tolerance = 0;
+  // The tolerance (and ε) as fractions of each pose's own scale S instead of model units
+  // (PmscModel::relative_tolerance): the model is made linear, the calibration samples are
+  // measured relative to S, and a HIT means the same at any intensity. error_bound stays in
+  // model units (the key selection's). Not with remove_rigid_motion.
+  bool relative_tolerance = false;
   // δ of that statement, in (0, 1). The default asks for a miss recall of 0.98 (issue #22).
   double false_hit_rate = 0.02;
   // Held-out folds for that calibration (each fold retrains the basis without its frames); every
