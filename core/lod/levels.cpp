@@ -57,7 +57,7 @@ class CollapseForest {
 
 LodLevel cut_level(const MeshState& state, const as::Skeleton& skeleton, double error, int64_t steps) {
   LodLevel level;
-  level.model = state.to_model(skeleton, &level.vertex_ids);
+  level.model = state.to_model(skeleton, &level.vertex_ids, &level.face_ids);
   level.epsilon = error;
   level.step_count = steps;
   return level;
@@ -141,6 +141,7 @@ Result<std::vector<LevelFit>> fit_levels(LodLevels& lods, const Eigen::MatrixXd&
 
 SimplifyOptions progressive_mesh_options(const LevelBuildOptions& options) {
   SimplifyOptions simplify;
+  simplify.atlas = options.atlas;
   simplify.influence_simplification = options.influence_simplification && !options.placement;
   simplify.max_normal_deviation_degrees = options.max_normal_deviation_degrees;
   simplify.progress = options.progress;
@@ -164,6 +165,17 @@ Result<BuiltLevels> build_levels(const as::AnimationSpaceModel& model, const as:
     auto fits = fit_levels(built.lods, metrics.P, level_fit_options(options));
     if (!fits) return fits.error();
     built.fits = std::move(*fits);
+  }
+  if (options.atlas) {
+    // Placement moved positions only: a corner keeps its input vertex's UV (chart_atlas.h).
+    auto charts = ChartUvs::build(*options.atlas, model.faces);
+    if (!charts) return charts.error();
+    for (LodLevel& level : built.lods.levels) {
+      auto uvs = level_corner_uvs(*charts, level.model.faces, level.face_ids, level.vertex_ids,
+                                  static_cast<int32_t>(model.faces.rows()));
+      if (!uvs) return uvs.error();
+      level.corner_uvs = std::move(*uvs);
+    }
   }
   return built;
 }

@@ -21,6 +21,7 @@
 
 #include "core/animspace/model.h"
 #include "core/common/result.h"
+#include "core/lod/chart_atlas.h"
 #include "core/lod/level_fit.h"
 #include "core/lod/progressive_mesh.h"
 #include "core/lod/simplify.h"
@@ -39,6 +40,11 @@ struct Geomorph {
 struct LodLevel {
   animation_space::AnimationSpaceModel model;  // compact, vertices in input order
   std::vector<int32_t> vertex_ids;             // input vertex of each vertex of this level
+  std::vector<int32_t> face_ids;               // input face of each face of this level (may be empty
+                                               // for levels stored before face ids were)
+  // With an atlas: the UV of each face corner (3·#F × 2, chart_atlas.h: a face keeps its input
+  // face's chart, a corner the UV its input vertex has there); empty without one.
+  CornerUvs corner_uvs;
   double epsilon = 0;                          // ε^l (0 for level 0)
   int64_t step_count = 0;                      // steps of the sequence applied
   // For each vertex of this level, the vertex of level l+1 it ends up in (empty for the last).
@@ -84,6 +90,9 @@ struct LevelBuildOptions {
   int max_levels = 16;  // ≥ 1
   double max_normal_deviation_degrees = 90;
   ProgressCallback progress = {};  // the progressive mesh's
+  // The model's texture atlas, or null. With one, the progressive mesh keeps its chart borders
+  // (chart_atlas.h, Merry 2007 §5.1) and every level carries corner_uvs. Not owned.
+  const ChartAtlas* atlas = nullptr;
 };
 
 // The progressive mesh's and the placement's options for `options`.
@@ -96,7 +105,8 @@ struct BuiltLevels {
   size_t steps = 0;            // of the progressive mesh
 };
 
-// Progressive mesh, levels, placement and influence simplification, as `options` say.
+// Progressive mesh, levels, placement and influence simplification, as `options` say; with an
+// atlas, each level's corner UVs (level_corner_uvs).
 // Errors: build_progressive_mesh's and fit_levels'.
 Result<BuiltLevels> build_levels(const animation_space::AnimationSpaceModel& model,
                                  const animation_space::AnimationSpaceMetrics& metrics,

@@ -6,7 +6,10 @@
 // plus lod.<l>.faces (F_l × 3 i32) and lod.<l>.vertex_ids (V_l × 1 i32: the level-0 vertex each
 // vertex is). For every level l < L−1, lod.<l>.coarser_vertex (V_l × 1 i32) names the vertex
 // of level l+1 that each vertex collapses into — what geomorphing needs (§7.3). Levels share
-// the model's skeleton.
+// the model's skeleton. Optional, per level l ≥ 1: lod.<l>.face_ids (F_l × 1 i32: the level-0
+// face each face is, increasing) and, for levels built under a texture atlas (chart_atlas.h),
+// lod.<l>.uvs (F_l × 6 f64: u, v of corners 0, 1, 2 of each face, in [0, 1]², the layout of
+// atlas.uvs). Files without them load as before, their levels without face ids or UVs.
 #pragma once
 
 #include <string>
@@ -30,7 +33,8 @@ void store_levels(const LodLevels& lods, container::ModelContainer& out);
 // lod.errors has one level, itself.
 // Errors: kInvalidArgument naming `source`, the section and expected vs actual for shapes, ε^l
 // that are negative, not finite or decreasing, vertex ids that are not increasing level-0
-// vertices, coarser_vertex out of range, or a level that fails validate(model).
+// vertices, face ids that are not increasing level-0 faces, UVs not finite or outside [0, 1],
+// coarser_vertex out of range, or a level that fails validate(model).
 Result<LodLevels> load_levels(const container::ModelContainer& in, const animation_space::AnimationSpaceModel& model,
                               const std::string& source);
 

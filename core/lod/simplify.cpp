@@ -35,8 +35,9 @@ Error invalid(std::string message) { return make_error(ErrorCode::kInvalidArgume
 class Simplifier {
  public:
   Simplifier(const as::AnimationSpaceModel& model, const as::AnimationSpaceMetrics& metrics, Eigen::MatrixXd C,
-             const SimplifyOptions& options)
+             const SimplifyOptions& options, const ChartUvs* charts)
       : model_(model),
+        charts_(charts),
         C_(std::move(C)),
         options_(options),
         cos_max_deviation_(std::cos(options.max_normal_deviation_degrees * std::numbers::pi / 180.0)),
@@ -119,7 +120,7 @@ class Simplifier {
         // condition without touching u's ring; look again before applying.
         const Mesh::HalfedgeHandle h =
             mesh_.find_halfedge(Mesh::VertexHandle(c.vertex), Mesh::VertexHandle(c.target));
-        if (!h.is_valid() || !collapse_legal(h)) {
+        if (!h.is_valid() || !collapse_legal(h) || (charts_ && !atlas_still_allows(c.vertex, c.target))) {
           schedule_collapse(c.vertex);
           continue;
         }
@@ -229,6 +230,119 @@ class Simplifier {
     return true;
   }
 
+  // Which collapses out of u the atlas allows (chart_atlas.h; Merry 2007 §5.1, and §5.3 Fig. 5.5:
+  // a border vertex may only be removed along its border): any (u inside one chart, no border
+  // edge), none (u where three or more charts meet, or where a border reaches the mesh boundary),
+  // or only along its two border edges, ring positions `along` — onto the next vertex of the same
+  // border, the two faces on that edge being one of each chart.
+  enum class ChartMoves { kAny, kNone, kAlongBorder };
+  ChartMoves chart_moves(const Ring& ring, std::array<int, 2>& along) const {
+    int count = 0;
+    for (size_t k = 0; k < ring.outgoing.size(); ++k) {
+      const Mesh::HalfedgeHandle h = ring.outgoing[k];
+      const Mesh::FaceHandle left = mesh_.face_handle(h);
+      const Mesh::FaceHandle right = mesh_.face_handle(mesh_.opposite_halfedge_handle(h));
+      if (!left.is_valid() || !right.is_valid()) continue;  // the mesh boundary: the boundary rule's
+      if (charts_->chart_of(left.idx()) == charts_->chart_of(right.idx())) continue;
+      if (count < 2) along[static_cast<size_t>(count)] = static_cast<int>(k);
+      ++count;
+    }
+    if (count == 0) return ChartMoves::kAny;
+    if (count == 2 && !ring.boundary) return ChartMoves::kAlongBorder;
+    return ChartMoves::kNone;
+  }
+
+  // A collapse along a border removes one face of each chart on edge u–v; it may not take the
+  // last face of a chart at the two faces' other corners or at v, or a chart would lose that
+  // vertex — a chart thinned away corner by corner until it vanishes, taking a vertex where three
+  // charts met with it. Every vertex keeps the charts it touches. (Inside a chart this cannot
+  // happen: the faces' other corners keep the chart across their edges with u.)
+  bool border_collapse_keeps_charts(const Ring& ring, int m) const {
+    const int n = static_cast<int>(ring.vertices.size());
+    const int v = ring.vertices[static_cast<size_t>(m)];
+    std::vector<int32_t>& removed = scratch_.removed_faces;
+    removed.clear();
+    for (const int k : {(m + n - 1) % n, m}) {  // faces a_{m−1}–a_m and a_m–a_{m+1}
+      if (k >= ring.face_count()) continue;
+      const Mesh::FaceHandle f = mesh_.face_handle(mesh_.opposite_halfedge_handle(ring.outgoing[static_cast<size_t>(k)]));
+      const int32_t chart = charts_->chart_of(f.idx());
+      removed.push_back(f.idx());
+      const int x = ring.vertices[static_cast<size_t>(k == m ? (m + 1) % n : k)];
+      int others = 0;
+      for (const Mesh::FaceHandle g : mesh_.vf_range(Mesh::VertexHandle(x))) {
+        if (g != f && charts_->chart_of(g.idx()) == chart) ++others;
+      }
+      if (others == 0) return false;
+    }
+    // v's charts afterwards: its faces but the removed ones, and u's other faces.
+    std::vector<int32_t>& before = scratch_.charts_before;
+    std::vector<int32_t>& after = scratch_.charts_after;
+    before.clear();
+    after.clear();
+    for (const Mesh::FaceHandle g : mesh_.vf_range(Mesh::VertexHandle(v))) {
+      before.push_back(charts_->chart_of(g.idx()));
+      if (std::find(removed.begin(), removed.end(), g.idx()) == removed.end()) after.push_back(charts_->chart_of(g.idx()));
+    }
+    for (int k = 0; k < ring.face_count(); ++k) {
+      if (k == m || (k + 1) % n == m) continue;
+      after.push_back(charts_->chart_of(
+          mesh_.face_handle(mesh_.opposite_halfedge_handle(ring.outgoing[static_cast<size_t>(k)])).idx()));
+    }
+    for (std::vector<int32_t>* set : {&before, &after}) {
+      std::sort(set->begin(), set->end());
+      set->erase(std::unique(set->begin(), set->end()), set->end());
+    }
+    return before == after;
+  }
+
+  // Every rule of the atlas for u → ring.vertices[m] (chart_atlas.h).
+  bool atlas_allows(const Ring& ring, int m) const {
+    std::array<int, 2> along = {-1, -1};
+    switch (chart_moves(ring, along)) {
+      case ChartMoves::kNone:
+        return false;
+      case ChartMoves::kAlongBorder:
+        if ((m != along[0] && m != along[1]) || !border_collapse_keeps_charts(ring, m)) return false;
+        break;
+      case ChartMoves::kAny:
+        break;
+    }
+    return uv_fan_keeps_orientation(ring, m);
+  }
+
+  // The same, again when the collapse is taken: a collapse elsewhere may have taken a face the
+  // border rule counted on without touching u's ring (it then re-queues u).
+  bool atlas_still_allows(int u, int v) const {
+    Ring& ring = scratch_.ring;
+    ring_of(u, ring);
+    const auto at = std::find(ring.vertices.begin(), ring.vertices.end(), v);
+    return at != ring.vertices.end() && atlas_allows(ring, static_cast<int>(at - ring.vertices.begin()));
+  }
+
+  // The UV fold guard (chart_atlas.h): every face of u's fan that survives u → v = ring.vertices[m]
+  // keeps its chart's orientation in UV with a non-degenerate area once u's corner is v. Face k of
+  // the ring runs a_k → u → a_{k+1} (ring_of), which is its corner order up to rotation.
+  bool uv_fan_keeps_orientation(const Ring& ring, int m) const {
+    const int n = static_cast<int>(ring.vertices.size());
+    const int v = ring.vertices[static_cast<size_t>(m)];
+    for (int k = 0; k < ring.face_count(); ++k) {
+      const int k1 = (k + 1) % n;
+      if (k == m || k1 == m) continue;  // vanishes with edge u–v
+      const Mesh::FaceHandle f = mesh_.face_handle(mesh_.opposite_halfedge_handle(ring.outgoing[static_cast<size_t>(k)]));
+      const int32_t c = charts_->chart_of(f.idx());
+      const Eigen::Vector2d* tv = charts_->find(v, c);
+      const Eigen::Vector2d* ta = charts_->find(ring.vertices[static_cast<size_t>(k)], c);
+      const Eigen::Vector2d* tb = charts_->find(ring.vertices[static_cast<size_t>(k1)], c);
+      // A corner's vertex always has a UV in its face's chart (chart_atlas.h's induction); v lacks
+      // one only when u → v would join charts, which chart_moves has refused.
+      if (tv == nullptr || ta == nullptr || tb == nullptr) return false;
+      const double area = charts_->orientation(c) * signed_uv_area(*ta, *tv, *tb);
+      const double scale = (*ta - *tv).squaredNorm() + (*tb - *tv).squaredNorm();
+      if (!(area > 1e-12 * scale)) return false;
+    }
+    return true;
+  }
+
   // Memoryless cost of u → ring.vertices[m] (§6.2.1), or nullopt when a guard refuses it.
   // `q` is the flattened ring, `gram` the L2,2 Gram matrix of d_k = p_{a_k} − p_u.
   std::optional<double> collapse_cost(int u, const Ring& ring, int m, const std::vector<Vector2>& q,
@@ -316,6 +430,10 @@ class Simplifier {
     ring_of(u, ring);
     const int n = static_cast<int>(ring.vertices.size());
     if (n < 2) return;
+    if (charts_) {
+      std::array<int, 2> along;
+      if (chart_moves(ring, along) == ChartMoves::kNone) return;  // pinned by the atlas's borders
+    }
     // d_k = p_{a_k} − p_u in normalised animation space, and their L2,2 Gram matrix.
     Eigen::MatrixXd& d = scratch_.d;
     d.resize(normalised_.rows(), n);
@@ -361,6 +479,7 @@ class Simplifier {
     costs.clear();
     for (int m = 0; m < n; ++m) {
       if (ring.boundary && m != 0 && m != n - 1) continue;  // boundary vertices move along the boundary
+      if (charts_ && !atlas_allows(ring, m)) continue;
       const std::optional<double> deviation = collapse_cost(u, ring, m, q, gram);
       if (!deviation) continue;
       const int v = ring.vertices[static_cast<size_t>(m)];
@@ -502,6 +621,7 @@ class Simplifier {
   }
 
   const as::AnimationSpaceModel& model_;
+  const ChartUvs* charts_;  // the atlas's, or null
   Eigen::MatrixXd C_;  // P^½
   Eigen::MatrixXd normalised_;  // 4b × V, y = C p of every vertex
   SimplifyOptions options_;
@@ -532,6 +652,7 @@ class Simplifier {
     std::vector<Vector2> q;
     std::vector<CollapseOption> costs;
     std::vector<int> kept;
+    std::vector<int32_t> removed_faces, charts_before, charts_after;
     Eigen::VectorXd moved;
   };
   mutable Scratch scratch_;
@@ -562,7 +683,13 @@ Result<ProgressiveMesh> build_progressive_mesh(const as::AnimationSpaceModel& mo
   }
   auto C = as::normalised_animation_space_matrix(metrics.P);
   if (!C) return invalid("metrics: " + C.error().message);
-  Simplifier simplifier(model, metrics, std::move(*C), options);
+  std::optional<ChartUvs> charts;
+  if (options.atlas) {
+    auto built = ChartUvs::build(*options.atlas, model.faces);
+    if (!built) return built.error();
+    charts = std::move(*built);
+  }
+  Simplifier simplifier(model, metrics, std::move(*C), options, charts ? &*charts : nullptr);
   ANIMSPACE_RETURN_IF_ERROR(simplifier.build_connectivity());
   return simplifier.run();
 }

@@ -14,13 +14,15 @@
 // Guards: OpenMesh's topological test (is_collapse_ok: no non-manifold edges, no fold-overs of
 // the link), a boundary vertex only collapses along the boundary, the new fan must not fold in
 // the flattening, and no face may turn by more than max_normal_deviation_degrees in the rest
-// pose (normal-flip guard).
+// pose (normal-flip guard). With an atlas (SimplifyOptions::atlas), chart_atlas.h's border rules
+// and the UV fold guard as well.
 #pragma once
 
 #include "core/animspace/metrics.h"
 #include "core/animspace/model.h"
 #include "core/common/result.h"
 #include "core/common/progress.h"
+#include "core/lod/chart_atlas.h"
 #include "core/lod/progressive_mesh.h"
 
 namespace animspace::lod {
@@ -53,6 +55,9 @@ struct SimplifyOptions {
   int min_vertices = 4;
   // Vertices collapsed so far, of the input's count less min_vertices (core/common/progress.h).
   ProgressCallback progress = {};
+  // The model's texture atlas, or null: with one, collapses keep its chart borders and no face
+  // flips in UV (chart_atlas.h, Merry 2007 §5.1, §5.3). Not owned; read during the call only.
+  const ChartAtlas* atlas = nullptr;
 };
 
 // The whole progressive mesh of `model` under the L2,2 metric of `metrics` (P = E[GᵀG]).
@@ -60,7 +65,7 @@ struct SimplifyOptions {
 // a collapse and are refused rather than silently kept).
 // Errors: kInvalidArgument naming the part for an invalid model or metrics, metrics of another
 // bone count, a model without faces, an unused vertex, or a non-manifold input (OpenMesh cannot
-// represent it: the first offending face is named).
+// represent it: the first offending face is named); ChartUvs::build's for an atlas that does not fit.
 Result<ProgressiveMesh> build_progressive_mesh(const animation_space::AnimationSpaceModel& model,
                                                const animation_space::AnimationSpaceMetrics& metrics,
                                                const SimplifyOptions& options = {});
