@@ -592,6 +592,10 @@ bool ModelContainer::has_section(std::string_view name) const {
   return sections_.find(name) != sections_.end();
 }
 
+void ModelContainer::remove_section(std::string_view name) {
+  if (const auto at = sections_.find(name); at != sections_.end()) sections_.erase(at);
+}
+
 std::vector<std::string> ModelContainer::section_names() const {
   std::vector<std::string> names;
   names.reserve(sections_.size());

@@ -78,6 +78,8 @@ class ModelContainer {
   void set_faces(const std::string& name, const FaceMatrix& m);
 
   bool has_section(std::string_view name) const;
+  // Drops a section (no-op when absent): for a writer whose new data makes a stored one stale.
+  void remove_section(std::string_view name);
   std::vector<std::string> section_names() const;  // sorted
   const std::map<std::string, Section, std::less<>>& sections() const { return sections_; }
 

@@ -308,9 +308,17 @@ Result<container::ModelContainer> make_demo_smooth_container(const container::Mo
   auto built = atlas::build_atlas(*model, metrics->metrics, atlas::AtlasOptions{});
   if (!built) return built.error();
   atlas::store_atlas(built->atlas, "poses", *smooth);
+  // Its levels of detail keep the atlas's chart borders and carry its UVs (lod/chart_atlas.h), as
+  // build-lod makes them for a model with an atlas.
+  const lod::ChartAtlas charts{built->atlas.chart_of_face, built->atlas.uvs};
+  lod::LevelBuildOptions lod_options;
+  lod_options.atlas = &charts;
+  auto levels = lod::build_levels(*model, metrics->metrics, lod_options);
+  if (!levels) return levels.error();
+  lod::store_levels(levels->lods, *smooth);
   smooth->metadata()["description"] =
       "The arm's animation-space model subdivided once in animation space (Loop), with a texture atlas balanced "
-      "across its poses.";
+      "across its poses and levels of detail that keep its charts.";
   return std::move(*smooth);
 }
 

@@ -70,7 +70,7 @@ class LodStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::Byte
   std::shared_ptr<const LoadedModel> model_;  // keeps the level alive across a hot swap
   LodChoice choice_;
   std::optional<lod::LevelBlocks> blocks_;
-  std::optional<atlas::Atlas> atlas_;  // include_texture_coordinates: the model's, level 0's faces
+  std::optional<atlas::Atlas> atlas_;  // include_texture_coordinates at level 0: the model's atlas
   bool prepared_ = false;
   Phase phase_ = Phase::kHeader;
   uint32_t next_vertex_ = 0;
@@ -118,12 +118,9 @@ grpc::Status LodStream::prepare() {
   set_model(model_->name);
   if (grpc::Status s = select_lod_level(*model_, r, &choice_); !s.ok()) return s;
   if (r.include_texture_coordinates()) {
-    // The atlas (animspace atlas) belongs to the full mesh: coarser levels have other faces.
-    if (choice_.level != 0) {
-      return invalid_argument("include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level " +
-                              std::to_string(choice_.level) + " of " + std::to_string(model_->lod_levels->count()));
-    }
-    const long faces = choice_.lod->model.faces.rows();
+    // Level 0 serves the atlas itself; a coarser level the corner UVs build-lod stored with it
+    // (lod/chart_atlas.h: its faces keep their charts, its borders the atlas's).
+    const long faces = model_->lod_levels->levels.front().model.faces.rows();
     auto stored = atlas::load_atlas(model_->container, faces, model_->path.string());
     if (!stored) return to_grpc_status(stored.error());
     if (!*stored) {
@@ -131,7 +128,14 @@ grpc::Status LodStream::prepare() {
                                  std::to_string(model_->version) +
                                  " stores no texture atlas (expected atlas sections; `animspace atlas` adds them)");
     }
-    atlas_ = std::move(**stored);
+    if (choice_.level == 0) {
+      atlas_ = std::move(**stored);
+    } else if (choice_.lod->corner_uvs.rows() == 0) {
+      return failed_precondition("include_texture_coordinates: level " + std::to_string(choice_.level) +
+                                 " of model '" + model_->name + "' version " + std::to_string(model_->version) +
+                                 " stores no texture coordinates (its levels were built without the atlas; "
+                                 "`animspace build-lod` on the model with its atlas stores them)");
+    }
   }
 
   lod::LevelBlockOptions options;
@@ -147,7 +151,11 @@ grpc::Status LodStream::prepare() {
     options.form = lod::LevelForm::kAnimationSpace;
     options.geomorph = r.include_geomorph();
   }
-  if (atlas_) options.corner_uvs = &atlas_->uvs;
+  if (atlas_) {
+    options.corner_uvs = &atlas_->uvs;
+  } else if (r.include_texture_coordinates()) {
+    options.corner_uvs = &choice_.lod->corner_uvs;  // the level outlives the stream (model_)
+  }
   options.max_block_vertices = r.vertices_per_chunk() != 0 ? r.vertices_per_chunk() : kDefaultVerticesPerChunk;
   options.max_block_bytes = std::max<int64_t>(1, std::min(kMaxBlockBytes, env_.options.max_message_bytes / 4));
   blocks_.emplace(*model_->lod_levels, choice_.level, options);

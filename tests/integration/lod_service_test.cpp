@@ -15,6 +15,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <map>
 #include <memory>
 #include <set>
 #include <string>
@@ -182,6 +183,8 @@ class LodServiceTest : public ::testing::Test {
       atlas::store_atlas(*atlas_, "rest_pose", *arm);
       testing::write_model(repo_, kAtlasModel, 1, *arm);
     }
+    // The demo's subdivided arm: an atlas made by `animspace atlas`'s code and levels that keep it.
+    ASSERT_TRUE(demo::write_demo_smooth(repo_).ok());
     daemon_ = new DaemonProcess({"--model-repository", repo_.string(), "--log-level", "info"}, work_->path());
     client_ = new Client(daemon_->address());
     ASSERT_TRUE(testing::wait_until_serving(*client_)) << "never SERVING";
@@ -894,14 +897,15 @@ TEST_F(LodServiceTest, TextureCoordinatesKeepFaceBlocksInTheByteBudget) {
 }
 
 TEST_F(LodServiceTest, TextureCoordinatesRefusalsNameTheField) {
+  // arm-atlas's levels are arm-animspace's, built before its atlas: they have no UVs.
   const std::vector<BadCase> cases = {
-      {"a coarser level", grpc::StatusCode::INVALID_ARGUMENT,
-       "include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level 1 of " +
-           std::to_string(levels_->count()),
+      {"a coarser level built without the atlas", grpc::StatusCode::FAILED_PRECONDITION,
+       "include_texture_coordinates: level 1 of model 'arm-atlas' version 1 stores no texture coordinates (its "
+       "levels were built without the atlas",
        [](auto& r) { r.set_level(1); }},
-      {"a budget that picks a coarser level", grpc::StatusCode::INVALID_ARGUMENT,
-       "include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level " +
-           std::to_string(levels_->count() - 1),
+      {"a budget that picks such a level", grpc::StatusCode::FAILED_PRECONDITION,
+       "include_texture_coordinates: level " + std::to_string(levels_->count() - 1) +
+           " of model 'arm-atlas' version 1 stores no texture coordinates",
        [&](auto& r) {
          r.mutable_budget()->set_max_vertices(static_cast<uint32_t>(level(levels_->count() - 1).model.vertex_count()));
        }},
@@ -922,6 +926,50 @@ TEST_F(LodServiceTest, TextureCoordinatesRefusalsNameTheField) {
     EXPECT_NE(raw.status.error_message().find(c.message_part), std::string::npos)
         << "message: " << raw.status.error_message() << "\nexpected to contain: " << c.message_part;
     EXPECT_TRUE(raw.chunks.empty()) << "a refused call streams nothing";
+  }
+}
+
+// Every level of a model whose levels were built under its atlas (the demo's arm-smooth) serves
+// its UVs: the stored level's, and each corner the atlas's UV of its vertex in its face's chart.
+TEST_F(LodServiceTest, TextureCoordinatesAtEveryLevelOfAModelBuiltWithItsAtlas) {
+  const std::string name(demo::kDemoSmoothModelName);
+  auto in = container::read_file(repo_ / name / "1" / "model.anim");
+  ASSERT_TRUE(in.ok()) << in.error().message;
+  auto smooth = as::load(*in, name);
+  ASSERT_TRUE(smooth.ok()) << smooth.error().message;
+  auto levels = lod::load_levels(*in, *smooth, name);
+  ASSERT_TRUE(levels.ok()) << levels.error().message;
+  auto stored = atlas::load_atlas(*in, smooth->faces.rows(), name);
+  ASSERT_TRUE(stored.ok() && stored->has_value());
+  const atlas::Atlas& a = **stored;
+  std::map<std::pair<int32_t, int32_t>, std::array<float, 2>> uv;  // (vertex, chart), as float32
+  for (Eigen::Index f = 0; f < smooth->faces.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      uv[{smooth->faces(f, k), a.chart_of_face[static_cast<size_t>(f)]}] = {static_cast<float>(a.uvs(3 * f + k, 0)),
+                                                                            static_cast<float>(a.uvs(3 * f + k, 1))};
+    }
+  }
+  ASSERT_GE(levels->count(), 3);
+  for (int l = 1; l < levels->count(); ++l) {
+    SCOPED_TRACE("level " + std::to_string(l));
+    const lod::LodLevel& level = levels->levels[static_cast<size_t>(l)];
+    v1::GetLodRequest request = level_request(static_cast<uint32_t>(l), v1::GetLodRequest::FORM_POSED, name);
+    request.set_include_texture_coordinates(true);
+    request.set_vertices_per_chunk(50);
+    const LodMesh mesh = client_->get_lod(request);
+    ASSERT_TRUE(mesh.header.texture_coordinates());
+    ASSERT_EQ(mesh.header.level(), static_cast<uint32_t>(l));
+    EXPECT_TRUE(same_bytes(mesh.indices, faces_u32(level.model.faces)));
+    ASSERT_EQ(mesh.corner_uvs.size(), static_cast<size_t>(6 * level.model.faces.rows()));
+    for (Eigen::Index f = 0; f < level.model.faces.rows(); ++f) {
+      const int32_t chart = a.chart_of_face[static_cast<size_t>(level.face_ids[static_cast<size_t>(f)])];
+      for (int k = 0; k < 3; ++k) {
+        const auto at = uv.find({level.vertex_ids[static_cast<size_t>(level.model.faces(f, k))], chart});
+        ASSERT_NE(at, uv.end()) << "face " << f << " corner " << k << " is no vertex of its chart";
+        EXPECT_EQ(mesh.corner_uvs[static_cast<size_t>(6 * f + 2 * k)], at->second[0]) << "face " << f;
+        EXPECT_EQ(mesh.corner_uvs[static_cast<size_t>(6 * f + 2 * k + 1)], at->second[1]) << "face " << f;
+      }
+    }
   }
 }
 

@@ -1,7 +1,8 @@
 """GetLod's texture coordinates (issue #37): level 0 of a model that stores a texture atlas
 (`animspace atlas`), fetched with ``get_lod(..., texture_coordinates=True)``, carries the atlas
-per face corner. Checked against the atlas read independently: the C++ CLI's offline
-``animspace export-lod --level 0`` of the same file, whose OBJ has the atlas as ``vt`` with the
+per face corner, and so does every level of a model whose levels were built under its atlas
+(`atlas`, then `build-lod`). Checked against the atlas read independently: the C++ CLI's offline
+``animspace export-lod --level L`` of the same file, whose OBJ has the UVs as ``vt`` with the
 seams split, corner for corner.
 """
 import pathlib
@@ -15,8 +16,9 @@ import animspace
 from conftest import BUILD, run_animspaced
 
 CLI = BUILD / "bin" / "animspace"
-MODEL = "arm-animspace"  # the demo's, with an atlas
+MODEL = "arm-animspace"  # the demo's, with an atlas (its levels built before it: no UVs)
 PLAIN = "arm-plain"      # the same model without one
+LEVELS = "arm-levels"    # the atlas'd model with levels built again under its atlas
 
 
 def _run(*arguments):
@@ -35,6 +37,8 @@ def atlas_repository(tmp_path_factory):
     (repository / PLAIN / "1").mkdir(parents=True)
     (repository / PLAIN / "1" / "model.anim").write_bytes(source.read_bytes())
     _run("atlas", source, "-o", repository / MODEL / "1" / "model.anim")
+    (repository / LEVELS / "1").mkdir(parents=True)
+    _run("build-lod", repository / MODEL / "1" / "model.anim", "-o", repository / LEVELS / "1" / "model.anim")
     return repository
 
 
@@ -95,13 +99,31 @@ def test_level_0_carries_the_stored_atlas_per_corner(atlas_client, atlas_reposit
     assert any(len(found) > 1 for found in per_vertex.values())
 
 
+def test_every_level_built_under_the_atlas_carries_its_uvs(atlas_client, atlas_repository, tmp_path):
+    levels = atlas_client.describe_model(LEVELS).default.lod_level_count
+    assert levels > 2
+    for level in range(levels):
+        mesh = atlas_client.get_lod(LEVELS, level=level, texture_coordinates=True, vertices_per_chunk=64)
+        assert mesh.header.texture_coordinates and mesh.header.level == level
+        uvs = mesh.texture_coordinates
+        assert uvs.shape == (mesh.face_count, 3, 2) and np.all((uvs >= 0) & (uvs <= 1))
+        obj = tmp_path / f"level{level}.obj"
+        _run("export-lod", atlas_repository / LEVELS / "1" / "model.anim", "--level", level, "-o", obj)
+        expected = _read_obj(obj)
+        served = np.concatenate([mesh.positions[mesh.indices.astype(np.int64)].reshape(-1, 3),
+                                 uvs.reshape(-1, 2)], axis=1).astype(np.float64)
+        assert served.shape == expected.shape, f"level {level}"
+        np.testing.assert_allclose(_sorted_rows(served), _sorted_rows(expected), rtol=0, atol=1e-6,
+                                   err_msg=f"level {level}")
+
+
 def test_refusals_name_include_texture_coordinates(atlas_client):
     levels = atlas_client.describe_model(MODEL).default.lod_level_count
     assert levels > 1
-    with pytest.raises(animspace.InvalidArgument) as error:
+    with pytest.raises(animspace.FailedPrecondition) as error:
         atlas_client.get_lod(MODEL, level=1, texture_coordinates=True)
-    assert (f"include_texture_coordinates: expected level 0 (only the full mesh has the atlas), got level 1 of "
-            f"{levels}") in error.value.message
+    assert (f"include_texture_coordinates: level 1 of model '{MODEL}' version 1 stores no texture coordinates"
+            in error.value.message)
     with pytest.raises(animspace.InvalidArgument) as error:
         atlas_client.get_lod(MODEL, level=0, form="animation_space", texture_coordinates=True)
     assert "include_texture_coordinates: expected FORM_POSED" in error.value.message

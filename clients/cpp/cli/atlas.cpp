@@ -60,6 +60,15 @@ int run_atlas(const AtlasArgs& a, bool json) {
   if (!built) return fail("atlas", a.input + ": " + built.error().message);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   atlas::store_atlas(built->atlas, metric_name, out);
+  // Levels built under a previous atlas carry its UVs (lod.<l>.uvs), which the new charts make
+  // stale: they are dropped, and build-lod stores the new ones.
+  int stale_level_uvs = 0;
+  for (const std::string& name : in->section_names()) {
+    if (name.starts_with("lod.") && name.ends_with(".uvs")) {
+      out.remove_section(name);
+      ++stale_level_uvs;
+    }
+  }
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("atlas", written.error().message);
   if (json) {
@@ -69,11 +78,17 @@ int run_atlas(const AtlasArgs& a, bool json) {
                 {"l2_stretch", built->l2},
                 {"linf_stretch", built->linf},
                 {"utilisation", built->utilisation},
+                {"dropped_level_uvs", stale_level_uvs},
                 {"seconds", seconds}});
   } else {
     std::printf("atlas (%s): %d charts, L2 stretch %.4f, L∞ %.3f (%s), utilisation %.3f, %.2f s\nwrote %s\n",
                 metric_name.c_str(), built->atlas.chart_count, built->l2, built->linf,
                 a.rest_pose ? "rest pose" : "across the model's poses", built->utilisation, seconds, path.c_str());
+    if (stale_level_uvs > 0) {
+      std::printf("dropped the UVs of %d levels of detail (made under the previous atlas); run build-lod for new "
+                  "ones\n",
+                  stale_level_uvs);
+    }
   }
   return 0;
 }

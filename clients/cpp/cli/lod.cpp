@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <numbers>
+#include <optional>
 #include <sstream>
 #include <vector>
 
@@ -31,8 +32,8 @@ CLI::App* add_build_lod(CLI::App& app, BuildLodArgs& a) {
       "build-lod",
       "Offline: add levels of detail to an animation-space model — memoryless appearance-preserving simplification "
       "in animation space (Merry 2007 ch. 6), levels halving the influences (§7.3), each level's vertices placed to "
-      "fit the model across poses, then its influences simplified while the error they add pays for itself — and "
-      "write a model version");
+      "fit the model across poses, then its influences simplified while the error they add pays for itself; a model "
+      "with a texture atlas keeps its chart borders and every level carries its UVs — and write a model version");
   cmd->add_option("input", a.input, "An animation-space model.anim (from fit or import-rig)")
       ->required()
       ->check(CLI::ExistingFile);
@@ -72,6 +73,13 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
   options.influence_exchange = a.influence_exchange;
   options.max_levels = a.max_levels;
   options.max_normal_deviation_degrees = a.max_normal_deviation_degrees;
+  // A model with an atlas (animspace atlas): the levels keep its chart borders and carry its UVs
+  // (lod/chart_atlas.h).
+  auto stored_atlas = atlas::load_atlas(*in, model->faces.rows(), a.input);
+  if (!stored_atlas) return fail("build-lod", stored_atlas.error().message);
+  std::optional<lod::ChartAtlas> charts;
+  if (*stored_atlas) charts = lod::ChartAtlas{(*stored_atlas)->chart_of_face, (*stored_atlas)->uvs};
+  options.atlas = charts ? &*charts : nullptr;
   options.progress = progress_bars("build-lod");
   const auto start = std::chrono::steady_clock::now();
   auto built = lod::build_levels(*model, stored->metrics, options);
@@ -108,8 +116,13 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
       }
       rows.push_back(std::move(row));
     }
-    print_json({{"output", path.string()}, {"seconds", seconds}, {"steps", built->steps}, {"levels", rows}});
+    print_json({{"output", path.string()},
+                {"seconds", seconds},
+                {"steps", built->steps},
+                {"chart_borders", charts.has_value()},
+                {"levels", rows}});
   } else {
+    if (charts) std::printf("the atlas's chart borders kept; every level carries its UVs\n");
     std::printf("progressive mesh: %zu steps; levels built in %.2f s\n%6s %9s %9s %11s %12s %12s %26s\n", built->steps,
                 seconds, "level", "vertices", "faces", "influences", "ε^l", "RMS", "collapses only: infl, RMS");
     for (int l = 0; l < levels.count(); ++l) {
@@ -214,15 +227,17 @@ int run_export_lod(const ExportLodArgs& a, bool json) {
   } else if (mesh.faces.rows() > 0) {
     mesh.normals = geometry::area_weighted_normals(mesh.points, mesh.faces);
   }
-  // The atlas (animspace atlas) belongs to the full mesh: level 0 carries its UVs, seams split.
+  // The atlas (animspace atlas): level 0 carries its UVs, a coarser level those build-lod stored
+  // with it (lod/chart_atlas.h); seams split.
   bool with_uvs = false;
-  if (chosen == 0) {
-    auto stored = atlas::load_atlas(*in, model->faces.rows(), a.input);
-    if (!stored) return fail("export-lod", stored.error().message);
-    if (*stored) {
-      mesh = mesh_io::split_seams(mesh, (*stored)->uvs.cast<float>());
-      with_uvs = true;
-    }
+  auto stored = atlas::load_atlas(*in, model->faces.rows(), a.input);
+  if (!stored) return fail("export-lod", stored.error().message);
+  if (*stored && chosen == 0) {
+    mesh = mesh_io::split_seams(mesh, (*stored)->uvs.cast<float>());
+    with_uvs = true;
+  } else if (*stored && level.corner_uvs.rows() > 0) {
+    mesh = mesh_io::split_seams(mesh, level.corner_uvs.cast<float>());
+    with_uvs = true;
   }
   if (auto written = mesh_io::write_posed_mesh(a.output, mesh); !written.ok()) {
     return fail("export-lod", written.error().message);
@@ -287,8 +302,9 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
       ->capture_default_str();
   cmd->add_option("--vertices-per-chunk", a.vertices_per_chunk, "Vertices per streamed block (default: the server's)");
   cmd->add_flag("--texture-coordinates", a.texture_coordinates,
-                "Level 0 only: fetch the model's texture atlas (animspace atlas) and write it as UVs, the vertices "
-                "split along its seams (OBJ vt, PLY s t, glTF TEXCOORD_0)");
+                "Fetch the model's texture atlas (animspace atlas) at the level (a coarser level's UVs as build-lod "
+                "stored them under the atlas) and write it as UVs, the vertices split along its seams (OBJ vt, PLY s "
+                "t, glTF TEXCOORD_0)");
   cmd->add_option("--deadline-s", a.deadline_s, "Deadline for the whole stream")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -59,7 +59,7 @@ struct LodArgs {
   std::string pose_file;
   std::string pose_space = "global";  // "global": G_j; "local": joint transforms L_j
   uint32_t vertices_per_chunk = 0;    // 0: the server's default
-  bool texture_coordinates = false;   // level 0 only: the model's atlas, written with seams split
+  bool texture_coordinates = false;   // the model's atlas at the level, written with seams split
   int deadline_s = 600;
   std::string output;
 };

@@ -766,17 +766,18 @@ class Client:
             pose: FORM_POSED's skeleton pose, B×3×4 or B×4×4 in ``space``.
             include_geomorph: animation-space form: Δp towards the next coarser level (eq. 7.1).
             vertices_per_chunk: most vertices per block (0 = server default).
-            texture_coordinates: "posed" form at level 0 only: also the model's texture atlas
-                (``animspace atlas``), ``LodMesh.texture_coordinates``, F×3×2 float32 per face
-                corner.
+            texture_coordinates: "posed" form only: also the model's texture atlas (``animspace
+                atlas``) at the level, ``LodMesh.texture_coordinates``, F×3×2 float32 per face
+                corner; a coarser level's are the UVs build-lod stored with it (its faces keep
+                their charts).
 
         Raises:
             ValueError: not exactly one selection, or a distance without a tolerance.
-            InvalidArgument: ``texture_coordinates`` with the animation-space form or a level
-                above 0 (the message names include_texture_coordinates).
+            InvalidArgument: ``texture_coordinates`` with the animation-space form (the message
+                names include_texture_coordinates).
             OutOfRange: ``max_vertices`` below the coarsest level's vertex count.
             FailedPrecondition: a model without levels, or ``texture_coordinates`` for a model
-                without an atlas.
+                without an atlas or at a level stored without UVs (built before the atlas).
             ProtocolError: blocks out of order or not adding up to the header.
         """
         chosen = [name for name, value in (("level", level), ("max_vertices", max_vertices),

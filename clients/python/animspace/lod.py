@@ -48,7 +48,7 @@ class LodHeader:
     ``epsilon`` is ε^l, the L2,2 deviation bound of the level in model units; with a pixel
     tolerance ``tolerated_error`` is eq. 7.2's ε for the request's view (``epsilon ≤
     tolerated_error``), else 0. ``form`` is "posed" or "animation_space".
-    ``texture_coordinates``: the face blocks carry the model's atlas UVs (asked for, level 0).
+    ``texture_coordinates``: the face blocks carry the model's atlas UVs at the level (asked for).
     """
 
     model_version: int
@@ -131,8 +131,8 @@ class LodMesh:
         indices: F×3 uint32 vertex indices, counter-clockwise seen from outside.
         skeleton: animation-space form: the skeleton; None for the posed form.
         chunk_count, bytes_received: what the stream took (for transfer reports).
-        texture_coordinates: with ``get_lod(..., texture_coordinates=True)`` (posed, level 0 of a
-            model with an atlas): F×3×2 float32, ``[f, k]`` the (u, v) of corner k of face f
+        texture_coordinates: with ``get_lod(..., texture_coordinates=True)`` (posed, any level of
+            a model with an atlas): F×3×2 float32, ``[f, k]`` the (u, v) of corner k of face f
             (vertex ``indices[f, k]``), in [0, 1]², v up; per corner because a seam gives one
             vertex several UVs. None otherwise.
     """

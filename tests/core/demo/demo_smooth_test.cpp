@@ -1,5 +1,6 @@
 // The demo's subdivided arm with its atlas (arm-smooth): the thesis's two systems on the bundled
 // model, judged with independent computations on the demo arm itself.
+#include <map>
 #include <set>
 #include <utility>
 
@@ -8,11 +9,12 @@
 #include "core/animspace/animspace_io.h"
 #include "core/atlas/atlas_io.h"
 #include "core/demo/demo_repository.h"
+#include "core/lod/lod_io.h"
 
 namespace animspace::demo {
 namespace {
 
-TEST(DemoSmoothTest, IsTheArmSubdividedOnceWithAnAtlasOfDiscCharts) {
+TEST(DemoSmoothTest, IsTheArmSubdividedOnceWithAnAtlasOfDiscChartsAndLevelsThatKeepThem) {
   auto arm = make_demo_animation_space_container();
   ASSERT_TRUE(arm.ok()) << arm.error().message;
   auto control = animation_space::load(*arm, "arm-animspace");
@@ -58,6 +60,29 @@ TEST(DemoSmoothTest, IsTheArmSubdividedOnceWithAnAtlasOfDiscCharts) {
     }
     EXPECT_EQ(static_cast<long>(vertices.size()) - static_cast<long>(chart_edges.size()) + faces, 1)
         << "chart " << chart << " is not a disc";
+  }
+
+  // Its levels of detail keep the charts (issue #37, §5.1): every level carries UVs, each corner
+  // the atlas's UV of its vertex in the chart of the face it came from.
+  auto levels = lod::load_levels(*smooth_file, *smooth, "arm-smooth");
+  ASSERT_TRUE(levels.ok()) << levels.error().message;
+  ASSERT_GE(levels->count(), 3);
+  std::map<std::pair<int, int>, Eigen::RowVector2d> uv;  // (vertex, chart)
+  for (Eigen::Index f = 0; f < smooth->faces.rows(); ++f) {
+    for (int c = 0; c < 3; ++c) uv[{smooth->faces(f, c), a.chart_of_face[static_cast<size_t>(f)]}] = a.uvs.row(3 * f + c);
+  }
+  for (int l = 1; l < levels->count(); ++l) {
+    const lod::LodLevel& level = levels->levels[static_cast<size_t>(l)];
+    ASSERT_EQ(level.corner_uvs.rows(), 3 * level.model.faces.rows()) << "level " << l;
+    ASSERT_EQ(level.face_ids.size(), static_cast<size_t>(level.model.faces.rows()));
+    for (Eigen::Index f = 0; f < level.model.faces.rows(); ++f) {
+      const int chart = a.chart_of_face[static_cast<size_t>(level.face_ids[static_cast<size_t>(f)])];
+      for (int c = 0; c < 3; ++c) {
+        const auto at = uv.find({level.vertex_ids[static_cast<size_t>(level.model.faces(f, c))], chart});
+        ASSERT_NE(at, uv.end()) << "level " << l << " face " << f << " corner " << c << " leaves its chart";
+        EXPECT_EQ(level.corner_uvs.row(3 * f + c), at->second) << "level " << l << " face " << f;
+      }
+    }
   }
 }
 
