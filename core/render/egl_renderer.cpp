@@ -133,6 +133,34 @@ Status validate_scene(const Scene& scene) {
     return invalid("exposure: expected a finite value > 0, got " + format_number(scene.exposure));
   }
   ANIMSPACE_RETURN_IF_ERROR(require_finite(scene.wireframe_colour, "wireframe_colour"));
+  if (scene.corner_uvs.rows() != 0) {
+    if (scene.corner_uvs.rows() != 3 * scene.faces.rows()) {
+      return invalid("corner_uvs: expected " + std::to_string(3 * scene.faces.rows()) +
+                     " rows (3 per face) or none, got " + std::to_string(scene.corner_uvs.rows()));
+    }
+    for (Eigen::Index c = 0; c < scene.corner_uvs.rows(); ++c) {
+      if (!scene.corner_uvs.row(c).allFinite()) {
+        return invalid("corner_uvs: corner " + std::to_string(c % 3) + " of face " + std::to_string(c / 3) +
+                       " is not finite (" + format_number(scene.corner_uvs(c, 0)) + ", " +
+                       format_number(scene.corner_uvs(c, 1)) + ")");
+      }
+    }
+    if (scene.heat.size() != 0 || scene.vertex_colours.rows() != 0) {
+      return invalid(std::string("corner_uvs: set together with ") +
+                     (scene.heat.size() != 0 ? "heat" : "vertex_colours") +
+                     "; the surface takes its colour from one of them");
+    }
+    const Checker& checker = scene.checker;
+    if (!(std::isfinite(checker.squares_per_uv) && checker.squares_per_uv > 0)) {
+      return invalid("checker.squares_per_uv: expected a finite value > 0, got " +
+                     format_number(checker.squares_per_uv));
+    }
+    ANIMSPACE_RETURN_IF_ERROR(require_finite(checker.even, "checker.even"));
+    ANIMSPACE_RETURN_IF_ERROR(require_finite(checker.odd, "checker.odd"));
+    ANIMSPACE_RETURN_IF_ERROR(require_finite(checker.chart_border_colour, "checker.chart_border_colour"));
+  } else if (scene.checker.chart_borders) {
+    return invalid("checker.chart_borders: needs corner_uvs (the borders are where they disagree)");
+  }
   return Status::Ok();
 }
 
@@ -147,6 +175,39 @@ std::vector<int32_t> line_indices(const FaceMatrix& faces) {
   for (const auto& [a, b] : edges) {
     indices.push_back(a);
     indices.push_back(b);
+  }
+  return indices;
+}
+
+// The seams of a per-corner UV map as index pairs for GL_LINES: each undirected edge unless exactly
+// two faces share it and give each of its ends the same (u, v) (Scene::Checker::chart_borders).
+// Exact comparison: within a chart the corners of a vertex are copies of one coordinate.
+std::vector<int32_t> seam_line_indices(const FaceMatrix& faces,
+                                       const Eigen::Matrix<float, Eigen::Dynamic, 2, Eigen::RowMajor>& corner_uvs) {
+  // (lower vertex, higher vertex) → the corners (rows of corner_uvs) at those ends, per face.
+  struct Side {
+    Eigen::Index low_corner, high_corner;
+  };
+  std::map<std::pair<int32_t, int32_t>, std::vector<Side>> sides;
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int kn = (k + 1) % 3;
+      Eigen::Index a = 3 * f + k, b = 3 * f + kn;
+      int32_t va = faces(f, k), vb = faces(f, kn);
+      if (va > vb) {
+        std::swap(va, vb);
+        std::swap(a, b);
+      }
+      sides[{va, vb}].push_back({a, b});
+    }
+  }
+  std::vector<int32_t> indices;
+  for (const auto& [edge, at] : sides) {
+    const bool shared = at.size() == 2 && corner_uvs.row(at[0].low_corner) == corner_uvs.row(at[1].low_corner) &&
+                        corner_uvs.row(at[0].high_corner) == corner_uvs.row(at[1].high_corner);
+    if (shared) continue;
+    indices.push_back(edge.first);
+    indices.push_back(edge.second);
   }
   return indices;
 }
@@ -337,15 +398,18 @@ layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in float a_heat;
 layout(location = 3) in vec3 a_colour;
+layout(location = 4) in vec2 a_uv;
 out vec3 v_position;
 out vec3 v_normal;
 out float v_heat;
 out vec3 v_colour;
+out vec2 v_uv;
 void main() {
   v_position = a_position;
   v_normal = a_normal;
   v_heat = a_heat;
   v_colour = a_colour;
+  v_uv = a_uv;
   gl_Position = u_mvp * vec4(a_position, 1.0);
 }
 )";
@@ -361,11 +425,23 @@ uniform float u_exposure;
 uniform vec4 u_material;  // ambient, diffuse, specular, shininess
 uniform int u_shading;    // 0 Lambert, 1 Blinn-Phong, 2 unlit
 uniform bool u_srgb;
+uniform bool u_use_checker;
+uniform float u_checker_squares;  // per unit of u and of v
+uniform vec3 u_checker_even;
+uniform vec3 u_checker_odd;
 in vec3 v_position;
 in vec3 v_normal;
 in float v_heat;
 in vec3 v_colour;
+in vec2 v_uv;
 out vec4 o_colour;
+
+// Square (i, j) = floor(N·uv); `even` when i + j is even (scene.h, Checker). mod() of a float is
+// x − 2·floor(x/2): 0 or 1 for negative sums too.
+vec3 checker_colour(vec2 uv) {
+  vec2 square = floor(u_checker_squares * uv);
+  return mod(square.x + square.y, 2.0) < 0.5 ? u_checker_even : u_checker_odd;
+}
 
 // Heat map (thesis Fig. 8.6): 0 blue, 1/3 green, 2/3 yellow, 1 red, linear in between. The heat
 // value is interpolated and mapped per fragment, so a face between blue and red passes through
@@ -391,7 +467,9 @@ void main() {
   // Two-sided: a normal facing away from the eye is flipped, so max(n·l, 0) = |n·l|.
   float nl = abs(dot(n, l));
   vec3 albedo = u_use_heat ? heat_colour(v_heat * u_heat_scale)
-                            : (u_use_colours ? u_exposure * v_colour : u_albedo);
+               : u_use_colours ? u_exposure * v_colour
+               : u_use_checker ? checker_colour(v_uv)
+               : u_albedo;
   vec3 c = u_shading == 2 ? albedo : albedo * (u_material.x + u_material.y * nl);
   if (u_shading == 1 && nl > 0.0) c += vec3(u_material.z * pow(nl, u_material.w));
   c = clamp(c, 0.0, 1.0);
@@ -540,12 +618,13 @@ class EglRenderer final : public Renderer {
   };
   struct SurfaceUniforms {
     GLint mvp = -1, eye = -1, albedo = -1, use_heat = -1, heat_scale = -1, use_colours = -1, exposure = -1,
-          material = -1, shading = -1, srgb = -1;
+          material = -1, shading = -1, srgb = -1, use_checker = -1, checker_squares = -1, checker_even = -1,
+          checker_odd = -1;
   };
   struct OverlayUniforms {
     GLint mvp = -1, point_size = -1, colour = -1, round = -1;
   };
-  enum Buffer { kPositions, kNormals, kHeat, kColours, kElements, kBufferCount };
+  enum Buffer { kPositions, kNormals, kHeat, kColours, kUvs, kElements, kBufferCount };
 
   Status make_current(const std::string& why) const;
   Status check_limits(const Scene& scene) const;
@@ -648,19 +727,24 @@ Status EglRenderer::init() {
                        glGetUniformLocation(surface_program_, "u_exposure"),
                        glGetUniformLocation(surface_program_, "u_material"),
                        glGetUniformLocation(surface_program_, "u_shading"),
-                       glGetUniformLocation(surface_program_, "u_srgb")};
+                       glGetUniformLocation(surface_program_, "u_srgb"),
+                       glGetUniformLocation(surface_program_, "u_use_checker"),
+                       glGetUniformLocation(surface_program_, "u_checker_squares"),
+                       glGetUniformLocation(surface_program_, "u_checker_even"),
+                       glGetUniformLocation(surface_program_, "u_checker_odd")};
   overlay_uniforms_ = {glGetUniformLocation(overlay_program_, "u_mvp"),
                        glGetUniformLocation(overlay_program_, "u_point_size"),
                        glGetUniformLocation(overlay_program_, "u_colour"),
                        glGetUniformLocation(overlay_program_, "u_round")};
 
   // One vertex array for both programs: attribute 0 positions, 1 normals, 2 heat, 3 vertex
-  // colours; the element buffer holds triangles, then edges, then key points.
+  // colours, 4 texture coordinates; the element buffer holds triangles, then edges, then key
+  // points.
   glGenBuffers(kBufferCount, buffers_);
   glGenVertexArrays(1, &vao_);
   glBindVertexArray(vao_);
-  const GLint sizes[] = {3, 3, 1, 3};
-  for (GLuint attribute = 0; attribute < 4; ++attribute) {
+  const GLint sizes[] = {3, 3, 1, 3, 2};
+  for (GLuint attribute = 0; attribute < 5; ++attribute) {
     glBindBuffer(GL_ARRAY_BUFFER, buffers_[attribute]);
     glVertexAttribPointer(attribute, sizes[attribute], GL_FLOAT, GL_FALSE, 0, nullptr);
   }
@@ -700,9 +784,16 @@ Status EglRenderer::check_limits(const Scene& scene) const {
     return exhausted("points: " + std::to_string(scene.points.rows()) + " exceeds the GL implementation's maximum of " +
                      std::to_string(limits_.max_vertices));
   }
+  // With texture coordinates each face corner is a vertex of its own, after the points.
+  if (scene.corner_uvs.rows() != 0 && scene.points.rows() + scene.corner_uvs.rows() > limits_.max_vertices) {
+    return exhausted("corner_uvs: " + std::to_string(scene.points.rows()) + " points and " +
+                     std::to_string(scene.corner_uvs.rows()) + " face corners exceed the GL implementation's maximum of " +
+                     std::to_string(limits_.max_vertices) + " vertices");
+  }
   // Triangle, edge (at most as many as triangle corners) and key-point indices share one
   // element buffer addressed with GLsizei counts and byte offsets.
-  const int64_t indices = 6 * static_cast<int64_t>(scene.faces.rows()) + static_cast<int64_t>(scene.key_points.size());
+  const int64_t indices = (scene.checker.chart_borders ? 12 : 6) * static_cast<int64_t>(scene.faces.rows()) +
+                          static_cast<int64_t>(scene.key_points.size());
   if (indices > INT_MAX / 4) {
     return exhausted("faces: " + std::to_string(scene.faces.rows()) + " is more than one draw call can index");
   }
@@ -764,29 +855,71 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
   const Eigen::Matrix4f mvp =
       (projection_matrix(camera, aspect, clip.near_distance, clip.far_distance) * view_matrix(camera)).cast<float>();
 
-  // Element buffer: triangles, then edges, then key points. Indices are validated ≥ 0, so int32
-  // data reads the same as GL_UNSIGNED_INT.
+  // With texture coordinates a vertex's corners may carry different ones (seams), so each face
+  // corner becomes a vertex of its own: the vertex arrays hold the #V points, then the 3·#F
+  // corners (copies of their points' positions and normals, with the corner's UV), and triangles
+  // index the corners while edges and key points keep indexing the points.
+  const bool use_checker = scene.corner_uvs.rows() != 0;
+  const auto point_count = static_cast<int32_t>(scene.points.rows());
+  FaceMatrix corner_faces;
+  if (use_checker) {
+    corner_faces.resize(scene.faces.rows(), 3);
+    for (Eigen::Index c = 0; c < scene.corner_uvs.rows(); ++c) corner_faces.data()[c] = point_count + static_cast<int32_t>(c);
+  }
+  const FaceMatrix& triangles = use_checker ? corner_faces : scene.faces;
+
+  // Element buffer: triangles, then edges, then seams, then key points. Indices are validated
+  // ≥ 0, so int32 data reads the same as GL_UNSIGNED_INT.
   const std::vector<int32_t> edges = scene.wireframe ? line_indices(scene.faces) : std::vector<int32_t>();
-  const auto face_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * static_cast<size_t>(scene.faces.size()));
+  const std::vector<int32_t> seams =
+      use_checker && scene.checker.chart_borders ? seam_line_indices(scene.faces, scene.corner_uvs) : std::vector<int32_t>();
+  const auto face_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * static_cast<size_t>(triangles.size()));
   const auto edge_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * edges.size());
+  const auto seam_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * seams.size());
   const auto key_bytes = static_cast<GLsizeiptr>(sizeof(int32_t) * scene.key_points.size());
   glBindVertexArray(vao_);
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, buffers_[kElements]);
-  glBufferData(GL_ELEMENT_ARRAY_BUFFER, face_bytes + edge_bytes + key_bytes, nullptr, GL_STREAM_DRAW);
-  glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, 0, face_bytes, scene.faces.data());
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, face_bytes + edge_bytes + seam_bytes + key_bytes, nullptr, GL_STREAM_DRAW);
+  glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, 0, face_bytes, triangles.data());
   glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, face_bytes, edge_bytes, edges.data());
-  glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, face_bytes + edge_bytes, key_bytes, scene.key_points.data());
+  glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, face_bytes + edge_bytes, seam_bytes, seams.data());
+  glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, face_bytes + edge_bytes + seam_bytes, key_bytes, scene.key_points.data());
 
   const auto upload = [&](Buffer buffer, const float* data, size_t count) {
     glBindBuffer(GL_ARRAY_BUFFER, buffers_[buffer]);
     glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(sizeof(float) * count), data, GL_STREAM_DRAW);
   };
+  // The points, then (with texture coordinates) a copy of each face corner's point.
+  const auto with_corners = [&](const PointMatrix& per_point) {
+    if (!use_checker) return PointMatrix();
+    PointMatrix out(per_point.rows() + scene.corner_uvs.rows(), 3);
+    out.topRows(per_point.rows()) = per_point;
+    for (Eigen::Index c = 0; c < scene.corner_uvs.rows(); ++c) {
+      out.row(per_point.rows() + c) = per_point.row(scene.faces.data()[c]);
+    }
+    return out;
+  };
   // Row-major #V × 3 matrices are already the interleaved x y z layout GL expects.
-  upload(kPositions, scene.points.data(), static_cast<size_t>(scene.points.size()));
+  const PointMatrix corner_points = with_corners(scene.points);
+  const PointMatrix& positions = use_checker ? corner_points : scene.points;
+  upload(kPositions, positions.data(), static_cast<size_t>(positions.size()));
   const PointMatrix computed_normals =
       scene.normals.rows() == 0 ? geometry::area_weighted_normals(scene.points, scene.faces) : PointMatrix();
-  const PointMatrix& normals = scene.normals.rows() == 0 ? computed_normals : scene.normals;
+  const PointMatrix& point_normals = scene.normals.rows() == 0 ? computed_normals : scene.normals;
+  const PointMatrix corner_normals = with_corners(point_normals);
+  const PointMatrix& normals = use_checker ? corner_normals : point_normals;
   upload(kNormals, normals.data(), static_cast<size_t>(normals.size()));
+  if (use_checker) {
+    // The points themselves are never drawn as surface: their UV is 0.
+    Eigen::Matrix<float, Eigen::Dynamic, 2, Eigen::RowMajor> uvs(scene.points.rows() + scene.corner_uvs.rows(), 2);
+    uvs.topRows(scene.points.rows()).setZero();
+    uvs.bottomRows(scene.corner_uvs.rows()) = scene.corner_uvs;
+    upload(kUvs, uvs.data(), static_cast<size_t>(uvs.size()));
+    glEnableVertexAttribArray(kUvs);
+  } else {
+    glDisableVertexAttribArray(kUvs);
+    glVertexAttrib2f(kUvs, 0, 0);
+  }
   const bool use_heat = scene.heat.size() != 0;
   if (use_heat) {
     upload(kHeat, scene.heat.data(), static_cast<size_t>(scene.heat.size()));
@@ -814,11 +947,11 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
   glClearDepthf(1);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
 
-  // Surface. With a wireframe, the filled triangles are pushed back by a polygon offset so that
-  // the edges drawn at their exact depth win the depth test.
+  // Surface. With a wireframe or seams, the filled triangles are pushed back by a polygon offset
+  // so that the edges drawn at their exact depth win the depth test.
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
-  if (scene.wireframe) {
+  if (scene.wireframe || !seams.empty()) {
     glEnable(GL_POLYGON_OFFSET_FILL);
     glPolygonOffset(1, 1);
   } else {
@@ -839,23 +972,30 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
   glUniform4f(surface_uniforms_.material, material.ambient, material.diffuse, material.specular, material.shininess);
   glUniform1i(surface_uniforms_.shading, shading_index(scene.shading));
   glUniform1i(surface_uniforms_.srgb, scene.srgb ? 1 : 0);
-  glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(scene.faces.size()), GL_UNSIGNED_INT, nullptr);
+  const Checker& checker = scene.checker;
+  glUniform1i(surface_uniforms_.use_checker, use_checker ? 1 : 0);
+  glUniform1f(surface_uniforms_.checker_squares, checker.squares_per_uv);
+  glUniform3f(surface_uniforms_.checker_even, checker.even.x(), checker.even.y(), checker.even.z());
+  glUniform3f(surface_uniforms_.checker_odd, checker.odd.x(), checker.odd.y(), checker.odd.z());
+  glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(triangles.size()), GL_UNSIGNED_INT, nullptr);
   glDisable(GL_POLYGON_OFFSET_FILL);
 
   glUseProgram(overlay_program_);
   glUniformMatrix4fv(overlay_uniforms_.mvp, 1, GL_FALSE, mvp.data());
-  if (!edges.empty()) {
-    // Hidden lines stay hidden (depth test on), without disturbing the depth buffer.
+  // Hidden lines stay hidden (depth test on), without disturbing the depth buffer; seams are drawn
+  // after the wireframe, so over it.
+  const auto draw_lines = [&](size_t count, GLsizeiptr offset, const Eigen::Vector3f& colour) {
+    if (count == 0) return;
     glDepthFunc(GL_LEQUAL);
     glDepthMask(GL_FALSE);
-    glUniform3f(overlay_uniforms_.colour, scene.wireframe_colour.x(), scene.wireframe_colour.y(),
-                scene.wireframe_colour.z());
+    glUniform3f(overlay_uniforms_.colour, colour.x(), colour.y(), colour.z());
     glUniform1i(overlay_uniforms_.round, 0);
     glUniform1f(overlay_uniforms_.point_size, 1);
-    glDrawElements(GL_LINES, static_cast<GLsizei>(edges.size()), GL_UNSIGNED_INT,
-                   reinterpret_cast<const void*>(face_bytes));
+    glDrawElements(GL_LINES, static_cast<GLsizei>(count), GL_UNSIGNED_INT, reinterpret_cast<const void*>(offset));
     glDepthMask(GL_TRUE);
-  }
+  };
+  draw_lines(edges.size(), face_bytes, scene.wireframe_colour);
+  draw_lines(seams.size(), face_bytes + edge_bytes, checker.chart_border_colour);
   if (!scene.key_points.empty()) {
     // Key points are always visible, also behind the surface, as in Meyer & Anderson 2007,
     // Fig. 1: they are the controls of the pose, not part of the shape.
@@ -866,7 +1006,7 @@ Status EglRenderer::draw(const Scene& scene, const Camera& camera) {
     glUniform1f(overlay_uniforms_.point_size,
                 std::clamp(2 * scene.key_point_radius_px, limits_.min_point_size, limits_.max_point_size));
     glDrawElements(GL_POINTS, static_cast<GLsizei>(scene.key_points.size()), GL_UNSIGNED_INT,
-                   reinterpret_cast<const void*>(face_bytes + edge_bytes));
+                   reinterpret_cast<const void*>(face_bytes + edge_bytes + seam_bytes));
   }
   glBindVertexArray(0);
 

@@ -17,7 +17,9 @@ class Renderer {
   // Errors: kInvalidArgument naming the field for a bad scene (size < 1, faces out of range,
   // non-finite points, sample count not 1/2/4/8, key point out of range, heat of the wrong
   // length or negative, vertex_colours of the wrong row count, negative, not finite or set
-  // together with heat, exposure not finite and > 0); kResourceExhausted when the size exceeds
+  // together with heat, exposure not finite and > 0, corner_uvs of the wrong row count, not finite
+  // or set together with heat or vertex_colours, checker.squares_per_uv not finite and > 0,
+  // checker.chart_borders without corner_uvs); kResourceExhausted when the size exceeds
   // what the GL implementation can allocate (its maximum renderbuffer size and sample count, and
   // a budget of width · height · samples ≤ 4096² · 8 that keeps a software rasteriser from being
   // killed for memory); kInternal for a GL failure (the renderer stays usable).

@@ -38,10 +38,11 @@ enum class Shading { kLambert, kBlinnPhong, kUnlit };
 // to nearest). Back faces are lit with their flipped normal (thumbnails of open meshes stay
 // readable).
 //
-// The albedo a of a fragment is, in order of precedence (Scene::heat and Scene::vertex_colours
-// are never both set):
+// The albedo a of a fragment is, in order of precedence (at most one of Scene::heat,
+// Scene::vertex_colours and Scene::corner_uvs is set):
 //   the heat colour of the interpolated heat value (Scene::heat),
 //   exposure · the interpolated vertex colour (Scene::vertex_colours, Scene::exposure),
+//   the checker colour of the interpolated texture coordinate (Scene::corner_uvs, Checker),
 //   Material::albedo.
 struct Material {
   Eigen::Vector3f albedo = Eigen::Vector3f(0.80f, 0.78f, 0.74f);
@@ -49,6 +50,22 @@ struct Material {
   float diffuse = 0.85f;
   float specular = 0.25f;
   float shininess = 32;
+};
+
+// A procedural checker texture (no image) over a texture atlas, to show its stretch and seams
+// (issue #37): squares that stay square across poses are what a balanced atlas buys. With (u, v)
+// the fragment's interpolated texture coordinate and N = squares_per_uv, the square is
+// (i, j) = (⌊N·u⌋, ⌊N·v⌋) and the albedo a is `even` when i + j is even, `odd` when it is odd:
+// square (0, 0), at the atlas's origin, is `even`. The checker colour is then lit like any albedo.
+struct Checker {
+  float squares_per_uv = 16;  // N: squares along one unit of u (and of v); finite, > 0
+  Eigen::Vector3f even = Eigen::Vector3f(0.92f, 0.92f, 0.92f);
+  Eigen::Vector3f odd = Eigen::Vector3f(0.20f, 0.20f, 0.22f);
+  // Lines on the atlas's seams: every edge not shared by exactly two faces that give both of its
+  // ends the same texture coordinates (in an atlas: the chart borders, and the mesh's own
+  // boundary). Drawn like the wireframe, on top of the surface with hidden lines hidden.
+  bool chart_borders = false;
+  Eigen::Vector3f chart_border_colour = Eigen::Vector3f(0.85f, 0.10f, 0.10f);
 };
 
 struct Scene {
@@ -86,6 +103,12 @@ struct Scene {
   // source per surface, so neither is dropped silently).
   PointMatrix vertex_colours;
   float exposure = 1.0f;  // > 0; scales vertex_colours only (not Material::albedo nor the heat map)
+  // Texture coordinates per face corner (3·#F × 2: row 3f + k is corner k of face f, finite),
+  // or empty. Set, the surface is drawn with `checker` as its albedo (see Checker). Refused
+  // together with `heat` or `vertex_colours`. Corners of one vertex may differ (seams): the
+  // renderer draws each corner as its own vertex.
+  Eigen::Matrix<float, Eigen::Dynamic, 2, Eigen::RowMajor> corner_uvs;
+  Checker checker;
   // Encode the surface's colour with the sRGB transfer function after clamping to [0, 1]:
   //   c ≤ 0.0031308:  12.92 · c,   otherwise  1.055 · c^(1/2.4) − 0.055
   // (IEC 61966-2-1), for linear radiance shown on a display. The background and the overlays

@@ -936,6 +936,211 @@ TEST_F(RenderTest, AnotherRendererOnTheSameDisplayDoesNotDisturbThisOne) {
   EXPECT_EQ(render_ok(scene).rgba, before.rgba);
 }
 
+// ---------------------------------------------------------------------------------------------
+// The checker texture (Scene::corner_uvs, Checker): a flat grid over [0, 1]² in the plane z = 0,
+// seen head-on, whose texture coordinates are known functions of the point. Every pixel whose
+// ray (testing::Pinhole) meets the grid well inside one checker square must have that square's
+// colour, lit by the documented model at the hit point.
+
+// n × n squares over [0, 1]² at z = 0, two triangles each, counter-clockwise seen from +z.
+Scene checker_grid_scene(int n) {
+  Scene scene;
+  scene.width = 200;
+  scene.height = 160;
+  scene.points.resize((n + 1) * (n + 1), 3);
+  for (int j = 0; j <= n; ++j) {
+    for (int i = 0; i <= n; ++i) scene.points.row(j * (n + 1) + i) << static_cast<float>(i) / n, static_cast<float>(j) / n, 0;
+  }
+  scene.faces.resize(2 * n * n, 3);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      scene.faces.row(2 * (j * n + i)) << a, b, d;
+      scene.faces.row(2 * (j * n + i) + 1) << a, d, c;
+    }
+  }
+  scene.camera = make_camera({0.5, 0.5, 1.6}, {0.5, 0.5, 0}, {0, 1, 0}, 0.8);
+  scene.background = Eigen::Vector4f(0, 0, 0, 1);
+  scene.samples = 1;
+  scene.shading = Shading::kLambert;
+  scene.checker.even = Eigen::Vector3f(0.9f, 0.6f, 0.2f);
+  scene.checker.odd = Eigen::Vector3f(0.1f, 0.3f, 0.8f);
+  return scene;
+}
+
+// Sets each face corner's UV to uv_of(the face's centroid, the corner's point).
+template <typename UvOf>
+void set_corner_uvs(Scene& scene, UvOf uv_of) {
+  scene.corner_uvs.resize(3 * scene.faces.rows(), 2);
+  for (Eigen::Index f = 0; f < scene.faces.rows(); ++f) {
+    const auto xy = [&](int k) {
+      const int32_t v = scene.faces(f, k);
+      return Eigen::Vector2d(scene.points(v, 0), scene.points(v, 1));
+    };
+    const Eigen::Vector2d centroid = (xy(0) + xy(1) + xy(2)) / 3;
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector2d uv = uv_of(centroid, xy(k));
+      scene.corner_uvs.row(3 * f + k) << static_cast<float>(uv.x()), static_cast<float>(uv.y());
+    }
+  }
+}
+
+// Compares every pixel whose ray meets the plane z = 0 at (x, y) with `uv_of(x, y)` more than
+// `margin` (in UV) inside a checker square, and `inside(x, y)`, with the square's lit colour;
+// returns how many pixels it compared.
+template <typename UvOf, typename Inside>
+int expect_checker_pixels(const Scene& scene, const Image& image, UvOf uv_of, Inside inside, double margin) {
+  const Pinhole camera = pinhole(scene);
+  const double n = scene.checker.squares_per_uv;
+  int compared = 0, wrong = 0;
+  for (int y = 0; y < scene.height; ++y) {
+    for (int x = 0; x < scene.width; ++x) {
+      const Eigen::Vector3d ray = camera.pixel_ray(x, y);
+      const double t = -camera.eye.z() / ray.z();
+      const Eigen::Vector3d p = camera.eye + t * ray;
+      if (!inside(p.x(), p.y())) continue;
+      const Eigen::Vector2d uv = uv_of(p.x(), p.y());
+      const Eigen::Vector2d s = n * uv;
+      const Eigen::Vector2d fraction = s - s.array().floor().matrix();
+      if ((fraction.array() < n * margin).any() || (fraction.array() > 1 - n * margin).any()) continue;
+      const bool even = static_cast<long>(std::floor(s.x()) + std::floor(s.y())) % 2 == 0;
+      Material material = scene.material;
+      material.albedo = even ? scene.checker.even : scene.checker.odd;
+      const double nl = std::abs((camera.eye - p).normalized().z());  // n = +z
+      const Rgb expected = to_rgb8(expected_colour(material, scene.shading, nl));
+      const Rgb actual = rgb(image, x, y);
+      ++compared;
+      bool close = true;
+      for (size_t c = 0; c < 3; ++c) close = close && std::abs(actual[c] - expected[c]) <= 2;
+      if (!close && ++wrong <= 5) {
+        ADD_FAILURE() << "pixel (" << x << ", " << y << ") at uv (" << uv.x() << ", " << uv.y() << "), "
+                      << (even ? "even" : "odd") << " square: got " << actual[0] << " " << actual[1] << " "
+                      << actual[2] << ", expected " << expected[0] << " " << expected[1] << " " << expected[2];
+      }
+    }
+  }
+  EXPECT_EQ(wrong, 0) << "of " << compared << " pixels";
+  return compared;
+}
+
+TEST_F(RenderTest, CheckerSquaresAreWhereTheTextureCoordinatesPutThem) {
+  // UVs an anisotropic affine map of the position: the squares are rectangles in the plane.
+  const auto uv_of = [](double x, double y) { return Eigen::Vector2d(0.3 + 0.5 * x, 0.1 + 0.75 * y); };
+  for (const float squares : {16.0f, 5.0f}) {
+    SCOPED_TRACE("squares_per_uv " + std::to_string(squares));
+    Scene scene = checker_grid_scene(4);
+    scene.checker.squares_per_uv = squares;
+    set_corner_uvs(scene, [&](const Eigen::Vector2d&, const Eigen::Vector2d& p) { return uv_of(p.x(), p.y()); });
+    const Image image = render_ok(scene);
+    ASSERT_FALSE(image.rgba.empty());
+    // 2 pixels of margin: the grid spans about 1.3 units over 200 pixels.
+    const double margin = 2 * 1.3 / 200;
+    const auto inside = [&](double x, double y) {
+      return x > margin && y > margin && x < 1 - margin && y < 1 - margin;
+    };
+    const int compared = expect_checker_pixels(scene, image, uv_of, inside, margin * 0.75);
+    EXPECT_GT(compared, 5000);
+  }
+}
+
+TEST_F(RenderTest, CheckerFollowsEachCornersOwnTextureCoordinateAcrossASeam) {
+  // Two charts: the faces left of x = 1/2 map to (x, y), those right of it to (x + ½ square, y),
+  // so the vertices on x = 1/2 have a different UV in each chart. Drawn with one UV per vertex,
+  // the right chart would be off by half a square.
+  Scene scene = checker_grid_scene(4);
+  scene.checker.squares_per_uv = 8;
+  const double shift = 0.5 / 8;
+  set_corner_uvs(scene, [&](const Eigen::Vector2d& centroid, const Eigen::Vector2d& p) {
+    return Eigen::Vector2d(p.x() + (centroid.x() > 0.5 ? shift : 0.0), p.y());
+  });
+  const Image image = render_ok(scene);
+  ASSERT_FALSE(image.rgba.empty());
+  const double margin = 2 * 1.3 / 200;
+  const auto uv_of = [&](double x, double y) { return Eigen::Vector2d(x + (x > 0.5 ? shift : 0.0), y); };
+  const auto inside = [&](double x, double y) {
+    return x > margin && y > margin && x < 1 - margin && y < 1 - margin && std::abs(x - 0.5) > margin;
+  };
+  EXPECT_GT(expect_checker_pixels(scene, image, uv_of, inside, margin * 0.75), 5000);
+}
+
+TEST_F(RenderTest, ChartBordersAreDrawnOnSeamsAndNowhereElse) {
+  Scene scene = checker_grid_scene(4);
+  scene.checker.squares_per_uv = 8;
+  scene.checker.chart_border_colour = Eigen::Vector3f(1, 0, 1);
+  set_corner_uvs(scene, [&](const Eigen::Vector2d& centroid, const Eigen::Vector2d& p) {
+    return Eigen::Vector2d(p.x() + (centroid.x() > 0.5 ? 0.3 : 0.0), p.y());
+  });
+  const Pinhole camera = pinhole(scene);
+  const Rgb magenta{255, 0, 255};
+  const auto on_line = [&](const Image& image, double x0, double y0, double x1, double y1) {
+    int hits = 0, probes = 0;
+    for (double t = 0.1; t < 0.95; t += 0.05) {
+      const Eigen::Vector2d q = camera.project({x0 + t * (x1 - x0), y0 + t * (y1 - y0), 0});
+      ++probes;
+      hits += colour_near(image, static_cast<int>(q.x()), static_cast<int>(q.y()), magenta) ? 1 : 0;
+    }
+    return std::pair(hits, probes);
+  };
+  for (const bool borders : {false, true}) {
+    SCOPED_TRACE(borders ? "borders" : "no borders");
+    scene.checker.chart_borders = borders;
+    const Image image = render_ok(scene);
+    ASSERT_FALSE(image.rgba.empty());
+    // The seam x = 1/2 and the mesh's boundary are chart borders; the grid lines x = 1/4 and
+    // y = 1/2 inside the left chart and its diagonals are not.
+    for (const auto& [x0, y0, x1, y1] : std::vector<std::array<double, 4>>{
+             {0.5, 0, 0.5, 1}, {0, 0, 1, 0}, {0, 1, 1, 1}, {0, 0, 0, 1}, {1, 0, 1, 1}}) {
+      const auto [hits, probes] = on_line(image, x0, y0, x1, y1);
+      EXPECT_EQ(hits, borders ? probes : 0) << "(" << x0 << ", " << y0 << ") to (" << x1 << ", " << y1 << ")";
+    }
+    for (const auto& [x0, y0, x1, y1] : std::vector<std::array<double, 4>>{{0.25, 0, 0.25, 1}, {0, 0.5, 0.45, 0.5}, {0, 0, 0.5, 0.5}}) {
+      EXPECT_EQ(on_line(image, x0, y0, x1, y1).first, 0)
+          << "(" << x0 << ", " << y0 << ") to (" << x1 << ", " << y1 << ")";
+    }
+  }
+}
+
+TEST_F(RenderTest, BadCheckersAreRefusedNamingTheField) {
+  Scene good = checker_grid_scene(2);
+  set_corner_uvs(good, [](const Eigen::Vector2d&, const Eigen::Vector2d& p) { return p; });
+  ASSERT_FALSE(render_ok(good).rgba.empty());
+
+  Scene scene = good;
+  scene.corner_uvs.conservativeResize(5, 2);
+  Error error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message, "corner_uvs: expected 24 rows (3 per face) or none, got 5");
+
+  scene = good;
+  scene.corner_uvs(7, 1) = std::numeric_limits<float>::infinity();
+  error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message.rfind("corner_uvs: corner 1 of face 2 is not finite", 0), 0u) << error.message;
+
+  for (const float squares : {0.0f, -2.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    scene = good;
+    scene.checker.squares_per_uv = squares;
+    error = render_error(scene);
+    EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+    EXPECT_EQ(error.message.rfind("checker.squares_per_uv: expected a finite value > 0, got ", 0), 0u) << error.message;
+  }
+
+  scene = good;
+  scene.heat = Eigen::VectorXf::Zero(scene.points.rows());
+  error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message, "corner_uvs: set together with heat; the surface takes its colour from one of them");
+
+  scene = good;
+  scene.corner_uvs.resize(0, 2);
+  scene.checker.chart_borders = true;
+  error = render_error(scene);
+  EXPECT_EQ(error.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(error.message.rfind("checker.chart_borders: needs corner_uvs", 0), 0u) << error.message;
+
+  EXPECT_FALSE(render_ok(good).rgba.empty());
+}
+
 TEST(RenderPlatformTest, NamesRoundTrip) {
   for (const EglPlatform platform : {EglPlatform::kAuto, EglPlatform::kSurfaceless, EglPlatform::kDevice}) {
     Result<EglPlatform> parsed = parse_egl_platform(egl_platform_name(platform));
