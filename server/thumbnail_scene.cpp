@@ -2,12 +2,14 @@
 
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
+#include "core/atlas/atlas_io.h"
 #include "core/illumination/illumination_io.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/thumbnail/heat_map.h"
@@ -165,6 +167,60 @@ grpc::Status illumination_scene(ServiceEnvironment& env, const LoadedModel& mode
   return grpc::Status::OK;
 }
 
+// The squares along one unit of texture coordinate when checker_squares is 0.
+constexpr int kDefaultCheckerSquares = 16;
+
+// The texture_checker fields, checked, and the model's atlas loaded: all before any pose is
+// evaluated. `atlas` stays empty without texture_checker.
+grpc::Status read_texture_checker(const LoadedModel& model, const Request& request, std::optional<atlas::Atlas>& atlas) {
+  if (!request.texture_checker()) {
+    if (request.checker_squares() != 0) {
+      return invalid_argument("checker_squares: needs texture_checker (the squares are the checker's), got " +
+                              std::to_string(request.checker_squares()) + " without it");
+    }
+    if (request.show_chart_borders()) {
+      return invalid_argument("show_chart_borders: needs texture_checker (the borders are the atlas's)");
+    }
+    return grpc::Status::OK;
+  }
+  if (request.checker_squares() < 0) {
+    return invalid_argument("checker_squares: expected > 0 squares per unit of texture coordinate (0: the default " +
+                            std::to_string(kDefaultCheckerSquares) + "), got " +
+                            std::to_string(request.checker_squares()));
+  }
+  if (request.has_full_values()) {
+    return invalid_argument("texture_checker: set together with full_values; the surface takes its colour from the "
+                            "checker or from the heat map, not both");
+  }
+  if (model.illumination) {
+    return unsupported_by_kind(model, "texture_checker: an illumination model's surface is drawn with its radiance "
+                                      "and has no texture atlas");
+  }
+  auto stored = atlas::load_atlas(model.container, model.info.face_count, model.path.string());
+  if (!stored) return to_grpc_status(stored.error());
+  if (!*stored) {
+    return failed_precondition("texture_checker: model '" + model.name + "' version " + std::to_string(model.version) +
+                               " stores no texture atlas (expected atlas sections; `animspace atlas MODEL.anim -o "
+                               "OUT.anim` adds one, then serve OUT.anim)");
+  }
+  atlas = std::move(**stored);
+  return grpc::Status::OK;
+}
+
+// The checker over the atlas (render::Checker), on the full-detail faces the atlas belongs to.
+grpc::Status draw_texture_checker(const LoadedModel& model, const Request& request, const atlas::Atlas& atlas,
+                                  render::Scene& scene) {
+  if (atlas.uvs.rows() != 3 * scene.faces.rows()) {
+    return unsupported_by_kind(model, "texture_checker: its atlas covers " + std::to_string(atlas.uvs.rows() / 3) +
+                                          " faces, the drawn mesh has " + std::to_string(scene.faces.rows()));
+  }
+  scene.corner_uvs = atlas.uvs.cast<float>();
+  scene.checker.squares_per_uv =
+      static_cast<float>(request.checker_squares() != 0 ? request.checker_squares() : kDefaultCheckerSquares);
+  scene.checker.chart_borders = request.show_chart_borders();
+  return grpc::Status::OK;
+}
+
 }  // namespace
 
 // SPEC: a posed mesh from PMSC key points, a skeleton pose, a stored sequence frame, or the rest
@@ -184,6 +240,10 @@ grpc::Status build_thumbnail_scene(ServiceEnvironment& env, const LoadedModel& m
     return invalid_argument("heat_max: expected a finite value ≥ 0 (0 = the model's error tolerance), got " +
                             std::to_string(request.heat_max()));
   }
+  std::optional<atlas::Atlas> atlas;
+  if (grpc::Status s = read_texture_checker(model, request, atlas); !s.ok()) return s;
+  // Key points and the atlas index the full-detail mesh: with either, draw full detail.
+  const bool level_zero_only = request.show_key_points() || atlas.has_value();
   if (model.illumination) {
     if (grpc::Status s = illumination_scene(env, model, request, scene, response); !s.ok()) return s;
     scene.wireframe = request.show_wireframe();
@@ -228,8 +288,7 @@ grpc::Status build_thumbnail_scene(ServiceEnvironment& env, const LoadedModel& m
           !s.ok()) {
         return s;
       }
-      // Key points index the full-detail mesh: with the overlay on, draw full detail.
-      if (grpc::Status s = pose_skinned(model, globals, request, request.show_key_points(), scene, level); !s.ok()) {
+      if (grpc::Status s = pose_skinned(model, globals, request, level_zero_only, scene, level); !s.ok()) {
         return s;
       }
       break;
@@ -251,7 +310,7 @@ grpc::Status build_thumbnail_scene(ServiceEnvironment& env, const LoadedModel& m
     case Request::SOURCE_NOT_SET: {
       if (model.animation_space && model.info.kind == container::ModelKind::kAnimationSpace) {
         const auto rest = animation_space::rest_pose(model.animation_space->skeleton);
-        if (grpc::Status s = pose_skinned(model, rest, request, false, scene, level); !s.ok()) return s;
+        if (grpc::Status s = pose_skinned(model, rest, request, atlas.has_value(), scene, level); !s.ok()) return s;
         break;
       }
       auto rest = model.container.points(container::sections::kRestPoints);
@@ -260,6 +319,9 @@ grpc::Status build_thumbnail_scene(ServiceEnvironment& env, const LoadedModel& m
       if (grpc::Status s = stored_faces(model, scene); !s.ok()) return s;
       break;
     }
+  }
+  if (atlas) {
+    if (grpc::Status s = draw_texture_checker(model, request, *atlas, scene); !s.ok()) return s;
   }
   scene.wireframe = request.show_wireframe();
   if (request.show_key_points()) scene.key_points.assign(model.pmsc->key_points.begin(), model.pmsc->key_points.end());

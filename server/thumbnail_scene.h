@@ -19,8 +19,9 @@ namespace animspace::server {
 // points), heat_max_error and heat_scale_max (for a heat map) and lod_level (the level drawn).
 // Every check that can refuse runs before the pose is evaluated, so a refused request leaves no
 // trace in the statistics or the miss log. Refusals: INVALID_ARGUMENT naming the field;
-// FAILED_PRECONDITION (unsupported_by_kind) for a source or overlay the model's kind cannot give;
-// a core error through to_grpc_status.
+// FAILED_PRECONDITION (unsupported_by_kind) for a source or overlay the model's kind cannot give,
+// and for texture_checker on a model that stores no texture atlas; a core error through
+// to_grpc_status.
 grpc::Status build_thumbnail_scene(ServiceEnvironment& env, const LoadedModel& model,
                                    const v1::RenderThumbnailRequest& request, render::Scene& scene,
                                    v1::RenderThumbnailResponse* response);

@@ -36,6 +36,15 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
                    ->needs(sequence);
   add_heat_scale_options(cmd, a.heat_scale, heat);
   cmd->add_flag("--wireframe", a.wireframe, "Draw the triangle edges");
+  auto* checker = cmd->add_flag("--checker", a.checker,
+                                "Draw the model's texture atlas as a checker (full detail; the model needs an atlas: "
+                                "`animspace atlas`)")
+                      ->excludes(heat);
+  cmd->add_option("--checker-squares", a.checker_squares,
+                  "With --checker: squares along one unit of texture coordinate (default 16)")
+      ->check(CLI::PositiveNumber)
+      ->needs(checker);
+  cmd->add_flag("--chart-borders", a.chart_borders, "With --checker: draw the atlas's chart borders")->needs(checker);
   cmd->add_flag("--lambert", a.lambert, "Lambert shading instead of Blinn-Phong");
   cmd->add_option("--samples", a.samples, "Multisampling: 1, 2, 4 or 8")->capture_default_str();
   cmd->add_option("--background", a.background, "Background RGBA in [0, 1], e.g. --background 1 1 1 1")
@@ -72,6 +81,9 @@ int run_thumbnail(const ThumbnailArgs& a, Client& client, bool json) {
   request.set_show_key_points(a.key_points);
   request.set_show_wireframe(a.wireframe);
   request.set_tolerance_px(a.tolerance_px);
+  request.set_texture_checker(a.checker);
+  request.set_checker_squares(a.checker_squares);
+  request.set_show_chart_borders(a.chart_borders);
   for (float c : a.background) request.add_background_rgba(c);
   if (!a.eye.empty()) {
     auto* camera = request.mutable_camera();

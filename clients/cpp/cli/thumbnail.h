@@ -1,6 +1,7 @@
 // `animspace thumbnail`: a PNG of a served model drawn by the daemon's render thread
 // (RenderService.RenderThumbnail) — its rest pose, a stored frame, or a sequence frame's key
-// points through the soft cache with the key points and the error heat map drawn over it.
+// points through the soft cache with the key points and the error heat map drawn over it; a
+// model's texture atlas as a checker.
 #pragma once
 
 #include <string>
@@ -27,6 +28,9 @@ struct ThumbnailArgs {
   bool heat = false;         // heat map of |full − returned| (needs --sequence)
   HeatScaleArgs heat_scale;
   bool wireframe = false;
+  bool checker = false;         // the texture atlas as a checker (texture_checker)
+  int32_t checker_squares = 0;  // squares per unit of texture coordinate; 0: the server's default
+  bool chart_borders = false;   // the atlas's chart borders drawn over the checker
   bool lambert = false;
   uint32_t samples = 4;
   std::vector<float> background;
