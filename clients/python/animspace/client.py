@@ -824,6 +824,7 @@ class Client:
                          heat_max: float = 0.0, show_heat_legend: bool = False,
                          lights: Optional[Union[PointLight, Sequence[PointLight], npt.ArrayLike]] = None,
                          illumination: Optional[IlluminationView] = None,
+                         texture_checker: bool = False, checker_squares: int = 0, show_chart_borders: bool = False,
                          deadline_s: Optional[float] = None) -> Thumbnail:
         """A PNG of the model drawn headless by the daemon's render thread.
 
@@ -850,9 +851,16 @@ class Client:
             lights: an illumination model's lights (PointLight(s) or L×3 positions): draws its
                 surface coloured by the served radiance (key_values optional: the server gathers
                 them); ``illumination`` says which radiance and how bright (IlluminationView).
+            texture_checker: draw the model's texture atlas (``animspace atlas``) as a checker of
+                light and dark squares, one texture coordinate per face corner, at full detail.
+            checker_squares: with texture_checker, squares along one unit of texture coordinate
+                (0: the server's default, 16).
+            show_chart_borders: with texture_checker, lines along the atlas's chart borders.
 
         Raises:
-            InvalidArgument: a size outside 1..max_thumbnail_px (naming ``width_px``) or a bad camera.
+            InvalidArgument: a size outside 1..max_thumbnail_px (naming ``width_px``) or a bad camera;
+                checker_squares < 0 (naming ``checker_squares``).
+            FailedPrecondition: texture_checker for a model that stores no texture atlas.
             Unavailable: the server has no renderer. ResourceExhausted: the render queue is full.
         """
         if sequence_frame is not None and (key_values is not None or skeleton_pose is not None):
@@ -866,7 +874,10 @@ class Client:
                                                     show_key_points=show_key_points, show_wireframe=show_wireframe,
                                                     tolerance_px=wire.as_float("tolerance_px", tolerance_px),
                                                     heat_max=wire.as_float("heat_max", heat_max),
-                                                    show_heat_legend=show_heat_legend)
+                                                    show_heat_legend=show_heat_legend,
+                                                    texture_checker=texture_checker,
+                                                    checker_squares=wire.as_int("checker_squares", checker_squares),
+                                                    show_chart_borders=show_chart_borders)
         if lights is not None:
             request.key_points.light_set.CopyFrom(messages.light_set("lights", lights))
         if illumination is not None:

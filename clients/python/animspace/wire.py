@@ -89,6 +89,22 @@ def as_uint(name: str, value: object, bits: int = 32) -> int:
     return number
 
 
+def as_int(name: str, value: object) -> int:
+    """``value`` as an integer for an ``int32`` field (range checks within int32 are the server's,
+    which names the field too).
+
+    Raises:
+        ValueError: naming ``name``, for a value that is not an integer or is outside int32.
+    """
+    try:
+        number = operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(f"{name}: expected an integer, got {value!r}") from None
+    if not -(1 << 31) <= number < (1 << 31):
+        raise ValueError(f"{name}: expected an int32, got {number}")
+    return number
+
+
 def as_float(name: str, value: object) -> float:
     """``value`` as a Python float for a ``float``/``double`` field (range checks are the server's,
     which names the field too).
