@@ -75,6 +75,8 @@ struct SuiteOptions {
   SkinningSuiteOptions skinning;
   // lod: datasets (the horse is fitted with the skinning options above).
   std::vector<std::string> lod_datasets{"cow-rig", "horse-gallop", "horse-gallop-block"};
+  // lod: only these methods (rows named as printed); empty: every one.
+  std::vector<std::string> lod_methods;
   // atlas: datasets (the horse is fitted with the skinning options above, on its training block).
   std::vector<std::string> atlas_datasets{"cow-rig", "horse-gallop-block"};
   IlluminationSuiteOptions illumination;

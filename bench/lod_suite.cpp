@@ -17,6 +17,10 @@
 //   animspace-lod-no-influence  the same without influence removals
 //   animspace-lod-unplaced[-no-influence]   the same without placement (what was served before)
 //   animspace-lod-quadric-unplaced-no-influence   ordered by quadric memory (CollapseCost::kQuadric)
+//   animspace-lod-chart-borders the served levels of a model with a texture atlas (issue #37): the
+//                               dataset's atlas (atlas::build_atlas under its P, the defaults of
+//                               `animspace atlas`), whose chart borders the collapses keep
+//                               (lod/chart_atlas.h) — what keeping them costs against animspace-lod
 //   openmesh-quadric-rest       OpenMesh's decimater, quadric error (ModQuadric) with its
 //                               normal-flip guard, on the rest pose
 //   multi-pose-quadric          the same decimater with quadrics summed over the poses P is built
@@ -48,6 +52,7 @@
 #include "bench/suites.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
+#include "core/atlas/atlas.h"
 #include "core/common/parallel.h"
 #include "core/common/timing.h"
 #include "core/lod/levels.h"
@@ -367,22 +372,26 @@ std::optional<Dataset> horse_dataset(const std::filesystem::path& data, const Sk
   return d;
 }
 
-nlohmann::json run_dataset(const Dataset& d) {
+nlohmann::json run_dataset(const Dataset& d, const std::vector<std::string>& methods) {
+  const auto wanted = [&methods](const std::string& method) {
+    return methods.empty() || std::find(methods.begin(), methods.end(), method) != methods.end();
+  };
   nlohmann::json rows = nlohmann::json::array();
   const int V = d.model.vertex_count();
   std::printf("\n%s: %d vertices, %d influences, %d bones, %zu poses\n", d.name.c_str(), V,
               d.model.influences.influence_count(), d.model.bone_count(), d.poses.size());
-  std::printf("%-30s %8s %9s %11s %14s %14s %9s\n", "method", "target", "vertices", "influences", "rms/diag",
-              "max/diag", "build s");
+  std::printf("%-30s %8s %9s %9s %11s %14s %14s %9s\n", "method", "target", "vertices", "faces", "influences",
+              "rms/diag", "max/diag", "build s");
   const auto row = [&](const std::string& method, double fraction, const as::AnimationSpaceModel& m, double seconds) {
     const Error e = measure(d, m);
-    std::printf("%-30s %7.0f%% %9d %11d %14.6f %14.6f %9.3f\n", method.c_str(), 100 * fraction, m.vertex_count(),
-                m.influences.influence_count(), e.rms, e.max, seconds);
+    std::printf("%-30s %7.0f%% %9d %9d %11d %14.6f %14.6f %9.3f\n", method.c_str(), 100 * fraction, m.vertex_count(),
+                static_cast<int>(m.faces.rows()), m.influences.influence_count(), e.rms, e.max, seconds);
     std::fflush(stdout);
     rows.push_back({{"dataset", d.name},
                     {"method", method},
                     {"target_fraction", fraction},
                     {"vertices", m.vertex_count()},
+                    {"faces", m.faces.rows()},
                     {"influences", m.influences.influence_count()},
                     {"rms_error_over_diag", e.rms},
                     {"max_error_over_diag", e.max},
@@ -397,20 +406,36 @@ nlohmann::json run_dataset(const Dataset& d) {
     bool influences;
     bool placement;
     bool combined_order = false;  // §6.3.1's one order of collapses and removals, then placement
+    bool chart_borders = false;   // the dataset's atlas's borders kept
   };
+  std::optional<lod::ChartAtlas> charts;
+  if (wanted("animspace-lod-chart-borders")) {
+    const auto start = std::chrono::steady_clock::now();
+    auto built = atlas::build_atlas(d.model, d.metrics, atlas::AtlasOptions{});
+    if (built) {
+      charts = lod::ChartAtlas{built->atlas.chart_of_face, built->atlas.uvs};
+      std::printf("  atlas for animspace-lod-chart-borders: %d charts, built in %.1f s\n", built->atlas.chart_count,
+                  seconds_since(start));
+    } else {
+      std::printf("%s: atlas: %s\n", d.name.c_str(), built.error().message.c_str());
+    }
+  }
   for (const Variant& variant :
        {Variant{"animspace-lod", lod::CollapseCost::kMemoryless, true, true},
         Variant{"animspace-lod-no-influence", lod::CollapseCost::kMemoryless, false, true},
         Variant{"animspace-lod-combined-order", lod::CollapseCost::kMemoryless, true, true, true},
         Variant{"animspace-lod-unplaced", lod::CollapseCost::kMemoryless, true, false},
         Variant{"animspace-lod-unplaced-no-influence", lod::CollapseCost::kMemoryless, false, false},
-        Variant{"animspace-lod-quadric-unplaced-no-influence", lod::CollapseCost::kQuadric, false, false}}) {
+        Variant{"animspace-lod-quadric-unplaced-no-influence", lod::CollapseCost::kQuadric, false, false},
+        Variant{"animspace-lod-chart-borders", lod::CollapseCost::kMemoryless, true, true, false, true}}) {
+    if (!wanted(variant.method) || (variant.chart_borders && !charts)) continue;
     lod::LevelBuildOptions build;
     build.influence_simplification = variant.influences;
     build.placement = variant.placement;
     lod::SimplifyOptions options = lod::progressive_mesh_options(build);
     lod::LevelFitOptions fit_options = lod::level_fit_options(build);
     options.cost = variant.cost;
+    if (variant.chart_borders) options.atlas = &*charts;
     if (variant.combined_order) {  // what was served before
       options.influence_simplification = true;
       fit_options.influence_exchange = -1;
@@ -451,16 +476,19 @@ nlohmann::json run_dataset(const Dataset& d) {
     }
   }
   for (const double fraction : kFractions) {
+    if (!wanted("openmesh-quadric-rest")) break;
     const int target = static_cast<int>(std::lround(fraction * V));
     const Simplified s = openmesh_quadric(d.model, target);
     row("openmesh-quadric-rest", fraction, s.model, s.build_seconds);
   }
   for (const double fraction : kFractions) {
+    if (!wanted("multi-pose-quadric")) break;
     const int target = static_cast<int>(std::lround(fraction * V));
     const Simplified s = multi_pose_quadric(d, target);
     row("multi-pose-quadric", fraction, s.model, s.build_seconds);
   }
   for (const double fraction : kFractions) {
+    if (!wanted("meshoptimizer-rest")) break;
     const int target = static_cast<int>(std::lround(fraction * V));
     const Simplified s = meshoptimizer_rest(d.model, target);
     row("meshoptimizer-rest", fraction, s.model, s.build_seconds);
@@ -486,7 +514,7 @@ nlohmann::json run_lod_suite(const SuiteOptions& suite) {
         std::printf("%s: unknown dataset (skipped)\n", name.c_str());
       continue;
     }
-    for (auto& r : run_dataset(*d)) rows.push_back(r);
+    for (auto& r : run_dataset(*d, suite.lod_methods)) rows.push_back(r);
   }
   return rows;
 }

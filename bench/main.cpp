@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   app.add_option("--skinning-datasets", options.skinning.datasets, "skinning: datasets under --data")
       ->capture_default_str();
   app.add_option("--lod-datasets", options.lod_datasets, "lod: datasets under --data")->capture_default_str();
+  app.add_option("--lod-methods", options.lod_methods, "lod: only these methods, as the rows name them (default: all)");
   app.add_option("--atlas-datasets", options.atlas_datasets, "atlas: datasets under --data")->capture_default_str();
   app.add_option("--bones", options.skinning.bones, "lod: rigid parts for sequences without a skeleton (horse-gallop)")
       ->check(CLI::Range(1, 200))
