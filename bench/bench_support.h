@@ -59,6 +59,9 @@ struct IlluminationSuiteOptions {
   std::string sampling = "hammersley";
   double light_radius = 0;
   int shadow_rays = 1;
+  // The soft cache's tolerance in radiance units (models before issue #38) instead of relative
+  // to each frame's radiance.
+  bool absolute_tolerance = false;
   // 0: no gather study; 1: the gather study (noise by two seeds, error against a 4096-ray
   // reference, roughness in the light's position, per candidate gather) and then the suite;
   // 2: the study only.

@@ -93,6 +93,8 @@ std::vector<NovelLight> novel_lights(const illumination::Box& room, const illumi
 struct Accuracy {
   double relative_rms_error = 0;
   double max_error_over_frame_max = 0;
+  double max_error = 0;       // radiance units
+  double estimate_scale = 0;  // S of the estimate: its RMS point radiance
 };
 
 Accuracy accuracy(const Eigen::VectorXf& estimate, const Eigen::VectorXf& full) {
@@ -103,7 +105,9 @@ Accuracy accuracy(const Eigen::VectorXf& estimate, const Eigen::VectorXf& full) 
   const Eigen::Map<const Eigen::Matrix3Xd> d(e.data(), 3, n);
   Accuracy a;
   a.relative_rms_error = std::sqrt(e.square().mean()) / mean;
-  a.max_error_over_frame_max = d.colwise().norm().maxCoeff() / static_cast<double>(f.colwise().norm().maxCoeff());
+  a.max_error = d.colwise().norm().maxCoeff();
+  a.max_error_over_frame_max = a.max_error / static_cast<double>(f.colwise().norm().maxCoeff());
+  a.estimate_scale = std::sqrt(estimate.cast<double>().squaredNorm() / static_cast<double>(n));
   return a;
 }
 
@@ -352,6 +356,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                                                          : illumination::HemisphereSampling::kHammersley;
   training.gather.light_radius = o.light_radius;
   training.gather.shadow_rays = o.shadow_rays;
+  training.relative_tolerance = !o.absolute_tolerance;
   if (o.gather_study > 0) {
     const std::vector<NovelLight> probe = novel_lights(room, grid, 1, 0);
     for (auto& row : gather_study(scene, probe[0].light, o.samples)) results.push_back(row);
@@ -376,11 +381,21 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
     return results;
   }
   const pmsc::PmscModel& model = *loaded;
-  std::printf("illumination: trained in %.1f s (gathers %.1f s, PMSC %.1f s): M = %d, K = %d key points, "
-              "ε = [%.4g, %.4g] radiance, tolerance %.4g (radiance scale %.4g)\n",
-              train_seconds, report.gather_seconds, report.pmsc.seconds, model.basis_size(), model.key_point_count(),
-              model.epsilon.epsilon_min, model.epsilon.epsilon_max,
-              training.tolerance_fraction * report.radiance_scale, report.radiance_scale);
+  if (model.relative_tolerance) {
+    std::printf("illumination: trained in %.1f s (gathers %.1f s, PMSC %.1f s): M = %d, K = %d key points, "
+                "ε = [%.4g, %.4g] × the frame's RMS radiance S, tolerance %.4g S (%.3g of the frame's largest "
+                "radiance at the training frames' median peak/RMS %.4g)\n",
+                train_seconds, report.gather_seconds, report.pmsc.seconds, model.basis_size(), model.key_point_count(),
+                model.epsilon.epsilon_min, model.epsilon.epsilon_max,
+                training.tolerance_fraction * report.peak_to_rms_ratio, training.tolerance_fraction,
+                report.peak_to_rms_ratio);
+  } else {
+    std::printf("illumination: trained in %.1f s (gathers %.1f s, PMSC %.1f s): M = %d, K = %d key points, "
+                "ε = [%.4g, %.4g] radiance, tolerance %.4g (radiance scale %.4g)\n",
+                train_seconds, report.gather_seconds, report.pmsc.seconds, model.basis_size(), model.key_point_count(),
+                model.epsilon.epsilon_min, model.epsilon.epsilon_max,
+                training.tolerance_fraction * report.radiance_scale, report.radiance_scale);
+  }
 
   const std::vector<int> all = scene.all_points();
   const std::vector<NovelLight> lights = novel_lights(room, grid, o.inside, o.outside);
@@ -396,6 +411,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "max/max", "status", "full_s", "keys_ms", "recon_ms", "est_ref", "full_ref");
   std::vector<double> full_s, keys_s, recon_s, rms_inside, max_inside, est_ref_inside, full_ref_inside;
   int hits_inside = 0, flagged_outside = 0, n_inside = 0, n_outside = 0;
+  int same_verdict = 0, intensity_trials = 0, hits_within_tolerance = 0;
   std::vector<Eigen::VectorXf> inside_keys;
   std::vector<Eigen::VectorXf> inside_estimates;
   std::vector<NovelLight> inside_lights;
@@ -453,6 +469,21 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
     if (novel.inside) {
       ++n_inside;
       hits_inside += cached.status == pmsc::CacheStatus::kHit ? 1 : 0;
+      // Issue #38 item 2: the same light ten times dimmer and ten times brighter (the radiance is
+      // linear in the intensity, so its keys are the keys scaled) should get the same verdict.
+      for (const float intensity : {0.1f, 10.0f}) {
+        pmsc::CachedPose scaled;
+        pmsc::evaluate_cached(model, Eigen::VectorXf(intensity * keys), nullptr, scaled);
+        same_verdict += scaled.status == cached.status ? 1 : 0;
+        ++intensity_trials;
+      }
+      // A HIT within the tolerance the model states: of the frame's own scale when relative.
+      if (cached.status == pmsc::CacheStatus::kHit) {
+        const double tolerance = model.relative_tolerance
+                                     ? training.tolerance_fraction * report.peak_to_rms_ratio * a.estimate_scale
+                                     : training.tolerance_fraction * report.radiance_scale;
+        hits_within_tolerance += a.max_error <= tolerance ? 1 : 0;
+      }
       rms_inside.push_back(a.relative_rms_error);
       max_inside.push_back(a.max_error_over_frame_max);
       est_ref_inside.push_back(estimate_vs_reference);
@@ -563,7 +594,12 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"recall_outside", recall_outside},
                          {"epsilon_min", model.epsilon.epsilon_min},
                          {"epsilon_max", model.epsilon.epsilon_max},
-                         {"radiance_scale", report.radiance_scale}};
+                         {"radiance_scale", report.radiance_scale},
+                         {"relative_tolerance", model.relative_tolerance},
+                         {"same_verdict_at_0.1x_and_10x_inside",
+                          intensity_trials > 0 ? static_cast<double>(same_verdict) / intensity_trials : 0.0},
+                         {"hits_within_tolerance_inside",
+                          hits_inside > 0 ? static_cast<double>(hits_within_tolerance) / hits_inside : 1.0}};
   if (!served_problem.empty()) summary["served_problem"] = served_problem;
   results.push_back(summary);
   std::printf("\ninside the hull (%d lights): median relative RMS %.3f%% of the mean radiance, p95 max error %.2f%% of "
@@ -574,6 +610,10 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "of the mean radiance\n",
               kReferenceRays, kReferencePoints, 100 * median(est_ref_inside), 100 * median(full_ref_inside));
   std::printf("outside (%d lights): flagged (blend or miss) %.2f\n", n_outside, recall_outside);
+  std::printf("tolerance %s: the same verdict at 0.1× and 10× the light's intensity for %.2f of the inside lights; "
+              "%d of %d inside hits within the tolerance\n",
+              model.relative_tolerance ? "relative to each frame" : "in radiance units",
+              summary["same_verdict_at_0.1x_and_10x_inside"].get<double>(), hits_within_tolerance, hits_inside);
   std::printf("full gather %.3f s; keys %.3f ms + reconstruction %.3f ms: %.0f× in process\n", full_gather,
               1e3 * key_gather, 1e3 * reconstruct, speedup_in_process);
   std::printf("served: round trip %.3f ms with the client's keys (%.0f× with the key gather), %.3f ms with the light "

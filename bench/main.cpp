@@ -87,6 +87,9 @@ int main(int argc, char** argv) {
                  "illumination: shadow rays per hit and light when the light radius is > 0")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
+  app.add_flag("--illumination-absolute-tolerance", options.illumination.absolute_tolerance,
+               "illumination: the soft cache's tolerance in radiance units (before issue #38), not relative to "
+               "each frame's radiance");
   app.add_option("--illumination-gather-study", options.illumination.gather_study,
                  "illumination: 1: measure candidate gathers' noise and smoothness first; 2: only that")
       ->check(CLI::Range(0, 2))

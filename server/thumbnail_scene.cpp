@@ -54,13 +54,15 @@ grpc::Status pose_skinned(const LoadedModel& model, const animation_space::Trans
   return grpc::Status::OK;
 }
 
-// The per-point error a PMSC model's ε was calibrated to flag (training option error_tolerance,
-// model units), or 0 when the model stores none.
-double error_tolerance(const LoadedModel& model) {
+// The per-point error a PMSC model's ε was calibrated to flag, in model units (training option
+// error_tolerance; for a relative-tolerance model that fraction of the pose's scale S, the RMS
+// point norm of `estimate`), or 0 when the model stores none.
+double error_tolerance(const LoadedModel& model, const Eigen::Ref<const PointMatrix>& estimate) {
   auto options = pmsc::load_training_options(model.container, model.name);
-  return options.ok() && std::isfinite(options->error_tolerance) && options->error_tolerance > 0
-             ? options->error_tolerance
-             : 0.0;
+  if (!options.ok() || !std::isfinite(options->error_tolerance) || !(options->error_tolerance > 0)) return 0.0;
+  if (!options->relative_tolerance) return options->error_tolerance;
+  const double scale = estimate.rows() > 0 ? std::sqrt(estimate.cast<double>().rowwise().squaredNorm().mean()) : 0.0;
+  return options->error_tolerance * scale;
 }
 
 // The heat map of how far what the cache returned (`estimate`) is from `truth` (core/thumbnail/
@@ -69,7 +71,7 @@ grpc::Status draw_heat(const LoadedModel& model, const Request& request, const E
                        const Eigen::Ref<const PointMatrix>& estimate, render::Scene& scene,
                        v1::RenderThumbnailResponse* response) {
   const double requested_max = request.heat_max();
-  auto heat = thumbnail::heat_map(truth, estimate, requested_max, requested_max == 0 ? error_tolerance(model) : 0.0,
+  auto heat = thumbnail::heat_map(truth, estimate, requested_max, requested_max == 0 ? error_tolerance(model, estimate) : 0.0,
                                   "full_values", scene);
   if (!heat) return to_grpc_status(heat.error());
   response->set_heat_max_error(heat->largest_error);

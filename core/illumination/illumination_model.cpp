@@ -1,6 +1,7 @@
 #include "core/illumination/illumination_model.h"
 
 #include <algorithm>
+#include <cmath>
 #include <utility>
 
 #include "core/common/format.h"
@@ -34,6 +35,20 @@ double radiance_scale(const FrameMatrix& frames) {
   return *middle;
 }
 
+double peak_to_rms_ratio(const FrameMatrix& frames) {
+  std::vector<double> ratios;
+  for (long f = 0; f < frames.rows() && frames.cols() >= 3; ++f) {
+    const Eigen::Map<const Eigen::Matrix3Xf> points(frames.row(f).data(), 3, frames.cols() / 3);
+    const Eigen::ArrayXd norms = points.colwise().norm().transpose().cast<double>().array();
+    const double rms = std::sqrt(norms.square().mean());
+    if (rms > 0) ratios.push_back(norms.maxCoeff() / rms);
+  }
+  if (ratios.empty()) return 0;
+  auto middle = ratios.begin() + static_cast<long>(ratios.size() / 2);
+  std::nth_element(ratios.begin(), middle, ratios.end());
+  return *middle;
+}
+
 Result<container::ModelContainer> train_illumination(const IlluminationEngine& engine,
                                                      const IlluminationTrainingOptions& options,
                                                      const std::string& description,
@@ -60,7 +75,13 @@ Result<container::ModelContainer> train_illumination(const IlluminationEngine& e
 
   pmsc::TrainingOptions trainer = options.pmsc;
   trainer.channel_count = 3;
-  trainer.error_tolerance = options.tolerance_fraction * r.radiance_scale;
+  trainer.relative_tolerance = options.relative_tolerance;
+  if (options.relative_tolerance) {
+    r.peak_to_rms_ratio = peak_to_rms_ratio(frames);
+    trainer.error_tolerance = options.tolerance_fraction * r.peak_to_rms_ratio;
+  } else {
+    trainer.error_tolerance = options.tolerance_fraction * r.radiance_scale;
+  }
   trainer.error_bound = options.error_bound_fraction * r.radiance_scale;
   trainer.positions = engine.surface().vertices;  // grid seeds over the surface, not over colours
   trainer.remove_rigid_motion = false;            // colours have no rigid motion
@@ -75,6 +96,9 @@ Result<container::ModelContainer> train_illumination(const IlluminationEngine& e
   pmsc::store_training_options(trainer, out);
   out.metadata()["illumination.radiance_scale"] = format_number(r.radiance_scale);
   out.metadata()["illumination.gather_seconds"] = format_number(r.gather_seconds);
+  if (options.relative_tolerance) {
+    out.metadata()["illumination.peak_to_rms_ratio"] = format_number(r.peak_to_rms_ratio);
+  }
   out.metadata()["units"] = "radiance (W/(sr·m²)); positions in metres";
   IlluminationSetup setup;
   setup.surface = engine.surface();

@@ -29,6 +29,12 @@ FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<Po
 // scene, light intensity or unit.
 double radiance_scale(const FrameMatrix& frames);
 
+// The median over frames of a frame's largest point radiance over its RMS point radiance S (the
+// scale a relative tolerance is stated in, pmsc::pose_scale). A fraction τ of a frame's largest
+// radiance is τ times this, in units of S, for a frame whose ratio is the median. 0 for no frames
+// or frames of zero radiance.
+double peak_to_rms_ratio(const FrameMatrix& frames);
+
 struct IlluminationTrainingOptions {
   std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 144)
   GatherOptions gather;
@@ -36,6 +42,13 @@ struct IlluminationTrainingOptions {
   // The soft cache must not call HIT a frame with a point error above this fraction of the
   // radiance scale (pmsc::TrainingOptions::error_tolerance, in radiance units).
   double tolerance_fraction = 0.05;
+  // Issue #38: the tolerance stated per frame, relative to the frame's own radiance, so that a
+  // HIT means the same for a dim and a bright light (pmsc::PmscModel::relative_tolerance). The
+  // soft cache then measures errors against S, the frame's RMS point radiance; tolerance_fraction
+  // is still read as a fraction of the frame's largest point radiance, converted to S by the
+  // training frames' median ratio of largest to RMS radiance (relative_tolerance_of). False: the
+  // tolerance in radiance units, a fraction of the training frames' radiance scale (before #38).
+  bool relative_tolerance = true;
   // Key selection iterates until every training point is within this fraction of the scale.
   double error_bound_fraction = 0.02;
   // The rest as pmsc::TrainingOptions (channel_count, error_tolerance, error_bound and positions
@@ -47,6 +60,7 @@ struct IlluminationTrainingReport {
   pmsc::TrainingReport pmsc;
   double gather_seconds = 0;   // the training frames' full gathers
   double radiance_scale = 0;   // of the training frames
+  double peak_to_rms_ratio = 0;  // of the training frames (relative tolerance only)
 };
 
 // Gathers the training frames, trains the PMSC model (channels = 3, grid seeds and regions over

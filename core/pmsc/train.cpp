@@ -409,6 +409,24 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     report->key_points = model.key_point_count();
     report->max_residual_per_iteration = selection->max_residual;
     report->max_training_error = selection->max_residual.empty() ? 0 : selection->max_residual.back();
+    if (model.relative_tolerance) {
+      // The keys were chosen for the affine subspace; the linear one served has the mean's
+      // direction too, so its training error is measured on the model itself (model units).
+      report->max_training_error = 0;
+      PoseEstimate estimate;
+      for (long f = 0; f < F; ++f) {
+        const Eigen::VectorXf control = control_frames.row(f).transpose();
+        const Eigen::VectorXf truth = cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : control;
+        evaluate(model, gather_key_values(model, control), estimate);
+        const Eigen::VectorXf residual = truth - estimate.points;
+        report->max_training_error =
+            std::max(report->max_training_error,
+                     static_cast<double>(Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, model.point_count)
+                                             .colwise()
+                                             .norm()
+                                             .maxCoeff()));
+      }
+    }
     report->converged = selection->converged;
     report->projection_error = projection_error;
     report->basis_capped = o.basis_size <= 0 && M == chosen_cap && projection_error > 0.5 * o.error_bound;

@@ -34,9 +34,13 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
       ->capture_default_str();
   cmd->add_option("--tolerance", a.tolerance,
                   "Soft cache: ε is calibrated so that frames with a point error above this fraction of the "
-                  "radiance scale (median frame maximum) are flagged")
+                  "frame's own largest radiance are flagged (of the training frames' median largest radiance "
+                  "with --absolute-tolerance)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_flag("--absolute-tolerance", a.absolute_tolerance,
+                "One tolerance in radiance units for every frame (models before issue #38), instead of one "
+                "relative to each frame's radiance: a dim light then always hits and a bright one misses");
   cmd->add_option("--error-bound", a.error_bound,
                   "Key selection stops when every training point is within this fraction of the radiance scale")
       ->check(CLI::PositiveNumber)
@@ -63,6 +67,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
   options.gather.samples = a.samples;
   options.gather.seed = a.seed;
   options.tolerance_fraction = a.tolerance;
+  options.relative_tolerance = !a.absolute_tolerance;
   options.error_bound_fraction = a.error_bound;
   options.pmsc.basis_size = a.basis;
   options.pmsc.max_key_points = a.max_key_points;
@@ -91,6 +96,8 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                 {"basis", r.basis_size},
                 {"key_points", r.key_points},
                 {"radiance_scale", report.radiance_scale},
+                {"relative_tolerance", options.relative_tolerance},
+                {"peak_to_rms_ratio", report.peak_to_rms_ratio},
                 {"max_training_error", r.max_training_error},
                 {"converged", r.converged},
                 {"gather_seconds", report.gather_seconds},
@@ -102,6 +109,12 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
     std::printf("trained in %.2f s: basis M = %d, %d key points; max training error %.4g (%.2f%% of the scale)\n",
                 r.seconds, r.basis_size, r.key_points, r.max_training_error,
                 100 * r.max_training_error / report.radiance_scale);
+    if (options.relative_tolerance) {
+      std::printf("a HIT is within %.3g of each frame's largest radiance (%.3g × its RMS radiance; the training "
+                  "frames' median peak/RMS is %.3g)\n",
+                  options.tolerance_fraction, options.tolerance_fraction * report.peak_to_rms_ratio,
+                  report.peak_to_rms_ratio);
+    }
     std::printf("wrote %s\n", path.c_str());
   }
   return 0;

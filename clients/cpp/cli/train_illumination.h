@@ -21,6 +21,7 @@ struct TrainIlluminationArgs {
   double drop = illumination::LightGrid{}.drop;
   double inset = illumination::LightGrid{}.inset;
   double tolerance = illumination::IlluminationTrainingOptions{}.tolerance_fraction;
+  bool absolute_tolerance = !illumination::IlluminationTrainingOptions{}.relative_tolerance;
   double error_bound = illumination::IlluminationTrainingOptions{}.error_bound_fraction;
   double false_hit_rate = pmsc::TrainingOptions{}.false_hit_rate;
   int basis = 0;

@@ -1,6 +1,8 @@
 // The illumination model: the engine's sections round-trip through a container, and a PMSC model
 // trained on gathered frames reproduces its training frames from their key points — and is served
 // with its engine (model::load_servable).
+#include <cmath>
+
 #include <gtest/gtest.h>
 
 #include "core/container/model_container.h"
@@ -109,6 +111,8 @@ TEST(IlluminationModelTest, RadianceScaleIsTheMedianFrameMaximum) {
       0, 0, 0, 5, 12, 0,       //
       0, 0, 2, 0, 0, 0;
   EXPECT_DOUBLE_EQ(radiance_scale(frames), 5.0);
+  // Largest over RMS point radiance: 5 / √13, 13 / (13 / √2) = √2, 2 / (2 / √2) = √2; median √2.
+  EXPECT_NEAR(peak_to_rms_ratio(frames), std::sqrt(2.0), 1e-12);
 }
 
 TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWithItsEngine) {
@@ -152,6 +156,58 @@ TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWith
     const Eigen::VectorXf difference = cached.points - full;
     const Eigen::Map<const Eigen::Matrix3Xf> error(difference.data(), 3, model.point_count);
     EXPECT_LE(error.colwise().norm().maxCoeff(), report.pmsc.max_training_error * 1.001 + 1e-6) << "light " << f;
+  }
+}
+
+TEST(IlluminationModelTest, ADimAndABrightLightGetTheSameVerdict) {
+  // Issue #38 item 2: the tolerance is relative to each frame's radiance, so the verdict on a
+  // light does not depend on its intensity. The gather is linear in the intensity; the keys of a
+  // light ten times brighter are ten times the keys, and every error is measured against S.
+  auto engine = IlluminationEngine::create(cornell_box({1500}));
+  ASSERT_TRUE(engine.ok()) << engine.error().message;
+  IlluminationTrainingOptions options;
+  for (const Eigen::Vector3d& p : light_grid(cornell_room(), {5, 5, 0.05, 0.1})) {
+    options.lights.push_back({p, Eigen::Vector3d::Ones()});
+  }
+  options.gather.samples = 8;
+  options.pmsc.max_key_points = 60;
+  options.pmsc.region_count = 2;
+  ASSERT_TRUE(options.relative_tolerance) << "the default since issue #38";
+  IlluminationTrainingReport report;
+  auto model_file = train_illumination(**engine, options, "test", &report);
+  ASSERT_TRUE(model_file.ok()) << model_file.error().message;
+  EXPECT_GT(report.peak_to_rms_ratio, 1) << "a frame's largest radiance is above its RMS";
+  auto servable = model::load_servable(*model_file, "trained");
+  ASSERT_TRUE(servable.ok()) << servable.error().message;
+  const pmsc::PmscModel& model = *servable->pmsc;
+  ASSERT_TRUE(model.relative_tolerance);
+
+  // Lights between the training lights and off the grid's plane.
+  const Box room = cornell_room();
+  for (int l = 0; l < 6; ++l) {
+    const Eigen::Vector3d position = room.min + Eigen::Vector3d(0.2 + 0.12 * l, 0.9 - 0.08 * l, 0.3 + 0.07 * l)
+                                                    .cwiseProduct(room.max - room.min);
+    Eigen::VectorXf dim_keys, bright_keys, dim_checks, bright_checks;
+    (*engine)->indirect({{position, Eigen::Vector3d::Constant(0.2)}}, options.gather, model.key_points, dim_keys);
+    (*engine)->indirect({{position, Eigen::Vector3d::Constant(20.0)}}, options.gather, model.key_points, bright_keys);
+    (*engine)->indirect({{position, Eigen::Vector3d::Constant(0.2)}}, options.gather, model.check_points, dim_checks);
+    (*engine)->indirect({{position, Eigen::Vector3d::Constant(20.0)}}, options.gather, model.check_points,
+                        bright_checks);
+    ASSERT_LE((bright_keys - 100.0f * dim_keys).cwiseAbs().maxCoeff(), 1e-4f * bright_keys.cwiseAbs().maxCoeff())
+        << "the gather is linear in the light's intensity";
+    pmsc::PoseEstimate dim, bright;
+    pmsc::estimate_coordinates(model, dim_keys, dim_checks, dim);
+    pmsc::estimate_coordinates(model, bright_keys, bright_checks, bright);
+    const auto dim_status = pmsc::decide(dim.error_estimate, pmsc::verdict_thresholds(model, dim)).status;
+    EXPECT_EQ(pmsc::decide(bright.error_estimate, pmsc::verdict_thresholds(model, bright)).status, dim_status)
+        << "light " << l << ": e = " << dim.error_estimate << " and " << bright.error_estimate;
+    if (dim.scale == 0) {  // a light inside a block reaches no key point: nothing to be relative to
+      EXPECT_EQ(bright.scale, 0) << "light " << l;
+      EXPECT_EQ(dim_status, pmsc::CacheStatus::kMiss) << "light " << l;
+      continue;
+    }
+    EXPECT_NEAR(bright.error_estimate, dim.error_estimate, 1e-3 * dim.error_estimate) << "light " << l;
+    EXPECT_NEAR(bright.scale, 100 * dim.scale, 1e-3 * bright.scale) << "light " << l;
   }
 }
 
