@@ -19,6 +19,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
 #include "tests/support/cli_run.h"
+#include "tests/support/gltf_posing.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -182,6 +183,38 @@ TEST(CliAtlas, BuildLodKeepsTheChartsAndExportLodWritesEveryLevelsUvs) {
     }
     for (size_t f = 0; f < got.size(); ++f) {
       for (size_t c = 0; c < 6; ++c) ASSERT_NEAR(got[f][c], want[f][c], 1e-6) << "face " << f;
+    }
+  }
+
+  // export-rig at a coarser level: TEXCOORD_0 per corner, in face order, the level's UVs in their
+  // charts (glTF's v runs down: the file holds 1 − v).
+  const int rig_level = levels->count() / 2;
+  const auto glb = dir / "rig.glb";
+  const auto rig = cli("--json export-rig " + (dir / "arm-lod.anim").string() + " --level " +
+                           std::to_string(rig_level) + " -o " + glb.string(), dir);
+  EXPECT_TRUE(testing::json_of(rig).at("texture_coordinates").get<bool>());
+  {
+    std::ifstream in(glb, std::ios::binary);
+    const testing::LoadedGltf loaded =
+        testing::load_gltf(std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()), true);
+    ASSERT_TRUE(loaded.ok) << loaded.error;
+    const tinygltf::Primitive& primitive = loaded.model.meshes.at(0).primitives.at(0);
+    ASSERT_EQ(primitive.attributes.count("TEXCOORD_0"), 1u);
+    const std::vector<uint32_t> indices = testing::accessor_values<uint32_t>(
+        loaded.model, primitive.indices, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR);
+    const std::vector<float> texcoords = testing::accessor_values<float>(
+        loaded.model, primitive.attributes.at("TEXCOORD_0"), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2);
+    const lod::LodLevel& level = levels->levels[static_cast<size_t>(rig_level)];
+    ASSERT_EQ(indices.size(), static_cast<size_t>(3 * level.model.faces.rows()));
+    for (Eigen::Index f = 0; f < level.model.faces.rows(); ++f) {
+      const int chart = (*charts)(level.face_ids[static_cast<size_t>(f)], 0);
+      for (int k = 0; k < 3; ++k) {
+        const auto at = uv.find({level.vertex_ids[static_cast<size_t>(level.model.faces(f, k))], chart});
+        ASSERT_NE(at, uv.end());
+        const uint32_t vertex = indices[static_cast<size_t>(3 * f + k)];
+        ASSERT_NEAR(texcoords[2 * vertex], at->second[0], 1e-6) << "face " << f << " corner " << k;
+        ASSERT_NEAR(1.0f - texcoords[2 * vertex + 1], at->second[1], 1e-6) << "face " << f << " corner " << k;
+      }
     }
   }
 

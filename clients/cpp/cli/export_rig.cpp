@@ -22,7 +22,8 @@ CLI::App* add_export_rig(CLI::App& app, ExportRigArgs& a) {
       "export-rig",
       "Offline: write an animation-space model (fitted, import-rig, subdivided, or a level of detail of build-lod) "
       "as a glTF 2.0 skinned character: its linear blend rig (weights p̲_j, bind pose the rest pose), the stored "
-      "training poses as its animation, at level 0 the atlas's UVs (TEXCOORD_0, seams split); prints how far the rig is "
+      "training poses as its animation, the atlas's UVs at the level (TEXCOORD_0, seams split; a coarser level's as "
+      "build-lod stored them under the atlas); prints how far the rig is "
       "from the model over those poses");
   cmd->add_option("input", a.input, "An animation-space model.anim")->required()->check(CLI::ExistingFile);
   cmd->add_option("--level", a.level, "Level of detail to write (0 = full detail)")
@@ -88,16 +89,18 @@ int run_export_rig(const ExportRigArgs& a, bool json) {
 
   auto character = as::skinned_character(*rig, poses, a.frames_per_second);
   if (!character) return fail(command, character.error().message);
-  // The atlas (animspace atlas) belongs to the full mesh: level 0 carries its UVs, the vertices
-  // split along its seams with their joints and weights.
+  // The atlas (animspace atlas): level 0 carries its UVs, a coarser level those build-lod stored
+  // with it (lod/chart_atlas.h); the vertices split along its seams with their joints and weights.
   bool with_uvs = false;
-  if (a.level == 0) {
-    auto stored = atlas::load_atlas(*in, model->faces.rows(), a.input);
-    if (!stored) return fail(command, stored.error().message);
-    if (*stored) {
-      *character = mesh_io::split_seams(*character, (*stored)->uvs.cast<float>());
-      with_uvs = true;
-    }
+  auto stored = atlas::load_atlas(*in, model->faces.rows(), a.input);
+  if (!stored) return fail(command, stored.error().message);
+  const lod::CornerUvs& level_uvs = levels->levels[static_cast<size_t>(a.level)].corner_uvs;
+  const lod::CornerUvs* uvs = !*stored ? nullptr : a.level == 0 ? &(*stored)->uvs
+                                                 : level_uvs.rows() > 0 ? &level_uvs
+                                                                        : nullptr;
+  if (uvs != nullptr) {
+    *character = mesh_io::split_seams(*character, uvs->cast<float>());
+    with_uvs = true;
   }
   if (auto written = mesh_io::write_skinned_character(a.output, *character); !written.ok()) {
     return fail(command, written.error().message);
