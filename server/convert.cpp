@@ -60,6 +60,7 @@ void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
   out->set_calibration_bad_samples(static_cast<uint64_t>(info.calibration_bad_samples));
   out->set_calibration_guarantee_holds(info.calibration_guarantee_holds);
   out->set_calibration_statement(info.calibration_statement);
+  out->set_relative_tolerance(info.relative_tolerance);
   out->set_file_size_bytes(m.file_size_bytes);
   out->set_loaded_at_unix_s(m.loaded_at_unix_s);
   for (const auto& [key, value] : m.container.metadata()) (*out->mutable_metadata())[key] = value;

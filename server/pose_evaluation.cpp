@@ -54,6 +54,7 @@ void write_verdict(const LoadedModel& model, const PoseOptions& options, const p
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
   out->set_check_point_error(static_cast<float>(cached.check_point_error));
   out->set_error_estimate(static_cast<float>(cached.error_estimate));
+  if (m.relative_tolerance) out->set_pose_scale(static_cast<float>(cached.scale));
   out->set_checked(cached.checked);
   out->set_blend_weight(static_cast<float>(cached.alpha));
   out->set_model_version(model.version);

@@ -45,6 +45,7 @@ struct ModelInfo {
   long calibration_bad_samples = 0;
   bool calibration_guarantee_holds = false;
   std::string calibration_statement;
+  bool relative_tolerance = false;  // pmsc::PmscModel::relative_tolerance (issue #38)
 };
 
 // Reads and cross-checks the sections every kind shares. Errors: kInvalidArgument (or the

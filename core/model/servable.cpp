@@ -25,6 +25,7 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     info->calibration_bad_samples = m.calibration.bad_samples;
     info->calibration_guarantee_holds = pmsc::calibration_guarantee_holds(m);
     info->calibration_statement = pmsc::calibration_statement(m);
+    info->relative_tolerance = m.relative_tolerance;
   }
   if (info->kind == ModelKind::kAnimationSpace || info->server_engine == ServerEngine::kAnimationSpace) {
     auto runtime = animation_space::load(container, source);

@@ -467,6 +467,7 @@ bool judge(const PmscModel& m, const PoseEstimate& estimate, CachedPose& out) {
   out.check_point_error = estimate.check_point_error;
   out.checked = estimate.checked;
   out.error_estimate = estimate.error_estimate;
+  out.scale = estimate.scale;
   out.region_errors = estimate.region_errors;
   out.full_evaluation_needed = false;
   out.computed_full_values.resize(0);

@@ -218,6 +218,7 @@ struct CachedPose {
   double check_point_error = 0;  // as PoseEstimate
   bool checked = false;
   double error_estimate = 0;     // what the verdict compared with verdict_thresholds
+  double scale = 1;              // S (PoseEstimate::scale): the errors' unit in a relative model
   double alpha = 0;
   // Blend or miss, but no full values were given: `points` is the estimate and the caller must
   // supply f (or accept f̂). Never set for cross-PMSC models, where no full calculation exists.

@@ -49,6 +49,23 @@ def test_a_light_at_floor_level_is_flagged_and_completed_by_the_server(client):
         np.testing.assert_allclose(both.points, a.points + b.points, rtol=1e-4, atol=1e-5)
 
 
+def test_a_dim_and_a_bright_light_get_the_same_verdict(client):
+    # Issue #38: the tolerance is relative to each frame's own radiance. The radiance is linear in
+    # the light's intensity, so the same light ten times dimmer or brighter is the same frame
+    # scaled: the same verdict, the same relative errors, a scale ten times smaller or larger.
+    assert client.describe_model(CORNELL).default.relative_tolerance
+    for position in (INSIDE, FLOOR):
+        base = client.relight(CORNELL, position)
+        assert base.pose_scale > 0
+        for intensity in (0.1, 10.0):
+            lit = client.relight(CORNELL, [animspace.PointLight(tuple(position), (intensity,) * 3)])
+            assert lit.status == base.status, (position, intensity, lit.error_estimate, base.error_estimate)
+            assert lit.error_estimate == pytest.approx(base.error_estimate, rel=1e-3)
+            assert lit.pose_scale == pytest.approx(intensity * base.pose_scale, rel=1e-3)
+    # The arm's tolerance stays in model units (a position has no intensity).
+    assert not client.describe_model("arm-pmsc").default.relative_tolerance
+
+
 def test_bad_lights_are_refused_naming_the_field(client):
     with pytest.raises(ValueError, match="lights"):
         client.relight(CORNELL, [[0.1, 0.2]])

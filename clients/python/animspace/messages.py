@@ -210,7 +210,9 @@ class ModelVersion:
     ``calibration_bad_samples`` the over-tolerance samples it rests on,
     ``calibration_guarantee_holds`` whether they back δ, and ``calibration_statement`` the
     server's sentence for operators: what a HIT means for this model, or why nothing is
-    guaranteed.
+    guaranteed. ``relative_tolerance`` (issue #38): ε and every error a ``PoseResult`` reports are
+    fractions of each pose's own scale (``PoseResult.pose_scale``), not model units, so a HIT
+    means the same at any intensity.
     """
 
     version: int
@@ -239,6 +241,7 @@ class ModelVersion:
     calibration_bad_samples: int = 0
     calibration_guarantee_holds: bool = False
     calibration_statement: str = ""
+    relative_tolerance: bool = False
 
     @classmethod
     def from_proto(cls, m: models_pb2.ModelVersion) -> "ModelVersion":
@@ -254,7 +257,8 @@ class ModelVersion:
                    check_point_count=m.check_point_count, false_hit_rate=m.false_hit_rate,
                    calibration_bad_samples=m.calibration_bad_samples,
                    calibration_guarantee_holds=m.calibration_guarantee_holds,
-                   calibration_statement=m.calibration_statement)
+                   calibration_statement=m.calibration_statement,
+                   relative_tolerance=m.relative_tolerance)
 
 
 @dataclass(frozen=True)
@@ -463,6 +467,8 @@ class PoseResult:
         error_estimate: what the verdict compared with ε: max(w·e_key, e_check) when ``checked``,
             else e_key (against the model's stricter key-only thresholds when it has check points).
         checked: the pose was sent with check values (and the model has check points).
+        pose_scale: for a model with ``relative_tolerance``, S, the pose's RMS point norm (model
+            units) that the errors above are fractions of; 0 when they are in model units.
         blend_weight: α ∈ [0, 1]: 0 for a hit, 1 for a miss.
         model_version: the version that answered.
         full_evaluation_needed: a blend or miss whose points are still the estimate: compute the
@@ -500,6 +506,7 @@ class PoseResult:
     error_estimate: float = 0.0
     checked: bool = False
     coordinates: Optional[SubspaceCoordinates] = None
+    pose_scale: float = 0.0
 
     @property
     def hit(self) -> bool:
@@ -518,7 +525,8 @@ class PoseResult:
                    full_points=np.array(m.full_points, dtype=np.uint32),
                    full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32),
                    points_max_error=m.points.max_error, check_point_error=m.check_point_error,
-                   error_estimate=m.error_estimate, checked=m.checked, coordinates=coordinates)
+                   error_estimate=m.error_estimate, checked=m.checked, coordinates=coordinates,
+                   pose_scale=m.pose_scale)
 
 
 @dataclass(frozen=True, eq=False)

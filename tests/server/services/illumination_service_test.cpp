@@ -140,6 +140,7 @@ TEST_F(IlluminationServiceTest, DescribeModelAnnouncesTheIlluminationEngine) {
   EXPECT_EQ(v.channel_count(), 3u);
   EXPECT_EQ(v.fail_through(), v1::FAIL_THROUGH_SERVER);
   EXPECT_EQ(v.server_engine(), v1::SERVER_ENGINE_ILLUMINATION);
+  EXPECT_TRUE(v.relative_tolerance()) << "the demo's tolerance is relative to each frame (issue #38)";
 }
 
 TEST_F(IlluminationServiceTest, TheServerGathersTheKeysOfALightAndAnswersAsForTheClientsKeys) {
