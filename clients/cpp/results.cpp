@@ -124,6 +124,7 @@ PoseResult decode_pose_result(const v1::PoseResult& result) {
   out.check_point_error = result.check_point_error();
   out.error_estimate = result.error_estimate();
   out.checked = result.checked();
+  out.pose_scale = result.pose_scale();
   out.blend_weight = result.blend_weight();
   out.model_version = result.model_version();
   out.full_evaluation_needed = result.full_evaluation_needed();

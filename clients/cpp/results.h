@@ -114,6 +114,9 @@ struct PoseResult {
   float check_point_error = 0;
   float error_estimate = 0;
   bool checked = false;       // the pose was sent with check values and the model has check points
+  // A model with ModelVersion.relative_tolerance (issue #38): S, the pose's RMS point norm that the
+  // errors above are fractions of; 0 when they are in model units.
+  float pose_scale = 0;
   float blend_weight = 0;     // α
   uint64_t model_version = 0;
   bool full_evaluation_needed = false;

@@ -222,6 +222,14 @@ int main(int argc, char** argv) try {
     std::printf("relit by a light at (%.2f, %.2f, %.2f): %s, %u points × %u channels (RGB radiance)\n", position[0],
                 position[1], position[2], animspace::cache_status_name(frame.status), frame.points.point_count,
                 frame.points.channel_count);
+    // The tolerance is relative to each frame's own radiance (issue #38): the same light ten
+    // times brighter gets the same verdict, its errors fractions of a scale ten times larger.
+    const std::vector<animspace::PointLight> brighter{{position, {10.0, 10.0, 10.0}}};
+    lit.lights = brighter;
+    const animspace::PoseResult bright = client.evaluate_key_points("cornell", lit);
+    std::printf("  ten times brighter: %s, error estimate %.4g of its scale %.4g (%.4g at the training intensity)\n",
+                animspace::cache_status_name(bright.status), bright.error_estimate, bright.pose_scale,
+                frame.pose_scale);
   }
 
   // A thumbnail, drawn headless by the daemon; UNAVAILABLE on a daemon without a renderer.
