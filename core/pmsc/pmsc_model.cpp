@@ -192,8 +192,12 @@ Status prepare_projection(PmscModel& m) {
       return make_error(ErrorCode::kInvalidArgument,
                         "pmsc model: a relative-tolerance model is linear: its mean and key_mean must be 0");
     }
-    const Eigen::MatrixXd basis = m.basis.cast<double>();
-    m.basis_gram.noalias() = basis.transpose() * basis;
+    // In float, as the basis is stored: S needs a few digits, and a double copy of an N·D × M
+    // basis per calibration fold was most of what a relative model added to its training.
+    Eigen::MatrixXf gram(m.basis.cols(), m.basis.cols());
+    gram.setZero();
+    gram.selfadjointView<Eigen::Lower>().rankUpdate(m.basis.transpose());
+    m.basis_gram = gram.selfadjointView<Eigen::Lower>().toDenseMatrix().cast<double>();
   } else {
     m.basis_gram.resize(0, 0);
   }
