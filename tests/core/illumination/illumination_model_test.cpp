@@ -104,6 +104,18 @@ TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
   EXPECT_FALSE(load_illumination(bad_quantity, "m.anim").ok());
 }
 
+// A training small enough for a unit test: 25 lights under the ceiling, 8 rays, 60 keys.
+IlluminationTrainingOptions small_training() {
+  IlluminationTrainingOptions options;
+  for (const Eigen::Vector3d& p : light_grid(cornell_room(), {5, 5, 0.05, 0.1})) {
+    options.lights.push_back({p, Eigen::Vector3d::Ones()});
+  }
+  options.gather.samples = 8;
+  options.pmsc.max_key_points = 60;
+  options.pmsc.region_count = 2;
+  return options;
+}
+
 TEST(IlluminationModelTest, RadianceScaleIsTheMedianFrameMaximum) {
   FrameMatrix frames(3, 6);
   // Point norms: frame 0 → {5, 1}, frame 1 → {0, 13}, frame 2 → {2, 0}: maxima 5, 13, 2.
@@ -118,13 +130,7 @@ TEST(IlluminationModelTest, RadianceScaleIsTheMedianFrameMaximum) {
 TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWithItsEngine) {
   auto engine = IlluminationEngine::create(cornell_box({2000}));
   ASSERT_TRUE(engine.ok()) << engine.error().message;
-  IlluminationTrainingOptions options;
-  for (const Eigen::Vector3d& p : light_grid(cornell_room(), {5, 5, 0.05, 0.1})) {
-    options.lights.push_back({p, Eigen::Vector3d::Ones()});
-  }
-  options.gather.samples = 8;
-  options.pmsc.max_key_points = 60;
-  options.pmsc.region_count = 2;
+  IlluminationTrainingOptions options = small_training();
   IlluminationTrainingReport report;
   auto model_file = train_illumination(**engine, options, "test", &report);
   ASSERT_TRUE(model_file.ok()) << model_file.error().message;
@@ -165,13 +171,7 @@ TEST(IlluminationModelTest, ADimAndABrightLightGetTheSameVerdict) {
   // light ten times brighter are ten times the keys, and every error is measured against S.
   auto engine = IlluminationEngine::create(cornell_box({1500}));
   ASSERT_TRUE(engine.ok()) << engine.error().message;
-  IlluminationTrainingOptions options;
-  for (const Eigen::Vector3d& p : light_grid(cornell_room(), {5, 5, 0.05, 0.1})) {
-    options.lights.push_back({p, Eigen::Vector3d::Ones()});
-  }
-  options.gather.samples = 8;
-  options.pmsc.max_key_points = 60;
-  options.pmsc.region_count = 2;
+  IlluminationTrainingOptions options = small_training();
   ASSERT_TRUE(options.relative_tolerance) << "the default since issue #38";
   IlluminationTrainingReport report;
   auto model_file = train_illumination(**engine, options, "test", &report);
