@@ -5,6 +5,8 @@ holding (positions, attributes, reports) to CONFIG's out_dir. It asserts nothing
 the test compares them with the daemon's own answers, fetched with the Python client outside
 Blender.
 """
+import contextlib
+import io
 import json
 import math
 import pathlib
@@ -39,6 +41,16 @@ def mesh_faces(obj):
     obj.data.polygons.foreach_get("loop_start", starts)
     data = np.stack([loops[starts], loops[starts + 1], loops[starts + 2]], axis=1)
     return data
+
+
+def loop_uvs(mesh, layer):
+    """F×3×2: ``[f, k]`` the UV of the loop at corner k of triangle f (polygon f's loop_start + k),
+    read from the mesh's UV layer as Blender holds it."""
+    data = np.empty(len(layer.data) * 2, dtype=np.float32)
+    layer.data.foreach_get("uv", data)
+    starts = np.empty(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("loop_start", starts)
+    return data.reshape(-1, 2)[starts[:, None] + np.arange(3)]
 
 
 def vertex_colours(obj, name):
@@ -324,22 +336,32 @@ try:
     settings.lod_level = 10_000
     results["bad_level_report"] = report_of(bpy.ops.animspace.import_lod)
 
-    # 6b. Level 0 of a model with a texture atlas arrives with its UV map (a second daemon serves
-    #     the atlas'd copy under the same name); the demo's own, without an atlas, has none.
+    # 6b. A level of a model with a texture atlas arrives with its UV map: level 0 of the atlas'd
+    #     copy of the arm (a second daemon serves it under the same name) and a coarser level of
+    #     the demo's arm-smooth (levels built under its atlas). The demo's own arm, without an
+    #     atlas, has none, and neither has a coarser level of the atlas'd copy, built before its
+    #     atlas: imported all the same, the report saying why.
     bpy.context.view_layer.objects.active = None
-    settings.lod_level = 0
-    import_lod("plain_level0")
-    results["lods"]["plain_level0"]["uv_layers"] = [layer.name for layer in bpy.data.objects[
-        lods["plain_level0"]["object"]].data.uv_layers]
+
+    def import_atlas_lod(name, level):
+        settings.lod_level = level
+        report = io.StringIO()
+        with contextlib.redirect_stdout(report):  # bpy.ops writes the operator's reports there
+            import_lod(name)
+        mesh = bpy.data.objects[lods[name]["object"]].data
+        lods[name]["uv_layers"] = [layer.name for layer in mesh.uv_layers]
+        lods[name]["report"] = report.getvalue()
+        if mesh.uv_layers:
+            save(f"lod_{name}_uvs", loop_uvs(mesh, mesh.uv_layers[0]))
+
+    import_atlas_lod("plain_level0", 0)
+    settings.model = config["atlas"]["levels_model"]
+    import_atlas_lod("smooth_level", config["atlas"]["coarser_level"])
+    settings.model = config["skinned_model"]
     settings.address = config["atlas"]["address"]
     bpy.ops.animspace.connect()
-    import_lod("atlas_level0")
-    atlas_mesh = bpy.data.objects[lods["atlas_level0"]["object"]].data
-    results["lods"]["atlas_level0"]["uv_layers"] = [layer.name for layer in atlas_mesh.uv_layers]
-    if atlas_mesh.uv_layers:
-        loop_uvs = np.empty(len(atlas_mesh.loops) * 2, dtype=np.float32)
-        atlas_mesh.uv_layers[0].data.foreach_get("uv", loop_uvs)
-        save("lod_atlas_level0_uvs", loop_uvs.reshape(-1, 2))
+    import_atlas_lod("atlas_level0", 0)
+    import_atlas_lod("atlas_stale_level", config["lod_level"])
     settings.address = config["address"]
     bpy.ops.animspace.connect()
 

@@ -37,6 +37,10 @@ SKINNED_MODEL = "arm-animspace"
 # Poses as (shoulder_rad, elbow_rad) of the bending arm.
 POSES = {"operator": (0.3, 1.1), "handler": (-0.2, 0.6), "bake_first": (0.1, 0.4), "bake_last": (0.25, 1.5)}
 LOD_LEVEL = 3
+# The demo's model whose levels were built under its texture atlas, and the coarser level of it
+# imported with its UV map.
+LEVELS_MODEL = "arm-smooth"
+LEVELS_MODEL_LEVEL = 2
 MAX_VERTICES = 600
 VIEW = {"location": (0.5, -20.0, 3.0), "rotation_euler": (math.radians(85), 0.0, 0.0), "lens_mm": 50.0,
         "sensor_width_mm": 36.0, "resolution": (1920, 1080), "resolution_percentage": 50, "tolerance_px": 1.5}
@@ -123,7 +127,7 @@ def blender_run(tmp_path_factory, request):
                       "mdd": str(work / "arm.mdd"),
                       "command": str(BUILD / "bin" / "animspace"), "missing_command": str(work / "no-such-animspace"),
                       "repository": str(work / "trained"), "sequence_folder": str(work / "sent")},
-            "atlas": {"address": atlas_address},
+            "atlas": {"address": atlas_address, "levels_model": LEVELS_MODEL, "coarser_level": LEVELS_MODEL_LEVEL},
             "thumbnail": THUMBNAIL, "screenshot": {"path": str(out / "workflows.png"), "resolution": [1200, 520]},
         }
         (work / "config.json").write_text(json.dumps(config))
@@ -428,20 +432,51 @@ def test_imported_levels_have_the_levels_counts_and_positions(blender_run):
     assert shown["tolerated_error"] == pytest.approx(expected.header.tolerated_error, rel=1e-4)
 
 
+def _check_uv_map(run, name, expected):
+    """The imported level ``name`` holds one UV map, "animspace atlas", whose loop at corner k of
+    triangle f has the UV ``expected`` (the Python client's own GetLod with texture coordinates)
+    sends for that corner: the same faces, corner for corner, float32 as sent."""
+    shown = run["results"]["lods"][name]
+    assert shown["level"] == expected.header.level and shown["uv_layers"] == ["animspace atlas"]
+    assert "UV map 'animspace atlas'" in shown["report"]
+    np.testing.assert_array_equal(load(run, f"lod_{name}_faces"), expected.indices.astype(np.int64))
+    uvs = load(run, f"lod_{name}_uvs")
+    assert uvs.shape == (expected.face_count, 3, 2)
+    np.testing.assert_array_equal(uvs, expected.texture_coordinates)
+
+
 def test_level_0_of_a_model_with_an_atlas_gets_its_uv_map(blender_run):
-    results, out = blender_run["results"], blender_run["out"]
-    # The demo's own arm has no atlas: no UV map.
-    assert results["lods"]["plain_level0"]["level"] == 0
-    assert results["lods"]["plain_level0"]["uv_layers"] == []
-    # The atlas'd copy: one UV map, one UV per loop, each triangle's loops its corners, equal to the
-    # per-corner UVs the Python client receives for the same level (float32, as sent).
-    shown = results["lods"]["atlas_level0"]
-    assert shown["level"] == 0 and shown["uv_layers"] == ["animspace atlas"]
+    results = blender_run["results"]
+    # The demo's own arm has no atlas: no UV map, and the report says why.
+    plain = results["lods"]["plain_level0"]
+    assert plain["level"] == 0 and plain["uv_layers"] == []
+    assert "no UV map: " in plain["report"] and "stores no texture atlas" in plain["report"]
+    # The atlas'd copy: one UV map, one UV per loop, each triangle's loops its corners.
     with animspace.Client(blender_run["atlas_address"]) as client:
-        expected = client.get_lod(SKINNED_MODEL, level=0, texture_coordinates=True)
-    np.testing.assert_array_equal(np.load(out / "lod_atlas_level0_faces.npy"), expected.indices.astype(np.int64))
-    np.testing.assert_array_equal(np.load(out / "lod_atlas_level0_uvs.npy"),
-                                  expected.texture_coordinates.reshape(-1, 2))
+        _check_uv_map(blender_run, "atlas_level0", client.get_lod(SKINNED_MODEL, level=0, texture_coordinates=True))
+
+
+def test_a_coarser_level_built_under_the_atlas_gets_its_uv_map(blender_run):
+    client = blender_run["client"]
+    levels = client.describe_model(LEVELS_MODEL).default.lod_level_count
+    assert 0 < LEVELS_MODEL_LEVEL < levels - 1
+    expected = client.get_lod(LEVELS_MODEL, level=LEVELS_MODEL_LEVEL, texture_coordinates=True)
+    # A coarser level indeed: fewer faces than the full mesh.
+    assert expected.face_count < client.get_lod(LEVELS_MODEL, level=0).face_count
+    _check_uv_map(blender_run, "smooth_level", expected)
+    np.testing.assert_allclose(load(blender_run, "lod_smooth_level_positions"), expected.positions, rtol=0, atol=2e-5)
+
+
+def test_a_level_built_before_the_atlas_is_imported_without_uvs_and_the_report_says_so(blender_run):
+    with animspace.Client(blender_run["atlas_address"]) as client:
+        with pytest.raises(animspace.FailedPrecondition) as refused:
+            client.get_lod(SKINNED_MODEL, level=LOD_LEVEL, texture_coordinates=True)
+        expected = client.get_lod(SKINNED_MODEL, level=LOD_LEVEL)
+    assert "include_texture_coordinates" in refused.value.message
+    shown = _check_lod(blender_run, "atlas_stale_level", expected)
+    assert shown["uv_layers"] == []
+    reason = refused.value.message.split("include_texture_coordinates: ", 1)[1]
+    assert f"no UV map: {reason}" in shown["report"] and "Traceback" not in shown["report"]
 
 
 def test_the_thumbnail_is_the_servers_png_in_an_image_datablock(blender_run):

@@ -12,9 +12,12 @@ which coincides with it for a symmetric model and is close otherwise.
 When the active object is an animation-space mesh built by the add-on, the level is placed where
 that mesh is and posed at its armature's pose; otherwise it is placed at the origin, at rest.
 
-Level 0 of a model that stores a texture atlas (``animspace atlas``) arrives with it: the mesh
+Every level of a model that stores a texture atlas (``animspace atlas``) arrives with it: the mesh
 gets a UV map, "animspace atlas", one UV per loop (the server sends them per face corner, and
-each triangle's three loops are its corners). Coarser levels have no atlas.
+each triangle's three loops are its corners); a coarser level's are the UVs ``build-lod`` stored
+with it (its faces keep their charts, Merry 2007 §5.1). A model without an atlas, or a level built
+before it, is imported without one and the report says why (the server's FAILED_PRECONDITION
+naming include_texture_coordinates).
 """
 import math
 from typing import Optional, Tuple
@@ -27,7 +30,7 @@ import animspace
 from . import connection, mesh_data, registry, skinning
 from .connection import SetupError
 
-# The UV map level 0 of a model with a texture atlas gets.
+# The UV map a level of a model with a texture atlas gets.
 ATLAS_UV_MAP = "animspace atlas"
 
 
@@ -69,18 +72,19 @@ def camera_distance(client: animspace.Client, model: str, camera: bpy.types.Obje
     return float(np.linalg.norm(eye - centre))
 
 
-def atlas_of(client: animspace.Client, model: str, header, pose) -> Optional[np.ndarray]:
-    """Level 0's per-corner UVs (F×3×2) of the version ``header`` names, or None when the model
-    stores no atlas (the server's FAILED_PRECONDITION naming include_texture_coordinates). Asked
-    for after the level is chosen, since a budget or a view may choose level 0 too; UVs are not
-    posed, so this second call only costs the transfer."""
+def fetch_level(client: animspace.Client, model: str, pose, selection: dict) -> Tuple[animspace.LodMesh, Optional[str]]:
+    """The level ``selection`` chooses, posed at ``pose``, with its atlas UVs (``texture_coordinates``,
+    F×3×2) where the server has them; and, when it has none, the server's reason (else None).
+    UVs are asked for first, so a level with them costs one call; a refusal comes before any
+    block is sent, and the second call chooses the same level (the selection is deterministic)."""
     try:
-        mesh = client.get_lod(model, version=header.model_version, level=0, pose=pose, texture_coordinates=True)
+        return client.get_lod(model, pose=pose, texture_coordinates=True, **selection), None
     except animspace.FailedPrecondition as error:
-        if "include_texture_coordinates" not in str(error):
+        # A model without an atlas, or a level built before it; other refusals stay errors.
+        if "include_texture_coordinates" not in error.message:
             raise
-        return None
-    return mesh.texture_coordinates
+        reason = error.message.split("include_texture_coordinates: ", 1)[-1]
+    return client.get_lod(model, pose=pose, **selection), reason
 
 
 class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
@@ -105,9 +109,9 @@ class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
             selection.update(tolerance_px=settings.tolerance_px, viewport_width_px=width_px,
                              horizontal_fov_rad=fov_rad,
                              distance=camera_distance(client, model, scene.camera, placement))
-        level = client.get_lod(model, pose=pose, **selection)
+        level, no_uvs = fetch_level(client, model, pose, selection)
         header = level.header
-        uvs = atlas_of(client, model, header, pose) if header.level == 0 else None
+        uvs = level.texture_coordinates
         mesh = mesh_data.new_mesh(f"{model} LOD {header.level}", level.positions, level.indices)
         if uvs is not None:
             layer = mesh.uv_layers.new(name=ATLAS_UV_MAP)
@@ -124,7 +128,7 @@ class ANIMSPACE_OT_import_lod(connection.ReportingOperator, bpy.types.Operator):
         obj.animspace.tolerated_error = header.tolerated_error
         view = (f", tolerated error {header.tolerated_error:.6g} at distance {selection['distance']:.6g}"
                 if "distance" in selection else "")
-        atlas = f", UV map '{ATLAS_UV_MAP}'" if uvs is not None else ""
+        atlas = f", UV map '{ATLAS_UV_MAP}'" if uvs is not None else f", no UV map: {no_uvs}"
         return (f"level {header.level} of {header.level_count}: {header.vertex_count} vertices, "
                 f"{header.face_count} faces, ε^l {header.epsilon:.6g}{view}{atlas}")
 
