@@ -39,6 +39,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench/cow_rig.h"
 #include "bench/scratch_directory.h"
 #include "bench/suites.h"
 #include "core/animspace/fit_sequence.h"
@@ -73,12 +74,8 @@ std::vector<PointMatrix> pose_all(const as::AnimationSpaceModel& model, const st
 }
 
 std::optional<Dataset> cow_dataset(const std::filesystem::path& data) {
-  const std::filesystem::path dir = data / "cow-rig";
-  auto rig = as::read_libigl_rig(dir / "cow.obj", dir / "cow.tgf", dir / "cow.DMAT");
-  if (!rig) {
-    std::printf("cow-rig: %s (skipped)\n", rig.error().message.c_str());
-    return std::nullopt;
-  }
+  auto rig = read_cow_rig(data);
+  if (!rig) return std::nullopt;
   Dataset d;
   d.name = "cow-rig";
   d.model = as::from_linear_blend(rig->model);

@@ -23,6 +23,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench/cow_rig.h"
 #include "bench/suites.h"
 #include "clients/cpp/tools/frame_selection.h"
 #include "clients/cpp/tools/quantile.h"
@@ -484,12 +485,8 @@ FrameMatrix cow_frames(const animation_space::LinearBlendModel& rig, int count, 
 
 std::vector<nlohmann::json> run_cow_extrapolation(const std::filesystem::path& data, const SuiteOptions& suite) {
   std::vector<nlohmann::json> rows;
-  const std::filesystem::path dir = data / "cow-rig";
-  auto rig = animation_space::read_libigl_rig(dir / "cow.obj", dir / "cow.tgf", dir / "cow.DMAT");
-  if (!rig) {
-    std::printf("cow-rig: %s (skipped)\n", rig.error().message.c_str());
-    return rows;
-  }
+  auto rig = read_cow_rig(data);
+  if (!rig) return rows;
   const Eigen::VectorXf rest = Eigen::Map<const Eigen::VectorXf>(
       Eigen::MatrixXf(rig->model.rest_points.cast<float>()).data(), rig->model.rest_points.size());
   const double diagonal = pmsc::bounding_box_diagonal(rest);

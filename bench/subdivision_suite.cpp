@@ -36,6 +36,7 @@
 #include <opensubdiv/far/topologyDescriptor.h>
 #include <opensubdiv/far/topologyRefinerFactory.h>
 
+#include "bench/cow_rig.h"
 #include "bench/scratch_directory.h"
 #include "bench/suites.h"
 #include "core/animspace/animspace_io.h"
@@ -115,12 +116,8 @@ double max_distance(const PointMatrix& a, const PointMatrix& b) {
 }
 
 std::optional<Dataset> cow_dataset(const std::filesystem::path& data) {
-  const std::filesystem::path dir = data / "cow-rig";
-  auto rig = as::read_libigl_rig(dir / "cow.obj", dir / "cow.tgf", dir / "cow.DMAT");
-  if (!rig) {
-    std::printf("cow-rig: %s (skipped)\n", rig.error().message.c_str());
-    return std::nullopt;
-  }
+  auto rig = read_cow_rig(data);
+  if (!rig) return std::nullopt;
   return Dataset{"cow-rig", as::from_linear_blend(rig->model), rig->model};
 }
 
