@@ -95,7 +95,8 @@ std::filesystem::path default_basis_cache_directory() {
   return std::filesystem::temp_directory_path() / "animspace-bases";
 }
 
-BasisCache::BasisCache(std::filesystem::path directory) : directory_(std::move(directory)) {}
+BasisCache::BasisCache(std::filesystem::path directory, size_t memory_limit_bytes)
+    : directory_(std::move(directory)), memory_limit_bytes_(memory_limit_bytes) {}
 
 std::filesystem::path BasisCache::file_of(const std::string& model, uint64_t version, uint64_t checksum) const {
   return directory_ / model / (std::to_string(version) + "-" + hex16(checksum) + ".basis");
@@ -155,10 +156,13 @@ void BasisCache::write_file(const Basis& basis) const {
 
 std::shared_ptr<const Basis> BasisCache::get(Client& client, const std::string& model, uint64_t version,
                                              uint64_t checksum) {
-  const auto key = std::make_tuple(model, version, checksum);
+  const Key key = std::make_tuple(model, version, checksum);
   {
     std::lock_guard lock(mutex_);
-    if (auto found = bases_.find(key); found != bases_.end()) return found->second;
+    if (auto found = bases_.find(key); found != bases_.end()) {
+      recency_.splice(recency_.begin(), recency_, found->second.position);
+      return found->second.basis;
+    }
   }
   std::shared_ptr<const Basis> basis = read_file(model, version, checksum);
   if (!basis) {
@@ -174,7 +178,40 @@ std::shared_ptr<const Basis> BasisCache::get(Client& client, const std::string& 
     basis = std::move(fetched);
   }
   std::lock_guard lock(mutex_);
-  return bases_.emplace(key, std::move(basis)).first->second;
+  return keep(key, std::move(basis));
+}
+
+namespace {
+size_t bytes_of(const Basis& basis) {
+  return sizeof(float) * static_cast<size_t>(basis.mean.size() + basis.basis.size());
+}
+}  // namespace
+
+std::shared_ptr<const Basis> BasisCache::keep(const Key& key, std::shared_ptr<const Basis> basis) {
+  if (auto found = bases_.find(key); found != bases_.end()) {  // another caller got it meanwhile
+    recency_.splice(recency_.begin(), recency_, found->second.position);
+    return found->second.basis;
+  }
+  recency_.push_front(key);
+  bytes_ += bytes_of(*basis);
+  bases_.emplace(key, Held{basis, recency_.begin()});
+  while (recency_.size() > 1 && bytes_ > memory_limit_bytes_) {
+    const auto oldest = bases_.find(recency_.back());
+    bytes_ -= bytes_of(*oldest->second.basis);
+    bases_.erase(oldest);
+    recency_.pop_back();
+  }
+  return basis;
+}
+
+size_t BasisCache::memory_count() const {
+  std::lock_guard lock(mutex_);
+  return bases_.size();
+}
+
+size_t BasisCache::memory_bytes() const {
+  std::lock_guard lock(mutex_);
+  return bytes_;
 }
 
 bool BasisCache::reconstruct(Client& client, const std::string& model, PoseResult& result) {

@@ -26,6 +26,7 @@
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -63,11 +64,14 @@ void reconstruct(const Basis& basis, const PoseResult& result, Points& out);
 std::filesystem::path default_basis_cache_directory();
 
 // The bases of the models a client takes coordinates from, in memory and on disk. Thread-safe:
-// one cache may serve every caller of a client.
+// one cache may serve every caller of a client. At most `memory_limit_bytes` of bases stay in
+// memory (as the Python client's BasisCache): the least recently used go first, the one just used
+// always stays; an evicted basis comes back from disk, else from GetBasis.
 class BasisCache {
  public:
   // An empty `directory` keeps bases in memory only.
-  explicit BasisCache(std::filesystem::path directory = default_basis_cache_directory());
+  explicit BasisCache(std::filesystem::path directory = default_basis_cache_directory(),
+                      size_t memory_limit_bytes = size_t{1} << 30);
 
   // The basis of `model` version `version` named `checksum` (see the header comment).
   std::shared_ptr<const Basis> get(Client& client, const std::string& model, uint64_t version, uint64_t checksum);
@@ -78,14 +82,28 @@ class BasisCache {
   std::filesystem::path file_of(const std::string& model, uint64_t version, uint64_t checksum) const;
   // GetBasis calls this cache made (a basis found in memory or on disk makes none).
   uint64_t fetch_count() const { return fetches_.load(); }
+  // Bases held in memory now, and their bytes (mean and basis values).
+  size_t memory_count() const;
+  size_t memory_bytes() const;
 
  private:
   std::shared_ptr<const Basis> read_file(const std::string& model, uint64_t version, uint64_t checksum) const;
   void write_file(const Basis& basis) const;
 
+  using Key = std::tuple<std::string, uint64_t, uint64_t>;
+  // Holds `basis` under `key` as the most recently used, then evicts down to the limit. Locked.
+  std::shared_ptr<const Basis> keep(const Key& key, std::shared_ptr<const Basis> basis);
+
   const std::filesystem::path directory_;
-  std::mutex mutex_;
-  std::map<std::tuple<std::string, uint64_t, uint64_t>, std::shared_ptr<const Basis>> bases_;
+  const size_t memory_limit_bytes_;
+  mutable std::mutex mutex_;
+  std::list<Key> recency_;  // most recently used first
+  struct Held {
+    std::shared_ptr<const Basis> basis;
+    std::list<Key>::iterator position;
+  };
+  std::map<Key, Held> bases_;
+  size_t bytes_ = 0;
   std::atomic<uint64_t> fetches_{0};
 };
 

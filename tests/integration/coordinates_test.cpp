@@ -286,6 +286,22 @@ TEST_F(CoordinatesTest, AVersionSwapIsFollowedNotMixed) {
   expect_within_bound(model_file("bend", 2), after.coordinates, after.points.values, expected.points.values,
                       "version 2");
 
+  // A cache with room for one basis in memory keeps the one used last: the other is evicted and
+  // fetched again (no disk to fall back on), and every reconstruction is still the right one.
+  BasisCache one(std::filesystem::path{}, 1);
+  PoseResult first = after, second = before;
+  ASSERT_TRUE(one.reconstruct(*client_, "bend", first));
+  ASSERT_TRUE(one.reconstruct(*client_, "bend", second));
+  EXPECT_EQ(one.memory_count(), 1u);
+  EXPECT_EQ(one.memory_bytes(), sizeof(float) * static_cast<size_t>(model_file("bend", 1).mean.size() +
+                                                                    model_file("bend", 1).basis.size()));
+  ASSERT_TRUE(one.reconstruct(*client_, "bend", second));
+  EXPECT_EQ(one.fetch_count(), 2u) << "the basis used last stays";
+  ASSERT_TRUE(one.reconstruct(*client_, "bend", first));
+  EXPECT_EQ(one.fetch_count(), 3u) << "the evicted one is fetched again";
+  EXPECT_EQ(first.points.values, after.points.values);
+  EXPECT_EQ(second.points.values, before.points.values);
+
   // Version 1 unloaded: an old answer can no longer be reconstructed by a cache without it.
   client_->unload_model("bend", 1);
   BasisCache empty(std::filesystem::path{});
