@@ -183,8 +183,6 @@ class LodServiceTest : public ::testing::Test {
       atlas::store_atlas(*atlas_, "rest_pose", *arm);
       testing::write_model(repo_, kAtlasModel, 1, *arm);
     }
-    // The demo's subdivided arm: an atlas made by `animspace atlas`'s code and levels that keep it.
-    ASSERT_TRUE(demo::write_demo_smooth(repo_).ok());
     daemon_ = new DaemonProcess({"--model-repository", repo_.string(), "--log-level", "info"}, work_->path());
     client_ = new Client(daemon_->address());
     ASSERT_TRUE(testing::wait_until_serving(*client_)) << "never SERVING";
@@ -932,7 +930,12 @@ TEST_F(LodServiceTest, TextureCoordinatesRefusalsNameTheField) {
 // Every level of a model whose levels were built under its atlas (the demo's arm-smooth) serves
 // its UVs: the stored level's, and each corner the atlas's UV of its vertex in its face's chart.
 TEST_F(LodServiceTest, TextureCoordinatesAtEveryLevelOfAModelBuiltWithItsAtlas) {
+  // The demo's subdivided arm: an atlas made by `animspace atlas`'s code and levels that keep it.
+  // Written and loaded here, not for the whole suite: ctest runs each test in its own process,
+  // and making it (subdivision, atlas, levels) is most of a sanitized suite set-up's time.
   const std::string name(demo::kDemoSmoothModelName);
+  ASSERT_TRUE(demo::write_demo_smooth(repo_).ok());
+  client_->load_model(name, 1);
   auto in = container::read_file(repo_ / name / "1" / "model.anim");
   ASSERT_TRUE(in.ok()) << in.error().message;
   auto smooth = as::load(*in, name);
