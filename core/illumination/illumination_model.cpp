@@ -23,30 +23,37 @@ FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<Po
   return frames;
 }
 
-double radiance_scale(const FrameMatrix& frames) {
-  if (frames.rows() == 0 || frames.cols() < 3) return 0;
-  std::vector<double> maxima(static_cast<size_t>(frames.rows()));
-  for (long f = 0; f < frames.rows(); ++f) {
-    const Eigen::Map<const Eigen::Matrix3Xf> points(frames.row(f).data(), 3, frames.cols() / 3);
-    maxima[static_cast<size_t>(f)] = points.colwise().norm().maxCoeff();
+namespace {
+
+// The median over frames of `of_frame` (each frame's points as a 3 × N map); frames for which it
+// returns NaN are left out. 0 for no frames.
+template <typename OfFrame>
+double median_over_frames(const FrameMatrix& frames, OfFrame of_frame) {
+  std::vector<double> values;
+  for (long f = 0; f < frames.rows() && frames.cols() >= 3; ++f) {
+    const double value = of_frame(Eigen::Map<const Eigen::Matrix3Xf>(frames.row(f).data(), 3, frames.cols() / 3));
+    if (!std::isnan(value)) values.push_back(value);
   }
-  auto middle = maxima.begin() + static_cast<long>(maxima.size() / 2);
-  std::nth_element(maxima.begin(), middle, maxima.end());
+  if (values.empty()) return 0;
+  auto middle = values.begin() + static_cast<long>(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
   return *middle;
 }
 
+}  // namespace
+
+double radiance_scale(const FrameMatrix& frames) {
+  return median_over_frames(frames, [](const Eigen::Map<const Eigen::Matrix3Xf>& points) {
+    return static_cast<double>(points.colwise().norm().maxCoeff());
+  });
+}
+
 double peak_to_rms_ratio(const FrameMatrix& frames) {
-  std::vector<double> ratios;
-  for (long f = 0; f < frames.rows() && frames.cols() >= 3; ++f) {
-    const Eigen::Map<const Eigen::Matrix3Xf> points(frames.row(f).data(), 3, frames.cols() / 3);
+  return median_over_frames(frames, [](const Eigen::Map<const Eigen::Matrix3Xf>& points) {
     const Eigen::ArrayXd norms = points.colwise().norm().transpose().cast<double>().array();
     const double rms = std::sqrt(norms.square().mean());
-    if (rms > 0) ratios.push_back(norms.maxCoeff() / rms);
-  }
-  if (ratios.empty()) return 0;
-  auto middle = ratios.begin() + static_cast<long>(ratios.size() / 2);
-  std::nth_element(ratios.begin(), middle, ratios.end());
-  return *middle;
+    return rms > 0 ? norms.maxCoeff() / rms : std::nan("");
+  });
 }
 
 Result<container::ModelContainer> train_illumination(const IlluminationEngine& engine,
