@@ -191,14 +191,12 @@ class StreamReactor : public Base {
         return;  // OnDone may run from here on; only holds keep this reactor alive
       }
       if (next.write == nullptr && !next.request) return;
-      if (next.write != nullptr) {
-        // More answers ready behind this one: let gRPC hold this write for them and send them
-        // together (one HTTP/2 flush and one syscall for a run of small answers, such as poses
-        // sent as coordinates); the last of the run is flushed at once.
-        grpc::WriteOptions options;
-        if (next.more) options.set_buffer_hint();
-        Base::StartWrite(next.write, options);
-      }
+      // Every write goes out at once: no buffer hint. A hinted write is not complete (no
+      // OnWriteDone) until the transport flushes it, and with one write outstanding the write
+      // that would flush it waits for that OnWriteDone; only unrelated traffic (the client's
+      // next frames) ever flushed it. A client whose window was full sent nothing more, and the
+      // stream hung under load (seen under TSan; grpc/grpc#34231 is the same for a first write).
+      if (next.write != nullptr) Base::StartWrite(next.write);
       if (next.request) request_more();
       std::lock_guard lock(mutex_);
       --starting_;
@@ -240,7 +238,6 @@ class StreamReactor : public Base {
   };
   struct Actions {
     const Response* write = nullptr;
-    bool more = false;  // another response is ready behind `write`
     bool request = false;
     bool finish = false;
     grpc::Status status;
@@ -262,7 +259,6 @@ class StreamReactor : public Base {
         if (front.response) {
           writing_ = true;
           next.write = &*front.response;
-          next.more = slots_.size() > 1 && slots_[1]->ready && slots_[1]->response.has_value();
         } else if (quiet) {
           next.finish = true;
           next.status = front.status;

@@ -6,6 +6,7 @@
 // tests are also the lifetime rule's use-after-free check.
 #include "server/stream_reactor.h"
 
+#include <chrono>
 #include <map>
 #include <memory>
 #include <optional>
@@ -124,10 +125,14 @@ class GatedService final : public grpc::CallbackGenericService {
   Probe& probe_;
 };
 
-// A blocking client of the generic method: one operation at a time on a completion queue.
+// A blocking client of the generic method: one operation at a time on a completion queue. With a
+// deadline, an answer that never comes fails the test instead of hanging it.
 class Client {
  public:
-  explicit Client(const std::shared_ptr<grpc::Channel>& channel) : stub_(channel) {
+  explicit Client(const std::shared_ptr<grpc::Channel>& channel,
+                  std::chrono::seconds deadline = std::chrono::seconds(0))
+      : stub_(channel) {
+    if (deadline.count() > 0) context_.set_deadline(std::chrono::system_clock::now() + deadline);
     call_ = stub_.PrepareCall(&context_, kMethod, &queue_);
     call_->StartCall(tag());
     EXPECT_TRUE(next());
@@ -178,14 +183,19 @@ class Client {
 
 class StreamReactorTest : public ::testing::Test {
  protected:
-  void serve(int pool_threads) {
+  // In process by default; over TCP (HTTP/2, as clients reach the daemon) with `tcp`: the
+  // in-process transport has no write buffering or flow control to get wrong.
+  void serve(int pool_threads, bool tcp = false) {
     pool_ = std::make_unique<WorkPool>(pool_threads, "test-pool");
     service_ = std::make_unique<GatedService>(*pool_, metrics_, probe_);
     grpc::ServerBuilder builder;
+    int port = 0;
+    if (tcp) builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
     builder.RegisterCallbackGenericService(service_.get());
     server_ = builder.BuildAndStart();
     ASSERT_NE(server_, nullptr);
-    channel_ = server_->InProcessChannel(grpc::ChannelArguments());
+    channel_ = tcp ? grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials())
+                   : server_->InProcessChannel(grpc::ChannelArguments());
   }
   void TearDown() override {
     // Every gate opened, so that no work is left waiting when the pool joins.
@@ -220,6 +230,27 @@ TEST_F(StreamReactorTest, ResponsesLeaveInRequestOrderWhateverOrderTheWorkFinish
   EXPECT_EQ(client.read(), std::nullopt);
   EXPECT_TRUE(client.finish().ok());
   EXPECT_TRUE(eventually([&] { return deleted(); }));
+}
+
+// A client that sends a few requests and then waits for their answers, sending nothing more,
+// still gets every answer while the next one is already produced behind the one being written.
+// (Writes that asked gRPC to hold them for the next — a buffer hint — completed only when other
+// traffic flushed them, and the write that would have flushed waited for that completion: this
+// stream hung. The first answer also carries the response headers: grpc/grpc#34231.)
+TEST_F(StreamReactorTest, AnswersReadyBehindEachOtherAllArriveWhileTheClientSendsNothingMore) {
+  serve(/*pool_threads=*/3, /*tcp=*/true);
+  Client client(channel_, std::chrono::seconds(60));
+  for (const char* text : {"a", "b", "c"}) ASSERT_TRUE(client.write(text));
+  ASSERT_TRUE(eventually([&] { return probe_.read([](Probe& p) { return p.started == 3; }); }));
+  // The second and third answers are ready before the first is written.
+  probe_.gate(1).open();
+  probe_.gate(2).open();
+  ASSERT_TRUE(eventually([&] { return probe_.read([](Probe& p) { return p.completed == 2; }); }));
+  probe_.gate(0).open();
+  for (const char* text : {"a", "b", "c"}) ASSERT_EQ(client.read(), std::optional<std::string>(text));
+  client.writes_done();
+  EXPECT_EQ(client.read(), std::nullopt);
+  EXPECT_TRUE(client.finish().ok());
 }
 
 TEST_F(StreamReactorTest, ACancelledStreamFinishesAtOnceAndItsWorkCompletesAfterOnDone) {
