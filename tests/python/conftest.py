@@ -1,10 +1,13 @@
 """Fixtures: a real animspaced on an ephemeral port, serving the bundled demo repository."""
+import atexit
 import contextlib
 import math
 import os
 import pathlib
+import shutil
 import signal
 import subprocess
+import tempfile
 import time
 
 import grpc
@@ -14,17 +17,40 @@ import pytest
 BUILD = pathlib.Path(os.environ.get("ANIMSPACE_BUILD", pathlib.Path(__file__).resolve().parents[2] / "build"))
 
 
+_demo_repository = None
+
+
+def demo_repository_copy(work):
+    """A private copy of the bundled demo repository under `work`. The demo is generated once per
+    test session (`animspace demo-repository`, the daemon's own generator) and copied for each
+    daemon, which may publish versions into it: generating it per daemon (the Cornell box's gathers
+    and training) was most of the Python suite's time under the sanitizers. Starting without
+    --model-repository, which generates it in the daemon, is tested by DaemonStartup in C++."""
+    global _demo_repository
+    if _demo_repository is None:
+        generated = pathlib.Path(tempfile.mkdtemp(prefix="animspace-demo-")) / "repository"
+        subprocess.run([str(BUILD / "bin" / "animspace"), "demo-repository", str(generated)], check=True,
+                       stdout=subprocess.DEVNULL, timeout=600)
+        atexit.register(shutil.rmtree, generated.parent, ignore_errors=True)
+        _demo_repository = generated
+    copy = work / "demo-repository"
+    shutil.copytree(_demo_repository, copy)
+    return copy
+
+
 @contextlib.contextmanager
 def run_animspaced(work, *arguments):
     """An animspaced on an ephemeral port (more `arguments` after --listen/--port-file), yielding its
-    address; SIGTERM at the end, which must exit 0. `work` holds the port file and the log."""
+    address; SIGTERM at the end, which must exit 0. `work` holds the port file and the log. Without
+    --model-repository it serves a copy of the bundled demo (demo_repository_copy)."""
+    if "--model-repository" not in arguments:
+        arguments = ("--model-repository", str(demo_repository_copy(work)), *arguments)
     port_file = work / "port"
     log = open(work / "animspaced.log", "w")
     process = subprocess.Popen(
         [str(BUILD / "bin" / "animspaced"), "--listen", "127.0.0.1:0", "--port-file", str(port_file), *arguments],
         stdout=log, stderr=subprocess.STDOUT)
-    # Generous: without --model-repository the daemon first generates the demo repository, which
-    # takes seconds (the Cornell box's gathers and training) and a sanitized build several times that.
+    # Generous: a sanitized build loads the demo's models several times slower.
     deadline = time.time() + 180
     while not (port_file.exists() and port_file.read_text().strip()):
         if process.poll() is not None or time.time() > deadline:
