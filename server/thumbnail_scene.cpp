@@ -154,7 +154,7 @@ grpc::Status illumination_scene(ServiceEnvironment& env, const LoadedModel& mode
   PointMatrix radiance;
   if (grpc::Status s = evaluate_for_picture(env, model, input, response, radiance); !s.ok()) return s;
   if (heat) {
-    if (view.heat_from_full_gather()) served.engine->indirect(input.lights, served.gather, all, full);
+    if (view.heat_from_full_gather()) served.full(input.lights, full);
     return draw_heat(model, request, Eigen::Map<const PointMatrix>(full.data(), radiance.rows(), 3), radiance, scene,
                      response);
   }

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <memory>
 #include <string>
 #include <utility>
 
@@ -20,6 +21,11 @@ constexpr const char* kQuantityKey = "illumination.quantity";
 constexpr const char* kSamplingKey = "illumination.sampling";
 constexpr const char* kLightRadiusKey = "illumination.light_radius";
 constexpr const char* kShadowRaysKey = "illumination.shadow_rays";
+// Issue #38 item 1; absent in older files, which then load unfiltered with the keys gathered as
+// the frames were.
+constexpr const char* kFilterNeighboursKey = "illumination.filter_neighbours";
+constexpr const char* kFilterNormalKey = "illumination.filter_min_normal_cosine";
+constexpr const char* kKeySamplesKey = "illumination.key_samples";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
@@ -58,6 +64,13 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
   if (setup.gather.light_radius > 0) {
     out.metadata()[kLightRadiusKey] = format_number(setup.gather.light_radius);
     out.metadata()[kShadowRaysKey] = std::to_string(setup.gather.shadow_rays);
+  }
+  if (setup.filter.enabled()) {
+    out.metadata()[kFilterNeighboursKey] = std::to_string(setup.filter.neighbours);
+    out.metadata()[kFilterNormalKey] = format_number(setup.filter.min_normal_cosine);
+  }
+  if (setup.key_samples > 0 && setup.key_samples != setup.gather.samples) {
+    out.metadata()[kKeySamplesKey] = std::to_string(setup.key_samples);
   }
 }
 
@@ -133,6 +146,32 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
   }
   Status gather = check_gather_options(setup.gather);
   if (!gather.ok()) return named(gather.error(), source);
+  if (in.metadata().count(kFilterNeighboursKey) != 0) {
+    auto neighbours = in.metadata_int(kFilterNeighboursKey);
+    if (!neighbours) return named(neighbours.error(), source);
+    setup.filter.neighbours = *neighbours;
+    const std::string cosine = in.metadata_value(kFilterNormalKey, "0.9");
+    char* end = nullptr;
+    setup.filter.min_normal_cosine = std::strtod(cosine.c_str(), &end);
+    if (cosine.empty() || end != cosine.c_str() + cosine.size()) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata " + kFilterNormalKey + " should be a number, got '" + cosine + "'");
+    }
+    if (setup.filter.neighbours < 0 || !(setup.filter.min_normal_cosine > -1 && setup.filter.min_normal_cosine <= 1)) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata " + kFilterNeighboursKey + " should be ≥ 0 and " + kFilterNormalKey +
+                            " in (−1, 1], got " + std::to_string(setup.filter.neighbours) + " and " + cosine);
+    }
+  }
+  if (in.metadata().count(kKeySamplesKey) != 0) {
+    auto key_samples = in.metadata_int(kKeySamplesKey);
+    if (!key_samples) return named(key_samples.error(), source);
+    if (*key_samples < 1) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kKeySamplesKey + " should be ≥ 1, got " +
+                                                         std::to_string(*key_samples));
+    }
+    setup.key_samples = *key_samples;
+  }
   setup.quantity = in.metadata_value(kQuantityKey, "indirect");
   if (setup.quantity != "indirect") {
     return make_error(ErrorCode::kInvalidArgument,
@@ -150,6 +189,11 @@ Result<ServedIllumination> load_served_illumination(const container::ModelContai
   if (!setup) return setup.error();
   ServedIllumination served;
   served.gather = setup->gather;
+  served.key_gather = setup->gather;
+  if (setup->key_samples > 0) served.key_gather.samples = setup->key_samples;
+  auto filter = surface_filter_precompute(setup->surface, setup->filter, "metadata illumination.filter");
+  if (!filter) return named(filter.error(), source);
+  served.filter = std::make_shared<const SurfaceFilter>(std::move(*filter));
   served.training_lights = std::move(setup->training_lights);
   served.view = setup->view;
   const std::string scale = in.metadata_value("illumination.radiance_scale", "0");
@@ -163,6 +207,21 @@ Result<ServedIllumination> load_served_illumination(const container::ModelContai
   if (!engine) return named(engine.error(), source);
   served.engine = std::move(*engine);
   return served;
+}
+
+void ServedIllumination::full(const std::vector<PointLight>& lights, Eigen::VectorXf& out) const {
+  if (filter == nullptr || !filter->enabled()) {
+    engine->indirect(lights, gather, engine->all_points(), out);
+    return;
+  }
+  Eigen::VectorXf gathered;
+  engine->indirect(lights, gather, engine->all_points(), gathered);
+  surface_filter_apply(*filter, gathered, out);
+}
+
+void ServedIllumination::keys(const std::vector<PointLight>& lights, const std::vector<int>& points,
+                              Eigen::VectorXf& out) const {
+  engine->indirect(lights, key_gather, points, out);
 }
 
 }  // namespace animspace::illumination

@@ -14,6 +14,7 @@
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/illumination/gather.h"
+#include "core/illumination/surface_filter.h"
 #include "core/illumination/surface.h"
 
 namespace animspace::illumination {
@@ -47,10 +48,16 @@ struct IlluminationSetup {
   // Which values the model's points are: "indirect" (one-bounce L_i, the papers' quantity).
   std::string quantity = "indirect";
   std::optional<SceneView> view;
+  // Issue #38 item 1: the filter the training frames went through (the full calculation applies
+  // it too), and the rays per key point when the server gathers the keys itself (0: gather's).
+  SurfaceFilterOptions filter;
+  int key_samples = 0;
 };
 
 // Writes the setup's sections and metadata (illumination.samples, illumination.seed,
-// illumination.quantity) into `out`, replacing mesh.rest_points and mesh.faces.
+// illumination.quantity; illumination.filter_neighbours, .filter_min_normal_cosine and
+// .key_samples only when set, so files without them read as before) into `out`, replacing
+// mesh.rest_points and mesh.faces.
 void attach_illumination(container::ModelContainer& out, const IlluminationSetup& setup);
 
 bool has_illumination(const container::ModelContainer& in);
@@ -61,6 +68,10 @@ bool has_illumination(const container::ModelContainer& in);
 struct ServedIllumination {
   std::shared_ptr<const IlluminationEngine> engine;
   GatherOptions gather;
+  // Issue #38 item 1: the key points' gather (gather with key_samples rays) and the surface
+  // filter precomputed once for every full frame (off for files without it).
+  GatherOptions key_gather;
+  std::shared_ptr<const SurfaceFilter> filter;
   std::vector<PointLight> training_lights;
   std::optional<SceneView> view;
   double radiance_scale = 0;  // metadata illumination.radiance_scale; 0 when absent
@@ -68,6 +79,11 @@ struct ServedIllumination {
   Eigen::Vector3d default_intensity() const {
     return training_lights.empty() ? Eigen::Vector3d::Ones() : training_lights.front().intensity;
   }
+  // The full calculation the subspace learned: the gather at every point, then the filter.
+  void full(const std::vector<PointLight>& lights, Eigen::VectorXf& out) const;
+  // The key points' values: the gather at `points` only, with key_gather's rays (a filter needs
+  // the neighbours, which a key point's gather does not have; more rays do its work there).
+  void keys(const std::vector<PointLight>& lights, const std::vector<int>& points, Eigen::VectorXf& out) const;
 };
 
 // load_illumination, then the engine built. Errors: load_illumination's; the engine's, naming
@@ -75,7 +91,8 @@ struct ServedIllumination {
 Result<ServedIllumination> load_served_illumination(const container::ModelContainer& in, const std::string& source);
 
 // Errors: kInvalidArgument naming `source` and the section or key (shapes against
-// mesh.rest_points, check_surface, samples ≥ 1, an unknown quantity).
+// mesh.rest_points, check_surface, samples ≥ 1, key_samples ≥ 1, the filter's options, an unknown
+// quantity).
 Result<IlluminationSetup> load_illumination(const container::ModelContainer& in, const std::string& source);
 
 }  // namespace animspace::illumination

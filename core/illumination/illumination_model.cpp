@@ -11,12 +11,16 @@
 namespace animspace::illumination {
 
 FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<PointLight>& lights,
-                          const GatherOptions& gather, const ProgressCallback& progress) {
+                          const GatherOptions& gather, const ProgressCallback& progress, const SurfaceFilter* filter) {
   const std::vector<int> points = engine.all_points();
   FrameMatrix frames(static_cast<long>(lights.size()), static_cast<long>(points.size()) * 3);
-  Eigen::VectorXf frame;
+  Eigen::VectorXf frame, filtered;
   for (size_t f = 0; f < lights.size(); ++f) {
     engine.indirect({lights[f]}, gather, points, frame);
+    if (filter != nullptr && filter->enabled()) {
+      surface_filter_apply(*filter, frame, filtered);
+      frame.swap(filtered);
+    }
     frames.row(static_cast<long>(f)) = frame.transpose();
     report_progress(progress, "gather", static_cast<int64_t>(f + 1), static_cast<int64_t>(lights.size()));
   }
@@ -62,6 +66,12 @@ Result<container::ModelContainer> train_illumination(const IlluminationEngine& e
                                                      IlluminationTrainingReport* report) {
   ANIMSPACE_RETURN_IF_ERROR(check_lights(options.lights, "lights", static_cast<int>(options.lights.size())));
   ANIMSPACE_RETURN_IF_ERROR(check_gather_options(options.gather));
+  if (options.key_samples < 0) {
+    return make_error(ErrorCode::kInvalidArgument, "key_samples must be ≥ 0 (0: gather.samples), got " +
+                                                       std::to_string(options.key_samples));
+  }
+  auto filter = surface_filter_precompute(engine.surface(), options.filter, "filter");
+  if (!filter) return filter.error();
   if (!(options.tolerance_fraction > 0) || !(options.error_bound_fraction > 0)) {
     return make_error(ErrorCode::kInvalidArgument,
                       "tolerance_fraction and error_bound_fraction must be > 0, got " +
@@ -72,7 +82,7 @@ Result<container::ModelContainer> train_illumination(const IlluminationEngine& e
   IlluminationTrainingReport& r = report != nullptr ? *report : local;
 
   const auto gather_start = std::chrono::steady_clock::now();
-  const FrameMatrix frames = gather_frames(engine, options.lights, options.gather, options.pmsc.progress);
+  const FrameMatrix frames = gather_frames(engine, options.lights, options.gather, options.pmsc.progress, &*filter);
   r.gather_seconds = seconds_since(gather_start);
   r.radiance_scale = radiance_scale(frames);
   if (!(r.radiance_scale > 0)) {
@@ -112,6 +122,8 @@ Result<container::ModelContainer> train_illumination(const IlluminationEngine& e
   setup.gather = options.gather;
   setup.training_lights = options.lights;
   setup.view = options.view;
+  setup.filter = options.filter;
+  setup.key_samples = options.key_samples;
   attach_illumination(out, setup);
   return out;
 }

@@ -19,9 +19,10 @@
 namespace animspace::illumination {
 
 // The indirect radiance of every point for each light (one light per frame): F × N·3, point-major
-// RGB, as the PMSC trainer takes them.
+// RGB, as the PMSC trainer takes them; each frame through `filter` when one is given and enabled.
 FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<PointLight>& lights,
-                          const GatherOptions& gather, const ProgressCallback& progress = {});
+                          const GatherOptions& gather, const ProgressCallback& progress = {},
+                          const SurfaceFilter* filter = nullptr);
 
 // Radiance scale of a set of frames: the median over frames of the largest point radiance ‖L‖
 // (Euclidean over RGB, as the soft cache measures a point's error). The soft cache's tolerance
@@ -38,6 +39,15 @@ double peak_to_rms_ratio(const FrameMatrix& frames);
 struct IlluminationTrainingOptions {
   std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 144)
   GatherOptions gather;
+  // Issue #38 item 1: the subspace should learn the illumination, not the gather's noise. Noise
+  // at ~100k points is cheap to remove with a filter over the surface (each training frame, and
+  // the server's full calculation on a miss, go through it); noise at the ~200 key points is
+  // cheap to remove with rays (a key point has no gathered neighbours to filter with, and 200
+  // points × 4 the rays cost far less than the full gather). Defaults: docs/BENCHMARKS.md
+  // "Issue #38 item 1". Stored in the model (illumination.filter_*, illumination.key_samples).
+  SurfaceFilterOptions filter;
+  // Rays per key point when the server gathers the keys from a request's light; 0: gather.samples.
+  int key_samples = 0;
   std::optional<SceneView> view = cornell_view();  // stored for thumbnails
   // The soft cache must not call HIT a frame with a point error above this fraction of the
   // radiance scale (pmsc::TrainingOptions::error_tolerance, in radiance units).

@@ -31,10 +31,10 @@ class IlluminationEngine final : public Engine {
       : served_(std::move(served)) {}
   Input input() const override { return Input::kLightSet; }
   void frame(const EngineInput& input, Eigen::VectorXf& out) const override {
-    served_->engine->indirect(input.lights, served_->gather, served_->engine->all_points(), out);
+    served_->full(input.lights, out);  // the gather and the surface filter (issue #38 item 1)
   }
   void points(const EngineInput& input, const std::vector<int>& points, Eigen::VectorXf& out) const override {
-    served_->engine->indirect(input.lights, served_->gather, points, out);
+    served_->keys(input.lights, points, out);  // key_samples rays: no neighbours to filter with
   }
 
  private:

@@ -81,6 +81,71 @@ TEST(IlluminationIoTest, GatherChoicesRoundTripAndOlderFilesLoadAsTheOriginalGat
   EXPECT_NE(refused.error().message.find("illumination.sampling"), std::string::npos) << refused.error().message;
 }
 
+// Issue #38 item 1: the surface filter and the key points' rays round-trip; a file without them
+// (every file written before) loads unfiltered with the keys gathered as the frames were, and the
+// served engine's full calculation and key gather are the gather (+ filter) computed directly.
+TEST(IlluminationIoTest, FilterAndKeySamplesRoundTripAndOlderFilesLoadUnfiltered) {
+  IlluminationSetup setup = small_setup();
+  container::ModelContainer original;
+  attach_illumination(original, setup);
+  EXPECT_EQ(original.metadata().count("illumination.filter_neighbours"), 0u);
+  EXPECT_EQ(original.metadata().count("illumination.key_samples"), 0u);
+  auto older = load_served_illumination(original, "mem");
+  ASSERT_TRUE(older.ok()) << older.error().message;
+  ASSERT_TRUE(older->filter != nullptr);
+  EXPECT_FALSE(older->filter->enabled());
+  EXPECT_EQ(older->key_gather.samples, 8);
+  const std::vector<PointLight> light{{{0.25, 0.4, 0.3}, {1, 1, 1}}};
+  Eigen::VectorXf served, direct;
+  older->full(light, served);
+  older->engine->indirect(light, setup.gather, older->engine->all_points(), direct);
+  EXPECT_EQ(served, direct) << "an older file's full calculation is the gather as it was";
+
+  setup.filter = {24, 0.85};
+  setup.key_samples = 32;
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  auto parsed = container::parse(container::serialize(out), "mem");
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  auto loaded = load_illumination(*parsed, "mem");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->filter.neighbours, 24);
+  EXPECT_EQ(loaded->filter.min_normal_cosine, 0.85);
+  EXPECT_EQ(loaded->key_samples, 32);
+  auto filtered = load_served_illumination(*parsed, "mem");
+  ASSERT_TRUE(filtered.ok()) << filtered.error().message;
+  ASSERT_TRUE(filtered->filter != nullptr && filtered->filter->enabled());
+  EXPECT_EQ(filtered->key_gather.samples, 32);
+  EXPECT_EQ(filtered->gather.samples, 8);
+  auto filter = surface_filter_precompute(setup.surface, {24, 0.85});
+  ASSERT_TRUE(filter.ok());
+  Eigen::VectorXf expected;
+  surface_filter_apply(*filter, direct, expected);
+  filtered->full(light, served);
+  EXPECT_EQ(served, expected) << "the served full calculation filters the same gather";
+  EXPECT_NE(served, direct);
+  const std::vector<int> keys{3, 500, 1200};
+  Eigen::VectorXf key_values, key_direct;
+  filtered->keys(light, keys, key_values);
+  GatherOptions key_gather = setup.gather;
+  key_gather.samples = 32;
+  filtered->engine->indirect(light, key_gather, keys, key_direct);
+  EXPECT_EQ(key_values, key_direct) << "the keys are gathered with key_samples rays";
+
+  for (const auto& [key, value] : std::vector<std::pair<std::string, std::string>>{
+           {"illumination.filter_neighbours", "-2"},
+           {"illumination.filter_min_normal_cosine", "1.5"},
+           {"illumination.filter_min_normal_cosine", "much"},
+           {"illumination.key_samples", "0"}}) {
+    container::ModelContainer bad = *parsed;
+    bad.metadata()[key] = value;
+    auto refused = load_illumination(bad, "m.anim");
+    ASSERT_FALSE(refused.ok()) << key << " = " << value;
+    EXPECT_NE(refused.error().message.find(key), std::string::npos) << refused.error().message;
+    EXPECT_NE(refused.error().message.find("m.anim"), std::string::npos) << refused.error().message;
+  }
+}
+
 TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
   const IlluminationSetup setup = small_setup();
   container::ModelContainer out;
@@ -163,6 +228,50 @@ TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWith
     const Eigen::Map<const Eigen::Matrix3Xf> error(difference.data(), 3, model.point_count);
     EXPECT_LE(error.colwise().norm().maxCoeff(), report.pmsc.max_training_error * 1.001 + 1e-6) << "light " << f;
   }
+}
+
+// Issue #38 item 1: a model trained on filtered frames stores its filter and key rays, and its
+// served full calculation is the filtered gather; bad values are refused naming the field.
+TEST(IlluminationModelTest, TrainsOnFilteredFramesAndServesTheSameFilter) {
+  auto engine = IlluminationEngine::create(cornell_box({1500}));
+  ASSERT_TRUE(engine.ok()) << engine.error().message;
+  IlluminationTrainingOptions options = small_training();
+  options.filter = {16, 0.9};
+  options.key_samples = 32;
+  IlluminationTrainingReport report;
+  auto model_file = train_illumination(**engine, options, "test", &report);
+  ASSERT_TRUE(model_file.ok()) << model_file.error().message;
+  EXPECT_EQ(model_file->metadata_value("illumination.filter_neighbours"), "16");
+  EXPECT_EQ(model_file->metadata_value("illumination.key_samples"), "32");
+  auto servable = model::load_servable(*model_file, "trained");
+  ASSERT_TRUE(servable.ok()) << servable.error().message;
+  const pmsc::PmscModel& model = *servable->pmsc;
+
+  // Training frame 0, gathered and filtered directly: the served full calculation is that frame,
+  // and the model reproduces it from its own key values within the reported training error.
+  auto filter = surface_filter_precompute((*engine)->surface(), options.filter);
+  ASSERT_TRUE(filter.ok());
+  Eigen::VectorXf gathered, frame, served;
+  (*engine)->indirect({options.lights[0]}, options.gather, (*engine)->all_points(), gathered);
+  surface_filter_apply(*filter, gathered, frame);
+  servable->illumination->full({options.lights[0]}, served);
+  EXPECT_EQ(served, frame);
+  pmsc::CachedPose cached;
+  pmsc::evaluate_cached(model, pmsc::gather_key_values(model, frame), nullptr, cached);
+  const Eigen::VectorXf difference = cached.points - frame;
+  const Eigen::Map<const Eigen::Matrix3Xf> error(difference.data(), 3, model.point_count);
+  EXPECT_LE(error.colwise().norm().maxCoeff(), report.pmsc.max_training_error * 1.001 + 1e-6);
+
+  IlluminationTrainingOptions bad = small_training();
+  bad.filter.neighbours = -4;
+  auto refused = train_illumination(**engine, bad, "test", nullptr);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("filter.neighbours"), std::string::npos) << refused.error().message;
+  bad = small_training();
+  bad.key_samples = -1;
+  refused = train_illumination(**engine, bad, "test", nullptr);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("key_samples"), std::string::npos) << refused.error().message;
 }
 
 TEST(IlluminationModelTest, ADimAndABrightLightGetTheSameVerdict) {

@@ -1,0 +1,160 @@
+#include "core/illumination/surface_filter.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <utility>
+
+#include <Eigen/Geometry>
+
+#include "core/common/format.h"
+#include "core/common/parallel.h"
+
+namespace animspace::illumination {
+
+namespace {
+
+Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
+
+// A cell's key: 21 bits per axis (cells are counted from the surface's bounding box, so a key is
+// only ambiguous past 2 million cells along one axis, which a radius from the point density
+// cannot reach for fewer than ~10¹² points).
+uint64_t cell_key(int64_t x, int64_t y, int64_t z) {
+  return (static_cast<uint64_t>(x) << 42) | (static_cast<uint64_t>(y) << 21) | static_cast<uint64_t>(z);
+}
+
+}  // namespace
+
+Status check_surface_filter_options(const SurfaceFilterOptions& options, const std::string& name) {
+  if (options.neighbours < 0) {
+    return invalid(name + ".neighbours must be ≥ 0 (0: no filter), got " + std::to_string(options.neighbours));
+  }
+  if (!(options.min_normal_cosine > -1 && options.min_normal_cosine <= 1)) {
+    return invalid(name + ".min_normal_cosine must be in (−1, 1], got " + format_number(options.min_normal_cosine));
+  }
+  return Status::Ok();
+}
+
+Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, const SurfaceFilterOptions& options,
+                                                const std::string& name) {
+  ANIMSPACE_RETURN_IF_ERROR(check_surface_filter_options(options, name));
+  SurfaceFilter filter;
+  filter.options = options;
+  if (!options.enabled()) return filter;
+  const PointMatrix& V = surface.vertices;
+  const long n = V.rows();
+  if (n == 0) return filter;
+
+  // The radius holding k points at the mean density N / A (double: the area is a sum of many
+  // small triangles).
+  double area = 0;
+  for (long t = 0; t < surface.faces.rows(); ++t) {
+    const Eigen::Vector3d a = V.row(surface.faces(t, 0)).transpose().cast<double>();
+    const Eigen::Vector3d b = V.row(surface.faces(t, 1)).transpose().cast<double>();
+    const Eigen::Vector3d c = V.row(surface.faces(t, 2)).transpose().cast<double>();
+    area += 0.5 * (b - a).cross(c - a).norm();
+  }
+  if (!(area > 0) || !std::isfinite(area)) {
+    return invalid(name + ": the surface has no area (" + format_number(area) + " m²): no point density to size the "
+                          "filter's radius from");
+  }
+  const double r = std::sqrt(options.neighbours * area / (M_PI * static_cast<double>(n)));
+  filter.radius = r;
+  filter.albedo = surface.albedo;
+
+  // Points sorted by cell: each query looks up the 27 cells around its own.
+  const Eigen::Vector3d lo = V.colwise().minCoeff().transpose().cast<double>();
+  const auto cell_of = [&](long i) {
+    const Eigen::Vector3d p = (V.row(i).transpose().cast<double>() - lo) / r;
+    return Eigen::Matrix<int64_t, 3, 1>(static_cast<int64_t>(std::floor(p.x())), static_cast<int64_t>(std::floor(p.y())),
+                                        static_cast<int64_t>(std::floor(p.z())));
+  };
+  std::vector<std::pair<uint64_t, int>> sorted(static_cast<size_t>(n));
+  for (long i = 0; i < n; ++i) {
+    const auto c = cell_of(i);
+    sorted[static_cast<size_t>(i)] = {cell_key(c.x(), c.y(), c.z()), static_cast<int>(i)};
+  }
+  std::sort(sorted.begin(), sorted.end());
+
+  const double two_sigma2 = 2 * (r / 2) * (r / 2);
+  const double edge = std::exp(-r * r / two_sigma2);
+  std::vector<std::vector<std::pair<int, float>>> lists(static_cast<size_t>(n));
+  parallel_for_chunks(n, 256, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) {
+      const Eigen::Vector3d p = V.row(i).transpose().cast<double>();
+      const Eigen::Vector3d normal = surface.normals.row(i).transpose().cast<double>();
+      const auto c = cell_of(static_cast<long>(i));
+      auto& list = lists[static_cast<size_t>(i)];
+      for (int64_t dx = -1; dx <= 1; ++dx) {
+        for (int64_t dy = -1; dy <= 1; ++dy) {
+          for (int64_t dz = -1; dz <= 1; ++dz) {
+            if (c.x() + dx < 0 || c.y() + dy < 0 || c.z() + dz < 0) continue;
+            const uint64_t key = cell_key(c.x() + dx, c.y() + dy, c.z() + dz);
+            auto it = std::lower_bound(sorted.begin(), sorted.end(), std::make_pair(key, 0));
+            for (; it != sorted.end() && it->first == key; ++it) {
+              const int j = it->second;
+              const double d2 = (V.row(j).transpose().cast<double>() - p).squaredNorm();
+              if (d2 > r * r) continue;
+              if (normal.dot(surface.normals.row(j).transpose().cast<double>()) < options.min_normal_cosine) continue;
+              const double w = std::exp(-d2 / two_sigma2) - edge;
+              if (w > 0) list.emplace_back(j, static_cast<float>(w));
+            }
+          }
+        }
+      }
+      // The point itself always counts (weight 1 − e^{−2} at d = 0, also when its normal test
+      // would fail by rounding), so every list is non-empty.
+      if (std::none_of(list.begin(), list.end(), [&](const auto& e) { return e.first == i; })) {
+        list.emplace_back(static_cast<int>(i), static_cast<float>(1 - edge));
+      }
+    }
+  });
+  filter.offsets.resize(static_cast<size_t>(n) + 1);
+  filter.offsets[0] = 0;
+  for (long i = 0; i < n; ++i) {
+    filter.offsets[static_cast<size_t>(i) + 1] = filter.offsets[static_cast<size_t>(i)] + static_cast<int64_t>(lists[static_cast<size_t>(i)].size());
+  }
+  filter.indices.reserve(static_cast<size_t>(filter.offsets.back()));
+  filter.weights.reserve(static_cast<size_t>(filter.offsets.back()));
+  for (auto& list : lists) {
+    for (const auto& [j, w] : list) {
+      filter.indices.push_back(j);
+      filter.weights.push_back(w);
+    }
+    std::vector<std::pair<int, float>>().swap(list);
+  }
+  return filter;
+}
+
+void surface_filter_apply(const SurfaceFilter& filter, const Eigen::VectorXf& frame, Eigen::VectorXf& out) {
+  if (!filter.enabled()) {
+    out = frame;
+    return;
+  }
+  const long n = static_cast<long>(filter.offsets.size()) - 1;
+  assert(frame.size() == 3 * n && filter.albedo.rows() == n);
+  assert(&out != &frame);
+  out.resize(3 * n);
+  parallel_for_chunks(n, 1024, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) {
+      Eigen::Array3d sum = Eigen::Array3d::Zero(), weight = Eigen::Array3d::Zero();
+      for (int64_t e = filter.offsets[static_cast<size_t>(i)]; e < filter.offsets[static_cast<size_t>(i) + 1]; ++e) {
+        const int j = filter.indices[static_cast<size_t>(e)];
+        const double w = filter.weights[static_cast<size_t>(e)];
+        for (int c = 0; c < 3; ++c) {
+          const double rho = filter.albedo(j, c);
+          if (rho > 0) {
+            sum[c] += w * frame[3 * j + c] / rho;  // the neighbour's irradiance E_j
+            weight[c] += w;
+          }
+        }
+      }
+      for (int c = 0; c < 3; ++c) {
+        const double rho = filter.albedo(i, c);
+        out[3 * i + c] = rho > 0 && weight[c] > 0 ? static_cast<float>(rho * sum[c] / weight[c]) : 0.0f;
+      }
+    }
+  });
+}
+
+}  // namespace animspace::illumination
