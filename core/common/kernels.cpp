@@ -3,9 +3,12 @@
 #include <atomic>
 #include <cassert>
 #include <cctype>
+#include <cstdint>
 
 #include <Eigen/Core>
 #include <cblas.h>
+
+#include "core/common/parallel.h"
 
 namespace animspace {
 namespace {
@@ -71,9 +74,10 @@ bool parse_kernel(const std::string& text, Kernel& out) {
   return true;
 }
 
-void gemm(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
-          float* c, long ldc) {
-  if (rows == 0 || columns == 0) return;
+namespace {
+
+void gemm_serial(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
+                 float* c, long ldc) {
   if (active_kernel() == Kernel::kPortable) return portable_gemm(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
   if (columns < kBlasGemmMinColumns) {
     for (long j = 0; j < columns; ++j) {
@@ -86,9 +90,8 @@ void gemm(long rows, long inner, long columns, const float* a, long lda, const f
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
 }
 
-void gemm(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb, double beta,
-          double* c, long ldc) {
-  if (rows == 0 || columns == 0) return;
+void gemm_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
+                 double beta, double* c, long ldc) {
   if (active_kernel() == Kernel::kPortable) return portable_gemm(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
   if (columns < kBlasGemmMinColumns) {
     for (long j = 0; j < columns; ++j) {
@@ -99,6 +102,37 @@ void gemm(long rows, long inner, long columns, const double* a, long lda, const 
   }
   cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
+}
+
+// Rows of C split across the cores (issue #38 item 3): every row of C = A·B + beta·C depends on its
+// own row of A only, so each thread runs the serial product on its own block of rows. A row's
+// value may differ from the one-thread product by float rounding (the kernels treat the rows of
+// a block's edges differently), never by more (kernels_test.cpp).
+template <typename T>
+void gemm_rows_split(long rows, long inner, long columns, const T* a, long lda, const T* b, long ldb, T beta, T* c,
+                     long ldc) {
+  const long units = (rows + kParallelProductRowGrain - 1) / kParallelProductRowGrain;
+  const long per_unit = std::max(1L, kParallelProductRowGrain * inner * columns);
+  const long min_units = (kParallelProductMinMultiplies + per_unit - 1) / per_unit;
+  parallel_for_chunks(units, std::max(1L, min_units), [&](int64_t first, int64_t last) {
+    const long r0 = static_cast<long>(first) * kParallelProductRowGrain;
+    const long r1 = std::min(rows, static_cast<long>(last) * kParallelProductRowGrain);
+    gemm_serial(r1 - r0, inner, columns, a + r0, lda, b, ldb, beta, c + r0, ldc);
+  });
+}
+
+}  // namespace
+
+void gemm(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
+          float* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
+  gemm_rows_split(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
+}
+
+void gemm(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb, double beta,
+          double* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
+  gemm_rows_split(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
 }
 
 }  // namespace animspace

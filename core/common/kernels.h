@@ -36,6 +36,17 @@ bool parse_kernel(const std::string& text, Kernel& out);
 // Fewer columns than this: the BLAS kernel multiplies one column at a time (gemv).
 inline constexpr long kBlasGemmMinColumns = 4;
 
+// Products of at least this many multiplies per thread split the rows of C across the cores
+// (parallel.h: a thread per kParallelProductMinMultiplies, at most one per core; issue #38 item 3).
+// Measured on the 2-core development VM, one float sgemv of rows × M, best of 21 with the second
+// core free: 1M multiplies 0.71× (starting a thread, ~20 µs, is not repaid), 1.8M 0.82×, 3M
+// 1.13–1.15×, 6M 1.41×, 10M 1.65×, 30M (the papers' 300k × 100 illumination basis, memory-bound)
+// 1.28×. So the split starts at 2 × 2M multiplies. On a shared machine whose other core is busy,
+// the median gain is nil and a pose may wait a scheduler slice for the second thread.
+inline constexpr long kParallelProductMinMultiplies = 2L << 20;
+// Rows per unit of that split: a cache line of doubles, so two threads never write one line.
+inline constexpr long kParallelProductRowGrain = 64;
+
 // C = A·B + beta·C, column-major, A rows × inner (leading dimension lda), B inner × columns
 // (ldb), C rows × columns (ldc). beta is 0 or 1.
 void gemm(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,

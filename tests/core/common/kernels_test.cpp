@@ -1,9 +1,12 @@
 #include "core/common/kernels.h"
 
+#include <cmath>
 #include <random>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "core/common/parallel.h"
 
 namespace animspace {
 namespace {
@@ -11,7 +14,10 @@ namespace {
 // Restores the process's kernel after a test that switches it.
 class KernelTest : public ::testing::Test {
  protected:
-  void TearDown() override { use_kernel(saved_); }
+  void TearDown() override {
+    use_kernel(saved_);
+    set_thread_limit(0);
+  }
   Kernel saved_ = active_kernel();
 };
 
@@ -69,6 +75,69 @@ TEST_F(KernelTest, BothKernelsComputeTheProductOfTheDefinition) {
   for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
     check_products<float>(kernel, 2e-7);
     check_products<double>(kernel, 4e-16);
+  }
+}
+
+// Issue #38 item 3: a product large enough to split its rows across threads (the size of a
+// 20000-point illumination model's reconstruction, one pose and a batch) gives, on one thread and
+// on two, every value within the float rounding bound of the exact product: n = inner + 1 terms
+// (beta·c included), each rounded once and summed, are within γ_n = n·u/(1 − n·u) of the exact
+// sum relative to Σ|terms| (Higham, Accuracy and Stability, §3.1), u = 2⁻²⁴. The two runs may
+// differ from each other only within that bound too (a kernel rounds the rows at a block's edge
+// its own way), and rows the product does not own are never written.
+TEST_F(KernelTest, ARowSplitProductIsWithinFloatRoundingOfTheExactProduct) {
+  const long inner = 101, lda = 60011, rows = 60001, ldb = inner + 1, ldc = rows + 7;
+  ASSERT_GE(rows * inner, 2 * kParallelProductMinMultiplies) << "the test must be large enough to split";
+  std::mt19937 random(11);
+  std::uniform_real_distribution<double> value(-1, 1);
+  for (long columns : {1L, kBlasGemmMinColumns}) {
+    std::vector<float> a(static_cast<size_t>(lda * inner)), b(static_cast<size_t>(ldb * columns)),
+        c(static_cast<size_t>(ldc * columns));
+    for (float& x : a) x = static_cast<float>(value(random));
+    for (float& x : b) x = static_cast<float>(value(random));
+    for (float& x : c) x = static_cast<float>(value(random));
+    const float beta = 1.0f;
+    std::vector<double> exact(c.size()), magnitude(c.size());
+    for (long j = 0; j < columns; ++j) {
+      for (long i = 0; i < rows; ++i) {
+        const auto at = static_cast<size_t>(i + j * ldc);
+        double sum = beta * static_cast<double>(c[at]), abs_sum = std::abs(sum);
+        for (long k = 0; k < inner; ++k) {
+          const double term = static_cast<double>(a[static_cast<size_t>(i + k * lda)]) * b[static_cast<size_t>(k + j * ldb)];
+          sum += term;
+          abs_sum += std::abs(term);
+        }
+        exact[at] = sum;
+        magnitude[at] = abs_sum;
+      }
+    }
+    const double n_u = static_cast<double>(inner + 1) * std::ldexp(1.0, -24);
+    const double gamma = n_u / (1 - n_u);
+    for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
+      use_kernel(kernel);
+      std::vector<std::vector<float>> outputs;
+      for (int threads : {1, 2}) {
+        set_thread_limit(threads);
+        std::vector<float> out = c;
+        gemm(rows, inner, columns, a.data(), lda, b.data(), ldb, beta, out.data(), ldc);
+        outputs.push_back(out);
+      }
+      for (long j = 0; j < columns; ++j) {
+        for (long i = 0; i < ldc; ++i) {
+          const auto at = static_cast<size_t>(i + j * ldc);
+          for (size_t run = 0; run < outputs.size(); ++run) {
+            if (i >= rows) {
+              ASSERT_EQ(outputs[run][at], c[at]) << "padding below row " << rows << " was written";
+            } else {
+              // The double reference itself is within inner · 2⁻⁵³ · Σ|terms|, negligible here.
+              ASSERT_LE(std::abs(static_cast<double>(outputs[run][at]) - exact[at]), gamma * magnitude[at] + 1e-30)
+                  << kernel_name(kernel) << " " << (run + 1) << " thread(s), columns " << columns << " at " << i << ","
+                  << j;
+            }
+          }
+        }
+      }
+    }
   }
 }
 
