@@ -1,5 +1,6 @@
 // Progress of long offline work (training, fitting, simplification), so that a command line can
-// draw a progress bar. Reported on the working thread between units of work; `done` ≤ `total`,
+// draw a progress bar. Reported between units of work, one call at a time (a stage that runs on
+// several threads reports from whichever finished a unit, never two at once); `done` ≤ `total`,
 // both counted in the stage's own unit (key points, folds, collapses, vertices). An empty
 // callback costs one branch.
 #pragma once

@@ -50,6 +50,7 @@ constexpr DoubleOption kDoubleOptions[] = {
     {"blend_zone_ratio", &TrainingOptions::blend_zone_ratio},
     {"false_hit_rate", &TrainingOptions::false_hit_rate, true},
     {"check_point_fraction", &TrainingOptions::check_point_fraction, true},  // issue #35
+    {"held_out_basis_slack", &TrainingOptions::held_out_basis_slack, true},  // issue #38
 };
 constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";

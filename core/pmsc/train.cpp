@@ -2,11 +2,16 @@
 
 #include <algorithm>
 #include <chrono>
+#include <atomic>
 #include <cmath>
+#include <mutex>
 #include <numeric>
 #include <string>
 
 #include <Eigen/Eigenvalues>
+
+#include "core/common/parallel.h"
+#include "core/common/timing.h"
 
 #include "core/pmsc/check_points.h"
 #include "core/pmsc/key_points.h"
@@ -89,7 +94,13 @@ struct Subspace {
 // same identity thin_pca uses), and every product runs on T itself — no R × F copy per fold,
 // which on crane was most of the calibration's time. Basis signs are arbitrary (the projection
 // does not see them); directions with σ_k ≤ kRelativeSingularValueFloor · σ_0 are dropped.
-Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M) {
+struct FoldWeights {
+  Eigen::MatrixXd W;             // F × count: basis = T W
+  Eigen::VectorXd mean_weights;  // F: mean = T mean_weights
+  Eigen::VectorXd sigma;         // count
+};
+
+FoldWeights fold_weights(const Eigen::MatrixXd& G, long F, const std::vector<long>& kept, int M) {
   const long s = static_cast<long>(kept.size());
   Eigen::MatrixXd C(s, s);
   for (long i = 0; i < s; ++i) {
@@ -102,7 +113,7 @@ Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const
   C.array() += total_mean;
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(C);  // ascending eigenvalues
   const double largest = std::max(eigen.eigenvalues()(s - 1), 0.0);
-  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(T.cols(), M);  // basis = T W
+  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(F, M);  // basis = T W
   Eigen::VectorXd sigma(M);
   long count = 0;
   for (; count < M && count < s; ++count) {
@@ -113,13 +124,56 @@ Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const
     const double v_mean = v.mean();  // X v = T_kept (v − mean(v) 1)
     for (long i = 0; i < s; ++i) W(kept[static_cast<size_t>(i)], count) = (v(i) - v_mean) / sigma(count);
   }
-  Subspace out;
-  Eigen::VectorXd mean_weights = Eigen::VectorXd::Zero(T.cols());
-  for (long f : kept) mean_weights(f) = 1.0 / static_cast<double>(s);
-  out.mean.noalias() = T * mean_weights;
-  out.basis.noalias() = T * W.leftCols(count);
+  FoldWeights out;
+  out.mean_weights = Eigen::VectorXd::Zero(F);
+  for (long f : kept) out.mean_weights(f) = 1.0 / static_cast<double>(s);
+  out.W = W.leftCols(count);
   out.sigma = sigma.head(count);
   return out;
+}
+
+Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M) {
+  const FoldWeights weights = fold_weights(G, T.cols(), kept, M);
+  Subspace out;
+  out.mean.noalias() = T * weights.mean_weights;
+  out.basis.noalias() = T * weights.W;
+  out.sigma = weights.sigma;
+  return out;
+}
+
+// Issue #38 item 3: the held-out projection error of every basis size 0 … M_max, through the Gram
+// matrix alone. For a fold (its mean μ = T m, basis A = T W) and a held-out frame x = T e_f, the
+// coefficients are c = Aᵀ(x − μ) = Wᵀ(G e_f − G m) and, A being orthonormal, the residual of the
+// first k directions is ‖x − μ‖² − Σ_{i<k} c_i² with ‖x − μ‖² = G_ff − 2 mᵀG e_f + mᵀG m: O(F²·M)
+// per fold, no pass over the R rows. (The subtraction loses what rounding left in G, ~1e-16 of
+// ‖x‖², i.e. relative RMS errors below ~1e-8 of the frame's norm are not resolved; no data set's
+// noise is that small.) Returns, per basis size k, the held-out residual energy summed over every
+// held-out frame of every set, and in `centred_energy` the sum of ‖x − μ‖².
+Eigen::VectorXd held_out_projection_curve(const Eigen::MatrixXd& G, const std::vector<std::vector<long>>& held_out,
+                                          const std::vector<std::vector<long>>& kept, int M_max,
+                                          double& centred_energy) {
+  const long F = G.cols();
+  Eigen::VectorXd residual = Eigen::VectorXd::Zero(M_max + 1);
+  centred_energy = 0;
+  for (size_t set = 0; set < held_out.size(); ++set) {
+    const int fold_basis = static_cast<int>(std::min<long>(M_max, static_cast<long>(kept[set].size()) - 1));
+    if (fold_basis < 1) continue;
+    const FoldWeights w = fold_weights(G, F, kept[set], fold_basis);
+    const Eigen::VectorXd G_mean = G * w.mean_weights;
+    const double mean_energy = w.mean_weights.dot(G_mean);
+    for (long f : held_out[set]) {
+      const double energy = std::max(0.0, G(f, f) - 2 * G_mean(f) + mean_energy);
+      const Eigen::VectorXd c = w.W.transpose() * (G.col(f) - G_mean);
+      centred_energy += energy;
+      double left = energy;
+      residual(0) += left;
+      for (int k = 1; k <= M_max; ++k) {
+        if (k <= c.size()) left = std::max(0.0, left - c(k - 1) * c(k - 1));
+        residual(k) += left;
+      }
+    }
+  }
+  return residual;
 }
 
 // The linear subspace spanned by an affine one's mean and basis: the basis (orthonormal, as PCA
@@ -204,6 +258,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     return invalid("check_point_fraction must be in [0, 1], got " + std::to_string(o.check_point_fraction));
   }
   if (!(o.max_basis_fraction > 0 && o.max_basis_fraction <= 1)) return invalid("max_basis_fraction must be in (0, 1]");
+  if (!(o.held_out_basis_slack >= 0) || !std::isfinite(o.held_out_basis_slack)) {
+    return invalid("held_out_basis_slack must be ≥ 0 (0: off), got " + std::to_string(o.held_out_basis_slack));
+  }
   const bool cross = output_frames != nullptr;
   const long control_points = control_frames.cols() / D;
 
@@ -226,60 +283,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     for (long f = 0; f < F; ++f) apply_inverse(transforms[static_cast<size_t>(f)], T.col(f));
   }
 
-  // Runtime basis from the initial training matrix (2007 §2.1).
-  const Eigen::VectorXd mean = T.rowwise().mean();
-  const Eigen::MatrixXd centred = T.colwise() - mean;
-  const int max_basis = static_cast<int>(std::min<long>(o.max_basis, F - 1));
-  const int chosen_cap = std::max(1, std::min(max_basis, static_cast<int>(o.max_basis_fraction * static_cast<double>(F))));
-  const PcaBasis pca = thin_pca(centred, max_basis);
-  if (pca.basis.cols() == 0) return invalid("the training frames are all identical: there is no motion to model");
-  const int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols()))
-                                 : choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
-  Subspace subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
-  const double projection_error =
-      max_point_error(centred - subspace.basis * (subspace.basis.transpose() * centred), D);
-
-  // Key points (2007 §2.2), seeded with fiducials and the optional sparse grid.
-  KeyPointOptions key_options;
-  key_options.channel_count = D;
-  key_options.block_size = o.block_size;
-  key_options.error_bound = o.error_bound;
-  key_options.max_key_points = o.max_key_points;
-  key_options.candidate_count = static_cast<int>(control_points);
-  key_options.progress = o.progress;
-  key_options.seed_points = o.fiducial_points;
-  if (o.grid_cells > 0) {
-    PointMatrix positions = o.positions;
-    if (positions.rows() == 0) {
-      if (D != 3) return invalid("grid_cells with channels ≠ 3 needs explicit positions");
-      positions = Eigen::Map<const PointMatrix>(mean.head(control_rows).cast<float>().eval().data(), control_points, 3);
-    }
-    if (positions.rows() != control_points) {
-      return invalid("positions must have one row per control point (" + std::to_string(control_points) + ")");
-    }
-    for (int seed : grid_seeds(positions, o.grid_cells)) key_options.seed_points.push_back(seed);
-  }
-  auto selection = select_key_points(centred, subspace.basis, key_options);
-  if (!selection) return selection.error();
-  ANIMSPACE_RETURN_IF_ERROR(assemble(subspace, control_rows, cross, selection->key_points, model));
-
-  // Regions for local fail-through (the keys index the same points only without cross).
-  if (!cross && o.region_count > 0) {
-    Regions regions = cluster_regions(subspace.basis, subspace.sigma, D, model.key_points, o.region_count);
-    model.region_count = regions.count;
-    model.point_regions = std::move(regions.point_regions);
-    model.key_regions = std::move(regions.key_regions);
-    model.region_weights = soft_region_weights(motion_signatures(subspace.basis, subspace.sigma, D),
-                                               model.point_regions, model.region_count);
-  }
-
-  // ε from held-out training frames only (calibration.h): retrain the subspace without each
-  // fold (same keys, same M), evaluate its frames through the runtime, and keep (e_key, true max
-  // point error, each point's error) of every held-out frame, overall and per region. Three fold
-  // families: every `folds`-th frame (poses between training poses); blocks of consecutive frames
-  // at three lengths, dealt to the folds in turn (motion the rest of the training never saw); and
-  // sparse folds, trained on every other frame an interleaved fold keeps (a model that saw less).
-  const auto calibration_start = std::chrono::steady_clock::now();
+  // The held-out sets of the calibration below (and of the held-out choice of M).
   const int folds = static_cast<int>(std::min<long>(std::max(o.calibration_folds, 2), F));
   const long block = o.calibration_block_frames > 0
                          ? o.calibration_block_frames
@@ -320,23 +324,124 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
       add_set(is_held, kBlockFold, 1);
     }
   }
+
+  // Runtime basis from the initial training matrix (2007 §2.1).
+  const auto pca_start = std::chrono::steady_clock::now();
+  const Eigen::VectorXd mean = T.rowwise().mean();
+  const Eigen::MatrixXd centred = T.colwise() - mean;
+  const int max_basis = static_cast<int>(std::min<long>(o.max_basis, F - 1));
+  const int chosen_cap = std::max(1, std::min(max_basis, static_cast<int>(o.max_basis_fraction * static_cast<double>(F))));
+  const PcaBasis pca = thin_pca(centred, max_basis);
+  if (pca.basis.cols() == 0) return invalid("the training frames are all identical: there is no motion to model");
+  const Eigen::MatrixXd gram = T.transpose() * T;
+  int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols()))
+                           : choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
+  std::vector<double> held_out_rms;
+  if (o.basis_size <= 0 && o.held_out_basis_slack > 0) {
+    // Issue #38 item 3, M chosen by the accuracy it buys on frames the basis did not see: the
+    // held-out frames' projection error onto each fold's first k directions, over the interleaved
+    // folds (poses between training poses) and the block folds (motion the rest never saw), as a
+    // relative RMS (residual energy / centred energy, both summed over every held-out frame).
+    // M = the smallest k whose held-out RMS is within (1 + slack) of the best k ≤ the cap. A
+    // direction the held-out frames do not share — noise of the training frames, motion of one
+    // block only — lowers that error by about its share of the noise and is not worth its cost
+    // in the reconstruction (time ∝ M) nor in the keys' estimate (M coefficients from K·D values).
+    std::vector<std::vector<long>> held_out, kept;
+    for (const HeldOutSet& set : sets) {
+      if (set.family == kSparseFold) continue;
+      held_out.push_back(set.held_out);
+      kept.push_back(set.train);
+    }
+    const int M_max = std::min<int>(chosen_cap, static_cast<int>(pca.basis.cols()));
+    double centred_energy = 0;
+    const Eigen::VectorXd residual = held_out_projection_curve(gram, held_out, kept, M_max, centred_energy);
+    if (centred_energy > 0) {
+      held_out_rms.resize(static_cast<size_t>(M_max + 1));
+      for (int k = 0; k <= M_max; ++k) held_out_rms[static_cast<size_t>(k)] = std::sqrt(residual(k) / centred_energy);
+      const double best = *std::min_element(held_out_rms.begin() + 1, held_out_rms.end());
+      M = M_max;
+      for (int k = 1; k <= M_max; ++k) {
+        if (held_out_rms[static_cast<size_t>(k)] <= (1 + o.held_out_basis_slack) * best) {
+          M = k;
+          break;
+        }
+      }
+    }
+  }
+  Subspace subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
+  const double projection_error =
+      max_point_error(centred - subspace.basis * (subspace.basis.transpose() * centred), D);
+  const double pca_seconds = seconds_since(pca_start);
+  const auto key_start = std::chrono::steady_clock::now();
+
+  // Key points (2007 §2.2), seeded with fiducials and the optional sparse grid.
+  KeyPointOptions key_options;
+  key_options.channel_count = D;
+  key_options.block_size = o.block_size;
+  key_options.error_bound = o.error_bound;
+  key_options.max_key_points = o.max_key_points;
+  key_options.candidate_count = static_cast<int>(control_points);
+  key_options.progress = o.progress;
+  key_options.seed_points = o.fiducial_points;
+  if (o.grid_cells > 0) {
+    PointMatrix positions = o.positions;
+    if (positions.rows() == 0) {
+      if (D != 3) return invalid("grid_cells with channels ≠ 3 needs explicit positions");
+      positions = Eigen::Map<const PointMatrix>(mean.head(control_rows).cast<float>().eval().data(), control_points, 3);
+    }
+    if (positions.rows() != control_points) {
+      return invalid("positions must have one row per control point (" + std::to_string(control_points) + ")");
+    }
+    for (int seed : grid_seeds(positions, o.grid_cells)) key_options.seed_points.push_back(seed);
+  }
+  auto selection = select_key_points(centred, subspace.basis, key_options);
+  if (!selection) return selection.error();
+  const double key_selection_seconds = seconds_since(key_start);
+  ANIMSPACE_RETURN_IF_ERROR(assemble(subspace, control_rows, cross, selection->key_points, model));
+
+  // Regions for local fail-through (the keys index the same points only without cross).
+  if (!cross && o.region_count > 0) {
+    Regions regions = cluster_regions(subspace.basis, subspace.sigma, D, model.key_points, o.region_count);
+    model.region_count = regions.count;
+    model.point_regions = std::move(regions.point_regions);
+    model.key_regions = std::move(regions.key_regions);
+    model.region_weights = soft_region_weights(motion_signatures(subspace.basis, subspace.sigma, D),
+                                               model.point_regions, model.region_count);
+  }
+
+  // ε from held-out training frames only (calibration.h): retrain the subspace without each
+  // fold (same keys, same M), evaluate its frames through the runtime, and keep (e_key, true max
+  // point error, each point's error) of every held-out frame, overall and per region. Three fold
+  // families: every `folds`-th frame (poses between training poses); blocks of consecutive frames
+  // at three lengths, dealt to the folds in turn (motion the rest of the training never saw); and
+  // sparse folds, trained on every other frame an interleaved fold keeps (a model that saw less).
+  const auto calibration_start = std::chrono::steady_clock::now();
   const long R_count = model.region_count;
   const long N_out = model.point_count;
-  const Eigen::MatrixXd gram = T.transpose() * T;
-  std::vector<double> sample_key, sample_max;
-  std::vector<char> sample_family;
-  std::vector<Eigen::VectorXd> sample_region_key, sample_region_max;
-  std::vector<Eigen::VectorXf> sample_point_errors;  // N each (check point selection; not cross)
-  for (size_t set = 0; set < sets.size(); ++set) {
+  // Every set is independent of the others (issue #38 item 3): the sets run on all cores, each
+  // worker taking the next set not yet taken (their costs differ: a sparse fold trains on half
+  // the frames), each writing its own samples; they are joined in set order afterwards, so the
+  // model is the same whatever the thread count. The products inside a set are not split again
+  // (parallel.h), so a set computes exactly what a one-thread training computes.
+  struct SetSamples {
+    std::vector<double> key, max;
+    std::vector<Eigen::VectorXd> region_key, region_max;
+    std::vector<Eigen::VectorXf> point_errors;  // N each (check point selection; not cross)
+  };
+  std::vector<SetSamples> per_set(sets.size());
+  std::atomic<size_t> next_set{0};
+  std::mutex progress_mutex;
+  size_t sets_done = 0;
+  const auto calibrate_set = [&](size_t set) {
     const HeldOutSet& held = sets[set];
+    SetSamples& out = per_set[set];
     // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
     const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(held.train.size()) - 1));
-    if (fold_basis < 1) continue;
+    if (fold_basis < 1) return;
     PmscModel fold_model = model;
-    report_progress(o.progress, "calibration", static_cast<int>(set), static_cast<int>(sets.size()));
     const Subspace fold = fold_subspace(T, gram, held.train, fold_basis);
-    if (fold.basis.cols() < 1) continue;
-    if (!assemble(fold, control_rows, cross, model.key_points, fold_model).ok()) continue;
+    if (fold.basis.cols() < 1) return;
+    if (!assemble(fold, control_rows, cross, model.key_points, fold_model).ok()) return;
     PoseEstimate estimate;
     for (long f : held.held_out) {
       // Held-out frames enter in the world frame, as at run time.
@@ -348,20 +453,43 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
       const Eigen::VectorXf point_errors =
           Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, N_out).colwise().norm().transpose() /
           static_cast<float>(estimate.scale);
-      sample_key.push_back(estimate.key_point_error);
-      sample_family.push_back(held.family);
-      sample_max.push_back(static_cast<double>(point_errors.maxCoeff()));
-      if (!cross) sample_point_errors.push_back(point_errors);
+      out.key.push_back(estimate.key_point_error);
+      out.max.push_back(static_cast<double>(point_errors.maxCoeff()));
+      if (!cross) out.point_errors.push_back(point_errors);
       if (R_count > 0) {
         Eigen::VectorXd region_max = Eigen::VectorXd::Zero(R_count);
         for (long i = 0; i < N_out; ++i) {
           double& m = region_max(model.point_regions[static_cast<size_t>(i)]);
           m = std::max(m, static_cast<double>(point_errors(i)));
         }
-        sample_region_key.push_back(Eigen::Map<const Eigen::VectorXd>(estimate.region_errors.data(), R_count));
-        sample_region_max.push_back(region_max);
+        out.region_key.push_back(Eigen::Map<const Eigen::VectorXd>(estimate.region_errors.data(), R_count));
+        out.region_max.push_back(region_max);
       }
     }
+  };
+  report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
+  parallel_for_chunks(static_cast<int64_t>(sets.size()), 1, [&](int64_t, int64_t) {
+    for (size_t set = next_set++; set < sets.size(); set = next_set++) {
+      calibrate_set(set);
+      const std::lock_guard<std::mutex> lock(progress_mutex);
+      if (++sets_done < sets.size()) {
+        report_progress(o.progress, "calibration", static_cast<int>(sets_done), static_cast<int>(sets.size()));
+      }
+    }
+  });
+  std::vector<double> sample_key, sample_max;
+  std::vector<char> sample_family;
+  std::vector<Eigen::VectorXd> sample_region_key, sample_region_max;
+  std::vector<Eigen::VectorXf> sample_point_errors;
+  for (size_t set = 0; set < sets.size(); ++set) {
+    SetSamples& out = per_set[set];
+    sample_key.insert(sample_key.end(), out.key.begin(), out.key.end());
+    sample_max.insert(sample_max.end(), out.max.begin(), out.max.end());
+    sample_family.insert(sample_family.end(), out.key.size(), sets[set].family);
+    for (auto& v : out.region_key) sample_region_key.push_back(std::move(v));
+    for (auto& v : out.region_max) sample_region_max.push_back(std::move(v));
+    for (auto& v : out.point_errors) sample_point_errors.push_back(std::move(v));
+    out = SetSamples();
   }
   report_progress(o.progress, "calibration", static_cast<int>(sets.size()), static_cast<int>(sets.size()));
   CalibrationSamples& samples = model.calibration.samples;
@@ -409,6 +537,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   if (report) {
     report->frames = static_cast<int>(F);
     report->basis_size = M;
+    report->held_out_relative_rms = held_out_rms;
+    report->pca_seconds = pca_seconds;
+    report->key_selection_seconds = key_selection_seconds;
     report->key_points = model.key_point_count();
     report->max_residual_per_iteration = selection->max_residual;
     report->max_training_error = selection->max_residual.empty() ? 0 : selection->max_residual.back();

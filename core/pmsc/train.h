@@ -26,6 +26,11 @@ struct TrainingOptions {
   // crane: 48 keys at M = 80 of 88 frames vs 200 keys at M = 60, 97.7% vs 98.9% of held-out
   // frames under 1% error). The papers train on F ≫ M (2503 poses, M = 85) and never meet this.
   double max_basis_fraction = 0.7;
+  // Issue #38 item 3: > 0 chooses M (when basis_size is 0) by the accuracy it buys on frames the
+  // basis did not see instead of by error_bound: the smallest M whose held-out relative RMS
+  // projection error (the calibration's interleaved and block folds) is within (1 + slack) of the
+  // best M up to the cap above. 0: off (M from error_bound). The curve is in the report.
+  double held_out_basis_slack = 0;
   int block_size = 12;       // basis vectors per key-selection block, 10–20 in the papers
   int max_key_points = 200;  // key budget
   std::vector<int> fiducial_points;  // seeded first (2007 §2.2)
@@ -87,7 +92,12 @@ struct TrainingReport {
   int calibration_frames = 0;
   int check_points = 0;                // C
   long calibration_bad_samples = 0;    // the over-tolerance samples ε rests on
+  // With held_out_basis_slack: the held-out relative RMS projection error of every basis size
+  // k = 0 … cap (index k), whose first k within (1 + slack) of the best is basis_size.
+  std::vector<double> held_out_relative_rms;
   double seconds = 0;              // training in all
+  double pca_seconds = 0;          // of which the PCA and the choice of M
+  double key_selection_seconds = 0;  // the key points
   double calibration_seconds = 0;  // of which the ε calibration
 };
 

@@ -11,6 +11,7 @@
 #include <Eigen/SVD>
 #include <gtest/gtest.h>
 
+#include "core/common/parallel.h"
 #include "core/container/model_container.h"
 #include "core/pmsc/pmsc_io.h"
 
@@ -366,6 +367,110 @@ TEST(PmscTrain, ReportsProgressThroughKeySelectionAndCalibration) {
   std::vector<int64_t> expected(19);
   std::iota(expected.begin(), expected.end(), 0);
   EXPECT_EQ(folds, expected);
+}
+
+
+// Issue #38 item 3: frames = a rank-r affine subspace + isotropic noise (N·D ≫ F, as PMSC data
+// is). Every held-out frame's projection error onto a fold's first k ≥ r directions is its noise
+// (less the ~k/R share a direction unrelated to it removes), and for k < r it also misses a
+// signal direction holding far more energy than the noise: the smallest k within 5% of the best
+// is r, at any scale. The curve at r is checked against the noise itself, computed independently.
+struct NoisySet {
+  FrameMatrix frames;
+  double noise_fraction = 0;  // ‖noise‖ / ‖frames − their mean‖ over all frames
+};
+
+NoisySet noisy_subspace(int points, int frames, int rank, double noise, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal;
+  const long R = 3L * points;
+  const Eigen::VectorXd mean = Eigen::VectorXd::NullaryExpr(R, [&] { return scale * normal(rng); });
+  const Eigen::MatrixXd B = Eigen::MatrixXd::NullaryExpr(R, rank, [&] { return 0.1 * scale * normal(rng); });
+  Eigen::MatrixXd clean(R, frames), noisy(R, frames);
+  for (int f = 0; f < frames; ++f) {
+    clean.col(f) = mean + B * Eigen::VectorXd::NullaryExpr(rank, [&] { return normal(rng); });
+    noisy.col(f) = clean.col(f) + Eigen::VectorXd::NullaryExpr(R, [&] { return noise * scale * normal(rng); });
+  }
+  NoisySet s;
+  s.frames = noisy.transpose().cast<float>();
+  const Eigen::MatrixXd centred = noisy.colwise() - noisy.rowwise().mean();
+  s.noise_fraction = (noisy - clean).norm() / centred.norm();
+  return s;
+}
+
+TEST(PmscTrain, AHeldOutBasisIsTheRankTheFramesSupport) {
+  for (double scale : {1e-4, 1.0, 1e4}) {
+    const int rank = 6;
+    const NoisySet data = noisy_subspace(1000, 80, rank, 0.002, scale, 21);
+    TrainingOptions o = options_for(scale);
+    o.held_out_basis_slack = 0.05;
+    TrainingReport report;
+    auto model = train(data.frames, o, &report);
+    ASSERT_TRUE(model.ok()) << model.error().message;
+    EXPECT_EQ(model->basis_size(), rank) << "scale " << scale;
+    EXPECT_EQ(report.basis_size, rank);
+    // The curve: one value per k = 0 … the cap (0.7 · 80 = 56), 1 at k = 0 (nothing projected).
+    ASSERT_EQ(report.held_out_relative_rms.size(), 57u);
+    EXPECT_NEAR(report.held_out_relative_rms[0], 1.0, 1e-9);
+    const double best =
+        *std::min_element(report.held_out_relative_rms.begin() + 1, report.held_out_relative_rms.end());
+    EXPECT_LE(report.held_out_relative_rms[rank], 1.05 * best);
+    EXPECT_GT(report.held_out_relative_rms[rank - 1], 1.05 * best);
+    // At k = r what is left is the noise: within 10% of its share of the frames' energy (the
+    // fold's mean and the r directions hold a few of its R = 3000 dimensions).
+    EXPECT_NEAR(report.held_out_relative_rms[rank], data.noise_fraction, 0.1 * data.noise_fraction) << "scale " << scale;
+  }
+}
+
+// With nothing but noise around the mean no direction generalises: the held-out error hardly
+// moves with k (each direction removes ~1/R of a held-out frame's energy), so M is 1.
+TEST(PmscTrain, AHeldOutBasisOfNoiseAloneIsOneVector) {
+  const NoisySet data = noisy_subspace(1000, 60, 0, 0.01, 1.0, 5);
+  TrainingOptions o = options_for(1.0);
+  o.held_out_basis_slack = 0.05;
+  TrainingReport report;
+  auto model = train(data.frames, o, &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  EXPECT_EQ(model->basis_size(), 1);
+  EXPECT_GT(report.held_out_relative_rms.back(), 0.95);
+}
+
+TEST(PmscTrain, AHeldOutBasisSlackMustBeANonNegativeNumber) {
+  const auto data = exact_subspace(50, 20, 3, 1.0, 3);
+  TrainingOptions o = options_for(1.0);
+  o.held_out_basis_slack = -0.1;
+  auto model = train(data.frames, o, nullptr);
+  ASSERT_FALSE(model.ok());
+  EXPECT_NE(model.error().message.find("held_out_basis_slack"), std::string::npos);
+}
+
+// Issue #38 item 3: the calibration folds run on every core, and the model is the same on one
+// thread and on two (each fold is computed alone; the samples are joined in fold order).
+TEST(PmscTrain, TheModelIsTheSameOnOneThreadAndOnTwo) {
+  const NoisySet data = noisy_subspace(400, 48, 5, 0.01, 1.0, 9);
+  TrainingOptions o = options_for(1.0);
+  o.held_out_basis_slack = 0.05;
+  std::vector<PmscModel> models;
+  for (int threads : {1, 2}) {
+    set_thread_limit(threads);
+    auto model = train(data.frames, o, nullptr);
+    set_thread_limit(0);
+    ASSERT_TRUE(model.ok()) << model.error().message;
+    models.push_back(*std::move(model));
+  }
+  const PmscModel& a = models[0];
+  const PmscModel& b = models[1];
+  EXPECT_EQ(a.basis, b.basis);
+  EXPECT_EQ(a.mean, b.mean);
+  EXPECT_EQ(a.key_points, b.key_points);
+  EXPECT_EQ(a.check_points, b.check_points);
+  ASSERT_GT(a.calibration.samples.key_point_errors.size(), 0);
+  EXPECT_EQ(a.calibration.samples.key_point_errors, b.calibration.samples.key_point_errors);
+  EXPECT_EQ(a.calibration.samples.max_errors, b.calibration.samples.max_errors);
+  EXPECT_EQ(a.calibration.samples.region_max_errors, b.calibration.samples.region_max_errors);
+  EXPECT_EQ(a.calibration.samples.fold_family, b.calibration.samples.fold_family);
+  EXPECT_EQ(a.epsilon.epsilon_min, b.epsilon.epsilon_min);
+  EXPECT_EQ(a.epsilon.epsilon_max, b.epsilon.epsilon_max);
 }
 
 }  // namespace
