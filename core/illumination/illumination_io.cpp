@@ -26,6 +26,7 @@ constexpr const char* kShadowRaysKey = "illumination.shadow_rays";
 constexpr const char* kFilterNeighboursKey = "illumination.filter_neighbours";
 constexpr const char* kFilterNormalKey = "illumination.filter_min_normal_cosine";
 constexpr const char* kKeySamplesKey = "illumination.key_samples";
+constexpr const char* kFilterLinearKey = "illumination.filter_linear";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
@@ -68,6 +69,7 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
   if (setup.filter.enabled()) {
     out.metadata()[kFilterNeighboursKey] = std::to_string(setup.filter.neighbours);
     out.metadata()[kFilterNormalKey] = format_number(setup.filter.min_normal_cosine);
+    if (setup.filter.linear) out.metadata()[kFilterLinearKey] = "true";
   }
   if (setup.key_samples > 0 && setup.key_samples != setup.gather.samples) {
     out.metadata()[kKeySamplesKey] = std::to_string(setup.key_samples);
@@ -157,6 +159,12 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
       return make_error(ErrorCode::kInvalidArgument,
                         source + ": metadata " + kFilterNormalKey + " should be a number, got '" + cosine + "'");
     }
+    const std::string linear = in.metadata_value(kFilterLinearKey, "false");
+    if (linear != "true" && linear != "false") {
+      return make_error(ErrorCode::kInvalidArgument,
+                        source + ": metadata " + kFilterLinearKey + " should be 'true' or 'false', got '" + linear + "'");
+    }
+    setup.filter.linear = linear == "true";
     if (setup.filter.neighbours < 0 || !(setup.filter.min_normal_cosine > -1 && setup.filter.min_normal_cosine <= 1)) {
       return make_error(ErrorCode::kInvalidArgument,
                         source + ": metadata " + kFilterNeighboursKey + " should be ≥ 0 and " + kFilterNormalKey +

@@ -55,8 +55,8 @@ struct IlluminationSetup {
 };
 
 // Writes the setup's sections and metadata (illumination.samples, illumination.seed,
-// illumination.quantity; illumination.filter_neighbours, .filter_min_normal_cosine and
-// .key_samples only when set, so files without them read as before) into `out`, replacing
+// illumination.quantity; illumination.filter_neighbours, .filter_min_normal_cosine,
+// .filter_linear and .key_samples only when set, so files without them read as before) into `out`, replacing
 // mesh.rest_points and mesh.faces.
 void attach_illumination(container::ModelContainer& out, const IlluminationSetup& setup);
 

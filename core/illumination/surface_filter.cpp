@@ -6,6 +6,7 @@
 #include <utility>
 
 #include <Eigen/Geometry>
+#include <Eigen/LU>
 
 #include "core/common/format.h"
 #include "core/common/parallel.h"
@@ -78,12 +79,22 @@ Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, cons
 
   const double two_sigma2 = 2 * (r / 2) * (r / 2);
   const double edge = std::exp(-r * r / two_sigma2);
-  std::vector<std::vector<std::pair<int, float>>> lists(static_cast<size_t>(n));
+  struct Entry {
+    int j;
+    float w;
+    Eigen::Vector2f tangent;
+  };
+  std::vector<std::vector<Entry>> lists(static_cast<size_t>(n));
   parallel_for_chunks(n, 256, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
       const Eigen::Vector3d p = V.row(i).transpose().cast<double>();
       const Eigen::Vector3d normal = surface.normals.row(i).transpose().cast<double>();
       const auto c = cell_of(static_cast<long>(i));
+      // Tangent axes of the point: any orthonormal pair ⟂ n (a fitted plane does not depend on
+      // which).
+      const Eigen::Vector3d t1 =
+          (std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(normal).normalized();
+      const Eigen::Vector3d t2 = normal.cross(t1);
       auto& list = lists[static_cast<size_t>(i)];
       for (int64_t dx = -1; dx <= 1; ++dx) {
         for (int64_t dy = -1; dy <= 1; ++dy) {
@@ -97,15 +108,16 @@ Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, cons
               if (d2 > r * r) continue;
               if (normal.dot(surface.normals.row(j).transpose().cast<double>()) < options.min_normal_cosine) continue;
               const double w = std::exp(-d2 / two_sigma2) - edge;
-              if (w > 0) list.emplace_back(j, static_cast<float>(w));
+              const Eigen::Vector3d d = V.row(j).transpose().cast<double>() - p;
+              if (w > 0) list.push_back({j, static_cast<float>(w), Eigen::Vector2d(d.dot(t1), d.dot(t2)).cast<float>() / static_cast<float>(r)});
             }
           }
         }
       }
       // The point itself always counts (weight 1 − e^{−2} at d = 0, also when its normal test
       // would fail by rounding), so every list is non-empty.
-      if (std::none_of(list.begin(), list.end(), [&](const auto& e) { return e.first == i; })) {
-        list.emplace_back(static_cast<int>(i), static_cast<float>(1 - edge));
+      if (std::none_of(list.begin(), list.end(), [&](const Entry& e) { return e.j == i; })) {
+        list.push_back({static_cast<int>(i), static_cast<float>(1 - edge), Eigen::Vector2f::Zero()});
       }
     }
   });
@@ -116,12 +128,14 @@ Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, cons
   }
   filter.indices.reserve(static_cast<size_t>(filter.offsets.back()));
   filter.weights.reserve(static_cast<size_t>(filter.offsets.back()));
+  if (options.linear) filter.tangent.reserve(static_cast<size_t>(filter.offsets.back()));
   for (auto& list : lists) {
-    for (const auto& [j, w] : list) {
-      filter.indices.push_back(j);
-      filter.weights.push_back(w);
+    for (const Entry& e : list) {
+      filter.indices.push_back(e.j);
+      filter.weights.push_back(e.w);
+      if (options.linear) filter.tangent.push_back(e.tangent);
     }
-    std::vector<std::pair<int, float>>().swap(list);
+    std::vector<Entry>().swap(list);
   }
   return filter;
 }
@@ -135,23 +149,47 @@ void surface_filter_apply(const SurfaceFilter& filter, const Eigen::VectorXf& fr
   assert(frame.size() == 3 * n && filter.albedo.rows() == n);
   assert(&out != &frame);
   out.resize(3 * n);
+  const bool linear = filter.options.linear;
+  assert(!linear || filter.tangent.size() == filter.indices.size());
   parallel_for_chunks(n, 1024, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
-      Eigen::Array3d sum = Eigen::Array3d::Zero(), weight = Eigen::Array3d::Zero();
+      // Per channel: the weighted moments of (1, u, v) and of E against them; the mean uses
+      // only the first.
+      Eigen::Matrix3d moments[3] = {Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero()};
+      Eigen::Vector3d sums[3] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
       for (int64_t e = filter.offsets[static_cast<size_t>(i)]; e < filter.offsets[static_cast<size_t>(i) + 1]; ++e) {
         const int j = filter.indices[static_cast<size_t>(e)];
         const double w = filter.weights[static_cast<size_t>(e)];
+        const Eigen::Vector3d x = linear ? Eigen::Vector3d(1, filter.tangent[static_cast<size_t>(e)].x(),
+                                                           filter.tangent[static_cast<size_t>(e)].y())
+                                         : Eigen::Vector3d(1, 0, 0);
         for (int c = 0; c < 3; ++c) {
           const double rho = filter.albedo(j, c);
           if (rho > 0) {
-            sum[c] += w * frame[3 * j + c] / rho;  // the neighbour's irradiance E_j
-            weight[c] += w;
+            sums[c] += w * (frame[3 * j + c] / rho) * x;  // the neighbour's irradiance E_j
+            if (linear) {
+              moments[c].noalias() += w * x * x.transpose();
+            } else {
+              moments[c](0, 0) += w;
+            }
           }
         }
       }
       for (int c = 0; c < 3; ++c) {
         const double rho = filter.albedo(i, c);
-        out[3 * i + c] = rho > 0 && weight[c] > 0 ? static_cast<float>(rho * sum[c] / weight[c]) : 0.0f;
+        double E = 0;
+        if (rho > 0 && moments[c](0, 0) > 0) {
+          E = sums[c][0] / moments[c](0, 0);
+          if (linear) {
+            // The plane's value at u = v = 0; the mean when the neighbours do not span the plane
+            // (tangent coordinates are in units of r, so the moments are O(1) and the threshold
+            // is scale-free).
+            Eigen::FullPivLU<Eigen::Matrix3d> lu(moments[c] / moments[c](0, 0));
+            lu.setThreshold(1e-6);
+            if (lu.rank() == 3) E = lu.solve(sums[c] / moments[c](0, 0))[0];
+          }
+        }
+        out[3 * i + c] = static_cast<float>(rho * E);
       }
     }
   });

@@ -46,6 +46,12 @@ struct SurfaceFilterOptions {
   // Neighbours whose unit normals make a cosine below this with the point's are left out. In
   // (−1, 1]; 0.9 is about 26°.
   double min_normal_cosine = 0.9;
+  // Local linear instead of local constant: Ẽ_i is the value at p_i of the plane (in the point's
+  // tangent coordinates) fitted to the neighbours' E_j by weighted least squares. A mean over a
+  // one-sided neighbourhood (at a face's border, by a crease) is biased by the irradiance's
+  // gradient times the offset of the neighbours' centroid; the fit keeps linear fields exactly
+  // wherever the neighbours span the plane, and equals the mean inside a symmetric neighbourhood.
+  bool linear = false;
   bool enabled() const { return neighbours > 0; }
 };
 
@@ -61,6 +67,8 @@ struct SurfaceFilter {
   std::vector<int64_t> offsets;     // N + 1
   std::vector<int> indices;
   std::vector<float> weights;
+  // With options.linear: each entry's tangent coordinates (p_j − p_i)·(t₁, t₂) / r.
+  std::vector<Eigen::Vector2f> tangent;
   PointMatrix albedo;               // N × 3, the surface's ρ
   bool enabled() const { return !offsets.empty(); }
 };
@@ -74,7 +82,9 @@ Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, cons
 
 // L̃ = the filtered frame (3·N values, point-major RGB) of `frame` (same shape). A channel whose
 // albedo is 0 at a neighbour carries no irradiance estimate and is left out of that channel's
-// average; a point whose own albedo is 0 in a channel gets 0 there. Accumulates in double.
+// average; a point whose own albedo is 0 in a channel gets 0 there. Accumulates in double. A
+// linear fit whose neighbours do not span the plane (collinear, or one point) falls back to the
+// mean.
 // Threads over points. With the filter off, out = frame. `out` must not alias `frame`.
 void surface_filter_apply(const SurfaceFilter& filter, const Eigen::VectorXf& frame, Eigen::VectorXf& out);
 

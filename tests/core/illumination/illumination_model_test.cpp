@@ -101,7 +101,7 @@ TEST(IlluminationIoTest, FilterAndKeySamplesRoundTripAndOlderFilesLoadUnfiltered
   older->engine->indirect(light, setup.gather, older->engine->all_points(), direct);
   EXPECT_EQ(served, direct) << "an older file's full calculation is the gather as it was";
 
-  setup.filter = {24, 0.85};
+  setup.filter = {24, 0.85, true};
   setup.key_samples = 32;
   container::ModelContainer out;
   attach_illumination(out, setup);
@@ -111,13 +111,14 @@ TEST(IlluminationIoTest, FilterAndKeySamplesRoundTripAndOlderFilesLoadUnfiltered
   ASSERT_TRUE(loaded.ok()) << loaded.error().message;
   EXPECT_EQ(loaded->filter.neighbours, 24);
   EXPECT_EQ(loaded->filter.min_normal_cosine, 0.85);
+  EXPECT_TRUE(loaded->filter.linear);
   EXPECT_EQ(loaded->key_samples, 32);
   auto filtered = load_served_illumination(*parsed, "mem");
   ASSERT_TRUE(filtered.ok()) << filtered.error().message;
   ASSERT_TRUE(filtered->filter != nullptr && filtered->filter->enabled());
   EXPECT_EQ(filtered->key_gather.samples, 32);
   EXPECT_EQ(filtered->gather.samples, 8);
-  auto filter = surface_filter_precompute(setup.surface, {24, 0.85});
+  auto filter = surface_filter_precompute(setup.surface, {24, 0.85, true});
   ASSERT_TRUE(filter.ok());
   Eigen::VectorXf expected;
   surface_filter_apply(*filter, direct, expected);
@@ -136,6 +137,7 @@ TEST(IlluminationIoTest, FilterAndKeySamplesRoundTripAndOlderFilesLoadUnfiltered
            {"illumination.filter_neighbours", "-2"},
            {"illumination.filter_min_normal_cosine", "1.5"},
            {"illumination.filter_min_normal_cosine", "much"},
+           {"illumination.filter_linear", "yes"},
            {"illumination.key_samples", "0"}}) {
     container::ModelContainer bad = *parsed;
     bad.metadata()[key] = value;

@@ -50,8 +50,8 @@ Eigen::VectorXf radiance(const SurfaceMesh& s, Irradiance E) {
   return L;
 }
 
-SurfaceFilter precompute(const SurfaceMesh& s, int k) {
-  auto filter = surface_filter_precompute(s, {k, 0.9});
+SurfaceFilter precompute(const SurfaceMesh& s, int k, bool linear = false) {
+  auto filter = surface_filter_precompute(s, {k, 0.9, linear});
   EXPECT_TRUE(filter.ok()) << filter.error().message;
   return filter.ok() ? std::move(*filter) : SurfaceFilter{};
 }
@@ -74,10 +74,12 @@ TEST(SurfaceFilterTest, AConstantIrradianceStaysConstantForAnyKAndAnyAlbedo) {
   std::uniform_real_distribution<float> albedo(0.05f, 0.95f);
   for (long i = 0; i < s.albedo.rows(); ++i) s.albedo.row(i) << albedo(random), albedo(random), albedo(random);
   const Eigen::VectorXf L = radiance(s, [](long) { return Eigen::Vector3d(0.7, 0.2, 1.3); });
-  for (const int k : {1, 4, 16, 64, 400}) {
-    Eigen::VectorXf out;
-    surface_filter_apply(precompute(s, k), L, out);
-    EXPECT_LE((out - L).cwiseAbs().maxCoeff(), 1e-5f * L.cwiseAbs().maxCoeff()) << "k " << k;
+  for (const bool linear : {false, true}) {
+    for (const int k : {1, 4, 16, 64, 400}) {
+      Eigen::VectorXf out;
+      surface_filter_apply(precompute(s, k, linear), L, out);
+      EXPECT_LE((out - L).cwiseAbs().maxCoeff(), 1e-5f * L.cwiseAbs().maxCoeff()) << "k " << k << " linear " << linear;
+    }
   }
 }
 
@@ -116,6 +118,27 @@ TEST(SurfaceFilterTest, ALinearIrradianceOnAPlaneIsKeptAtInteriorPoints) {
   }
 }
 
+TEST(SurfaceFilterTest, TheLinearFilterKeepsALinearIrradianceEverywhere) {
+  // The local linear fit keeps a plane's field also where the neighbourhood is one-sided (the
+  // borders and corners, where the mean is biased), and on a tilted plane.
+  const Eigen::Vector3d u = Eigen::Vector3d(1, 0.3, 0.2).normalized();
+  const Eigen::Vector3d v = u.cross(Eigen::Vector3d(0.1, 0.2, 1)).normalized();
+  const double h = 0.01;
+  const int n = 30;
+  const SurfaceMesh s = grid(n, h, Eigen::Vector3d(0.3, -0.2, 0.1), u, v);
+  const Eigen::VectorXf L = radiance(s, [&](long i) {
+    const double x = h * static_cast<double>(i % n), y = h * static_cast<double>(i / n);
+    return Eigen::Vector3d(1 + 3 * x - 2 * y, 0.5 + 5 * y, 2 - 4 * x);
+  });
+  for (const int k : {9, 25, 60}) {
+    Eigen::VectorXf out;
+    surface_filter_apply(precompute(s, k, true), L, out);
+    for (long i = 0; i < L.size(); ++i) {
+      ASSERT_NEAR(out[i], L[i], 1e-4 * std::abs(L[i]) + 1e-6) << "k " << k << " value " << i;
+    }
+  }
+}
+
 TEST(SurfaceFilterTest, TheTwoSidesOfAFoldDoNotMix) {
   // A floor (normal +y) and a wall (normal +x) meeting along the z axis, each with its own
   // vertices at the shared edge, lit with different constant irradiances.
@@ -133,9 +156,11 @@ TEST(SurfaceFilterTest, TheTwoSidesOfAFoldDoNotMix) {
   s.faces.resize(floor.faces.rows() * 2, 3);
   s.faces << floor.faces, (wall.faces.array() + 400).matrix();
   const Eigen::VectorXf L = radiance(s, [](long i) { return Eigen::Vector3d::Constant(i < 400 ? 1.0 : 5.0); });
-  Eigen::VectorXf out;
-  surface_filter_apply(precompute(s, 40), L, out);
-  EXPECT_LE((out - L).cwiseAbs().maxCoeff(), 1e-5f * 5 * 0.5f);
+  for (const bool linear : {false, true}) {
+    Eigen::VectorXf out;
+    surface_filter_apply(precompute(s, 40, linear), L, out);
+    EXPECT_LE((out - L).cwiseAbs().maxCoeff(), 1e-5f * 5 * 0.5f) << "linear " << linear;
+  }
 }
 
 TEST(SurfaceFilterTest, AnAlbedoBoundaryDoesNotBleed) {
@@ -212,13 +237,13 @@ TEST(SurfaceFilterTest, OffLeavesTheFrameAndBadOptionsAreNamed) {
   surface_filter_apply(*off, L, out);
   EXPECT_EQ(out, L);
 
-  auto negative = surface_filter_precompute(s, {-1, 0.9}, "training.filter");
+  auto negative = surface_filter_precompute(s, {-1, 0.9, false}, "training.filter");
   ASSERT_FALSE(negative.ok());
   EXPECT_EQ(negative.error().code, ErrorCode::kInvalidArgument);
   EXPECT_NE(negative.error().message.find("training.filter.neighbours"), std::string::npos) << negative.error().message;
   EXPECT_NE(negative.error().message.find("-1"), std::string::npos) << negative.error().message;
   for (const double cosine : {-1.0, 1.5, std::nan("")}) {
-    auto bad = surface_filter_precompute(s, {8, cosine}, "filter");
+    auto bad = surface_filter_precompute(s, {8, cosine, false}, "filter");
     ASSERT_FALSE(bad.ok()) << cosine;
     EXPECT_NE(bad.error().message.find("filter.min_normal_cosine"), std::string::npos) << bad.error().message;
   }
