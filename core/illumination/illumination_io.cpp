@@ -229,7 +229,27 @@ void ServedIllumination::full(const std::vector<PointLight>& lights, Eigen::Vect
 
 void ServedIllumination::keys(const std::vector<PointLight>& lights, const std::vector<int>& points,
                               Eigen::VectorXf& out) const {
-  engine->indirect(lights, key_gather, points, out);
+  gather_keys(*engine, gather, filter.get(), key_gather.samples != gather.samples ? key_gather.samples : 0, lights,
+              points, out);
+}
+
+void gather_keys(const IlluminationEngine& engine, const GatherOptions& gather, const SurfaceFilter* filter,
+                 int key_samples, const std::vector<PointLight>& lights, const std::vector<int>& points,
+                 Eigen::VectorXf& out) {
+  if (key_samples > 0) {
+    GatherOptions keys = gather;
+    keys.samples = key_samples;
+    engine.indirect(lights, keys, points, out);
+    return;
+  }
+  if (filter == nullptr || !filter->enabled()) {
+    engine.indirect(lights, gather, points, out);
+    return;
+  }
+  const std::vector<int> support = surface_filter_support(*filter, points);
+  Eigen::VectorXf values;
+  engine.indirect(lights, gather, support, values);
+  surface_filter_apply_at(*filter, points, support, values, out);
 }
 
 }  // namespace animspace::illumination

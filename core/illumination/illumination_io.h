@@ -81,10 +81,19 @@ struct ServedIllumination {
   }
   // The full calculation the subspace learned: the gather at every point, then the filter.
   void full(const std::vector<PointLight>& lights, Eigen::VectorXf& out) const;
-  // The key points' values: the gather at `points` only, with key_gather's rays (a filter needs
-  // the neighbours, which a key point's gather does not have; more rays do its work there).
+  // The key points' values: gather_keys with this model's gather, filter and key_samples.
   void keys(const std::vector<PointLight>& lights, const std::vector<int>& points, Eigen::VectorXf& out) const;
 };
+
+// The values at a model's key points for `lights` (3·|points|), as the subspace expects them
+// (issue #38 item 1). key_samples > 0: the gather at `points` alone with that many rays (no
+// filter: the noise at a few hundred points is cheap to remove with rays). Otherwise, with the
+// filter on: the gather (gather's rays) at every point the key points' filters read, then the
+// filter at the key points — the full calculation's values there bit for bit. Filter off: the
+// gather at `points`.
+void gather_keys(const IlluminationEngine& engine, const GatherOptions& gather, const SurfaceFilter* filter,
+                 int key_samples, const std::vector<PointLight>& lights, const std::vector<int>& points,
+                 Eigen::VectorXf& out);
 
 // load_illumination, then the engine built. Errors: load_illumination's; the engine's, naming
 // `source`.

@@ -140,6 +140,57 @@ Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, cons
   return filter;
 }
 
+namespace {
+
+// Ẽ_i ⊙ ρ_i for one point, reading the neighbours' radiance through value(j) (3 floats).
+template <typename Value>
+Eigen::Vector3f filtered_point(const SurfaceFilter& filter, int64_t i, const Value& value) {
+  const bool linear = filter.options.linear;
+  // Per channel: the weighted moments of (1, u, v) and of E against them; the mean uses only the
+  // first.
+  Eigen::Matrix3d moments[3] = {Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero()};
+  Eigen::Vector3d sums[3] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  for (int64_t e = filter.offsets[static_cast<size_t>(i)]; e < filter.offsets[static_cast<size_t>(i) + 1]; ++e) {
+    const int j = filter.indices[static_cast<size_t>(e)];
+    const double w = filter.weights[static_cast<size_t>(e)];
+    const float* L = value(j);
+    const Eigen::Vector3d x = linear ? Eigen::Vector3d(1, filter.tangent[static_cast<size_t>(e)].x(),
+                                                       filter.tangent[static_cast<size_t>(e)].y())
+                                     : Eigen::Vector3d(1, 0, 0);
+    for (int c = 0; c < 3; ++c) {
+      const double rho = filter.albedo(j, c);
+      if (rho > 0) {
+        sums[c] += w * (L[c] / rho) * x;  // the neighbour's irradiance E_j
+        if (linear) {
+          moments[c].noalias() += w * x * x.transpose();
+        } else {
+          moments[c](0, 0) += w;
+        }
+      }
+    }
+  }
+  Eigen::Vector3f out;
+  for (int c = 0; c < 3; ++c) {
+    const double rho = filter.albedo(i, c);
+    double E = 0;
+    if (rho > 0 && moments[c](0, 0) > 0) {
+      E = sums[c][0] / moments[c](0, 0);
+      if (linear) {
+        // The plane's value at u = v = 0; the mean when the neighbours do not span the plane
+        // (tangent coordinates are in units of r, so the moments are O(1) and the threshold is
+        // scale-free).
+        Eigen::FullPivLU<Eigen::Matrix3d> lu(moments[c] / moments[c](0, 0));
+        lu.setThreshold(1e-6);
+        if (lu.rank() == 3) E = lu.solve(sums[c] / moments[c](0, 0))[0];
+      }
+    }
+    out[c] = static_cast<float>(rho * E);
+  }
+  return out;
+}
+
+}  // namespace
+
 void surface_filter_apply(const SurfaceFilter& filter, const Eigen::VectorXf& frame, Eigen::VectorXf& out) {
   if (!filter.enabled()) {
     out = frame;
@@ -148,51 +199,44 @@ void surface_filter_apply(const SurfaceFilter& filter, const Eigen::VectorXf& fr
   const long n = static_cast<long>(filter.offsets.size()) - 1;
   assert(frame.size() == 3 * n && filter.albedo.rows() == n);
   assert(&out != &frame);
+  assert(!filter.options.linear || filter.tangent.size() == filter.indices.size());
   out.resize(3 * n);
-  const bool linear = filter.options.linear;
-  assert(!linear || filter.tangent.size() == filter.indices.size());
   parallel_for_chunks(n, 1024, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
-      // Per channel: the weighted moments of (1, u, v) and of E against them; the mean uses
-      // only the first.
-      Eigen::Matrix3d moments[3] = {Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero()};
-      Eigen::Vector3d sums[3] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
-      for (int64_t e = filter.offsets[static_cast<size_t>(i)]; e < filter.offsets[static_cast<size_t>(i) + 1]; ++e) {
-        const int j = filter.indices[static_cast<size_t>(e)];
-        const double w = filter.weights[static_cast<size_t>(e)];
-        const Eigen::Vector3d x = linear ? Eigen::Vector3d(1, filter.tangent[static_cast<size_t>(e)].x(),
-                                                           filter.tangent[static_cast<size_t>(e)].y())
-                                         : Eigen::Vector3d(1, 0, 0);
-        for (int c = 0; c < 3; ++c) {
-          const double rho = filter.albedo(j, c);
-          if (rho > 0) {
-            sums[c] += w * (frame[3 * j + c] / rho) * x;  // the neighbour's irradiance E_j
-            if (linear) {
-              moments[c].noalias() += w * x * x.transpose();
-            } else {
-              moments[c](0, 0) += w;
-            }
-          }
-        }
-      }
-      for (int c = 0; c < 3; ++c) {
-        const double rho = filter.albedo(i, c);
-        double E = 0;
-        if (rho > 0 && moments[c](0, 0) > 0) {
-          E = sums[c][0] / moments[c](0, 0);
-          if (linear) {
-            // The plane's value at u = v = 0; the mean when the neighbours do not span the plane
-            // (tangent coordinates are in units of r, so the moments are O(1) and the threshold
-            // is scale-free).
-            Eigen::FullPivLU<Eigen::Matrix3d> lu(moments[c] / moments[c](0, 0));
-            lu.setThreshold(1e-6);
-            if (lu.rank() == 3) E = lu.solve(sums[c] / moments[c](0, 0))[0];
-          }
-        }
-        out[3 * i + c] = static_cast<float>(rho * E);
-      }
+      out.segment<3>(3 * i) = filtered_point(filter, i, [&](int j) { return frame.data() + 3 * static_cast<long>(j); });
     }
   });
+}
+
+std::vector<int> surface_filter_support(const SurfaceFilter& filter, const std::vector<int>& points) {
+  std::vector<int> support;
+  for (const int i : points) {
+    if (!filter.enabled()) {
+      support.push_back(i);
+      continue;
+    }
+    for (int64_t e = filter.offsets[static_cast<size_t>(i)]; e < filter.offsets[static_cast<size_t>(i) + 1]; ++e) {
+      support.push_back(filter.indices[static_cast<size_t>(e)]);
+    }
+  }
+  std::sort(support.begin(), support.end());
+  support.erase(std::unique(support.begin(), support.end()), support.end());
+  return support;
+}
+
+void surface_filter_apply_at(const SurfaceFilter& filter, const std::vector<int>& points,
+                             const std::vector<int>& support, const Eigen::VectorXf& values, Eigen::VectorXf& out) {
+  assert(values.size() == 3 * static_cast<long>(support.size()));
+  const auto value = [&](int j) {
+    const auto it = std::lower_bound(support.begin(), support.end(), j);
+    assert(it != support.end() && *it == j);
+    return values.data() + 3 * (it - support.begin());
+  };
+  out.resize(3 * static_cast<long>(points.size()));
+  for (size_t p = 0; p < points.size(); ++p) {
+    out.segment<3>(3 * static_cast<long>(p)) =
+        filter.enabled() ? filtered_point(filter, points[p], value) : Eigen::Map<const Eigen::Vector3f>(value(points[p]));
+  }
 }
 
 }  // namespace animspace::illumination

@@ -88,4 +88,12 @@ Result<SurfaceFilter> surface_filter_precompute(const SurfaceMesh& surface, cons
 // Threads over points. With the filter off, out = frame. `out` must not alias `frame`.
 void surface_filter_apply(const SurfaceFilter& filter, const Eigen::VectorXf& frame, Eigen::VectorXf& out);
 
+// The filtered values at a few points only (a PMSC model's key points): `support` is every point
+// their filters read (sorted, unique; surface_filter_support), `values` the frame there (3·|support|),
+// out the filtered values at `points` (3·|points|), equal bit for bit to those of
+// surface_filter_apply on the whole frame. With the filter off, support = points' sorted set.
+std::vector<int> surface_filter_support(const SurfaceFilter& filter, const std::vector<int>& points);
+void surface_filter_apply_at(const SurfaceFilter& filter, const std::vector<int>& points,
+                             const std::vector<int>& support, const Eigen::VectorXf& values, Eigen::VectorXf& out);
+
 }  // namespace animspace::illumination

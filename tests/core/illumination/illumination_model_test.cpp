@@ -132,6 +132,15 @@ TEST(IlluminationIoTest, FilterAndKeySamplesRoundTripAndOlderFilesLoadUnfiltered
   key_gather.samples = 32;
   filtered->engine->indirect(light, key_gather, keys, key_direct);
   EXPECT_EQ(key_values, key_direct) << "the keys are gathered with key_samples rays";
+  // Without key_samples the keys are the full calculation's values at the key points: the gather
+  // at their filters' support, filtered there.
+  Eigen::VectorXf from_support;
+  gather_keys(*filtered->engine, setup.gather, filtered->filter.get(), 0, light, keys, from_support);
+  for (size_t p = 0; p < keys.size(); ++p) {
+    EXPECT_EQ(Eigen::Vector3f(from_support.segment<3>(3 * static_cast<long>(p))),
+              Eigen::Vector3f(expected.segment<3>(3 * keys[p])))
+        << "key " << keys[p];
+  }
 
   for (const auto& [key, value] : std::vector<std::pair<std::string, std::string>>{
            {"illumination.filter_neighbours", "-2"},

@@ -2,6 +2,7 @@
 // constant for any k and any albedo, a linear irradiance on a plane is kept where the
 // neighbourhood is symmetric, the two sides of a fold and two albedos do not mix, and a noisy
 // constant field's variance falls as 1/k by the Gaussian's effective neighbour count.
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -224,6 +225,31 @@ TEST(SurfaceFilterTest, ANoisyConstantFieldsVarianceFallsAsOneOverK) {
       EXPECT_NEAR(previous / variance, 4.0, 1.0) << "k " << k << ": 4 times the neighbours";
     }
     previous = variance;
+  }
+}
+
+TEST(SurfaceFilterTest, FilteringAFewPointsFromTheirSupportEqualsFilteringTheFrame) {
+  SurfaceMesh s = grid(25, 0.01);
+  std::mt19937 random(5);
+  std::uniform_real_distribution<float> uniform(0.05f, 0.95f);
+  for (long i = 0; i < s.albedo.rows(); ++i) s.albedo.row(i) << uniform(random), uniform(random), uniform(random);
+  Eigen::VectorXf L(3 * s.vertices.rows());
+  for (long i = 0; i < L.size(); ++i) L[i] = uniform(random);
+  const std::vector<int> points{0, 312, 77, 600, 312};
+  for (const bool linear : {false, true}) {
+    const SurfaceFilter f = precompute(s, 20, linear);
+    Eigen::VectorXf whole, few;
+    surface_filter_apply(f, L, whole);
+    const std::vector<int> support = surface_filter_support(f, points);
+    ASSERT_TRUE(std::is_sorted(support.begin(), support.end()));
+    EXPECT_LT(support.size(), static_cast<size_t>(s.vertices.rows()) / 2);
+    Eigen::VectorXf values(3 * support.size());
+    for (size_t q = 0; q < support.size(); ++q) values.segment<3>(3 * static_cast<long>(q)) = L.segment<3>(3 * support[q]);
+    surface_filter_apply_at(f, points, support, values, few);
+    for (size_t p = 0; p < points.size(); ++p) {
+      EXPECT_EQ(Eigen::Vector3f(few.segment<3>(3 * static_cast<long>(p))), Eigen::Vector3f(whole.segment<3>(3 * points[p])))
+          << "point " << points[p] << " linear " << linear;
+    }
   }
 }
 
