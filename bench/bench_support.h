@@ -66,6 +66,9 @@ struct IlluminationSuiteOptions {
   // reference, roughness in the light's position, per candidate gather) and then the suite;
   // 2: the study only.
   int gather_study = 0;
+  // Issue #38 item 3: pmsc::TrainingOptions::held_out_basis_slack (0: M from the error bound);
+  // < 0: the illumination training's default.
+  double basis_slack = -1;
 };
 
 struct SuiteOptions {

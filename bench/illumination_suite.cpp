@@ -35,6 +35,7 @@
 #include "core/illumination/gather_noise.h"
 #include "core/illumination/illumination_model.h"
 #include "core/common/atomic_file.h"
+#include "core/common/parallel.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/render/png.h"
 #include "core/render/renderer.h"
@@ -357,6 +358,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   training.gather.light_radius = o.light_radius;
   training.gather.shadow_rays = o.shadow_rays;
   training.relative_tolerance = !o.absolute_tolerance;
+  if (o.basis_slack >= 0) training.pmsc.held_out_basis_slack = o.basis_slack;
   if (o.gather_study > 0) {
     const std::vector<NovelLight> probe = novel_lights(room, grid, 1, 0);
     for (auto& row : gather_study(scene, probe[0].light, o.samples)) results.push_back(row);
@@ -409,6 +411,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   if (reference_gather.light_radius > 0) reference_gather.shadow_rays = std::max(reference_gather.shadow_rays, 4);
   std::printf("\n%-4s %-18s %-7s %9s %9s %9s %7s %9s %9s %9s %9s %9s\n", "#", "where", "inside", "rel_rms", "floor",
               "max/max", "status", "full_s", "keys_ms", "recon_ms", "est_ref", "full_ref");
+  std::vector<double> recon_one_thread_s;
   std::vector<double> full_s, keys_s, recon_s, rms_inside, max_inside, est_ref_inside, full_ref_inside;
   int hits_inside = 0, flagged_outside = 0, n_inside = 0, n_outside = 0;
   int same_verdict = 0, intensity_trials = 0, hits_within_tolerance = 0;
@@ -423,7 +426,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
     scene.indirect({novel.light}, training.gather, all, full);
     const double full_seconds = since(full_start);
     Eigen::VectorXf keys;
-    std::vector<double> key_times, recon_times;
+    std::vector<double> key_times, recon_times, recon_one_thread_times;
     pmsc::CachedPose cached;
     for (int r = 0; r < kTimedRepetitions; ++r) {
       const auto k0 = Clock::now();
@@ -432,6 +435,14 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       const auto r0 = Clock::now();
       pmsc::evaluate_cached(model, keys, nullptr, cached);
       recon_times.push_back(since(r0));
+      // Issue #38 item 3: the reconstruction before its rows were split across the cores, in the
+      // same run (the same product on one thread).
+      set_thread_limit(1);
+      pmsc::CachedPose one_thread;
+      const auto r1 = Clock::now();
+      pmsc::evaluate_cached(model, keys, nullptr, one_thread);
+      recon_one_thread_times.push_back(since(r1));
+      set_thread_limit(0);
     }
     const Accuracy a = accuracy(cached.points, full);
     // The floor of any key choice: the full frame's orthogonal projection onto the subspace.
@@ -458,6 +469,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                        {"full_gather_seconds", full_seconds},
                        {"key_gather_seconds", median(key_times)},
                        {"reconstruct_seconds", median(recon_times)},
+                       {"reconstruct_one_thread_seconds", median(recon_one_thread_times)},
                        {"estimate_reference_relative_rms_error", estimate_vs_reference},
                        {"full_reference_relative_rms_error", full_vs_reference}};
     std::printf("%-4zu %-18s %-7s %8.3f%% %8.3f%% %8.2f%% %7s %9.3f %9.3f %9.3f %8.3f%% %8.3f%%\n", l,
@@ -491,6 +503,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       full_s.push_back(full_seconds);
       keys_s.push_back(median(key_times));
       recon_s.push_back(median(recon_times));
+      recon_one_thread_s.push_back(median(recon_one_thread_times));
       inside_keys.push_back(keys);
       inside_estimates.push_back(cached.points);
       inside_lights.push_back(novel);
@@ -580,6 +593,13 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"full_gather_seconds", full_gather},
                          {"key_gather_seconds", key_gather},
                          {"reconstruct_seconds", reconstruct},
+                         {"reconstruct_one_thread_seconds", median(recon_one_thread_s)},
+                         {"reconstruct_threads", thread_count()},
+                         {"held_out_basis_slack", training.pmsc.held_out_basis_slack},
+                         {"held_out_relative_rms", report.pmsc.held_out_relative_rms},
+                         {"pmsc_pca_seconds", report.pmsc.pca_seconds},
+                         {"pmsc_key_selection_seconds", report.pmsc.key_selection_seconds},
+                         {"pmsc_calibration_seconds", report.pmsc.calibration_seconds},
                          {"round_trip_seconds", round_trip},
                          {"round_trip_light_set_seconds", round_trip_light},  // hits only
                          {"speedup_in_process", speedup_in_process},
@@ -621,6 +641,22 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               1e3 * round_trip, speedup_served, 1e3 * round_trip_light, speedup_served_light, served_difference);
   std::printf("training: %.1f s for %zu frames (%.1f s gathering)\n", train_seconds, training.lights.size(),
               report.gather_seconds);
+  // Issue #38 item 3: the reconstruction on every core against one thread in this run, the basis
+  // size and the rule that chose it, and where the PMSC training's time went.
+  std::printf("reconstruction %.3f ms on up to %lld threads, %.3f ms on one (%.2f×); M = %d%s\n", 1e3 * reconstruct,
+              static_cast<long long>(thread_count()), 1e3 * median(recon_one_thread_s),
+              reconstruct > 0 ? median(recon_one_thread_s) / reconstruct : 0.0, model.basis_size(),
+              training.pmsc.held_out_basis_slack > 0 ? " (held-out rule)" : "");
+  const std::vector<double>& curve = report.pmsc.held_out_relative_rms;
+  if (!curve.empty()) {
+    std::printf("held-out relative RMS projection error by M (slack %g: the smallest M within %g× the best):",
+                training.pmsc.held_out_basis_slack, 1 + training.pmsc.held_out_basis_slack);
+    for (size_t k = 1; k < curve.size(); k += k < 10 ? 1 : 10) std::printf(" %zu:%.4f", k, curve[k]);
+    std::printf(" %zu:%.4f\n", curve.size() - 1, curve.back());
+  }
+  std::printf("PMSC training %.1f s: PCA and M %.1f s, key points %.1f s, calibration folds %.1f s\n",
+              report.pmsc.seconds, report.pmsc.pca_seconds, report.pmsc.key_selection_seconds,
+              report.pmsc.calibration_seconds);
   return results;
 }
 

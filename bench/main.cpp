@@ -90,6 +90,9 @@ int main(int argc, char** argv) {
   app.add_flag("--illumination-absolute-tolerance", options.illumination.absolute_tolerance,
                "illumination: the soft cache's tolerance in radiance units (before issue #38), not relative to "
                "each frame's radiance");
+  app.add_option("--illumination-basis-slack", options.illumination.basis_slack,
+                 "illumination: M is the smallest basis whose held-out projection error is within (1 + this) of "
+                 "the best (0: M from the error bound; < 0: the training's default; issue #38)");
   app.add_option("--illumination-gather-study", options.illumination.gather_study,
                  "illumination: 1: measure candidate gathers' noise and smoothness first; 2: only that")
       ->check(CLI::Range(0, 2))
