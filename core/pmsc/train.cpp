@@ -10,6 +10,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "core/common/kernels.h"
 #include "core/common/parallel.h"
 #include "core/common/timing.h"
 
@@ -136,7 +137,12 @@ Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const
   const FoldWeights weights = fold_weights(G, T.cols(), kept, M);
   Subspace out;
   out.mean.noalias() = T * weights.mean_weights;
-  out.basis.noalias() = T * weights.W;
+  // The R × F by F × M product through the dispatched kernel (kernels.h): OpenBLAS's dgemm took
+  // 0.07 s against Eigen/SSE2's 0.38 s for the 20,000-point Cornell box (60,000 × 144 × 100),
+  // once per calibration fold (issue #38 item 3).
+  out.basis.resize(T.rows(), weights.W.cols());
+  gemm(T.rows(), T.cols(), weights.W.cols(), T.data(), T.rows(), weights.W.data(), weights.W.rows(), 0.0,
+       out.basis.data(), out.basis.rows());
   out.sigma = weights.sigma;
   return out;
 }
