@@ -74,10 +74,9 @@ bool parse_kernel(const std::string& text, Kernel& out) {
   return true;
 }
 
-namespace {
-
 void gemm_serial(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
                  float* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
   if (active_kernel() == Kernel::kPortable) return portable_gemm(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
   if (columns < kBlasGemmMinColumns) {
     for (long j = 0; j < columns; ++j) {
@@ -92,6 +91,7 @@ void gemm_serial(long rows, long inner, long columns, const float* a, long lda, 
 
 void gemm_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
                  double beta, double* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
   if (active_kernel() == Kernel::kPortable) return portable_gemm(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
   if (columns < kBlasGemmMinColumns) {
     for (long j = 0; j < columns; ++j) {
@@ -103,6 +103,8 @@ void gemm_serial(long rows, long inner, long columns, const double* a, long lda,
   cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
 }
+
+namespace {
 
 // Rows of C split across the cores (issue #38 item 3): every row of C = A·B + beta·C depends on its
 // own row of A only, so each thread runs the serial product on its own block of rows. A row's

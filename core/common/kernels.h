@@ -54,4 +54,12 @@ void gemm(long rows, long inner, long columns, const float* a, long lda, const f
 void gemm(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb, double beta,
           double* c, long ldc);
 
+// The same products on the calling thread alone, whatever their size: for results that must not
+// depend on the machine's cores (the rows at a split's edge may round differently), e.g. a
+// training whose model is the same on one thread and on two.
+void gemm_serial(long rows, long inner, long columns, const float* a, long lda, const float* b, long ldb, float beta,
+                 float* c, long ldc);
+void gemm_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
+                 double beta, double* c, long ldc);
+
 }  // namespace animspace

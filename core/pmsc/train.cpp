@@ -141,8 +141,8 @@ Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const
   // 0.07 s against Eigen/SSE2's 0.38 s for the 20,000-point Cornell box (60,000 × 144 × 100),
   // once per calibration fold (issue #38 item 3).
   out.basis.resize(T.rows(), weights.W.cols());
-  gemm(T.rows(), T.cols(), weights.W.cols(), T.data(), T.rows(), weights.W.data(), weights.W.rows(), 0.0,
-       out.basis.data(), out.basis.rows());
+  gemm_serial(T.rows(), T.cols(), weights.W.cols(), T.data(), T.rows(), weights.W.data(), weights.W.rows(), 0.0,
+              out.basis.data(), out.basis.rows());
   out.sigma = weights.sigma;
   return out;
 }
