@@ -20,6 +20,24 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
       ->check(CLI::Range(1, 65536))
       ->capture_default_str();
   cmd->add_option("--seed", a.seed, "Seed of the per-point ray directions")->capture_default_str();
+  cmd->add_option("--filter-neighbours", a.filter_neighbours,
+                  "Surface filter of each gathered frame (and of the daemon's full calculation): each point's "
+                  "irradiance averaged over about this many neighbours on the surface (0: no filter)")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
+  cmd->add_option("--filter-min-normal-cosine", a.filter_min_normal_cosine,
+                  "Surface filter: neighbours whose normals make a smaller cosine with the point's are left out")
+      ->check(CLI::Range(-0.999999, 1.0))
+      ->capture_default_str();
+  cmd->add_flag("--filter-linear,!--filter-mean", a.filter_linear,
+                "Surface filter: fit a plane to the neighbours' irradiance (keeps gradients by borders and creases) "
+                "instead of averaging it");
+  cmd->add_option("--key-samples", a.key_samples,
+                  "Gather rays per key point, unfiltered, when the daemon gathers the keys from a request's light (0: the "
+                  "key points' filter support at --samples rays, filtered: the values the model learned; measured "
+                  "better in docs/BENCHMARKS.md \"Issue #38 item 1\")")
+      ->check(CLI::Range(0, 65536))
+      ->capture_default_str();
   cmd->add_option("--lights-x", a.lights_x, "Training lights across the room (x)")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
@@ -66,6 +84,8 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
   }
   options.gather.samples = a.samples;
   options.gather.seed = a.seed;
+  options.filter = {a.filter_neighbours, a.filter_min_normal_cosine, a.filter_linear};
+  options.key_samples = a.key_samples;
   options.tolerance_fraction = a.tolerance;
   options.relative_tolerance = !a.absolute_tolerance;
   options.error_bound_fraction = a.error_bound;

@@ -24,6 +24,11 @@ struct TrainIlluminationArgs {
   bool absolute_tolerance = !illumination::IlluminationTrainingOptions{}.relative_tolerance;
   double error_bound = illumination::IlluminationTrainingOptions{}.error_bound_fraction;
   double false_hit_rate = pmsc::TrainingOptions{}.false_hit_rate;
+  // Issue #38 item 1: the surface filter's k (0: none) and its normal test; rays per key point.
+  int filter_neighbours = illumination::IlluminationTrainingOptions{}.filter.neighbours;
+  double filter_min_normal_cosine = illumination::SurfaceFilterOptions{}.min_normal_cosine;
+  bool filter_linear = illumination::IlluminationTrainingOptions{}.filter.linear;
+  int key_samples = illumination::IlluminationTrainingOptions{}.key_samples;
   int basis = 0;
   int max_key_points = 200;
   int regions = 8;
