@@ -69,6 +69,13 @@ struct IlluminationSuiteOptions {
   // Issue #38 item 3: pmsc::TrainingOptions::held_out_basis_slack (0: M from the error bound);
   // < 0: the illumination training's default.
   double basis_slack = -1;
+  // Issue #38 item 1: the surface filter's expected neighbour count k for the training frames and
+  // the full calculation (0: unfiltered), the rays per key point (0: samples), and the ray count
+  // of the "converged full calculation" baseline (timed and judged against the reference).
+  int filter_neighbours = 0;
+  bool filter_linear = false;
+  int key_samples = 0;
+  int converged_samples = 1024;
 };
 
 struct SuiteOptions {

@@ -10,6 +10,12 @@
 //                             mean indirect radiance
 //   max_error_over_frame_max  the largest point error ‖estimate − full‖ ÷ the frame's largest ‖full‖
 //   status                    the soft cache's verdict (hit / blend / miss) for the key values
+// Issue #38 item 1 (--illumination-filter-neighbours k > 0): the full calculation is the gather
+// through the surface filter, the model is trained on such frames, and its keys are gather_keys's
+// (the filter's support gathered and filtered, or --illumination-key-samples rays unfiltered).
+// Against the 4096-ray reference at 200 spread points: est_ref (the subspace estimate), full_ref
+// (the full calculation), gather_ref (the same gather before the filter) and conv_ref (the
+// converged full calculation, --illumination-converged-samples rays, also timed).
 // Speed (medians over the inside lights): the full gather, the key gather, the reconstruction
 // (pmsc::evaluate_cached) and, through a real animspaced on loopback, the round trip of
 // EvaluateKeyPoints with the client's key values, and with the light alone (the server gathers
@@ -34,6 +40,7 @@
 #include "core/container/model_container.h"
 #include "core/illumination/gather_noise.h"
 #include "core/illumination/illumination_model.h"
+#include "core/illumination/surface_filter.h"
 #include "core/common/atomic_file.h"
 #include "core/common/parallel.h"
 #include "core/pmsc/pmsc_io.h"
@@ -333,6 +340,81 @@ nlohmann::json gather_study(const illumination::IlluminationEngine& scene, const
                     {"reference_relative_rms_error", reference_rms},
                     {"reference_max_error_over_max", reference_max}});
   }
+  // Issue #38 item 1: the original gather at S rays through the surface filter, by its expected
+  // neighbour count k, against the same reference: the filter trades the gather's noise (falling
+  // as 1/√(0.6 k)) for a bias that grows with the radius; the two seeds' difference is what is
+  // left of the noise.
+  std::printf("original gather (%d rays) through the surface filter by neighbour count k, at the %d reference "
+              "points:\n%-8s %9s %10s %10s %10s %10s %10s\n",
+              samples, kReferencePoints, "k", "radius_m", "2seeds_rms", "ref_rms", "ref_max", "roughness",
+              "filter_s");
+  illumination::GatherOptions original;
+  original.samples = samples;
+  illumination::GatherOptions other = original;
+  other.seed = 1;
+  Eigen::VectorXf gathered, gathered_other;
+  scene.indirect({light}, original, all, gathered);
+  scene.indirect({light}, other, all, gathered_other);
+  for (const auto& [k, linear] : std::vector<std::pair<int, bool>>{
+           {0, false}, {8, false}, {16, false}, {32, false}, {64, false}, {16, true}, {32, true}, {64, true},
+           {128, true}}) {
+    auto filter = illumination::surface_filter_precompute(scene.surface(), {k, 0.9, linear});
+    if (!filter) {
+      std::printf("illumination: %s\n", filter.error().message.c_str());
+      break;
+    }
+    Eigen::VectorXf a, b;
+    const auto start = Clock::now();
+    illumination::surface_filter_apply(*filter, gathered, a);
+    const double filter_seconds = since(start);
+    illumination::surface_filter_apply(*filter, gathered_other, b);
+    Eigen::VectorXf a_sampled(3 * reference_points.size());
+    for (size_t p = 0; p < reference_points.size(); ++p) {
+      a_sampled.segment<3>(3 * static_cast<long>(p)) = a.segment<3>(3 * reference_points[p]);
+    }
+    const double seeds = illumination::relative_rms_difference(a, b);
+    const double reference_rms = illumination::relative_rms_difference(a_sampled, point_reference.values);
+    const double reference_max = illumination::max_error_over_max(a_sampled, point_reference.values);
+    // Roughness in the light's position of the filtered gather: the filter is linear and fixed,
+    // so it cannot add steps; it averages those of neighbouring points.
+    double roughness = 0;
+    {
+      std::vector<Eigen::VectorXf> frames(static_cast<size_t>(positions));
+      for (int q = 0; q < positions; ++q) {
+        PointLight moved = light;
+        moved.position += (q - positions / 2) * step;
+        Eigen::VectorXf raw;
+        scene.indirect({moved}, original, all, raw);
+        illumination::surface_filter_apply(*filter, raw, frames[static_cast<size_t>(q)]);
+      }
+      double sum2 = 0, mean = 0;
+      long count = 0;
+      for (int q = 0; q < positions; ++q) mean += frames[static_cast<size_t>(q)].cast<double>().mean() / positions;
+      for (int q = 1; q + 1 < positions; ++q) {
+        for (const int p : roughness_points) {
+          const Eigen::Vector3d second = (frames[static_cast<size_t>(q) - 1].segment<3>(3 * p) -
+                                          2 * frames[static_cast<size_t>(q)].segment<3>(3 * p) +
+                                          frames[static_cast<size_t>(q) + 1].segment<3>(3 * p)).cast<double>();
+          sum2 += second.squaredNorm();
+          count += 3;
+        }
+      }
+      roughness = mean > 0 ? std::sqrt(sum2 / static_cast<double>(count)) / mean : 0;
+    }
+    std::printf("%-8s %9.4f %9.3f%% %9.3f%% %9.3f%% %9.3f%% %10.4f\n",
+                (std::to_string(k) + (linear ? " lin" : "")).c_str(), filter->radius, 100 * seeds,
+                100 * reference_rms, 100 * reference_max, 100 * roughness, filter_seconds);
+    rows.push_back({{"filter_study", true},
+                    {"samples", samples},
+                    {"filter_neighbours", k},
+                    {"filter_linear", linear},
+                    {"filter_radius", filter->radius},
+                    {"filter_seconds", filter_seconds},
+                    {"two_seed_relative_rms_difference", seeds},
+                    {"reference_relative_rms_error", reference_rms},
+                    {"reference_max_error_over_max", reference_max},
+                    {"roughness", roughness}});
+  }
   return rows;
 }
 
@@ -359,6 +441,13 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   training.gather.shadow_rays = o.shadow_rays;
   training.relative_tolerance = !o.absolute_tolerance;
   if (o.basis_slack >= 0) training.pmsc.held_out_basis_slack = o.basis_slack;
+  training.filter.neighbours = o.filter_neighbours;
+  training.filter.linear = o.filter_linear;
+  training.key_samples = o.key_samples;
+  illumination::GatherOptions keys_gather = training.gather;
+  if (o.key_samples > 0) keys_gather.samples = o.key_samples;
+  illumination::GatherOptions converged_gather = training.gather;
+  converged_gather.samples = o.converged_samples;
   if (o.gather_study > 0) {
     const std::vector<NovelLight> probe = novel_lights(room, grid, 1, 0);
     for (auto& row : gather_study(scene, probe[0].light, o.samples)) results.push_back(row);
@@ -368,6 +457,21 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "training on %zu lights (%d × %d grid)\n",
               scene.point_count(), o.samples, o.sampling.c_str(), o.light_radius, o.shadow_rays, training.lights.size(),
               grid.nx, grid.nz);
+  auto surface_filter = illumination::surface_filter_precompute(scene.surface(), training.filter, "filter");
+  if (!surface_filter) {
+    std::printf("illumination: %s\n", surface_filter.error().message.c_str());
+    return results;
+  }
+  std::printf("illumination (issue #38 item 1): the full calculation is the %d-ray gather %s; key points gathered with "
+              "%d rays%s; the converged full calculation: %d rays, unfiltered\n",
+              o.samples,
+              surface_filter->enabled() ? ("through the surface filter (" + std::string(o.filter_linear ? "linear, " : "") +
+                                           "k = " + std::to_string(o.filter_neighbours) +
+                                           ", radius " + std::to_string(surface_filter->radius) + " m)").c_str()
+                                        : "unfiltered",
+              keys_gather.samples,
+              o.key_samples == 0 && surface_filter->enabled() ? " at every point their filters read, then filtered" : "",
+              o.converged_samples);
 
   illumination::IlluminationTrainingReport report;
   const auto train_start = Clock::now();
@@ -409,10 +513,13 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   reference_gather.samples = kReferenceRays;
   reference_gather.seed = 7777;
   if (reference_gather.light_radius > 0) reference_gather.shadow_rays = std::max(reference_gather.shadow_rays, 4);
-  std::printf("\n%-4s %-18s %-7s %9s %9s %9s %7s %9s %9s %9s %9s %9s\n", "#", "where", "inside", "rel_rms", "floor",
-              "max/max", "status", "full_s", "keys_ms", "recon_ms", "est_ref", "full_ref");
+  std::printf("\n%-4s %-18s %-7s %9s %9s %9s %7s %9s %9s %9s %9s %9s %9s %9s\n", "#", "where", "inside", "rel_rms",
+              "floor", "max/max", "status", "full_s", "keys_ms", "recon_ms", "est_ref", "full_ref", "gather_ref",
+              "conv_ref");
   std::vector<double> recon_one_thread_s;
   std::vector<double> full_s, keys_s, recon_s, rms_inside, max_inside, est_ref_inside, full_ref_inside;
+  std::vector<double> gather_ref_inside, converged_ref_inside, converged_s, filter_s;
+  constexpr size_t kConvergedTimed = 3;  // inside lights whose converged full frame is timed (it costs 16×)
   int hits_inside = 0, flagged_outside = 0, n_inside = 0, n_outside = 0;
   int same_verdict = 0, intensity_trials = 0, hits_within_tolerance = 0;
   std::vector<Eigen::VectorXf> inside_keys;
@@ -421,16 +528,22 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   std::vector<Eigen::VectorXf> inside_full;  // the first three, for the figure
   for (size_t l = 0; l < lights.size(); ++l) {
     const NovelLight& novel = lights[l];
-    Eigen::VectorXf full;
+    // The full calculation the model learned: the gather, then the surface filter (issue #38
+    // item 1; off when k = 0).
+    Eigen::VectorXf gathered, full;
     const auto full_start = Clock::now();
-    scene.indirect({novel.light}, training.gather, all, full);
+    scene.indirect({novel.light}, training.gather, all, gathered);
+    const auto filter_start = Clock::now();
+    illumination::surface_filter_apply(*surface_filter, gathered, full);
+    const double filter_seconds = since(filter_start);
     const double full_seconds = since(full_start);
     Eigen::VectorXf keys;
     std::vector<double> key_times, recon_times, recon_one_thread_times;
     pmsc::CachedPose cached;
     for (int r = 0; r < kTimedRepetitions; ++r) {
       const auto k0 = Clock::now();
-      scene.indirect({novel.light}, training.gather, model.key_points, keys);
+      illumination::gather_keys(scene, training.gather, &*surface_filter, o.key_samples, {novel.light},
+                                model.key_points, keys);
       key_times.push_back(since(k0));
       const auto r0 = Clock::now();
       pmsc::evaluate_cached(model, keys, nullptr, cached);
@@ -450,13 +563,27 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
     const Eigen::VectorXf projected = model.mean + model.basis * (model.basis.transpose() * centred);
     const Accuracy floor = accuracy(projected, full);
     Eigen::VectorXf reference, estimate_sampled(3 * reference_points.size()), full_sampled(3 * reference_points.size());
+    Eigen::VectorXf gather_sampled(3 * reference_points.size()), converged_sampled;
     scene.indirect({novel.light}, reference_gather, reference_points, reference);
     for (size_t p = 0; p < reference_points.size(); ++p) {
       estimate_sampled.segment<3>(3 * static_cast<long>(p)) = cached.points.segment<3>(3 * reference_points[p]);
       full_sampled.segment<3>(3 * static_cast<long>(p)) = full.segment<3>(3 * reference_points[p]);
+      gather_sampled.segment<3>(3 * static_cast<long>(p)) = gathered.segment<3>(3 * reference_points[p]);
+    }
+    // The converged full calculation: the gather's value at a point does not depend on the other
+    // points gathered, so its error at the reference points is that of its full frame; the full
+    // frame is gathered (and timed) for the first few inside lights only.
+    scene.indirect({novel.light}, converged_gather, reference_points, converged_sampled);
+    if (novel.inside && converged_s.size() < kConvergedTimed) {
+      Eigen::VectorXf converged;
+      const auto converged_start = Clock::now();
+      scene.indirect({novel.light}, converged_gather, all, converged);
+      converged_s.push_back(since(converged_start));
     }
     const double estimate_vs_reference = illumination::relative_rms_difference(estimate_sampled, reference);
     const double full_vs_reference = illumination::relative_rms_difference(full_sampled, reference);
+    const double gather_vs_reference = illumination::relative_rms_difference(gather_sampled, reference);
+    const double converged_vs_reference = illumination::relative_rms_difference(converged_sampled, reference);
     nlohmann::json row{{"light", l},
                        {"position", {novel.light.position.x(), novel.light.position.y(), novel.light.position.z()}},
                        {"where", novel.where},
@@ -471,12 +598,15 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                        {"reconstruct_seconds", median(recon_times)},
                        {"reconstruct_one_thread_seconds", median(recon_one_thread_times)},
                        {"estimate_reference_relative_rms_error", estimate_vs_reference},
-                       {"full_reference_relative_rms_error", full_vs_reference}};
-    std::printf("%-4zu %-18s %-7s %8.3f%% %8.3f%% %8.2f%% %7s %9.3f %9.3f %9.3f %8.3f%% %8.3f%%\n", l,
+                       {"full_reference_relative_rms_error", full_vs_reference},
+                       {"gather_reference_relative_rms_error", gather_vs_reference},
+                       {"converged_reference_relative_rms_error", converged_vs_reference},
+                       {"filter_seconds", filter_seconds}};
+    std::printf("%-4zu %-18s %-7s %8.3f%% %8.3f%% %8.2f%% %7s %9.3f %9.3f %9.3f %8.3f%% %8.3f%% %8.3f%% %8.3f%%\n", l,
                 novel.where.c_str(), novel.inside ? "yes" : "no", 100 * a.relative_rms_error,
                 100 * floor.relative_rms_error, 100 * a.max_error_over_frame_max, status_name(cached.status),
                 full_seconds, 1e3 * median(key_times), 1e3 * median(recon_times), 100 * estimate_vs_reference,
-                100 * full_vs_reference);
+                100 * full_vs_reference, 100 * gather_vs_reference, 100 * converged_vs_reference);
     results.push_back(row);
     if (novel.inside) {
       ++n_inside;
@@ -500,6 +630,9 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       max_inside.push_back(a.max_error_over_frame_max);
       est_ref_inside.push_back(estimate_vs_reference);
       full_ref_inside.push_back(full_vs_reference);
+      gather_ref_inside.push_back(gather_vs_reference);
+      converged_ref_inside.push_back(converged_vs_reference);
+      filter_s.push_back(filter_seconds);
       full_s.push_back(full_seconds);
       keys_s.push_back(median(key_times));
       recon_s.push_back(median(recon_times));
@@ -521,6 +654,8 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   }
   const double full_gather = median(full_s), key_gather = median(keys_s), reconstruct = median(recon_s);
   const double speedup_in_process = full_gather / (key_gather + reconstruct);
+  const double converged_full = median(converged_s);
+  const double speedup_vs_converged = converged_full / (key_gather + reconstruct);
 
   // Served: the same model from a real daemon on loopback, inside lights only (hits: what the
   // soft cache answers from the subspace alone).
@@ -609,6 +744,16 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"median_relative_rms_error_inside", median(rms_inside)},
                          {"median_estimate_reference_relative_rms_error_inside", median(est_ref_inside)},
                          {"median_full_reference_relative_rms_error_inside", median(full_ref_inside)},
+                         {"median_gather_reference_relative_rms_error_inside", median(gather_ref_inside)},
+                         {"median_converged_reference_relative_rms_error_inside", median(converged_ref_inside)},
+                         {"filter_neighbours", o.filter_neighbours},
+                         {"filter_linear", o.filter_linear},
+                         {"filter_radius", surface_filter->radius},
+                         {"filter_seconds", median(filter_s)},
+                         {"key_samples", keys_gather.samples},
+                         {"converged_samples", o.converged_samples},
+                         {"converged_full_gather_seconds", converged_full},
+                         {"speedup_vs_converged_in_process", speedup_vs_converged},
                          {"p95_max_error_over_frame_max_inside", max_inside.empty() ? 0.0 : tools::quantile(max_inside, 0.95)},
                          {"hit_rate_inside", hit_rate_inside},
                          {"recall_outside", recall_outside},
@@ -626,16 +771,20 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "the frame max, hit rate %.2f\n",
               n_inside, 100 * median(rms_inside), 100 * summary["p95_max_error_over_frame_max_inside"].get<double>(),
               hit_rate_inside);
-  std::printf("against a %d-ray reference at %d points (inside, medians): subspace estimate %.3f%%, full gather %.3f%% "
-              "of the mean radiance\n",
-              kReferenceRays, kReferencePoints, 100 * median(est_ref_inside), 100 * median(full_ref_inside));
+  std::printf("against a %d-ray reference at %d points (inside, medians): subspace estimate %.3f%%, full calculation "
+              "%.3f%% (the %d-ray gather %.3f%% before the filter), converged full calculation (%d rays) %.3f%% of the "
+              "mean radiance\n",
+              kReferenceRays, kReferencePoints, 100 * median(est_ref_inside), 100 * median(full_ref_inside), o.samples,
+              100 * median(gather_ref_inside), o.converged_samples, 100 * median(converged_ref_inside));
   std::printf("outside (%d lights): flagged (blend or miss) %.2f\n", n_outside, recall_outside);
   std::printf("tolerance %s: the same verdict at 0.1× and 10× the light's intensity for %.2f of the inside lights; "
               "%d of %d inside hits within the tolerance\n",
               model.relative_tolerance ? "relative to each frame" : "in radiance units",
               summary["same_verdict_at_0.1x_and_10x_inside"].get<double>(), hits_within_tolerance, hits_inside);
-  std::printf("full gather %.3f s; keys %.3f ms + reconstruction %.3f ms: %.0f× in process\n", full_gather,
-              1e3 * key_gather, 1e3 * reconstruct, speedup_in_process);
+  std::printf("full calculation %.3f s (filter %.3f s of it); keys (%d rays) %.3f ms + reconstruction %.3f ms: %.0f× in "
+              "process; the converged full calculation %.3f s: %.0f×\n",
+              full_gather, median(filter_s), keys_gather.samples, 1e3 * key_gather, 1e3 * reconstruct, speedup_in_process,
+              converged_full, speedup_vs_converged);
   std::printf("served: round trip %.3f ms with the client's keys (%.0f× with the key gather), %.3f ms with the light "
               "alone (hits; %.0f×); served points differ from in-process by ≤ %g\n",
               1e3 * round_trip, speedup_served, 1e3 * round_trip_light, speedup_served_light, served_difference);

@@ -97,6 +97,23 @@ int main(int argc, char** argv) {
                  "illumination: 1: measure candidate gathers' noise and smoothness first; 2: only that")
       ->check(CLI::Range(0, 2))
       ->capture_default_str();
+  app.add_option("--illumination-filter-neighbours", options.illumination.filter_neighbours,
+                 "illumination: the surface filter's expected neighbour count k for the training frames and the full "
+                 "calculation (0: unfiltered; issue #38 item 1)")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
+  app.add_flag("--illumination-filter-linear", options.illumination.filter_linear,
+               "illumination: the surface filter fits a plane to the neighbours' irradiance instead of averaging it");
+  app.add_option("--illumination-key-samples", options.illumination.key_samples,
+                 "illumination: gather rays per key point, unfiltered (0: the key points' filter support at "
+                 "--illumination-samples rays, filtered)")
+      ->check(CLI::Range(0, 65536))
+      ->capture_default_str();
+  app.add_option("--illumination-converged-samples", options.illumination.converged_samples,
+                 "illumination: rays per point of the converged full calculation, the baseline timed beside the "
+                 "filtered one")
+      ->check(CLI::Range(1, 65536))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   if (std::filesystem::is_directory(data_dir)) {
