@@ -49,7 +49,8 @@ struct IlluminationSetup {
   std::string quantity = "indirect";
   std::optional<SceneView> view;
   // Issue #38 item 1: the filter the training frames went through (the full calculation applies
-  // it too), and the rays per key point when the server gathers the keys itself (0: gather's).
+  // it too), and the rays per key point, unfiltered, when the server gathers the keys itself (0:
+  // gather_keys's default, the filtered values at the keys).
   SurfaceFilterOptions filter;
   int key_samples = 0;
 };
