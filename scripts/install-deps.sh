@@ -10,7 +10,7 @@ packages=(
   # RPC
   libgrpc++-dev libgrpc-dev protobuf-compiler protobuf-compiler-grpc libprotobuf-dev grpc-proto
   # core numerics and geometry
-  libeigen3-dev libopenblas-serial-dev libopenmesh-dev libmeshoptimizer-dev libtinygltf-dev nlohmann-json3-dev libstb-dev
+  libeigen3-dev libopenblas-pthread-dev libopenmesh-dev libmeshoptimizer-dev libtinygltf-dev nlohmann-json3-dev libstb-dev
   # indirect illumination (core/illumination): Embree 3 ray tracing
   libembree-dev
   # subdivision in animation space (core/subdivision): OpenSubdiv builds the stencils S of P' = P S

@@ -15,6 +15,15 @@ namespace {
 
 std::atomic<Kernel> active{Kernel::kBlas};
 
+// OpenBLAS multiplies in the thread that calls it: the cores belong to the callers (the server's
+// work pool, parallel.h's loops), and a product split again inside OpenBLAS would only add
+// threads to share them. Set before main, so every product of the process — those called
+// through here and a benchmark's direct cblas anchors alike — runs the same way.
+const bool kOneBlasThread = [] {
+  openblas_set_num_threads(1);
+  return true;
+}();
+
 template <typename T>
 using Matrix = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
 template <typename T>

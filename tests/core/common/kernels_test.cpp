@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <random>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -139,6 +140,44 @@ TEST_F(KernelTest, ARowSplitProductIsWithinFloatRoundingOfTheExactProduct) {
       }
     }
   }
+}
+
+// Products called from two threads at once (the server's callers, the calibration folds) each
+// equal the same product computed alone, bit for bit. Debian's serial OpenBLAS failed this: it
+// hands out its packing buffers without a lock, and 4-9% of the products came back wrong once two
+// threads had taken the same buffer. The sizes are the calibration's (R × F by F × M): large
+// enough that OpenBLAS packs rather than taking its small-matrix path.
+TEST_F(KernelTest, ConcurrentProductsFromTwoThreadsEqualEachProductAlone) {
+  constexpr long rows = 3000, inner = 60, columns = 16;
+  constexpr int kCalls = 20000;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> value(-1, 1);
+  struct Operands {
+    std::vector<float> a, b, alone;
+    long wrong = 0;
+  };
+  std::vector<Operands> operands(2);
+  for (Operands& o : operands) {
+    o.a.resize(rows * inner);
+    o.b.resize(inner * columns);
+    for (float& x : o.a) x = value(rng);
+    for (float& x : o.b) x = value(rng);
+    o.alone.assign(rows * columns, 0.0f);
+    gemm_serial(rows, inner, columns, o.a.data(), rows, o.b.data(), inner, 0.0f, o.alone.data(), rows);
+  }
+  std::vector<std::thread> threads;
+  for (Operands& o : operands) {
+    threads.emplace_back([&o] {
+      std::vector<float> c(rows * columns);
+      for (int call = 0; call < kCalls; ++call) {
+        gemm_serial(rows, inner, columns, o.a.data(), rows, o.b.data(), inner, 0.0f, c.data(), rows);
+        if (c != o.alone) ++o.wrong;
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  EXPECT_EQ(operands[0].wrong, 0) << "of " << kCalls << " products on the first thread";
+  EXPECT_EQ(operands[1].wrong, 0) << "of " << kCalls << " products on the second thread";
 }
 
 TEST_F(KernelTest, TheBlasKernelNamesTheCoreItDispatchedTo) {
