@@ -72,10 +72,14 @@ struct IlluminationSuiteOptions {
   // Issue #38 item 1: the surface filter's expected neighbour count k for the training frames and
   // the full calculation (0: unfiltered), the rays per key point (0: samples), and the ray count
   // of the "converged full calculation" baseline (timed and judged against the reference).
-  int filter_neighbours = 0;
+  int filter_neighbours = -1;  // < 0: the illumination training's default
   bool filter_linear = false;
   int key_samples = 0;
   int converged_samples = 1024;
+  // Issue #38, an experiment for the next step: with the training unfiltered, the surface filter
+  // (this k; 0: off) applied to the subspace's reconstruction instead, measured against the
+  // filtered full calculation and the reference.
+  int post_filter_neighbours = 0;
 };
 
 struct SuiteOptions {

@@ -56,6 +56,7 @@ using illumination::PointLight;
 
 constexpr const char* kModelName = "cornell";
 constexpr int kTimedRepetitions = 5;  // of the cheap steps (key gather, reconstruction, round trip)
+constexpr int kGrainNeighbours = 8;   // grain(): the neighbourhood a frame is compared with
 
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
@@ -149,40 +150,69 @@ render::Scene figure_scene(const illumination::IlluminationEngine& scene, const 
   return s;
 }
 
-// Meyer & Anderson 2007 Fig. 5, on our scene: per novel light (rows) the full calculation
-// (direct + gathered indirect), the subspace's (direct + indirect from key points) and the error
-// of the indirect, |full − subspace|, red at 5% of the frame's largest indirect radiance.
+// Issue #38: how grainy a frame looks, as a number. Grain is what varies from a point to its
+// neighbours and not in the light: the frame minus its own surface-filtered self (`smoother`: a
+// few neighbours on the same face, so that shadow edges and fall-off, which are wider, mostly
+// stay), as the RMS over points of ‖x_i − x̃_i‖ ÷ the mean ‖x_i‖. The converged frame's value is
+// the floor (its features, and its own small noise); a panel at about that value shows no more
+// grain than the converged image.
+double grain(const illumination::SurfaceFilter& smoother, const Eigen::VectorXf& frame) {
+  Eigen::VectorXf smooth;
+  illumination::surface_filter_apply(smoother, frame, smooth);
+  const Eigen::Map<const Eigen::Matrix3Xf> x(frame.data(), 3, frame.size() / 3);
+  const Eigen::Map<const Eigen::Matrix3Xf> y(smooth.data(), 3, smooth.size() / 3);
+  const double mean = static_cast<double>(x.colwise().norm().mean());
+  const double rms = std::sqrt(static_cast<double>((x - y).colwise().squaredNorm().mean()));
+  return mean > 0 ? rms / mean : 0.0;
+}
+
+// One row of the figure: a novel light, its frames' grain (grain() above) and its panels.
+struct FigureRow {
+  PointLight light;
+  Eigen::VectorXf converged, full, estimate;
+};
+
+// Meyer & Anderson 2007 Fig. 5, on our scene: per novel light (rows) the converged full
+// calculation (issue #38: the reference a renderer would accept), the full calculation the model
+// learned, the subspace's (each direct + indirect) and the error of the subspace's indirect against
+// the full calculation's, |full − subspace|, red at 5% of the frame's largest indirect radiance.
+// Every panel of a row is exposed alike (white at the converged frame's 99th percentile).
 void write_figure(const std::string& path, const illumination::IlluminationEngine& scene,
-                  const std::vector<PointLight>& lights, const std::vector<Eigen::VectorXf>& full,
-                  const std::vector<Eigen::VectorXf>& estimate) {
+                  const std::vector<FigureRow>& rows) {
   auto renderer = render::make_egl_renderer(render::EglPlatform::kAuto);
   if (!renderer) {
     std::printf("illumination: no figure: %s\n", renderer.error().message.c_str());
     return;
   }
+  constexpr int kColumns = 4;
   const illumination::SceneView view = illumination::cornell_view();
   const std::vector<int> all = scene.all_points();
   render::Image sheet;
-  sheet.width = 3 * 256;
-  sheet.height = static_cast<int>(lights.size()) * 256;
+  sheet.width = kColumns * 256;
+  sheet.height = static_cast<int>(rows.size()) * 256;
   sheet.rgba.assign(static_cast<size_t>(sheet.width) * sheet.height * 4, 255);
-  for (size_t row = 0; row < lights.size(); ++row) {
+  for (size_t row = 0; row < rows.size(); ++row) {
+    const FigureRow& r = rows[row];
     Eigen::VectorXf direct;
-    scene.direct({lights[row]}, all, direct);
-    const Eigen::VectorXf full_total = direct + full[row];
-    const Eigen::VectorXf served_total = direct + estimate[row];
+    scene.direct({r.light}, all, direct);
+    const Eigen::VectorXf converged_total = direct + r.converged;
+    const Eigen::VectorXf full_total = direct + r.full;
+    const Eigen::VectorXf served_total = direct + r.estimate;
     std::vector<float> largest(static_cast<size_t>(scene.point_count()));
-    for (int i = 0; i < scene.point_count(); ++i) largest[static_cast<size_t>(i)] = full_total.segment<3>(3 * i).maxCoeff();
+    for (int i = 0; i < scene.point_count(); ++i) {
+      largest[static_cast<size_t>(i)] = converged_total.segment<3>(3 * i).maxCoeff();
+    }
     std::nth_element(largest.begin(), largest.begin() + static_cast<long>(0.99 * (largest.size() - 1)), largest.end());
     const double white = largest[static_cast<size_t>(0.99 * (largest.size() - 1))];
-    const Eigen::Map<const Eigen::Matrix3Xf> f(full[row].data(), 3, scene.point_count());
-    const Eigen::Map<const Eigen::Matrix3Xf> e(estimate[row].data(), 3, scene.point_count());
+    const Eigen::Map<const Eigen::Matrix3Xf> f(r.full.data(), 3, scene.point_count());
+    const Eigen::Map<const Eigen::Matrix3Xf> e(r.estimate.data(), 3, scene.point_count());
     const Eigen::VectorXf heat = (f - e).colwise().norm().transpose();
     const double heat_max = 0.05 * f.colwise().norm().maxCoeff();
-    const render::Scene panels[3] = {figure_scene(scene, view, &full_total, white, nullptr, 0),
-                                     figure_scene(scene, view, &served_total, white, nullptr, 0),
-                                     figure_scene(scene, view, nullptr, 0, &heat, heat_max)};
-    for (int column = 0; column < 3; ++column) {
+    const render::Scene panels[kColumns] = {figure_scene(scene, view, &converged_total, white, nullptr, 0),
+                                            figure_scene(scene, view, &full_total, white, nullptr, 0),
+                                            figure_scene(scene, view, &served_total, white, nullptr, 0),
+                                            figure_scene(scene, view, nullptr, 0, &heat, heat_max)};
+    for (int column = 0; column < kColumns; ++column) {
       auto image = (*renderer)->render(panels[column]);
       if (!image) {
         std::printf("illumination: no figure: %s\n", image.error().message.c_str());
@@ -199,8 +229,8 @@ void write_figure(const std::string& path, const illumination::IlluminationEngin
     std::printf("illumination: could not write the figure %s\n", path.c_str());
     return;
   }
-  std::printf("illumination: figure (rows: novel lights; columns: full, subspace, |error| red at 5%% of the frame's "
-              "largest indirect radiance) written to %s\n", path.c_str());
+  std::printf("illumination: figure (rows: novel lights; columns: converged full calculation, full calculation, "
+              "subspace, |error| red at 5%% of the frame's largest indirect radiance) written to %s\n", path.c_str());
 }
 
 // Issue #38, the gather study: for one novel light inside the hull and each candidate gather, the
@@ -441,7 +471,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   training.gather.shadow_rays = o.shadow_rays;
   training.relative_tolerance = !o.absolute_tolerance;
   if (o.basis_slack >= 0) training.pmsc.held_out_basis_slack = o.basis_slack;
-  training.filter.neighbours = o.filter_neighbours;
+  if (o.filter_neighbours >= 0) training.filter.neighbours = o.filter_neighbours;
   training.filter.linear = o.filter_linear;
   training.key_samples = o.key_samples;
   illumination::GatherOptions keys_gather = training.gather;
@@ -466,12 +496,23 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "%d rays%s; the converged full calculation: %d rays, unfiltered\n",
               o.samples,
               surface_filter->enabled() ? ("through the surface filter (" + std::string(o.filter_linear ? "linear, " : "") +
-                                           "k = " + std::to_string(o.filter_neighbours) +
+                                           "k = " + std::to_string(training.filter.neighbours) +
                                            ", radius " + std::to_string(surface_filter->radius) + " m)").c_str()
                                         : "unfiltered",
               keys_gather.samples,
               o.key_samples == 0 && surface_filter->enabled() ? " at every point their filters read, then filtered" : "",
               o.converged_samples);
+
+  // The post-filter experiment (--illumination-post-filter): the filter applied to the raw model's
+  // reconstruction, F·f̂, against the filtered full calculation F·g and the reference.
+  illumination::SurfaceFilterOptions post_options;
+  post_options.neighbours = training.filter.enabled() ? 0 : o.post_filter_neighbours;
+  auto post_filter = illumination::surface_filter_precompute(scene.surface(), post_options, "post_filter");
+  if (!post_filter) {
+    std::printf("illumination: %s\n", post_filter.error().message.c_str());
+    return results;
+  }
+  std::vector<double> post_rms_inside, post_max_inside, post_est_ref_inside, post_full_ref_inside, post_s;
 
   illumination::IlluminationTrainingReport report;
   const auto train_start = Clock::now();
@@ -525,7 +566,8 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   std::vector<Eigen::VectorXf> inside_keys;
   std::vector<Eigen::VectorXf> inside_estimates;
   std::vector<NovelLight> inside_lights;
-  std::vector<Eigen::VectorXf> inside_full;  // the first three, for the figure
+  // The first three inside lights' frames, for the figure and its grain.
+  std::vector<Eigen::VectorXf> inside_full, inside_converged, inside_gathered;
   for (size_t l = 0; l < lights.size(); ++l) {
     const NovelLight& novel = lights[l];
     // The full calculation the model learned: the gather, then the surface filter (issue #38
@@ -580,6 +622,24 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       const auto converged_start = Clock::now();
       scene.indirect({novel.light}, converged_gather, all, converged);
       converged_s.push_back(since(converged_start));
+      inside_converged.push_back(std::move(converged));
+    }
+    if (novel.inside && post_filter->enabled()) {
+      Eigen::VectorXf post_estimate, post_full;
+      const auto post_start = Clock::now();
+      illumination::surface_filter_apply(*post_filter, cached.points, post_estimate);
+      post_s.push_back(since(post_start));
+      illumination::surface_filter_apply(*post_filter, gathered, post_full);
+      const Accuracy post = accuracy(post_estimate, post_full);
+      post_rms_inside.push_back(post.relative_rms_error);
+      post_max_inside.push_back(post.max_error_over_frame_max);
+      Eigen::VectorXf post_estimate_sampled(3 * reference_points.size()), post_full_sampled(3 * reference_points.size());
+      for (size_t p = 0; p < reference_points.size(); ++p) {
+        post_estimate_sampled.segment<3>(3 * static_cast<long>(p)) = post_estimate.segment<3>(3 * reference_points[p]);
+        post_full_sampled.segment<3>(3 * static_cast<long>(p)) = post_full.segment<3>(3 * reference_points[p]);
+      }
+      post_est_ref_inside.push_back(illumination::relative_rms_difference(post_estimate_sampled, reference));
+      post_full_ref_inside.push_back(illumination::relative_rms_difference(post_full_sampled, reference));
     }
     const double estimate_vs_reference = illumination::relative_rms_difference(estimate_sampled, reference);
     const double full_vs_reference = illumination::relative_rms_difference(full_sampled, reference);
@@ -641,18 +701,43 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       inside_keys.push_back(keys);
       inside_estimates.push_back(cached.points);
       inside_lights.push_back(novel);
-      if (inside_full.size() < 3) inside_full.push_back(full);
+      if (inside_full.size() < 3) {
+        inside_full.push_back(full);
+        inside_gathered.push_back(gathered);
+      }
     } else {
       ++n_outside;
       flagged_outside += cached.status != pmsc::CacheStatus::kHit ? 1 : 0;
     }
   }
-  if (!o.figure.empty() && !inside_full.empty()) {
-    std::vector<PointLight> shown;
-    for (size_t l = 0; l < inside_full.size(); ++l) shown.push_back(inside_lights[l].light);
-    write_figure(o.figure, scene, shown, inside_full,
-                 std::vector<Eigen::VectorXf>(inside_estimates.begin(), inside_estimates.begin() + static_cast<long>(shown.size())));
+  // Issue #38: the figure's rows, and their grain (grain() above, k = 8 neighbours) for the
+  // converged full calculation, the full calculation, the subspace estimate and the gather before
+  // the surface filter (what the figure showed before issue #38 item 1: the measure's scale).
+  std::vector<FigureRow> figure_rows;
+  for (size_t l = 0; l < std::min(inside_full.size(), inside_converged.size()); ++l) {
+    figure_rows.push_back({inside_lights[l].light, inside_converged[l], inside_full[l], inside_estimates[l]});
   }
+  illumination::SurfaceFilterOptions grain_options;
+  grain_options.neighbours = kGrainNeighbours;
+  auto grain_smoother = illumination::surface_filter_precompute(scene.surface(), grain_options, "grain");
+  nlohmann::json figure_grain = nlohmann::json::array();
+  std::vector<double> grain_ratio_full, grain_ratio_estimate;
+  for (size_t l = 0; l < figure_rows.size() && grain_smoother; ++l) {
+    const FigureRow& r = figure_rows[l];
+    const double g_converged = grain(*grain_smoother, r.converged), g_full = grain(*grain_smoother, r.full),
+                 g_estimate = grain(*grain_smoother, r.estimate), g_gather = grain(*grain_smoother, inside_gathered[l]);
+    figure_grain.push_back({{"converged", g_converged}, {"full", g_full}, {"subspace", g_estimate}, {"gather", g_gather}});
+    if (g_converged > 0) {
+      grain_ratio_full.push_back(g_full / g_converged);
+      grain_ratio_estimate.push_back(g_estimate / g_converged);
+    }
+    std::printf("figure row %zu grain (RMS of the frame minus its %d-neighbour filtered self ÷ mean radiance): converged "
+                "%.2f%%, full calculation %.2f%% (%.2f×), subspace %.2f%% (%.2f×); the gather unfiltered %.2f%% (%.2f×)\n",
+                l, kGrainNeighbours, 100 * g_converged, 100 * g_full, g_converged > 0 ? g_full / g_converged : 0.0,
+                100 * g_estimate, g_converged > 0 ? g_estimate / g_converged : 0.0, 100 * g_gather,
+                g_converged > 0 ? g_gather / g_converged : 0.0);
+  }
+  if (!o.figure.empty() && !figure_rows.empty()) write_figure(o.figure, scene, figure_rows);
   const double full_gather = median(full_s), key_gather = median(keys_s), reconstruct = median(recon_s);
   const double speedup_in_process = full_gather / (key_gather + reconstruct);
   const double converged_full = median(converged_s);
@@ -747,12 +832,15 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"median_full_reference_relative_rms_error_inside", median(full_ref_inside)},
                          {"median_gather_reference_relative_rms_error_inside", median(gather_ref_inside)},
                          {"median_converged_reference_relative_rms_error_inside", median(converged_ref_inside)},
-                         {"filter_neighbours", o.filter_neighbours},
+                         {"filter_neighbours", training.filter.neighbours},
                          {"filter_linear", o.filter_linear},
                          {"filter_radius", surface_filter->radius},
                          {"filter_seconds", median(filter_s)},
                          {"key_samples", keys_gather.samples},
                          {"converged_samples", o.converged_samples},
+                         {"figure_grain", figure_grain},
+                         {"median_grain_over_converged_full", median(grain_ratio_full)},
+                         {"median_grain_over_converged_subspace", median(grain_ratio_estimate)},
                          {"converged_full_gather_seconds", converged_full},
                          {"speedup_vs_converged_in_process", speedup_vs_converged},
                          {"p95_max_error_over_frame_max_inside", max_inside.empty() ? 0.0 : tools::quantile(max_inside, 0.95)},
@@ -767,6 +855,16 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"hits_within_tolerance_inside",
                           hits_inside > 0 ? static_cast<double>(hits_within_tolerance) / hits_inside : 1.0}};
   if (!served_problem.empty()) summary["served_problem"] = served_problem;
+  if (post_filter->enabled()) {
+    summary["post_filter_neighbours"] = post_options.neighbours;
+    summary["post_filter_median_relative_rms_error_inside"] = median(post_rms_inside);
+    summary["post_filter_p95_max_error_over_frame_max_inside"] =
+        post_max_inside.empty() ? 0.0 : tools::quantile(post_max_inside, 0.95);
+    summary["post_filter_median_estimate_reference_relative_rms_error_inside"] = median(post_est_ref_inside);
+    summary["post_filter_median_full_reference_relative_rms_error_inside"] = median(post_full_ref_inside);
+    summary["post_filter_seconds"] = median(post_s);
+    summary["post_filter_speedup_in_process"] = full_gather / (key_gather + reconstruct + median(post_s));
+  }
   results.push_back(summary);
   std::printf("\ninside the hull (%d lights): median relative RMS %.3f%% of the mean radiance, p95 max error %.2f%% of "
               "the frame max, hit rate %.2f\n",
@@ -777,6 +875,15 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
               "mean radiance\n",
               kReferenceRays, kReferencePoints, 100 * median(est_ref_inside), 100 * median(full_ref_inside), o.samples,
               100 * median(gather_ref_inside), o.converged_samples, 100 * median(converged_ref_inside));
+  if (post_filter->enabled()) {
+    std::printf("post-filter experiment (k = %d on the raw model's reconstruction; inside, medians): F·f̂ against F·g "
+                "%.3f%% RMS, p95 max %.2f%% of the frame max; against the reference F·f̂ %.3f%%, F·g %.3f%%; filter "
+                "%.3f ms: %.0f× against the raw full calculation\n",
+                post_options.neighbours, 100 * median(post_rms_inside),
+                100 * summary["post_filter_p95_max_error_over_frame_max_inside"].get<double>(),
+                100 * median(post_est_ref_inside), 100 * median(post_full_ref_inside), 1e3 * median(post_s),
+                summary["post_filter_speedup_in_process"].get<double>());
+  }
   std::printf("outside (%d lights): flagged (blend or miss) %.2f\n", n_outside, recall_outside);
   std::printf("tolerance %s: the same verdict at 0.1× and 10× the light's intensity for %.2f of the inside lights; "
               "%d of %d inside hits within the tolerance\n",

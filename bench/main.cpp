@@ -99,7 +99,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--illumination-filter-neighbours", options.illumination.filter_neighbours,
                  "illumination: the surface filter's expected neighbour count k for the training frames and the full "
-                 "calculation (0: unfiltered; issue #38 item 1)")
+                 "calculation (0: unfiltered; default: the training's, 32; issue #38 item 1)")
       ->check(CLI::Range(0, 4096))
       ->capture_default_str();
   app.add_flag("--illumination-filter-linear", options.illumination.filter_linear,
@@ -108,6 +108,11 @@ int main(int argc, char** argv) {
                  "illumination: gather rays per key point, unfiltered (0: the key points' filter support at "
                  "--illumination-samples rays, filtered)")
       ->check(CLI::Range(0, 65536))
+      ->capture_default_str();
+  app.add_option("--illumination-post-filter", options.illumination.post_filter_neighbours,
+                 "illumination: train on the raw gather (with --illumination-filter-neighbours 0) and filter the "
+                 "reconstruction with k neighbours instead: an experiment, reported beside the rows (0: off)")
+      ->check(CLI::Range(0, 4096))
       ->capture_default_str();
   app.add_option("--illumination-converged-samples", options.illumination.converged_samples,
                  "illumination: rays per point of the converged full calculation, the baseline timed beside the "

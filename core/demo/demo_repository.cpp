@@ -172,6 +172,9 @@ Result<container::ModelContainer> make_demo_illumination_container(const DemoIll
     training.lights.push_back({p, Eigen::Vector3d::Ones()});
   }
   training.gather.samples = options.samples;
+  // No surface filter: at the demo's few thousand points the key points' filter support (K·k ≈
+  // 200 · 32 points) is the whole surface, so the keys would cost the full calculation.
+  training.filter.neighbours = 0;
   auto container = illumination::train_illumination(
       **engine, training,
       "Cornell box: one-bounce indirect illumination of " + std::to_string(training.lights.size()) +

@@ -189,6 +189,7 @@ IlluminationTrainingOptions small_training() {
   options.gather.samples = 8;
   options.pmsc.max_key_points = 60;
   options.pmsc.region_count = 2;
+  options.filter.neighbours = 0;  // the raw gather; TrainsOnFilteredFrames… tests the filter
   return options;
 }
 
