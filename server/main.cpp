@@ -1,11 +1,9 @@
 // animspaced: serves trained character-animation models over gRPC.
-#include <fcntl.h>
+#include <pthread.h>
 #include <unistd.h>
 
-#include <cerrno>
 #include <csignal>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <iostream>
 
@@ -19,19 +17,15 @@
 
 namespace {
 
-// The stop signals reach main through a pipe. Blocking them in every thread and taking them with
-// sigwait is not enough: threads that libraries start before main (OpenBLAS's pool, kernels.cpp)
-// never had them blocked, the kernel delivers a process signal to such a thread, and with no
-// handler installed the default action ended the daemon without its graceful shutdown. With a
-// handler, whichever thread takes the signal writes its number here, and main reads it.
-int stop_pipe_write = -1;
+// Main takes the stop signals with sigwait, blocked in every thread it starts. A thread that a
+// library started before main (OpenBLAS's pthread build started a pool when it was loaded) never
+// blocked them, the kernel may deliver a process signal to it, and with the default action that
+// ended the daemon without its graceful shutdown. So a handler is installed as well: it runs
+// only on such a thread (main and the threads it starts block the signals) and sends the signal
+// on to main, where sigwait takes it. pthread_kill is async-signal-safe.
+pthread_t main_thread;
 
-void on_stop_signal(int signal_number) {
-  const int saved = errno;
-  const char byte = static_cast<char>(signal_number);
-  [[maybe_unused]] const ssize_t written = ::write(stop_pipe_write, &byte, 1);
-  errno = saved;
-}
+void forward_stop_signal(int signal_number) { pthread_kill(main_thread, signal_number); }
 
 // Generates the bundled demo repository in a fresh temporary directory: the embedded default
 // that lets `animspaced` serve something with nothing else present.
@@ -135,26 +129,20 @@ int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::from_str(options.log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %^%l%$ animspaced[%P] %v");
 
-  // Block the stop signals in the threads we start (the gRPC threads inherit this mask), and
-  // take them through a handler that only writes to a pipe (on_stop_signal), so shutdown runs
-  // here on an ordinary thread and not in a signal handler.
+  // Block the stop signals in every thread we start (the gRPC threads inherit this mask) and
+  // take them synchronously here, so shutdown runs on an ordinary thread and not in a signal
+  // handler; forward_stop_signal sends on those that reach a library's own thread.
   sigset_t stop_signals;
   sigemptyset(&stop_signals);
   sigaddset(&stop_signals, SIGTERM);
   sigaddset(&stop_signals, SIGINT);
-  int stop_pipe[2];
-  if (::pipe2(stop_pipe, O_CLOEXEC) != 0) {
-    spdlog::critical("cannot create the stop signals' pipe: {}", std::strerror(errno));
-    return EXIT_FAILURE;
-  }
-  stop_pipe_write = stop_pipe[1];
-  struct sigaction action {};
-  action.sa_handler = on_stop_signal;
-  sigemptyset(&action.sa_mask);
-  action.sa_flags = SA_RESTART;
-  sigaction(SIGTERM, &action, nullptr);
-  sigaction(SIGINT, &action, nullptr);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+  main_thread = pthread_self();
+  struct sigaction forward {};
+  forward.sa_handler = forward_stop_signal;
+  sigemptyset(&forward.sa_mask);
+  sigaction(SIGTERM, &forward, nullptr);
+  sigaction(SIGINT, &forward, nullptr);
 
   const bool demo = options.repository.empty();
   if (demo) options.repository = make_demo_repository();
@@ -167,13 +155,8 @@ int main(int argc, char** argv) {
       spdlog::critical("{}", status.error().message);
       exit_code = EXIT_FAILURE;
     } else {
-      // Main takes the signals too while it waits, so one is never left pending when every
-      // other thread blocks it.
-      pthread_sigmask(SIG_UNBLOCK, &stop_signals, nullptr);
-      char signal_number = 0;
-      while (::read(stop_pipe[0], &signal_number, 1) < 0 && errno == EINTR) {
-      }
-      pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+      int signal_number = 0;
+      sigwait(&stop_signals, &signal_number);
       spdlog::info("received {}", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
       daemon.shutdown();
     }

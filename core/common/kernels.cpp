@@ -8,6 +8,9 @@
 #include <Eigen/Core>
 #include <cblas.h>
 
+// OpenBLAS's pthread build exports this (interface of its blas_server.c) but no header declares it.
+extern "C" int blas_thread_shutdown_(void);
+
 #include "core/common/parallel.h"
 
 namespace animspace {
@@ -18,9 +21,14 @@ std::atomic<Kernel> active{Kernel::kBlas};
 // OpenBLAS multiplies in the thread that calls it: the cores belong to the callers (the server's
 // work pool, parallel.h's loops), and a product split again inside OpenBLAS would only add
 // threads to share them. Set before main, so every product of the process — those called
-// through here and a benchmark's direct cblas anchors alike — runs the same way.
+// through here and a benchmark's direct cblas anchors alike — runs the same way. The pool that
+// the pthread build started when it was loaded is then ended (its exported shutdown, the one it
+// runs at exit and before a fork): with one thread it is never used, and its threads, started
+// before main could block any signal, were where the kernel delivered the daemon's SIGTERM
+// (under TSan, a signal taken there waited forever).
 const bool kOneBlasThread = [] {
   openblas_set_num_threads(1);
+  blas_thread_shutdown_();
   return true;
 }();
 
