@@ -66,7 +66,12 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
   cmd->add_option("--false-hit-rate", a.false_hit_rate, "Soft cache: δ of the conformal calibration")
       ->check(CLI::Range(1e-6, 0.999999))
       ->capture_default_str();
-  cmd->add_option("--basis", a.basis, "Subspace dimension M (default: from the error bound); M < lights");
+  cmd->add_option("--basis", a.basis, "Subspace dimension M (default: chosen by --basis-slack); M < lights");
+  cmd->add_option("--basis-slack", a.basis_slack,
+                  "M = the smallest whose error on held-out lights is within (1 + this) of the best (0: M from the "
+                  "error bound, the measured best with --filter-neighbours 0)")
+      ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
   cmd->add_option("--max-key-points", a.max_key_points, "Key point budget")->capture_default_str();
   cmd->add_option("--regions", a.regions, "Regions for local fail-through (0 = none)")->capture_default_str();
   cmd->add_option("--description", a.description, "One-line description stored in the model");
@@ -90,6 +95,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
   options.relative_tolerance = !a.absolute_tolerance;
   options.error_bound_fraction = a.error_bound;
   options.pmsc.basis_size = a.basis;
+  options.pmsc.held_out_basis_slack = a.basis_slack;
   options.pmsc.max_key_points = a.max_key_points;
   options.pmsc.region_count = a.regions;
   options.pmsc.false_hit_rate = a.false_hit_rate;

@@ -30,6 +30,7 @@ struct TrainIlluminationArgs {
   bool filter_linear = illumination::IlluminationTrainingOptions{}.filter.linear;
   int key_samples = illumination::IlluminationTrainingOptions{}.key_samples;
   int basis = 0;
+  double basis_slack = illumination::IlluminationTrainingOptions{}.pmsc.held_out_basis_slack;
   int max_key_points = 200;
   int regions = 8;
   std::string description;
