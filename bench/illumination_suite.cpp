@@ -124,6 +124,13 @@ const char* status_name(pmsc::CacheStatus s) {
   return s == pmsc::CacheStatus::kHit ? "hit" : s == pmsc::CacheStatus::kBlend ? "blend" : "miss";
 }
 
+// A frame's RGB values at `points` (3·|points|, point-major): what is compared with the reference.
+Eigen::VectorXf at_points(const Eigen::VectorXf& frame, const std::vector<int>& points) {
+  Eigen::VectorXf out(3 * static_cast<long>(points.size()));
+  for (size_t p = 0; p < points.size(); ++p) out.segment<3>(3 * static_cast<long>(p)) = frame.segment<3>(3 * points[p]);
+  return out;
+}
+
 double median(std::vector<double> values) { return values.empty() ? 0.0 : tools::quantile(std::move(values), 0.5); }
 
 // One frame of the figure: the surface coloured by `radiance` (N·3, drawn white at `white`), or
@@ -398,10 +405,7 @@ nlohmann::json gather_study(const illumination::IlluminationEngine& scene, const
     illumination::surface_filter_apply(*filter, gathered, a);
     const double filter_seconds = since(start);
     illumination::surface_filter_apply(*filter, gathered_other, b);
-    Eigen::VectorXf a_sampled(3 * reference_points.size());
-    for (size_t p = 0; p < reference_points.size(); ++p) {
-      a_sampled.segment<3>(3 * static_cast<long>(p)) = a.segment<3>(3 * reference_points[p]);
-    }
+    const Eigen::VectorXf a_sampled = at_points(a, reference_points);
     const double seeds = illumination::relative_rms_difference(a, b);
     const double reference_rms = illumination::relative_rms_difference(a_sampled, point_reference.values);
     const double reference_max = illumination::max_error_over_max(a_sampled, point_reference.values);
@@ -605,14 +609,11 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
     const Eigen::VectorXf centred = full - model.mean;
     const Eigen::VectorXf projected = model.mean + model.basis * (model.basis.transpose() * centred);
     const Accuracy floor = accuracy(projected, full);
-    Eigen::VectorXf reference, estimate_sampled(3 * reference_points.size()), full_sampled(3 * reference_points.size());
-    Eigen::VectorXf gather_sampled(3 * reference_points.size()), converged_sampled;
+    Eigen::VectorXf reference, converged_sampled;
     scene.indirect({novel.light}, reference_gather, reference_points, reference);
-    for (size_t p = 0; p < reference_points.size(); ++p) {
-      estimate_sampled.segment<3>(3 * static_cast<long>(p)) = cached.points.segment<3>(3 * reference_points[p]);
-      full_sampled.segment<3>(3 * static_cast<long>(p)) = full.segment<3>(3 * reference_points[p]);
-      gather_sampled.segment<3>(3 * static_cast<long>(p)) = gathered.segment<3>(3 * reference_points[p]);
-    }
+    const Eigen::VectorXf estimate_sampled = at_points(cached.points, reference_points);
+    const Eigen::VectorXf full_sampled = at_points(full, reference_points);
+    const Eigen::VectorXf gather_sampled = at_points(gathered, reference_points);
     // The converged full calculation: the gather's value at a point does not depend on the other
     // points gathered, so its error at the reference points is that of its full frame; the full
     // frame is gathered (and timed) for the first few inside lights only.
@@ -633,13 +634,10 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
       const Accuracy post = accuracy(post_estimate, post_full);
       post_rms_inside.push_back(post.relative_rms_error);
       post_max_inside.push_back(post.max_error_over_frame_max);
-      Eigen::VectorXf post_estimate_sampled(3 * reference_points.size()), post_full_sampled(3 * reference_points.size());
-      for (size_t p = 0; p < reference_points.size(); ++p) {
-        post_estimate_sampled.segment<3>(3 * static_cast<long>(p)) = post_estimate.segment<3>(3 * reference_points[p]);
-        post_full_sampled.segment<3>(3 * static_cast<long>(p)) = post_full.segment<3>(3 * reference_points[p]);
-      }
-      post_est_ref_inside.push_back(illumination::relative_rms_difference(post_estimate_sampled, reference));
-      post_full_ref_inside.push_back(illumination::relative_rms_difference(post_full_sampled, reference));
+      post_est_ref_inside.push_back(
+          illumination::relative_rms_difference(at_points(post_estimate, reference_points), reference));
+      post_full_ref_inside.push_back(
+          illumination::relative_rms_difference(at_points(post_full, reference_points), reference));
     }
     const double estimate_vs_reference = illumination::relative_rms_difference(estimate_sampled, reference);
     const double full_vs_reference = illumination::relative_rms_difference(full_sampled, reference);

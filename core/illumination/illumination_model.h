@@ -50,7 +50,7 @@ struct IlluminationTrainingOptions {
   // measured best (docs/BENCHMARKS.md "Issue #38 item 1"); at the papers' 100k points it takes the
   // error against a converged reference from 11% to 3%, the HIT rate from 0.42 to 0.83 and the
   // image's grain below the converged image's, for a speed-up against the (filtered) full
-  // calculation of 30× instead of 89× ("Issue #38: the figure"). k = 0 turns it off; a model
+  // calculation of 30× instead of 142× (same session; BENCHMARKS "Issue #38: the papers' size"). k = 0 turns it off; a model
   // without the filter's keys in its file (every file before issue #38) is unfiltered. Stored in
   // the model (illumination.filter_*, illumination.key_samples).
   SurfaceFilterOptions filter{.neighbours = 32};
