@@ -49,7 +49,7 @@ struct SkinningSuiteOptions {
 // illumination (issue #24): the scene's size and the gather's, and the novel lights tested.
 struct IlluminationSuiteOptions {
   int points = 100000;   // surface sample points of the Cornell box
-  int samples = 64;      // final-gather rays per point, the same for the full gather and the keys
+  int samples = 0;       // final-gather rays per point, the full gather's and the keys' (0: the training's default)
   int inside = 24;       // novel lights inside the training grid's hull
   int outside = 12;      // novel lights well outside it (walls, floor level)
   double drop = 0;       // the training grid's drop below the ceiling (0: LightGrid's default)
@@ -80,6 +80,12 @@ struct IlluminationSuiteOptions {
   // (this k; 0: off) applied to the subspace's reconstruction instead, measured against the
   // filtered full calculation and the reference.
   int post_filter_neighbours = 0;
+  // GatherOptions::direct_from_vertices for the training and the full calculation: 0 a shadow ray
+  // from every hit, 1 the direct light read from the hit triangle's vertices; < 0: the training's
+  // default.
+  int direct_from_vertices = -1;
+  // pmsc::TrainingOptions::max_key_points (0: the training's default, 200).
+  int max_key_points = 0;
 };
 
 struct SuiteOptions {

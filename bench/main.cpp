@@ -65,8 +65,9 @@ int main(int argc, char** argv) {
   app.add_option("--illumination-points", options.illumination.points, "illumination: surface sample points")
       ->check(CLI::Range(100, 5000000))
       ->capture_default_str();
-  app.add_option("--illumination-samples", options.illumination.samples, "illumination: final-gather rays per point")
-      ->check(CLI::Range(1, 65536))
+  app.add_option("--illumination-samples", options.illumination.samples,
+                 "illumination: final-gather rays per point (0: the training's default; the gather study's S: 64)")
+      ->check(CLI::Range(0, 65536))
       ->capture_default_str();
   app.add_option("--illumination-drop", options.illumination.drop,
                  "illumination: the training grid's plane below the ceiling, fraction of the room's height (0: the "
@@ -114,6 +115,13 @@ int main(int argc, char** argv) {
                  "reconstruction with k neighbours instead: an experiment, reported beside the rows (0: off)")
       ->check(CLI::Range(0, 4096))
       ->capture_default_str();
+  app.add_option("--illumination-direct-from-vertices", options.illumination.direct_from_vertices,
+                 "illumination: 1: the gather reads the direct light at its hits from the hit triangle's vertices "
+                 "(issue #38); 0: a shadow ray from every hit (default: the training's)")
+      ->check(CLI::Range(-1, 1));
+  app.add_option("--illumination-max-key-points", options.illumination.max_key_points,
+                 "illumination: the key selection's budget K (0: the training's default)")
+      ->check(CLI::Range(0, 100000));
   app.add_option("--illumination-converged-samples", options.illumination.converged_samples,
                  "illumination: rays per point of the converged full calculation, the baseline timed beside the "
                  "filtered one")

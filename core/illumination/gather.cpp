@@ -42,6 +42,11 @@ constexpr double kShadowShortening = 1e-4;
 // Points per thread below which threads do not pay (a point costs ~S µs indirect, ~1 µs direct).
 constexpr int64_t kIndirectPointsPerThread = 16;
 constexpr int64_t kDirectPointsPerThread = 1024;
+// The interpolated sums cost ~3·S lookups per point and light.
+constexpr int64_t kInterpolatedPointsPerThread = 64;
+// indirect_frames with direct_from_vertices: lights whose L_d sit side by side per vertex, so that
+// a hit's three vertices are read once for all of them (8 lights: 96 bytes per vertex).
+constexpr int kLightsPerBlock = 8;
 
 Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
 
@@ -116,6 +121,58 @@ void set_ray(RTCRay16& packet, int k, const Eigen::Vector3d& origin, const Eigen
   packet.flags[k] = 0;
 }
 
+// A hemisphere ray's lit hit as the interpolated gather reads it: the triangle, and Embree's
+// barycentric weights u, v of its vertices 1 and 2 (vertex 0 weighs 1 − u − v).
+struct VertexHit {
+  uint32_t face;
+  float u;
+  float v;
+};
+
+// The lit hits of a list of points' rays, in blocks of kPointsPerHitBlock points that the threads
+// fill independently: point p's hits are blocks[p / kPointsPerHitBlock][ends[p − 1] .. ends[p]),
+// ends counted within the block. Blocks rather than one array, so that the largest (the papers'
+// 100k points × 2,048 rays: 2.5 GB) is never held twice while it is joined.
+constexpr int64_t kPointsPerHitBlock = 256;
+struct PointHits {
+  std::vector<std::vector<VertexHit>> blocks;
+  std::vector<int64_t> ends;
+  const VertexHit* begin(int64_t p) const {
+    return blocks[static_cast<size_t>(p / kPointsPerHitBlock)].data() +
+           (p % kPointsPerHitBlock == 0 ? 0 : ends[static_cast<size_t>(p - 1)]);
+  }
+  const VertexHit* end(int64_t p) const {
+    return blocks[static_cast<size_t>(p / kPointsPerHitBlock)].data() + ends[static_cast<size_t>(p)];
+  }
+};
+
+// sums[3·l + c] += Σ over the hits of (1 − u − v)·L_d(v₀) + u·L_d(v₁) + v·L_d(v₂) for the
+// kLights lights whose L_d sit side by side per vertex in `direct` (3·kLights floats per vertex).
+// One function for one light and for a block, so that both add the same terms in the same order
+// (per light and channel the arithmetic is the same whatever kLights; x86-64's baseline has no
+// fused multiply-add to contract it differently).
+template <int kLights>
+void sum_interpolated(const FaceMatrix& faces, const VertexHit* first, const VertexHit* last, const float* direct,
+                      double* sums) {
+  constexpr size_t kStride = 3 * kLights;
+  for (const VertexHit* hit = first; hit != last; ++hit) {
+    const double u = hit->u;
+    const double v = hit->v;
+    const double w = 1.0 - u - v;
+    const float* d0 = direct + kStride * static_cast<size_t>(faces(hit->face, 0));
+    const float* d1 = direct + kStride * static_cast<size_t>(faces(hit->face, 1));
+    const float* d2 = direct + kStride * static_cast<size_t>(faces(hit->face, 2));
+    for (size_t j = 0; j < kStride; ++j) sums[j] += (w * d0[j] + u * d1[j]) + v * d2[j];
+  }
+}
+
+// L_i at vertex v from its sum of L_d over S hits: ρ(v) ⊙ sum / S, rounded to float.
+void store_indirect(const SurfaceMesh& surface, int v, const double* sums, int samples, float* out) {
+  for (int c = 0; c < 3; ++c) {
+    out[c] = static_cast<float>(static_cast<double>(surface.albedo(v, c)) * sums[c] / samples);
+  }
+}
+
 const char* embree_error_name(RTCError code) {
   switch (code) {
     case RTC_ERROR_NONE: return "no error";
@@ -141,6 +198,10 @@ Status check_gather_options(const GatherOptions& options) {
   if (options.shadow_rays < 1) return invalid("shadow_rays must be ≥ 1, got " + std::to_string(options.shadow_rays));
   if (!std::isfinite(options.light_radius) || options.light_radius < 0) {
     return invalid("light_radius must be finite and ≥ 0, got " + format_number(options.light_radius));
+  }
+  if (options.direct_from_vertices && options.light_radius != 0) {
+    return invalid("light_radius must be 0 with direct_from_vertices (the vertices' direct light is a point light's), "
+                   "got " + format_number(options.light_radius));
   }
   if (options.sampling != HemisphereSampling::kHammersley && options.sampling != HemisphereSampling::kStratified) {
     return invalid("sampling " + std::to_string(static_cast<int>(options.sampling)) + " is not a known sampling");
@@ -184,6 +245,99 @@ struct IlluminationEngine::Embree {
   ~Embree() {
     if (scene != nullptr) rtcReleaseScene(scene);
     if (device != nullptr) rtcReleaseDevice(device);
+  }
+
+  // Casts vertex v's S hemisphere rays and calls on_packet(packet, directions, first, count, hash)
+  // after each intersection. The rays go in packets of kPacket consecutive samples (always the
+  // same packets for the same point, whatever the batch): they share an origin, which Embree's
+  // packet traversal turns into shared work near it. `hash` is the point's, for per-sample jitter.
+  template <typename OnPacket>
+  void cast_hemisphere(int v, const GatherOptions& options, RTCIntersectContext& context, OnPacket&& on_packet) const {
+    const auto vs = static_cast<size_t>(v);
+    const int samples = options.samples;
+    const bool stratified = options.sampling == HemisphereSampling::kStratified;
+    const int rows = std::max(1, static_cast<int>(std::floor(std::sqrt(static_cast<double>(samples)))));
+    // The point's Cranley–Patterson rotation of the Hammersley set.
+    const uint64_t hash = splitmix64(splitmix64(options.seed) ^ static_cast<uint64_t>(v));
+    const double rotation_1 = unit_interval(hash);
+    const double rotation_2 = unit_interval(splitmix64(hash));
+    const Eigen::Vector3d& normal = vertex_normals[vs];
+    Eigen::Vector3d tangent, bitangent;
+    orthonormal_basis(normal, tangent, bitangent);
+    const Eigen::Vector3d& origin = ray_origins[vs];
+    for (int first = 0; first < samples; first += kPacket) {
+      const int count = std::min(kPacket, samples - first);
+      alignas(64) int valid[kPacket];
+      alignas(64) RTCRayHit16 packet;
+      Eigen::Vector3d directions[kPacket];
+      for (int k = 0; k < kPacket; ++k) {
+        valid[k] = k < count ? -1 : 0;
+        packet.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+        packet.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
+        if (k >= count) continue;
+        const int s = first + k;
+        // Cosine-weighted direction (pdf cos θ / π): r = √u₁ on the unit disc, lifted to the
+        // hemisphere.
+        double u1, u2;
+        if (stratified) {
+          // Cell s of `rows` rows; row i holds the cells s ∈ [a, b) = [⌈i·S/rows⌉, ⌈(i+1)·S/rows⌉)
+          // (so s is in row ⌊s·rows/S⌋) and spans u₁ ∈ [a/S, b/S): every cell has area 1/S,
+          // which the plain average over samples needs to be unbiased when rows differ in count.
+          const int row = static_cast<int>(static_cast<int64_t>(s) * rows / samples);
+          const int row_first = static_cast<int>((static_cast<int64_t>(row) * samples + rows - 1) / rows);
+          const int row_end = static_cast<int>((static_cast<int64_t>(row + 1) * samples + rows - 1) / rows);
+          const uint64_t bits = splitmix64(hash ^ (0x5bd1e995ull * static_cast<uint64_t>(s + 1)));
+          u1 = (row_first + unit_interval(bits) * (row_end - row_first)) / samples;
+          u2 = (s - row_first + unit_interval(splitmix64(bits))) / (row_end - row_first);
+        } else {
+          u1 = fractional(static_cast<double>(s) / samples + rotation_1);
+          u2 = fractional(radical_inverse_base2(static_cast<uint32_t>(s)) + rotation_2);
+        }
+        const double radius = std::sqrt(u1);
+        const double phi = 2.0 * kPi * u2;
+        directions[k] = (radius * std::cos(phi)) * tangent + (radius * std::sin(phi)) * bitangent +
+                        std::sqrt(std::max(0.0, 1.0 - u1)) * normal;
+        set_ray(packet.ray, k, origin, directions[k], std::numeric_limits<float>::infinity());
+      }
+      rtcIntersect16(valid, scene, &context, &packet);
+      on_packet(packet, directions, first, count, hash);
+    }
+  }
+
+  // Whether ray k of the packet hit a triangle from its lit side (a ray that left the scene, a
+  // hit on the unlit side or on a degenerate triangle adds nothing to the gather).
+  bool lit_hit(const RTCRayHit16& packet, int k, const Eigen::Vector3d& direction) const {
+    if (packet.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) return false;
+    return triangle_normals[static_cast<size_t>(packet.hit.primID[k])].dot(direction) < 0;
+  }
+
+  // The lit hits of each point's rays, in the order of `points` and of the samples.
+  PointHits vertex_hits(const std::vector<int>& points, const GatherOptions& options) const {
+    const auto count = static_cast<int64_t>(points.size());
+    PointHits hits;
+    hits.blocks.resize(static_cast<size_t>((count + kPointsPerHitBlock - 1) / kPointsPerHitBlock));
+    hits.ends.assign(points.size(), 0);
+    parallel_for_chunks(static_cast<int64_t>(hits.blocks.size()), 1, [&](int64_t begin, int64_t end) {
+      RTCIntersectContext context;
+      rtcInitIntersectContext(&context);
+      for (int64_t b = begin; b < end; ++b) {
+        std::vector<VertexHit>& out = hits.blocks[static_cast<size_t>(b)];
+        out.reserve(static_cast<size_t>(kPointsPerHitBlock * options.samples));
+        for (int64_t p = b * kPointsPerHitBlock; p < std::min(count, (b + 1) * kPointsPerHitBlock); ++p) {
+          const int v = points[static_cast<size_t>(p)];
+          assert(v >= 0 && static_cast<size_t>(v) < vertex_normals.size());
+          cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions,
+                                                   int, int packet_count, uint64_t) {
+            for (int k = 0; k < packet_count; ++k) {
+              if (lit_hit(packet, k, directions[k])) out.push_back({packet.hit.primID[k], packet.hit.u[k], packet.hit.v[k]});
+            }
+          });
+          hits.ends[static_cast<size_t>(p)] = static_cast<int64_t>(out.size());
+        }
+        out.shrink_to_fit();
+      }
+    });
+    return hits;
   }
 
   // Σ_l I_l · max(0, n·ω_l) / r_l² · V: the irradiance at x (normal n) from the lights, with
@@ -384,76 +538,53 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
   assert(options.samples >= 1);
   out.resize(3 * static_cast<Eigen::Index>(points.size()));
   const Embree& e = *embree_;
-  const int samples = options.samples;
-  const bool stratified = options.sampling == HemisphereSampling::kStratified;
-  const int rows = std::max(1, static_cast<int>(std::floor(std::sqrt(static_cast<double>(samples)))));
+  if (options.direct_from_vertices) {
+    // L_d at every vertex (one shadow ray per vertex and light: at 100k points about what 50 of
+    // the points' 2,048 rays cost), then each point's hits summed as its packets come back, in
+    // the order of its samples — the terms and order of indirect_frames, so that a point's value
+    // does not depend on how it was computed, and no hit is stored.
+    Eigen::VectorXf vertex_direct;
+    direct(lights, all_points(), vertex_direct);
+    parallel_for_chunks(static_cast<int64_t>(points.size()), kIndirectPointsPerThread, [&](int64_t begin, int64_t end) {
+      RTCIntersectContext context;
+      rtcInitIntersectContext(&context);
+      for (int64_t p = begin; p < end; ++p) {
+        const int v = points[static_cast<size_t>(p)];
+        assert(v >= 0 && v < point_count());
+        double sums[3] = {0, 0, 0};
+        e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions, int,
+                                                   int count, uint64_t) {
+          VertexHit hits[kPacket];
+          int lit = 0;
+          for (int k = 0; k < count; ++k) {
+            if (e.lit_hit(packet, k, directions[k])) hits[lit++] = {packet.hit.primID[k], packet.hit.u[k], packet.hit.v[k]};
+          }
+          sum_interpolated<1>(surface_.faces, hits, hits + lit, vertex_direct.data(), sums);
+        });
+        store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
+      }
+    });
+    return;
+  }
   parallel_for_chunks(static_cast<int64_t>(points.size()), kIndirectPointsPerThread, [&](int64_t begin, int64_t end) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     for (int64_t p = begin; p < end; ++p) {
       const int v = points[static_cast<size_t>(p)];
       assert(v >= 0 && v < point_count());
-      const auto vs = static_cast<size_t>(v);
-      // The point's Cranley–Patterson rotation of the Hammersley set.
-      const uint64_t hash = splitmix64(splitmix64(options.seed) ^ static_cast<uint64_t>(v));
-      const double rotation_1 = unit_interval(hash);
-      const double rotation_2 = unit_interval(splitmix64(hash));
-      const Eigen::Vector3d& normal = e.vertex_normals[vs];
-      Eigen::Vector3d tangent, bitangent;
-      orthonormal_basis(normal, tangent, bitangent);
-      const Eigen::Vector3d& origin = e.ray_origins[vs];
-
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();  // Σ_s L_d(y_s), in the order of s
-      // The point's rays go in packets of kPacket consecutive samples (always the same packets for
-      // the same point, whatever the batch): they share an origin, which Embree's packet traversal
-      // turns into shared work near it. Each packet's shadow rays, one per hit and light, go as a
-      // packet too.
-      for (int first = 0; first < samples; first += kPacket) {
-        const int count = std::min(kPacket, samples - first);
-        alignas(64) int valid[kPacket];
-        alignas(64) RTCRayHit16 packet;
-        Eigen::Vector3d directions[kPacket];
-        for (int k = 0; k < kPacket; ++k) {
-          valid[k] = k < count ? -1 : 0;
-          packet.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-          packet.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
-          if (k >= count) continue;
-          const int s = first + k;
-          // Cosine-weighted direction (pdf cos θ / π): r = √u₁ on the unit disc, lifted to the
-          // hemisphere.
-          double u1, u2;
-          if (stratified) {
-            // Cell s of `rows` rows; row i holds the cells s ∈ [a, b) = [⌈i·S/rows⌉, ⌈(i+1)·S/rows⌉)
-            // (so s is in row ⌊s·rows/S⌋) and spans u₁ ∈ [a/S, b/S): every cell has area 1/S,
-            // which the plain average over samples needs to be unbiased when rows differ in count.
-            const int row = static_cast<int>(static_cast<int64_t>(s) * rows / samples);
-            const int row_first = static_cast<int>((static_cast<int64_t>(row) * samples + rows - 1) / rows);
-            const int row_end = static_cast<int>((static_cast<int64_t>(row + 1) * samples + rows - 1) / rows);
-            const uint64_t bits = splitmix64(hash ^ (0x5bd1e995ull * static_cast<uint64_t>(s + 1)));
-            u1 = (row_first + unit_interval(bits) * (row_end - row_first)) / samples;
-            u2 = (s - row_first + unit_interval(splitmix64(bits))) / (row_end - row_first);
-          } else {
-            u1 = fractional(static_cast<double>(s) / samples + rotation_1);
-            u2 = fractional(radical_inverse_base2(static_cast<uint32_t>(s)) + rotation_2);
-          }
-          const double radius = std::sqrt(u1);
-          const double phi = 2.0 * kPi * u2;
-          directions[k] = (radius * std::cos(phi)) * tangent + (radius * std::sin(phi)) * bitangent +
-                          std::sqrt(std::max(0.0, 1.0 - u1)) * normal;
-          set_ray(packet.ray, k, origin, directions[k], std::numeric_limits<float>::infinity());
-        }
-        rtcIntersect16(valid, e.scene, &context, &packet);
-
+      double sums[3] = {0, 0, 0};  // Σ_s L_d(y_s), in the order of s
+      e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions,
+                                                 int first, int count, uint64_t hash) {
         // Each hit's point, normal and albedo (Embree: p = (1−u−v)·v₀ + u·v₁ + v·v₂); hits on
         // the unlit side (or a degenerate triangle) and rays that left the scene add nothing.
+        // The packet's shadow rays, one per hit and light, go as a packet too.
         bool lit[kPacket] = {};
         uint64_t jitter[kPacket];
         Eigen::Vector3d hits[kPacket], hit_normals[kPacket], albedos[kPacket], irradiance[kPacket];
         for (int k = 0; k < count; ++k) {
-          if (packet.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) continue;
+          if (!e.lit_hit(packet, k, directions[k])) continue;
           const auto f = static_cast<Eigen::Index>(packet.hit.primID[k]);
           hit_normals[k] = e.triangle_normals[static_cast<size_t>(f)];
-          if (!(hit_normals[k].dot(directions[k]) < 0)) continue;
           const double bu = packet.hit.u[k];
           const double bv = packet.hit.v[k];
           const double bw = 1.0 - bu - bv;
@@ -471,13 +602,63 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
         e.add_irradiance_packet(hits, hit_normals, lit, count, lights, options.light_radius, options.shadow_rays, jitter,
                                 context, irradiance);
         for (int k = 0; k < count; ++k) {
-          if (lit[k]) sum += albedos[k].cwiseProduct(irradiance[k]) / kPi;
+          if (!lit[k]) continue;
+          const Eigen::Vector3d radiance = albedos[k].cwiseProduct(irradiance[k]) / kPi;
+          for (int c = 0; c < 3; ++c) sums[c] += radiance(c);
         }
-      }
-      const Eigen::Vector3d radiance = surface_.albedo.row(v).cast<double>().transpose().cwiseProduct(sum) / samples;
-      out.segment<3>(3 * p) = radiance.cast<float>();
+      });
+      store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
     }
   });
+}
+
+void IlluminationEngine::indirect_frames(const std::vector<PointLight>& lights, const GatherOptions& options,
+                                         FrameMatrix& frames, const ProgressCallback& progress) const {
+  const std::vector<int> points = all_points();
+  const auto light_count = static_cast<int64_t>(lights.size());
+  frames.resize(static_cast<Eigen::Index>(light_count), 3 * static_cast<Eigen::Index>(points.size()));
+  if (!options.direct_from_vertices) {
+    Eigen::VectorXf frame;
+    for (int64_t l = 0; l < light_count; ++l) {
+      indirect({lights[static_cast<size_t>(l)]}, options, points, frame);
+      frames.row(static_cast<Eigen::Index>(l)) = frame.transpose();
+      report_progress(progress, "gather", l + 1, light_count);
+    }
+    return;
+  }
+  // The rays once for every light; then, a block of lights at a time, L_d of each at every vertex
+  // (vertex-major, the block's lights side by side so that one hit reads them together) and every
+  // point's sums for the block.
+  const PointHits hits = embree_->vertex_hits(points, options);
+  const int64_t n = point_count();
+  std::vector<float> block_direct;
+  Eigen::VectorXf light_direct;
+  for (int64_t first = 0; first < light_count; first += kLightsPerBlock) {
+    const int block = static_cast<int>(std::min<int64_t>(kLightsPerBlock, light_count - first));
+    // Always kLightsPerBlock lights per vertex (a short last block padded with zeros).
+    block_direct.assign(3 * static_cast<size_t>(kLightsPerBlock) * static_cast<size_t>(n), 0.0f);
+    for (int b = 0; b < block; ++b) {
+      direct({lights[static_cast<size_t>(first + b)]}, points, light_direct);
+      for (int64_t v = 0; v < n; ++v) {
+        for (int c = 0; c < 3; ++c) {
+          block_direct[static_cast<size_t>((v * kLightsPerBlock + b) * 3 + c)] = light_direct(3 * v + c);
+        }
+      }
+    }
+    parallel_for_chunks(n, kInterpolatedPointsPerThread, [&](int64_t begin, int64_t end) {
+      std::vector<double> sums(3 * static_cast<size_t>(kLightsPerBlock));
+      float out[3];
+      for (int64_t p = begin; p < end; ++p) {
+        std::fill(sums.begin(), sums.end(), 0.0);
+        sum_interpolated<kLightsPerBlock>(surface_.faces, hits.begin(p), hits.end(p), block_direct.data(), sums.data());
+        for (int b = 0; b < block; ++b) {
+          store_indirect(surface_, static_cast<int>(p), sums.data() + 3 * b, options.samples, out);
+          for (int c = 0; c < 3; ++c) frames(static_cast<Eigen::Index>(first + b), 3 * p + c) = out[c];
+        }
+      }
+    });
+    report_progress(progress, "gather", first + block, light_count);
+  }
 }
 
 std::vector<int> IlluminationEngine::all_points() const {

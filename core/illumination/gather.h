@@ -11,7 +11,8 @@
 // where y(x, ω) is the first surface hit from x along ω (nothing when the ray leaves the scene,
 // or when it hits a surface from its unlit side) and V is a shadow ray from y towards the light.
 // L_d(y) at a hit is evaluated at the hit itself with the triangle's interpolated albedo and
-// its geometric normal, not interpolated from vertices.
+// its geometric normal — or, with GatherOptions::direct_from_vertices (issue #38), interpolated
+// from L_d at the hit triangle's vertices: L_d(y) ≈ (1 − u − v)·L_d(v₀) + u·L_d(v₁) + v·L_d(v₂).
 //
 // Determinism: the S directions of point i depend only on (seed, i, S, sampling) — a per-point
 // rotation of one low-discrepancy set, or per-point jittered strata — never on which other points are computed, the thread count or the
@@ -28,7 +29,9 @@
 
 #include <Eigen/Core>
 
+#include "core/common/progress.h"
 #include "core/common/result.h"
+#include "core/common/types.h"
 #include "core/illumination/surface.h"
 
 namespace animspace::illumination {
@@ -54,10 +57,19 @@ struct GatherOptions {
   // (direct() stays a point light).
   double light_radius = 0;
   int shadow_rays = 1;     // per hit and light when light_radius > 0, ≥ 1
+  // Issue #38: a hit reads the direct radiance L_d interpolated (barycentric) from its triangle's
+  // three vertices, each computed once per light with one shadow ray, instead of tracing a shadow
+  // ray from the hit itself to every light — the final gather of a two-pass renderer, which reads
+  // a stored first pass at its hits. A ray then costs one cast instead of 1 + lights, and the
+  // hits no longer depend on the light, so the training lights share them (indirect_frames):
+  // ~1,000 rays per point, the count a converged gather needs, cost a training about what 64 cost
+  // it with shadow rays. The price is L_d's variation inside one triangle (a shadow edge spread
+  // over a triangle, the second-order part of cos θ / r²). Point lights only (light_radius 0).
+  bool direct_from_vertices = false;
 };
 
-// Checks samples ≥ 1, shadow_rays ≥ 1, light_radius finite and ≥ 0. Error: kInvalidArgument
-// naming the field.
+// Checks samples ≥ 1, shadow_rays ≥ 1, light_radius finite and ≥ 0, and light_radius 0 with
+// direct_from_vertices. Error: kInvalidArgument naming the field.
 Status check_gather_options(const GatherOptions& options);
 
 // Checks 1 ≤ |lights| ≤ max_lights, finite positions, finite intensities ≥ 0. Errors:
@@ -83,9 +95,18 @@ class IlluminationEngine {
   void direct(const std::vector<PointLight>& lights, const std::vector<int>& points, Eigen::VectorXf& out) const;
 
   // One-bounce indirect radiance L_i at `points`, point-major RGB (3·|points| values).
-  // S hemisphere rays per point plus one shadow ray per hit and light; threads over points.
+  // S hemisphere rays per point plus one shadow ray per hit and light — or, with
+  // direct_from_vertices, plus one per vertex of the surface and light (L_d at every vertex,
+  // whatever the points); threads over points.
   void indirect(const std::vector<PointLight>& lights, const GatherOptions& options, const std::vector<int>& points,
                 Eigen::VectorXf& out) const;
+
+  // One frame per light: frames.row(l) = indirect({lights[l]}, options, all_points()) bit for bit
+  // (|lights| × 3N). With options.direct_from_vertices each point's rays are cast once for all the
+  // lights and L_d is computed per light at every vertex; otherwise one gather per light.
+  // Progress: stage "gather", lights done of |lights|.
+  void indirect_frames(const std::vector<PointLight>& lights, const GatherOptions& options, FrameMatrix& frames,
+                       const ProgressCallback& progress = {}) const;
 
   std::vector<int> all_points() const;
 

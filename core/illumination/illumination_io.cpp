@@ -27,6 +27,10 @@ constexpr const char* kFilterNeighboursKey = "illumination.filter_neighbours";
 constexpr const char* kFilterNormalKey = "illumination.filter_min_normal_cosine";
 constexpr const char* kKeySamplesKey = "illumination.key_samples";
 constexpr const char* kFilterLinearKey = "illumination.filter_linear";
+// Issue #38: "vertices" when the gather reads the direct light at its hits from the hit
+// triangle's vertices (GatherOptions::direct_from_vertices); absent in older files and for the
+// gather with a shadow ray from every hit.
+constexpr const char* kDirectAtHitsKey = "illumination.direct_at_hits";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
@@ -66,6 +70,7 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
     out.metadata()[kLightRadiusKey] = format_number(setup.gather.light_radius);
     out.metadata()[kShadowRaysKey] = std::to_string(setup.gather.shadow_rays);
   }
+  if (setup.gather.direct_from_vertices) out.metadata()[kDirectAtHitsKey] = "vertices";
   if (setup.filter.enabled()) {
     out.metadata()[kFilterNeighboursKey] = std::to_string(setup.filter.neighbours);
     out.metadata()[kFilterNormalKey] = format_number(setup.filter.min_normal_cosine);
@@ -145,6 +150,13 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
     auto rays = in.metadata_int(kShadowRaysKey);
     if (!rays) return named(rays.error(), source);
     setup.gather.shadow_rays = *rays;
+  }
+  const std::string direct_at_hits = in.metadata_value(kDirectAtHitsKey, "shadow rays");
+  if (direct_at_hits == "vertices") {
+    setup.gather.direct_from_vertices = true;
+  } else if (direct_at_hits != "shadow rays") {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kDirectAtHitsKey +
+                                                       " should be 'vertices' or absent, got '" + direct_at_hits + "'");
   }
   Status gather = check_gather_options(setup.gather);
   if (!gather.ok()) return named(gather.error(), source);

@@ -12,17 +12,15 @@ namespace animspace::illumination {
 
 FrameMatrix gather_frames(const IlluminationEngine& engine, const std::vector<PointLight>& lights,
                           const GatherOptions& gather, const ProgressCallback& progress, const SurfaceFilter* filter) {
-  const std::vector<int> points = engine.all_points();
-  FrameMatrix frames(static_cast<long>(lights.size()), static_cast<long>(points.size()) * 3);
-  Eigen::VectorXf frame, filtered;
-  for (size_t f = 0; f < lights.size(); ++f) {
-    engine.indirect({lights[f]}, gather, points, frame);
-    if (filter != nullptr && filter->enabled()) {
+  FrameMatrix frames;
+  engine.indirect_frames(lights, gather, frames, progress);
+  if (filter != nullptr && filter->enabled()) {
+    Eigen::VectorXf frame, filtered;
+    for (Eigen::Index f = 0; f < frames.rows(); ++f) {
+      frame = frames.row(f).transpose();
       surface_filter_apply(*filter, frame, filtered);
-      frame.swap(filtered);
+      frames.row(f) = filtered.transpose();
     }
-    frames.row(static_cast<long>(f)) = frame.transpose();
-    report_progress(progress, "gather", static_cast<int64_t>(f + 1), static_cast<int64_t>(lights.size()));
   }
   return frames;
 }

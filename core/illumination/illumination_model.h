@@ -38,22 +38,30 @@ double peak_to_rms_ratio(const FrameMatrix& frames);
 
 struct IlluminationTrainingOptions {
   std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 144)
-  GatherOptions gather;
-  // Issue #38 item 1: the subspace should learn the illumination, not the gather's noise. Noise
-  // at ~100k points is cheap to remove with a filter over the surface: each training frame, and
-  // the server's full calculation on a miss, go through it. At the key points, removing it with
-  // rays instead (key_samples > 0: unfiltered, more rays) looked cheap but measured badly: such
-  // keys disagree with the filtered training frames by the filter's bias and their own noise,
-  // which the reconstruction amplifies (16% at 20k points against 5.6% with filtered keys). So by
-  // default the keys are the filtered values themselves (gather_keys: the key points' filter
-  // support gathered), exact but K·k points' worth of rays. On by default at k = 32, the value
-  // measured best (docs/BENCHMARKS.md "Issue #38 item 1"); at the papers' 100k points it takes the
-  // error against a converged reference from 11% to 3%, the HIT rate from 0.42 to 0.83 and the
-  // image's grain below the converged image's, for a speed-up against the (filtered) full
-  // calculation of 30× instead of 142× (same session; BENCHMARKS "Issue #38: the papers' size"). k = 0 turns it off; a model
-  // without the filter's keys in its file (every file before issue #38) is unfiltered. Stored in
-  // the model (illumination.filter_*, illumination.key_samples).
-  SurfaceFilterOptions filter{.neighbours = 32};
+  // Issue #38: a converged full calculation, so that the subspace learns the illumination, not
+  // the noise. 2,048 rays per point, each hit reading the direct light from its triangle's
+  // vertices: at 20k points the gather is then 0.68% from a 4,096-ray reference (64 rays: 12%;
+  // the interpolation's own bias is within the noise: 1,024 rays give 1.30% with it, 1.28% with a
+  // shadow ray per hit), and the 144 training lights share the rays (docs/BENCHMARKS.md, "Issue
+  // #38: a converged gather"). The rule: the fewest rays, in powers of two, whose gather is
+  // within 1% of the reference — the accuracy the subspace is asked for.
+  GatherOptions gather = [] {
+    GatherOptions g;
+    g.samples = 2048;
+    g.direct_from_vertices = true;
+    return g;
+  }();
+  // Issue #38 item 1: a surface filter of each training frame and of the server's full
+  // calculation (k expected neighbours; 0: off). It was the default while the gather was 64 rays
+  // with a shadow ray per hit: it cut that gather's noise from 12% to 4.6% against a converged
+  // reference, but its own bias (~3%, features narrower than its disc) is then what is left, and
+  // a converged gather has no noise for it to remove. Off by default since the converged gather;
+  // a model without the filter's keys in its file (every file before issue #38) is unfiltered.
+  // With the filter on, the keys are the filtered values themselves (gather_keys: the key points'
+  // filter support gathered), exact but K·k points' worth of rays; unfiltered keys with more
+  // rays (key_samples > 0) measured badly against filtered frames (16% at 20k points against
+  // 5.6%). Stored in the model (illumination.filter_*, illumination.key_samples).
+  SurfaceFilterOptions filter;
   // Rays per key point, unfiltered, when the server gathers the keys from a request's light; 0:
   // gather_keys's default (the filter's support at gather.samples rays, filtered).
   int key_samples = 0;

@@ -20,6 +20,9 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
       ->check(CLI::Range(1, 65536))
       ->capture_default_str();
   cmd->add_option("--seed", a.seed, "Seed of the per-point ray directions")->capture_default_str();
+  cmd->add_flag("--direct-from-vertices,!--shadow-ray-per-hit", a.direct_from_vertices,
+                "Each gather ray's hit reads the direct light interpolated from its triangle's vertices, computed "
+                "once per light (the lights share the rays), instead of tracing a shadow ray from the hit");
   cmd->add_option("--filter-neighbours", a.filter_neighbours,
                   "Surface filter of each gathered frame (and of the daemon's full calculation): each point's "
                   "irradiance averaged over about this many neighbours on the surface (0: no filter)")
@@ -89,6 +92,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
   }
   options.gather.samples = a.samples;
   options.gather.seed = a.seed;
+  options.gather.direct_from_vertices = a.direct_from_vertices;
   options.filter = {a.filter_neighbours, a.filter_min_normal_cosine, a.filter_linear};
   options.key_samples = a.key_samples;
   options.tolerance_fraction = a.tolerance;
@@ -119,6 +123,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                 {"points", points},
                 {"lights", options.lights.size()},
                 {"samples", a.samples},
+                {"direct_from_vertices", a.direct_from_vertices},
                 {"basis", r.basis_size},
                 {"key_points", r.key_points},
                 {"radiance_scale", report.radiance_scale},

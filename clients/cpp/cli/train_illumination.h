@@ -14,7 +14,9 @@ namespace animspace::cli {
 
 struct TrainIlluminationArgs {
   int points = 100000;         // target surface sample points (vertices)
-  int samples = 64;            // final-gather rays per point
+  int samples = illumination::IlluminationTrainingOptions{}.gather.samples;  // final-gather rays per point
+  // Issue #38: the hits read the direct light from their triangles' vertices (GatherOptions).
+  bool direct_from_vertices = illumination::IlluminationTrainingOptions{}.gather.direct_from_vertices;
   unsigned long long seed = 0;
   int lights_x = 12;           // training grid, 12 × 12 = 144 as in the papers
   int lights_z = 12;

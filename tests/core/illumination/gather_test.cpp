@@ -122,6 +122,32 @@ struct PlaneMoments {
   double second_moment = 0;  // per unit (ρ_c ρ_f I)²
 };
 
+// L_d / (ρ_f I) at a floor point y.
+double floor_direct(const Eigen::Vector3d& y, const Eigen::Vector3d& light) {
+  const double d = (light - y).norm();
+  return light.y() / (kPi * d * d * d);
+}
+
+// The moments of the estimator whose hits read `psi`(y) for L_d / (ρ_f I); floor_direct by default.
+template <typename Psi>
+PlaneMoments floor_moments_of(const Eigen::Vector3d& x, double half_side, Psi psi_at) {
+  const int cells = 1200;
+  const double step = 2 * half_side / cells;
+  const double H = x.y();
+  double m1 = 0, m2 = 0;
+  for (int i = 0; i < cells; ++i) {
+    for (int j = 0; j < cells; ++j) {
+      const Eigen::Vector3d y(-half_side + (i + 0.5) * step, 0.0, -half_side + (j + 0.5) * step);
+      const double r2 = (x - y).squaredNorm();
+      const double psi = psi_at(y);
+      const double kernel = H * H / (r2 * r2) / kPi;  // cos θ_x cos θ_y / (π r²)
+      m1 += psi * kernel;
+      m2 += psi * psi * kernel;
+    }
+  }
+  return {m1 * step * step, m2 * step * step};
+}
+
 PlaneMoments floor_moments(const Eigen::Vector3d& x, const Eigen::Vector3d& light, double half_side) {
   const int cells = 1200;
   const double step = 2 * half_side / cells;
@@ -242,6 +268,68 @@ TEST(IlluminationIndirect, StratifiedSamplingIsUnbiasedOnParallelPlanes) {
   }
 }
 
+// Issue #38: with direct_from_vertices a hit reads L_d interpolated linearly over its triangle
+// from the triangle's vertices. On the parallel planes' coarse floor (8 × 8 cells of 0.5 m under a
+// light 0.5 m high, each cell cut along its diagonal from vertex (i, j) to (i + 1, j + 1)) that
+// interpolant is far from L_d, so the gather's mean over seeds must match the quadrature of the
+// interpolant, computed here from the grid — and not the exact field's.
+TEST(IlluminationIndirect, DirectFromVerticesIntegratesTheInterpolantOfTheVertexValues) {
+  const ParallelPlanes scene;
+  auto engine = make_engine(scene.mesh);
+  constexpr int kCells = 8;
+  const double cell = 2 * ParallelPlanes::kHalfSide / kCells;
+  // Floor vertex (i, j) sits at x = −L + i·cell, z = L − j·cell (add_rectangle's u and v).
+  const auto vertex_value = [&](int i, int j) {
+    return floor_direct({-ParallelPlanes::kHalfSide + i * cell, 0.0, ParallelPlanes::kHalfSide - j * cell},
+                        scene.light.position);
+  };
+  const auto interpolant = [&](const Eigen::Vector3d& y) {
+    const double fi = (y.x() + ParallelPlanes::kHalfSide) / cell;
+    const double fj = (ParallelPlanes::kHalfSide - y.z()) / cell;
+    const int i = std::clamp(static_cast<int>(std::floor(fi)), 0, kCells - 1);
+    const int j = std::clamp(static_cast<int>(std::floor(fj)), 0, kCells - 1);
+    const double s = fi - i, t = fj - j;
+    const double a = vertex_value(i, j), b = vertex_value(i + 1, j), c = vertex_value(i + 1, j + 1),
+                 d = vertex_value(i, j + 1);
+    // Triangle (a, b, c) where s ≥ t, (a, c, d) where t ≥ s.
+    return s >= t ? a + s * (b - a) + t * (c - b) : a + s * (c - d) + t * (d - a);
+  };
+  const int samples = 256, seeds = 16;
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  std::vector<Eigen::VectorXf> estimates(seeds);
+  for (int seed = 0; seed < seeds; ++seed) {
+    GatherOptions options{samples, static_cast<uint64_t>(seed)};
+    options.direct_from_vertices = true;
+    engine->indirect({scene.light}, options, ceiling, estimates[static_cast<size_t>(seed)]);
+  }
+  double largest_gap = 0;  // between the interpolant's and the exact field's values, ÷ the interpolant's
+  for (int p = 0; p < scene.ceiling_count; ++p) {
+    const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
+    const PlaneMoments m = floor_moments_of(x, ParallelPlanes::kHalfSide, interpolant);
+    const PlaneMoments exact_field = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
+    largest_gap = std::max(largest_gap, std::abs(exact_field.mean - m.mean) / m.mean);
+    for (int k = 0; k < 3; ++k) {
+      const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
+      const double expected = scale * m.mean;
+      const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
+      double sum = 0, sum2 = 0;
+      for (const Eigen::VectorXf& estimate : estimates) {
+        const double value = estimate[3 * p + k];
+        EXPECT_NEAR(value, expected, 4 * iid_sigma) << "ceiling vertex " << p << " channel " << k;
+        sum += value;
+        sum2 += value * value;
+      }
+      const double mean = sum / seeds;
+      const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
+      EXPECT_NEAR(mean, expected, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * expected)
+          << "ceiling vertex " << p << " channel " << k;
+    }
+  }
+  // The test tells the two apart: the coarse interpolant is well outside the allowance above.
+  EXPECT_GT(largest_gap, 0.05);
+}
+
+
 // With nothing between the hits and the light, every shadow ray to the light's disc arrives: a
 // light of any radius gives the point light's value (the irradiance uses the centre).
 TEST(IlluminationIndirect, AnUnoccludedDiscLightEqualsThePointLight) {
@@ -358,6 +446,10 @@ TEST(IlluminationIndirect, ClosedCubeDoesNotLeakAtItsEdges) {
     EXPECT_TRUE(out.isZero(0)) << "direct, light at " << position.transpose();
     engine->indirect({{position, {1, 1, 1}}}, {32, 3}, engine->all_points(), out);
     EXPECT_TRUE(out.isZero(0)) << "indirect, light at " << position.transpose();
+    GatherOptions from_vertices{32, 3};
+    from_vertices.direct_from_vertices = true;
+    engine->indirect({{position, {1, 1, 1}}}, from_vertices, engine->all_points(), out);
+    EXPECT_TRUE(out.isZero(0)) << "indirect from the vertices, light at " << position.transpose();
   }
 }
 
@@ -416,19 +508,20 @@ TEST(IlluminationGather, APointsValueDoesNotDependOnTheBatch) {
   EXPECT_GT(differ, part.size() / 2);
 }
 
-// Issue #38: every gather (stratified, disc lights) is deterministic per point and per seed — a
+// Issue #38: every gather (stratified, disc lights, the direct light from the vertices) is deterministic per point and per seed — a
 // point's value alone equals its value in the full gather bit for bit, the same seed repeats,
 // another seed draws other directions.
 TEST(IlluminationGather, EveryGatherIsDeterministicPerPointAndPerSeed) {
   auto engine = make_engine(cornell_box({2000}));
   const int n = engine->point_count();
   const std::vector<PointLight> lights = {{{0.3, 0.45, 0.25}, {1, 1, 1}}};
-  std::vector<GatherOptions> gathers(3);
+  std::vector<GatherOptions> gathers(4);
   gathers[0].sampling = HemisphereSampling::kStratified;
   gathers[1].light_radius = 0.02;
   gathers[1].shadow_rays = 3;
   gathers[2].sampling = HemisphereSampling::kStratified;
   gathers[2].light_radius = 0.01;
+  gathers[3].direct_from_vertices = true;  // a subset reads the direct light at fewer vertices
   for (size_t g = 0; g < gathers.size(); ++g) {
     SCOPED_TRACE("gather " + std::to_string(g));
     GatherOptions options = gathers[g];
@@ -451,6 +544,43 @@ TEST(IlluminationGather, EveryGatherIsDeterministicPerPointAndPerSeed) {
     int differ = 0;
     for (Eigen::Index i = 0; i < part.size(); ++i) differ += part[i] != full[i];
     EXPECT_GT(differ, part.size() / 2);
+  }
+}
+
+// Issue #38: indirect_frames gives each light's frame of indirect() bit for bit, for both ways of
+// reading the direct light at the hits — with more lights than one block of the shared-ray path,
+// and lights on both sides of the blocks.
+TEST(IlluminationGather, FramesForManyLightsEqualEachLightsOwnGather) {
+  auto engine = make_engine(cornell_box({1500}));
+  std::vector<PointLight> lights;
+  for (int l = 0; l < 11; ++l) {
+    lights.push_back({{0.08 + 0.04 * l, 0.45 - 0.01 * l, 0.1 + 0.03 * l}, {1.0 + l, 1.0, 0.5}});
+  }
+  lights.push_back({{0.3, 0.3, -0.5}, {1, 1, 1}});  // in front of the open side
+  for (const bool from_vertices : {false, true}) {
+    SCOPED_TRACE(from_vertices ? "direct from the vertices" : "shadow rays");
+    GatherOptions options{24, 5};
+    options.direct_from_vertices = from_vertices;
+    FrameMatrix frames;
+    std::vector<int64_t> progress;
+    engine->indirect_frames(lights, options, frames,
+                            [&](std::string_view stage, int64_t done, int64_t total) {
+                              EXPECT_EQ(stage, "gather");
+                              EXPECT_EQ(total, static_cast<int64_t>(lights.size()));
+                              progress.push_back(done);
+                            });
+    ASSERT_EQ(frames.rows(), static_cast<Eigen::Index>(lights.size()));
+    ASSERT_EQ(frames.cols(), 3 * static_cast<Eigen::Index>(engine->point_count()));
+    ASSERT_FALSE(progress.empty());
+    EXPECT_EQ(progress.back(), static_cast<int64_t>(lights.size()));
+    EXPECT_TRUE(std::is_sorted(progress.begin(), progress.end()));
+    for (size_t l = 0; l < lights.size(); ++l) {
+      Eigen::VectorXf own;
+      engine->indirect({lights[l]}, options, engine->all_points(), own);
+      EXPECT_GT(own.maxCoeff(), 0.0f) << "light " << l;
+      const Eigen::VectorXf row = frames.row(static_cast<Eigen::Index>(l)).transpose();
+      expect_bitwise_equal(own, engine->all_points(), row, "light " + std::to_string(l));
+    }
   }
 }
 
@@ -515,6 +645,11 @@ TEST(IlluminationValidation, ErrorsNameTheField) {
   bad_gather = GatherOptions{};
   bad_gather.light_radius = -0.5;
   expect_invalid(check_gather_options(bad_gather), {"light_radius", "-0.5"});
+  bad_gather = GatherOptions{};
+  bad_gather.direct_from_vertices = true;
+  EXPECT_TRUE(check_gather_options(bad_gather).ok());
+  bad_gather.light_radius = 0.01;
+  expect_invalid(check_gather_options(bad_gather), {"light_radius", "direct_from_vertices", "0.01"});
 
   const PointLight good{{0.1, 0.2, 0.3}, {1, 1, 1}};
   EXPECT_TRUE(check_lights({good}, "lights").ok());

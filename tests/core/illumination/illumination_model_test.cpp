@@ -180,7 +180,45 @@ TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
   EXPECT_FALSE(load_illumination(bad_quantity, "m.anim").ok());
 }
 
-// A training small enough for a unit test: 25 lights under the ceiling, 8 rays, 60 keys.
+// Issue #38: the gather that reads the direct light from the vertices is stored as
+// illumination.direct_at_hits = vertices and read back; a file without the key (every file
+// before it) loads with a shadow ray per hit; an unknown value, or the key beside a disc light,
+// is refused naming the file and the key or field.
+TEST(IlluminationIoTest, TheDirectLightAtTheHitsRoundTripsAndOlderFilesReadAsShadowRays) {
+  IlluminationSetup setup = small_setup();
+  ASSERT_FALSE(setup.gather.direct_from_vertices);
+  container::ModelContainer older;
+  attach_illumination(older, setup);
+  EXPECT_EQ(older.metadata().count("illumination.direct_at_hits"), 0u) << "unchanged files for older readers";
+  auto loaded = load_illumination(older, "old.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_FALSE(loaded->gather.direct_from_vertices);
+
+  setup.gather.direct_from_vertices = true;
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  EXPECT_EQ(out.metadata_value("illumination.direct_at_hits"), "vertices");
+  loaded = load_illumination(out, "m.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_TRUE(loaded->gather.direct_from_vertices);
+
+  container::ModelContainer bad = out;
+  bad.metadata()["illumination.direct_at_hits"] = "photons";
+  auto refused = load_illumination(bad, "m.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("illumination.direct_at_hits"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("photons"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("m.anim"), std::string::npos) << refused.error().message;
+  bad = out;
+  bad.metadata()["illumination.light_radius"] = "0.01";
+  bad.metadata()["illumination.shadow_rays"] = "2";
+  refused = load_illumination(bad, "m.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("light_radius"), std::string::npos) << refused.error().message;
+}
+
+// A training small enough for a unit test: 25 lights under the ceiling, 8 rays (the direct light
+// read from the vertices, the default), 60 keys.
 IlluminationTrainingOptions small_training() {
   IlluminationTrainingOptions options;
   for (const Eigen::Vector3d& p : light_grid(cornell_room(), {5, 5, 0.05, 0.1})) {
@@ -220,6 +258,7 @@ TEST(IlluminationModelTest, TrainedModelReproducesItsTrainingFramesAndServesWith
   EXPECT_EQ(servable->info.server_engine, model::ServerEngine::kIllumination);
   EXPECT_EQ(servable->info.channel_count, 3);
   EXPECT_EQ(servable->illumination->gather.samples, 8);
+  EXPECT_TRUE(servable->illumination->gather.direct_from_vertices) << "the training's default gather, stored";
   ASSERT_EQ(servable->illumination->training_lights.size(), options.lights.size());
   EXPECT_NEAR(servable->illumination->radiance_scale, report.radiance_scale, 1e-6 * report.radiance_scale);
   ASSERT_TRUE(servable->illumination->view.has_value());
