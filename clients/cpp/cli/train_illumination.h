@@ -33,7 +33,7 @@ struct TrainIlluminationArgs {
   int key_samples = illumination::IlluminationTrainingOptions{}.key_samples;
   int basis = 0;
   double basis_slack = illumination::IlluminationTrainingOptions{}.pmsc.held_out_basis_slack;
-  int max_key_points = 200;
+  int max_key_points = illumination::IlluminationTrainingOptions{}.pmsc.max_key_points;
   int regions = 8;
   std::string description;
   std::string output;
