@@ -166,6 +166,17 @@ void sum_interpolated(const FaceMatrix& faces, const VertexHit* first, const Ver
   }
 }
 
+// Calls body(p, v, context) for every position p of `points` (v = points[p]) on the threads, each
+// thread with its own Embree intersection context.
+template <typename Body>
+void for_each_point(const std::vector<int>& points, int64_t min_per_thread, Body&& body) {
+  parallel_for_chunks(static_cast<int64_t>(points.size()), min_per_thread, [&](int64_t begin, int64_t end) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    for (int64_t p = begin; p < end; ++p) body(p, points[static_cast<size_t>(p)], context);
+  });
+}
+
 // L_i at vertex v from its sum of L_d over S hits: ρ(v) ⊙ sum / S, rounded to float.
 void store_indirect(const SurfaceMesh& surface, int v, const double* sums, int samples, float* out) {
   for (int c = 0; c < 3; ++c) {
@@ -517,19 +528,14 @@ void IlluminationEngine::direct(const std::vector<PointLight>& lights, const std
                                 Eigen::VectorXf& out) const {
   out.resize(3 * static_cast<Eigen::Index>(points.size()));
   const Embree& e = *embree_;
-  parallel_for_chunks(static_cast<int64_t>(points.size()), kDirectPointsPerThread, [&](int64_t begin, int64_t end) {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    for (int64_t p = begin; p < end; ++p) {
-      const int v = points[static_cast<size_t>(p)];
-      assert(v >= 0 && v < point_count());
-      const auto vs = static_cast<size_t>(v);
-      Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();
-      e.add_irradiance(surface_.vertices.row(v).cast<double>(), e.vertex_normals[vs], e.ray_origins[vs], lights,
-                       context, irradiance);
-      const Eigen::Vector3d radiance = surface_.albedo.row(v).cast<double>().transpose().cwiseProduct(irradiance) / kPi;
-      out.segment<3>(3 * p) = radiance.cast<float>();
-    }
+  for_each_point(points, kDirectPointsPerThread, [&](int64_t p, int v, RTCIntersectContext& context) {
+    assert(v >= 0 && v < point_count());
+    const auto vs = static_cast<size_t>(v);
+    Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();
+    e.add_irradiance(surface_.vertices.row(v).cast<double>(), e.vertex_normals[vs], e.ray_origins[vs], lights, context,
+                     irradiance);
+    const Eigen::Vector3d radiance = surface_.albedo.row(v).cast<double>().transpose().cwiseProduct(irradiance) / kPi;
+    out.segment<3>(3 * p) = radiance.cast<float>();
   });
 }
 
@@ -545,70 +551,60 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
     // does not depend on how it was computed, and no hit is stored.
     Eigen::VectorXf vertex_direct;
     direct(lights, all_points(), vertex_direct);
-    parallel_for_chunks(static_cast<int64_t>(points.size()), kIndirectPointsPerThread, [&](int64_t begin, int64_t end) {
-      RTCIntersectContext context;
-      rtcInitIntersectContext(&context);
-      for (int64_t p = begin; p < end; ++p) {
-        const int v = points[static_cast<size_t>(p)];
-        assert(v >= 0 && v < point_count());
-        double sums[3] = {0, 0, 0};
-        e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions, int,
-                                                   int count, uint64_t) {
-          VertexHit hits[kPacket];
-          int lit = 0;
-          for (int k = 0; k < count; ++k) {
-            if (e.lit_hit(packet, k, directions[k])) hits[lit++] = {packet.hit.primID[k], packet.hit.u[k], packet.hit.v[k]};
-          }
-          sum_interpolated<1>(surface_.faces, hits, hits + lit, vertex_direct.data(), sums);
-        });
-        store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
-      }
+    for_each_point(points, kIndirectPointsPerThread, [&](int64_t p, int v, RTCIntersectContext& context) {
+      assert(v >= 0 && v < point_count());
+      double sums[3] = {0, 0, 0};
+      e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions, int,
+                                                 int count, uint64_t) {
+        VertexHit hits[kPacket];
+        int lit = 0;
+        for (int k = 0; k < count; ++k) {
+          if (e.lit_hit(packet, k, directions[k])) hits[lit++] = {packet.hit.primID[k], packet.hit.u[k], packet.hit.v[k]};
+        }
+        sum_interpolated<1>(surface_.faces, hits, hits + lit, vertex_direct.data(), sums);
+      });
+      store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
     });
     return;
   }
-  parallel_for_chunks(static_cast<int64_t>(points.size()), kIndirectPointsPerThread, [&](int64_t begin, int64_t end) {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    for (int64_t p = begin; p < end; ++p) {
-      const int v = points[static_cast<size_t>(p)];
-      assert(v >= 0 && v < point_count());
-      double sums[3] = {0, 0, 0};  // Σ_s L_d(y_s), in the order of s
-      e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions,
-                                                 int first, int count, uint64_t hash) {
-        // Each hit's point, normal and albedo (Embree: p = (1−u−v)·v₀ + u·v₁ + v·v₂); hits on
-        // the unlit side (or a degenerate triangle) and rays that left the scene add nothing.
-        // The packet's shadow rays, one per hit and light, go as a packet too.
-        bool lit[kPacket] = {};
-        uint64_t jitter[kPacket];
-        Eigen::Vector3d hits[kPacket], hit_normals[kPacket], albedos[kPacket], irradiance[kPacket];
-        for (int k = 0; k < count; ++k) {
-          if (!e.lit_hit(packet, k, directions[k])) continue;
-          const auto f = static_cast<Eigen::Index>(packet.hit.primID[k]);
-          hit_normals[k] = e.triangle_normals[static_cast<size_t>(f)];
-          const double bu = packet.hit.u[k];
-          const double bv = packet.hit.v[k];
-          const double bw = 1.0 - bu - bv;
-          const int i0 = surface_.faces(f, 0);
-          const int i1 = surface_.faces(f, 1);
-          const int i2 = surface_.faces(f, 2);
-          hits[k] = bw * surface_.vertices.row(i0).cast<double>() + bu * surface_.vertices.row(i1).cast<double>() +
-                    bv * surface_.vertices.row(i2).cast<double>();
-          albedos[k] = bw * surface_.albedo.row(i0).cast<double>() + bu * surface_.albedo.row(i1).cast<double>() +
-                       bv * surface_.albedo.row(i2).cast<double>();
-          irradiance[k].setZero();
-          jitter[k] = splitmix64(hash + static_cast<uint64_t>(first + k));
-          lit[k] = true;
-        }
-        e.add_irradiance_packet(hits, hit_normals, lit, count, lights, options.light_radius, options.shadow_rays, jitter,
-                                context, irradiance);
-        for (int k = 0; k < count; ++k) {
-          if (!lit[k]) continue;
-          const Eigen::Vector3d radiance = albedos[k].cwiseProduct(irradiance[k]) / kPi;
-          for (int c = 0; c < 3; ++c) sums[c] += radiance(c);
-        }
-      });
-      store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
-    }
+  for_each_point(points, kIndirectPointsPerThread, [&](int64_t p, int v, RTCIntersectContext& context) {
+    assert(v >= 0 && v < point_count());
+    double sums[3] = {0, 0, 0};  // Σ_s L_d(y_s), in the order of s
+    e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions,
+                                               int first, int count, uint64_t hash) {
+      // Each hit's point, normal and albedo (Embree: p = (1−u−v)·v₀ + u·v₁ + v·v₂); hits on
+      // the unlit side (or a degenerate triangle) and rays that left the scene add nothing.
+      // The packet's shadow rays, one per hit and light, go as a packet too.
+      bool lit[kPacket] = {};
+      uint64_t jitter[kPacket];
+      Eigen::Vector3d hits[kPacket], hit_normals[kPacket], albedos[kPacket], irradiance[kPacket];
+      for (int k = 0; k < count; ++k) {
+        if (!e.lit_hit(packet, k, directions[k])) continue;
+        const auto f = static_cast<Eigen::Index>(packet.hit.primID[k]);
+        hit_normals[k] = e.triangle_normals[static_cast<size_t>(f)];
+        const double bu = packet.hit.u[k];
+        const double bv = packet.hit.v[k];
+        const double bw = 1.0 - bu - bv;
+        const int i0 = surface_.faces(f, 0);
+        const int i1 = surface_.faces(f, 1);
+        const int i2 = surface_.faces(f, 2);
+        hits[k] = bw * surface_.vertices.row(i0).cast<double>() + bu * surface_.vertices.row(i1).cast<double>() +
+                  bv * surface_.vertices.row(i2).cast<double>();
+        albedos[k] = bw * surface_.albedo.row(i0).cast<double>() + bu * surface_.albedo.row(i1).cast<double>() +
+                     bv * surface_.albedo.row(i2).cast<double>();
+        irradiance[k].setZero();
+        jitter[k] = splitmix64(hash + static_cast<uint64_t>(first + k));
+        lit[k] = true;
+      }
+      e.add_irradiance_packet(hits, hit_normals, lit, count, lights, options.light_radius, options.shadow_rays, jitter,
+                              context, irradiance);
+      for (int k = 0; k < count; ++k) {
+        if (!lit[k]) continue;
+        const Eigen::Vector3d radiance = albedos[k].cwiseProduct(irradiance[k]) / kPi;
+        for (int c = 0; c < 3; ++c) sums[c] += radiance(c);
+      }
+    });
+    store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
   });
 }
 

@@ -128,7 +128,8 @@ double floor_direct(const Eigen::Vector3d& y, const Eigen::Vector3d& light) {
   return light.y() / (kPi * d * d * d);
 }
 
-// The moments of the estimator whose hits read `psi`(y) for L_d / (ρ_f I); floor_direct by default.
+// The moments of the estimator whose hits read psi_at(y) for L_d / (ρ_f I) (floor_moments: the
+// exact field, floor_direct).
 template <typename Psi>
 PlaneMoments floor_moments_of(const Eigen::Vector3d& x, double half_side, Psi psi_at) {
   const int cells = 1200;
@@ -149,23 +150,7 @@ PlaneMoments floor_moments_of(const Eigen::Vector3d& x, double half_side, Psi ps
 }
 
 PlaneMoments floor_moments(const Eigen::Vector3d& x, const Eigen::Vector3d& light, double half_side) {
-  const int cells = 1200;
-  const double step = 2 * half_side / cells;
-  const double h = light.y();
-  const double H = x.y();
-  double m1 = 0, m2 = 0;
-  for (int i = 0; i < cells; ++i) {
-    for (int j = 0; j < cells; ++j) {
-      const Eigen::Vector3d y(-half_side + (i + 0.5) * step, 0.0, -half_side + (j + 0.5) * step);
-      const double d = (light - y).norm();
-      const double r2 = (x - y).squaredNorm();
-      const double psi = h / (kPi * d * d * d);   // L_d / (ρ_f I)
-      const double kernel = H * H / (r2 * r2) / kPi;  // cos θ_x cos θ_y / (π r²)
-      m1 += psi * kernel;
-      m2 += psi * psi * kernel;
-    }
-  }
-  return {m1 * step * step, m2 * step * step};
+  return floor_moments_of(x, half_side, [&](const Eigen::Vector3d& y) { return floor_direct(y, light); });
 }
 
 struct ParallelPlanes {
@@ -187,26 +172,23 @@ struct ParallelPlanes {
   }
 };
 
-TEST(IlluminationIndirect, ParallelPlanesMatchQuadratureWithinStandardError) {
-  const ParallelPlanes scene;
-  auto engine = make_engine(scene.mesh);
-  // Each seed rotates the point set independently, so the estimates of one point over seeds are
-  // independent and unbiased: their spread gives the standard error of their mean. The ray
-  // origins sit ~1e-4 × the scene's size (here ~6e-4 m) below the ceiling, which moves the
-  // value by ~2·6e-4 / H; hence the 2e-3 relative allowance besides the statistical one.
-  const int samples = 256, seeds = 16;
-  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
-  std::vector<Eigen::VectorXf> estimates(seeds);
-  for (int seed = 0; seed < seeds; ++seed) {
-    engine->indirect({scene.light}, {samples, static_cast<uint64_t>(seed)}, ceiling, estimates[static_cast<size_t>(seed)]);
-  }
+// Per-seed estimates at the parallel planes' ceiling points against the moments of their
+// estimator (`moments_at(x)`, per unit ρ_c ρ_f I): each estimate within 4 independent-sample
+// standard errors, the seeds' spread non-zero (they do rotate the directions), and their mean
+// within 4 standard errors of the mean plus the ray origins' offset. The origins sit ~1e-4 × the
+// scene's size (here ~6e-4 m) below the ceiling, which moves the value by ~2·6e-4 / H; hence the
+// 2e-3 relative allowance besides the statistical one.
+template <typename MomentsAt>
+void expect_seeds_match_quadrature(const ParallelPlanes& scene, const std::vector<int>& ceiling,
+                                   const std::vector<Eigen::VectorXf>& estimates, int samples, MomentsAt moments_at) {
+  const auto seeds = static_cast<double>(estimates.size());
   for (int p = 0; p < scene.ceiling_count; ++p) {
     const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
-    const PlaneMoments m = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
+    const PlaneMoments m = moments_at(x);
     for (int k = 0; k < 3; ++k) {
       const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
       const double exact = scale * m.mean;
-      // Independent samples would have this standard error; one rotated Hammersley set is no worse.
+      // Independent samples would have this standard error; one rotated point set is no worse.
       const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
       double sum = 0, sum2 = 0;
       for (const Eigen::VectorXf& estimate : estimates) {
@@ -217,11 +199,26 @@ TEST(IlluminationIndirect, ParallelPlanesMatchQuadratureWithinStandardError) {
       }
       const double mean = sum / seeds;
       const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
-      EXPECT_GT(spread, 0.0);  // the seeds do rotate the directions
-      EXPECT_NEAR(mean, exact, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * exact)
-          << "ceiling vertex " << p << " channel " << k;
+      EXPECT_GT(spread, 0.0);
+      EXPECT_NEAR(mean, exact, 4 * spread / std::sqrt(seeds) + 2e-3 * exact) << "ceiling vertex " << p << " channel " << k;
     }
   }
+}
+
+TEST(IlluminationIndirect, ParallelPlanesMatchQuadratureWithinStandardError) {
+  const ParallelPlanes scene;
+  auto engine = make_engine(scene.mesh);
+  // Each seed rotates the point set independently, so the estimates of one point over seeds are
+  // independent and unbiased: their spread gives the standard error of their mean.
+  const int samples = 256, seeds = 16;
+  const std::vector<int> ceiling = range(scene.ceiling_first, scene.ceiling_first + scene.ceiling_count);
+  std::vector<Eigen::VectorXf> estimates(seeds);
+  for (int seed = 0; seed < seeds; ++seed) {
+    engine->indirect({scene.light}, {samples, static_cast<uint64_t>(seed)}, ceiling, estimates[static_cast<size_t>(seed)]);
+  }
+  expect_seeds_match_quadrature(scene, ceiling, estimates, samples, [&](const Eigen::Vector3d& x) {
+    return floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
+  });
 }
 
 // Issue #38: jittered strata (one jitter per cell from (seed, point, cell)) are unbiased — the mean
@@ -243,28 +240,9 @@ TEST(IlluminationIndirect, StratifiedSamplingIsUnbiasedOnParallelPlanes) {
       options.sampling = HemisphereSampling::kStratified;
       engine->indirect({scene.light}, options, ceiling, estimates[static_cast<size_t>(seed)]);
     }
-    for (int p = 0; p < scene.ceiling_count; ++p) {
-      const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
-      const PlaneMoments m = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
-      for (int k = 0; k < 3; ++k) {
-        const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
-        const double exact = scale * m.mean;
-        const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
-        double sum = 0, sum2 = 0;
-        for (const Eigen::VectorXf& estimate : estimates) {
-          const double value = estimate[3 * p + k];
-          EXPECT_NEAR(value, exact, 4 * iid_sigma) << "ceiling vertex " << p << " channel " << k;
-          sum += value;
-          sum2 += value * value;
-        }
-        const double mean = sum / seeds;
-        const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
-        EXPECT_GT(spread, 0.0);
-        // 4 standard errors of the mean, plus the ray origins' offset (see the test above).
-        EXPECT_NEAR(mean, exact, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * exact)
-            << "ceiling vertex " << p << " channel " << k;
-      }
-    }
+    expect_seeds_match_quadrature(scene, ceiling, estimates, samples, [&](const Eigen::Vector3d& x) {
+      return floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
+    });
   }
 }
 
@@ -302,28 +280,15 @@ TEST(IlluminationIndirect, DirectFromVerticesIntegratesTheInterpolantOfTheVertex
     options.direct_from_vertices = true;
     engine->indirect({scene.light}, options, ceiling, estimates[static_cast<size_t>(seed)]);
   }
-  double largest_gap = 0;  // between the interpolant's and the exact field's values, ÷ the interpolant's
+  expect_seeds_match_quadrature(scene, ceiling, estimates, samples, [&](const Eigen::Vector3d& x) {
+    return floor_moments_of(x, ParallelPlanes::kHalfSide, interpolant);
+  });
+  double largest_gap = 0;  // between the exact field's and the interpolant's means, ÷ the interpolant's
   for (int p = 0; p < scene.ceiling_count; ++p) {
     const Eigen::Vector3d x = scene.mesh.vertices.row(ceiling[static_cast<size_t>(p)]).cast<double>();
-    const PlaneMoments m = floor_moments_of(x, ParallelPlanes::kHalfSide, interpolant);
-    const PlaneMoments exact_field = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide);
-    largest_gap = std::max(largest_gap, std::abs(exact_field.mean - m.mean) / m.mean);
-    for (int k = 0; k < 3; ++k) {
-      const double scale = scene.rho_ceiling[k] * scene.rho_floor[k] * scene.light.intensity[k];
-      const double expected = scale * m.mean;
-      const double iid_sigma = scale * std::sqrt((m.second_moment - m.mean * m.mean) / samples);
-      double sum = 0, sum2 = 0;
-      for (const Eigen::VectorXf& estimate : estimates) {
-        const double value = estimate[3 * p + k];
-        EXPECT_NEAR(value, expected, 4 * iid_sigma) << "ceiling vertex " << p << " channel " << k;
-        sum += value;
-        sum2 += value * value;
-      }
-      const double mean = sum / seeds;
-      const double spread = std::sqrt(std::max(0.0, (sum2 - seeds * mean * mean) / (seeds - 1)));
-      EXPECT_NEAR(mean, expected, 4 * spread / std::sqrt(double{seeds}) + 2e-3 * expected)
-          << "ceiling vertex " << p << " channel " << k;
-    }
+    const double interpolated = floor_moments_of(x, ParallelPlanes::kHalfSide, interpolant).mean;
+    const double exact = floor_moments(x, scene.light.position, ParallelPlanes::kHalfSide).mean;
+    largest_gap = std::max(largest_gap, std::abs(exact - interpolated) / interpolated);
   }
   // The test tells the two apart: the coarse interpolant is well outside the allowance above.
   EXPECT_GT(largest_gap, 0.05);
