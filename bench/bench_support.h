@@ -84,8 +84,10 @@ struct IlluminationSuiteOptions {
   // from every hit, 1 the direct light read from the hit triangle's vertices; < 0: the training's
   // default.
   int direct_from_vertices = -1;
-  // pmsc::TrainingOptions::max_key_points (0: the training's default, 200).
+  // pmsc::TrainingOptions::max_key_points (0: the training's default).
   int max_key_points = 0;
+  // Training lights per side of the grid (n × n; 0: LightGrid's default, the papers' 12 × 12).
+  int grid = 0;
 };
 
 struct SuiteOptions {

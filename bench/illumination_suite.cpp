@@ -478,6 +478,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   const illumination::Box room = illumination::cornell_room();
   illumination::LightGrid grid;  // 12 × 12, the papers' 144
   if (o.drop > 0) grid.drop = o.drop;
+  if (o.grid > 0) grid.nx = grid.nz = o.grid;
   illumination::IlluminationTrainingOptions training;
   for (const Eigen::Vector3d& p : illumination::light_grid(room, grid)) training.lights.push_back({p, Eigen::Vector3d::Ones()});
   if (o.samples > 0) training.gather.samples = o.samples;  // else the training's default

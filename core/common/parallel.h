@@ -73,4 +73,33 @@ void parallel_for_chunks(int64_t count, int64_t min_per_thread, Body&& body) {
   for (auto& thread : threads) thread.join();
 }
 
+// As parallel_for_chunks, for loops whose items cost unequally (a gather's points: where their
+// rays go decides their cost): the range is cut into grains of `grain` items that the workers
+// take in turn, so that no core idles while another still has half the range (contiguous halves
+// of the papers' 100k points finished minutes apart). body(begin, end) is called once per grain,
+// on whichever worker takes it; the workers and the inline cases are parallel_for_chunks's.
+template <typename Body>
+void parallel_for_grains(int64_t count, int64_t min_per_thread, int64_t grain, Body&& body) {
+  const int64_t workers = parallel_detail::inside_parallel_body
+                              ? 1
+                              : std::min<int64_t>(thread_count(), count / std::max<int64_t>(1, min_per_thread));
+  grain = std::max<int64_t>(1, grain);
+  if (workers <= 1) {
+    if (count > 0) body(int64_t{0}, count);
+    return;
+  }
+  std::atomic<int64_t> next{0};
+  const auto work = [&] {
+    const parallel_detail::BodyScope scope;
+    for (int64_t begin = next.fetch_add(grain); begin < count; begin = next.fetch_add(grain)) {
+      body(begin, std::min(count, begin + grain));
+    }
+  };
+  std::vector<std::thread> threads;
+  threads.reserve(static_cast<size_t>(workers - 1));
+  for (int64_t w = 1; w < workers; ++w) threads.emplace_back(work);
+  work();
+  for (auto& thread : threads) thread.join();
+}
+
 }  // namespace animspace

@@ -27,6 +27,7 @@
 
 #include "core/common/format.h"
 #include "core/common/parallel.h"
+#include "core/illumination/hit_sums.h"
 
 namespace animspace::illumination {
 
@@ -42,11 +43,13 @@ constexpr double kShadowShortening = 1e-4;
 // Points per thread below which threads do not pay (a point costs ~S µs indirect, ~1 µs direct).
 constexpr int64_t kIndirectPointsPerThread = 16;
 constexpr int64_t kDirectPointsPerThread = 1024;
-// The interpolated sums cost ~3·S lookups per point and light.
+// The interpolated sums cost ~3·S lookups per point and block of lights.
 constexpr int64_t kInterpolatedPointsPerThread = 64;
-// indirect_frames with direct_from_vertices: lights whose L_d sit side by side per vertex, so that
-// a hit's three vertices are read once for all of them (8 lights: 96 bytes per vertex).
-constexpr int kLightsPerBlock = 8;
+// Points per grain of work a thread takes at a time (parallel_for_grains): a point's cost depends
+// on where its rays go, so contiguous halves of the points finished minutes apart at 100k points.
+constexpr int64_t kIndirectPointsPerGrain = 32;
+constexpr int64_t kDirectPointsPerGrain = 1024;
+constexpr int64_t kInterpolatedPointsPerGrain = 256;
 
 Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
 
@@ -121,14 +124,6 @@ void set_ray(RTCRay16& packet, int k, const Eigen::Vector3d& origin, const Eigen
   packet.flags[k] = 0;
 }
 
-// A hemisphere ray's lit hit as the interpolated gather reads it: the triangle, and Embree's
-// barycentric weights u, v of its vertices 1 and 2 (vertex 0 weighs 1 − u − v).
-struct VertexHit {
-  uint32_t face;
-  float u;
-  float v;
-};
-
 // The lit hits of a list of points' rays, in blocks of kPointsPerHitBlock points that the threads
 // fill independently: point p's hits are blocks[p / kPointsPerHitBlock][ends[p − 1] .. ends[p]),
 // ends counted within the block. Blocks rather than one array, so that the largest (the papers'
@@ -146,31 +141,11 @@ struct PointHits {
   }
 };
 
-// sums[3·l + c] += Σ over the hits of (1 − u − v)·L_d(v₀) + u·L_d(v₁) + v·L_d(v₂) for the
-// kLights lights whose L_d sit side by side per vertex in `direct` (3·kLights floats per vertex).
-// One function for one light and for a block, so that both add the same terms in the same order
-// (per light and channel the arithmetic is the same whatever kLights; x86-64's baseline has no
-// fused multiply-add to contract it differently).
-template <int kLights>
-void sum_interpolated(const FaceMatrix& faces, const VertexHit* first, const VertexHit* last, const float* direct,
-                      double* sums) {
-  constexpr size_t kStride = 3 * kLights;
-  for (const VertexHit* hit = first; hit != last; ++hit) {
-    const double u = hit->u;
-    const double v = hit->v;
-    const double w = 1.0 - u - v;
-    const float* d0 = direct + kStride * static_cast<size_t>(faces(hit->face, 0));
-    const float* d1 = direct + kStride * static_cast<size_t>(faces(hit->face, 1));
-    const float* d2 = direct + kStride * static_cast<size_t>(faces(hit->face, 2));
-    for (size_t j = 0; j < kStride; ++j) sums[j] += (w * d0[j] + u * d1[j]) + v * d2[j];
-  }
-}
-
-// Calls body(p, v, context) for every position p of `points` (v = points[p]) on the threads, each
-// thread with its own Embree intersection context.
+// Calls body(p, v, context) for every position p of `points` (v = points[p]) on the threads, a
+// grain of points at a time, each with its own Embree intersection context.
 template <typename Body>
-void for_each_point(const std::vector<int>& points, int64_t min_per_thread, Body&& body) {
-  parallel_for_chunks(static_cast<int64_t>(points.size()), min_per_thread, [&](int64_t begin, int64_t end) {
+void for_each_point(const std::vector<int>& points, int64_t min_per_thread, int64_t grain, Body&& body) {
+  parallel_for_grains(static_cast<int64_t>(points.size()), min_per_thread, grain, [&](int64_t begin, int64_t end) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     for (int64_t p = begin; p < end; ++p) body(p, points[static_cast<size_t>(p)], context);
@@ -178,7 +153,8 @@ void for_each_point(const std::vector<int>& points, int64_t min_per_thread, Body
 }
 
 // L_i at vertex v from its sum of L_d over S hits: ρ(v) ⊙ sum / S, rounded to float.
-void store_indirect(const SurfaceMesh& surface, int v, const double* sums, int samples, float* out) {
+template <typename Sum>
+void store_indirect(const SurfaceMesh& surface, int v, const Sum* sums, int samples, float* out) {
   for (int c = 0; c < 3; ++c) {
     out[c] = static_cast<float>(static_cast<double>(surface.albedo(v, c)) * sums[c] / samples);
   }
@@ -328,7 +304,7 @@ struct IlluminationEngine::Embree {
     PointHits hits;
     hits.blocks.resize(static_cast<size_t>((count + kPointsPerHitBlock - 1) / kPointsPerHitBlock));
     hits.ends.assign(points.size(), 0);
-    parallel_for_chunks(static_cast<int64_t>(hits.blocks.size()), 1, [&](int64_t begin, int64_t end) {
+    parallel_for_grains(static_cast<int64_t>(hits.blocks.size()), 1, 1, [&](int64_t begin, int64_t end) {
       RTCIntersectContext context;
       rtcInitIntersectContext(&context);
       for (int64_t b = begin; b < end; ++b) {
@@ -528,7 +504,7 @@ void IlluminationEngine::direct(const std::vector<PointLight>& lights, const std
                                 Eigen::VectorXf& out) const {
   out.resize(3 * static_cast<Eigen::Index>(points.size()));
   const Embree& e = *embree_;
-  for_each_point(points, kDirectPointsPerThread, [&](int64_t p, int v, RTCIntersectContext& context) {
+  for_each_point(points, kDirectPointsPerThread, kDirectPointsPerGrain, [&](int64_t p, int v, RTCIntersectContext& context) {
     assert(v >= 0 && v < point_count());
     const auto vs = static_cast<size_t>(v);
     Eigen::Vector3d irradiance = Eigen::Vector3d::Zero();
@@ -551,9 +527,9 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
     // does not depend on how it was computed, and no hit is stored.
     Eigen::VectorXf vertex_direct;
     direct(lights, all_points(), vertex_direct);
-    for_each_point(points, kIndirectPointsPerThread, [&](int64_t p, int v, RTCIntersectContext& context) {
+    for_each_point(points, kIndirectPointsPerThread, kIndirectPointsPerGrain, [&](int64_t p, int v, RTCIntersectContext& context) {
       assert(v >= 0 && v < point_count());
-      double sums[3] = {0, 0, 0};
+      float sums[3] = {0, 0, 0};
       e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions, int,
                                                  int count, uint64_t) {
         VertexHit hits[kPacket];
@@ -561,13 +537,13 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
         for (int k = 0; k < count; ++k) {
           if (e.lit_hit(packet, k, directions[k])) hits[lit++] = {packet.hit.primID[k], packet.hit.u[k], packet.hit.v[k]};
         }
-        sum_interpolated<1>(surface_.faces, hits, hits + lit, vertex_direct.data(), sums);
+        sum_interpolated(surface_.faces.data(), hits, hits + lit, vertex_direct.data(), 1, sums);
       });
       store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
     });
     return;
   }
-  for_each_point(points, kIndirectPointsPerThread, [&](int64_t p, int v, RTCIntersectContext& context) {
+  for_each_point(points, kIndirectPointsPerThread, kIndirectPointsPerGrain, [&](int64_t p, int v, RTCIntersectContext& context) {
     assert(v >= 0 && v < point_count());
     double sums[3] = {0, 0, 0};  // Σ_s L_d(y_s), in the order of s
     e.cast_hemisphere(v, options, context, [&](const RTCRayHit16& packet, const Eigen::Vector3d* directions,
@@ -641,14 +617,14 @@ void IlluminationEngine::indirect_frames(const std::vector<PointLight>& lights, 
         }
       }
     }
-    parallel_for_chunks(n, kInterpolatedPointsPerThread, [&](int64_t begin, int64_t end) {
-      std::vector<double> sums(3 * static_cast<size_t>(kLightsPerBlock));
+    parallel_for_grains(n, kInterpolatedPointsPerThread, kInterpolatedPointsPerGrain, [&](int64_t begin, int64_t end) {
+      float sums[3 * kLightsPerBlock];
       float out[3];
       for (int64_t p = begin; p < end; ++p) {
-        std::fill(sums.begin(), sums.end(), 0.0);
-        sum_interpolated<kLightsPerBlock>(surface_.faces, hits.begin(p), hits.end(p), block_direct.data(), sums.data());
+        std::fill(std::begin(sums), std::end(sums), 0.0f);
+        sum_interpolated(surface_.faces.data(), hits.begin(p), hits.end(p), block_direct.data(), kLightsPerBlock, sums);
         for (int b = 0; b < block; ++b) {
-          store_indirect(surface_, static_cast<int>(p), sums.data() + 3 * b, options.samples, out);
+          store_indirect(surface_, static_cast<int>(p), sums + 3 * b, options.samples, out);
           for (int c = 0; c < 3; ++c) frames(static_cast<Eigen::Index>(first + b), 3 * p + c) = out[c];
         }
       }
