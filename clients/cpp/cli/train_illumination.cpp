@@ -133,12 +133,16 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                 {"converged", r.converged},
                 {"gather_seconds", report.gather_seconds},
                 {"train_seconds", r.seconds},
+                {"pca_seconds", r.pca_seconds},
+                {"key_selection_seconds", r.key_selection_seconds},
+                {"calibration_seconds", r.calibration_seconds},
                 {"seconds", report.gather_seconds + r.seconds}});
   } else {
     std::printf("gathered %zu frames of %d points (%d rays each) in %.2f s; radiance scale %.4g\n",
                 options.lights.size(), points, a.samples, report.gather_seconds, report.radiance_scale);
-    std::printf("trained in %.2f s: basis M = %d, %d key points; max training error %.4g (%.2f%% of the scale)\n",
-                r.seconds, r.basis_size, r.key_points, r.max_training_error,
+    std::printf("trained in %.2f s (PCA and M %.2f s, key points %.2f s, calibration %.2f s): basis M = %d, %d key "
+                "points; max training error %.4g (%.2f%% of the scale)\n",
+                r.seconds, r.pca_seconds, r.key_selection_seconds, r.calibration_seconds, r.basis_size, r.key_points, r.max_training_error,
                 100 * r.max_training_error / report.radiance_scale);
     if (options.relative_tolerance) {
       std::printf("a HIT is within %.3g of each frame's largest radiance (%.3g × its RMS radiance; the training "
