@@ -52,6 +52,14 @@ void portable_gemm(long rows, long inner, long columns, const T* a, long lda, co
   }
 }
 
+template <typename T>
+void portable_gram_lower(long rows, long columns, const T* x, long ldx, T* out, long ldo) {
+  const View<T> X(x, rows, columns, Eigen::OuterStride<>(ldx));
+  Target<T> G(out, columns, columns, Eigen::OuterStride<>(ldo));
+  G.template triangularView<Eigen::Lower>().setZero();
+  G.template selfadjointView<Eigen::Lower>().rankUpdate(X.transpose());
+}
+
 int blas_int(long n) {
   assert(n >= 0 && n <= 0x7fffffff);
   return static_cast<int>(n);
@@ -119,6 +127,20 @@ void gemm_serial(long rows, long inner, long columns, const double* a, long lda,
   }
   cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
+}
+
+void gram_lower_serial(long rows, long columns, const float* x, long ldx, float* out, long ldo) {
+  if (columns == 0) return;
+  if (active_kernel() == Kernel::kPortable) return portable_gram_lower(rows, columns, x, ldx, out, ldo);
+  cblas_ssyrk(CblasColMajor, CblasLower, CblasTrans, blas_int(columns), blas_int(rows), 1.0f, x, blas_int(ldx), 0.0f,
+              out, blas_int(ldo));
+}
+
+void gram_lower_serial(long rows, long columns, const double* x, long ldx, double* out, long ldo) {
+  if (columns == 0) return;
+  if (active_kernel() == Kernel::kPortable) return portable_gram_lower(rows, columns, x, ldx, out, ldo);
+  cblas_dsyrk(CblasColMajor, CblasLower, CblasTrans, blas_int(columns), blas_int(rows), 1.0, x, blas_int(ldx), 0.0, out,
+              blas_int(ldo));
 }
 
 namespace {

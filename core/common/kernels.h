@@ -62,4 +62,11 @@ void gemm_serial(long rows, long inner, long columns, const float* a, long lda, 
 void gemm_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
                  double beta, double* c, long ldc);
 
+// The lower triangle (diagonal included) of XᵀX into `out` (columns × columns, leading dimension
+// ldo; the strict upper triangle is left as it was), X rows × columns column-major (leading
+// dimension ldx): the Gram matrices of the PMSC's PCA, on the calling thread alone like
+// gemm_serial (issue #38: the key selection forms one per iteration).
+void gram_lower_serial(long rows, long columns, const float* x, long ldx, float* out, long ldo);
+void gram_lower_serial(long rows, long columns, const double* x, long ldx, double* out, long ldo);
+
 }  // namespace animspace

@@ -15,6 +15,8 @@
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
+#include "core/common/kernels.h"
+
 namespace animspace::pmsc {
 namespace {
 
@@ -45,7 +47,7 @@ void reorthonormalize(MatrixXd& U) {
   const Index k = U.cols();
   if (k == 0) return;
   MatrixXd gram = MatrixXd::Zero(k, k);
-  gram.selfadjointView<Eigen::Lower>().rankUpdate(U.transpose());
+  gram_lower_serial(U.rows(), k, U.data(), U.outerStride(), gram.data(), k);
   gram = gram.selfadjointView<Eigen::Lower>();
   // ‖UᵀU − I‖_F < 1/2 bounds κ(U)² by 3.
   if ((gram - MatrixXd::Identity(k, k)).norm() < 0.5) {
@@ -92,7 +94,7 @@ PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
     // Only the lower triangle of XᵀX is formed (SYRK, R·F²/2 flops) and only it is read by the
     // eigensolver.
     MatrixXd gram = MatrixXd::Zero(F, F);
-    gram.selfadjointView<Eigen::Lower>().rankUpdate(X.transpose());
+    gram_lower_serial(R, F, X.data(), X.outerStride(), gram.data(), F);
     const Eigen::SelfAdjointEigenSolver<MatrixXd> eigen(gram, Eigen::ComputeEigenvectors);
     // Eigenvalues come ascending: the largest `candidates` are the rightmost columns.
     U.noalias() = X * eigen.eigenvectors().rightCols(candidates).rowwise().reverse();

@@ -196,7 +196,7 @@ Status prepare_projection(PmscModel& m) {
     // basis per calibration fold was most of what a relative model added to its training.
     Eigen::MatrixXf gram(m.basis.cols(), m.basis.cols());
     gram.setZero();
-    gram.selfadjointView<Eigen::Lower>().rankUpdate(m.basis.transpose());
+    gram_lower_serial(m.basis.rows(), m.basis.cols(), m.basis.data(), m.basis.outerStride(), gram.data(), gram.rows());
     m.basis_gram = gram.selfadjointView<Eigen::Lower>().toDenseMatrix().cast<double>();
   } else {
     m.basis_gram.resize(0, 0);

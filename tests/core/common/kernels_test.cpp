@@ -180,6 +180,49 @@ TEST_F(KernelTest, ConcurrentProductsFromTwoThreadsEqualEachProductAlone) {
   EXPECT_EQ(operands[1].wrong, 0) << "of " << kCalls << " products on the second thread";
 }
 
+// The Gram matrices of the PMSC's PCA: the lower triangle of XᵀX against the definition in long
+// double, within (rows + 1)·ε·Σ|terms| (Higham §3.1, as above), and the strict upper triangle
+// untouched.
+template <typename T>
+void check_gram(Kernel kernel, double epsilon) {
+  use_kernel(kernel);
+  std::mt19937 random(5);
+  std::uniform_real_distribution<double> value(-1, 1);
+  for (long columns : {1L, 3L, 17L}) {
+    const long rows = 213, ldx = rows + 4, ldo = columns + 2;
+    std::vector<T> x(static_cast<size_t>(ldx * columns));
+    for (T& v : x) v = static_cast<T>(value(random));
+    const T sentinel = T(1234.5);
+    std::vector<T> out(static_cast<size_t>(ldo * columns), sentinel);
+    gram_lower_serial(rows, columns, x.data(), ldx, out.data(), ldo);
+    for (long j = 0; j < columns; ++j) {
+      for (long i = 0; i < ldo; ++i) {
+        const T got = out[static_cast<size_t>(i + j * ldo)];
+        if (i < j || i >= columns) {
+          EXPECT_EQ(got, sentinel) << "outside the lower triangle, at " << i << "," << j;
+          continue;
+        }
+        long double exact = 0, magnitude = 0;
+        for (long r = 0; r < rows; ++r) {
+          const long double term =
+              static_cast<long double>(x[static_cast<size_t>(r + i * ldx)]) * x[static_cast<size_t>(r + j * ldx)];
+          exact += term;
+          magnitude += term < 0 ? -term : term;
+        }
+        EXPECT_NEAR(got, static_cast<double>(exact), epsilon * static_cast<double>(rows + 1) * static_cast<double>(magnitude))
+            << kernel_name(kernel) << " columns " << columns << " at " << i << "," << j;
+      }
+    }
+  }
+}
+
+TEST_F(KernelTest, BothKernelsComputeTheGramMatrixOfTheDefinition) {
+  for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
+    check_gram<float>(kernel, 2e-7);
+    check_gram<double>(kernel, 4e-16);
+  }
+}
+
 TEST_F(KernelTest, TheBlasKernelNamesTheCoreItDispatchedTo) {
   const std::string blas = kernel_name(Kernel::kBlas);
   ASSERT_EQ(blas.rfind("openblas:", 0), 0u) << blas;
