@@ -86,7 +86,7 @@ struct IlluminationSuiteOptions {
   int direct_from_vertices = -1;
   // pmsc::TrainingOptions::max_key_points (0: the training's default).
   int max_key_points = 0;
-  // Training lights per side of the grid (n × n; 0: LightGrid's default, the papers' 12 × 12).
+  // Training lights per side of the grid (n × n; 0: LightGrid's default, 18 × 18).
   int grid = 0;
 };
 

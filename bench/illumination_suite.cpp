@@ -1,7 +1,8 @@
 // The illumination suite (issue #24): the seeds' second application (Meyer & Anderson 2006 §8;
-// 2007 §3.2, Figs. 5 and 10). The Cornell box lit by one point light at each node of a 12 × 12
-// grid under the ceiling is gathered (one-bounce indirect, final gather on Embree), a PMSC model
-// of the RGB radiance is trained on those 144 frames, and then for novel lights — inside the
+// 2007 §3.2, Figs. 5 and 10). The Cornell box lit by one point light at each node of a grid under
+// the ceiling (18 × 18; the papers' 12 × 12 with --illumination-grid 12) is gathered (one-bounce
+// indirect, final gather on Embree), a PMSC model of the RGB radiance is trained on those frames,
+// and then for novel lights — inside the
 // grid's hull and well outside it (by the walls, at floor level) — the indirect illumination is
 // computed at the key points only and reconstructed everywhere.
 //
@@ -476,7 +477,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   }
   const illumination::IlluminationEngine& scene = **engine;
   const illumination::Box room = illumination::cornell_room();
-  illumination::LightGrid grid;  // 12 × 12, the papers' 144
+  illumination::LightGrid grid;  // 18 × 18 (the papers' 12 × 12: --illumination-grid 12)
   if (o.drop > 0) grid.drop = o.drop;
   if (o.grid > 0) grid.nx = grid.nz = o.grid;
   illumination::IlluminationTrainingOptions training;

@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 100000));
   app.add_option("--illumination-grid", options.illumination.grid,
                  "illumination: training lights per side of the grid, n × n over the same rectangle (0: the "
-                 "papers' 12 × 12)")
+                 "training's default, 18 × 18; the papers': 12)")
       ->check(CLI::Range(0, 64));
   app.add_option("--illumination-converged-samples", options.illumination.converged_samples,
                  "illumination: rays per point of the converged full calculation, the baseline timed beside the "

@@ -37,12 +37,12 @@ double radiance_scale(const FrameMatrix& frames);
 double peak_to_rms_ratio(const FrameMatrix& frames);
 
 struct IlluminationTrainingOptions {
-  std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 144)
+  std::vector<PointLight> lights;  // the training lights, one frame each (light_grid: 324)
   // Issue #38: a converged full calculation, so that the subspace learns the illumination, not
   // the noise. 2,048 rays per point, each hit reading the direct light from its triangle's
   // vertices: at 20k points the gather is then 0.68% from a 4,096-ray reference (64 rays: 12%;
   // the interpolation's own bias is within the noise: 1,024 rays give 1.30% with it, 1.28% with a
-  // shadow ray per hit), and the 144 training lights share the rays (docs/BENCHMARKS.md, "Issue
+  // shadow ray per hit), and the training lights share the rays (docs/BENCHMARKS.md, "Issue
   // #38: a converged gather"). The rule: the fewest rays, in powers of two, whose gather is
   // within 1% of the reference — the accuracy the subspace is asked for.
   GatherOptions gather = [] {

@@ -18,8 +18,8 @@ struct TrainIlluminationArgs {
   // Issue #38: the hits read the direct light from their triangles' vertices (GatherOptions).
   bool direct_from_vertices = illumination::IlluminationTrainingOptions{}.gather.direct_from_vertices;
   unsigned long long seed = 0;
-  int lights_x = 12;           // training grid, 12 × 12 = 144 as in the papers
-  int lights_z = 12;
+  int lights_x = illumination::LightGrid{}.nx;  // training grid (the papers': 12 × 12 = 144)
+  int lights_z = illumination::LightGrid{}.nz;
   double drop = illumination::LightGrid{}.drop;
   double inset = illumination::LightGrid{}.inset;
   double tolerance = illumination::IlluminationTrainingOptions{}.tolerance_fraction;
