@@ -10,13 +10,29 @@ namespace animspace::illumination {
 
 namespace {
 
-// One function body for every instruction set: inlined into each target's entry point below, so
-// that the compiler vectorises it for that target.
-template <int kStride>
+// A block's sums as whole vectors of 16 floats (the compiler splits them into the target's
+// registers: one zmm, two ymm or four xmm), so that they stay in registers across the hits.
+using Lanes = float __attribute__((vector_size(64)));
+constexpr int kBlockStride = 3 * kLightsPerBlock;
+static_assert(kBlockStride * sizeof(float) % sizeof(Lanes) == 0);
+
+// An unaligned load (a vertex's floats are not aligned to a vector); by reference, as a vector
+// returned by value would change the ABI between the targets.
+template <typename Value>
+__attribute__((always_inline)) inline void load(Value& value, const float* values) {
+  std::memcpy(&value, values, sizeof value);
+}
+
+// One body for one light (Value = float, 3 per vertex) and for a block (Value = Lanes), with the
+// same operations element by element; inlined into each target's entry point below, so that the
+// compiler generates it for that target.
+template <typename Value, int kStride>
 __attribute__((always_inline)) inline void sum_hits(const int32_t* faces, const VertexHit* first,
                                                     const VertexHit* last, const float* direct, float* sums) {
-  float acc[kStride];
-  for (int j = 0; j < kStride; ++j) acc[j] = sums[j];
+  constexpr int kLanes = static_cast<int>(sizeof(Value) / sizeof(float));
+  constexpr int kValues = kStride / kLanes;
+  Value acc[kValues];
+  for (int k = 0; k < kValues; ++k) load(acc[k], sums + kLanes * k);
   for (const VertexHit* hit = first; hit != last; ++hit) {
     const float u = hit->u;
     const float v = hit->v;
@@ -25,40 +41,8 @@ __attribute__((always_inline)) inline void sum_hits(const int32_t* faces, const 
     const float* d0 = direct + kStride * static_cast<size_t>(face[0]);
     const float* d1 = direct + kStride * static_cast<size_t>(face[1]);
     const float* d2 = direct + kStride * static_cast<size_t>(face[2]);
-    for (int j = 0; j < kStride; ++j) acc[j] += (w * d0[j] + u * d1[j]) + v * d2[j];
-  }
-  for (int j = 0; j < kStride; ++j) sums[j] = acc[j];
-}
-
-// A block's sums as whole vectors of 16 floats (the compiler splits them into the target's
-// registers: one zmm, two ymm or four xmm), so that they stay in registers across the hits; the
-// same operations, element by element, as sum_hits.
-using Lanes = float __attribute__((vector_size(64)));
-constexpr int kLanes = 16;
-constexpr int kBlockStride = 3 * kLightsPerBlock;
-static_assert(kBlockStride % kLanes == 0);
-constexpr int kBlockVectors = kBlockStride / kLanes;
-
-// An unaligned load (a vertex's floats are not 64-byte aligned); by reference, as a vector
-// returned by value would change the ABI between the targets.
-__attribute__((always_inline)) inline void load(Lanes& lanes, const float* values) {
-  std::memcpy(&lanes, values, sizeof lanes);
-}
-
-__attribute__((always_inline)) inline void sum_block(const int32_t* faces, const VertexHit* first,
-                                                     const VertexHit* last, const float* direct, float* sums) {
-  Lanes acc[kBlockVectors];
-  for (int k = 0; k < kBlockVectors; ++k) load(acc[k], sums + kLanes * k);
-  for (const VertexHit* hit = first; hit != last; ++hit) {
-    const float u = hit->u;
-    const float v = hit->v;
-    const float w = 1.0f - u - v;
-    const int32_t* face = faces + 3 * static_cast<size_t>(hit->face);
-    const float* d0 = direct + kBlockStride * static_cast<size_t>(face[0]);
-    const float* d1 = direct + kBlockStride * static_cast<size_t>(face[1]);
-    const float* d2 = direct + kBlockStride * static_cast<size_t>(face[2]);
-    for (int k = 0; k < kBlockVectors; ++k) {
-      Lanes x0, x1, x2;
+    for (int k = 0; k < kValues; ++k) {
+      Value x0, x1, x2;
       load(x0, d0 + kLanes * k);
       load(x1, d1 + kLanes * k);
       load(x2, d2 + kLanes * k);
@@ -73,16 +57,16 @@ using SumFunction = void (*)(const int32_t*, const VertexHit*, const VertexHit*,
 #if defined(__x86_64__)
 __attribute__((target("avx512f"))) void block_avx512(const int32_t* faces, const VertexHit* first,
                                                      const VertexHit* last, const float* direct, float* sums) {
-  sum_block(faces, first, last, direct, sums);
+  sum_hits<Lanes, kBlockStride>(faces, first, last, direct, sums);
 }
 __attribute__((target("avx2"))) void block_avx2(const int32_t* faces, const VertexHit* first, const VertexHit* last,
                                                 const float* direct, float* sums) {
-  sum_block(faces, first, last, direct, sums);
+  sum_hits<Lanes, kBlockStride>(faces, first, last, direct, sums);
 }
 #endif
 void block_baseline(const int32_t* faces, const VertexHit* first, const VertexHit* last, const float* direct,
                     float* sums) {
-  sum_block(faces, first, last, direct, sums);
+  sum_hits<Lanes, kBlockStride>(faces, first, last, direct, sums);
 }
 
 SumFunction block_function(HitSumsIsa isa) {
@@ -114,7 +98,7 @@ void sum_interpolated(const int32_t* faces, const VertexHit* first, const Vertex
   assert(lights == 1 || lights == kLightsPerBlock);
   // One light: three floats per hit, too few to gain from a wider unit (its cost is the rays).
   if (lights == 1) {
-    sum_hits<3>(faces, first, last, direct, sums);
+    sum_hits<float, 3>(faces, first, last, direct, sums);
   } else {
     static const SumFunction block = block_function(hit_sums_isa());
     block(faces, first, last, direct, sums);
