@@ -182,7 +182,7 @@ Result<container::ModelContainer> make_demo_illumination_container(const DemoIll
   // worse there).
   training.filter.neighbours = 0;
   training.pmsc.held_out_basis_slack = 0;
-  training.pmsc.max_key_points = 200;  // the papers' budget, as shipped (the training's is 400)
+  training.pmsc.max_key_points = 200;  // the papers' budget, as shipped (the training's is 600)
   auto container = illumination::train_illumination(
       **engine, training,
       "Cornell box: one-bounce indirect illumination of " + std::to_string(training.lights.size()) +
