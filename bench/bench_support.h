@@ -84,6 +84,9 @@ struct IlluminationSuiteOptions {
   // from every hit, 1 the direct light read from the hit triangle's vertices; < 0: the training's
   // default.
   int direct_from_vertices = -1;
+  // GatherOptions::cell_average for the training, the full calculation and the reference: 0 rays
+  // from the vertex, 1 from its cell; < 0: the training's default.
+  int cell_average = -1;
   // pmsc::TrainingOptions::max_key_points (0: the training's default).
   int max_key_points = 0;
   // Training lights per side of the grid (n × n; 0: LightGrid's default, 18 × 18).

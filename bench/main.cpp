@@ -119,6 +119,10 @@ int main(int argc, char** argv) {
                  "illumination: 1: the gather reads the direct light at its hits from the hit triangle's vertices "
                  "(issue #38); 0: a shadow ray from every hit (default: the training's)")
       ->check(CLI::Range(-1, 1));
+  app.add_option("--illumination-cell-average", options.illumination.cell_average,
+                 "illumination: 1: a vertex's value is the mean over its cell (its rays leave from all over it; "
+                 "issue #38); 0: the value at the vertex (default: the training's)")
+      ->check(CLI::Range(-1, 1));
   app.add_option("--illumination-max-key-points", options.illumination.max_key_points,
                  "illumination: the key selection's budget K (0: the training's default)")
       ->check(CLI::Range(0, 100000));

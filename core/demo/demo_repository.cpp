@@ -174,8 +174,12 @@ Result<container::ModelContainer> make_demo_illumination_container(const DemoIll
   // The demo keeps the small gather it has always shipped (a few rays, a shadow ray from every
   // hit), so that `make run` and the tour stay quick; the converged gather (issue #38: 2,048 rays,
   // the direct light read from the vertices) is train-illumination's default at the papers' size.
+  // Each vertex's value is the irradiance at the vertex, not the training default's mean over its
+  // cell: 16 rays spread over a cell (~2 cm across at 3,000 points) add the cell's variation to
+  // their noise, and the tour's relit light turned from a HIT into a blend with it.
   training.gather.samples = options.samples;
   training.gather.direct_from_vertices = false;
+  training.gather.cell_average = false;
   // No surface filter (the training's default since the converged gather; at the demo's few
   // thousand points the key points' filter support, K·k ≈ 200 · 32 points, would be the whole
   // surface anyway). On the raw gather M comes from the error bound (the held-out rule measured

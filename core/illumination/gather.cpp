@@ -7,6 +7,10 @@
 //   - Hammersley point set with a Cranley–Patterson rotation (Cranley & Patterson 1976) per point:
 //     one low-discrepancy set of S directions, rotated by a hash of (seed, point).
 //   - Duff et al. 2017, "Building an Orthonormal Basis, Revisited" (JCGT 6(1)): the tangent frame.
+//   - Halton 1960: the cell average's ray origins (GatherOptions::cell_average) take the radical
+//     inverses in bases 3, 5 and 7 of the sample's index, the next dimensions after the
+//     Hammersley directions' (s/S, base 2), so that origins and directions cover their 4-D domain
+//     together; rotated per point like the directions.
 //
 // Determinism: everything a point's value depends on — its rotation, its frame, its ray origin,
 // the order of its sums — is a function of the point alone, and its rays are traced in packets of
@@ -15,6 +19,7 @@
 #include "core/illumination/gather.h"
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cmath>
 #include <limits>
@@ -78,6 +83,29 @@ double radical_inverse_base2(uint32_t s) {
 }
 
 double fractional(double x) { return x - std::floor(x); }
+
+// Van der Corput in `Base` (Halton's coordinates past the first two).
+template <uint32_t Base>
+double radical_inverse(uint32_t s) {
+  double inverse = 0, digit = 1.0 / Base;
+  for (; s > 0; s /= Base, digit /= Base) inverse += digit * (s % Base);
+  return inverse;
+}
+
+// The cell average's coordinates of samples 0 … S − 1 (radical inverses in bases 3, 5, 7), the
+// same for every point (each rotates them by its own hash): computed once per thread and S, as
+// they cost more than the rest of a ray's set-up.
+const std::vector<std::array<double, 3>>& halton_cell_points(int samples) {
+  thread_local std::vector<std::array<double, 3>> points;
+  if (points.size() != static_cast<size_t>(samples)) {
+    points.resize(static_cast<size_t>(samples));
+    for (int s = 0; s < samples; ++s) {
+      const auto index = static_cast<uint32_t>(s);
+      points[static_cast<size_t>(s)] = {radical_inverse<3>(index), radical_inverse<5>(index), radical_inverse<7>(index)};
+    }
+  }
+  return points;
+}
 
 constexpr double kGoldenFraction = 0.6180339887498949;  // (√5 − 1)/2: spreads the shadow rays' angles
 
@@ -225,6 +253,13 @@ struct IlluminationEngine::Embree {
   std::vector<Eigen::Vector3d> vertex_normals;     // unit, double
   std::vector<Eigen::Vector3d> ray_origins;        // per vertex
   std::vector<Eigen::Vector3d> triangle_normals;   // unit, lit side; zero for a degenerate triangle
+  // Each vertex's triangles (fan_faces[fan_offsets[v] .. fan_offsets[v + 1])) with the running
+  // fraction of the fan's area up to and including each: where a cell-averaged gather picks the
+  // triangle of a ray's origin.
+  std::vector<int64_t> fan_offsets;
+  std::vector<int32_t> fan_faces;
+  std::vector<double> fan_area_fraction;
+  const SurfaceMesh* mesh = nullptr;  // the engine's, for the cells' corners
 
   Embree() = default;
   Embree(const Embree&) = delete;
@@ -252,6 +287,11 @@ struct IlluminationEngine::Embree {
     Eigen::Vector3d tangent, bitangent;
     orthonormal_basis(normal, tangent, bitangent);
     const Eigen::Vector3d& origin = ray_origins[vs];
+    const bool cell = options.cell_average && fan_offsets[vs + 1] > fan_offsets[vs];
+    const std::array<double, 3>* cell_points = cell ? halton_cell_points(samples).data() : nullptr;
+    const uint64_t cell_hash = splitmix64(hash ^ 0x9e3779b97f4a7c15ull);
+    const double cell_rotation[3] = {unit_interval(cell_hash), unit_interval(splitmix64(cell_hash)),
+                                     unit_interval(splitmix64(splitmix64(cell_hash)))};
     for (int first = 0; first < samples; first += kPacket) {
       const int count = std::min(kPacket, samples - first);
       alignas(64) int valid[kPacket];
@@ -284,11 +324,41 @@ struct IlluminationEngine::Embree {
         const double phi = 2.0 * kPi * u2;
         directions[k] = (radius * std::cos(phi)) * tangent + (radius * std::sin(phi)) * bitangent +
                         std::sqrt(std::max(0.0, 1.0 - u1)) * normal;
-        set_ray(packet.ray, k, origin, directions[k], std::numeric_limits<float>::infinity());
+        const Eigen::Vector3d ray_origin =
+            cell ? Eigen::Vector3d(origin + cell_offset(v, {fractional(cell_points[static_cast<size_t>(s)][0] + cell_rotation[0]),
+                                                            fractional(cell_points[static_cast<size_t>(s)][1] + cell_rotation[1]),
+                                                            fractional(cell_points[static_cast<size_t>(s)][2] + cell_rotation[2])}))
+                 : origin;
+        set_ray(packet.ray, k, ray_origin, directions[k], std::numeric_limits<float>::infinity());
       }
       rtcIntersect16(valid, scene, &context, &packet);
       on_packet(packet, directions, first, count, hash);
     }
+  }
+
+  // A uniform point of vertex v's cell — the part of its triangles where its barycentric weight is
+  // the largest (a third of each) — minus the vertex, from u ∈ [0, 1)³: u₀ picks the triangle by
+  // area, (u₁, u₂) a uniform point of it (barycentrics (1 − √u₁, √u₁ (1 − u₂), √u₁ u₂)), and the
+  // largest barycentric is swapped onto v. Each of the three regions where one barycentric is the
+  // largest is the image of the others under a swap of two coordinates, an area-preserving map,
+  // so the swapped point is uniform on v's region.
+  Eigen::Vector3d cell_offset(int v, const std::array<double, 3>& u) const {
+    const auto vs = static_cast<size_t>(v);
+    int64_t i = fan_offsets[vs];
+    while (i + 1 < fan_offsets[vs + 1] && fan_area_fraction[static_cast<size_t>(i)] <= u[0]) ++i;
+    const int32_t f = fan_faces[static_cast<size_t>(i)];
+    const double root = std::sqrt(u[1]);
+    double weights[3] = {1.0 - root, root * (1.0 - u[2]), root * u[2]};
+    int mine = 0;
+    for (int c = 1; c < 3; ++c) mine = mesh->faces(f, c) == v ? c : mine;
+    const int largest = weights[0] >= weights[1] ? (weights[0] >= weights[2] ? 0 : 2) : (weights[1] >= weights[2] ? 1 : 2);
+    std::swap(weights[largest], weights[mine]);
+    Eigen::Vector3d from_vertex = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 3; ++c) {
+      const int32_t corner = mesh->faces(f, c);
+      if (corner != v) from_vertex += weights[c] * (mesh->vertices.row(corner) - mesh->vertices.row(v)).cast<double>().transpose();
+    }
+    return from_vertex;
   }
 
   // Whether ray k of the packet hit a triangle from its lit side (a ray that left the scene, a
@@ -461,6 +531,41 @@ Result<std::unique_ptr<IlluminationEngine>> IlluminationEngine::create(SurfaceMe
       if (length > 0) origin += (e.offset / length) * inward;
     }
     e.ray_origins[static_cast<size_t>(v)] = origin;
+  }
+  // Each vertex's fan, for the cell-averaged gather.
+  e.mesh = &mesh;
+  e.fan_offsets.assign(static_cast<size_t>(n) + 1, 0);
+  for (Eigen::Index f = 0; f < t; ++f) {
+    for (int k = 0; k < 3; ++k) ++e.fan_offsets[static_cast<size_t>(mesh.faces(f, k)) + 1];
+  }
+  std::partial_sum(e.fan_offsets.begin(), e.fan_offsets.end(), e.fan_offsets.begin());
+  e.fan_faces.resize(static_cast<size_t>(e.fan_offsets.back()));
+  e.fan_area_fraction.resize(e.fan_faces.size());
+  {
+    std::vector<int64_t> next(e.fan_offsets.begin(), e.fan_offsets.end() - 1);
+    for (Eigen::Index f = 0; f < t; ++f) {
+      const Eigen::Vector3d a = mesh.vertices.row(mesh.faces(f, 0)).cast<double>();
+      const Eigen::Vector3d b = mesh.vertices.row(mesh.faces(f, 1)).cast<double>();
+      const Eigen::Vector3d c = mesh.vertices.row(mesh.faces(f, 2)).cast<double>();
+      const double area = 0.5 * (b - a).cross(c - a).norm();
+      for (int k = 0; k < 3; ++k) {
+        const auto at = static_cast<size_t>(next[static_cast<size_t>(mesh.faces(f, k))]++);
+        e.fan_faces[at] = static_cast<int32_t>(f);
+        e.fan_area_fraction[at] = area;
+      }
+    }
+  }
+  for (Eigen::Index v = 0; v < n; ++v) {
+    const auto begin = static_cast<size_t>(e.fan_offsets[static_cast<size_t>(v)]);
+    const auto end = static_cast<size_t>(e.fan_offsets[static_cast<size_t>(v) + 1]);
+    const double total = std::accumulate(e.fan_area_fraction.begin() + static_cast<long>(begin),
+                                         e.fan_area_fraction.begin() + static_cast<long>(end), 0.0);
+    double running = 0;
+    for (size_t i = begin; i < end; ++i) {
+      running += e.fan_area_fraction[i];
+      // A fan of degenerate triangles: uniform over them (their points are the vertex anyway).
+      e.fan_area_fraction[i] = total > 0 ? running / total : static_cast<double>(i + 1 - begin) / static_cast<double>(end - begin);
+    }
   }
 
   // 2. The Embree scene: one triangle geometry over the surface, built once.

@@ -66,6 +66,16 @@ struct GatherOptions {
   // it with shadow rays. The price is L_d's variation inside one triangle (a shadow edge spread
   // over a triangle, the second-order part of cos θ / r²). Point lights only (light_radius 0).
   bool direct_from_vertices = false;
+  // Issue #38: a vertex's value is the mean irradiance over its cell — the part of its triangles
+  // where its barycentric weight is the largest, the area it stands for when the surface is drawn
+  // — rather than the irradiance at the vertex itself: each ray leaves from its own point of the
+  // cell (low-discrepancy, with the directions). A box filter over the sample's footprint, as a
+  // pixel's value is over its own. It matters at contacts: a floor vertex on the line where a
+  // wall stands sees, through half its hemisphere, the wall's first millimetres, so its value is
+  // the value of one wall vertex and steps as a shadow edge crosses that vertex — a step in the
+  // light's position that no subspace of a finite set of training lights represents (at 100k
+  // points the largest errors of the subspace were all such vertices; docs/BENCHMARKS.md).
+  bool cell_average = false;
 };
 
 // Checks samples ≥ 1, shadow_rays ≥ 1, light_radius finite and ≥ 0, and light_radius 0 with

@@ -31,6 +31,9 @@ constexpr const char* kFilterLinearKey = "illumination.filter_linear";
 // triangle's vertices (GatherOptions::direct_from_vertices); absent in older files and for the
 // gather with a shadow ray from every hit.
 constexpr const char* kDirectAtHitsKey = "illumination.direct_at_hits";
+// Issue #38: "cell" when a vertex's rays leave from points of its cell (GatherOptions::
+// cell_average); absent in older files and for rays from the vertex itself.
+constexpr const char* kRayOriginsKey = "illumination.ray_origins";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
@@ -71,6 +74,7 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
     out.metadata()[kShadowRaysKey] = std::to_string(setup.gather.shadow_rays);
   }
   if (setup.gather.direct_from_vertices) out.metadata()[kDirectAtHitsKey] = "vertices";
+  if (setup.gather.cell_average) out.metadata()[kRayOriginsKey] = "cell";
   if (setup.filter.enabled()) {
     out.metadata()[kFilterNeighboursKey] = std::to_string(setup.filter.neighbours);
     out.metadata()[kFilterNormalKey] = format_number(setup.filter.min_normal_cosine);
@@ -157,6 +161,13 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
   } else if (direct_at_hits != "shadow rays") {
     return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kDirectAtHitsKey +
                                                        " should be 'vertices' or absent, got '" + direct_at_hits + "'");
+  }
+  const std::string ray_origins = in.metadata_value(kRayOriginsKey, "vertex");
+  if (ray_origins == "cell") {
+    setup.gather.cell_average = true;
+  } else if (ray_origins != "vertex") {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kRayOriginsKey +
+                                                       " should be 'cell' or absent, got '" + ray_origins + "'");
   }
   Status gather = check_gather_options(setup.gather);
   if (!gather.ok()) return named(gather.error(), source);

@@ -49,6 +49,7 @@ struct IlluminationTrainingOptions {
     GatherOptions g;
     g.samples = 2048;
     g.direct_from_vertices = true;
+    g.cell_average = true;
     return g;
   }();
   // Issue #38 item 1: a surface filter of each training frame and of the server's full

@@ -23,6 +23,10 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
   cmd->add_flag("--direct-from-vertices,!--shadow-ray-per-hit", a.direct_from_vertices,
                 "Each gather ray's hit reads the direct light interpolated from its triangle's vertices, computed "
                 "once per light (the lights share the rays), instead of tracing a shadow ray from the hit");
+  cmd->add_flag("--cell-average,!--vertex-gather", a.cell_average,
+                "Each vertex's rays leave from points spread over its cell (the part of its triangles where it "
+                "weighs the most), so that its value is the mean over the area it stands for, not the value at the "
+                "vertex alone");
   cmd->add_option("--filter-neighbours", a.filter_neighbours,
                   "Surface filter of each gathered frame (and of the daemon's full calculation): each point's "
                   "irradiance averaged over about this many neighbours on the surface (0: no filter)")
@@ -93,6 +97,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
   options.gather.samples = a.samples;
   options.gather.seed = a.seed;
   options.gather.direct_from_vertices = a.direct_from_vertices;
+  options.gather.cell_average = a.cell_average;
   options.filter = {a.filter_neighbours, a.filter_min_normal_cosine, a.filter_linear};
   options.key_samples = a.key_samples;
   options.tolerance_fraction = a.tolerance;
@@ -124,6 +129,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                 {"lights", options.lights.size()},
                 {"samples", a.samples},
                 {"direct_from_vertices", a.direct_from_vertices},
+                {"cell_average", a.cell_average},
                 {"basis", r.basis_size},
                 {"key_points", r.key_points},
                 {"radiance_scale", report.radiance_scale},

@@ -17,6 +17,8 @@ struct TrainIlluminationArgs {
   int samples = illumination::IlluminationTrainingOptions{}.gather.samples;  // final-gather rays per point
   // Issue #38: the hits read the direct light from their triangles' vertices (GatherOptions).
   bool direct_from_vertices = illumination::IlluminationTrainingOptions{}.gather.direct_from_vertices;
+  // Issue #38: a vertex's value is the mean over its cell (GatherOptions::cell_average).
+  bool cell_average = illumination::IlluminationTrainingOptions{}.gather.cell_average;
   unsigned long long seed = 0;
   int lights_x = illumination::LightGrid{}.nx;  // training grid (the papers': 12 × 12 = 144)
   int lights_z = illumination::LightGrid{}.nz;

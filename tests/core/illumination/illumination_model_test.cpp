@@ -180,6 +180,36 @@ TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
   EXPECT_FALSE(load_illumination(bad_quantity, "m.anim").ok());
 }
 
+// Issue #38: the cell-averaged gather is stored as illumination.ray_origins = cell and read back;
+// a file without the key (every file before it) loads with the rays leaving from the vertices; an
+// unknown value is refused naming the file, the key and the value.
+TEST(IlluminationIoTest, TheCellAverageRoundTripsAndOlderFilesReadAsRaysFromTheVertices) {
+  IlluminationSetup setup = small_setup();
+  ASSERT_FALSE(setup.gather.cell_average);
+  container::ModelContainer older;
+  attach_illumination(older, setup);
+  EXPECT_EQ(older.metadata().count("illumination.ray_origins"), 0u) << "unchanged files for older readers";
+  auto loaded = load_illumination(older, "old.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_FALSE(loaded->gather.cell_average);
+
+  setup.gather.cell_average = true;
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  EXPECT_EQ(out.metadata_value("illumination.ray_origins"), "cell");
+  loaded = load_illumination(out, "m.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_TRUE(loaded->gather.cell_average);
+
+  container::ModelContainer bad = out;
+  bad.metadata()["illumination.ray_origins"] = "centroid";
+  auto refused = load_illumination(bad, "m.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("illumination.ray_origins"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("centroid"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("m.anim"), std::string::npos) << refused.error().message;
+}
+
 // Issue #38: the gather that reads the direct light from the vertices is stored as
 // illumination.direct_at_hits = vertices and read back; a file without the key (every file
 // before it) loads with a shadow ray per hit; an unknown value, or the key beside a disc light,
