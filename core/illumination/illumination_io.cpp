@@ -37,6 +37,17 @@ constexpr const char* kRayOriginsKey = "illumination.ray_origins";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
+// A gather choice written as `key` = `marker` only when made: absent (or `absent`) reads as the
+// other choice, so every file from before the key loads as it did. Any other value is refused
+// naming the file, the key and the value.
+Result<bool> read_marker(const container::ModelContainer& in, const char* key, const std::string& marker,
+                         const std::string& absent, const std::string& source) {
+  const std::string value = in.metadata_value(key, absent);
+  if (value == marker || value == absent) return value == marker;
+  return make_error(ErrorCode::kInvalidArgument,
+                    source + ": metadata " + key + " should be '" + marker + "' or absent, got '" + value + "'");
+}
+
 }  // namespace
 
 SceneView cornell_view() {
@@ -155,20 +166,12 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
     if (!rays) return named(rays.error(), source);
     setup.gather.shadow_rays = *rays;
   }
-  const std::string direct_at_hits = in.metadata_value(kDirectAtHitsKey, "shadow rays");
-  if (direct_at_hits == "vertices") {
-    setup.gather.direct_from_vertices = true;
-  } else if (direct_at_hits != "shadow rays") {
-    return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kDirectAtHitsKey +
-                                                       " should be 'vertices' or absent, got '" + direct_at_hits + "'");
-  }
-  const std::string ray_origins = in.metadata_value(kRayOriginsKey, "vertex");
-  if (ray_origins == "cell") {
-    setup.gather.cell_average = true;
-  } else if (ray_origins != "vertex") {
-    return make_error(ErrorCode::kInvalidArgument, source + ": metadata " + kRayOriginsKey +
-                                                       " should be 'cell' or absent, got '" + ray_origins + "'");
-  }
+  auto from_vertices = read_marker(in, kDirectAtHitsKey, "vertices", "shadow rays", source);
+  if (!from_vertices) return from_vertices.error();
+  setup.gather.direct_from_vertices = *from_vertices;
+  auto cell_average = read_marker(in, kRayOriginsKey, "cell", "vertex", source);
+  if (!cell_average) return cell_average.error();
+  setup.gather.cell_average = *cell_average;
   Status gather = check_gather_options(setup.gather);
   if (!gather.ok()) return named(gather.error(), source);
   if (in.metadata().count(kFilterNeighboursKey) != 0) {

@@ -180,69 +180,58 @@ TEST(IlluminationIoTest, RefusesSectionsThatDisagreeNamingThem) {
   EXPECT_FALSE(load_illumination(bad_quantity, "m.anim").ok());
 }
 
-// Issue #38: the cell-averaged gather is stored as illumination.ray_origins = cell and read back;
-// a file without the key (every file before it) loads with the rays leaving from the vertices; an
-// unknown value is refused naming the file, the key and the value.
-TEST(IlluminationIoTest, TheCellAverageRoundTripsAndOlderFilesReadAsRaysFromTheVertices) {
+// Issue #38: a gather choice stored as `key` = `marker` only when made. A file without the key
+// (every file before it) loads with the other choice; the marker reads back; another value is
+// refused naming the file, the key and the value. Returns the file with the marker.
+container::ModelContainer expect_marker_round_trips(const std::string& key, const std::string& marker,
+                                                    const std::string& unknown, bool GatherOptions::*choice) {
   IlluminationSetup setup = small_setup();
-  ASSERT_FALSE(setup.gather.cell_average);
+  EXPECT_FALSE(setup.gather.*choice);
   container::ModelContainer older;
   attach_illumination(older, setup);
-  EXPECT_EQ(older.metadata().count("illumination.ray_origins"), 0u) << "unchanged files for older readers";
+  EXPECT_EQ(older.metadata().count(key), 0u) << "unchanged files for older readers";
   auto loaded = load_illumination(older, "old.anim");
-  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-  EXPECT_FALSE(loaded->gather.cell_average);
+  EXPECT_TRUE(loaded.ok()) << loaded.error().message;
+  if (loaded.ok()) {
+    EXPECT_FALSE((*loaded).gather.*choice);
+  }
 
-  setup.gather.cell_average = true;
+  setup.gather.*choice = true;
   container::ModelContainer out;
   attach_illumination(out, setup);
-  EXPECT_EQ(out.metadata_value("illumination.ray_origins"), "cell");
+  EXPECT_EQ(out.metadata_value(key), marker);
   loaded = load_illumination(out, "m.anim");
-  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-  EXPECT_TRUE(loaded->gather.cell_average);
+  EXPECT_TRUE(loaded.ok()) << loaded.error().message;
+  if (loaded.ok()) {
+    EXPECT_TRUE((*loaded).gather.*choice);
+  }
 
   container::ModelContainer bad = out;
-  bad.metadata()["illumination.ray_origins"] = "centroid";
+  bad.metadata()[key] = unknown;
   auto refused = load_illumination(bad, "m.anim");
-  ASSERT_FALSE(refused.ok());
-  EXPECT_NE(refused.error().message.find("illumination.ray_origins"), std::string::npos) << refused.error().message;
-  EXPECT_NE(refused.error().message.find("centroid"), std::string::npos) << refused.error().message;
-  EXPECT_NE(refused.error().message.find("m.anim"), std::string::npos) << refused.error().message;
+  EXPECT_FALSE(refused.ok());
+  if (!refused.ok()) {
+    for (const std::string& named : {key, unknown, std::string("m.anim")}) {
+      EXPECT_NE(refused.error().message.find(named), std::string::npos) << refused.error().message;
+    }
+  }
+  return out;
 }
 
-// Issue #38: the gather that reads the direct light from the vertices is stored as
-// illumination.direct_at_hits = vertices and read back; a file without the key (every file
-// before it) loads with a shadow ray per hit; an unknown value, or the key beside a disc light,
-// is refused naming the file and the key or field.
+// The cell-averaged gather: illumination.ray_origins = cell; older files read as rays from the vertices.
+TEST(IlluminationIoTest, TheCellAverageRoundTripsAndOlderFilesReadAsRaysFromTheVertices) {
+  expect_marker_round_trips("illumination.ray_origins", "cell", "centroid", &GatherOptions::cell_average);
+}
+
+// The direct light read from the vertices: illumination.direct_at_hits = vertices; older files
+// read as a shadow ray per hit; the key beside a disc light is refused naming the field.
 TEST(IlluminationIoTest, TheDirectLightAtTheHitsRoundTripsAndOlderFilesReadAsShadowRays) {
-  IlluminationSetup setup = small_setup();
-  ASSERT_FALSE(setup.gather.direct_from_vertices);
-  container::ModelContainer older;
-  attach_illumination(older, setup);
-  EXPECT_EQ(older.metadata().count("illumination.direct_at_hits"), 0u) << "unchanged files for older readers";
-  auto loaded = load_illumination(older, "old.anim");
-  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-  EXPECT_FALSE(loaded->gather.direct_from_vertices);
-
-  setup.gather.direct_from_vertices = true;
-  container::ModelContainer out;
-  attach_illumination(out, setup);
-  EXPECT_EQ(out.metadata_value("illumination.direct_at_hits"), "vertices");
-  loaded = load_illumination(out, "m.anim");
-  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-  EXPECT_TRUE(loaded->gather.direct_from_vertices);
-
+  const container::ModelContainer out = expect_marker_round_trips(
+      "illumination.direct_at_hits", "vertices", "photons", &GatherOptions::direct_from_vertices);
   container::ModelContainer bad = out;
-  bad.metadata()["illumination.direct_at_hits"] = "photons";
-  auto refused = load_illumination(bad, "m.anim");
-  ASSERT_FALSE(refused.ok());
-  EXPECT_NE(refused.error().message.find("illumination.direct_at_hits"), std::string::npos) << refused.error().message;
-  EXPECT_NE(refused.error().message.find("photons"), std::string::npos) << refused.error().message;
-  EXPECT_NE(refused.error().message.find("m.anim"), std::string::npos) << refused.error().message;
-  bad = out;
   bad.metadata()["illumination.light_radius"] = "0.01";
   bad.metadata()["illumination.shadow_rays"] = "2";
-  refused = load_illumination(bad, "m.anim");
+  auto refused = load_illumination(bad, "m.anim");
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.error().message.find("light_radius"), std::string::npos) << refused.error().message;
 }
