@@ -56,20 +56,37 @@ std::vector<int> select_check_points(const Eigen::MatrixXf& point_errors, const 
       if (region_best[static_cast<size_t>(r)] >= 0) take(region_best[static_cast<size_t>(r)]);
     }
   }
-  // Then the largest gain in coverage.
-  while (static_cast<long>(chosen.size()) < wanted) {
-    long best = -1;
-    float best_gain = -1;
-    for (long j = 0; j < N; ++j) {
-      if (taken[static_cast<size_t>(j)]) continue;
-      const float gain = (u.col(j) - coverage).cwiseMax(0.0f).sum();
-      if (gain > best_gain) {
-        best_gain = gain;
-        best = j;
-      }
+  // Then the largest gain in coverage, lazily (Minoux 1978): a point's gain only falls as the
+  // coverage grows, so the gain it had when last computed bounds it, and a point whose fresh gain
+  // beats every other point's bound is the one a full scan would take. In float too: each term
+  // max(0, u − c) and a sum of terms in a fixed order only fall as c rises. Ties go to the lower
+  // index, as a scan in index order would. At the papers' 100k illumination points a full scan
+  // per check point read the 1,600 samples' 650 MB of errors 120 times.
+  const auto gain_of = [&](long j) { return (u.col(j) - coverage).cwiseMax(0.0f).sum(); };
+  struct Bound {
+    float gain;
+    long point;
+    bool operator<(const Bound& other) const {  // the heap's top: largest gain, then lowest index
+      return gain < other.gain || (gain == other.gain && point > other.point);
     }
-    if (best < 0) break;
-    take(best);
+  };
+  std::vector<Bound> heap;
+  heap.reserve(static_cast<size_t>(N));
+  for (long j = 0; j < N; ++j) {
+    if (!taken[static_cast<size_t>(j)]) heap.push_back({gain_of(j), j});
+  }
+  std::make_heap(heap.begin(), heap.end());
+  while (static_cast<long>(chosen.size()) < wanted && !heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end());
+    Bound top = heap.back();
+    heap.pop_back();
+    top.gain = gain_of(top.point);
+    if (heap.empty() || !(top < heap.front())) {
+      take(top.point);
+    } else {
+      heap.push_back(top);
+      std::push_heap(heap.begin(), heap.end());
+    }
   }
   return chosen;
 }

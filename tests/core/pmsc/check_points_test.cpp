@@ -1,6 +1,8 @@
 // Check point selection (issue #35, core/pmsc/check_points.h) on hand-worked cases.
 #include "core/pmsc/check_points.h"
 
+#include <random>
+
 #include <gtest/gtest.h>
 
 namespace animspace::pmsc {
@@ -47,6 +49,50 @@ TEST(CheckPoints, SamplesReproducedToRoundingAreIgnored) {
   max(1) = 1e-9;
   e.row(1) *= 1e-9f;
   EXPECT_EQ(select_check_points(e, max, {0}, {}, 0, 1, 1e-6), (std::vector<int>{4}));
+}
+
+// The greedy step written as its definition, a scan of every point in index order: the point with
+// the largest Σ_i max(0, u_ij − c_i), the lowest index on ties.
+std::vector<int> greedy_by_scan(const Eigen::MatrixXf& u, const std::vector<int>& keys, int count) {
+  std::vector<char> taken(static_cast<size_t>(u.cols()), 0);
+  for (int k : keys) taken[static_cast<size_t>(k)] = 1;
+  Eigen::VectorXf coverage = Eigen::VectorXf::Zero(u.rows());
+  std::vector<int> chosen;
+  while (static_cast<int>(chosen.size()) < count) {
+    long best = -1;
+    float best_gain = -1;
+    for (long j = 0; j < u.cols(); ++j) {
+      if (taken[static_cast<size_t>(j)]) continue;
+      const float gain = (u.col(j) - coverage).cwiseMax(0.0f).sum();
+      if (gain > best_gain) {
+        best_gain = gain;
+        best = j;
+      }
+    }
+    if (best < 0) break;
+    chosen.push_back(static_cast<int>(best));
+    taken[static_cast<size_t>(best)] = 1;
+    coverage = coverage.cwiseMax(u.col(best));
+  }
+  return chosen;
+}
+
+TEST(CheckPoints, TheLazySelectionTakesWhatAFullScanTakes) {
+  // Errors on a coarse grid of levels, so that gains tie often, and columns repeated outright.
+  std::mt19937 random(7);
+  std::uniform_int_distribution<int> level(0, 4);
+  for (int trial = 0; trial < 20; ++trial) {
+    const long n = 12, N = 40;
+    Eigen::MatrixXf e(n, N);
+    for (long j = 0; j < N; ++j) {
+      for (long i = 0; i < n; ++i) e(i, j) = 0.25f * static_cast<float>(level(random));
+    }
+    for (long j = 30; j < N; ++j) e.col(j) = e.col(j - 30);
+    for (long i = 0; i < n; ++i) e(i, 0) = 1;  // the key: every sample's worst point
+    const Eigen::VectorXd max = Eigen::VectorXd::Ones(n);
+    const std::vector<int> keys = {0};
+    EXPECT_EQ(select_check_points(e, max, keys, {}, 0, 25, 1e-6), greedy_by_scan(e, keys, 25)) << "trial " << trial;
+  }
 }
 
 }  // namespace
