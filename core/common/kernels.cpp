@@ -52,6 +52,18 @@ void portable_gemm(long rows, long inner, long columns, const T* a, long lda, co
   }
 }
 
+void portable_gemm_transposed(long rows, long inner, long columns, const double* a, long lda, const double* b,
+                              long ldb, double beta, double* c, long ldc) {
+  const View<double> A(a, inner, rows, Eigen::OuterStride<>(lda));
+  const View<double> B(b, inner, columns, Eigen::OuterStride<>(ldb));
+  Target<double> C(c, rows, columns, Eigen::OuterStride<>(ldc));
+  if (beta == 0.0) {
+    C.noalias() = A.transpose() * B;
+  } else {
+    C.noalias() += A.transpose() * B;
+  }
+}
+
 template <typename T>
 void portable_gram_lower(long rows, long columns, const T* x, long ldx, T* out, long ldo) {
   const View<T> X(x, rows, columns, Eigen::OuterStride<>(ldx));
@@ -126,6 +138,16 @@ void gemm_serial(long rows, long inner, long columns, const double* a, long lda,
     return;
   }
   cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
+              blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
+}
+
+void gemm_transposed_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
+                            double beta, double* c, long ldc) {
+  if (rows == 0 || columns == 0) return;
+  if (active_kernel() == Kernel::kPortable) {
+    return portable_gemm_transposed(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
+  }
+  cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
 }
 

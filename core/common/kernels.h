@@ -62,6 +62,12 @@ void gemm_serial(long rows, long inner, long columns, const float* a, long lda, 
 void gemm_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
                  double beta, double* c, long ldc);
 
+// C = Aᵀ·B + beta·C with A stored inner × rows (leading dimension lda), B inner × columns, C
+// rows × columns: the coefficients of B's columns on A's columns (the PMSC's projections onto a
+// basis, issue #38), on the calling thread alone like gemm_serial. beta is 0 or 1.
+void gemm_transposed_serial(long rows, long inner, long columns, const double* a, long lda, const double* b, long ldb,
+                            double beta, double* c, long ldc);
+
 // The lower triangle (diagonal included) of XᵀX into `out` (columns × columns, leading dimension
 // ldo; the strict upper triangle is left as it was), X rows × columns column-major (leading
 // dimension ldx): the Gram matrices of the PMSC's PCA, on the calling thread alone like

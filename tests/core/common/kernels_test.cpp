@@ -223,6 +223,43 @@ TEST_F(KernelTest, BothKernelsComputeTheGramMatrixOfTheDefinition) {
   }
 }
 
+// Aᵀ·B + beta·C against the definition: the reference above with A's transpose written out.
+TEST_F(KernelTest, BothKernelsComputeTheTransposedProductOfTheDefinition) {
+  for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
+    use_kernel(kernel);
+    std::mt19937 random(11);
+    std::uniform_real_distribution<double> value(-1, 1);
+    for (long columns : {1L, 5L, 40L}) {
+      for (double beta : {0.0, 1.0}) {
+        const long rows = 19, inner = 53, lda = inner + 3, ldb = inner + 2, ldc = rows + 4;
+        std::vector<double> a(static_cast<size_t>(lda * rows)), b(static_cast<size_t>(ldb * columns)),
+            c(static_cast<size_t>(ldc * columns));
+        for (double& x : a) x = value(random);
+        for (double& x : b) x = value(random);
+        for (double& x : c) x = value(random);
+        std::vector<double> transposed(static_cast<size_t>(rows * inner));  // rows × inner, leading dimension rows
+        for (long i = 0; i < rows; ++i) {
+          for (long k = 0; k < inner; ++k) transposed[static_cast<size_t>(i + k * rows)] = a[static_cast<size_t>(k + i * lda)];
+        }
+        const std::vector<long double> expected = reference(rows, inner, columns, transposed, rows, b, ldb, beta, c, ldc);
+        std::vector<double> out = c;
+        gemm_transposed_serial(rows, inner, columns, a.data(), lda, b.data(), ldb, beta, out.data(), ldc);
+        for (long j = 0; j < columns; ++j) {
+          for (long i = 0; i < ldc; ++i) {
+            const auto at = static_cast<size_t>(i + j * ldc);
+            if (i >= rows) {
+              EXPECT_EQ(out[at], c[at]) << "padding below row " << rows << " was written";
+            } else {
+              EXPECT_NEAR(out[at], static_cast<double>(expected[at]), 4e-16 * (inner + 1))
+                  << kernel_name(kernel) << " columns " << columns << " beta " << beta << " at " << i << "," << j;
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 TEST_F(KernelTest, TheBlasKernelNamesTheCoreItDispatchedTo) {
   const std::string blas = kernel_name(Kernel::kBlas);
   ASSERT_EQ(blas.rfind("openblas:", 0), 0u) << blas;
