@@ -94,25 +94,38 @@ Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eige
     out.key_points.push_back(seed);
   }
 
-  // Residual of the KPSA reconstruction of T with the current keys, into one buffer for all the
-  // iterations (at the papers' 100k illumination points, 345 MB whose fresh pages each iteration
-  // cost more than its product).
-  Eigen::MatrixXd residual = T;
-  Eigen::MatrixXd negated;
-  const auto update_residual = [&](const std::vector<int>& keys) {
+  // The residual of the KPSA reconstruction of T with the current keys is E = T − A·C, with C =
+  // P·T_key (M × F) the keys' coordinates of every frame. Each iteration needs its largest point
+  // error and the leading directions of its Gram matrix EᵀE; forming EᵀE from E cost R·F² flops
+  // an iteration (31 GFlop at the papers' 100k illumination points), but
+  //   EᵀE = TᵀT − Hᵀ·C − Cᵀ·H + Cᵀ·(AᵀA)·C,   H = AᵀT,
+  // from products formed once, costs O(M·F²). (Rounding in TᵀT is ~eps·‖T‖², far below the
+  // residual's energy whenever the keys are worth choosing; the σ_i and the basis are still
+  // measured on E itself, by residual_pass.)
+  const long R = T.rows(), F = T.cols(), M = basis.cols();
+  Eigen::MatrixXd gram_T = Eigen::MatrixXd::Zero(F, F);
+  gram_lower_serial(R, F, T.data(), T.outerStride(), gram_T.data(), F);
+  gram_T = gram_T.selfadjointView<Eigen::Lower>();
+  Eigen::MatrixXd H(M, F);
+  gemm_transposed_serial(M, R, F, basis.data(), basis.outerStride(), T.data(), T.outerStride(), 0.0, H.data(), M);
+  Eigen::MatrixXd gram_A = Eigen::MatrixXd::Zero(M, M);
+  gram_lower_serial(R, M, basis.data(), basis.outerStride(), gram_A.data(), M);
+  gram_A = gram_A.selfadjointView<Eigen::Lower>();
+
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(M, F);
+  const auto update_coordinates = [&](const std::vector<int>& keys) {
     const Eigen::MatrixXd P = least_squares_projection(gather_key_rows(basis, keys, D), kMaxConditionNumber, nullptr, nullptr);
-    negated.noalias() = -(P * gather_key_rows(T, keys, D));
-    // T − A·coordinates through the dispatched kernel, on this thread alone so that the keys do
-    // not depend on the thread count: OpenBLAS's dgemm against Eigen/SSE2's 0.38 s per iteration
-    // for the 20,000-point Cornell box (60,000 × 100 × 144; issue #38 item 3).
-    residual = T;  // same size: the buffer is reused
-    gemm_serial(residual.rows(), basis.cols(), residual.cols(), basis.data(), basis.outerStride(), negated.data(),
-                negated.rows(), 1.0, residual.data(), residual.rows());
+    C.noalias() = P * gather_key_rows(T, keys, D);
   };
 
-  if (!out.key_points.empty()) update_residual(out.key_points);
+  if (!out.key_points.empty()) update_coordinates(out.key_points);
+  Eigen::MatrixXd directions;
   for (int iteration = 0; iteration < o.max_iterations; ++iteration) {
-    const double max_residual = max_point_error(residual, D);
+    const Eigen::MatrixXd HtC = H.transpose() * C;
+    Eigen::MatrixXd gram_E = gram_T - HtC - HtC.transpose();
+    gram_E.noalias() += C.transpose() * (gram_A * C);
+    const Eigen::MatrixXd V = leading_gram_eigenvectors(gram_E, static_cast<int>(std::min<long>(o.block_size, R)));
+    const double max_residual = residual_pass(T, basis, C, D, V, &directions);
     if (!out.key_points.empty()) out.max_residual.push_back(max_residual);
     if (!out.key_points.empty() && max_residual <= o.error_bound) {
       out.converged = true;
@@ -121,7 +134,7 @@ Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eige
     if (static_cast<int>(out.key_points.size()) >= o.max_key_points) break;
 
     // A block of basis vectors from the residual, localised by Varimax.
-    const PcaBasis block = thin_pca(residual, o.block_size);
+    const PcaBasis block = pca_from_directions(directions);
     if (block.basis.cols() == 0) break;  // the residual is numerically zero
     // Only the argmax points of the rotated vectors are used, so a loose tolerance suffices.
     const VarimaxResult rotated = varimax(block.basis, 100, 1e-6);
@@ -134,9 +147,9 @@ Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eige
     if (static_cast<int>(out.key_points.size()) > o.max_key_points) out.key_points.resize(static_cast<size_t>(o.max_key_points));
     if (added == 0) break;  // every candidate is already a key
     report_progress(o.progress, "key points", static_cast<int64_t>(out.key_points.size()), o.max_key_points);
-    update_residual(out.key_points);
+    update_coordinates(out.key_points);
   }
-  if (out.max_residual.empty()) out.max_residual.push_back(max_point_error(residual, D));
+  if (out.max_residual.empty()) out.max_residual.push_back(residual_pass(T, basis, C, D));
   return out;
 }
 

@@ -16,6 +16,7 @@
 #include <Eigen/SVD>
 
 #include "core/common/kernels.h"
+#include "core/common/parallel.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -40,8 +41,8 @@ using Eigen::VectorXd;
 // Gram–Schmidt-equivalent re-orthonormalisation of U (R × k), keeping column order and signs
 // (column j only loses its components along columns 0 … j-1). Columns come in with unit norm
 // and near-orthogonal (off-diagonals of UᵀU up to ~eps·σ_0²/(σ_i σ_j)), so Cholesky QR —
-// U ← U L⁻ᵀ with L Lᵀ = UᵀU — is stable (orthogonality error ~eps·κ(U)²) and costs two
-// GEMM-speed passes of R·k² / 2 flops. Should UᵀU be far from I (not seen in practice), a
+// U ← U L⁻ᵀ with L Lᵀ = UᵀU — is stable (orthogonality error ~eps·κ(U)²) and costs a
+// SYRK (R·k² flops) and a GEMM (2·R·k²). Should UᵀU be far from I (not seen in practice), a
 // Householder QR (2·R·k² flops, unconditionally stable) takes over.
 void reorthonormalize(MatrixXd& U) {
   const Index k = U.cols();
@@ -53,7 +54,14 @@ void reorthonormalize(MatrixXd& U) {
   if ((gram - MatrixXd::Identity(k, k)).norm() < 0.5) {
     const Eigen::LLT<MatrixXd> llt(gram);
     if (llt.info() == Eigen::Success) {
-      llt.matrixU().solveInPlace<Eigen::OnTheRight>(U);
+      // U L⁻ᵀ as one product with the explicit inverse (upper triangular, κ ≤ √3, so forming it
+      // costs no accuracy) through the dispatched kernel rather than Eigen/SSE2's triangular
+      // solve: 300k × 256² for the papers' 100k illumination points.
+      MatrixXd inverse = MatrixXd::Identity(k, k);
+      llt.matrixU().solveInPlace(inverse);
+      MatrixXd product(U.rows(), k);
+      gemm_serial(U.rows(), k, k, U.data(), U.outerStride(), inverse.data(), k, 0.0, product.data(), U.rows());
+      U = std::move(product);
       return;
     }
   }
@@ -78,37 +86,13 @@ void fix_signs(MatrixXd& U) {
   }
 }
 
-}  // namespace
-
-PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
-  assert(max_vectors >= 0);
-  const Index R = X.rows(), F = X.cols();
-  const Index candidates = std::min<Index>(max_vectors, std::min(R, F));
+// Steps 2 and 3 of a thin PCA from its candidate directions U (R × k, columns X v_i) and their
+// σ_i: order by σ (‖X v_i‖ can swap neighbours of a near-degenerate pair), drop directions below
+// the floor, a_i = X v_i / σ_i, then one re-orthonormalisation and the sign convention.
+PcaBasis basis_from_directions(const MatrixXd& U, const VectorXd& sigma) {
+  const Index R = U.rows(), candidates = U.cols();
   PcaBasis pca{MatrixXd(R, 0), VectorXd(0)};
   if (candidates == 0) return pca;
-
-  // 1. Candidate directions U (R × candidates, unnormalised columns X v_i) and their σ_i.
-  MatrixXd U;
-  VectorXd sigma;
-  if (F < R) {
-    // Only the lower triangle of XᵀX is formed (SYRK, R·F²/2 flops) and only it is read by the
-    // eigensolver.
-    MatrixXd gram = MatrixXd::Zero(F, F);
-    gram_lower_serial(R, F, X.data(), X.outerStride(), gram.data(), F);
-    const Eigen::SelfAdjointEigenSolver<MatrixXd> eigen(gram, Eigen::ComputeEigenvectors);
-    // Eigenvalues come ascending: the largest `candidates` are the rightmost columns.
-    U.noalias() = X * eigen.eigenvectors().rightCols(candidates).rowwise().reverse();
-    sigma = U.colwise().norm().transpose();
-  } else {
-    // Wide (or square) X: the Gram matrix on either side is no smaller than X itself, so take
-    // the SVD directly; its U is already orthonormal and σ_i accurate to eps·σ_0.
-    const Eigen::BDCSVD<MatrixXd> svd(X, Eigen::ComputeThinU);
-    sigma = svd.singularValues().head(candidates);
-    U.noalias() = svd.matrixU().leftCols(candidates) * sigma.asDiagonal();  // X v_i, as above
-  }
-
-  // 2. Order by σ (‖X v_i‖ can swap neighbours of a near-degenerate pair) and drop directions
-  //    below the floor.
   std::vector<Index> order(static_cast<size_t>(candidates));
   std::iota(order.begin(), order.end(), Index{0});
   std::stable_sort(order.begin(), order.end(),
@@ -118,8 +102,6 @@ PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
   const double sigma_floor = kRelativeSingularValueFloor * sigma_0;
   const auto kept = static_cast<Index>(
       std::count_if(order.begin(), order.end(), [&](Index i) { return sigma(i) > sigma_floor; }));
-
-  // 3. a_i = X v_i / σ_i, then one re-orthonormalisation and the sign convention.
   pca.basis.resize(R, kept);
   pca.singular_values.resize(kept);
   for (Index j = 0; j < kept; ++j) {
@@ -130,6 +112,81 @@ PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
   reorthonormalize(pca.basis);
   fix_signs(pca.basis);
   return pca;
+}
+
+}  // namespace
+
+MatrixXd leading_gram_eigenvectors(const MatrixXd& gram, int count) {
+  assert(count >= 0 && gram.rows() == gram.cols());
+  const Index F = gram.rows();
+  const Index k = std::min<Index>(count, F);
+  if (k == 0) return MatrixXd(F, 0);
+  // The eigensolver reads the lower triangle only.
+  const Eigen::SelfAdjointEigenSolver<MatrixXd> eigen(gram, Eigen::ComputeEigenvectors);
+  // Eigenvalues come ascending: the largest k are the rightmost columns.
+  return eigen.eigenvectors().rightCols(k).rowwise().reverse();
+}
+
+PcaBasis pca_from_directions(const MatrixXd& directions) {
+  return basis_from_directions(directions, directions.colwise().norm().transpose());
+}
+
+PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
+  assert(max_vectors >= 0);
+  const Index R = X.rows(), F = X.cols();
+  const Index candidates = std::min<Index>(max_vectors, std::min(R, F));
+  if (candidates == 0) return PcaBasis{MatrixXd(R, 0), VectorXd(0)};
+  if (F < R) {
+    // Only the lower triangle of XᵀX is formed (SYRK, R·F²/2 flops). X V through the dispatched
+    // kernel: in Eigen/SSE2, products of this shape were 15% of the key selection's profile at
+    // the papers' 100k illumination points (300k × 324 × 12, once per iteration).
+    MatrixXd gram = MatrixXd::Zero(F, F);
+    gram_lower_serial(R, F, X.data(), X.outerStride(), gram.data(), F);
+    const MatrixXd V = leading_gram_eigenvectors(gram, static_cast<int>(candidates));
+    MatrixXd U(R, candidates);
+    gemm_serial(R, F, candidates, X.data(), X.outerStride(), V.data(), V.rows(), 0.0, U.data(), R);
+    return pca_from_directions(U);
+  }
+  // Wide (or square) X: the Gram matrix on either side is no smaller than X itself, so take the
+  // SVD directly; its U is already orthonormal and σ_i accurate to eps·σ_0.
+  const Eigen::BDCSVD<MatrixXd> svd(X, Eigen::ComputeThinU);
+  const VectorXd sigma = svd.singularValues().head(candidates);
+  return basis_from_directions(svd.matrixU().leftCols(candidates) * sigma.asDiagonal(), sigma);  // X v_i, as above
+}
+
+double residual_pass(const MatrixXd& X, const MatrixXd& A, const MatrixXd& C, int channels,
+                     const MatrixXd& directions, MatrixXd* projected) {
+  assert(channels >= 1 && X.rows() % channels == 0);
+  assert(A.rows() == X.rows() && C.rows() == A.cols() && C.cols() == X.cols());
+  assert(directions.cols() == 0 || (directions.rows() == X.cols() && projected != nullptr));
+  const Index R = X.rows(), F = X.cols(), M = A.cols(), k = directions.cols();
+  if (k > 0) projected->resize(R, k);
+  const Index block_rows = kResidualBlockPoints * channels;
+  const Index blocks = (R + block_rows - 1) / block_rows;
+  std::vector<double> block_max(static_cast<size_t>(blocks), 0.0);
+  const MatrixXd negated = -C;
+  parallel_for_chunks(blocks, 1, [&](int64_t first, int64_t last) {
+    MatrixXd E(std::min(block_rows, R), F);  // one block of the residual, in cache
+    for (int64_t b = first; b < last; ++b) {
+      const Index r0 = b * block_rows;
+      const Index n = std::min(block_rows, R - r0);
+      E.topRows(n) = X.middleRows(r0, n);
+      gemm_serial(n, M, F, A.data() + r0, A.outerStride(), negated.data(), negated.rows(), 1.0, E.data(), E.rows());
+      for (Index f = 0; f < F; ++f) {
+        const Eigen::Map<const MatrixXd, 0, Eigen::OuterStride<>> frame(E.col(f).data(), channels, n / channels,
+                                                                         Eigen::OuterStride<>(channels));
+        block_max[static_cast<size_t>(b)] =
+            std::max(block_max[static_cast<size_t>(b)], frame.colwise().squaredNorm().maxCoeff());
+      }
+      if (k > 0) {
+        gemm_serial(n, F, k, E.data(), E.rows(), directions.data(), directions.rows(), 0.0, projected->data() + r0,
+                    R);
+      }
+    }
+  });
+  double largest = 0;
+  for (double m : block_max) largest = std::max(largest, m);
+  return std::sqrt(largest);
 }
 
 VectorXd max_point_error_per_frame(const MatrixXd& residual, int channels) {

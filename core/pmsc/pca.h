@@ -44,6 +44,27 @@ struct PcaBasis {
 // takes the thin U of a bidiagonal divide-and-conquer SVD of X instead.
 PcaBasis thin_pca(const Eigen::MatrixXd& X, int max_vectors);
 
+// thin_pca in two halves, for a caller that has XᵀX without forming it from X (key_points.cpp:
+// the residual's Gram matrix from products computed once):
+//   leading_gram_eigenvectors  V, the eigenvectors of the F × F Gram matrix XᵀX (lower triangle
+//                              read) with the min(count, F) largest eigenvalues, descending;
+//   pca_from_directions        from U = X V (R × k): σ_i = ‖X v_i‖ and the basis thin_pca returns
+//                              (order by σ, floor, a_i = X v_i / σ_i, re-orthonormalised, signs).
+Eigen::MatrixXd leading_gram_eigenvectors(const Eigen::MatrixXd& gram, int count);
+PcaBasis pca_from_directions(const Eigen::MatrixXd& directions);
+
+// Points per row block of residual_pass: a block of the residual (kResidualBlockPoints · D rows
+// by F frames) stays in cache between its product and its reads (2.5 MB for D = 3, F = 324).
+inline constexpr long kResidualBlockPoints = 1024;
+
+// One pass over the residual E = X − A·C (X: R × F, A: R × M, C: M × F) without forming it
+// whole: returns max_point_error(E, channels) and, when `directions` (F × k) has columns, writes
+// E·directions (R × k) to `projected`. Blocks of kResidualBlockPoints points run on all cores;
+// the blocks do not depend on the thread count, so neither does any bit of the result. For the
+// key selection's residual at the papers' 100k illumination points, 777 MB never written.
+double residual_pass(const Eigen::MatrixXd& X, const Eigen::MatrixXd& A, const Eigen::MatrixXd& C, int channels,
+                     const Eigen::MatrixXd& directions = Eigen::MatrixXd(), Eigen::MatrixXd* projected = nullptr);
+
 // The subspace dimension M (seed 001 §2.1): the smallest M in 1 … min(max_basis,
 // pca.basis.cols()) such that the projection residual X − A_M A_Mᵀ X (A_M = the first M basis
 // columns) has, at every point and frame, Euclidean norm ≤ point_error_bound (the norm over the

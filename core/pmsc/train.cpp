@@ -24,6 +24,10 @@
 namespace animspace::pmsc {
 namespace {
 
+// Held-out poses per reconstruction in the calibration: the batched product's gain is mostly had
+// by 16 poses (kernels.h), and 32 keep a worker's points at 38 MB for the papers' 100k points.
+constexpr long kCalibrationBatch = 32;
+
 Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
 
 Eigen::Map<const Eigen::Matrix3Xd> points_of(const Eigen::VectorXd& frame, long first_point, long count) {
@@ -133,18 +137,21 @@ FoldWeights fold_weights(const Eigen::MatrixXd& G, long F, const std::vector<lon
   return out;
 }
 
-Subspace fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M) {
+// Writes into `out`, whose storage a calibration worker reuses from one fold to the next: at the
+// papers' 100k illumination points a fold's basis is 300k × 136 doubles, and faulting in fresh
+// pages for it, its linear copy and the model's float copy in every fold was a third of the
+// calibration's profile.
+void fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M,
+                   Subspace& out) {
   const FoldWeights weights = fold_weights(G, T.cols(), kept, M);
-  Subspace out;
   out.mean.noalias() = T * weights.mean_weights;
   // The R × F by F × M product through the dispatched kernel (kernels.h): OpenBLAS's dgemm took
   // 0.07 s against Eigen/SSE2's 0.38 s for the 20,000-point Cornell box (60,000 × 144 × 100),
   // once per calibration fold (issue #38 item 3).
-  out.basis.resize(T.rows(), weights.W.cols());
+  out.basis.resize(T.rows(), weights.W.cols());  // keeps its storage when the size repeats
   gemm_serial(T.rows(), T.cols(), weights.W.cols(), T.data(), T.rows(), weights.W.data(), weights.W.rows(), 0.0,
               out.basis.data(), out.basis.rows());
   out.sigma = weights.sigma;
-  return out;
 }
 
 // Issue #38 item 3: the held-out projection error of every basis size 0 … M_max, through the Gram
@@ -182,42 +189,52 @@ Eigen::VectorXd held_out_projection_curve(const Eigen::MatrixXd& G, const std::v
   return residual;
 }
 
-// The linear subspace spanned by an affine one's mean and basis: the basis (orthonormal, as PCA
-// and fold_subspace give it) and the mean's component orthogonal to it, normalised (twice
-// Gram–Schmidt; nothing when the mean is already in the span), with mean 0. What a
-// relative-tolerance model serves (PmscModel::relative_tolerance): it reproduces everything the
-// affine subspace does with one more direction, and s·keys then give exactly s·f̂. O(R·M): a QR
-// of every fold's R × (M + 1) rows doubled the calibration's time on the Cornell box.
-Subspace linear_subspace(const Subspace& s) {
+// The direction a relative-tolerance model adds to an affine subspace (PmscModel::
+// relative_tolerance): the mean's component orthogonal to the basis (orthonormal, as PCA and
+// fold_subspace give it), normalised (twice Gram–Schmidt), or an empty vector when the mean is
+// already in the span. The basis and this direction span the affine subspace with one more
+// dimension, through the origin, so s·keys then give exactly s·f̂. O(R·M): a QR of every fold's
+// R × (M + 1) rows doubled the calibration's time on the Cornell box.
+Eigen::VectorXd mean_direction(const Subspace& s) {
   Eigen::VectorXd direction = s.mean;
   for (int pass = 0; pass < 2; ++pass) direction -= s.basis * (s.basis.transpose() * direction);
   const double norm = direction.norm();
-  Subspace out;
-  out.mean = Eigen::VectorXd::Zero(s.mean.size());
-  const bool spanned = !(norm > 1e-9 * s.mean.norm());
-  out.basis.resize(s.basis.rows(), s.basis.cols() + (spanned ? 0 : 1));
-  out.basis.leftCols(s.basis.cols()) = s.basis;
-  if (!spanned) out.basis.col(s.basis.cols()) = direction / norm;
-  out.sigma = s.sigma;
-  return out;
+  if (!(norm > 1e-9 * s.mean.norm())) return Eigen::VectorXd();
+  return direction / norm;
 }
 
-// Copies the output rows and the key rows of a subspace into a runtime model and prepares it
-// (made linear first for a relative-tolerance model).
+// Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
+// A relative-tolerance model is served linear: mean 0 and the mean's direction as one more basis
+// column. Written straight into the model's own storage (the calibration's workers reuse it).
 Status assemble(const Subspace& affine, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
-  const Subspace s = m.relative_tolerance ? linear_subspace(affine) : affine;
+  const Eigen::VectorXd extra = m.relative_tolerance ? mean_direction(affine) : Eigen::VectorXd();
   const long D = m.channel_count;
+  const long M_affine = affine.basis.cols();
+  const long M = M_affine + (extra.size() > 0 ? 1 : 0);
   const long output_first = cross ? control_rows : 0;
-  const long output_rows = s.mean.size() - output_first;
-  m.mean = s.mean.segment(output_first, output_rows).cast<float>();
-  m.basis = s.basis.middleRows(output_first, output_rows).cast<float>();
-  m.key_points = keys;
-  Eigen::VectorXd key_mean(static_cast<long>(keys.size()) * D);
-  for (size_t k = 0; k < keys.size(); ++k) {
-    key_mean.segment(static_cast<long>(k) * D, D) = s.mean.segment(static_cast<long>(keys[k]) * D, D);
+  const long output_rows = affine.mean.size() - output_first;
+  if (m.relative_tolerance) {
+    m.mean.setZero(output_rows);
+  } else {
+    m.mean = affine.mean.segment(output_first, output_rows).cast<float>();
   }
-  m.key_mean = key_mean;
-  m.key_basis = gather_key_rows(s.basis, keys, static_cast<int>(D));
+  m.basis.resize(output_rows, M);
+  m.basis.leftCols(M_affine) = affine.basis.middleRows(output_first, output_rows).cast<float>();
+  if (M > M_affine) m.basis.col(M_affine) = extra.segment(output_first, output_rows).cast<float>();
+  m.key_points = keys;
+  const long K = static_cast<long>(keys.size());
+  m.key_mean.resize(K * D);
+  m.key_basis.resize(K * D, M);
+  for (long k = 0; k < K; ++k) {
+    const long row = static_cast<long>(keys[static_cast<size_t>(k)]) * D;
+    if (m.relative_tolerance) {
+      m.key_mean.segment(k * D, D).setZero();
+    } else {
+      m.key_mean.segment(k * D, D) = affine.mean.segment(row, D);
+    }
+    m.key_basis.block(k * D, 0, D, M_affine) = affine.basis.middleRows(row, D);
+    if (M > M_affine) m.key_basis.block(k * D, M_affine, D, 1) = extra.segment(row, D);
+  }
   return prepare_projection(m);
 }
 
@@ -380,8 +397,11 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // frames cost more than the rest of the PCA).
   if (M == 0) M = choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
   Subspace subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
-  const double projection_error =
-      max_point_error(centred - subspace.basis * (subspace.basis.transpose() * centred), D);
+  // The projection's error through the dispatched kernels, never forming the R × F residual.
+  Eigen::MatrixXd projection_coordinates(M, F);
+  gemm_transposed_serial(M, centred.rows(), F, subspace.basis.data(), subspace.basis.outerStride(), centred.data(),
+                         centred.outerStride(), 0.0, projection_coordinates.data(), M);
+  const double projection_error = residual_pass(centred, subspace.basis, projection_coordinates, D);
   const double pca_seconds = seconds_since(pca_start);
   const auto key_start = std::chrono::steady_clock::now();
 
@@ -443,45 +463,79 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   std::atomic<size_t> next_set{0};
   std::mutex progress_mutex;
   size_t sets_done = 0;
-  const auto calibrate_set = [&](size_t set) {
+  // What a worker keeps from one set to the next (fold_subspace): the fold's subspace, its model
+  // (the trained model's members without the basis, which assemble replaces) and the batch's
+  // reconstructed points.
+  Eigen::MatrixXf served_basis = std::move(model.basis);  // moved-from Eigen matrices are empty
+  Eigen::VectorXf served_mean = std::move(model.mean);
+  const PmscModel shell = model;
+  model.basis = std::move(served_basis);
+  model.mean = std::move(served_mean);
+  struct Workspace {
+    Subspace fold;
+    PmscModel model;
+    Eigen::MatrixXf points;
+    std::vector<PoseEstimate> estimates;
+  };
+  const auto calibrate_set = [&](size_t set, Workspace& work) {
     const HeldOutSet& held = sets[set];
     SetSamples& out = per_set[set];
     // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
     const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(held.train.size()) - 1));
     if (fold_basis < 1) return;
-    PmscModel fold_model = model;
-    const Subspace fold = fold_subspace(T, gram, held.train, fold_basis);
-    if (fold.basis.cols() < 1) return;
-    if (!assemble(fold, control_rows, cross, model.key_points, fold_model).ok()) return;
-    PoseEstimate estimate;
-    for (long f : held.held_out) {
-      // Held-out frames enter in the world frame, as at run time.
-      const Eigen::VectorXf control = control_frames.row(f).transpose();
-      const Eigen::VectorXf truth = cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : control;
-      evaluate(fold_model, gather_key_values(fold_model, control), estimate);
-      const Eigen::VectorXf residual = truth - estimate.points;
-      // In the units of the estimate's errors: fractions of the pose's scale S when relative.
-      const Eigen::VectorXf point_errors =
-          Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, N_out).colwise().norm().transpose() /
-          static_cast<float>(estimate.scale);
-      out.key.push_back(estimate.key_point_error);
-      out.max.push_back(static_cast<double>(point_errors.maxCoeff()));
-      if (!cross) out.point_errors.push_back(point_errors);
-      if (R_count > 0) {
-        Eigen::VectorXd region_max = Eigen::VectorXd::Zero(R_count);
-        for (long i = 0; i < N_out; ++i) {
-          double& m = region_max(model.point_regions[static_cast<size_t>(i)]);
-          m = std::max(m, static_cast<double>(point_errors(i)));
+    fold_subspace(T, gram, held.train, fold_basis, work.fold);
+    if (work.fold.basis.cols() < 1) return;
+    PmscModel& fold_model = work.model;
+    if (!assemble(work.fold, control_rows, cross, model.key_points, fold_model).ok()) return;
+    // The held-out frames go through the runtime as a server's batch does (estimate_coordinates,
+    // then one reconstruct per kCalibrationBatch poses): the basis is read once per batch, not
+    // once per frame.
+    const long count = static_cast<long>(held.held_out.size());
+    for (long first = 0; first < count; first += kCalibrationBatch) {
+      const long batch = std::min(kCalibrationBatch, count - first);
+      work.estimates.resize(static_cast<size_t>(batch));
+      work.points.resize(fold_model.mean.size(), batch);
+      std::vector<const PoseEstimate*> estimates(static_cast<size_t>(batch));
+      std::vector<float*> destinations(static_cast<size_t>(batch));
+      for (long b = 0; b < batch; ++b) {
+        // Held-out frames enter in the world frame, as at run time.
+        const long f = held.held_out[static_cast<size_t>(first + b)];
+        const Eigen::VectorXf control = control_frames.row(f).transpose();
+        estimate_coordinates(fold_model, gather_key_values(fold_model, control), work.estimates[static_cast<size_t>(b)]);
+        estimates[static_cast<size_t>(b)] = &work.estimates[static_cast<size_t>(b)];
+        destinations[static_cast<size_t>(b)] = work.points.col(b).data();
+      }
+      reconstruct(fold_model, estimates, destinations);
+      for (long b = 0; b < batch; ++b) {
+        const long f = held.held_out[static_cast<size_t>(first + b)];
+        const PoseEstimate& estimate = work.estimates[static_cast<size_t>(b)];
+        const Eigen::VectorXf truth =
+            cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : Eigen::VectorXf(control_frames.row(f).transpose());
+        const Eigen::VectorXf residual = truth - work.points.col(b);
+        // In the units of the estimate's errors: fractions of the pose's scale S when relative.
+        const Eigen::VectorXf point_errors =
+            Eigen::Map<const Eigen::MatrixXf>(residual.data(), D, N_out).colwise().norm().transpose() /
+            static_cast<float>(estimate.scale);
+        out.key.push_back(estimate.key_point_error);
+        out.max.push_back(static_cast<double>(point_errors.maxCoeff()));
+        if (!cross) out.point_errors.push_back(point_errors);
+        if (R_count > 0) {
+          Eigen::VectorXd region_max = Eigen::VectorXd::Zero(R_count);
+          for (long i = 0; i < N_out; ++i) {
+            double& m = region_max(model.point_regions[static_cast<size_t>(i)]);
+            m = std::max(m, static_cast<double>(point_errors(i)));
+          }
+          out.region_key.push_back(Eigen::Map<const Eigen::VectorXd>(estimate.region_errors.data(), R_count));
+          out.region_max.push_back(region_max);
         }
-        out.region_key.push_back(Eigen::Map<const Eigen::VectorXd>(estimate.region_errors.data(), R_count));
-        out.region_max.push_back(region_max);
       }
     }
   };
   report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
   parallel_for_chunks(static_cast<int64_t>(sets.size()), 1, [&](int64_t, int64_t) {
+    Workspace work{Subspace(), shell, Eigen::MatrixXf(), {}};
     for (size_t set = next_set++; set < sets.size(); set = next_set++) {
-      calibrate_set(set);
+      calibrate_set(set, work);
       const std::lock_guard<std::mutex> lock(progress_mutex);
       if (++sets_done < sets.size()) {
         report_progress(o.progress, "calibration", static_cast<int>(sets_done), static_cast<int>(sets.size()));

@@ -13,6 +13,7 @@
 #include <Eigen/SVD>
 #include <gtest/gtest.h>
 
+#include "core/common/parallel.h"
 #include "tests/support/random_matrices.h"
 
 namespace animspace::pmsc {
@@ -188,6 +189,71 @@ TEST(PcaMaxPointError, IsTheLargestPointNormPerFrame) {
   EXPECT_DOUBLE_EQ(max_point_error_per_frame(residual, 2)(0), 4.0);
   EXPECT_DOUBLE_EQ(max_point_error_per_frame(residual, 2)(1), std::sqrt(5.0));
   EXPECT_DOUBLE_EQ(max_point_error(MatrixXd(6, 0), 3), 0.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// thin_pca in halves, from a Gram matrix formed another way
+
+TEST(PcaFromGram, TheLeadingEigenvectorsAreTheRightSingularVectorsInOrder) {
+  // X = B diag(s) Wᵀ: XᵀX = W diag(s²) Wᵀ, so its eigenvectors are W's columns, largest first.
+  const VectorXd s = (VectorXd(4) << 9, 5, 2, 0.5).finished();
+  const Index R = 90, F = 12;
+  const MatrixXd B = random_orthonormal(R, 4, 301);
+  const MatrixXd W = random_orthonormal(F, 4, 302);
+  const MatrixXd X = B * s.asDiagonal() * W.transpose();
+  MatrixXd gram = X.transpose() * X;
+  gram.triangularView<Eigen::StrictlyUpper>().setConstant(1e300);  // only the lower triangle is read
+  const MatrixXd V = leading_gram_eigenvectors(gram, 3);
+  ASSERT_EQ(V.rows(), F);
+  ASSERT_EQ(V.cols(), 3);
+  for (Index i = 0; i < 3; ++i) EXPECT_NEAR(std::abs(V.col(i).dot(W.col(i))), 1.0, 1e-12) << "vector " << i;
+  EXPECT_EQ(leading_gram_eigenvectors(gram, 40).cols(), F);  // never more than F
+
+  // From X·V: σ_i = ‖X v_i‖ = s_i, and the basis is thin_pca's (same columns, same signs).
+  const PcaBasis halves = pca_from_directions(X * V);
+  const PcaBasis whole = thin_pca(X, 3);
+  ASSERT_EQ(halves.basis.cols(), 3);
+  for (Index i = 0; i < 3; ++i) EXPECT_NEAR(halves.singular_values(i), s(i), 1e-12 * s(0));
+  EXPECT_LT((halves.basis - whole.basis).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT(orthonormality_error(halves.basis), 1e-14);
+}
+
+// ---------------------------------------------------------------------------------------------
+// residual_pass
+
+TEST(PcaResidualPass, EqualsTheFormedResidualOnAnyThreadCount) {
+  // Points on both sides of a block (kResidualBlockPoints) and a last block cut short; the
+  // residual formed whole (Eigen, one expression) is the reference.
+  const Index D = 3, N = 2 * kResidualBlockPoints + 77, R = N * D, F = 23, M = 5, k = 4;
+  const MatrixXd X = gaussian_matrix(R, F, 311);
+  const MatrixXd A = gaussian_matrix(R, M, 312);
+  const MatrixXd C = gaussian_matrix(M, F, 313);
+  const MatrixXd directions = gaussian_matrix(F, k, 314);
+  const MatrixXd E = X - A * C;
+  const double expected = max_point_error(E, static_cast<int>(D));
+  const MatrixXd expected_projected = E * directions;
+
+  MatrixXd one, two;
+  set_thread_limit(1);
+  const double on_one = residual_pass(X, A, C, static_cast<int>(D), directions, &one);
+  set_thread_limit(2);
+  const double on_two = residual_pass(X, A, C, static_cast<int>(D), directions, &two);
+  set_thread_limit(0);
+  // Each entry of E is a sum of M + 1 terms of size ~1: within a few ε of the reference.
+  EXPECT_NEAR(on_one, expected, 1e-13 * expected);
+  ASSERT_EQ(one.rows(), R);
+  ASSERT_EQ(one.cols(), k);
+  EXPECT_LT((one - expected_projected).cwiseAbs().maxCoeff(), 1e-12 * expected_projected.cwiseAbs().maxCoeff());
+  // The blocks do not depend on the threads: the same bits.
+  EXPECT_EQ(on_one, on_two);
+  EXPECT_TRUE(one == two);
+  // Without directions: the error alone.
+  EXPECT_EQ(residual_pass(X, A, C, static_cast<int>(D)), on_one);
+  // A hand-built case: the only nonzero residual is point N − 1's (3, 4, 0) in frame 2.
+  MatrixXd Y = A * C;
+  Y(R - 3, 2) += 3;
+  Y(R - 2, 2) += 4;
+  EXPECT_NEAR(residual_pass(Y, A, C, static_cast<int>(D)), 5.0, 1e-12);
 }
 
 // ---------------------------------------------------------------------------------------------
