@@ -13,6 +13,7 @@
 
 #include "core/common/parallel.h"
 #include "core/container/model_container.h"
+#include "core/pmsc/pca.h"
 #include "core/pmsc/pmsc_io.h"
 
 namespace animspace::pmsc {
@@ -445,9 +446,12 @@ TEST(PmscTrain, AHeldOutBasisSlackMustBeANonNegativeNumber) {
 }
 
 // Issue #38 item 3: the calibration folds run on every core, and the model is the same on one
-// thread and on two (each fold is computed alone; the samples are joined in fold order).
+// thread and on two (each fold is computed alone; the samples are joined in fold order). The
+// key selection's residual passes split their blocks of kResidualBlockPoints points across the
+// cores too: 2,500 points make three blocks, the last one short.
 TEST(PmscTrain, TheModelIsTheSameOnOneThreadAndOnTwo) {
-  const NoisySet data = noisy_subspace(400, 48, 5, 0.01, 1.0, 9);
+  static_assert(2 * kResidualBlockPoints < 2500 && 2500 < 3 * kResidualBlockPoints);
+  const NoisySet data = noisy_subspace(2500, 48, 5, 0.01, 1.0, 9);
   TrainingOptions o = options_for(1.0);
   o.held_out_basis_slack = 0.05;
   std::vector<PmscModel> models;
