@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <random>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -39,6 +40,23 @@ std::vector<long double> reference(long rows, long inner, long columns, const st
   return out;
 }
 
+// Checks a product `out` (rows × columns, leading dimension ldc) against the exact `expected`: every
+// value within `tolerance`, and the padding below row `rows` as it was in `c`.
+template <typename T>
+void expect_product(const std::vector<T>& out, const std::vector<T>& c, const std::vector<long double>& expected,
+                    long rows, long columns, long ldc, double tolerance, const std::string& what) {
+  for (long j = 0; j < columns; ++j) {
+    for (long i = 0; i < ldc; ++i) {
+      const auto at = static_cast<size_t>(i + j * ldc);
+      if (i >= rows) {
+        EXPECT_EQ(out[at], c[at]) << what << ": padding below row " << rows << " was written";
+      } else {
+        EXPECT_NEAR(out[at], static_cast<double>(expected[at]), tolerance) << what << " at " << i << "," << j;
+      }
+    }
+  }
+}
+
 template <typename T>
 void check_products(Kernel kernel, double relative) {
   use_kernel(kernel);
@@ -56,18 +74,9 @@ void check_products(Kernel kernel, double relative) {
       const std::vector<long double> expected = reference(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
       std::vector<T> out = c;
       gemm(rows, inner, columns, a.data(), lda, b.data(), ldb, beta, out.data(), ldc);
-      for (long j = 0; j < columns; ++j) {
-        for (long i = 0; i < ldc; ++i) {
-          const auto at = static_cast<size_t>(i + j * ldc);
-          if (i >= rows) {
-            EXPECT_EQ(out[at], c[at]) << "padding below row " << rows << " was written";
-          } else {
-            // |a·b| ≤ 1 per term: the sum of inner + 1 terms is within (inner + 1)·ε of exact.
-            EXPECT_NEAR(out[at], static_cast<double>(expected[at]), relative * (inner + 1))
-                << kernel_name(kernel) << " columns " << columns << " beta " << beta << " at " << i << "," << j;
-          }
-        }
-      }
+      // |a·b| ≤ 1 per term: the sum of inner + 1 terms is within (inner + 1)·ε of exact.
+      expect_product(out, c, expected, rows, columns, ldc, relative * (inner + 1),
+                     kernel_name(kernel) + " columns " + std::to_string(columns) + " beta " + std::to_string(beta));
     }
   }
 }
@@ -244,17 +253,8 @@ TEST_F(KernelTest, BothKernelsComputeTheTransposedProductOfTheDefinition) {
         const std::vector<long double> expected = reference(rows, inner, columns, transposed, rows, b, ldb, beta, c, ldc);
         std::vector<double> out = c;
         gemm_transposed_serial(rows, inner, columns, a.data(), lda, b.data(), ldb, beta, out.data(), ldc);
-        for (long j = 0; j < columns; ++j) {
-          for (long i = 0; i < ldc; ++i) {
-            const auto at = static_cast<size_t>(i + j * ldc);
-            if (i >= rows) {
-              EXPECT_EQ(out[at], c[at]) << "padding below row " << rows << " was written";
-            } else {
-              EXPECT_NEAR(out[at], static_cast<double>(expected[at]), 4e-16 * (inner + 1))
-                  << kernel_name(kernel) << " columns " << columns << " beta " << beta << " at " << i << "," << j;
-            }
-          }
-        }
+        expect_product(out, c, expected, rows, columns, ldc, 4e-16 * (inner + 1),
+                       kernel_name(kernel) + " columns " + std::to_string(columns) + " beta " + std::to_string(beta));
       }
     }
   }
