@@ -24,8 +24,9 @@
 namespace animspace::pmsc {
 namespace {
 
-// Held-out poses per reconstruction in the calibration: the batched product's gain is mostly had
-// by 16 poses (kernels.h), and 32 keep a worker's points at 38 MB for the papers' 100k points.
+// Held-out poses per reconstruction in the calibration: the batched product reads the basis once
+// per batch (from kBlasGemmMinColumns poses on it beats a product per pose, kernels.h), and 32
+// keep a worker's points at 38 MB for the papers' 100k points.
 constexpr long kCalibrationBatch = 32;
 
 Error invalid(const std::string& message) { return make_error(ErrorCode::kInvalidArgument, message); }
