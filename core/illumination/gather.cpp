@@ -45,6 +45,8 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kOffsetPerSceneSize = 1e-4;
 // Shadow rays stop this fraction short of the light.
 constexpr double kShadowShortening = 1e-4;
+// Salts the hash of a vertex's cell shadow rays, so that their points are not its hemisphere's.
+constexpr uint64_t kCellShadowStream = 0xC3A5C85C97CB3127ull;
 // Points per thread below which threads do not pay (a point costs ~S µs indirect, ~1 µs direct).
 constexpr int64_t kIndirectPointsPerThread = 16;
 constexpr int64_t kDirectPointsPerThread = 1024;
@@ -218,6 +220,13 @@ Status check_gather_options(const GatherOptions& options) {
     return invalid("light_radius must be 0 with direct_from_vertices (the vertices' direct light is a point light's), "
                    "got " + format_number(options.light_radius));
   }
+  if (options.cell_shadow_rays < 0) {
+    return invalid("cell_shadow_rays must be ≥ 0 (0: one from the vertex), got " + std::to_string(options.cell_shadow_rays));
+  }
+  if (options.cell_shadow_rays > 0 && !options.direct_from_vertices) {
+    return invalid("cell_shadow_rays must be 0 without direct_from_vertices (they make the vertices' stored direct "
+                   "light), got " + std::to_string(options.cell_shadow_rays));
+  }
   if (options.sampling != HemisphereSampling::kHammersley && options.sampling != HemisphereSampling::kStratified) {
     return invalid("sampling " + std::to_string(static_cast<int>(options.sampling)) + " is not a known sampling");
   }
@@ -359,6 +368,54 @@ struct IlluminationEngine::Embree {
       if (corner != v) from_vertex += weights[c] * (mesh->vertices.row(corner) - mesh->vertices.row(v)).cast<double>().transpose();
     }
     return from_vertex;
+  }
+
+  // The fraction of `rays` shadow rays to `light` that arrive from points of vertex v's cell: the
+  // cell points of cast_hemisphere (halton_cell_points), rotated per (seed, v) from their own
+  // stream, each moved off the surface as ray_origins[v] is.
+  double cell_visibility(int v, const Eigen::Vector3d& light, int rays, uint64_t seed, RTCIntersectContext& context) const {
+    const uint64_t hash = splitmix64(splitmix64(seed ^ kCellShadowStream) ^ static_cast<uint64_t>(v));
+    const double rotation[3] = {unit_interval(hash), unit_interval(splitmix64(hash)),
+                                unit_interval(splitmix64(splitmix64(hash)))};
+    const std::vector<std::array<double, 3>>& points = halton_cell_points(rays);
+    const Eigen::Vector3d& origin = ray_origins[static_cast<size_t>(v)];
+    int arrived = 0;
+    for (int first = 0; first < rays; first += kPacket) {
+      const int count = std::min(kPacket, rays - first);
+      alignas(64) int valid[kPacket];
+      alignas(64) RTCRay16 shadow;
+      for (int k = 0; k < kPacket; ++k) {
+        valid[k] = 0;
+        if (k >= count) continue;
+        const std::array<double, 3>& u = points[static_cast<size_t>(first + k)];
+        const Eigen::Vector3d from = origin + cell_offset(v, {fractional(u[0] + rotation[0]), fractional(u[1] + rotation[1]),
+                                                              fractional(u[2] + rotation[2])});
+        const Eigen::Vector3d to = light - from;
+        const double distance = to.norm();
+        if (!(distance > 0)) continue;
+        set_ray(shadow, k, from, to / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
+        valid[k] = -1;
+      }
+      rtcOccluded16(valid, scene, &context, &shadow);
+      for (int k = 0; k < count; ++k) {
+        if (valid[k] != 0 && shadow.tfar[k] >= 0) ++arrived;  // Embree sets tfar to −∞ when blocked
+      }
+    }
+    return static_cast<double>(arrived) / rays;
+  }
+
+  // Whether vertex v's fan has a corner whose light (`seen`: 0 facing away, 1 blocked, 2 lit)
+  // differs from v's, the corners facing away aside.
+  bool fan_straddles_a_shadow(int v, const std::vector<uint8_t>& seen) const {
+    const auto vs = static_cast<size_t>(v);
+    for (int64_t i = fan_offsets[vs]; i < fan_offsets[vs + 1]; ++i) {
+      const int32_t f = fan_faces[static_cast<size_t>(i)];
+      for (int c = 0; c < 3; ++c) {
+        const uint8_t corner = seen[static_cast<size_t>(mesh->faces(f, c))];
+        if (corner != 0 && corner != seen[vs]) return true;
+      }
+    }
+    return false;
   }
 
   // Whether ray k of the packet hit a triangle from its lit side (a ray that left the scene, a
@@ -620,18 +677,67 @@ void IlluminationEngine::direct(const std::vector<PointLight>& lights, const std
   });
 }
 
+void IlluminationEngine::vertex_direct(const std::vector<PointLight>& lights, const GatherOptions& options,
+                                       Eigen::VectorXf& out) const {
+  const std::vector<int> points = all_points();
+  if (options.cell_shadow_rays <= 0) {
+    direct(lights, points, out);
+    return;
+  }
+  // Per light: the vertex's own shadow ray everywhere (as direct()), then the cell's rays where
+  // the fan straddles the shadow's edge; the cos θ / r² factor is the vertex's either way, so a
+  // cell all lit gives direct()'s value bit for bit.
+  const Embree& e = *embree_;
+  const auto n = static_cast<size_t>(point_count());
+  std::vector<Eigen::Vector3d> irradiance(n, Eigen::Vector3d::Zero());
+  std::vector<uint8_t> seen(n);
+  std::vector<double> received(n);
+  for (const PointLight& light : lights) {
+    for_each_point(points, kDirectPointsPerThread, kDirectPointsPerGrain, [&](int64_t, int v, RTCIntersectContext& context) {
+      const auto vs = static_cast<size_t>(v);
+      seen[vs] = 0;
+      const Eigen::Vector3d to_light = light.position - surface_.vertices.row(v).cast<double>().transpose();
+      const double n_dot = e.vertex_normals[vs].dot(to_light);
+      if (!(n_dot > 0)) return;
+      const double r2 = to_light.squaredNorm();
+      received[vs] = n_dot / (std::sqrt(r2) * r2);
+      const Eigen::Vector3d shadow = light.position - e.ray_origins[vs];
+      const double distance = shadow.norm();
+      if (!(distance > 0)) return;
+      RTCRay ray = make_ray(e.ray_origins[vs], shadow / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
+      rtcOccluded1(e.scene, &context, &ray);
+      seen[vs] = ray.tfar < 0 ? 1 : 2;  // Embree sets tfar to −∞ when the ray is blocked
+    });
+    for_each_point(points, kDirectPointsPerThread, kDirectPointsPerGrain, [&](int64_t, int v, RTCIntersectContext& context) {
+      const auto vs = static_cast<size_t>(v);
+      if (seen[vs] == 0) return;
+      double fraction = seen[vs] == 2 ? 1.0 : 0.0;
+      if (e.fan_straddles_a_shadow(v, seen)) {
+        fraction = e.cell_visibility(v, light.position, options.cell_shadow_rays, options.seed, context);
+      }
+      if (fraction > 0) irradiance[vs] += light.intensity * (received[vs] * fraction);
+    });
+  }
+  out.resize(3 * static_cast<Eigen::Index>(n));
+  for (Eigen::Index v = 0; v < static_cast<Eigen::Index>(n); ++v) {
+    const Eigen::Vector3d rho = surface_.albedo.row(v).cast<double>().transpose();
+    out.segment<3>(3 * v) = (rho.cwiseProduct(irradiance[static_cast<size_t>(v)]) / kPi).cast<float>();
+  }
+}
+
 void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const GatherOptions& options,
                                   const std::vector<int>& points, Eigen::VectorXf& out) const {
   assert(options.samples >= 1);
   out.resize(3 * static_cast<Eigen::Index>(points.size()));
   const Embree& e = *embree_;
   if (options.direct_from_vertices) {
-    // L_d at every vertex (one shadow ray per vertex and light: at 100k points about what 50 of
-    // the points' 2,048 rays cost), then each point's hits summed as its packets come back, in
-    // the order of its samples — the terms and order of indirect_frames, so that a point's value
-    // does not depend on how it was computed, and no hit is stored.
-    Eigen::VectorXf vertex_direct;
-    direct(lights, all_points(), vertex_direct);
+    // L_d at every vertex (vertex_direct: one shadow ray per vertex and light, a cell's more at a
+    // shadow's edge; at 100k points about what 50 of the points' 2,048 rays cost), then each
+    // point's hits summed as its packets come back, in the order of its samples — the terms and
+    // order of indirect_frames, so that a point's value does not depend on how it was computed,
+    // and no hit is stored.
+    Eigen::VectorXf stored_direct;
+    vertex_direct(lights, options, stored_direct);
     for_each_point(points, kIndirectPointsPerThread, kIndirectPointsPerGrain, [&](int64_t p, int v, RTCIntersectContext& context) {
       assert(v >= 0 && v < point_count());
       float sums[3] = {0, 0, 0};
@@ -642,7 +748,7 @@ void IlluminationEngine::indirect(const std::vector<PointLight>& lights, const G
         for (int k = 0; k < count; ++k) {
           if (e.lit_hit(packet, k, directions[k])) hits[lit++] = {packet.hit.primID[k], packet.hit.u[k], packet.hit.v[k]};
         }
-        sum_interpolated(surface_.faces.data(), hits, hits + lit, vertex_direct.data(), 1, sums);
+        sum_interpolated(surface_.faces.data(), hits, hits + lit, stored_direct.data(), 1, sums);
       });
       store_indirect(surface_, v, sums, options.samples, out.data() + 3 * p);
     });
@@ -715,7 +821,7 @@ void IlluminationEngine::indirect_frames(const std::vector<PointLight>& lights, 
     // Always kLightsPerBlock lights per vertex (a short last block padded with zeros).
     block_direct.assign(3 * static_cast<size_t>(kLightsPerBlock) * static_cast<size_t>(n), 0.0f);
     for (int b = 0; b < block; ++b) {
-      direct({lights[static_cast<size_t>(first + b)]}, points, light_direct);
+      vertex_direct({lights[static_cast<size_t>(first + b)]}, options, light_direct);
       for (int64_t v = 0; v < n; ++v) {
         for (int c = 0; c < 3; ++c) {
           block_direct[static_cast<size_t>((v * kLightsPerBlock + b) * 3 + c)] = light_direct(3 * v + c);

@@ -76,10 +76,23 @@ struct GatherOptions {
   // light's position that no subspace of a finite set of training lights represents (at 100k
   // points the largest errors of the subspace were all such vertices; docs/BENCHMARKS.md).
   bool cell_average = false;
+  // Issue #38: with direct_from_vertices, the direct light stored at a vertex — what the hits
+  // read — is the mean over its cell (the cell of cell_average) rather than the value at the
+  // vertex: each light's shadow rays leave from this many points of the cell, and the vertex
+  // keeps the fraction that arrive (the irradiance's cos θ / r² still the vertex's). 0: one
+  // shadow ray from the vertex. A stored point value steps by its whole height when a shadow's
+  // edge crosses the vertex, and a contact vertex (a block's side where it meets the floor) sees
+  // the floor's first millimetres through half its hemisphere, so its gather steps with it: at
+  // 20k points one 0.5 mm move of the light doubled such a vertex's value. The cell mean steps
+  // by 1/this instead. Only vertices whose fan has both lit and shadowed corners cast them (a
+  // straight shadow edge that crosses a cell separates the corners of its convex fan); the
+  // others' cells are all lit or all dark. A vertex's points depend on (seed, vertex, count).
+  int cell_shadow_rays = 0;
 };
 
-// Checks samples ≥ 1, shadow_rays ≥ 1, light_radius finite and ≥ 0, and light_radius 0 with
-// direct_from_vertices. Error: kInvalidArgument naming the field.
+// Checks samples ≥ 1, shadow_rays ≥ 1, light_radius finite and ≥ 0, light_radius 0 with
+// direct_from_vertices, and cell_shadow_rays ≥ 0 (> 0 only with direct_from_vertices). Error:
+// kInvalidArgument naming the field.
 Status check_gather_options(const GatherOptions& options);
 
 // Checks 1 ≤ |lights| ≤ max_lights, finite positions, finite intensities ≥ 0. Errors:
@@ -110,6 +123,11 @@ class IlluminationEngine {
   // whatever the points); threads over points.
   void indirect(const std::vector<PointLight>& lights, const GatherOptions& options, const std::vector<int>& points,
                 Eigen::VectorXf& out) const;
+
+  // The direct radiance L_d at every vertex (point-major RGB, 3·N values) as a gather with
+  // `options` and direct_from_vertices reads it at its hits: direct() at all_points(), or with
+  // cell_shadow_rays > 0 each vertex's cell mean. Threads over the vertices.
+  void vertex_direct(const std::vector<PointLight>& lights, const GatherOptions& options, Eigen::VectorXf& out) const;
 
   // One frame per light: frames.row(l) = indirect({lights[l]}, options, all_points()) bit for bit
   // (|lights| × 3N). With options.direct_from_vertices each point's rays are cast once for all the

@@ -34,6 +34,9 @@ constexpr const char* kDirectAtHitsKey = "illumination.direct_at_hits";
 // Issue #38: "cell" when a vertex's rays leave from points of its cell (GatherOptions::
 // cell_average); absent in older files and for rays from the vertex itself.
 constexpr const char* kRayOriginsKey = "illumination.ray_origins";
+// Issue #38: the shadow rays from each vertex's cell for its stored direct light
+// (GatherOptions::cell_shadow_rays); absent in older files and for the vertex's own shadow ray.
+constexpr const char* kCellShadowRaysKey = "illumination.cell_shadow_rays";
 
 Error named(const Error& e, const std::string& source) { return Error{e.code, source + ": " + e.message}; }
 
@@ -86,6 +89,7 @@ void attach_illumination(container::ModelContainer& out, const IlluminationSetup
   }
   if (setup.gather.direct_from_vertices) out.metadata()[kDirectAtHitsKey] = "vertices";
   if (setup.gather.cell_average) out.metadata()[kRayOriginsKey] = "cell";
+  if (setup.gather.cell_shadow_rays > 0) out.metadata()[kCellShadowRaysKey] = std::to_string(setup.gather.cell_shadow_rays);
   if (setup.filter.enabled()) {
     out.metadata()[kFilterNeighboursKey] = std::to_string(setup.filter.neighbours);
     out.metadata()[kFilterNormalKey] = format_number(setup.filter.min_normal_cosine);
@@ -172,6 +176,11 @@ Result<IlluminationSetup> load_illumination(const container::ModelContainer& in,
   auto cell_average = read_marker(in, kRayOriginsKey, "cell", "vertex", source);
   if (!cell_average) return cell_average.error();
   setup.gather.cell_average = *cell_average;
+  if (in.metadata().count(kCellShadowRaysKey) != 0) {
+    auto rays = in.metadata_int(kCellShadowRaysKey);
+    if (!rays) return named(rays.error(), source);
+    setup.gather.cell_shadow_rays = *rays;
+  }
   Status gather = check_gather_options(setup.gather);
   if (!gather.ok()) return named(gather.error(), source);
   if (in.metadata().count(kFilterNeighboursKey) != 0) {

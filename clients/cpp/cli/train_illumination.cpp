@@ -27,6 +27,12 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
                 "Each vertex's rays leave from points spread over its cell (the part of its triangles where it "
                 "weighs the most), so that its value is the mean over the area it stands for, not the value at the "
                 "vertex alone");
+  cmd->add_option("--cell-shadow-rays", a.cell_shadow_rays,
+                  "With --direct-from-vertices: the direct light stored at a vertex is the mean over its cell, from "
+                  "this many shadow rays per light where a shadow's edge crosses the cell (0: the vertex's own shadow "
+                  "ray; default: " +
+                      std::to_string(illumination::IlluminationTrainingOptions{}.gather.cell_shadow_rays) + ")")
+      ->check(CLI::Range(0, 4096));
   cmd->add_option("--filter-neighbours", a.filter_neighbours,
                   "Surface filter of each gathered frame (and of the daemon's full calculation): each point's "
                   "irradiance averaged over about this many neighbours on the surface (0: no filter)")
@@ -98,6 +104,11 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
   options.gather.seed = a.seed;
   options.gather.direct_from_vertices = a.direct_from_vertices;
   options.gather.cell_average = a.cell_average;
+  if (a.cell_shadow_rays >= 0) {
+    options.gather.cell_shadow_rays = a.cell_shadow_rays;
+  } else if (!a.direct_from_vertices) {
+    options.gather.cell_shadow_rays = 0;  // they make the vertices' stored direct light
+  }
   options.filter = {a.filter_neighbours, a.filter_min_normal_cosine, a.filter_linear};
   options.key_samples = a.key_samples;
   options.tolerance_fraction = a.tolerance;
@@ -130,6 +141,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                 {"samples", a.samples},
                 {"direct_from_vertices", a.direct_from_vertices},
                 {"cell_average", a.cell_average},
+                {"cell_shadow_rays", options.gather.cell_shadow_rays},
                 {"basis", r.basis_size},
                 {"key_points", r.key_points},
                 {"radiance_scale", report.radiance_scale},

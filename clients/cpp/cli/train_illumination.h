@@ -19,6 +19,10 @@ struct TrainIlluminationArgs {
   bool direct_from_vertices = illumination::IlluminationTrainingOptions{}.gather.direct_from_vertices;
   // Issue #38: a vertex's value is the mean over its cell (GatherOptions::cell_average).
   bool cell_average = illumination::IlluminationTrainingOptions{}.gather.cell_average;
+  // Issue #38: shadow rays from each vertex's cell for its stored direct light
+  // (GatherOptions::cell_shadow_rays); < 0: the training's default with --direct-from-vertices, 0
+  // without.
+  int cell_shadow_rays = -1;
   unsigned long long seed = 0;
   int lights_x = illumination::LightGrid{}.nx;  // training grid (the papers': 12 × 12 = 144)
   int lights_z = illumination::LightGrid{}.nz;

@@ -236,6 +236,41 @@ TEST(IlluminationIoTest, TheDirectLightAtTheHitsRoundTripsAndOlderFilesReadAsSha
   EXPECT_NE(refused.error().message.find("light_radius"), std::string::npos) << refused.error().message;
 }
 
+// The cell's shadow rays: illumination.cell_shadow_rays = K only when K > 0, so that older files
+// (and the vertex's own shadow ray) read as 0; K reads back; a value that is not a count, or a
+// count without the direct light read from the vertices, is refused naming the file and the key.
+TEST(IlluminationIoTest, TheCellShadowRaysRoundTripAndOlderFilesReadAsTheVertexsOwnRay) {
+  IlluminationSetup setup = small_setup();
+  setup.gather.direct_from_vertices = true;
+  container::ModelContainer older;
+  attach_illumination(older, setup);
+  EXPECT_EQ(older.metadata().count("illumination.cell_shadow_rays"), 0u) << "unchanged files for older readers";
+  auto loaded = load_illumination(older, "old.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->gather.cell_shadow_rays, 0);
+
+  setup.gather.cell_shadow_rays = 24;
+  container::ModelContainer out;
+  attach_illumination(out, setup);
+  EXPECT_EQ(out.metadata_value("illumination.cell_shadow_rays"), "24");
+  auto parsed = container::parse(container::serialize(out), "mem");
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  loaded = load_illumination(*parsed, "m.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->gather.cell_shadow_rays, 24);
+
+  for (const auto& [value, without_vertices] : {std::pair{"many", false}, std::pair{"-2", false}, std::pair{"8", true}}) {
+    container::ModelContainer bad = out;
+    bad.metadata()["illumination.cell_shadow_rays"] = value;
+    if (without_vertices) bad.metadata().erase("illumination.direct_at_hits");
+    auto refused = load_illumination(bad, "m.anim");
+    ASSERT_FALSE(refused.ok()) << value;
+    for (const std::string& named : {std::string("m.anim"), std::string("cell_shadow_rays")}) {
+      EXPECT_NE(refused.error().message.find(named), std::string::npos) << refused.error().message;
+    }
+  }
+}
+
 // A training small enough for a unit test: 25 lights under the ceiling, 8 rays (the direct light
 // read from the vertices, the default), 60 keys.
 IlluminationTrainingOptions small_training() {
