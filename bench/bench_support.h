@@ -87,8 +87,14 @@ struct IlluminationSuiteOptions {
   // GatherOptions::cell_average for the training, the full calculation and the reference: 0 rays
   // from the vertex, 1 from its cell; < 0: the training's default.
   int cell_average = -1;
+  // GatherOptions::cell_shadow_rays for the training and the full calculation (with the direct
+  // light read from the vertices): 0 the vertex's own shadow ray; < 0: the training's default.
+  int cell_shadow_rays = -1;
   // pmsc::TrainingOptions::max_key_points (0: the training's default).
   int max_key_points = 0;
+  // IlluminationTrainingOptions::error_bound_fraction, where the key selection stops (0: the
+  // training's default).
+  double error_bound = 0;
   // Training lights per side of the grid (n × n; 0: LightGrid's default, 18 × 18).
   int grid = 0;
 };

@@ -494,17 +494,21 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   training.relative_tolerance = !o.absolute_tolerance;
   if (o.basis_slack >= 0) training.pmsc.held_out_basis_slack = o.basis_slack;
   if (o.max_key_points > 0) training.pmsc.max_key_points = o.max_key_points;
+  if (o.error_bound > 0) training.error_bound_fraction = o.error_bound;
   if (o.filter_neighbours >= 0) training.filter.neighbours = o.filter_neighbours;
   training.filter.linear = o.filter_linear;
   training.key_samples = o.key_samples;
   if (o.direct_from_vertices >= 0) training.gather.direct_from_vertices = o.direct_from_vertices != 0;
   if (o.cell_average >= 0) training.gather.cell_average = o.cell_average != 0;
+  if (o.cell_shadow_rays >= 0) training.gather.cell_shadow_rays = o.cell_shadow_rays;
+  if (!training.gather.direct_from_vertices) training.gather.cell_shadow_rays = 0;  // they make the vertices' L_d
   illumination::GatherOptions keys_gather = training.gather;
   if (o.key_samples > 0) keys_gather.samples = o.key_samples;
   // The converged baseline is the physical gather: a shadow ray from every hit.
   illumination::GatherOptions converged_gather = training.gather;
   converged_gather.samples = o.converged_samples;
   converged_gather.direct_from_vertices = false;
+  converged_gather.cell_shadow_rays = 0;
   if (o.gather_study > 0) {
     const std::vector<NovelLight> probe = novel_lights(room, grid, 1, 0);
     for (auto& row : gather_study(scene, probe[0].light, o.samples > 0 ? o.samples : kStudySamples)) results.push_back(row);
@@ -583,6 +587,7 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   reference_gather.samples = kReferenceRays;
   reference_gather.seed = 7777;
   reference_gather.direct_from_vertices = false;  // a shadow ray from every hit: the physical gather
+  reference_gather.cell_shadow_rays = 0;
   // (of the same quantity: with cell_average, each vertex's cell mean, as the training's)
   if (reference_gather.light_radius > 0) reference_gather.shadow_rays = std::max(reference_gather.shadow_rays, 4);
   std::printf("\n%-4s %-18s %-7s %9s %9s %9s %7s %9s %9s %9s %9s %9s %9s %9s\n", "#", "where", "inside", "rel_rms",
@@ -880,10 +885,12 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
                          {"samples", training.gather.samples},
                          {"direct_from_vertices", training.gather.direct_from_vertices},
                          {"cell_average", training.gather.cell_average},
+                         {"cell_shadow_rays", training.gather.cell_shadow_rays},
                          {"full_frames_timed", full_s.size()},
                          {"timed_full_frames_differing_from_shared_rays", timed_frames_differing},
                          {"training_lights", training.lights.size()},
                          {"key_points", model.key_point_count()},
+                         {"error_bound_fraction", training.error_bound_fraction},
                          {"basis", model.basis_size()},
                          {"train_seconds", train_seconds},
                          {"training_gather_seconds", report.gather_seconds},

@@ -123,9 +123,17 @@ int main(int argc, char** argv) {
                  "illumination: 1: a vertex's value is the mean over its cell (its rays leave from all over it; "
                  "issue #38); 0: the value at the vertex (default: the training's)")
       ->check(CLI::Range(-1, 1));
+  app.add_option("--illumination-cell-shadow-rays", options.illumination.cell_shadow_rays,
+                 "illumination: shadow rays from each vertex's cell for the direct light the gather reads at its hits, "
+                 "where a shadow's edge crosses the cell (issue #38); 0: the vertex's own (default: the training's)")
+      ->check(CLI::Range(-1, 4096));
   app.add_option("--illumination-max-key-points", options.illumination.max_key_points,
                  "illumination: the key selection's budget K (0: the training's default)")
       ->check(CLI::Range(0, 100000));
+  app.add_option("--illumination-error-bound", options.illumination.error_bound,
+                 "illumination: the key selection stops when every training point is within this fraction of the "
+                 "radiance scale (0: the training's default)")
+      ->check(CLI::Range(0.0, 1.0));
   app.add_option("--illumination-grid", options.illumination.grid,
                  "illumination: training lights per side of the grid, n × n over the same rectangle (0: the "
                  "training's default, 18 × 18; the papers': 12)")
