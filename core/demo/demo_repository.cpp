@@ -180,6 +180,10 @@ Result<container::ModelContainer> make_demo_illumination_container(const DemoIll
   training.gather.samples = options.samples;
   training.gather.direct_from_vertices = false;
   training.gather.cell_average = false;
+  training.gather.cell_shadow_rays = 0;  // they make the stored direct light, which this gather has not
+  // The key selection's bound as shipped: the training's 1% is the converged gather's accuracy, far
+  // below this gather's noise, which more keys would only chase.
+  training.error_bound_fraction = 0.02;
   // No surface filter (the training's default since the converged gather; at the demo's few
   // thousand points the key points' filter support, K·k ≈ 200 · 32 points, would be the whole
   // surface anyway). On the raw gather M comes from the error bound (the held-out rule measured
