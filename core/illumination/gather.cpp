@@ -404,20 +404,6 @@ struct IlluminationEngine::Embree {
     return static_cast<double>(arrived) / rays;
   }
 
-  // Whether vertex v's fan has a corner whose light (`seen`: 0 facing away, 1 blocked, 2 lit)
-  // differs from v's, the corners facing away aside.
-  bool fan_straddles_a_shadow(int v, const std::vector<uint8_t>& seen) const {
-    const auto vs = static_cast<size_t>(v);
-    for (int64_t i = fan_offsets[vs]; i < fan_offsets[vs + 1]; ++i) {
-      const int32_t f = fan_faces[static_cast<size_t>(i)];
-      for (int c = 0; c < 3; ++c) {
-        const uint8_t corner = seen[static_cast<size_t>(mesh->faces(f, c))];
-        if (corner != 0 && corner != seen[vs]) return true;
-      }
-    }
-    return false;
-  }
-
   // Whether ray k of the packet hit a triangle from its lit side (a ray that left the scene, a
   // hit on the unlit side or on a degenerate triangle adds nothing to the gather).
   bool lit_hit(const RTCRayHit16& packet, int k, const Eigen::Vector3d& direction) const {
@@ -454,23 +440,52 @@ struct IlluminationEngine::Embree {
     return hits;
   }
 
+  // What x (normal n) receives from a point light: max(0, n·ω) / r² per unit intensity, and
+  // whether one shadow ray from `origin` (x moved off the surface) reaches it.
+  struct LightAtPoint {
+    enum Seen : uint8_t { kFacingAway, kBlocked, kLit };
+    double received = 0;  // set unless kFacingAway
+    Seen seen = kFacingAway;
+  };
+  LightAtPoint light_at(const Eigen::Vector3d& x, const Eigen::Vector3d& n, const Eigen::Vector3d& origin,
+                        const Eigen::Vector3d& light, RTCIntersectContext& context) const {
+    LightAtPoint at;
+    const Eigen::Vector3d to_light = light - x;
+    const double n_dot = n.dot(to_light);
+    if (!(n_dot > 0)) return at;
+    const double r2 = to_light.squaredNorm();
+    const Eigen::Vector3d shadow = light - origin;
+    const double distance = shadow.norm();
+    if (!(distance > 0)) return at;
+    at.received = n_dot / (std::sqrt(r2) * r2);
+    RTCRay ray = make_ray(origin, shadow / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
+    rtcOccluded1(scene, &context, &ray);
+    at.seen = ray.tfar < 0 ? LightAtPoint::kBlocked : LightAtPoint::kLit;  // Embree sets tfar to −∞ when blocked
+    return at;
+  }
+
   // Σ_l I_l · max(0, n·ω_l) / r_l² · V: the irradiance at x (normal n) from the lights, with
-  // shadow rays leaving from `origin` (x moved off the surface). Channels in `sum`.
+  // shadow rays leaving from `origin`. Channels in `sum`.
   void add_irradiance(const Eigen::Vector3d& x, const Eigen::Vector3d& n, const Eigen::Vector3d& origin,
                       const std::vector<PointLight>& lights, RTCIntersectContext& context, Eigen::Vector3d& sum) const {
     for (const PointLight& light : lights) {
-      const Eigen::Vector3d to_light = light.position - x;
-      const double n_dot = n.dot(to_light);
-      if (!(n_dot > 0)) continue;
-      const double r2 = to_light.squaredNorm();
-      const Eigen::Vector3d shadow = light.position - origin;
-      const double distance = shadow.norm();
-      if (!(distance > 0)) continue;
-      RTCRay ray = make_ray(origin, shadow / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
-      rtcOccluded1(scene, &context, &ray);
-      if (ray.tfar < 0) continue;  // Embree sets tfar to −∞ when the ray is blocked
-      sum += light.intensity * (n_dot / (std::sqrt(r2) * r2));
+      const LightAtPoint at = light_at(x, n, origin, light.position, context);
+      if (at.seen == LightAtPoint::kLit) sum += light.intensity * at.received;
     }
+  }
+
+  // Whether vertex v's fan has a corner whose light differs from v's (lit against blocked), the
+  // corners facing away aside.
+  bool fan_straddles_a_shadow(int v, const std::vector<LightAtPoint>& at) const {
+    const auto vs = static_cast<size_t>(v);
+    for (int64_t i = fan_offsets[vs]; i < fan_offsets[vs + 1]; ++i) {
+      const int32_t f = fan_faces[static_cast<size_t>(i)];
+      for (int c = 0; c < 3; ++c) {
+        const LightAtPoint::Seen corner = at[static_cast<size_t>(mesh->faces(f, c))].seen;
+        if (corner != LightAtPoint::kFacingAway && corner != at[vs].seen) return true;
+      }
+    }
+    return false;
   }
 
   // add_irradiance for the hits of one packet (`lit` marks the hits that count): per light, one
@@ -688,34 +703,24 @@ void IlluminationEngine::vertex_direct(const std::vector<PointLight>& lights, co
   // the fan straddles the shadow's edge; the cos θ / r² factor is the vertex's either way, so a
   // cell all lit gives direct()'s value bit for bit.
   const Embree& e = *embree_;
+  using LightAtPoint = Embree::LightAtPoint;
   const auto n = static_cast<size_t>(point_count());
   std::vector<Eigen::Vector3d> irradiance(n, Eigen::Vector3d::Zero());
-  std::vector<uint8_t> seen(n);
-  std::vector<double> received(n);
+  std::vector<LightAtPoint> at(n);
   for (const PointLight& light : lights) {
     for_each_point(points, kDirectPointsPerThread, kDirectPointsPerGrain, [&](int64_t, int v, RTCIntersectContext& context) {
       const auto vs = static_cast<size_t>(v);
-      seen[vs] = 0;
-      const Eigen::Vector3d to_light = light.position - surface_.vertices.row(v).cast<double>().transpose();
-      const double n_dot = e.vertex_normals[vs].dot(to_light);
-      if (!(n_dot > 0)) return;
-      const double r2 = to_light.squaredNorm();
-      received[vs] = n_dot / (std::sqrt(r2) * r2);
-      const Eigen::Vector3d shadow = light.position - e.ray_origins[vs];
-      const double distance = shadow.norm();
-      if (!(distance > 0)) return;
-      RTCRay ray = make_ray(e.ray_origins[vs], shadow / distance, static_cast<float>(distance * (1.0 - kShadowShortening)));
-      rtcOccluded1(e.scene, &context, &ray);
-      seen[vs] = ray.tfar < 0 ? 1 : 2;  // Embree sets tfar to −∞ when the ray is blocked
+      at[vs] = e.light_at(surface_.vertices.row(v).cast<double>(), e.vertex_normals[vs], e.ray_origins[vs], light.position,
+                          context);
     });
     for_each_point(points, kDirectPointsPerThread, kDirectPointsPerGrain, [&](int64_t, int v, RTCIntersectContext& context) {
       const auto vs = static_cast<size_t>(v);
-      if (seen[vs] == 0) return;
-      double fraction = seen[vs] == 2 ? 1.0 : 0.0;
-      if (e.fan_straddles_a_shadow(v, seen)) {
+      if (at[vs].seen == LightAtPoint::kFacingAway) return;
+      double fraction = at[vs].seen == LightAtPoint::kLit ? 1.0 : 0.0;
+      if (e.fan_straddles_a_shadow(v, at)) {
         fraction = e.cell_visibility(v, light.position, options.cell_shadow_rays, options.seed, context);
       }
-      if (fraction > 0) irradiance[vs] += light.intensity * (received[vs] * fraction);
+      if (fraction > 0) irradiance[vs] += light.intensity * (at[vs].received * fraction);
     });
   }
   out.resize(3 * static_cast<Eigen::Index>(n));
