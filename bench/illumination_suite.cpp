@@ -500,8 +500,13 @@ nlohmann::json run_illumination_suite(const SuiteOptions& options) {
   training.key_samples = o.key_samples;
   if (o.direct_from_vertices >= 0) training.gather.direct_from_vertices = o.direct_from_vertices != 0;
   if (o.cell_average >= 0) training.gather.cell_average = o.cell_average != 0;
-  if (o.cell_shadow_rays >= 0) training.gather.cell_shadow_rays = o.cell_shadow_rays;
-  if (!training.gather.direct_from_vertices) training.gather.cell_shadow_rays = 0;  // they make the vertices' L_d
+  // The cell's shadow rays make the vertices' stored L_d: off with a shadow ray per hit, unless
+  // asked for (which the training then refuses, naming the field).
+  if (o.cell_shadow_rays >= 0) {
+    training.gather.cell_shadow_rays = o.cell_shadow_rays;
+  } else if (!training.gather.direct_from_vertices) {
+    training.gather.cell_shadow_rays = 0;
+  }
   illumination::GatherOptions keys_gather = training.gather;
   if (o.key_samples > 0) keys_gather.samples = o.key_samples;
   // The converged baseline is the physical gather: a shadow ray from every hit.
