@@ -61,6 +61,11 @@ void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
   out->set_calibration_guarantee_holds(info.calibration_guarantee_holds);
   out->set_calibration_statement(info.calibration_statement);
   out->set_relative_tolerance(info.relative_tolerance);
+  if (!info.subspace_kind.empty()) {
+    out->set_subspace_kind(info.subspace_kind == "articulated" ? v1::SUBSPACE_KIND_ARTICULATED : v1::SUBSPACE_KIND_LINEAR);
+  }
+  out->set_subspace_bone_count(static_cast<uint32_t>(info.subspace_bone_count));
+  out->set_residual_components(static_cast<uint32_t>(info.residual_components));
   out->set_file_size_bytes(m.file_size_bytes);
   out->set_loaded_at_unix_s(m.loaded_at_unix_s);
   for (const auto& [key, value] : m.container.metadata()) (*out->mutable_metadata())[key] = value;

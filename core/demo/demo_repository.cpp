@@ -351,9 +351,38 @@ Status write_demo_smooth(const std::filesystem::path& repository) {
   return write_model(repository, kDemoSmoothModelName, *smooth);
 }
 
+Result<container::ModelContainer> make_demo_articulated_container(int frames) {
+  FrameMatrix expensive;
+  TriangleMesh rest;
+  pose_animation(frames, &expensive, nullptr, &rest);
+  const FrameMatrix output = even_rows(expensive);
+  pmsc::TrainingOptions options = demo_training_options(rest);
+  options.subspace_kind = pmsc::SubspaceKind::kArticulated;
+  options.faces = rest.F;
+  pmsc::TrainingReport report;
+  auto model = pmsc::train(output, options, &report);
+  if (!model) return model.error();
+  auto container = pmsc::make_container(
+      rest, output, nullptr, *model, report,
+      "Articulated PMSC soft cache of the bending arm's expensive rig: bone transforms and residual components, "
+      "trained on every other demo frame.");
+  pmsc::store_training_options(options, container);
+  container.metadata()["generator"] = "animspace demo bending arm";
+  container.metadata()["units"] = "arbitrary (arm length 2)";
+  container.metadata()["up_axis"] = "y";
+  return container;
+}
+
+Status write_demo_articulated(const std::filesystem::path& repository) {
+  auto model = make_demo_articulated_container();
+  if (!model) return model.error();
+  return write_model(repository, kDemoArticulatedModelName, *model);
+}
+
 Status write_bundled_demo(const std::filesystem::path& repository) {
   ANIMSPACE_RETURN_IF_ERROR(write_demo_repository(repository));
   ANIMSPACE_RETURN_IF_ERROR(write_demo_illumination(repository));
+  ANIMSPACE_RETURN_IF_ERROR(write_demo_articulated(repository));
   return write_demo_smooth(repository);
 }
 

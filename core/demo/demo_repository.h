@@ -110,8 +110,21 @@ Result<container::ModelContainer> make_demo_smooth_container(const container::Mo
 // from write_demo_repository, like the illumination model, for the tests that call that often.
 Status write_demo_smooth(const std::filesystem::path& repository);
 
+inline constexpr std::string_view kDemoArticulatedModelName = "arm-articulated";
+
+// The arm as an articulated PMSC model (issue #51, pmsc/articulated.h): the arm-pmsc training
+// frames and options, but a basis built on the arm's skinning — bone transforms as coordinates,
+// then principal components of what the skinning leaves (the biceps, the elbow's kept volume) —
+// so that a pose past every training pose stays inside it. Training options are stored, so the
+// server can retrain it. Errors: the trainer's (none expected).
+Result<container::ModelContainer> make_demo_articulated_container(int frames = kDemoFrames);
+
+// Writes `arm-articulated` (version 1). Kept apart from write_demo_repository like the models
+// above: its skinning decomposition is the longest step of the arm's models.
+Status write_demo_articulated(const std::filesystem::path& repository);
+
 // What `animspaced` serves without --model-repository and `animspace demo-repository` writes:
-// write_demo_repository, write_demo_illumination and write_demo_smooth.
+// write_demo_repository, write_demo_illumination, write_demo_smooth and write_demo_articulated.
 Status write_bundled_demo(const std::filesystem::path& repository);
 
 // The path of the demo model's file inside `repository`.

@@ -46,6 +46,11 @@ struct ModelInfo {
   bool calibration_guarantee_holds = false;
   std::string calibration_statement;
   bool relative_tolerance = false;  // pmsc::PmscModel::relative_tolerance (issue #38)
+  // pmsc::PmscModel::subspace_kind, bone_count and residual_components (issue #51), from the
+  // loaded runtime like the members above; "" for a model that is not PMSC.
+  std::string subspace_kind;
+  int subspace_bone_count = 0;
+  int residual_components = 0;
 };
 
 // Reads and cross-checks the sections every kind shares. Errors: kInvalidArgument (or the

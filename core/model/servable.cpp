@@ -26,6 +26,9 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     info->calibration_guarantee_holds = pmsc::calibration_guarantee_holds(m);
     info->calibration_statement = pmsc::calibration_statement(m);
     info->relative_tolerance = m.relative_tolerance;
+    info->subspace_kind = pmsc::subspace_kind_name(m.subspace_kind);
+    info->subspace_bone_count = m.bone_count;
+    info->residual_components = m.residual_components;
   }
   if (info->kind == ModelKind::kAnimationSpace || info->server_engine == ServerEngine::kAnimationSpace) {
     auto runtime = animation_space::load(container, source);

@@ -42,6 +42,8 @@ constexpr IntOption kIntOptions[] = {
     {"calibration_folds", &TrainingOptions::calibration_folds},
     {"region_count", &TrainingOptions::region_count},
     {"calibration_block_frames", &TrainingOptions::calibration_block_frames, true},
+    {"bone_count", &TrainingOptions::bone_count, true},                    // issue #51
+    {"residual_components", &TrainingOptions::residual_components, true},  // issue #51
 };
 constexpr DoubleOption kDoubleOptions[] = {
     {"error_bound", &TrainingOptions::error_bound},
@@ -56,6 +58,19 @@ constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
 constexpr const char* kRelativeTolerance = "relative_tolerance";  // absent before issue #38: 0
 constexpr const char* kRelativeToleranceKey = "pmsc.relative_tolerance";
+// Issue #51: absent in models written before it, which are all linear.
+constexpr const char* kSubspaceKind = "subspace_kind";
+constexpr const char* kSubspaceKindKey = "pmsc.subspace_kind";
+constexpr const char* kBoneCountKey = "pmsc.bone_count";
+constexpr const char* kResidualComponentsKey = "pmsc.residual_components";
+
+Result<SubspaceKind> parse_subspace_kind(const std::string& source, const std::string& key, const std::string& text) {
+  for (SubspaceKind kind : {SubspaceKind::kLinear, SubspaceKind::kArticulated}) {
+    if (text == subspace_kind_name(kind)) return kind;
+  }
+  return make_error(ErrorCode::kInvalidArgument,
+                    source + ": metadata '" + key + "' should be linear or articulated, got '" + text + "'");
+}
 
 std::string option_key(const char* name) { return std::string(kOptionsPrefix) + name; }
 
@@ -217,6 +232,11 @@ void store(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()["pmsc.cross"] = m.cross ? "1" : "0";
   out.metadata()["pmsc.aligned"] = m.aligned ? "1" : "0";
   out.metadata()[kRelativeToleranceKey] = m.relative_tolerance ? "1" : "0";
+  out.metadata()[kSubspaceKindKey] = subspace_kind_name(m.subspace_kind);
+  if (m.subspace_kind == SubspaceKind::kArticulated) {
+    out.metadata()[kBoneCountKey] = std::to_string(m.bone_count);
+    out.metadata()[kResidualComponentsKey] = std::to_string(m.residual_components);
+  }
   out.metadata()["pmsc.control_point_count"] = std::to_string(m.control_point_count);
   out.metadata()["pmsc.region_count"] = std::to_string(m.region_count);
   out.set_matrix("pmsc.mean", FrameMatrix(m.mean.transpose()));
@@ -264,6 +284,19 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
                                                          "' should be 0 or 1, got '" + relative + "'");
     }
     m.relative_tolerance = relative == "1";
+  }
+  if (in.metadata().contains(kSubspaceKindKey)) {
+    auto kind = parse_subspace_kind(source, kSubspaceKindKey, in.metadata_value(kSubspaceKindKey));
+    if (!kind) return kind.error();
+    m.subspace_kind = *kind;
+  }
+  if (m.subspace_kind == SubspaceKind::kArticulated) {
+    auto bones = in.metadata_int(kBoneCountKey);
+    if (!bones) return with_source(bones.error(), source);
+    auto residuals = in.metadata_int(kResidualComponentsKey);
+    if (!residuals) return with_source(residuals.error(), source);
+    m.bone_count = *bones;
+    m.residual_components = *residuals;  // prepare_projection checks both against the basis
   }
   if (m.channel_count < 1) return make_error(ErrorCode::kInvalidArgument, source + ": pmsc.channels must be ≥ 1");
 
@@ -366,6 +399,7 @@ void store_training_options(const TrainingOptions& options, container::ModelCont
   metadata[option_key(kFiducialPoints)] = fiducials;
   metadata[option_key(kRemoveRigidMotion)] = options.remove_rigid_motion ? "1" : "0";
   metadata[option_key(kRelativeTolerance)] = options.relative_tolerance ? "1" : "0";
+  metadata[option_key(kSubspaceKind)] = subspace_kind_name(options.subspace_kind);
 }
 
 Result<TrainingOptions> load_training_options(const container::ModelContainer& in, const std::string& source) {
@@ -437,6 +471,11 @@ Result<TrainingOptions> load_training_options(const container::ModelContainer& i
       return unparsable(source, option_key(kRelativeTolerance), "0 or 1", *relative);
     }
     options.relative_tolerance = *relative == "1";
+  }
+  if (!absent(kSubspaceKind, true)) {
+    auto kind = parse_subspace_kind(source, option_key(kSubspaceKind), metadata.at(option_key(kSubspaceKind)));
+    if (!kind) return kind.error();
+    options.subspace_kind = *kind;
   }
 
   for (auto it = first; it != metadata.end() && it->first.compare(0, prefix.size(), prefix) == 0; ++it) {

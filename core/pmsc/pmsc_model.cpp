@@ -18,6 +18,17 @@
 #include "core/pmsc/local_fail_through.h"
 
 namespace animspace::pmsc {
+
+const char* subspace_kind_name(SubspaceKind kind) {
+  switch (kind) {
+    case SubspaceKind::kLinear:
+      return "linear";
+    case SubspaceKind::kArticulated:
+      return "articulated";
+  }
+  return "unknown";
+}
+
 namespace {
 
 Error shape_error(const std::string& member, const std::string& expected, long rows, long cols) {
@@ -130,6 +141,22 @@ Status prepare_projection(PmscModel& m) {
   }
   if (m.basis.rows() != m.point_count * D || M < 1) {
     return shape_error("basis", std::to_string(m.point_count * D) + "×M (M ≥ 1)", m.basis.rows(), M);
+  }
+  if (m.subspace_kind == SubspaceKind::kArticulated) {
+    if (D != 3 || m.cross || m.aligned || m.relative_tolerance) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "pmsc model: an articulated subspace is of positions (3 channels), not cross, aligned "
+                        "or relative");
+    }
+    if (m.bone_count < 1 || m.residual_components < 0 || 12L * m.bone_count + m.residual_components != M) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "pmsc model: an articulated basis has 12·bones + residual components columns: expected " +
+                            std::to_string(12L * m.bone_count + m.residual_components) + " (" +
+                            std::to_string(m.bone_count) + " bones, " + std::to_string(m.residual_components) +
+                            " residual components), got " + std::to_string(M));
+    }
+  } else if (m.bone_count != 0 || m.residual_components != 0) {
+    return make_error(ErrorCode::kInvalidArgument, "pmsc model: a linear subspace has no bones or residual components");
   }
   if (K < 1) return make_error(ErrorCode::kInvalidArgument, "pmsc model: no key points");
   for (long k = 0; k < K; ++k) {

@@ -34,12 +34,28 @@
 
 namespace animspace::pmsc {
 
+// What the basis A is (issue #51). Both kinds are served by the same runtime, f̂ = mean + A p
+// with p from the key rows by least squares; they differ in what A's columns are:
+//   kLinear       principal components of the training frames (2007 §2.1);
+//   kArticulated  a linear blend skinning model's Jacobian — 12 columns per bone, the bone's
+//                 affine transform about its rest centre (articulated.h) — then principal
+//                 components of what the skinning leaves in the training frames. A limb turned
+//                 further than in any training frame is still a combination of these columns,
+//                 which a position PCA cannot reach.
+enum class SubspaceKind : int { kLinear = 0, kArticulated = 1 };
+// "linear", "articulated": the name in model files, on the command line and on the wire.
+const char* subspace_kind_name(SubspaceKind kind);
+
 struct PmscModel {
   int channel_count = 3;             // D
   int point_count = 0;          // N, output points
   int control_point_count = 0;  // points key indices refer to (== N unless cross)
   bool cross = false;
   bool aligned = false;         // requires channels == 3
+  SubspaceKind subspace_kind = SubspaceKind::kLinear;
+  // Articulated models: p = (bone transforms, 12 per bone, then residual coefficients).
+  int bone_count = 0;            // B
+  int residual_components = 0;   // r; M = 12·B + r
 
   Eigen::VectorXf mean;                 // N·D, output mean, point-major (x0 y0 z0 x1 …)
   Eigen::MatrixXf basis;                // N·D × M, output basis A (column-major for the GEMV)

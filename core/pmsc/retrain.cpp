@@ -95,6 +95,12 @@ Result<RetrainResult> retrain(const container::ModelContainer& current, uint64_t
   }
   if (options.error_bound > 0) o.error_bound = options.error_bound;
   if (options.max_key_points > 0) o.max_key_points = options.max_key_points;
+  if (o.subspace_kind == SubspaceKind::kArticulated && current.has_section("mesh.faces")) {
+    // The skinning's parts are kept spatially coherent by the mesh it was first trained with.
+    auto faces = current.faces("mesh.faces");
+    if (!faces) return make_error(faces.error().code, source + ": " + faces.error().message);
+    o.faces = *faces;
+  }
 
   // The new training set: old frames, then the misses. A new basis is fit to all of it (2007
   // §2.1), keys are reselected and ε recalibrated on held-out frames, exactly as the first time.

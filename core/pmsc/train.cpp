@@ -14,6 +14,7 @@
 #include "core/common/parallel.h"
 #include "core/common/timing.h"
 
+#include "core/pmsc/articulated.h"
 #include "core/pmsc/check_points.h"
 #include "core/pmsc/key_points.h"
 #include "core/pmsc/local_fail_through.h"
@@ -287,6 +288,20 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   }
   const bool cross = output_frames != nullptr;
   const long control_points = control_frames.cols() / D;
+  const bool articulated = o.subspace_kind == SubspaceKind::kArticulated;
+  if (articulated) {
+    if (D != 3) return invalid("subspace_kind articulated needs positions (3 channels), got " + std::to_string(D));
+    if (cross) return invalid("subspace_kind articulated is for one point set; cross-PMSC models are linear");
+    if (o.remove_rigid_motion) {
+      return invalid("subspace_kind articulated needs remove_rigid_motion off: the bones carry the rigid motion");
+    }
+    if (o.relative_tolerance) return invalid("subspace_kind articulated needs relative_tolerance off");
+    if (o.bone_count < 0) return invalid("bone_count must be ≥ 0 (0: by rule), got " + std::to_string(o.bone_count));
+    if (o.residual_components < -1) {
+      return invalid("residual_components must be ≥ 0, or −1 for the held-out rule, got " +
+                     std::to_string(o.residual_components));
+    }
+  }
 
   // T: R × F, control rows first, in double: PCA and least squares at training time deserve it.
   const long control_rows = control_frames.cols();
@@ -362,7 +377,15 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   gram = gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
   int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols())) : 0;
   std::vector<double> held_out_rms;
-  if (o.basis_size <= 0 && o.held_out_basis_slack > 0) {
+  // The held-out sets without the sparse folds (trained on half a fold's frames): the held-out
+  // rules below measure the basis of a fold, not a sparser training.
+  std::vector<std::vector<long>> held_out_frames, kept_frames;
+  for (const HeldOutSet& set : sets) {
+    if (set.family == kSparseFold) continue;
+    held_out_frames.push_back(set.held_out);
+    kept_frames.push_back(set.train);
+  }
+  if (!articulated && o.basis_size <= 0 && o.held_out_basis_slack > 0) {
     // Issue #38 item 3, M chosen by the accuracy it buys on frames the basis did not see: the
     // held-out frames' projection error onto each fold's first k directions, over the interleaved
     // folds (poses between training poses) and the block folds (motion the rest never saw), as a
@@ -371,15 +394,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     // direction the held-out frames do not share — noise of the training frames, motion of one
     // block only — lowers that error by about its share of the noise and is not worth its cost
     // in the reconstruction (time ∝ M) nor in the keys' estimate (M coefficients from K·D values).
-    std::vector<std::vector<long>> held_out, kept;
-    for (const HeldOutSet& set : sets) {
-      if (set.family == kSparseFold) continue;
-      held_out.push_back(set.held_out);
-      kept.push_back(set.train);
-    }
     const int M_max = std::min<int>(chosen_cap, static_cast<int>(pca.basis.cols()));
     double centred_energy = 0;
-    const Eigen::VectorXd residual = held_out_projection_curve(gram, held_out, kept, M_max, centred_energy);
+    const Eigen::VectorXd residual =
+        held_out_projection_curve(gram, held_out_frames, kept_frames, M_max, centred_energy);
     if (centred_energy > 0) {
       held_out_rms.resize(static_cast<size_t>(M_max + 1));
       for (int k = 0; k <= M_max; ++k) held_out_rms[static_cast<size_t>(k)] = std::sqrt(residual(k) / centred_energy);
@@ -396,13 +414,69 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // M from the error bound: when asked for, or when the held-out rule had no held-out energy to
   // measure (only then: at the papers' 100k illumination points its passes over the centred
   // frames cost more than the rest of the PCA).
-  if (M == 0) M = choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
-  Subspace subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
-  // The projection's error through the dispatched kernels, never forming the R × F residual.
-  Eigen::MatrixXd projection_coordinates(M, F);
-  gemm_transposed_serial(M, centred.rows(), F, subspace.basis.data(), subspace.basis.outerStride(), centred.data(),
-                         centred.outerStride(), 0.0, projection_coordinates.data(), M);
-  const double projection_error = residual_pass(centred, subspace.basis, projection_coordinates, D);
+  if (!articulated && M == 0) M = choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
+  Subspace subspace;
+  double projection_error = 0;
+  // The frames the key selection reconstructs: T less the subspace's mean.
+  Eigen::MatrixXd articulated_centred;
+  // Articulated (articulated.h): the skinning columns L, the residuals E they leave and E's Gram
+  // matrix, which takes the place of T's in the calibration's folds.
+  ArticulatedSkinning skinning;
+  Eigen::MatrixXd residual_gram;
+  int residual_count = 0;
+  double skinning_seconds = 0;
+  if (articulated) {
+    const auto skinning_start = std::chrono::steady_clock::now();
+    const int bones = o.bone_count > 0 ? o.bone_count : default_bone_count(control_points);
+    auto fitted = fit_articulated_skinning(control_frames, o.faces, bones, o.progress);
+    if (!fitted) return fitted.error();
+    skinning = std::move(*fitted);
+    skinning_seconds = seconds_since(skinning_start);
+    residual_gram.setZero(F, F);
+    gram_lower_serial(rows, F, skinning.residuals.data(), rows, residual_gram.data(), F);
+    residual_gram = residual_gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
+    // r: given, or the smallest count whose held-out projection error is within
+    // kResidualHeldOutSlack of the largest count's (a component the held-out frames do not share
+    // is noise of the training frames, and one more coordinate to estimate from the keys).
+    const int residual_cap = std::min<int>(chosen_cap, static_cast<int>(F - 1));
+    if (o.residual_components >= 0) {
+      residual_count = std::min(o.residual_components, residual_cap);
+    } else {
+      double centred_energy = 0;
+      const Eigen::VectorXd curve =
+          held_out_projection_curve(residual_gram, held_out_frames, kept_frames, residual_cap, centred_energy);
+      residual_count = residual_cap;
+      for (int k = 0; k <= residual_cap && centred_energy > 0; ++k) {
+        if (curve(k) <= (1 + kResidualHeldOutSlack) * (1 + kResidualHeldOutSlack) * curve(residual_cap)) {
+          residual_count = k;
+          break;
+        }
+      }
+    }
+    std::vector<long> every_frame(static_cast<size_t>(F));
+    std::iota(every_frame.begin(), every_frame.end(), 0L);
+    Subspace residual;
+    fold_subspace(skinning.residuals, residual_gram, every_frame, std::max(residual_count, 1), residual);
+    if (residual_count == 0) residual.basis.resize(rows, 0);
+    residual_count = static_cast<int>(residual.basis.cols());
+    subspace.mean = residual.mean;
+    subspace.basis.resize(rows, skinning.columns.cols() + residual_count);
+    subspace.basis << skinning.columns, residual.basis;
+    M = static_cast<int>(subspace.basis.cols());
+    articulated_centred = T.colwise() - subspace.mean;
+    // The residual components are orthogonal to L's columns (every frame's residual is), so the
+    // projection onto [L | R] leaves what R leaves of E.
+    const Eigen::MatrixXd residual_centred = skinning.residuals.colwise() - residual.mean;
+    const Eigen::MatrixXd coordinates = residual.basis.transpose() * residual_centred;
+    projection_error = residual_pass(residual_centred, residual.basis, coordinates, D);
+  } else {
+    subspace = Subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
+    // The projection's error through the dispatched kernels, never forming the R × F residual.
+    Eigen::MatrixXd projection_coordinates(M, F);
+    gemm_transposed_serial(M, centred.rows(), F, subspace.basis.data(), subspace.basis.outerStride(), centred.data(),
+                           centred.outerStride(), 0.0, projection_coordinates.data(), M);
+    projection_error = residual_pass(centred, subspace.basis, projection_coordinates, D);
+  }
   const double pca_seconds = seconds_since(pca_start);
   const auto key_start = std::chrono::steady_clock::now();
 
@@ -415,6 +489,14 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   key_options.candidate_count = static_cast<int>(control_points);
   key_options.progress = o.progress;
   key_options.seed_points = o.fiducial_points;
+  if (articulated) {
+    // Every bone's 12 numbers fixed by its own points first; then keys enough for
+    // kKeyEquationsPerUnknown equations per coordinate, never over kMaxKeyFraction of the points.
+    for (int point : skinning.coverage_points) key_options.seed_points.push_back(point);
+    const int needed = static_cast<int>(std::ceil(kKeyEquationsPerUnknown * M / D));
+    const int ceiling = std::max(1, static_cast<int>(kMaxKeyFraction * static_cast<double>(control_points)));
+    key_options.max_key_points = std::min(std::max(o.max_key_points, needed), ceiling);
+  }
   if (o.grid_cells > 0) {
     PointMatrix positions = o.positions;
     if (positions.rows() == 0) {
@@ -426,18 +508,22 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
     for (int seed : grid_seeds(positions, o.grid_cells)) key_options.seed_points.push_back(seed);
   }
-  auto selection = select_key_points(centred, subspace.basis, key_options);
+  auto selection = select_key_points(articulated ? articulated_centred : centred, subspace.basis, key_options);
   if (!selection) return selection.error();
   const double key_selection_seconds = seconds_since(key_start);
   ANIMSPACE_RETURN_IF_ERROR(assemble(subspace, control_rows, cross, selection->key_points, model));
 
   // Regions for local fail-through (the keys index the same points only without cross).
   if (!cross && o.region_count > 0) {
-    Regions regions = cluster_regions(subspace.basis, subspace.sigma, D, model.key_points, o.region_count);
+    // Points that move together, by the training frames' principal components (for the
+    // articulated kind too: its columns are not orthonormal, which the signatures assume).
+    const Eigen::MatrixXd& motion_basis = articulated ? pca.basis : subspace.basis;
+    const Eigen::VectorXd& motion_sigma = articulated ? pca.singular_values : subspace.sigma;
+    Regions regions = cluster_regions(motion_basis, motion_sigma, D, model.key_points, o.region_count);
     model.region_count = regions.count;
     model.point_regions = std::move(regions.point_regions);
     model.key_regions = std::move(regions.key_regions);
-    model.region_weights = soft_region_weights(motion_signatures(subspace.basis, subspace.sigma, D),
+    model.region_weights = soft_region_weights(motion_signatures(motion_basis, motion_sigma, D),
                                                model.point_regions, model.region_count);
   }
 
@@ -474,6 +560,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   model.mean = std::move(served_mean);
   struct Workspace {
     Subspace fold;
+    Subspace residual;  // articulated: the fold's residual components
     PmscModel model;
     Eigen::MatrixXf points;
     std::vector<PoseEstimate> estimates;
@@ -481,11 +568,22 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   const auto calibrate_set = [&](size_t set, Workspace& work) {
     const HeldOutSet& held = sets[set];
     SetSamples& out = per_set[set];
-    // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
-    const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(held.train.size()) - 1));
-    if (fold_basis < 1) return;
-    fold_subspace(T, gram, held.train, fold_basis, work.fold);
-    if (work.fold.basis.cols() < 1) return;
+    if (articulated) {
+      // The same skinning columns; the residual components of the fold's frames alone.
+      const int fold_residuals = static_cast<int>(std::min<long>(residual_count, static_cast<long>(held.train.size()) - 1));
+      fold_subspace(skinning.residuals, residual_gram, held.train, std::max(fold_residuals, 1), work.residual);
+      const long kept_residuals = fold_residuals > 0 ? work.residual.basis.cols() : 0;
+      work.fold.mean = work.residual.mean;
+      work.fold.basis.resize(rows, skinning.columns.cols() + kept_residuals);
+      work.fold.basis.leftCols(skinning.columns.cols()) = skinning.columns;
+      work.fold.basis.rightCols(kept_residuals) = work.residual.basis.leftCols(kept_residuals);
+    } else {
+      // M < F must hold in the fold too; a fold with fewer frames uses a smaller subspace.
+      const int fold_basis = static_cast<int>(std::min<long>(M, static_cast<long>(held.train.size()) - 1));
+      if (fold_basis < 1) return;
+      fold_subspace(T, gram, held.train, fold_basis, work.fold);
+      if (work.fold.basis.cols() < 1) return;
+    }
     PmscModel& fold_model = work.model;
     if (!assemble(work.fold, control_rows, cross, model.key_points, fold_model).ok()) return;
     // The held-out frames go through the runtime as a server's batch does (estimate_coordinates,
@@ -534,7 +632,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   };
   report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
   parallel_for_chunks(static_cast<int64_t>(sets.size()), 1, [&](int64_t, int64_t) {
-    Workspace work{Subspace(), shell, Eigen::MatrixXf(), {}};
+    Workspace work{Subspace(), Subspace(), shell, Eigen::MatrixXf(), {}};
     for (size_t set = next_set++; set < sets.size(); set = next_set++) {
       calibrate_set(set, work);
       const std::lock_guard<std::mutex> lock(progress_mutex);
@@ -595,6 +693,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
     if (C == 0) samples.check_point_errors.resize(0);
   }
+  model.subspace_kind = o.subspace_kind;
+  model.bone_count = articulated ? skinning.bone_count : 0;
+  model.residual_components = articulated ? residual_count : 0;
   model.calibration.false_hit_rate = o.false_hit_rate;
   model.calibration.block_frames = static_cast<int>(block);
   ANIMSPACE_RETURN_IF_ERROR(apply_calibration(model, o.error_tolerance, o.blend_zone_ratio));
@@ -635,6 +736,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     report->error_ratio = model.calibration.error_ratio;
     report->calibration_frames = static_cast<int>(n);
     report->check_points = model.check_point_count();
+    report->bones = model.bone_count;
+    report->residual_components = model.residual_components;
+    report->skinning_rms = skinning.rms;
+    report->skinning_seconds = skinning_seconds;
     report->calibration_bad_samples = model.calibration.bad_samples;
     const auto now = std::chrono::steady_clock::now();
     report->seconds = std::chrono::duration<double>(now - start).count();
@@ -652,6 +757,53 @@ Result<PmscModel> train(const FrameMatrix& frames, const TrainingOptions& option
 Result<PmscModel> train_cross(const FrameMatrix& control_frames, const FrameMatrix& output_frames,
                               const TrainingOptions& options, TrainingReport* report) {
   return train_joint(control_frames, &output_frames, options, report);
+}
+
+double held_out_block_fraction(const PmscModel& model, double tolerance, long* samples) {
+  const CalibrationSamples& s = model.calibration.samples;
+  long count = 0, within = 0;
+  for (long i = 0; i < s.size(); ++i) {
+    if (s.fold_family[static_cast<size_t>(i)] != kBlockFold) continue;
+    ++count;
+    within += s.max_errors(i) <= tolerance ? 1 : 0;
+  }
+  if (samples) *samples = count;
+  return count > 0 ? static_cast<double>(within) / static_cast<double>(count) : 0.0;
+}
+
+Result<PmscModel> train_best_kind(const FrameMatrix& frames, const TrainingOptions& options, TrainingReport* report,
+                                  SubspaceChoice* choice) {
+  TrainingOptions linear_options = options;
+  linear_options.subspace_kind = SubspaceKind::kLinear;
+  TrainingReport linear_report;
+  auto linear = train(frames, linear_options, &linear_report);
+  if (!linear) return linear.error();
+  TrainingOptions articulated_options = options;
+  articulated_options.subspace_kind = SubspaceKind::kArticulated;
+  articulated_options.remove_rigid_motion = false;  // the bones carry the rigid motion
+  TrainingReport articulated_report;
+  auto articulated = train(frames, articulated_options, &articulated_report);
+
+  SubspaceChoice made;
+  made.linear_block_within_tolerance = held_out_block_fraction(*linear, options.error_tolerance, &made.block_samples);
+  const auto percent = [](double fraction) { return std::to_string(static_cast<int>(std::lround(100 * fraction))) + "%"; };
+  if (!articulated) {
+    made.reason = "linear: the articulated kind could not be trained (" + articulated.error().message + ")";
+  } else {
+    made.articulated_block_within_tolerance = held_out_block_fraction(*articulated, options.error_tolerance);
+    const bool better = made.articulated_block_within_tolerance > made.linear_block_within_tolerance;
+    made.kind = better ? SubspaceKind::kArticulated : SubspaceKind::kLinear;
+    made.reason = std::string(better ? "articulated" : "linear") + ": on held-out blocks of the training frames (" +
+                  std::to_string(made.block_samples) + " samples, motion each fold never saw) the articulated kind is "
+                  "within the tolerance on " + percent(made.articulated_block_within_tolerance) +
+                  ", the linear kind on " + percent(made.linear_block_within_tolerance) +
+                  (better ? "" : " (a tie keeps the linear kind, the cheaper to train)");
+  }
+  if (choice) *choice = made;
+  const bool keep_articulated = made.kind == SubspaceKind::kArticulated;
+  if (report) *report = keep_articulated ? articulated_report : linear_report;
+  if (keep_articulated) return std::move(*articulated);
+  return std::move(*linear);
 }
 
 double bounding_box_diagonal(const Eigen::Ref<const Eigen::VectorXf>& frame) {

@@ -2,6 +2,7 @@
 // 2007 §2.1–2.2), with the soft-cache thresholds calibrated on held-out training frames.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "core/common/progress.h"
@@ -14,6 +15,15 @@ namespace animspace::pmsc {
 
 struct TrainingOptions {
   int channel_count = 3;  // D
+  // What the basis is (PmscModel::subspace_kind). Articulated: positions (D = 3), not cross, not
+  // remove_rigid_motion (the bones carry the rigid motion), not relative_tolerance.
+  SubspaceKind subspace_kind = SubspaceKind::kLinear;
+  // Articulated only: the control points' triangles (#F × 3, may be empty: then the rigid parts
+  // are not spatially coherent), B bones (0: kArticulatedDefaultBones, at most one per 20 points)
+  // and r residual components (−1: by the held-out rule of articulated.h).
+  FaceMatrix faces;
+  int bone_count = 0;
+  int residual_components = -1;
   // Largest per-point training error (Euclidean over D channels, model units) that the key
   // selection iterates towards; the basis is chosen to project the training set within half of it.
   double error_bound = 0;
@@ -91,6 +101,12 @@ struct TrainingReport {
   double error_ratio = 0;
   int calibration_frames = 0;
   int check_points = 0;                // C
+  // Articulated models: B, r, the skinning's RMS error on the training frames (model units,
+  // each frame's bone transforms fitted to all its points) and the decomposition's time.
+  int bones = 0;
+  int residual_components = 0;
+  double skinning_rms = 0;
+  double skinning_seconds = 0;
   long calibration_bad_samples = 0;    // the over-tolerance samples ε rests on
   // With held_out_basis_slack: the held-out relative RMS projection error of every basis size
   // k = 0 … cap (index k), whose first k within (1 + slack) of the best is basis_size.
@@ -109,6 +125,26 @@ Result<PmscModel> train(const FrameMatrix& frames, const TrainingOptions& option
 // are chosen among the control points; the model outputs the output points.
 Result<PmscModel> train_cross(const FrameMatrix& control_frames, const FrameMatrix& output_frames,
                               const TrainingOptions& options, TrainingReport* report);
+
+// `--subspace auto` (issue #51): trains both kinds on the same frames with the same options and
+// keeps the one whose held-out blocks of motion (the calibration's block folds: frames its fold
+// never saw, as a new shot is) are within the tolerance more often; a tie keeps the linear kind,
+// the cheaper to train. The choice and its figures, for the operator.
+struct SubspaceChoice {
+  SubspaceKind kind = SubspaceKind::kLinear;
+  double linear_block_within_tolerance = 0;       // fraction of block-fold samples
+  double articulated_block_within_tolerance = 0;
+  long block_samples = 0;                         // per kind
+  std::string reason;                             // one sentence
+};
+// The fraction of a trained model's block-fold calibration samples whose max point error is within
+// `tolerance` (model units; 0 when it has none).
+double held_out_block_fraction(const PmscModel& model, double tolerance, long* samples = nullptr);
+// options.subspace_kind is ignored; `report` describes the model kept. Errors: the linear
+// training's (the articulated kind's own errors, e.g. too few points for its keys, keep the
+// linear model and say why in the choice).
+Result<PmscModel> train_best_kind(const FrameMatrix& frames, const TrainingOptions& options, TrainingReport* report,
+                                  SubspaceChoice* choice);
 
 // Axis-aligned bounding-box diagonal of one frame's points (N·D values, D = 3), model units.
 double bounding_box_diagonal(const Eigen::Ref<const Eigen::VectorXf>& frame);

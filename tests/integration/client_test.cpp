@@ -550,6 +550,8 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   // own process and the Cornell box's gathers and training dominate a sanitized set-up.
   ASSERT_TRUE(demo::write_demo_illumination(repo_->path()).ok());
   client_->load_model("cornell", 1);
+  ASSERT_TRUE(demo::write_demo_articulated(repo_->path()).ok());
+  client_->load_model(std::string(demo::kDemoArticulatedModelName), 1);
   // The tour's basis cache goes to the test's folder, not the home folder.
   const std::string command = "ANIMSPACE_BASIS_CACHE=" + (work_->path() / "bases").string() + " " +
                               std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + daemon_->address() + " " +
@@ -565,6 +567,17 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   // Answers as coordinates (issue #36), reconstructed by the client from the cached basis.
   EXPECT_NE(output.find(" values reconstructed into 1154 points, within "), std::string::npos) << output;
   EXPECT_FALSE(std::filesystem::is_empty(work_->path() / "bases" / "arm-pmsc")) << "no basis cached";
+  // Issue #51: the articulated arm's answer, its coordinates and error against the rig's pose, next
+  // to arm-pmsc's estimate of the same unseen swing.
+  const size_t articulated = output.find("articulated: ");
+  ASSERT_NE(articulated, std::string::npos) << output;
+  float articulated_error = 0, linear_error = 0;
+  ASSERT_EQ(std::sscanf(output.c_str() + output.find("largest error ", articulated), "largest error %g (arm-pmsc's estimate: %g)",
+                        &articulated_error, &linear_error),
+            2)
+      << output.substr(articulated, 200);
+  EXPECT_LT(articulated_error, 0.5f * linear_error) << output.substr(articulated, 200);
+  EXPECT_FALSE(std::filesystem::is_empty(work_->path() / "bases" / "arm-articulated")) << "no basis cached";
   EXPECT_NE(output.find("skinned "), std::string::npos) << output;
   EXPECT_NE(output.find("LOD level "), std::string::npos) << output;
   EXPECT_NE(output.find("relit by a light at (0.45, 0.44, 0.45): HIT, "), std::string::npos) << output;

@@ -17,7 +17,8 @@ import pytest
 import animspace
 from animspace.v1 import models_pb2, models_pb2_grpc
 
-DEMO_MODELS = ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine", "arm-smooth", "cornell"]
+DEMO_MODELS = ["arm", "arm-animspace", "arm-articulated", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine", "arm-smooth",
+               "cornell"]
 
 
 def rms(a, b):

@@ -170,5 +170,10 @@ def test_the_readmes_query_it_from_python_snippet_runs(readme, daemon, tmp_path)
         # Answers as coordinates (issue #36): p reconstructed into every point, the basis cached.
         assert any(line.endswith("coordinates -> (1154, 3)") for line in lines), lines
         assert list((tmp_path / "bases" / "arm-pmsc-engine").glob("1-*.basis")), "no basis cached"
+        # Issue #51: the articulated arm names its kind, and its p is 12 per bone + the residuals.
+        line = next(line for line in lines if line.startswith("arm-articulated ARTICULATED "))
+        words = line.split()
+        bones, residuals, sent = int(words[2]), int(words[5]), int(words[-2])
+        assert sent == 12 * bones + residuals and bones >= 1, line
     assert (tmp_path / "arm.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (tmp_path / "cornell-3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -219,6 +219,44 @@ def test_relight_answers_as_coordinates_within_the_bound(client, channel, tmp_pa
     expect_within_bound(answer.points, exact.points, mean, A, answer)
 
 
+def test_an_articulated_model_answers_bone_transforms_and_residuals_as_coordinates(counted, channel, arm_transforms,
+                                                                                    demo_arm_transforms):
+    # Issue #51: arm-articulated's p is 12 numbers per bone, then its residual coefficients; the
+    # client reconstructs it with the mean and basis GetBasis sends, within the same bound.
+    client, counter = counted
+    described = client.describe_model("arm-articulated").default
+    assert described.subspace_kind == "ARTICULATED" and described.subspace_bone_count >= 1
+    _, mean, A = raw_basis(channel, "arm-articulated")
+    assert A.shape[1] == described.basis_size == 12 * described.subspace_bone_count + described.residual_components
+    keys = client.describe_key_points("arm-articulated")
+    # A demo frame, and an elbow bent 150° with the shoulder swung 40°: past every training pose
+    # (the demo flexes to 130° and swings 15°).
+    frames = [posed_arm(client, G) for G in (demo_arm_transforms(14 / 120),
+                                             arm_transforms(math.radians(150), math.radians(40)))]
+    values = np.stack([keys.select(f) for f in frames])
+    checks = np.stack([keys.select_check_values(f) for f in frames])
+    exact = client.evaluate_key_points("arm-articulated", values, check_values=checks)
+    answers = client.evaluate_key_points("arm-articulated", values, check_values=checks,
+                                         points_encoding="coordinates")
+    for a, b in zip(exact, answers, strict=True):
+        assert b.status == a.status and b.coordinates.p.shape == (A.shape[1],)
+        expect_within_bound(client.reconstruct("arm-articulated", b), a.points, mean, A, b)
+    assert counter.calls[GET_BASIS] == 1
+    # Past the training poses the skinning carries the arm where principal components of the
+    # same frames cannot: arm-pmsc's estimate of that pose (its points before any blend) is
+    # several times farther from it.
+    linear_keys = client.describe_key_points("arm-pmsc")
+    linear = client.evaluate_key_points("arm-pmsc", linear_keys.select(frames[1]),
+                                        check_values=linear_keys.select_check_values(frames[1]),
+                                        points_encoding="coordinates", reconstruct=True)
+    articulated = client.reconstruct("arm-articulated", answers[1])
+
+    def worst(points):
+        return float(np.linalg.norm(points.astype(np.float64) - frames[1].astype(np.float64), axis=1).max())
+
+    assert worst(articulated) < 0.25 * worst(linear.points), (worst(articulated), worst(linear.points))
+
+
 def test_points_the_server_computes_still_come_as_float32(client, arm_transforms):
     # arm-pmsc-engine completes a miss itself from the skeleton pose: those are points, not p.
     keys = client.describe_key_points("arm-pmsc-engine")

@@ -13,7 +13,7 @@ def wait_until_loaded(stub):
     deadline = time.time() + 30
     while time.time() < deadline:
         models = stub.ListModels(models_pb2.ListModelsRequest(), timeout=5).models
-        if len(models) == 7:
+        if len(models) == 8:
             return models
         time.sleep(0.05)
     pytest.fail("the demo repository never finished loading")
@@ -22,8 +22,8 @@ def wait_until_loaded(stub):
 def test_demo_models_are_listed_with_their_kinds(channel):
     stub = models_pb2_grpc.ModelServiceStub(channel)
     models = {m.name: m for m in wait_until_loaded(stub)}
-    assert sorted(models) == ["arm", "arm-animspace", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine", "arm-smooth",
-                              "cornell"]
+    assert sorted(models) == ["arm", "arm-animspace", "arm-articulated", "arm-cross-pmsc", "arm-pmsc", "arm-pmsc-engine",
+                              "arm-smooth", "cornell"]
     animspace = models["arm-animspace"].versions[0]
     assert animspace.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE
     assert animspace.bone_count == 3 and animspace.point_count > 0
@@ -38,6 +38,12 @@ def test_demo_models_are_listed_with_their_kinds(channel):
     smooth = models["arm-smooth"].versions[0]  # arm-animspace subdivided once: V + E vertices, 4F faces
     assert smooth.kind == models_pb2.MODEL_KIND_ANIMATION_SPACE and smooth.bone_count == 3
     assert smooth.point_count > animspace.point_count and smooth.face_count == 4 * animspace.face_count
+    articulated = models["arm-articulated"].versions[0]  # issue #51: 12 coordinates per bone + residuals
+    assert articulated.kind == models_pb2.MODEL_KIND_PMSC
+    assert articulated.subspace_kind == models_pb2.SUBSPACE_KIND_ARTICULATED
+    assert articulated.subspace_bone_count >= 1
+    assert articulated.basis_size == 12 * articulated.subspace_bone_count + articulated.residual_components
+    assert pmsc.subspace_kind == models_pb2.SUBSPACE_KIND_LINEAR and pmsc.subspace_bone_count == 0
 
 
 def test_unknown_model_is_not_found_with_its_name(channel):

@@ -171,6 +171,15 @@ int run_describe(const Globals& g, const std::string& name, uint64_t version) {
                                           : v.calibration_statement();
       std::printf("  version %llu calibration: %s\n", static_cast<unsigned long long>(v.version()),
                   calibration.c_str());
+      if (v.subspace_kind() == animspace::v1::SUBSPACE_KIND_ARTICULATED) {
+        std::printf("  version %llu subspace: articulated, %u bones (12 coordinates each: the bone's affine transform "
+                    "about its rest centre) + %u residual components = M %u\n",
+                    static_cast<unsigned long long>(v.version()), v.subspace_bone_count(), v.residual_components(),
+                    v.basis_size());
+      } else if (v.subspace_kind() == animspace::v1::SUBSPACE_KIND_LINEAR) {
+        std::printf("  version %llu subspace: linear, M %u principal components of the training frames\n",
+                    static_cast<unsigned long long>(v.version()), v.basis_size());
+      }
     }
     std::printf("  version %llu metadata:\n", static_cast<unsigned long long>(v.version()));
     std::map<std::string, std::string> sorted(v.metadata().begin(), v.metadata().end());

@@ -26,6 +26,9 @@ struct TrainPmscArgs {
   std::vector<int> fiducials;
   int grid = 0;
   bool align = false;
+  std::string subspace = "linear";  // pmsc::SubspaceKind by name
+  int bones = 0;                    // articulated: 0 by rule
+  int residual_components = -1;     // articulated: −1 by the held-out rule
   int regions = 8;
   double check_point_fraction = pmsc::kCheckPointFraction;
   std::string description;

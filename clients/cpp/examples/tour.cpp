@@ -130,6 +130,33 @@ int main(int argc, char** argv) try {
   std::printf("coordinates: %s, %zu values reconstructed into %u points, within %.3g of float32\n",
               animspace::cache_status_name(answer.status), sent, answer.points.point_count, largest);
 
+  // Two kinds of subspace (issue #51): arm-articulated was trained on the same frames as arm-pmsc,
+  // but its basis is the arm's skinning — its coordinates are the bones' affine transforms, 12
+  // numbers each, then residual components — so the unseen swing stays inside it. Its answer is
+  // reconstructed exactly as arm-pmsc's; here both are set against the rig's full pose.
+  const animspace::v1::ModelVersion articulated = client.describe_model("arm-articulated").versions(0);
+  const animspace::KeyPoints articulated_keys = client.describe_key_points("arm-articulated");
+  const animspace::KeyPointPose articulated_pose{.key_values = articulated_keys.gather(full),
+                                                 .channel_count = articulated_keys.channel_count,
+                                                 .check_values = articulated_keys.gather_check_values(full)};
+  animspace::PoseResult articulated_answer =
+      client.evaluate_key_points("arm-articulated", articulated_pose, coordinate_options);
+  const size_t articulated_sent = articulated_answer.coordinates.p.size();
+  bases.reconstruct(client, "arm-articulated", articulated_answer);
+  const auto farthest = [&](const std::vector<float>& points) {
+    float worst = 0;
+    for (size_t i = 0; i + 2 < points.size(); i += 3) {
+      const float dx = points[i] - full[i], dy = points[i + 1] - full[i + 1], dz = points[i + 2] - full[i + 2];
+      worst = std::max(worst, std::sqrt(dx * dx + dy * dy + dz * dz));
+    }
+    return worst;
+  };
+  std::printf("articulated: %u bones + %u residual components, %zu coordinates: %s, largest error %.3g "
+              "(arm-pmsc's estimate: %.3g)\n",
+              articulated.subspace_bone_count(), articulated.residual_components(), articulated_sent,
+              animspace::cache_status_name(articulated_answer.status), farthest(articulated_answer.points.values),
+              farthest(answer.points.values));
+
   // On a blend or miss the client's own engine supplies the full pose (client fail-through); the
   // server checks it repeats the key values, answers with it and logs it for retraining. The pose
   // repeats its check values, so the verdict (and α) is the one evaluated.

@@ -212,7 +212,10 @@ class ModelVersion:
     server's sentence for operators: what a HIT means for this model, or why nothing is
     guaranteed. ``relative_tolerance`` (issue #38): ε and every error a ``PoseResult`` reports are
     fractions of each pose's own scale (``PoseResult.pose_scale``), not model units, so a HIT
-    means the same at any intensity.
+    means the same at any intensity. ``subspace_kind`` (issue #51): "LINEAR" (principal components
+    of the training frames) or "ARTICULATED" (``subspace_bone_count`` bones' transforms, 12
+    coordinates each, then ``residual_components`` principal components of what the skinning
+    leaves), "UNSPECIFIED" for a model that is not PMSC or a server from before.
     """
 
     version: int
@@ -242,6 +245,9 @@ class ModelVersion:
     calibration_guarantee_holds: bool = False
     calibration_statement: str = ""
     relative_tolerance: bool = False
+    subspace_kind: str = "UNSPECIFIED"
+    subspace_bone_count: int = 0
+    residual_components: int = 0
 
     @classmethod
     def from_proto(cls, m: models_pb2.ModelVersion) -> "ModelVersion":
@@ -258,7 +264,9 @@ class ModelVersion:
                    calibration_bad_samples=m.calibration_bad_samples,
                    calibration_guarantee_holds=m.calibration_guarantee_holds,
                    calibration_statement=m.calibration_statement,
-                   relative_tolerance=m.relative_tolerance)
+                   relative_tolerance=m.relative_tolerance,
+                   subspace_kind=enum_name(models_pb2.SubspaceKind, m.subspace_kind, "SUBSPACE_KIND_"),
+                   subspace_bone_count=m.subspace_bone_count, residual_components=m.residual_components)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,238 @@
+// The articulated subspace (issue #51, core/pmsc/articulated.h): its skinning columns against the
+// linear blend formula written out, and a model trained on a skinned arm that meets motion past
+// every training pose — where a position PCA cannot follow — against the rig's own poses.
+#include "core/pmsc/articulated.h"
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/container/model_container.h"
+#include "core/demo/bending_arm.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/train.h"
+
+namespace animspace::pmsc {
+namespace {
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+
+// L p against Σ_j w_ij M_j [p̂_i − c_j; 1] for random weights, rest points, centres and affine
+// maps: the columns' layout (12 per bone, row-major 3 × 4) is what the coordinates mean.
+TEST(ArticulatedSubspace, SkinningColumnsPoseByTheLinearBlendFormula) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> uniform(-1, 1);
+  const int N = 9, B = 3;
+  Eigen::MatrixX3d rest(N, 3), centres(B, 3);
+  for (int i = 0; i < N; ++i) rest.row(i) << uniform(random), uniform(random), uniform(random);
+  for (int j = 0; j < B; ++j) centres.row(j) << uniform(random), uniform(random), uniform(random);
+  // Point i has bones (i mod 3) + 1 and, for odd i, also the next one; the root (bone 0) on
+  // point 0 carries no columns.
+  animation_space::InfluenceSets influences;
+  std::vector<double> w;
+  for (int i = 0; i < N; ++i) {
+    if (i == 0) {
+      influences.bones.push_back(0);
+      w.push_back(0.25);
+    }
+    const int first = i % 3 + 1;
+    influences.bones.push_back(first);
+    if (i % 2 == 1) {
+      influences.bones.push_back(first % 3 + 1);
+      w.push_back(0.3);
+      w.push_back(0.7);
+    } else {
+      w.push_back(i == 0 ? 0.75 : 1.0);
+    }
+    influences.offsets.push_back(static_cast<int32_t>(influences.bones.size()));
+  }
+  const Eigen::VectorXd weights = Eigen::Map<const Eigen::VectorXd>(w.data(), static_cast<long>(w.size()));
+  std::vector<Eigen::Matrix<double, 3, 4>> maps(B);
+  Eigen::VectorXd p(kBoneCoordinates * B);
+  for (int j = 0; j < B; ++j) {
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 4; ++c) {
+        maps[static_cast<size_t>(j)](r, c) = uniform(random);
+        p(kBoneCoordinates * j + 4 * r + c) = maps[static_cast<size_t>(j)](r, c);
+      }
+    }
+  }
+  const Eigen::VectorXd posed = skinning_columns(rest, influences, weights, B, centres) * p;
+  for (int i = 0; i < N; ++i) {
+    Eigen::Vector3d expected = Eigen::Vector3d::Zero();
+    for (int k = influences.begin(i); k < influences.end(i); ++k) {
+      const int bone = influences.bones[static_cast<size_t>(k)];
+      if (bone == 0) continue;
+      Eigen::Vector4d h;
+      h << (rest.row(i) - centres.row(bone - 1)).transpose(), 1.0;
+      expected += weights(k) * maps[static_cast<size_t>(bone - 1)] * h;
+    }
+    EXPECT_LT((posed.segment<3>(3 * i) - expected).norm(), 1e-12) << "point " << i;
+  }
+}
+
+// Frames of the bending arm's plain linear blend skinning, one row each.
+FrameMatrix arm_frames(const demo::ArmRig& rig, const std::vector<demo::ArmPose>& poses) {
+  FrameMatrix frames(static_cast<long>(poses.size()), 3 * rig.rest.V.rows());
+  for (size_t f = 0; f < poses.size(); ++f) {
+    const PointMatrix posed = demo::pose_linear_blend(poses[f], rig);
+    frames.row(static_cast<long>(f)) = Eigen::Map<const Eigen::RowVectorXf>(posed.data(), posed.size());
+  }
+  return frames;
+}
+
+std::vector<demo::ArmPose> random_poses(int count, double max_elbow, double min_elbow, double max_swing,
+                                        uint32_t seed) {
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<double> elbow(min_elbow, max_elbow), swing(-max_swing, max_swing);
+  std::vector<demo::ArmPose> poses(static_cast<size_t>(count));
+  for (demo::ArmPose& pose : poses) {
+    pose.elbow_angle_rad = elbow(random);
+    pose.shoulder_angle_rad = swing(random);
+  }
+  return poses;
+}
+
+// Worst point error of the model's estimate from each frame's key values, over the frames.
+double worst_point_error(const PmscModel& model, const FrameMatrix& frames) {
+  double worst = 0;
+  PoseEstimate estimate;
+  for (long f = 0; f < frames.rows(); ++f) {
+    const Eigen::VectorXf frame = frames.row(f).transpose();
+    evaluate(model, gather_key_values(model, frame), estimate);
+    const Eigen::VectorXf residual = frame - estimate.points;
+    worst = std::max(worst, static_cast<double>(
+                                Eigen::Map<const Eigen::Matrix3Xf>(residual.data(), 3, residual.size() / 3)
+                                    .colwise()
+                                    .norm()
+                                    .maxCoeff()));
+  }
+  return worst;
+}
+
+struct ArmCase {
+  demo::ArmRig rig = demo::make_arm_rig();
+  // Trained on an elbow within 0–40° and a swing of ±10°; tested at 80–120° and ±30°: every test
+  // pose is past every training pose, as a new shot is.
+  FrameMatrix training = arm_frames(rig, random_poses(60, 40 * kDegree, 0, 10 * kDegree, 1));
+  FrameMatrix new_shot = arm_frames(rig, random_poses(40, 120 * kDegree, 80 * kDegree, 30 * kDegree, 2));
+  double diagonal = bounding_box_diagonal(training.row(0).transpose());
+
+  TrainingOptions options(SubspaceKind kind) const {
+    TrainingOptions o;
+    o.subspace_kind = kind;
+    o.error_bound = 0.0025 * diagonal;
+    o.error_tolerance = 0.01 * diagonal;
+    if (kind == SubspaceKind::kArticulated) {
+      o.faces = rig.rest.F;
+      o.bone_count = 2;  // the rig's own bones
+    }
+    return o;
+  }
+};
+
+// The arm's frames are linear blend skinning with two bones: the articulated subspace contains
+// every pose of it, trained or not, so a new shot is reconstructed from its keys (up to the
+// decomposition's fit of the weights); the linear subspace, trained on the same frames, cannot
+// bend the elbow further than it saw.
+TEST(ArticulatedSubspace, ANewShotOfASkinnedArmStaysInsideIt) {
+  const ArmCase arm;
+  TrainingReport articulated_report;
+  auto articulated = train(arm.training, arm.options(SubspaceKind::kArticulated), &articulated_report);
+  ASSERT_TRUE(articulated.ok()) << articulated.error().message;
+  auto linear = train(arm.training, arm.options(SubspaceKind::kLinear), nullptr);
+  ASSERT_TRUE(linear.ok()) << linear.error().message;
+
+  EXPECT_EQ(articulated->subspace_kind, SubspaceKind::kArticulated);
+  EXPECT_EQ(articulated->bone_count, 2);
+  EXPECT_EQ(articulated->basis_size(), 12 * 2 + articulated->residual_components);
+  EXPECT_EQ(articulated_report.bones, 2);
+  // Skinning alone fits the training frames: they are skinning.
+  EXPECT_LT(articulated_report.skinning_rms, 1e-3 * arm.diagonal);
+
+  const double articulated_error = worst_point_error(*articulated, arm.new_shot);
+  const double linear_error = worst_point_error(*linear, arm.new_shot);
+  EXPECT_LT(articulated_error, 0.01 * arm.diagonal) << "articulated " << articulated_error / arm.diagonal;
+  EXPECT_GT(linear_error, 0.05 * arm.diagonal) << "linear " << linear_error / arm.diagonal;
+  EXPECT_LT(articulated_error, 0.1 * linear_error);
+}
+
+TEST(ArticulatedSubspace, AModelFileKeepsItsKindAndOlderFilesAreLinear) {
+  const ArmCase arm;
+  auto model = train(arm.training, arm.options(SubspaceKind::kArticulated), nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  container::ModelContainer file;
+  store(*model, file);
+  auto loaded = load(file, "arm.anim");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->subspace_kind, SubspaceKind::kArticulated);
+  EXPECT_EQ(loaded->bone_count, model->bone_count);
+  EXPECT_EQ(loaded->residual_components, model->residual_components);
+  EXPECT_EQ(worst_point_error(*loaded, arm.new_shot), worst_point_error(*model, arm.new_shot));
+
+  // A file whose counts disagree with its basis is refused, naming both.
+  container::ModelContainer wrong = file;
+  wrong.metadata()["pmsc.bone_count"] = std::to_string(model->bone_count + 1);
+  auto refused = load(wrong, "wrong.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("wrong.anim"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("12·bones + residual components"), std::string::npos)
+      << refused.error().message;
+  // An unknown kind is refused, naming the key and the value.
+  wrong = file;
+  wrong.metadata()["pmsc.subspace_kind"] = "cubic";
+  refused = load(wrong, "wrong.anim");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("'pmsc.subspace_kind' should be linear or articulated, got 'cubic'"),
+            std::string::npos)
+      << refused.error().message;
+
+  // A file written before issue #51 has no kind: it is linear.
+  auto linear = train(arm.training, arm.options(SubspaceKind::kLinear), nullptr);
+  ASSERT_TRUE(linear.ok());
+  container::ModelContainer older;
+  store(*linear, older);
+  older.metadata().erase("pmsc.subspace_kind");
+  auto old_loaded = load(older, "old.anim");
+  ASSERT_TRUE(old_loaded.ok()) << old_loaded.error().message;
+  EXPECT_EQ(old_loaded->subspace_kind, SubspaceKind::kLinear);
+
+  // The training options round-trip the kind and its counts, for retraining.
+  TrainingOptions options = arm.options(SubspaceKind::kArticulated);
+  options.residual_components = 3;
+  container::ModelContainer with_options;
+  store_training_options(options, with_options);
+  auto read = load_training_options(with_options, "m");
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  EXPECT_EQ(read->subspace_kind, SubspaceKind::kArticulated);
+  EXPECT_EQ(read->bone_count, 2);
+  EXPECT_EQ(read->residual_components, 3);
+}
+
+TEST(ArticulatedSubspace, OptionsItCannotHonourAreRefusedByName) {
+  const ArmCase arm;
+  const auto message = [&](TrainingOptions o, const FrameMatrix& frames) {
+    auto model = train(frames, o, nullptr);
+    return model.ok() ? std::string("trained") : model.error().message;
+  };
+  TrainingOptions o = arm.options(SubspaceKind::kArticulated);
+  o.remove_rigid_motion = true;
+  EXPECT_NE(message(o, arm.training).find("remove_rigid_motion"), std::string::npos);
+  o = arm.options(SubspaceKind::kArticulated);
+  o.bone_count = -1;
+  EXPECT_NE(message(o, arm.training).find("bone_count"), std::string::npos);
+  o = arm.options(SubspaceKind::kArticulated);
+  o.residual_components = -2;
+  EXPECT_NE(message(o, arm.training).find("residual_components"), std::string::npos);
+  o = arm.options(SubspaceKind::kArticulated);
+  o.bone_count = static_cast<int>(arm.rig.rest.V.rows()) + 1;
+  EXPECT_NE(message(o, arm.training).find("bone_count"), std::string::npos);
+  o = arm.options(SubspaceKind::kArticulated);
+  o.channel_count = 1;
+  EXPECT_NE(message(o, arm.training).find("3 channels"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace animspace::pmsc
