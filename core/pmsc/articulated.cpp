@@ -95,8 +95,11 @@ Result<ArticulatedSkinning> fit_articulated_skinning(const FrameMatrix& frames, 
   segmentation_options.bone_count = bone_count;
   auto segmentation = animation_space::segment_rigid_parts(rest_float, faces, frames, segmentation_options);
   if (!segmentation) return segmentation.error();
-  auto decomposition = animation_space::decompose_skinning(rest_float, faces, frames, segmentation->labels,
-                                                           segmentation->transforms, {}, nullptr, progress);
+  animation_space::DecompositionOptions decomposition_options;
+  decomposition_options.tolerance = kDecompositionTolerance;
+  auto decomposition =
+      animation_space::decompose_skinning(rest_float, faces, frames, segmentation->labels, segmentation->transforms,
+                                          decomposition_options, nullptr, progress);
   if (!decomposition) return decomposition.error();
   const animation_space::InfluenceSets& influences = decomposition->weights.influences;
   const Eigen::VectorXd& weights = decomposition->weights.weights;

@@ -39,13 +39,18 @@ inline constexpr int kBoneCoordinates = 12;
 // coordinate, and never more than kMaxKeyFraction of the points (issue #51).
 inline constexpr double kKeyEquationsPerUnknown = 4.5;
 inline constexpr double kMaxKeyFraction = 0.08;
-// Bones when the caller does not choose: as many rigid parts as the skinning benchmark's rows
-// fit within about 2% of the diagonal (docs/BENCHMARKS.md, skinning decomposition), and never
-// more than one bone per kPointsPerBone points, so that the key ceiling still gives
-// kKeyEquationsPerUnknown equations for each bone's 12 numbers with a fifth of it left for the
-// residual components: 3 · kMaxKeyFraction · 250 / 4.5 = 13.3 ≥ 12 · 1.1.
-inline constexpr int kArticulatedDefaultBones = 24;
+// Bones when the caller does not choose: 32 (the skinning benchmark fits horse-gallop's 48 frames
+// with 30 bones within 1.3 of 100 units RMS, docs/BENCHMARKS.md; on crane's first 60%, 32 bones
+// left 0.17% of the diagonal RMS where 24 left 0.22%), and never more than one bone per
+// kPointsPerBone points, so that the key ceiling still gives kKeyEquationsPerUnknown equations
+// for each bone's 12 numbers with room for the residual components:
+// 12 · 4.5 / 3 = 18 keys per bone ≤ kMaxKeyFraction · 250 = 20.
+inline constexpr int kArticulatedDefaultBones = 32;
 inline constexpr int kPointsPerBone = 250;
+// The skinning decomposition stops once an iteration lowers its error by less than this fraction:
+// what the last percent would fit, the residual components take up (crane's first 60%, 32 bones:
+// 0.173% of the diagonal RMS in 5 s, against 0.171% in 28 s at the decomposition's own 1e-3).
+inline constexpr double kDecompositionTolerance = 1e-2;
 // The residual components' count: the smallest r whose held-out projection error (blocks and
 // interleaved frames the fold did not see) is within this fraction of the largest r's.
 inline constexpr double kResidualHeldOutSlack = 0.05;

@@ -492,6 +492,12 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   if (articulated) {
     // Every bone's 12 numbers fixed by its own points first; then keys enough for
     // kKeyEquationsPerUnknown equations per coordinate, never over kMaxKeyFraction of the points.
+    // The selection runs to that count: every training frame is inside the articulated subspace
+    // (its own transforms and residual coefficients fit it), so its error bound is met early and
+    // says nothing of new motion, where each key's equations steady the least squares (crane,
+    // 32 bones, trained on 60%: 272 keys at the bound, 0.95% of the diagonal median worst-point
+    // error on the rest; 638 keys, 0.75%).
+    key_options.error_bound = 0;
     for (int point : skinning.coverage_points) key_options.seed_points.push_back(point);
     const int needed = static_cast<int>(std::ceil(kKeyEquationsPerUnknown * M / D));
     const int ceiling = std::max(1, static_cast<int>(kMaxKeyFraction * static_cast<double>(control_points)));
@@ -728,7 +734,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
                                              .maxCoeff()));
       }
     }
-    report->converged = selection->converged;
+    // (The articulated selection runs past the bound to its key count: converged is whether it
+    // ended within the bound.)
+    report->converged = articulated ? report->max_training_error <= o.error_bound : selection->converged;
     report->projection_error = projection_error;
     report->basis_capped = o.basis_size <= 0 && M == chosen_cap && projection_error > 0.5 * o.error_bound;
     report->condition_number = model.condition_number;

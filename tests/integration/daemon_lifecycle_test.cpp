@@ -390,16 +390,19 @@ TEST(DaemonStartup, ServesTheBundledDemoWithNoRepositoryFlag) {
   Client client(daemon.address());
   wait_until_serving(client);
   const auto models = client.list_models();
-  // The five arm models, the Cornell box's illumination and the subdivided arm with its atlas.
-  ASSERT_EQ(models.size(), 7u);
+  // The five arm models, the articulated arm, the Cornell box's illumination and the subdivided
+  // arm with its atlas.
+  ASSERT_EQ(models.size(), 8u);
   for (const auto& model : models) {
     EXPECT_EQ(model.versions(0).state(), v1::VERSION_STATE_AVAILABLE) << model.name() << ": " << model.versions(0).error();
   }
   EXPECT_EQ(models[0].name(), "arm");
-  EXPECT_EQ(models[5].name(), "arm-smooth");
-  EXPECT_EQ(models[5].versions(0).kind(), v1::MODEL_KIND_ANIMATION_SPACE);
-  EXPECT_EQ(models[6].name(), "cornell");
-  EXPECT_EQ(models[6].versions(0).server_engine(), v1::SERVER_ENGINE_ILLUMINATION);
+  EXPECT_EQ(models[2].name(), "arm-articulated");
+  EXPECT_EQ(models[2].versions(0).subspace_kind(), v1::SUBSPACE_KIND_ARTICULATED);
+  EXPECT_EQ(models[6].name(), "arm-smooth");
+  EXPECT_EQ(models[6].versions(0).kind(), v1::MODEL_KIND_ANIMATION_SPACE);
+  EXPECT_EQ(models[7].name(), "cornell");
+  EXPECT_EQ(models[7].versions(0).server_engine(), v1::SERVER_ENGINE_ILLUMINATION);
   daemon.send_signal(SIGTERM);
   EXPECT_EQ(daemon.wait_for_exit(std::chrono::seconds(15)), 0) << daemon.log();
 }

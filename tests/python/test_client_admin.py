@@ -66,7 +66,7 @@ def test_bearer_tokens_and_admin_tokens(spawn_daemon, tmp_path):
             stranger.list_models()
     with animspace.Client(address, token="user-secret") as user:
         assert user.metadata == (("authorization", "Bearer user-secret"),)
-        assert len(user.list_models()) == 7
+        assert len(user.list_models()) == 8
         assert user.get_lod("arm-animspace", level=2).vertex_count > 0
         for admin_only in (lambda: user.unload_model("arm"), lambda: user.stats(reset=True),
                            lambda: user.retrain("arm-pmsc", dry_run=True)):
@@ -104,7 +104,7 @@ def test_mutual_tls_with_a_server_name_override(spawn_daemon, tmp_path):
     with animspace.Client(address, root_certificates=ca, client_certificate=(tmp_path / "client.pem").read_text(),
                           client_key=(tmp_path / "client.key").read_bytes(), server_name="animspace.test") as client:
         client.wait_until_serving()
-        assert len(client.list_models()) == 7
+        assert len(client.list_models()) == 8
     refused = [
         animspace.Client(address, deadline_s=5),  # plaintext
         animspace.Client(address, root_certificates=ca, server_name="animspace.test", deadline_s=5),  # no client cert

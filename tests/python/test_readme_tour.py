@@ -89,3 +89,50 @@ def test_the_nightly_retrain_of_the_tour_logs_misses_folds_them_in_and_refuses_a
         assert again.returncode != 0
         assert "FAILED_PRECONDITION" in again.stderr and "nothing new to train on" in again.stderr, again.stderr
         assert not (tmp_path / "repo" / "crane" / "3").exists()
+
+
+def new_shots_block():
+    """The command lines of the README paragraph on new shots (issue #51)."""
+    text = (ROOT / "README.md").read_text()
+    start = text.index("# New shots (issue #51)")
+    block = text[start:text.index("\n\n", start)]
+    return [line for line in block.splitlines() if line.startswith("build/bin/")]
+
+
+@pytest.mark.skipif(not (SHARED_DATA / "crane" / "frames.pc2").exists(),
+                    reason="needs ../shared/data/crane (reference data), absent here")
+def test_the_new_shots_of_the_tour_hit_where_the_linear_kind_misses(tmp_path):
+    lines = new_shots_block()
+    train = next(line for line in lines if " train-pmsc " in line)
+    done = run(train, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert re.search(r"articulated: \d+ bones \(12 coordinates each\) \+ \d+ residual components", done.stdout), done.stdout
+    # The linear kind on the same frames, as the nightly block trains it, beside it in the same run.
+    linear = train.replace(" --subspace articulated", " --align").replace("repo-new-shots", "repo-linear")
+    done = run(linear, tmp_path)
+    assert done.returncode == 0, done.stderr
+
+    daemon_line = next(line for line in lines if line.startswith("build/bin/animspaced "))
+    repositories = {"articulated": "repo-new-shots", "linear": "repo-linear"}
+    hits = {}
+    for kind, repository in repositories.items():
+        work = tmp_path / kind
+        work.mkdir()
+        with run_animspaced(work, "--model-repository", str(tmp_path / repository)) as address:
+            deadline = time.time() + 120
+            while animspace.Client(address).health() != "SERVING":
+                assert time.time() < deadline, "the daemon never served its repository"
+                time.sleep(0.05)
+            for line in lines[lines.index(daemon_line) + 1:]:
+                if line.startswith("until "):
+                    continue
+                line = line.replace("127.0.0.1:50053", "127.0.0.1:50052")  # run() puts the daemon's address there
+                done = run(line, tmp_path, address)
+                assert done.returncode == 0, (line, done.stderr)
+                if " describe " in line and kind == "articulated":
+                    assert "subspace: articulated, " in done.stdout, done.stdout
+                if " play " in line:
+                    counts = re.search(r"hits (\d+), blends (\d+), misses (\d+)", done.stdout)
+                    assert counts and sum(map(int, counts.groups())) == 70, done.stdout  # frames 105–174
+                    hits[kind] = int(counts.group(1))
+    assert hits["articulated"] > hits["linear"], hits

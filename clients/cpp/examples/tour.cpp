@@ -136,9 +136,11 @@ int main(int argc, char** argv) try {
   // reconstructed exactly as arm-pmsc's; here both are set against the rig's full pose.
   const animspace::v1::ModelVersion articulated = client.describe_model("arm-articulated").versions(0);
   const animspace::KeyPoints articulated_keys = client.describe_key_points("arm-articulated");
-  const animspace::KeyPointPose articulated_pose{.key_values = articulated_keys.gather(full),
+  const std::vector<float> articulated_values = articulated_keys.gather(full);
+  const std::vector<float> articulated_checks = articulated_keys.gather_check_values(full);
+  const animspace::KeyPointPose articulated_pose{.key_values = articulated_values,
                                                  .channel_count = articulated_keys.channel_count,
-                                                 .check_values = articulated_keys.gather_check_values(full)};
+                                                 .check_values = articulated_checks};
   animspace::PoseResult articulated_answer =
       client.evaluate_key_points("arm-articulated", articulated_pose, coordinate_options);
   const size_t articulated_sent = articulated_answer.coordinates.p.size();

@@ -211,6 +211,66 @@ TEST(ArticulatedSubspace, AModelFileKeepsItsKindAndOlderFilesAreLinear) {
   EXPECT_EQ(read->residual_components, 3);
 }
 
+// `--subspace auto`: both kinds trained, the one within the tolerance more often on the held-out
+// blocks kept; the fractions counted here from each model's own samples.
+TEST(ArticulatedSubspace, AutoKeepsTheKindBetterOnHeldOutBlocksAndSaysWhy) {
+  const ArmCase arm;
+  // Sequential frames (the elbow bending further frame by frame), so that a held-out block is
+  // motion the rest of the training did not show.
+  std::vector<demo::ArmPose> sweep(48);
+  for (size_t f = 0; f < sweep.size(); ++f) {
+    sweep[f].elbow_angle_rad = 100 * kDegree * static_cast<double>(f) / 47;
+    sweep[f].shoulder_angle_rad = 20 * kDegree * std::sin(0.2 * static_cast<double>(f));
+  }
+  const FrameMatrix frames = arm_frames(arm.rig, sweep);
+  TrainingOptions options = arm.options(SubspaceKind::kArticulated);
+  SubspaceChoice choice;
+  TrainingReport report;
+  auto model = train_best_kind(frames, options, &report, &choice);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+
+  const auto block_fraction = [&](SubspaceKind kind) {
+    TrainingOptions o = options;
+    o.subspace_kind = kind;
+    auto trained = train(frames, o, nullptr);
+    EXPECT_TRUE(trained.ok());
+    const CalibrationSamples& s = trained->calibration.samples;
+    double within = 0, count = 0;
+    for (long i = 0; i < s.size(); ++i) {
+      if (s.fold_family[static_cast<size_t>(i)] != kBlockFold) continue;
+      count += 1;
+      within += s.max_errors(i) <= options.error_tolerance ? 1 : 0;
+    }
+    return within / count;
+  };
+  const double linear = block_fraction(SubspaceKind::kLinear);
+  const double articulated = block_fraction(SubspaceKind::kArticulated);
+  EXPECT_DOUBLE_EQ(choice.linear_block_within_tolerance, linear);
+  EXPECT_DOUBLE_EQ(choice.articulated_block_within_tolerance, articulated);
+  EXPECT_EQ(choice.kind, articulated > linear ? SubspaceKind::kArticulated : SubspaceKind::kLinear);
+  EXPECT_EQ(model->subspace_kind, choice.kind);
+  // The arm is skinning: its held-out blocks stay inside the articulated subspace.
+  EXPECT_GT(articulated, linear);
+  EXPECT_NE(choice.reason.find("held-out blocks"), std::string::npos) << choice.reason;
+  EXPECT_EQ(report.bones, model->bone_count);
+}
+
+// The same frames and options give the same model, bit for bit: a retrain reproduces it.
+TEST(ArticulatedSubspace, TrainingIsDeterministic) {
+  const ArmCase arm;
+  TrainingOptions options = arm.options(SubspaceKind::kArticulated);
+  options.bone_count = 0;  // by rule, 4 bones for the arm's 1154 points
+  auto first = train(arm.training, options, nullptr);
+  auto second = train(arm.training, options, nullptr);
+  ASSERT_TRUE(first.ok() && second.ok());
+  EXPECT_EQ(first->bone_count, default_bone_count(arm.rig.rest.V.rows()));
+  EXPECT_EQ(first->key_points, second->key_points);
+  EXPECT_EQ(first->check_points, second->check_points);
+  EXPECT_TRUE(first->basis == second->basis);
+  EXPECT_TRUE(first->mean == second->mean);
+  EXPECT_EQ(first->epsilon.epsilon_min, second->epsilon.epsilon_min);
+}
+
 TEST(ArticulatedSubspace, OptionsItCannotHonourAreRefusedByName) {
   const ArmCase arm;
   const auto message = [&](TrainingOptions o, const FrameMatrix& frames) {
