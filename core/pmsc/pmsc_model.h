@@ -126,6 +126,14 @@ struct PmscModel {
   Eigen::MatrixXd check_basis;
   // Relative-tolerance models only: AᵀA (M × M), so that S costs M² and not a reconstruction.
   Eigen::MatrixXd basis_gram;
+  // Articulated models only: the basis's skinning columns read back as each point's influences,
+  // so that a reconstruction costs a few terms per point instead of 12·B columns (issue #51):
+  // point i's bones are skinning_bones[skinning_offsets[i] … skinning_offsets[i + 1]) (0-based,
+  // columns 12·j …), each with its four numbers h = w·(p̂ − c, 1) in skinning_terms (4 per
+  // influence), and f̂_i = mean_i + Σ_j M_j h_ij + (residual rows) · p_residual.
+  std::vector<int32_t> skinning_offsets;
+  std::vector<int32_t> skinning_bones;
+  Eigen::VectorXf skinning_terms;
 
   int basis_size() const { return static_cast<int>(basis.cols()); }
   int key_point_count() const { return static_cast<int>(key_points.size()); }

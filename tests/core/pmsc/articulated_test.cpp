@@ -271,6 +271,47 @@ TEST(ArticulatedSubspace, TrainingIsDeterministic) {
   EXPECT_EQ(first->epsilon.epsilon_min, second->epsilon.epsilon_min);
 }
 
+// The server reconstructs an articulated answer from each point's skinning terms, a client from
+// the whole basis (coordinates.h): both are f̂ = mean + A p, here against that sum in double, alone
+// and in a batch, within the bound pmsc_model.h states for any order of the float additions.
+TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
+  const ArmCase arm;
+  auto model = train(arm.training, arm.options(SubspaceKind::kArticulated), nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  ASSERT_EQ(model->skinning_offsets.size(), static_cast<size_t>(model->point_count) + 1);
+  std::vector<PoseEstimate> estimates(static_cast<size_t>(arm.new_shot.rows()));
+  std::vector<const PoseEstimate*> inputs;
+  Eigen::MatrixXf points(model->mean.size(), arm.new_shot.rows());
+  std::vector<float*> destinations;
+  for (long f = 0; f < arm.new_shot.rows(); ++f) {
+    estimate_coordinates(*model, gather_key_values(*model, arm.new_shot.row(f).transpose()), estimates[f]);
+    inputs.push_back(&estimates[f]);
+    destinations.push_back(points.col(f).data());
+  }
+  reconstruct(*model, inputs, destinations);  // one batch
+  const double u = reconstruction_rounding_bound(model->basis_size());
+  const Eigen::MatrixXd A = model->basis.cast<double>();
+  for (long f = 0; f < arm.new_shot.rows(); ++f) {
+    const Eigen::VectorXd p = estimates[f].coordinates.cast<float>().cast<double>();
+    const Eigen::VectorXd exact = model->mean.cast<double>() + A * p;
+    const Eigen::VectorXd bound = u * (model->mean.cast<double>().cwiseAbs() + A.cwiseAbs() * p.cwiseAbs());
+    Eigen::VectorXf alone(model->mean.size());
+    float* destination = alone.data();
+    const PoseEstimate* input = &estimates[f];
+    reconstruct(*model, {&input, 1}, {&destination, 1});
+    EXPECT_TRUE(((points.col(f).cast<double>() - exact).cwiseAbs().array() <= bound.array()).all())
+        << "frame " << f << ": " << ((points.col(f).cast<double>() - exact).cwiseAbs() - bound).maxCoeff() << " over";
+    EXPECT_TRUE(((alone.cast<double>() - exact).cwiseAbs().array() <= bound.array()).all()) << "frame " << f;
+  }
+
+  // A basis whose bone columns are not of the skinning form is refused, naming the point.
+  PmscModel corrupt = *model;
+  corrupt.basis(3 * 5 + 1, 0) += 0.25f;  // point 5's y row in bone 0's x columns
+  const Status refused = prepare_projection(corrupt);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("point 5, bone 0"), std::string::npos) << refused.error().message;
+}
+
 TEST(ArticulatedSubspace, OptionsItCannotHonourAreRefusedByName) {
   const ArmCase arm;
   const auto message = [&](TrainingOptions o, const FrameMatrix& frames) {
