@@ -111,20 +111,27 @@ pmsc::TrainingOptions demo_training_options(const TriangleMesh& rest) {
   return options;
 }
 
-Result<container::ModelContainer> make_pmsc_demo(int frames, bool cross) {
+// arm-pmsc, arm-cross-pmsc (`cross`) and arm-articulated (`kind`): the same frames and options.
+Result<container::ModelContainer> make_pmsc_demo(int frames, bool cross,
+                                                 pmsc::SubspaceKind kind = pmsc::SubspaceKind::kLinear) {
   FrameMatrix expensive, linear_blend;
   TriangleMesh rest;
   pose_animation(frames, &expensive, cross ? &linear_blend : nullptr, &rest);
   const FrameMatrix output = even_rows(expensive);
   const FrameMatrix control = cross ? even_rows(linear_blend) : FrameMatrix();
-  const pmsc::TrainingOptions options = demo_training_options(rest);
+  pmsc::TrainingOptions options = demo_training_options(rest);
+  options.subspace_kind = kind;
+  if (kind == pmsc::SubspaceKind::kArticulated) options.faces = rest.F;
   pmsc::TrainingReport report;
   auto model = cross ? pmsc::train_cross(control, output, options, &report) : pmsc::train(output, options, &report);
   if (!model) return model.error();
   const std::string description =
       cross ? "Cross-PMSC: key points of the linear-blend-skinned arm drive the expensive rig's arm "
               "(no fail-through possible)."
-            : "PMSC soft cache of the bending arm's expensive rig, trained on every other demo frame.";
+      : kind == pmsc::SubspaceKind::kArticulated
+          ? "Articulated PMSC soft cache of the bending arm's expensive rig: bone transforms and residual "
+            "components, trained on every other demo frame."
+          : "PMSC soft cache of the bending arm's expensive rig, trained on every other demo frame.";
   auto container = pmsc::make_container(rest, output, cross ? &control : nullptr, *model, report, description);
   pmsc::store_training_options(options, container);
   container.metadata()["generator"] = "animspace demo bending arm";
@@ -352,25 +359,7 @@ Status write_demo_smooth(const std::filesystem::path& repository) {
 }
 
 Result<container::ModelContainer> make_demo_articulated_container(int frames) {
-  FrameMatrix expensive;
-  TriangleMesh rest;
-  pose_animation(frames, &expensive, nullptr, &rest);
-  const FrameMatrix output = even_rows(expensive);
-  pmsc::TrainingOptions options = demo_training_options(rest);
-  options.subspace_kind = pmsc::SubspaceKind::kArticulated;
-  options.faces = rest.F;
-  pmsc::TrainingReport report;
-  auto model = pmsc::train(output, options, &report);
-  if (!model) return model.error();
-  auto container = pmsc::make_container(
-      rest, output, nullptr, *model, report,
-      "Articulated PMSC soft cache of the bending arm's expensive rig: bone transforms and residual components, "
-      "trained on every other demo frame.");
-  pmsc::store_training_options(options, container);
-  container.metadata()["generator"] = "animspace demo bending arm";
-  container.metadata()["units"] = "arbitrary (arm length 2)";
-  container.metadata()["up_axis"] = "y";
-  return container;
+  return make_pmsc_demo(frames, false, pmsc::SubspaceKind::kArticulated);
 }
 
 Status write_demo_articulated(const std::filesystem::path& repository) {
