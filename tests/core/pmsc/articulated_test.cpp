@@ -12,6 +12,7 @@
 #include "core/container/model_container.h"
 #include "core/demo/bending_arm.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/retrain.h"
 #include "core/pmsc/train.h"
 
 namespace animspace::pmsc {
@@ -310,6 +311,29 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
   const Status refused = prepare_projection(corrupt);
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.error().message.find("point 5, bone 0"), std::string::npos) << refused.error().message;
+}
+
+// "Train each night": misses of a new shot folded into an articulated model keep it articulated
+// (its kind and counts from the stored options, its faces from mesh.faces), and the rest of the
+// shot stays inside its tolerance.
+TEST(ArticulatedSubspace, ARetrainKeepsTheKind) {
+  const ArmCase arm;
+  TrainingOptions options = arm.options(SubspaceKind::kArticulated);
+  TrainingReport report;
+  auto model = train(arm.training, options, &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  container::ModelContainer current = make_container(arm.rig.rest, arm.training, nullptr, *model, report, "arm");
+  store_training_options(options, current);
+  const FrameMatrix misses = arm.new_shot.topRows(20);
+  auto retrained = retrain(current, 1, misses, 20, {}, "arm/1");
+  ASSERT_TRUE(retrained.ok()) << retrained.error().message;
+  auto loaded = load(retrained->container, "arm/2");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->subspace_kind, SubspaceKind::kArticulated);
+  EXPECT_EQ(loaded->bone_count, 2);
+  EXPECT_EQ(retrained->training_frames, arm.training.rows() + 20);
+  // The rest of the new shot, which neither version trained on.
+  EXPECT_LT(worst_point_error(*loaded, arm.new_shot.bottomRows(20)), 0.01 * arm.diagonal);
 }
 
 TEST(ArticulatedSubspace, OptionsItCannotHonourAreRefusedByName) {
