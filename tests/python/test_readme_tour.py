@@ -24,12 +24,12 @@ def nightly_block():
     return [line for line in block.splitlines() if line.startswith("build/bin/")]
 
 
-def run(line, tmp_path, address=None):
+def run(line, tmp_path, address=None, timeout=300):
     line = line.split("  #", 1)[0].strip()
     line = line.replace("build/bin/", f"{BUILD}/bin/").replace("/tmp/", f"{tmp_path}/")
     if address:
         line = line.replace("127.0.0.1:50052", address)
-    done = subprocess.run(shlex.split(line), cwd=ROOT, capture_output=True, text=True, timeout=300)
+    done = subprocess.run(shlex.split(line), cwd=ROOT, capture_output=True, text=True, timeout=timeout)
     return done
 
 
@@ -104,7 +104,8 @@ def new_shots_block():
 def test_the_new_shots_of_the_tour_hit_where_the_linear_kind_misses(tmp_path):
     lines = new_shots_block()
     train = next(line for line in lines if " train-pmsc " in line)
-    done = run(train, tmp_path)
+    # About 20 s in a release build; the sanitized builds' Eigen at -O1 are many times slower.
+    done = run(train, tmp_path, timeout=1800)
     assert done.returncode == 0, done.stderr
     assert re.search(r"articulated: \d+ bones \(12 coordinates each\) \+ \d+ residual components", done.stdout), done.stdout
     # The linear kind on the same frames, as the nightly block trains it, beside it in the same run.
