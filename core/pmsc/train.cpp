@@ -191,6 +191,17 @@ Eigen::VectorXd held_out_projection_curve(const Eigen::MatrixXd& G, const std::v
   return residual;
 }
 
+// The smallest size k ≥ first whose held-out relative RMS error rms[k] is within (1 + slack) of
+// the best size's ≥ first: how many directions are worth their cost, for the linear basis (issue
+// #38 item 3) and for the articulated kind's residual components (issue #51).
+int smallest_within_slack(const std::vector<double>& rms, int first, double slack) {
+  const double best = *std::min_element(rms.begin() + first, rms.end());
+  for (size_t k = static_cast<size_t>(first); k < rms.size(); ++k) {
+    if (rms[k] <= (1 + slack) * best) return static_cast<int>(k);
+  }
+  return static_cast<int>(rms.size()) - 1;
+}
+
 // The direction a relative-tolerance model adds to an affine subspace (PmscModel::
 // relative_tolerance): the mean's component orthogonal to the basis (orthonormal, as PCA and
 // fold_subspace give it), normalised (twice Gram–Schmidt), or an empty vector when the mean is
@@ -401,14 +412,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     if (centred_energy > 0) {
       held_out_rms.resize(static_cast<size_t>(M_max + 1));
       for (int k = 0; k <= M_max; ++k) held_out_rms[static_cast<size_t>(k)] = std::sqrt(residual(k) / centred_energy);
-      const double best = *std::min_element(held_out_rms.begin() + 1, held_out_rms.end());
-      M = M_max;
-      for (int k = 1; k <= M_max; ++k) {
-        if (held_out_rms[static_cast<size_t>(k)] <= (1 + o.held_out_basis_slack) * best) {
-          M = k;
-          break;
-        }
-      }
+      M = smallest_within_slack(held_out_rms, 1, o.held_out_basis_slack);
     }
   }
   // M from the error bound: when asked for, or when the held-out rule had no held-out energy to
@@ -449,11 +453,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
       const Eigen::VectorXd curve =
           held_out_projection_curve(residual_gram, held_out_frames, kept_frames, residual_cap, centred_energy);
       residual_count = residual_cap;
-      for (int k = 0; k <= residual_cap && centred_energy > 0; ++k) {
-        if (curve(k) <= (1 + kResidualHeldOutSlack) * (1 + kResidualHeldOutSlack) * curve(residual_cap)) {
-          residual_count = k;
-          break;
-        }
+      if (centred_energy > 0) {
+        std::vector<double> rms(static_cast<size_t>(residual_cap + 1));
+        for (int k = 0; k <= residual_cap; ++k) rms[static_cast<size_t>(k)] = std::sqrt(curve(k) / centred_energy);
+        residual_count = smallest_within_slack(rms, 0, kResidualHeldOutSlack);
       }
     }
     std::vector<long> every_frame(static_cast<size_t>(F));
