@@ -15,7 +15,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
+#include <memory>
 #include <numbers>
 #include <random>
 #include <string>
@@ -33,6 +35,7 @@
 #include "core/pmsc/calibration.h"
 #include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pca.h"
+#include "core/pmsc/subspace.h"
 #include "core/pmsc/train.h"
 
 namespace animspace::bench {
@@ -197,14 +200,41 @@ nlohmann::json estimator_json(const NamedEstimator& e, const Verdicts& v, double
            e.name == "key" || e.name == "key_bad_frames" ? 0.0 : static_cast<double>(check_points) / key_points}};
 }
 
+// The server's runtime of a trained model (core/pmsc/subspace.h): what every timing and every
+// verdict below goes through, as in the daemon.
+std::shared_ptr<const pmsc::Subspace> served_runtime(const pmsc::PmscModel& model) {
+  auto runtime = pmsc::make_subspace(std::make_shared<const pmsc::PmscModel>(model));
+  if (!runtime) {
+    std::fprintf(stderr, "pmsc: a trained model has no runtime: %s\n", runtime.error().message.c_str());
+    std::abort();
+  }
+  return *runtime;
+}
+
+// Eq. 2 for each column of `keys`, then one reconstruction of them all, as a server's batch.
+void serve_batch(const pmsc::Subspace& runtime, const Eigen::MatrixXf& keys, std::vector<pmsc::PoseEstimate>& estimates,
+                 Eigen::MatrixXf& points) {
+  const long B = keys.cols();
+  estimates.resize(static_cast<size_t>(B));
+  points.resize(runtime.model().mean.size(), B);
+  std::vector<const pmsc::PoseEstimate*> inputs(static_cast<size_t>(B));
+  std::vector<float*> destinations(static_cast<size_t>(B));
+  for (long b = 0; b < B; ++b) {
+    runtime.estimate(keys.col(b), Eigen::VectorXf(), estimates[static_cast<size_t>(b)]);
+    inputs[static_cast<size_t>(b)] = &estimates[static_cast<size_t>(b)];
+    destinations[static_cast<size_t>(b)] = points.col(b).data();
+  }
+  runtime.reconstruct(inputs, destinations);
+}
+
 // Poses test frames from their key and check points through the model's runtime.
-TestFrame measure_frame(const pmsc::PmscModel& model, const Eigen::VectorXf& truth, pmsc::PoseEstimate& estimate) {
-  pmsc::estimate_coordinates(model, pmsc::gather_key_values(model, truth), pmsc::gather_check_values(model, truth),
-                             estimate);
+TestFrame measure_frame(const pmsc::Subspace& runtime, const Eigen::VectorXf& truth, pmsc::PoseEstimate& estimate) {
+  const pmsc::PmscModel& model = runtime.model();
+  runtime.estimate(pmsc::gather_key_values(model, truth), pmsc::gather_check_values(model, truth), estimate);
   Eigen::VectorXf points(model.mean.size());
   const pmsc::PoseEstimate* input = &estimate;
   float* destination = points.data();
-  pmsc::reconstruct(model, {&input, 1}, {&destination, 1});
+  runtime.reconstruct({&input, 1}, {&destination, 1});
   TestFrame t;
   const Eigen::VectorXf residual = truth - points;
   t.point_errors = Eigen::Map<const Eigen::Matrix3Xf>(residual.data(), 3, model.point_count).colwise().norm();
@@ -257,10 +287,11 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
   std::vector<TestFrame> frames;
   std::vector<Eigen::VectorXf> test_keys;
   pmsc::PoseEstimate estimate;
+  const auto runtime = served_runtime(*model);
   for (int f : split.test) {
     const Eigen::VectorXf truth = all.row(f).transpose();
     test_keys.push_back(pmsc::gather_key_values(*model, truth));
-    frames.push_back(measure_frame(*model, truth, estimate));
+    frames.push_back(measure_frame(*runtime, truth, estimate));
     max_error_over_diag.push_back(frames.back().max_error / frames.back().diagonal);
   }
   const double test_count = static_cast<double>(split.test.size());
@@ -369,11 +400,16 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
   const Eigen::VectorXf x = Eigen::VectorXf::Random(model->basis_size());
   Eigen::VectorXf y(model->basis.rows());
   std::vector<double> reconstruct_times, gemv_times;
+  Eigen::VectorXf served(model->mean.size());
   for (int repetition = 0; repetition < repetitions; ++repetition) {
     reconstruct_times.push_back(median_seconds(1, [&] {
       for (int i = 0; i < 16; ++i) {
-        pmsc::evaluate(*model, test_keys[static_cast<size_t>(next++ % static_cast<long>(test_keys.size()))], estimate);
-        do_not_optimize(estimate.points.data());
+        runtime->estimate(test_keys[static_cast<size_t>(next++ % static_cast<long>(test_keys.size()))],
+                          Eigen::VectorXf(), estimate);
+        const pmsc::PoseEstimate* input = &estimate;
+        float* destination = served.data();
+        runtime->reconstruct({&input, 1}, {&destination, 1});
+        do_not_optimize(served.data());
       }
     }) / 16);
     gemv_times.push_back(median_seconds(1, [&] {
@@ -388,9 +424,9 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
   Eigen::MatrixXf batch_keys(model->key_mean.size(), 64);
   for (long b = 0; b < 64; ++b) batch_keys.col(b) = test_keys[static_cast<size_t>(b) % test_keys.size()];
   Eigen::MatrixXf batch_points;
-  Eigen::VectorXd batch_errors;
+  std::vector<pmsc::PoseEstimate> batch_estimates;
   const double batch_seconds = median_seconds(std::max(3, repetitions / 3), [&] {
-    pmsc::evaluate_batch(*model, batch_keys, batch_points, batch_errors);
+    serve_batch(*runtime, batch_keys, batch_estimates, batch_points);
     do_not_optimize(batch_points.data());
   });
 
@@ -532,13 +568,14 @@ std::vector<nlohmann::json> run_cow_extrapolation(const std::filesystem::path& d
   const double tolerance_diag = options.error_tolerance / diagonal;
   std::vector<TestFrame> pooled;
   const std::vector<NamedEstimator> estimators = calibrated_estimators(*model, options.error_tolerance);
+  const auto runtime = served_runtime(*model);
   uint64_t seed = 3500;
   for (double angle : kCowTestAngles) {
     const FrameMatrix test = cow_frames(rig->model, kCowTestPoses, angle, ++seed);
     std::vector<TestFrame> frames;
     pmsc::PoseEstimate estimate;
     for (long f = 0; f < test.rows(); ++f) {
-      frames.push_back(measure_frame(*model, test.row(f).transpose(), estimate));
+      frames.push_back(measure_frame(*runtime, test.row(f).transpose(), estimate));
       frames.back().diagonal = diagonal;  // one tolerance for every pose: 1% of the rest diagonal
       frames.back().point_errors.resize(0);
     }

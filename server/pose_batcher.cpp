@@ -22,14 +22,14 @@ PoseBatcher::~PoseBatcher() {
   assert(lanes_.empty());  // every group was awaited or withdrawn
 }
 
-void PoseBatcher::enqueue(const pmsc::PmscModel& model, std::span<const Pose> poses, Group& group) {
+void PoseBatcher::enqueue(const pmsc::Subspace& subspace, std::span<const Pose> poses, Group& group) {
   std::lock_guard lock(mutex_);
   assert(group.remaining_ == 0);
   group.batcher_ = this;
-  group.model_ = &model;
+  group.subspace_ = &subspace;
   group.remaining_ = poses.size();
   if (poses.empty()) return;
-  Lane& lane = lanes_[&model];
+  Lane& lane = lanes_[&subspace];
   for (const Pose& pose : poses) lane.waiting.push_back({pose, &group});
   // A thread holding a batch open for `delay` may now have enough.
   if (options_.delay.count() > 0) changed_.notify_all();
@@ -38,15 +38,15 @@ void PoseBatcher::enqueue(const pmsc::PmscModel& model, std::span<const Pose> po
 void PoseBatcher::await(Group& group) {
   std::unique_lock lock(mutex_);
   while (group.remaining_ > 0) {
-    auto lane = lanes_.find(group.model_);
+    auto lane = lanes_.find(group.subspace_);
     assert(lane != lanes_.end());
     const size_t waiting = lane->second.waiting.size();
     if (lane->second.batching || waiting == 0) {
       changed_.wait(lock);  // a batch is being taken or holds this group's poses
     } else if (waiting >= options_.min_batch || options_.delay.count() > 0) {
-      compute(lock, *group.model_, lane->second, nullptr);
+      compute(lock, *group.subspace_, lane->second, nullptr);
     } else {
-      compute(lock, *group.model_, lane->second, &group);
+      compute(lock, *group.subspace_, lane->second, &group);
     }
   }
 }
@@ -54,7 +54,7 @@ void PoseBatcher::await(Group& group) {
 void PoseBatcher::withdraw(Group& group) {
   std::unique_lock lock(mutex_);
   if (group.remaining_ == 0) return;
-  auto lane = lanes_.find(group.model_);
+  auto lane = lanes_.find(group.subspace_);
   assert(lane != lanes_.end());
   auto& waiting = lane->second.waiting;
   const auto removed = std::remove_if(waiting.begin(), waiting.end(), [&](const Job& job) { return job.group == &group; });
@@ -66,7 +66,7 @@ void PoseBatcher::withdraw(Group& group) {
   changed_.wait(lock, [&] { return group.remaining_ == 0; });
 }
 
-void PoseBatcher::compute(std::unique_lock<std::mutex>& lock, const pmsc::PmscModel& model, Lane& lane,
+void PoseBatcher::compute(std::unique_lock<std::mutex>& lock, const pmsc::Subspace& subspace, Lane& lane,
                           const Group* own) {
   std::vector<Job> batch;
   if (own == nullptr) {
@@ -98,21 +98,18 @@ void PoseBatcher::compute(std::unique_lock<std::mutex>& lock, const pmsc::PmscMo
   std::vector<float*> destinations(size);
   for (size_t i = 0; i < size; ++i) {
     const Pose& pose = batch[i].pose;
-    if (pose.check_values != nullptr) {
-      pmsc::estimate_coordinates(model, *pose.key_values, *pose.check_values, *pose.estimate);
-    } else {
-      pmsc::estimate_coordinates(model, *pose.key_values, *pose.estimate);
-    }
+    static const Eigen::VectorXf kNoChecks;
+    subspace.estimate(*pose.key_values, pose.check_values != nullptr ? *pose.check_values : kNoChecks, *pose.estimate);
     estimates[i] = batch[i].pose.estimate;
     destinations[i] = batch[i].pose.points;
   }
-  pmsc::reconstruct(model, estimates, destinations);
+  subspace.reconstruct(estimates, destinations);
 
   lock.lock();
   for (const Job& job : batch) --job.group->remaining_;
   --lane.computing;
   if (own == nullptr) lane.batching = false;
-  if (lane.computing == 0 && lane.waiting.empty()) lanes_.erase(&model);
+  if (lane.computing == 0 && lane.waiting.empty()) lanes_.erase(&subspace);
   changed_.notify_all();
 }
 

@@ -1,7 +1,7 @@
 // Dynamic batching (issue #25; the role of Triton's dynamic batcher): the poses waiting for the
 // same served model version — a unary batch, concurrent unary calls, a stream's read-ahead — are
 // reconstructed as one matrix product, so the basis (crane: 7.3 MB) is read once per batch rather
-// than once per pose (core/pmsc/pmsc_model.h, `reconstruct`).
+// than once per pose (core/pmsc/subspace.h, `reconstruct`).
 //
 // A caller enqueues its poses (cheap, any thread) and later awaits them on a pool thread. There
 // is no batching thread: whoever awaits while nobody is taking a batch for that model takes what
@@ -30,7 +30,7 @@
 #include <Eigen/Core>
 
 #include "core/common/kernels.h"
-#include "core/pmsc/pmsc_model.h"
+#include "core/pmsc/subspace.h"
 
 namespace animspace::server {
 
@@ -66,7 +66,7 @@ class PoseBatcher {
    private:
     friend class PoseBatcher;
     PoseBatcher* batcher_ = nullptr;
-    const pmsc::PmscModel* model_ = nullptr;
+    const pmsc::Subspace* subspace_ = nullptr;
     size_t remaining_ = 0;  // poses not yet reconstructed (batcher's mutex)
   };
 
@@ -75,8 +75,8 @@ class PoseBatcher {
   PoseBatcher(const PoseBatcher&) = delete;
   PoseBatcher& operator=(const PoseBatcher&) = delete;
 
-  // Queues `poses` of `model` (which must outlive the group) into `group` (not in use).
-  void enqueue(const pmsc::PmscModel& model, std::span<const Pose> poses, Group& group);
+  // Queues `poses` of `subspace` (a model version's runtime, which must outlive the group) into `group` (not in use).
+  void enqueue(const pmsc::Subspace& subspace, std::span<const Pose> poses, Group& group);
   // Returns once every pose of `group` is estimated and reconstructed, taking and reconstructing
   // batches of the group's model itself whenever nobody else is.
   void await(Group& group);
@@ -98,12 +98,12 @@ class PoseBatcher {
 
   // Takes a batch from `lane` — everyone's poses, or only `own`'s when not null — and
   // reconstructs it; the lock is released while it computes.
-  void compute(std::unique_lock<std::mutex>& lock, const pmsc::PmscModel& model, Lane& lane, const Group* own);
+  void compute(std::unique_lock<std::mutex>& lock, const pmsc::Subspace& subspace, Lane& lane, const Group* own);
 
   const Options options_;
   mutable std::mutex mutex_;
   std::condition_variable changed_;
-  std::map<const pmsc::PmscModel*, Lane> lanes_;  // models with poses waiting or in a batch
+  std::map<const pmsc::Subspace*, Lane> lanes_;  // model versions with poses waiting or in a batch
 };
 
 }  // namespace animspace::server

@@ -6,7 +6,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/pmsc/coordinates.h"
-#include "core/pmsc/local_fail_through.h"
+#include "core/pmsc/subspace.h"
 #include "server/convert.h"
 #include "server/status_mapping.h"
 #include "server/unary_call.h"
@@ -47,14 +47,14 @@ pmsc::PartialFullCalculation partial_calculation(const LoadedModel& model, const
 }
 
 // The verdict and its numbers, as the wire names them.
-void write_verdict(const LoadedModel& model, const PoseOptions& options, const pmsc::CachedPose& cached,
+void write_verdict(const LoadedModel& model, const PoseOptions& options, const pmsc::PoseAnswer& answer,
                    v1::PoseResult* out) {
-  const pmsc::PmscModel& m = *model.pmsc;
+  const pmsc::CachedPose& cached = answer.cached;
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
   out->set_check_point_error(static_cast<float>(cached.check_point_error));
   out->set_error_estimate(static_cast<float>(cached.error_estimate));
-  if (m.relative_tolerance) out->set_pose_scale(static_cast<float>(cached.scale));
+  if (model.pmsc->relative_tolerance) out->set_pose_scale(static_cast<float>(cached.scale));
   out->set_checked(cached.checked);
   out->set_blend_weight(static_cast<float>(cached.alpha));
   out->set_model_version(model.version);
@@ -64,13 +64,7 @@ void write_verdict(const LoadedModel& model, const PoseOptions& options, const p
     auto* region = out->add_region_errors();
     region->set_region(static_cast<uint32_t>(r));
     region->set_key_point_error(static_cast<float>(cached.region_errors[r]));
-    // The verdict local fail-through acts on: each region against its own thresholds — or, for a
-    // pose without check values of a model with check points, the whole pose's (its regions are
-    // calibrated for estimates that include check points; local_fail_through.h).
-    const auto& thresholds = pmsc::region_thresholds(m, static_cast<int>(r));
-    const bool regional = cached.checked || m.check_points.empty();
-    region->set_status(regional ? to_proto(pmsc::decide(cached.region_errors[r], thresholds).status)
-                                : to_proto(cached.status));
+    region->set_status(to_proto(answer.region_statuses[r]));
   }
 }
 
@@ -93,8 +87,8 @@ void write_coordinates(const LoadedModel& model, const pmsc::PoseEstimate& estim
 // Appends a blend or miss to the model's miss log: the key values, and the full values the
 // client sent or the engine computed (a partial frame on the local path). Returns whether it
 // was appended; a failed append leaves the answer right and is logged loudly.
-bool log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& job, const pmsc::CachedPose& cached,
-              const pmsc::LocalFailThrough& local) {
+bool log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& job, const pmsc::PoseAnswer& answer) {
+  const pmsc::CachedPose& cached = answer.cached;
   const PoseInput& input = job.input;
   misslog::MissRecord record;
   record.model_version = model.version;
@@ -111,7 +105,7 @@ bool log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& 
   if (full != nullptr) {
     record.full_values.assign(full->data(), full->data() + full->size());
     // A partial frame: the client's points, or those the engine computed.
-    const std::vector<int>& points = client_full ? input.full_points : local.full_points;
+    const std::vector<int>& points = client_full ? input.full_points : answer.local.full_points;
     if (local_path(job)) record.full_points.assign(points.begin(), points.end());
   }
   auto appended = env.miss_logs.append(model.name, *model.pmsc, record);
@@ -135,9 +129,9 @@ void PoseRun::start(ServiceEnvironment& env, const LoadedModel& model, std::span
   std::vector<PoseBatcher::Pose> batched;
   for (size_t i = 0; i < jobs.size(); ++i) {
     PoseJob& job = jobs[i];
-    // Local fail-through assembles its answer point by point; coordinates need no f̂ unless the
-    // verdict asks the server for the answer (finish_one).
-    job.batched_ = !local_path(job) && !wants_coordinates(job.options);
+    // Coordinates need no f̂ unless the verdict asks the server for the answer (finish); local
+    // fail-through answers with points, whatever the encoding.
+    job.batched_ = local_path(job) || !wants_coordinates(job.options);
     if (!job.batched_) continue;
     // float32 goes out as computed: f̂ is reconstructed into the message itself, and the blend of
     // a blend or miss happens there too. A 16-bit encoding is written from the scratch values.
@@ -152,7 +146,7 @@ void PoseRun::start(ServiceEnvironment& env, const LoadedModel& model, std::span
     }
     batched.push_back({&job.input.key_values, &job.estimate_, job.points_, &job.input.check_values});
   }
-  env.batcher.enqueue(*model.pmsc, batched, group_);
+  env.batcher.enqueue(*model.subspace, batched, group_);
 }
 
 grpc::Status PoseRun::finish(const CallControl* call) {
@@ -168,61 +162,50 @@ grpc::Status PoseRun::finish(const CallControl* call) {
 
 grpc::Status PoseRun::finish_one(PoseJob& job, v1::PoseResult* out) {
   const LoadedModel& model = *model_;
-  const pmsc::PmscModel& m = *model.pmsc;
+  const pmsc::Subspace& subspace = *model.subspace;
+  const pmsc::PmscModel& m = subspace.model();
   const PoseInput& input = job.input;
-  const Eigen::VectorXf* client_full = input.full_values.size() > 0 ? &input.full_values : nullptr;
-  pmsc::CachedPose cached;
-  pmsc::LocalFailThrough local;
-  const float* answer = nullptr;
-  bool coordinates = false;
-  if (job.batched_) {
-    Eigen::Map<Eigen::VectorXf> points(job.points_, m.mean.size());
-    pmsc::finish_cached(m, job.estimate_, points, client_full, full_calculation(model, input), cached);
-    answer = job.points_;
-  } else if (local_path(job)) {
-    if (auto covered = pmsc::evaluate_cached_local(m, input.key_values, input.check_values, input.full_points,
-                                                   client_full, partial_calculation(model, input), cached, local);
-        !covered.ok()) {
-      return to_grpc_status(covered.error(), "full_points");
-    }
-    answer = cached.points.data();
+  // A pose answered as coordinates skipped the batch: its estimate is computed now.
+  if (!job.batched_) subspace.estimate(input.key_values, input.check_values, job.estimate_);
+  pmsc::FinishInput finish;
+  finish.points = job.batched_ ? job.points_ : nullptr;
+  finish.local = local_path(job);
+  if (input.full_values.size() > 0) {
+    finish.full_values = &input.full_values;
+    if (finish.local) finish.full_points = &input.full_points;
+  }
+  if (finish.local) {
+    finish.partial_calculation = partial_calculation(model, input);
   } else {
-    // Coordinates: eq. 2 alone; f̂ only when the server itself must answer with points.
-    pmsc::estimate_coordinates(m, input.key_values, input.check_values, job.estimate_);
-    const bool needs_full = pmsc::judge(m, job.estimate_, cached);
-    if (needs_full && (client_full != nullptr || input.has_engine_input)) {
-      job.scratch_.resize(m.mean.size());
-      const pmsc::PoseEstimate* estimate = &job.estimate_;
-      float* destination = job.scratch_.data();
-      pmsc::reconstruct(m, {&estimate, 1}, {&destination, 1});
-      pmsc::finish_cached(m, job.estimate_, job.scratch_, client_full, full_calculation(model, input), cached);
-      answer = job.scratch_.data();
-    } else {
-      cached.full_evaluation_needed = needs_full;
-      coordinates = true;
-    }
+    finish.full_calculation = full_calculation(model, input);
+  }
+  pmsc::PoseAnswer answer;
+  if (Status finished = subspace.finish(job.estimate_, finish, answer); !finished.ok()) {
+    return to_grpc_status(finished.error(), "full_points");
   }
 
-  write_verdict(model, job.options, cached, out);
-  if (coordinates) {
+  write_verdict(model, job.options, answer, out);
+  if (answer.points == nullptr) {
     if (!job.options.omit_points) write_coordinates(model, job.estimate_, out);
-  } else if (job.in_response_) {
+  } else if (answer.points == job.points_ && job.in_response_) {
     out->mutable_points()->set_point_count(static_cast<uint32_t>(m.point_count));
     out->mutable_points()->set_channel_count(static_cast<uint32_t>(m.channel_count));
   } else if (!job.options.omit_points) {
-    if (grpc::Status s = encode_points(answer, static_cast<uint32_t>(m.point_count),
+    if (grpc::Status s = encode_points(answer.points, static_cast<uint32_t>(m.point_count),
                                        static_cast<uint32_t>(m.channel_count), job.options.points_encoding,
                                        out->mutable_points());
         !s.ok()) {
       return s;
     }
   }
-  for (size_t j = 0; j < local.full_points.size(); ++j) {
-    out->add_full_points(static_cast<uint32_t>(local.full_points[j]));
-    out->add_full_point_blend_weights(static_cast<float>(local.full_point_blend_weights[j]));
+  for (size_t j = 0; j < answer.local.full_points.size(); ++j) {
+    out->add_full_points(static_cast<uint32_t>(answer.local.full_points[j]));
+    out->add_full_point_blend_weights(static_cast<float>(answer.local.full_point_blend_weights[j]));
   }
-  if (job.options.count_in_statistics) env_->metrics.record_pose(model.name, cached.status, cached.key_point_error);
-  if (cached.status != pmsc::CacheStatus::kHit) job.logged_ = log_miss(*env_, model, job, cached, local);
+  if (job.options.count_in_statistics) {
+    env_->metrics.record_pose(model.name, answer.cached.status, answer.cached.key_point_error);
+  }
+  if (answer.cached.status != pmsc::CacheStatus::kHit) job.logged_ = log_miss(*env_, model, job, answer);
   return grpc::Status::OK;
 }
 

@@ -1,13 +1,17 @@
 // The pose pipeline: every pose the daemon evaluates — EvaluateKeyPoints' batch, a
-// StreamKeyPoints frame, CompleteMiss, a thumbnail's pose — takes these steps, written once:
+// StreamKeyPoints frame, CompleteMiss, a thumbnail's pose — takes these steps, written once. The
+// server decodes, batches, encodes and records; what a pose's answer is, every kind of subspace
+// decides behind one interface (core/pmsc/subspace.h), built once when the model version loaded:
 //
 //   decode       server/pose_input.h: key values, check values, engine input, full values
-//   estimate     eq. 2 for the pose alone: p, e_key, e_check, the rigid alignment
-//   reconstruct  f̂ = mean + A p, batched with every pose waiting for the same model version
-//                (server/pose_batcher.h) and written straight into the answer's float32 bytes
-//   finish       the verdict (eqs. 8–11), fail-through to the model's engine, the blend
-//   record       the answer (points, or coordinates the client reconstructs), the statistics,
-//                and a blend or miss appended to the model's miss log
+//   estimate     Subspace::estimate, eq. 2 for the pose alone
+//   reconstruct  Subspace::reconstruct, batched with every pose waiting for the same model
+//                version (server/pose_batcher.h) and written straight into the answer's float32
+//                bytes
+//   finish       Subspace::finish: the verdict (eqs. 8–11) and each region's, fail-through to
+//                the model's engine (whole or local), the blend
+//   encode       points, or coordinates the client reconstructs
+//   record       the statistics, and a blend or miss appended to the model's miss log
 //
 // A pose asked for as POINT_ENCODING_COORDINATES skips the batch: its estimate is computed when it
 // finishes, and only a pose whose answer the server must compute itself (a blend or miss with an

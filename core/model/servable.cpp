@@ -7,6 +7,7 @@
 #include "core/lod/selection.h"
 #include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/subspace.h"
 
 namespace animspace::model {
 
@@ -19,6 +20,9 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     if (!runtime) return runtime.error();
     servable.pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
     servable.basis_checksum = pmsc::basis_checksum(servable.pmsc->mean, servable.pmsc->basis);
+    auto subspace = pmsc::make_subspace(servable.pmsc);
+    if (!subspace) return make_error(subspace.error().code, source + ": " + subspace.error().message);
+    servable.subspace = std::move(*subspace);
     const pmsc::PmscModel& m = *servable.pmsc;
     info->check_point_count = m.check_point_count();
     info->false_hit_rate = m.calibration.false_hit_rate;

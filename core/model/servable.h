@@ -15,6 +15,7 @@
 #include "core/model/engine.h"
 #include "core/model/model_info.h"
 #include "core/pmsc/pmsc_model.h"
+#include "core/pmsc/subspace.h"
 
 namespace animspace::model {
 
@@ -24,6 +25,9 @@ struct Servable {
   ModelInfo info;
   // The soft-cache runtime of a PMSC or cross-PMSC model (null for other kinds).
   std::shared_ptr<const pmsc::PmscModel> pmsc;
+  // Its runtime for the subspace's kind, built once here: what every pose goes through
+  // (estimate, reconstruct, finish; core/pmsc/subspace.h).
+  std::shared_ptr<const pmsc::Subspace> subspace;
   // Its mean and basis named exactly (pmsc::basis_checksum), for clients that reconstruct
   // answers sent as coordinates; 0 for other kinds.
   uint64_t basis_checksum = 0;

@@ -131,7 +131,7 @@ LocalFailThrough local_fail_through(const PmscModel& m, double error_estimate,
   LocalFailThrough out;
   if (m.cross) return out;
   const long N = m.point_count;
-  if (m.region_count == 0 || (!checked && !m.check_points.empty())) {
+  if (!regions_judged_alone(m, checked)) {
     // One region, the whole pose: the whole-pose α of eqs. 9–11 at every point.
     const double alpha =
         decide(error_estimate, checked || m.check_points.empty() ? m.epsilon : m.key_only_epsilon).alpha;
@@ -210,25 +210,49 @@ Status evaluate_cached_local(const PmscModel& m, const Eigen::Ref<const Eigen::V
                              const Eigen::Ref<const Eigen::VectorXf>& check_values,
                              const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
                              const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local) {
-  // The whole-pose verdict first: without f, a blend or miss leaves f̂ in out.points.
-  evaluate_cached(m, key_values, check_values, nullptr, FullCalculation(), out);
+  PoseEstimate estimate;
+  estimate_coordinates(m, key_values, check_values, estimate);
+  out.points.resize(m.mean.size());
+  const PoseEstimate* input = &estimate;
+  float* destination = out.points.data();
+  reconstruct(m, {&input, 1}, {&destination, 1});
+  return finish_cached_local(m, estimate, out.points, full_points, full_values, full_calculation, out, local);
+}
+
+Status finish_cached_local(const PmscModel& m, const PoseEstimate& estimate, Eigen::Ref<Eigen::VectorXf> points,
+                           const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
+                           const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local) {
+  assert(points.size() == m.mean.size());
   local = LocalFailThrough();
-  if (out.status == CacheStatus::kHit || m.cross) return Status::Ok();
+  // The whole-pose verdict first; a hit (or a cross-PMSC model, which has no f) is f̂.
+  if (!judge(m, estimate, out)) return Status::Ok();
   local = local_fail_through(m, out.error_estimate, out.region_errors, out.checked);
   if (full_values != nullptr) {
     ANIMSPACE_RETURN_IF_ERROR(check_covers(local, full_points));
-    blend_partial(m, local, out.points, full_points, *full_values, out.points);
-    out.full_evaluation_needed = false;
+    blend_partial(m, local, points, full_points, *full_values, points);
   } else if (local.full_points.empty()) {
-    out.full_evaluation_needed = false;  // every region within tolerance: f̂ is the answer
+    // Every region within tolerance: f̂ is the answer.
   } else if (full_calculation && full_calculation(local.full_points, out.computed_full_values)) {
     assert(out.computed_full_values.size() == static_cast<long>(local.full_points.size()) * m.channel_count);
-    blend_partial(m, local, out.points, local.full_points, out.computed_full_values, out.points);
-    out.full_evaluation_needed = false;
+    blend_partial(m, local, points, local.full_points, out.computed_full_values, points);
   } else {
     out.computed_full_values.resize(0);
+    out.full_evaluation_needed = true;
   }
   return Status::Ok();
+}
+
+bool regions_judged_alone(const PmscModel& m, bool checked) {
+  return m.region_count > 0 && (checked || m.check_points.empty());
+}
+
+std::vector<CacheStatus> region_statuses(const PmscModel& m, const CachedPose& pose) {
+  std::vector<CacheStatus> out(pose.region_errors.size(), pose.status);
+  if (!regions_judged_alone(m, pose.checked)) return out;
+  for (size_t r = 0; r < out.size(); ++r) {
+    out[r] = decide(pose.region_errors[r], region_thresholds(m, static_cast<int>(r))).status;
+  }
+  return out;
 }
 
 Eigen::VectorXf complete_partial_frame(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,

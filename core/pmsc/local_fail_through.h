@@ -109,6 +109,22 @@ Status evaluate_cached_local(const PmscModel& model, const Eigen::Ref<const Eige
                              const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
                              const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local);
 
+// The same on a pose whose f̂ is already in `points` (N·D, from reconstruct; the answer is written
+// over it in place): the verdict of `estimate`, then the local blend as above. Fills every member
+// of `out` but `points`.
+Status finish_cached_local(const PmscModel& model, const PoseEstimate& estimate, Eigen::Ref<Eigen::VectorXf> points,
+                           const std::vector<int>& full_points, const Eigen::VectorXf* full_values,
+                           const PartialFullCalculation& full_calculation, CachedPose& out, LocalFailThrough& local);
+
+// Whether a pose's regions are judged each against its own thresholds: the model has regions,
+// and they were calibrated for this estimate (with check values, or a model without check
+// points). Otherwise every region takes the whole pose's verdict.
+bool regions_judged_alone(const PmscModel& model, bool checked);
+
+// Each region's verdict for a judged pose (judge / finish_cached filled `pose`), by the rule
+// above: what a client sees per region and what local fail-through acts on.
+std::vector<CacheStatus> region_statuses(const PmscModel& model, const CachedPose& pose);
+
 // A whole frame (N·D) from a partial one, for retraining: the given points' full values; at the
 // other key points their key values (they are the full calculation at those points); elsewhere
 // the model's estimate f̂ for `key_values`, which the soft cache judged within tolerance there.

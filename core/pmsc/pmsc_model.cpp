@@ -129,50 +129,6 @@ Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, doubl
   return svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose();
 }
 
-namespace {
-
-// An articulated basis's first 12·B columns are skinning (articulated.h): at point i and bone j
-// the 3 × 12 block is h_ij in the four columns of each row's transform row and 0 elsewhere. Reads
-// each point's non-zero h_ij into the model's skinning terms, and refuses a basis of another
-// shape (a corrupt or hand-made file would otherwise be reconstructed differently by the server,
-// which reads the terms, and a client, which reads the whole basis).
-Status read_skinning_terms(PmscModel& m) {
-  m.skinning_offsets.clear();
-  m.skinning_bones.clear();
-  m.skinning_terms.resize(0);
-  if (m.subspace_kind != SubspaceKind::kArticulated) return Status::Ok();
-  const long N = m.point_count;
-  std::vector<float> terms;
-  m.skinning_offsets.push_back(0);
-  for (long i = 0; i < N; ++i) {
-    for (int j = 0; j < m.bone_count; ++j) {
-      const auto block = m.basis.block(3 * i, 12L * j, 3, 12);
-      const Eigen::RowVector4f h = block.block<1, 4>(0, 0);
-      bool skinning_form = true;
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 12; ++c) {
-          const float expected = c / 4 == r ? h(c % 4) : 0.0f;
-          skinning_form = skinning_form && block(r, c) == expected;
-        }
-      }
-      if (!skinning_form) {
-        return make_error(ErrorCode::kInvalidArgument,
-                          "pmsc model: an articulated basis's bone columns must have the skinning form "
-                          "(w·(p̂ − c, 1) in each row's four columns of the bone, 0 elsewhere); point " +
-                              std::to_string(i) + ", bone " + std::to_string(j) + " does not");
-      }
-      if ((h.array() == 0.0f).all()) continue;  // exactly: a weight of 1e-6 is still a term
-      m.skinning_bones.push_back(j);
-      terms.insert(terms.end(), h.data(), h.data() + 4);
-    }
-    m.skinning_offsets.push_back(static_cast<int32_t>(m.skinning_bones.size()));
-  }
-  m.skinning_terms = Eigen::Map<const Eigen::VectorXf>(terms.data(), static_cast<long>(terms.size()));
-  return Status::Ok();
-}
-
-}  // namespace
-
 Status prepare_projection(PmscModel& m) {
   const long D = m.channel_count;
   const long M = m.basis.cols();
@@ -275,7 +231,6 @@ Status prepare_projection(PmscModel& m) {
   } else {
     m.basis_gram.resize(0, 0);
   }
-  ANIMSPACE_RETURN_IF_ERROR(read_skinning_terms(m));
 
   m.projection = least_squares_projection(m.key_basis, kMaxConditionNumber, &m.condition_number, &m.regularization,
                                           m.aligned ? &m.key_range : nullptr);
@@ -469,49 +424,6 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
   }
 }
 
-namespace {
-
-// Eq. 1 for an articulated model (issue #51): the residual columns as the linear kind's product,
-// then each point's bones from its skinning terms — 12 multiply–adds per influence instead of a
-// row of 12·B columns, most of them zero.
-void reconstruct_articulated(const PmscModel& m, const Eigen::MatrixXf& coordinates,
-                             std::span<float* const> destinations) {
-  const long rows = m.basis.rows();
-  const long B = coordinates.cols();
-  const long skinning = 12L * m.bone_count;
-  const long r = m.residual_components;
-  const long block = std::max(kReconstructionBlockValues / B, 256L);
-  Eigen::MatrixXf scratch(std::min(block, rows), B);
-  const Eigen::MatrixXf residual_coordinates = coordinates.bottomRows(r);
-  for (long r0 = 0; r0 < rows; r0 += block) {
-    const long n = std::min(block, rows - r0);
-    if (r > 0) {
-      gemm(n, r, B, m.basis.data() + skinning * rows + r0, rows, residual_coordinates.data(), r, 0.0f, scratch.data(),
-           scratch.rows());
-    }
-    for (long b = 0; b < B; ++b) {
-      Eigen::Map<Eigen::VectorXf> destination(destinations[static_cast<size_t>(b)] + r0, n);
-      destination = m.mean.segment(r0, n);
-      if (r > 0) destination += scratch.col(b).head(n);
-    }
-  }
-  for (long b = 0; b < B; ++b) {
-    const float* p = coordinates.col(b).data();
-    float* f = destinations[static_cast<size_t>(b)];
-    for (long i = 0; i < m.point_count; ++i) {
-      for (int32_t k = m.skinning_offsets[static_cast<size_t>(i)]; k < m.skinning_offsets[static_cast<size_t>(i) + 1]; ++k) {
-        const float* h = m.skinning_terms.data() + 4L * k;
-        const float* M_j = p + 12L * m.skinning_bones[static_cast<size_t>(k)];
-        for (int row = 0; row < 3; ++row) {
-          f[3 * i + row] += h[0] * M_j[4 * row] + h[1] * M_j[4 * row + 1] + h[2] * M_j[4 * row + 2] + h[3] * M_j[4 * row + 3];
-        }
-      }
-    }
-  }
-}
-
-}  // namespace
-
 void reconstruct(const PmscModel& m, std::span<const PoseEstimate* const> estimates,
                  std::span<float* const> destinations) {
   assert(estimates.size() == destinations.size());
@@ -521,10 +433,6 @@ void reconstruct(const PmscModel& m, std::span<const PoseEstimate* const> estima
   if (B == 0) return;
   Eigen::MatrixXf coordinates(M, B);
   for (long b = 0; b < B; ++b) coordinates.col(b) = estimates[static_cast<size_t>(b)]->coordinates.cast<float>();
-  if (m.subspace_kind == SubspaceKind::kArticulated) {
-    reconstruct_articulated(m, coordinates, destinations);
-    return;
-  }
   if (B < kBlasGemmMinColumns) {
     // Alone (or nearly): one matrix–vector product per pose, straight into its destination —
     // the reconstruction a client holding the basis does (coordinates.h).

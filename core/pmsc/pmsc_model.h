@@ -34,8 +34,9 @@
 
 namespace animspace::pmsc {
 
-// What the basis A is (issue #51). Both kinds are served by the same runtime, f̂ = mean + A p
-// with p from the key rows by least squares; they differ in what A's columns are:
+// What the basis A is (issue #51). Both kinds share eq. 2 — p from the key rows by least squares —
+// and f̂ = mean + A p; they differ in what A's columns are, and so in how a server reconstructs
+// f̂ fast (each kind's runtime, subspace.h):
 //   kLinear       principal components of the training frames (2007 §2.1);
 //   kArticulated  a linear blend skinning model's Jacobian — 12 columns per bone, the bone's
 //                 affine transform about its rest centre (articulated.h) — then principal
@@ -126,15 +127,6 @@ struct PmscModel {
   Eigen::MatrixXd check_basis;
   // Relative-tolerance models only: AᵀA (M × M), so that S costs M² and not a reconstruction.
   Eigen::MatrixXd basis_gram;
-  // Articulated models only: the basis's skinning columns read back as each point's influences,
-  // so that a reconstruction costs a few terms per point instead of 12·B columns (issue #51):
-  // point i's bones are skinning_bones[skinning_offsets[i] … skinning_offsets[i + 1]) (0-based,
-  // columns 12·j …), each with its four numbers h = w·(p̂ − c, 1) in skinning_terms (4 per
-  // influence), and f̂_i = mean_i + Σ_j M_j h_ij + (residual rows) · p_residual.
-  std::vector<int32_t> skinning_offsets;
-  std::vector<int32_t> skinning_bones;
-  Eigen::VectorXf skinning_terms;
-
   int basis_size() const { return static_cast<int>(basis.cols()); }
   int key_point_count() const { return static_cast<int>(key_points.size()); }
   int check_point_count() const { return static_cast<int>(check_points.size()); }
@@ -182,7 +174,9 @@ struct PoseEstimate {
 //                          always one pose at a time, so a pose's verdict never depends on what
 //                          else it was evaluated with;
 //   reconstruct            eq. 1, f̂ = mean + A p, for any number of poses at once.
-// Products run through the active kernel (core/common/kernels.h).
+// Products run through the active kernel (core/common/kernels.h). These free functions work on
+// any kind through the dense basis, the reference every client reconstructs by; a server goes
+// through the model's Subspace (subspace.h), whose kind may reconstruct faster.
 
 // Eq. 2 for one pose. `key_values` holds K·D values in key order. The model must be prepared.
 // Values are assumed finite (the caller validates input; asserted in debug builds). Leaves

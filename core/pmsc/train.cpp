@@ -20,6 +20,7 @@
 #include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/regions.h"
+#include "core/pmsc/subspace.h"
 #include "core/geometry/rigid_fit.h"
 
 namespace animspace::pmsc {
@@ -89,7 +90,7 @@ std::vector<int> grid_seeds(const PointMatrix& positions, int cells) {
   return seeds;
 }
 
-struct Subspace {
+struct TrainingBasis {
   Eigen::VectorXd mean;    // R
   Eigen::MatrixXd basis;   // R × M
   Eigen::VectorXd sigma;   // M
@@ -144,7 +145,7 @@ FoldWeights fold_weights(const Eigen::MatrixXd& G, long F, const std::vector<lon
 // pages for it, its linear copy and the model's float copy in every fold was a third of the
 // calibration's profile.
 void fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M,
-                   Subspace& out) {
+                   TrainingBasis& out) {
   const FoldWeights weights = fold_weights(G, T.cols(), kept, M);
   out.mean.noalias() = T * weights.mean_weights;
   // The R × F by F × M product through the dispatched kernel (kernels.h): OpenBLAS's dgemm took
@@ -208,7 +209,7 @@ int smallest_within_slack(const std::vector<double>& rms, int first, double slac
 // already in the span. The basis and this direction span the affine subspace with one more
 // dimension, through the origin, so s·keys then give exactly s·f̂. O(R·M): a QR of every fold's
 // R × (M + 1) rows doubled the calibration's time on the Cornell box.
-Eigen::VectorXd mean_direction(const Subspace& s) {
+Eigen::VectorXd mean_direction(const TrainingBasis& s) {
   Eigen::VectorXd direction = s.mean;
   for (int pass = 0; pass < 2; ++pass) direction -= s.basis * (s.basis.transpose() * direction);
   const double norm = direction.norm();
@@ -219,7 +220,7 @@ Eigen::VectorXd mean_direction(const Subspace& s) {
 // Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
 // A relative-tolerance model is served linear: mean 0 and the mean's direction as one more basis
 // column. Written straight into the model's own storage (the calibration's workers reuse it).
-Status assemble(const Subspace& affine, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
+Status assemble(const TrainingBasis& affine, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
   const Eigen::VectorXd extra = m.relative_tolerance ? mean_direction(affine) : Eigen::VectorXd();
   const long D = m.channel_count;
   const long M_affine = affine.basis.cols();
@@ -251,12 +252,25 @@ Status assemble(const Subspace& affine, long control_rows, bool cross, const std
   return prepare_projection(m);
 }
 
-Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
-                              const TrainingOptions& o, TrainingReport* report) {
-  const auto start = std::chrono::steady_clock::now();
+// The held-out sets of the calibration (and of the held-out rules for M and for r): every
+// `folds`-th frame, the same trained on half the frames, and blocks of consecutive frames.
+struct HeldOutSet {
+  std::vector<long> held_out, train;
+  char family = kInterleavedFold;
+};
+struct HeldOutSets {
+  std::vector<HeldOutSet> sets;
+  long block = 1;  // frames per block of the shortest block family
+  // The sets without the sparse folds (trained on half a fold's frames): the held-out rules
+  // measure the basis of a fold, not a sparser training.
+  std::vector<std::vector<long>> held_out_frames, kept_frames;
+};
+
+// The options and frames, every rule naming the option or the data.
+Status check_training_input(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
+                            const TrainingOptions& o) {
   const int D = o.channel_count;
   const long F = control_frames.rows();
-  // Validation: every rule names the option or the data.
   if (D < 1) return invalid("channels must be ≥ 1, got " + std::to_string(D));
   if (F < 2) return invalid("training needs at least 2 frames, got " + std::to_string(F));
   if (control_frames.cols() == 0 || control_frames.cols() % D != 0) {
@@ -297,12 +311,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   if (!(o.held_out_basis_slack >= 0) || !std::isfinite(o.held_out_basis_slack)) {
     return invalid("held_out_basis_slack must be ≥ 0 (0: off), got " + std::to_string(o.held_out_basis_slack));
   }
-  const bool cross = output_frames != nullptr;
-  const long control_points = control_frames.cols() / D;
-  const bool articulated = o.subspace_kind == SubspaceKind::kArticulated;
-  if (articulated) {
-    if (D != 3) return invalid("subspace_kind articulated needs positions (3 channels), got " + std::to_string(D));
-    if (cross) return invalid("subspace_kind articulated is for one point set; cross-PMSC models are linear");
+  if (o.subspace_kind == SubspaceKind::kArticulated) {
+    if (o.channel_count != 3) return invalid("subspace_kind articulated needs positions (3 channels), got " + std::to_string(o.channel_count));
+    if (output_frames != nullptr) return invalid("subspace_kind articulated is for one point set; cross-PMSC models are linear");
     if (o.remove_rigid_motion) {
       return invalid("subspace_kind articulated needs remove_rigid_motion off: the bones carry the rigid motion");
     }
@@ -314,35 +325,16 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
   }
 
-  // T: R × F, control rows first, in double: PCA and least squares at training time deserve it.
-  const long control_rows = control_frames.cols();
-  const long rows = control_rows + (cross ? output_frames->cols() : 0);
-  Eigen::MatrixXd T(rows, F);
-  T.topRows(control_rows) = control_frames.transpose().cast<double>();
-  if (cross) T.bottomRows(rows - control_rows) = output_frames->transpose().cast<double>();
+  return Status::Ok();
+}
 
-  PmscModel model;
-  model.channel_count = D;
-  model.cross = cross;
-  model.control_point_count = static_cast<int>(control_points);
-  model.point_count = static_cast<int>((rows - (cross ? control_rows : 0)) / D);
-  model.aligned = o.remove_rigid_motion;
-  model.relative_tolerance = o.relative_tolerance;
-  if (o.remove_rigid_motion) {
-    const auto transforms = rigid_motion_per_frame(T, control_points);
-    for (long f = 0; f < F; ++f) apply_inverse(transforms[static_cast<size_t>(f)], T.col(f));
-  }
-
-  // The held-out sets of the calibration below (and of the held-out choice of M).
+HeldOutSets held_out_sets(long F, const TrainingOptions& o) {
+  HeldOutSets out;
+  std::vector<HeldOutSet>& sets = out.sets;
   const int folds = static_cast<int>(std::min<long>(std::max(o.calibration_folds, 2), F));
   const long block = o.calibration_block_frames > 0
                          ? o.calibration_block_frames
                          : std::max<long>(1, (F + 2 * folds - 1) / (2 * folds));  // two blocks per fold
-  struct HeldOutSet {
-    std::vector<long> held_out, train;
-    char family = kInterleavedFold;
-  };
-  std::vector<HeldOutSet> sets;
   const auto add_set = [&](const std::vector<char>& is_held, char family, long stride) {
     HeldOutSet set;
     set.family = family;
@@ -375,28 +367,43 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
   }
 
-  // Runtime basis from the initial training matrix (2007 §2.1).
-  const auto pca_start = std::chrono::steady_clock::now();
-  const Eigen::VectorXd mean = T.rowwise().mean();
-  const Eigen::MatrixXd centred = T.colwise() - mean;
-  const int max_basis = static_cast<int>(std::min<long>(o.max_basis, F - 1));
-  const int chosen_cap = std::max(1, std::min(max_basis, static_cast<int>(o.max_basis_fraction * static_cast<double>(F))));
-  const PcaBasis pca = thin_pca(centred, max_basis);
-  if (pca.basis.cols() == 0) return invalid("the training frames are all identical: there is no motion to model");
-  Eigen::MatrixXd gram(F, F);
-  gram_lower_serial(T.rows(), F, T.data(), T.rows(), gram.data(), F);
-  gram = gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
-  int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols())) : 0;
-  std::vector<double> held_out_rms;
-  // The held-out sets without the sparse folds (trained on half a fold's frames): the held-out
-  // rules below measure the basis of a fold, not a sparser training.
-  std::vector<std::vector<long>> held_out_frames, kept_frames;
+  out.block = block;
   for (const HeldOutSet& set : sets) {
     if (set.family == kSparseFold) continue;
-    held_out_frames.push_back(set.held_out);
-    kept_frames.push_back(set.train);
+    out.held_out_frames.push_back(set.held_out);
+    out.kept_frames.push_back(set.train);
   }
-  if (!articulated && o.basis_size <= 0 && o.held_out_basis_slack > 0) {
+  return out;
+}
+
+// The served basis and what the later steps need of how it was made.
+struct ChosenBasis {
+  TrainingBasis subspace;
+  int M = 0;
+  double projection_error = 0;          // of the training frames (report)
+  std::vector<double> held_out_rms;     // the linear held-out rule's curve (report)
+  // Articulated (articulated.h): the frames less the subspace's mean (what the key selection
+  // reconstructs), the skinning, and the residuals' Gram matrix, which takes the place of T's in
+  // the calibration's folds.
+  Eigen::MatrixXd articulated_centred;
+  ArticulatedSkinning skinning;
+  Eigen::MatrixXd residual_gram;
+  int residual_count = 0;
+  double skinning_seconds = 0;
+};
+
+// The linear kind (2007 §2.1): the leading principal components of the centred frames, as many
+// as the held-out rule or the error bound asks.
+ChosenBasis linear_basis(const Eigen::VectorXd& mean, const Eigen::MatrixXd& centred, const PcaBasis& pca,
+                         const Eigen::MatrixXd& gram, const HeldOutSets& held, int chosen_cap, const TrainingOptions& o) {
+  const int D = o.channel_count;
+  const long F = centred.cols();
+  ChosenBasis out;
+  int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols())) : 0;
+  std::vector<double>& held_out_rms = out.held_out_rms;
+  const auto& held_out_frames = held.held_out_frames;
+  const auto& kept_frames = held.kept_frames;
+  if (o.basis_size <= 0 && o.held_out_basis_slack > 0) {
     // Issue #38 item 3, M chosen by the accuracy it buys on frames the basis did not see: the
     // held-out frames' projection error onto each fold's first k directions, over the interleaved
     // folds (poses between training poses) and the block folds (motion the rest never saw), as a
@@ -418,27 +425,40 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // M from the error bound: when asked for, or when the held-out rule had no held-out energy to
   // measure (only then: at the papers' 100k illumination points its passes over the centred
   // frames cost more than the rest of the PCA).
-  if (!articulated && M == 0) M = choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
-  Subspace subspace;
-  double projection_error = 0;
-  // The frames the key selection reconstructs: T less the subspace's mean.
-  Eigen::MatrixXd articulated_centred;
-  // Articulated (articulated.h): the skinning columns L, the residuals E they leave and E's Gram
-  // matrix, which takes the place of T's in the calibration's folds.
-  ArticulatedSkinning skinning;
-  Eigen::MatrixXd residual_gram;
+  if (M == 0) M = choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
+  out.subspace = TrainingBasis{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
+  // The projection's error through the dispatched kernels, never forming the R × F residual.
+  Eigen::MatrixXd projection_coordinates(M, F);
+  gemm_transposed_serial(M, centred.rows(), F, out.subspace.basis.data(), out.subspace.basis.outerStride(),
+                         centred.data(), centred.outerStride(), 0.0, projection_coordinates.data(), M);
+  out.projection_error = residual_pass(centred, out.subspace.basis, projection_coordinates, D);
+  out.M = M;
+  return out;
+}
+
+// The articulated kind (articulated.h): the skinning columns L fitted to the frames, then the
+// principal components of what they leave, as many as the held-out rule keeps.
+Result<ChosenBasis> articulated_basis(const FrameMatrix& control_frames, const Eigen::MatrixXd& T,
+                                      const HeldOutSets& held, int chosen_cap, const TrainingOptions& o) {
+  const int D = o.channel_count;
+  const long F = T.cols();
+  const long rows = T.rows();
+  const auto& held_out_frames = held.held_out_frames;
+  const auto& kept_frames = held.kept_frames;
+  ChosenBasis out;
+  const auto skinning_start = std::chrono::steady_clock::now();
+  const long control_points = control_frames.cols() / D;
+  const int bones = o.bone_count > 0 ? o.bone_count : default_bone_count(control_points);
+  auto fitted = fit_articulated_skinning(control_frames, o.faces, bones, o.progress);
+  if (!fitted) return fitted.error();
+  ArticulatedSkinning& skinning = out.skinning;
+  skinning = std::move(*fitted);
+  out.skinning_seconds = seconds_since(skinning_start);
+  Eigen::MatrixXd& residual_gram = out.residual_gram;
+  residual_gram.setZero(F, F);
+  gram_lower_serial(rows, F, skinning.residuals.data(), rows, residual_gram.data(), F);
+  residual_gram = residual_gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
   int residual_count = 0;
-  double skinning_seconds = 0;
-  if (articulated) {
-    const auto skinning_start = std::chrono::steady_clock::now();
-    const int bones = o.bone_count > 0 ? o.bone_count : default_bone_count(control_points);
-    auto fitted = fit_articulated_skinning(control_frames, o.faces, bones, o.progress);
-    if (!fitted) return fitted.error();
-    skinning = std::move(*fitted);
-    skinning_seconds = seconds_since(skinning_start);
-    residual_gram.setZero(F, F);
-    gram_lower_serial(rows, F, skinning.residuals.data(), rows, residual_gram.data(), F);
-    residual_gram = residual_gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
     // r: given, or the smallest count whose held-out projection error is within
     // kResidualHeldOutSlack of the largest count's (a component the held-out frames do not share
     // is noise of the training frames, and one more coordinate to estimate from the keys). No
@@ -461,32 +481,30 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
     std::vector<long> every_frame(static_cast<size_t>(F));
     std::iota(every_frame.begin(), every_frame.end(), 0L);
-    Subspace residual;
+    TrainingBasis residual;
     fold_subspace(skinning.residuals, residual_gram, every_frame, std::max(residual_count, 1), residual);
     if (residual_count == 0) residual.basis.resize(rows, 0);
     residual_count = static_cast<int>(residual.basis.cols());
-    subspace.mean = residual.mean;
-    subspace.basis.resize(rows, skinning.columns.cols() + residual_count);
-    subspace.basis << skinning.columns, residual.basis;
-    M = static_cast<int>(subspace.basis.cols());
-    articulated_centred = T.colwise() - subspace.mean;
+    out.residual_count = residual_count;
+    out.subspace.mean = residual.mean;
+    out.subspace.basis.resize(rows, skinning.columns.cols() + residual_count);
+    out.subspace.basis << skinning.columns, residual.basis;
+    out.M = static_cast<int>(out.subspace.basis.cols());
+    out.articulated_centred = T.colwise() - out.subspace.mean;
     // The residual components are orthogonal to L's columns (every frame's residual is), so the
     // projection onto [L | R] leaves what R leaves of E.
     const Eigen::MatrixXd residual_centred = skinning.residuals.colwise() - residual.mean;
     const Eigen::MatrixXd coordinates = residual.basis.transpose() * residual_centred;
-    projection_error = residual_pass(residual_centred, residual.basis, coordinates, D);
-  } else {
-    subspace = Subspace{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
-    // The projection's error through the dispatched kernels, never forming the R × F residual.
-    Eigen::MatrixXd projection_coordinates(M, F);
-    gemm_transposed_serial(M, centred.rows(), F, subspace.basis.data(), subspace.basis.outerStride(), centred.data(),
-                           centred.outerStride(), 0.0, projection_coordinates.data(), M);
-    projection_error = residual_pass(centred, subspace.basis, projection_coordinates, D);
-  }
-  const double pca_seconds = seconds_since(pca_start);
-  const auto key_start = std::chrono::steady_clock::now();
+    out.projection_error = residual_pass(residual_centred, residual.basis, coordinates, D);
+  return out;
+}
 
-  // Key points (2007 §2.2), seeded with fiducials and the optional sparse grid.
+// The key selection's options (2007 §2.2): fiducials, the optional sparse grid, and for the
+// articulated kind every bone's coverage points and the key budget by rule.
+Result<KeyPointOptions> key_point_options(const TrainingOptions& o, const ChosenBasis& basis, const Eigen::VectorXd& mean,
+                                          long control_points, bool articulated) {
+  const int D = o.channel_count;
+  const int M = basis.M;
   KeyPointOptions key_options;
   key_options.channel_count = D;
   key_options.block_size = o.block_size;
@@ -504,7 +522,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     // 32 bones, trained on 60%: 272 keys at the bound, 0.95% of the diagonal median worst-point
     // error on the rest; 638 keys, 0.75%).
     key_options.error_bound = 0;
-    for (int point : skinning.coverage_points) key_options.seed_points.push_back(point);
+    for (int point : basis.skinning.coverage_points) key_options.seed_points.push_back(point);
     const int needed = static_cast<int>(std::ceil(kKeyEquationsPerUnknown * M / D));
     const int ceiling = std::max(1, static_cast<int>(kMaxKeyFraction * static_cast<double>(control_points)));
     key_options.max_key_points = std::min(std::max(o.max_key_points, needed), ceiling);
@@ -513,23 +531,22 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     PointMatrix positions = o.positions;
     if (positions.rows() == 0) {
       if (D != 3) return invalid("grid_cells with channels ≠ 3 needs explicit positions");
-      positions = Eigen::Map<const PointMatrix>(mean.head(control_rows).cast<float>().eval().data(), control_points, 3);
+      positions = Eigen::Map<const PointMatrix>(mean.head(control_points * D).cast<float>().eval().data(),
+                                                control_points, 3);
     }
     if (positions.rows() != control_points) {
       return invalid("positions must have one row per control point (" + std::to_string(control_points) + ")");
     }
     for (int seed : grid_seeds(positions, o.grid_cells)) key_options.seed_points.push_back(seed);
   }
-  auto selection = select_key_points(articulated ? articulated_centred : centred, subspace.basis, key_options);
-  if (!selection) return selection.error();
-  const double key_selection_seconds = seconds_since(key_start);
-  model.subspace_kind = o.subspace_kind;
-  model.bone_count = articulated ? skinning.bone_count : 0;
-  model.residual_components = articulated ? residual_count : 0;
-  ANIMSPACE_RETURN_IF_ERROR(assemble(subspace, control_rows, cross, selection->key_points, model));
+  return key_options;
+}
 
-  // Regions for local fail-through (the keys index the same points only without cross).
-  if (!cross && o.region_count > 0) {
+// Regions for local fail-through (local_fail_through.h).
+void assign_regions(const PcaBasis& pca, const ChosenBasis& basis, bool articulated, const TrainingOptions& o,
+                    PmscModel& model) {
+  const int D = o.channel_count;
+  const TrainingBasis& subspace = basis.subspace;
     // Points that move together, by the training frames' principal components (for the
     // articulated kind too: its columns are not orthonormal, which the signatures assume).
     const Eigen::MatrixXd& motion_basis = articulated ? pca.basis : subspace.basis;
@@ -540,7 +557,15 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     model.key_regions = std::move(regions.key_regions);
     model.region_weights = soft_region_weights(motion_signatures(motion_basis, motion_sigma, D),
                                                model.point_regions, model.region_count);
-  }
+}
+
+// The calibration's samples from every held-out set, joined in set order.
+struct FoldSamples {
+  std::vector<double> key, max;
+  std::vector<char> family;
+  std::vector<Eigen::VectorXd> region_key, region_max;
+  std::vector<Eigen::VectorXf> point_errors;  // N each (check point selection; not cross)
+};
 
   // ε from held-out training frames only (calibration.h): retrain the subspace without each
   // fold (same keys, same M), evaluate its frames through the runtime, and keep (e_key, true max
@@ -548,7 +573,18 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // families: every `folds`-th frame (poses between training poses); blocks of consecutive frames
   // at three lengths, dealt to the folds in turn (motion the rest of the training never saw); and
   // sparse folds, trained on every other frame an interleaved fold keeps (a model that saw less).
-  const auto calibration_start = std::chrono::steady_clock::now();
+FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
+                                const Eigen::MatrixXd& T, const Eigen::MatrixXd& gram, const HeldOutSets& held_sets,
+                                const ChosenBasis& basis, bool articulated, PmscModel& model, const TrainingOptions& o) {
+  const int D = o.channel_count;
+  const bool cross = output_frames != nullptr;
+  const long control_rows = control_frames.cols();
+  const long rows = T.rows();
+  const int M = basis.M;
+  const ArticulatedSkinning& skinning = basis.skinning;
+  const Eigen::MatrixXd& residual_gram = basis.residual_gram;
+  const int residual_count = basis.residual_count;
+  const std::vector<HeldOutSet>& sets = held_sets.sets;
   const long R_count = model.region_count;
   const long N_out = model.point_count;
   // Every set is independent of the others (issue #38 item 3): the sets run on all cores, each
@@ -556,12 +592,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // the frames), each writing its own samples; they are joined in set order afterwards, so the
   // model is the same whatever the thread count. The products inside a set are not split again
   // (parallel.h), so a set computes exactly what a one-thread training computes.
-  struct SetSamples {
-    std::vector<double> key, max;
-    std::vector<Eigen::VectorXd> region_key, region_max;
-    std::vector<Eigen::VectorXf> point_errors;  // N each (check point selection; not cross)
-  };
-  std::vector<SetSamples> per_set(sets.size());
+  std::vector<FoldSamples> per_set(sets.size());
   std::atomic<size_t> next_set{0};
   std::mutex progress_mutex;
   size_t sets_done = 0;
@@ -574,15 +605,15 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   model.basis = std::move(served_basis);
   model.mean = std::move(served_mean);
   struct Workspace {
-    Subspace fold;
-    Subspace residual;  // articulated: the fold's residual components
+    TrainingBasis fold;
+    TrainingBasis residual;  // articulated: the fold's residual components
     PmscModel model;
     Eigen::MatrixXf points;
     std::vector<PoseEstimate> estimates;
   };
   const auto calibrate_set = [&](size_t set, Workspace& work) {
     const HeldOutSet& held = sets[set];
-    SetSamples& out = per_set[set];
+    FoldSamples& out = per_set[set];
     if (articulated) {
       // The same skinning columns; the residual components of the fold's frames alone.
       const int fold_residuals = static_cast<int>(std::min<long>(residual_count, static_cast<long>(held.train.size()) - 1));
@@ -602,6 +633,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
     PmscModel& fold_model = work.model;
     if (!assemble(work.fold, control_rows, cross, model.key_points, fold_model).ok()) return;
+    // The fold's runtime, as a server would build it (non-owning: fold_model outlives it).
+    const auto runtime = make_subspace(std::shared_ptr<const PmscModel>(std::shared_ptr<const PmscModel>(), &fold_model));
+    if (!runtime) return;
+    const pmsc::Subspace& fold_runtime = **runtime;
     // The held-out frames go through the runtime as a server's batch does (estimate_coordinates,
     // then one reconstruct per kCalibrationBatch poses): the basis is read once per batch, not
     // once per frame.
@@ -616,11 +651,12 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
         // Held-out frames enter in the world frame, as at run time.
         const long f = held.held_out[static_cast<size_t>(first + b)];
         const Eigen::VectorXf control = control_frames.row(f).transpose();
-        estimate_coordinates(fold_model, gather_key_values(fold_model, control), work.estimates[static_cast<size_t>(b)]);
+        fold_runtime.estimate(gather_key_values(fold_model, control), Eigen::VectorXf(),
+                                       work.estimates[static_cast<size_t>(b)]);
         estimates[static_cast<size_t>(b)] = &work.estimates[static_cast<size_t>(b)];
         destinations[static_cast<size_t>(b)] = work.points.col(b).data();
       }
-      reconstruct(fold_model, estimates, destinations);
+      fold_runtime.reconstruct(estimates, destinations);
       for (long b = 0; b < batch; ++b) {
         const long f = held.held_out[static_cast<size_t>(first + b)];
         const PoseEstimate& estimate = work.estimates[static_cast<size_t>(b)];
@@ -648,7 +684,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   };
   report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
   parallel_for_chunks(static_cast<int64_t>(sets.size()), 1, [&](int64_t, int64_t) {
-    Workspace work{Subspace(), Subspace(), shell, Eigen::MatrixXf(), {}};
+    Workspace work{TrainingBasis(), TrainingBasis(), shell, Eigen::MatrixXf(), {}};
     for (size_t set = next_set++; set < sets.size(); set = next_set++) {
       calibrate_set(set, work);
       const std::lock_guard<std::mutex> lock(progress_mutex);
@@ -657,34 +693,39 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
       }
     }
   });
-  std::vector<double> sample_key, sample_max;
-  std::vector<char> sample_family;
-  std::vector<Eigen::VectorXd> sample_region_key, sample_region_max;
-  std::vector<Eigen::VectorXf> sample_point_errors;
+  FoldSamples joined;
   for (size_t set = 0; set < sets.size(); ++set) {
-    SetSamples& out = per_set[set];
-    sample_key.insert(sample_key.end(), out.key.begin(), out.key.end());
-    sample_max.insert(sample_max.end(), out.max.begin(), out.max.end());
-    sample_family.insert(sample_family.end(), out.key.size(), sets[set].family);
-    for (auto& v : out.region_key) sample_region_key.push_back(std::move(v));
-    for (auto& v : out.region_max) sample_region_max.push_back(std::move(v));
-    for (auto& v : out.point_errors) sample_point_errors.push_back(std::move(v));
-    out = SetSamples();
+    FoldSamples& out = per_set[set];
+    joined.key.insert(joined.key.end(), out.key.begin(), out.key.end());
+    joined.max.insert(joined.max.end(), out.max.begin(), out.max.end());
+    joined.family.insert(joined.family.end(), out.key.size(), sets[set].family);
+    for (auto& v : out.region_key) joined.region_key.push_back(std::move(v));
+    for (auto& v : out.region_max) joined.region_max.push_back(std::move(v));
+    for (auto& v : out.point_errors) joined.point_errors.push_back(std::move(v));
+    out = FoldSamples();
   }
   report_progress(o.progress, "calibration", static_cast<int>(sets.size()), static_cast<int>(sets.size()));
+  return joined;
+}
+
+// The samples into the model's calibration, then check points (check_points.h) from the
+// held-out residuals and each sample's e_check.
+void store_samples(FoldSamples folds, const TrainingOptions& o, bool cross, PmscModel& model) {
+  const long R_count = model.region_count;
+  const long N_out = model.point_count;
   CalibrationSamples& samples = model.calibration.samples;
-  const long n = static_cast<long>(sample_key.size());
-  samples.key_point_errors = Eigen::Map<const Eigen::VectorXd>(sample_key.data(), n);
-  samples.max_errors = Eigen::Map<const Eigen::VectorXd>(sample_max.data(), n);
+  const long n = static_cast<long>(folds.key.size());
+  samples.key_point_errors = Eigen::Map<const Eigen::VectorXd>(folds.key.data(), n);
+  samples.max_errors = Eigen::Map<const Eigen::VectorXd>(folds.max.data(), n);
   samples.region_key_point_errors.resize(R_count > 0 ? n : 0, R_count);
   samples.region_max_errors.resize(R_count > 0 ? n : 0, R_count);
   for (long i = 0; i < n && R_count > 0; ++i) {
-    samples.region_key_point_errors.row(i) = sample_region_key[static_cast<size_t>(i)].transpose();
-    samples.region_max_errors.row(i) = sample_region_max[static_cast<size_t>(i)].transpose();
+    samples.region_key_point_errors.row(i) = folds.region_key[static_cast<size_t>(i)].transpose();
+    samples.region_max_errors.row(i) = folds.region_max[static_cast<size_t>(i)].transpose();
   }
-  samples.fold_family = std::move(sample_family);
+  samples.fold_family = std::move(folds.family);
+  std::vector<Eigen::VectorXf>& sample_point_errors = folds.point_errors;
 
-  // Check points (check_points.h) from the held-out residuals, and each sample's e_check.
   const int check_count =
       cross ? 0 : static_cast<int>(std::ceil(o.check_point_fraction * static_cast<double>(model.key_point_count()) - 1e-9));
   if (check_count > 0 && n > 0) {
@@ -709,12 +750,92 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     }
     if (C == 0) samples.check_point_errors.resize(0);
   }
+}
+
+Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
+                              const TrainingOptions& o, TrainingReport* report) {
+  const auto start = std::chrono::steady_clock::now();
+  ANIMSPACE_RETURN_IF_ERROR(check_training_input(control_frames, output_frames, o));
+  const int D = o.channel_count;
+  const long F = control_frames.rows();
+  const bool cross = output_frames != nullptr;
+  const long control_points = control_frames.cols() / D;
+  const bool articulated = o.subspace_kind == SubspaceKind::kArticulated;
+
+  // T: R × F, control rows first, in double: PCA and least squares at training time deserve it.
+  const long control_rows = control_frames.cols();
+  const long rows = control_rows + (cross ? output_frames->cols() : 0);
+  Eigen::MatrixXd T(rows, F);
+  T.topRows(control_rows) = control_frames.transpose().cast<double>();
+  if (cross) T.bottomRows(rows - control_rows) = output_frames->transpose().cast<double>();
+
+  PmscModel model;
+  model.channel_count = D;
+  model.cross = cross;
+  model.control_point_count = static_cast<int>(control_points);
+  model.point_count = static_cast<int>((rows - (cross ? control_rows : 0)) / D);
+  model.aligned = o.remove_rigid_motion;
+  model.relative_tolerance = o.relative_tolerance;
+  if (o.remove_rigid_motion) {
+    const auto transforms = rigid_motion_per_frame(T, control_points);
+    for (long f = 0; f < F; ++f) apply_inverse(transforms[static_cast<size_t>(f)], T.col(f));
+  }
+  const HeldOutSets held = held_out_sets(F, o);
+
+  // The basis: principal components of the training matrix (2007 §2.1), or the skinning and
+  // its residual components.
+  const auto pca_start = std::chrono::steady_clock::now();
+  const Eigen::VectorXd mean = T.rowwise().mean();
+  const Eigen::MatrixXd centred = T.colwise() - mean;
+  const int max_basis = static_cast<int>(std::min<long>(o.max_basis, F - 1));
+  const int chosen_cap = std::max(1, std::min(max_basis, static_cast<int>(o.max_basis_fraction * static_cast<double>(F))));
+  const PcaBasis pca = thin_pca(centred, max_basis);
+  if (pca.basis.cols() == 0) return invalid("the training frames are all identical: there is no motion to model");
+  Eigen::MatrixXd gram(F, F);
+  gram_lower_serial(T.rows(), F, T.data(), T.rows(), gram.data(), F);
+  gram = gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
+  ChosenBasis basis;
+  if (articulated) {
+    auto fitted = articulated_basis(control_frames, T, held, chosen_cap, o);
+    if (!fitted) return fitted.error();
+    basis = std::move(*fitted);
+  } else {
+    basis = linear_basis(mean, centred, pca, gram, held, chosen_cap, o);
+  }
+  const int M = basis.M;
+  const double pca_seconds = seconds_since(pca_start);
+
+  // Key points (2007 §2.2).
+  const auto key_start = std::chrono::steady_clock::now();
+  auto key_options = key_point_options(o, basis, mean, control_points, articulated);
+  if (!key_options) return key_options.error();
+  auto selection =
+      select_key_points(articulated ? basis.articulated_centred : centred, basis.subspace.basis, *key_options);
+  if (!selection) return selection.error();
+  const double key_selection_seconds = seconds_since(key_start);
+  model.subspace_kind = o.subspace_kind;
+  model.bone_count = articulated ? basis.skinning.bone_count : 0;
+  model.residual_components = articulated ? basis.residual_count : 0;
+  ANIMSPACE_RETURN_IF_ERROR(assemble(basis.subspace, control_rows, cross, selection->key_points, model));
+
+  // Regions for local fail-through (the keys index the same points only without cross).
+  if (!cross && o.region_count > 0) assign_regions(pca, basis, articulated, o, model);
+
+  // Calibration (calibration.h) and check points.
+  const auto calibration_start = std::chrono::steady_clock::now();
+  FoldSamples folds = calibration_samples(control_frames, output_frames, T, gram, held, basis, articulated, model, o);
+  const long n = static_cast<long>(folds.key.size());
+  store_samples(std::move(folds), o, cross, model);
   model.calibration.false_hit_rate = o.false_hit_rate;
-  model.calibration.block_frames = static_cast<int>(block);
+  model.calibration.block_frames = static_cast<int>(held.block);
   ANIMSPACE_RETURN_IF_ERROR(apply_calibration(model, o.error_tolerance, o.blend_zone_ratio));
   ANIMSPACE_RETURN_IF_ERROR(prepare_projection(model));  // the check rows
 
   if (report) {
+    const std::vector<double>& held_out_rms = basis.held_out_rms;
+    const double projection_error = basis.projection_error;
+    const ArticulatedSkinning& skinning = basis.skinning;
+    const double skinning_seconds = basis.skinning_seconds;
     report->frames = static_cast<int>(F);
     report->basis_size = M;
     report->held_out_relative_rms = held_out_rms;

@@ -46,6 +46,7 @@ TEST(PoseBatcher, ConcurrentCallersGetTheOnePoseAnswersOfTheirOwnPoses) {
   const pmsc::PmscModel b = testing::random_model(random, 300, 5, 10, false);
   ASSERT_GT(a.projection.size(), 0);
   ASSERT_GT(b.projection.size(), 0);
+  const auto runtime_a = testing::runtime(a), runtime_b = testing::runtime(b);
   PoseBatcher batcher({std::chrono::microseconds(0), 7});
   constexpr int kThreads = 6, kRounds = 25;
   std::vector<std::thread> threads;
@@ -54,7 +55,9 @@ TEST(PoseBatcher, ConcurrentCallersGetTheOnePoseAnswersOfTheirOwnPoses) {
     threads.emplace_back([&, t] {
       std::mt19937 mine(100 + static_cast<unsigned>(t));
       for (int round = 0; round < kRounds; ++round) {
-        const pmsc::PmscModel& m = (round + t) % 3 == 0 ? b : a;
+        const bool use_b = (round + t) % 3 == 0;
+        const pmsc::PmscModel& m = use_b ? b : a;
+        const pmsc::Subspace& runtime = use_b ? *runtime_b : *runtime_a;
         // Groups of 1 to 20 poses: some larger than max_batch, so they span batches.
         std::vector<std::unique_ptr<Slot>> slots(1 + mine() % 20);
         std::vector<PoseBatcher::Pose> poses;
@@ -65,7 +68,7 @@ TEST(PoseBatcher, ConcurrentCallersGetTheOnePoseAnswersOfTheirOwnPoses) {
           poses.push_back({&slot->keys, &slot->estimate, slot->points.data()});
         }
         PoseBatcher::Group group;
-        batcher.enqueue(m, poses, group);
+        batcher.enqueue(runtime, poses, group);
         batcher.await(group);
         if (group.pending()) ++failures;
         for (const auto& slot : slots) {
@@ -100,12 +103,13 @@ struct Prepared {
 TEST(PoseBatcher, EnoughWaitingPosesAreTakenIntoOneCallersBatch) {
   std::mt19937 random(22);
   const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  const auto runtime = testing::runtime(m);
   PoseBatcher batcher({std::chrono::microseconds(0), 64});
   Prepared first(random, m, 2), second(random, m, 2);  // together min_batch (4)
   ASSERT_EQ(batcher.options().min_batch, 4u);
   PoseBatcher::Group g1, g2;
-  batcher.enqueue(m, first.poses, g1);
-  batcher.enqueue(m, second.poses, g2);
+  batcher.enqueue(*runtime, first.poses, g1);
+  batcher.enqueue(*runtime, second.poses, g2);
   // One await reconstructs everything waiting for the model: the second group is done without
   // anyone awaiting it.
   batcher.await(g1);
@@ -119,11 +123,12 @@ TEST(PoseBatcher, EnoughWaitingPosesAreTakenIntoOneCallersBatch) {
 TEST(PoseBatcher, BelowTheMinimumBatchEachCallerComputesItsOwn) {
   std::mt19937 random(25);
   const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  const auto runtime = testing::runtime(m);
   PoseBatcher batcher({std::chrono::microseconds(0), 64});
   Prepared first(random, m, 1), second(random, m, 2);  // 3 waiting: one product would not pay
   PoseBatcher::Group g1, g2;
-  batcher.enqueue(m, first.poses, g1);
-  batcher.enqueue(m, second.poses, g2);
+  batcher.enqueue(*runtime, first.poses, g1);
+  batcher.enqueue(*runtime, second.poses, g2);
   batcher.await(g1);
   EXPECT_TRUE(g2.pending()) << "left for its own caller, on another core";
   batcher.await(g2);
@@ -135,6 +140,7 @@ TEST(PoseBatcher, BelowTheMinimumBatchEachCallerComputesItsOwn) {
 TEST(PoseBatcher, WithdrawnPosesAreNeverWritten) {
   std::mt19937 random(23);
   const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  const auto runtime = testing::runtime(m);
   PoseBatcher batcher({std::chrono::microseconds(0), 64});
   Slot dropped;
   dropped.keys = testing::random_keys(random, m);
@@ -142,12 +148,12 @@ TEST(PoseBatcher, WithdrawnPosesAreNeverWritten) {
   const PoseBatcher::Pose pose{&dropped.keys, &dropped.estimate, dropped.points.data()};
   {
     PoseBatcher::Group gone;
-    batcher.enqueue(m, {&pose, 1}, gone);
+    batcher.enqueue(*runtime, {&pose, 1}, gone);
   }  // destroyed unawaited (a stream frame skipped after a cancel): withdrawn
   // A batch of everything waiting: it would take the dropped pose had it stayed.
   Prepared kept(random, m, 4);
   PoseBatcher::Group group;
-  batcher.enqueue(m, kept.poses, group);
+  batcher.enqueue(*runtime, kept.poses, group);
   batcher.await(group);
   for (const auto& slot : kept.slots) expect_one_pose_answer(m, *slot);
   EXPECT_TRUE((dropped.points.array() == -7.0f).all());
@@ -156,6 +162,7 @@ TEST(PoseBatcher, WithdrawnPosesAreNeverWritten) {
 TEST(PoseBatcher, ADelayLetsABatchFillFromAnotherThread) {
   std::mt19937 random(24);
   const pmsc::PmscModel m = testing::random_model(random, 200, 5, 10, false);
+  const auto runtime = testing::runtime(m);
   // A delay far longer than the test: the batch can only start because it filled.
   PoseBatcher batcher({std::chrono::microseconds(60'000'000), 2});
   Slot first, second;
@@ -166,9 +173,9 @@ TEST(PoseBatcher, ADelayLetsABatchFillFromAnotherThread) {
   const PoseBatcher::Pose p1{&first.keys, &first.estimate, first.points.data()};
   const PoseBatcher::Pose p2{&second.keys, &second.estimate, second.points.data()};
   PoseBatcher::Group g1, g2;
-  batcher.enqueue(m, {&p1, 1}, g1);
+  batcher.enqueue(*runtime, {&p1, 1}, g1);
   std::thread late([&] {
-    batcher.enqueue(m, {&p2, 1}, g2);
+    batcher.enqueue(*runtime, {&p2, 1}, g2);
     batcher.await(g2);
   });
   batcher.await(g1);

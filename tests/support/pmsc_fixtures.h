@@ -1,12 +1,15 @@
 // A PMSC model small enough to work by hand, shared by the pmsc and misslog tests.
 #pragma once
 
+#include <cstdlib>
+#include <memory>
 #include <random>
 #include <vector>
 
 #include <Eigen/QR>
 
 #include "core/pmsc/pmsc_model.h"
+#include "core/pmsc/subspace.h"
 
 namespace animspace::testing {
 
@@ -56,6 +59,14 @@ inline pmsc::PmscModel random_model(std::mt19937& random, int points, int basis_
   m.epsilon = {0.05, 0.1};
   if (!pmsc::prepare_projection(m).ok()) m.projection.resize(0, 0);  // callers check projection's size
   return m;
+}
+
+// The runtime a server builds for `m` (a copy, prepared), for tests that drive the server's
+// pipeline pieces directly.
+inline std::shared_ptr<const pmsc::Subspace> runtime(const pmsc::PmscModel& m) {
+  auto subspace = pmsc::make_subspace(std::make_shared<const pmsc::PmscModel>(m));
+  if (!subspace.ok()) std::abort();  // a fixture's model is always servable
+  return *subspace;
 }
 
 // Key values of a random pose near random_model's subspace, with noise of a random size so that

@@ -14,6 +14,7 @@
 #include "core/demo/bending_arm.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/retrain.h"
+#include "core/pmsc/subspace.h"
 #include "core/pmsc/train.h"
 
 namespace animspace::pmsc {
@@ -277,14 +278,17 @@ TEST(ArticulatedSubspace, TrainingIsDeterministic) {
   EXPECT_EQ(first->epsilon.epsilon_min, second->epsilon.epsilon_min);
 }
 
-// The server reconstructs an articulated answer from each point's skinning terms, a client from
-// the whole basis (coordinates.h): both are f̂ = mean + A p, here against that sum in double, alone
-// and in a batch, within the bound pmsc_model.h states for any order of the float additions.
+// The server reconstructs an articulated answer from each point's skinning terms (its kind's
+// runtime, subspace.h), a client from the whole basis (coordinates.h): both are f̂ = mean + A p,
+// here against that sum in double, alone and in a batch, within the bound pmsc_model.h states
+// for any order of the float additions.
 TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
   const ArmCase arm;
   auto model = train(arm.training, arm.options(SubspaceKind::kArticulated), nullptr);
   ASSERT_TRUE(model.ok()) << model.error().message;
-  ASSERT_EQ(model->skinning_offsets.size(), static_cast<size_t>(model->point_count) + 1);
+  auto subspace = make_subspace(std::make_shared<const PmscModel>(*model));
+  ASSERT_TRUE(subspace.ok()) << subspace.error().message;
+  const Subspace& runtime = **subspace;
   std::vector<PoseEstimate> estimates(static_cast<size_t>(arm.new_shot.rows()));
   std::vector<const PoseEstimate*> inputs;
   Eigen::MatrixXf points(model->mean.size(), arm.new_shot.rows());
@@ -294,7 +298,7 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
     inputs.push_back(&estimates[f]);
     destinations.push_back(points.col(f).data());
   }
-  reconstruct(*model, inputs, destinations);  // one batch
+  runtime.reconstruct(inputs, destinations);  // one batch
   const double u = reconstruction_rounding_bound(model->basis_size());
   const Eigen::MatrixXd A = model->basis.cast<double>();
   for (long f = 0; f < arm.new_shot.rows(); ++f) {
@@ -304,7 +308,7 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
     Eigen::VectorXf alone(model->mean.size());
     float* destination = alone.data();
     const PoseEstimate* input = &estimates[f];
-    reconstruct(*model, {&input, 1}, {&destination, 1});
+    runtime.reconstruct({&input, 1}, {&destination, 1});
     EXPECT_TRUE(((points.col(f).cast<double>() - exact).cwiseAbs().array() <= bound.array()).all())
         << "frame " << f << ": " << ((points.col(f).cast<double>() - exact).cwiseAbs() - bound).maxCoeff() << " over";
     EXPECT_TRUE(((alone.cast<double>() - exact).cwiseAbs().array() <= bound.array()).all()) << "frame " << f;
@@ -313,8 +317,10 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
   // A basis whose bone columns are not of the skinning form is refused, naming the point.
   PmscModel corrupt = *model;
   corrupt.basis(3 * 5 + 1, 0) += 0.25f;  // point 5's y row in bone 0's x columns
-  const Status refused = prepare_projection(corrupt);
+  ASSERT_TRUE(prepare_projection(corrupt).ok());
+  const auto refused = make_subspace(std::make_shared<const PmscModel>(std::move(corrupt)));
   ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
   EXPECT_NE(refused.error().message.find("point 5, bone 0"), std::string::npos) << refused.error().message;
 }
 

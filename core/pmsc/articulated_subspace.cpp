@@ -1,0 +1,123 @@
+// The articulated kind's runtime (issue #51; articulated.h): the basis's skinning columns read
+// back, once at load, as each point's influences, so that a reconstruction costs a few terms per
+// point instead of a row of 12·B mostly-zero columns. The dense product mean + A p
+// (pmsc::reconstruct) gives the same points and stays the reference: a client holding the whole
+// basis reconstructs that way (coordinates.h).
+#include <cassert>
+#include <string>
+#include <vector>
+
+#include "core/common/kernels.h"
+#include "core/pmsc/articulated.h"
+#include "core/pmsc/subspace.h"
+
+namespace animspace::pmsc {
+namespace {
+
+// Point i's bones are bones[offsets[i] … offsets[i + 1]) (0-based, columns 12·j …), each with
+// its four numbers h = w·(p̂ − c, 1) in terms (4 per influence), and
+//   f̂_i = mean_i + Σ_j M_j h_ij + (residual rows) · p_residual.
+struct SkinningTerms {
+  std::vector<int32_t> offsets;
+  std::vector<int32_t> bones;
+  std::vector<float> terms;
+};
+
+// An articulated basis's first 12·B columns are skinning: at point i and bone j the 3 × 12 block
+// is h_ij in the four columns of each row's transform row and 0 elsewhere. Refuses a basis of
+// another shape: a corrupt or hand-made file would otherwise be reconstructed differently by the
+// server, which reads the terms, and by a client, which reads the whole basis.
+Result<SkinningTerms> read_skinning_terms(const PmscModel& m) {
+  SkinningTerms out;
+  out.offsets.reserve(static_cast<size_t>(m.point_count) + 1);
+  out.offsets.push_back(0);
+  for (long i = 0; i < m.point_count; ++i) {
+    for (int j = 0; j < m.bone_count; ++j) {
+      const auto block = m.basis.block(3 * i, static_cast<long>(kBoneCoordinates) * j, 3, kBoneCoordinates);
+      const Eigen::RowVector4f h = block.block<1, 4>(0, 0);
+      bool skinning_form = true;
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < kBoneCoordinates; ++c) {
+          const float expected = c / 4 == r ? h(c % 4) : 0.0f;
+          skinning_form = skinning_form && block(r, c) == expected;
+        }
+      }
+      if (!skinning_form) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          "pmsc model: an articulated basis's bone columns must have the skinning form "
+                          "(w·(p̂ − c, 1) in each row's four columns of the bone, 0 elsewhere); point " +
+                              std::to_string(i) + ", bone " + std::to_string(j) + " does not");
+      }
+      if ((h.array() == 0.0f).all()) continue;  // exactly: a weight of 1e-6 is still a term
+      out.bones.push_back(j);
+      out.terms.insert(out.terms.end(), h.data(), h.data() + 4);
+    }
+    out.offsets.push_back(static_cast<int32_t>(out.bones.size()));
+  }
+  return out;
+}
+
+class ArticulatedSubspace final : public Subspace {
+ public:
+  ArticulatedSubspace(std::shared_ptr<const PmscModel> model, SkinningTerms skinning)
+      : Subspace(std::move(model)), skinning_(std::move(skinning)) {}
+
+  // The residual columns as the linear kind's product (a block of rows at a time, for the whole
+  // batch), then each point's bones from its skinning terms.
+  void reconstruct(std::span<const PoseEstimate* const> estimates,
+                   std::span<float* const> destinations) const override {
+    assert(estimates.size() == destinations.size());
+    const PmscModel& m = model();
+    const long rows = m.basis.rows();
+    const long B = static_cast<long>(estimates.size());
+    if (B == 0) return;
+    const long skinning = static_cast<long>(kBoneCoordinates) * m.bone_count;
+    const long r = m.residual_components;
+    Eigen::MatrixXf coordinates(m.basis.cols(), B);
+    for (long b = 0; b < B; ++b) coordinates.col(b) = estimates[static_cast<size_t>(b)]->coordinates.cast<float>();
+    const long block = std::max(kReconstructionBlockValues / B, 256L);
+    Eigen::MatrixXf scratch(std::min(block, rows), B);
+    const Eigen::MatrixXf residual_coordinates = coordinates.bottomRows(r);
+    for (long r0 = 0; r0 < rows; r0 += block) {
+      const long n = std::min(block, rows - r0);
+      if (r > 0) {
+        gemm(n, r, B, m.basis.data() + skinning * rows + r0, rows, residual_coordinates.data(), r, 0.0f,
+             scratch.data(), scratch.rows());
+      }
+      for (long b = 0; b < B; ++b) {
+        Eigen::Map<Eigen::VectorXf> destination(destinations[static_cast<size_t>(b)] + r0, n);
+        destination = m.mean.segment(r0, n);
+        if (r > 0) destination += scratch.col(b).head(n);
+      }
+    }
+    for (long b = 0; b < B; ++b) {
+      const float* p = coordinates.col(b).data();
+      float* f = destinations[static_cast<size_t>(b)];
+      for (long i = 0; i < m.point_count; ++i) {
+        for (int32_t k = skinning_.offsets[static_cast<size_t>(i)]; k < skinning_.offsets[static_cast<size_t>(i) + 1];
+             ++k) {
+          const float* h = skinning_.terms.data() + 4L * k;
+          const float* M_j = p + static_cast<long>(kBoneCoordinates) * skinning_.bones[static_cast<size_t>(k)];
+          for (int row = 0; row < 3; ++row) {
+            f[3 * i + row] +=
+                h[0] * M_j[4 * row] + h[1] * M_j[4 * row + 1] + h[2] * M_j[4 * row + 2] + h[3] * M_j[4 * row + 3];
+          }
+        }
+      }
+    }
+  }
+
+ private:
+  SkinningTerms skinning_;
+};
+
+}  // namespace
+
+Result<std::shared_ptr<const Subspace>> make_articulated_subspace(std::shared_ptr<const PmscModel> model) {
+  assert(model->subspace_kind == SubspaceKind::kArticulated && !model->aligned);
+  auto skinning = read_skinning_terms(*model);
+  if (!skinning) return skinning.error();
+  return std::shared_ptr<const Subspace>(std::make_shared<ArticulatedSubspace>(std::move(model), std::move(*skinning)));
+}
+
+}  // namespace animspace::pmsc
