@@ -52,6 +52,7 @@ void write_verdict(const LoadedModel& model, const PoseOptions& options, const p
   const pmsc::CachedPose& cached = answer.cached;
   out->set_status(to_proto(cached.status));
   out->set_key_point_error(static_cast<float>(cached.key_point_error));
+  out->set_key_point_max_error(static_cast<float>(cached.key_point_max_error));
   out->set_check_point_error(static_cast<float>(cached.check_point_error));
   out->set_error_estimate(static_cast<float>(cached.error_estimate));
   if (model.pmsc->relative_tolerance) out->set_pose_scale(static_cast<float>(cached.scale));

@@ -121,6 +121,7 @@ PoseResult decode_pose_result(const v1::PoseResult& result) {
   if (result.has_points()) out.points = decode_points(result.points());
   out.status = result.status();
   out.key_point_error = result.key_point_error();
+  out.key_point_max_error = result.key_point_max_error();
   out.check_point_error = result.check_point_error();
   out.error_estimate = result.error_estimate();
   out.checked = result.checked();

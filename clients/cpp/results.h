@@ -109,8 +109,10 @@ struct PoseResult {
   Points points;  // empty when points were omitted
   v1::CacheStatus status = v1::CACHE_STATUS_UNSPECIFIED;
   float key_point_error = 0;  // e_key
+  float key_point_max_error = 0;  // the worst key point's residual (issue #52)
   // e_check = max over check points of ‖f_c − f̂_c‖ (0 unless `checked`), and the error estimate
-  // the verdict compared with ε: max(w·e_key, e_check) when checked, else e_key.
+  // the verdict compared with ε: max(w·k, e_check) when checked, else k — k the worst key's
+  // residual (models trained since issue #52) or e_key (before).
   float check_point_error = 0;
   float error_estimate = 0;
   bool checked = false;       // the pose was sent with check values and the model has check points

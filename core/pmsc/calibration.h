@@ -75,6 +75,9 @@ struct CalibrationSamples {
   // format 2 hold only the first two.
   std::vector<char> fold_family;
   Eigen::VectorXd key_point_errors;    // n, e_key of each held-out frame
+  // n, its worst key point's residual (PoseEstimate::key_point_max_error); empty in models
+  // calibrated before issue #52.
+  Eigen::VectorXd key_point_max_errors;
   Eigen::VectorXd check_point_errors;  // n, its e_check; empty for a model without check points
   Eigen::VectorXd max_errors;          // n, its true max point error
   // n × R (R = regions, 0 without regions): each region's RMS key error, its check points' worst

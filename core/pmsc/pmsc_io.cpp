@@ -44,6 +44,7 @@ constexpr IntOption kIntOptions[] = {
     {"calibration_block_frames", &TrainingOptions::calibration_block_frames, true},
     {"bone_count", &TrainingOptions::bone_count, true},                    // issue #51
     {"residual_components", &TrainingOptions::residual_components, true},  // issue #51
+    {"cross_fitted_calibration", &TrainingOptions::cross_fitted_calibration, true},  // issue #52
 };
 constexpr DoubleOption kDoubleOptions[] = {
     {"error_bound", &TrainingOptions::error_bound},
@@ -112,6 +113,9 @@ void store_calibration(const PmscModel& m, container::ModelContainer& out) {
     samples.middleCols(3 + R, R) = c.samples.region_max_errors;
   }
   out.set_matrix(kCalibrationSamplesSection, samples);
+  if (c.samples.key_point_max_errors.size() == n) {
+    out.set_matrix(kCalibrationKeyMaxErrorsSection, Float64Matrix(c.samples.key_point_max_errors));
+  }
   if (c.samples.checked()) {
     const long check_regions = c.samples.region_check_point_errors.cols();
     Float64Matrix check(n, 1 + check_regions);
@@ -177,6 +181,20 @@ Status load_calibration(const container::ModelContainer& in, const std::string& 
   if (!in.metadata_value(kBadSamplesKey).empty() && !parse_exactly(in.metadata_value(kBadSamplesKey), c.bad_samples)) {
     return unparsable(source, kBadSamplesKey, "a decimal integer", in.metadata_value(kBadSamplesKey));
   }
+  if (in.has_section(kCalibrationKeyMaxErrorsSection)) {
+    auto key_max = in.double_matrix(kCalibrationKeyMaxErrorsSection);
+    if (!key_max) return with_source(key_max.error(), source);
+    if (key_max->rows() != samples->rows() || key_max->cols() != 1) {
+      return container::section_shape_error(source, kCalibrationKeyMaxErrorsSection,
+                                            std::to_string(samples->rows()) + "×1 (one worst key error per sample)",
+                                            key_max->rows(), key_max->cols());
+    }
+    if (!key_max->allFinite() || (key_max->size() > 0 && key_max->minCoeff() < 0)) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": section '" + kCalibrationKeyMaxErrorsSection +
+                                                         "' holds negative, NaN or Inf errors");
+    }
+    c.samples.key_point_max_errors = key_max->col(0);
+  }
   if (in.has_section(kCalibrationCheckErrorsSection)) {
     auto check = in.double_matrix(kCalibrationCheckErrorsSection);
     if (!check) return with_source(check.error(), source);
@@ -233,6 +251,7 @@ void store(const PmscModel& m, container::ModelContainer& out) {
   out.metadata()["pmsc.aligned"] = m.aligned ? "1" : "0";
   out.metadata()[kRelativeToleranceKey] = m.relative_tolerance ? "1" : "0";
   out.metadata()[kSubspaceKindKey] = subspace_kind_name(m.subspace_kind);
+  out.metadata()[kEstimatorKey] = error_estimator_name(m.estimator);
   if (m.subspace_kind == SubspaceKind::kArticulated) {
     out.metadata()[kBoneCountKey] = std::to_string(m.bone_count);
     out.metadata()[kResidualComponentsKey] = std::to_string(m.residual_components);
@@ -289,6 +308,15 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
     auto kind = parse_subspace_kind(source, kSubspaceKindKey, in.metadata_value(kSubspaceKindKey));
     if (!kind) return kind.error();
     m.subspace_kind = *kind;
+  }
+  if (in.metadata().contains(kEstimatorKey)) {
+    const std::string estimator = in.metadata_value(kEstimatorKey);
+    if (estimator == error_estimator_name(ErrorEstimator::kWorstPoint)) {
+      m.estimator = ErrorEstimator::kWorstPoint;
+    } else if (estimator != error_estimator_name(ErrorEstimator::kKeyRms)) {
+      return make_error(ErrorCode::kInvalidArgument, source + ": metadata '" + std::string(kEstimatorKey) +
+                                                         "' should be key_rms or worst_point, got '" + estimator + "'");
+    }
   }
   if (m.subspace_kind == SubspaceKind::kArticulated) {
     auto bones = in.metadata_int(kBoneCountKey);
@@ -356,6 +384,12 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
     m.key_only_epsilon = {(*key_only)(0, 0), (*key_only)(0, 1)};
   }
   if (auto calibration = load_calibration(in, source, m); !calibration.ok()) return calibration.error();
+  if (m.estimator == ErrorEstimator::kWorstPoint && m.calibration.samples.size() > 0 &&
+      m.calibration.samples.key_point_max_errors.size() != m.calibration.samples.size()) {
+    return make_error(ErrorCode::kInvalidArgument, source + ": metadata '" + std::string(kEstimatorKey) +
+                                                       "' is worst_point but section '" +
+                                                       kCalibrationKeyMaxErrorsSection + "' is absent");
+  }
   ANIMSPACE_RETURN_IF_ERROR(load_region_weights(in, source, m));
   if (auto prepared = prepare_projection(m); !prepared.ok()) return with_source(prepared.error(), source);
   return m;

@@ -52,6 +52,10 @@ inline constexpr const char* kCheckPointsSection = "pmsc.check_points";
 inline constexpr const char* kCheckRegionsSection = "pmsc.check_regions";
 inline constexpr const char* kKeyOnlyEpsilonSection = "pmsc.key_only_epsilon";
 inline constexpr const char* kKeyWeightKey = "pmsc.key_weight";
+// Issue #52: the verdict's estimator ("key_rms" when absent: every model before it) and each
+// calibration sample's worst key error (n × 1; absent before it).
+inline constexpr const char* kEstimatorKey = "pmsc.estimator";
+inline constexpr const char* kCalibrationKeyMaxErrorsSection = "pmsc.calibration_key_max_errors";
 // The section of PmscModel::region_weights (read and written only here, hence not in sections.h).
 inline constexpr const char* kRegionWeightsSection = "pmsc.region_weights";
 

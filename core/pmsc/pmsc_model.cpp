@@ -19,6 +19,10 @@
 
 namespace animspace::pmsc {
 
+const char* error_estimator_name(ErrorEstimator estimator) {
+  return estimator == ErrorEstimator::kWorstPoint ? "worst_point" : "key_rms";
+}
+
 const char* subspace_kind_name(SubspaceKind kind) {
   switch (kind) {
     case SubspaceKind::kLinear:
@@ -375,6 +379,14 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
     return scale > 0 ? error / scale : std::numeric_limits<double>::infinity();
   };
   out.key_point_error = measured(rms(key_residual));
+  {
+    const long D_keys = m.channel_count;
+    double worst = 0;
+    for (long k = 0; k * D_keys < key_residual.size(); ++k) {
+      worst = std::max(worst, key_residual.segment(k * D_keys, D_keys).squaredNorm());
+    }
+    out.key_point_max_error = measured(std::sqrt(worst));
+  }
   out.points.resize(0);
   const long D = m.channel_count;
   const long C = m.check_point_count();
@@ -395,8 +407,9 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
       out.check_point_error = std::max(out.check_point_error, check_errors[static_cast<size_t>(c)]);
     }
   }
-  out.error_estimate = out.checked ? combined_error_estimate(m.key_weight, out.key_point_error, out.check_point_error)
-                                   : out.key_point_error;
+  const double key_term =
+      m.estimator == ErrorEstimator::kWorstPoint ? out.key_point_max_error : out.key_point_error;
+  out.error_estimate = out.checked ? combined_error_estimate(m.key_weight, key_term, out.check_point_error) : key_term;
 
   // Local fail-through: the same estimate, restricted to the key (and check) points of each region.
   out.region_errors.assign(static_cast<size_t>(m.region_count), 0.0);
@@ -498,6 +511,7 @@ bool judge(const PmscModel& m, const PoseEstimate& estimate, CachedPose& out) {
   out.status = decision.status;
   out.alpha = decision.alpha;
   out.key_point_error = estimate.key_point_error;
+  out.key_point_max_error = estimate.key_point_max_error;
   out.check_point_error = estimate.check_point_error;
   out.checked = estimate.checked;
   out.error_estimate = estimate.error_estimate;
@@ -590,16 +604,31 @@ Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio
                                                        " region check columns expected, got " +
                                                        std::to_string(samples.region_check_point_errors.cols()));
   }
+  if (m.estimator == ErrorEstimator::kWorstPoint && samples.key_point_max_errors.size() != samples.size()) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "calibration samples: the worst key point's error of every sample is needed by the estimator "
+                      "worst_point, got " + std::to_string(samples.key_point_max_errors.size()) + " of " +
+                          std::to_string(samples.size()));
+  }
   const auto thresholds = [&](double epsilon_min) {
     return SoftCacheThresholds{epsilon_min, epsilon_min * blend_zone_ratio};
   };
-  m.key_weight = checked ? choose_key_weight(samples, tolerance, delta) : 1.0;
+  // The whole pose's key term, as the model's estimator measures it (ErrorEstimator); the
+  // regions' samples are RMS either way.
+  CalibrationSamples worst_point_samples;
+  if (m.estimator == ErrorEstimator::kWorstPoint) {
+    worst_point_samples = samples;
+    worst_point_samples.key_point_errors = samples.key_point_max_errors;
+  }
+  const CalibrationSamples& whole_samples = m.estimator == ErrorEstimator::kWorstPoint ? worst_point_samples : samples;
+  m.key_weight = checked ? choose_key_weight(whole_samples, tolerance, delta) : 1.0;
   const ExtrapolatedEpsilon whole =
-      calibrate_extrapolated(samples.error_estimates(m.key_weight), samples.max_errors, tolerance, delta);
+      calibrate_extrapolated(whole_samples.error_estimates(m.key_weight), samples.max_errors, tolerance, delta);
   m.epsilon = thresholds(whole.epsilon_min);
-  m.key_only_epsilon =
-      checked ? thresholds(calibrate_extrapolated(samples.key_point_errors, samples.max_errors, tolerance, delta).epsilon_min)
-              : SoftCacheThresholds{};
+  m.key_only_epsilon = checked ? thresholds(calibrate_extrapolated(whole_samples.key_point_errors, samples.max_errors,
+                                                                   tolerance, delta)
+                                                .epsilon_min)
+                               : SoftCacheThresholds{};
   m.calibration.error_ratio = whole.epsilon_min > 0 ? tolerance / whole.epsilon_min : 0;
   m.calibration.over_tolerance = whole.over_tolerance;
   m.calibration.bad_samples = whole.bad_samples;

@@ -47,6 +47,17 @@ enum class SubspaceKind : int { kLinear = 0, kArticulated = 1 };
 // "linear", "articulated": the name in model files, on the command line and on the wire.
 const char* subspace_kind_name(SubspaceKind kind);
 
+// What the whole pose's verdict measures of the key points (issue #52):
+//   kKeyRms      e_key, their RMS residual (2007 eq. 8) — every model before issue #52;
+//   kWorstPoint  the worst key point's residual, max_k ‖f_k − f̂_k‖: an error under a few of K
+//                keys moves the RMS by only √(few/K) of itself, so a local error a key does see
+//                (a limb turned further on a new shot, a bulge) went unnoticed in the RMS.
+// Either is weighted and joined with e_check (calibration.h, combined_error_estimate) and
+// calibrated the same way. Region errors stay RMS over each region's keys.
+enum class ErrorEstimator : int { kKeyRms = 0, kWorstPoint = 1 };
+// "key_rms", "worst_point": the name in model files and reports.
+const char* error_estimator_name(ErrorEstimator estimator);
+
 struct PmscModel {
   int channel_count = 3;             // D
   int point_count = 0;          // N, output points
@@ -54,6 +65,7 @@ struct PmscModel {
   bool cross = false;
   bool aligned = false;         // requires channels == 3
   SubspaceKind subspace_kind = SubspaceKind::kLinear;
+  ErrorEstimator estimator = ErrorEstimator::kKeyRms;
   // Articulated models: p = (bone transforms, 12 per bone, then residual coefficients).
   int bone_count = 0;            // B
   int residual_components = 0;   // r; M = 12·B + r
@@ -154,11 +166,14 @@ struct PoseEstimate {
   Eigen::VectorXf points;            // N·D estimate f̂ (world frame when aligned)
   Eigen::VectorXd coordinates;       // M, subspace coordinates p
   double key_point_error = 0;        // e_key = rms(f_key − f̂_key), eq. 8
+  // The worst key point's residual, max_k ‖f_k − f̂_k‖ (issue #52): a local error under a few of
+  // K keys moves the RMS by only √(few/K) of itself.
+  double key_point_max_error = 0;
   // e_check = max over check points of ‖f_c − f̂_c‖ (0 when `checked` is false).
   double check_point_error = 0;
   bool checked = false;              // the pose came with check values
-  // What the verdict compares with verdict_thresholds(): max(w·e_key, e_check) when checked,
-  // else e_key.
+  // What the verdict compares with verdict_thresholds(): max(w·k, e_check) when checked, else k,
+  // with k the model's estimator's key term (e_key, or key_point_max_error).
   double error_estimate = 0;
   // Per region, the same estimate over the region's key and check points (empty without regions).
   std::vector<double> region_errors;
@@ -233,6 +248,7 @@ struct CachedPose {
   Eigen::VectorXf points;  // N·D: f̂ (hit), α f + (1 − α) f̂ (blend), f (miss) — or f̂ when no f
   CacheStatus status = CacheStatus::kHit;
   double key_point_error = 0;
+  double key_point_max_error = 0;  // as PoseEstimate
   double check_point_error = 0;  // as PoseEstimate
   bool checked = false;
   double error_estimate = 0;     // what the verdict compared with verdict_thresholds

@@ -72,6 +72,11 @@ struct TrainingOptions {
   // poses besides the keys, chosen from the calibration folds' residuals; 0: none. Cross-PMSC
   // models have none.
   double check_point_fraction = kCheckPointFraction;
+  // Issue #52, measured and not served by default (docs/BENCHMARKS.md): 1 judges each held-out
+  // frame with keys, and check points, chosen without it — on the other half of the frames,
+  // halves by alternating blocks — so that the calibration sees what a new shot's errors look like
+  // to keys that never saw them (train.cpp, CrossFittedKeys); 0: the served keys and check points.
+  int cross_fitted_calibration = 0;
   // ε_max / ε_min (the papers' example uses [0.1, 0.15]).
   double blend_zone_ratio = 1.5;
   // Regions for local fail-through (0 = none; cross-PMSC models have none).

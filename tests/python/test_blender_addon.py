@@ -104,7 +104,7 @@ def blender_run(tmp_path_factory, request):
         # The sequence the Mesh Cache modifier plays: three of the demo's unseen frames (hits),
         # an elbow bent past the training range (a blend, judged with its check points: the
         # middle of arm-pmsc's blend zone) and one bent backwards (a miss).
-        transforms = [_demo_arm_transforms(f / 120) for f in (1, 31, 61)] + [_arm_transforms(2.5),
+        transforms = [_demo_arm_transforms(f / 120) for f in (1, 31, 61)] + [_arm_transforms(2.37),
                                                                              _arm_transforms(math.radians(-60))]
         frames = np.stack([client.evaluate_skeleton_pose(SKINNED_MODEL, G).points for G in transforms])
         animspace.write_pc2(work / "sequence.pc2", frames)

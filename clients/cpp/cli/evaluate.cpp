@@ -113,6 +113,7 @@ int run_evaluate(const EvaluateArgs& a, Client& client, bool json) {
                             {"status", cache_status_name(r.status)},
                             {"key_point_error", r.key_point_error},
                             {"check_point_error", r.check_point_error},
+                            {"key_point_max_error", r.key_point_max_error},
                             {"error_estimate", r.error_estimate},
                             {"checked", r.checked},
                             {"blend_weight", r.blend_weight},

@@ -78,18 +78,20 @@ int main(int argc, char** argv) try {
               result.key_point_error, result.check_point_error, result.blend_weight, result.points.point_count);
 
   // What the check points are for: a dent the training never saw (a trained pose pressed in 0.05
-  // deep within 0.08 of the first check point, as a collision might) leaves the key points almost
-  // where the subspace puts them. From the key points alone (a client from before check points) it is a
-  // HIT; with its check values the server measures the dent and overturns it.
+  // deep around the first check point, as a collision might, and between the key points: no key
+  // is moved) leaves the key points where the subspace puts them. From the key points alone (a
+  // client from before check points) it is a HIT; with its check values the server measures the
+  // dent and overturns it.
   if (!keys.check_point_indices.empty()) {
     const std::vector<float> trained = full_pose(rig, animspace::demo::demo_pose(14.0 / 120));  // an even frame
     std::vector<float> dented = trained;
     const float* centre = &trained[3 * size_t{keys.check_point_indices[0]}];
-    for (size_t i = 0; i < dented.size() / 3; ++i) {
-      const float d = std::hypot(trained[3 * i] - centre[0], trained[3 * i + 1] - centre[1],
-                                 trained[3 * i + 2] - centre[2]);
-      dented[3 * i + 2] -= 0.05f * std::max(0.0f, 1 - d / 0.08f);
-    }
+    const auto distance = [&](size_t i) {
+      return std::hypot(trained[3 * i] - centre[0], trained[3 * i + 1] - centre[1], trained[3 * i + 2] - centre[2]);
+    };
+    float radius = 0.08f;
+    for (uint32_t k : keys.indices) radius = std::min(radius, 0.9f * distance(k));
+    for (size_t i = 0; i < dented.size() / 3; ++i) dented[3 * i + 2] -= 0.05f * std::max(0.0f, 1 - distance(i) / radius);
     const std::vector<float> dent_keys = keys.gather(dented), dent_checks = keys.gather_check_values(dented);
     const animspace::PoseResult alone = client.evaluate_key_points("arm-pmsc", {dent_keys, keys.channel_count});
     const animspace::PoseResult checked = client.evaluate_key_points(

@@ -470,10 +470,13 @@ class PoseResult:
             answer came as ``coordinates`` (unless the call reconstructed them: ``reconstruct=True``).
         status: "HIT" (e ≤ ε_min), "BLEND" or "MISS" (e ≥ ε_max), e = ``error_estimate``.
         key_point_error: e_key, RMS over key points and channels of f_key − f̂_key, model units.
+        key_point_max_error: the worst key point's residual, max over key points of ‖f_k − f̂_k‖
+            (issue #52).
         check_point_error: e_check, the largest distance ‖f_c − f̂_c‖ over the check points sent
             (0 unless ``checked``), model units.
-        error_estimate: what the verdict compared with ε: max(w·e_key, e_check) when ``checked``,
-            else e_key (against the model's stricter key-only thresholds when it has check points).
+        error_estimate: what the verdict compared with ε: max(w·k, e_check) when ``checked``, else
+            k (against the model's stricter key-only thresholds when it has check points), k being
+            ``key_point_max_error`` for a model trained since issue #52, else ``key_point_error``.
         checked: the pose was sent with check values (and the model has check points).
         pose_scale: for a model with ``relative_tolerance``, S, the pose's RMS point norm (model
             units) that the errors above are fractions of; 0 when they are in model units.
@@ -515,6 +518,7 @@ class PoseResult:
     checked: bool = False
     coordinates: Optional[SubspaceCoordinates] = None
     pose_scale: float = 0.0
+    key_point_max_error: float = 0.0
 
     @property
     def hit(self) -> bool:
@@ -534,7 +538,7 @@ class PoseResult:
                    full_point_blend_weights=np.array(m.full_point_blend_weights, dtype=np.float32),
                    points_max_error=m.points.max_error, check_point_error=m.check_point_error,
                    error_estimate=m.error_estimate, checked=m.checked, coordinates=coordinates,
-                   pose_scale=m.pose_scale)
+                   pose_scale=m.pose_scale, key_point_max_error=m.key_point_max_error)
 
 
 @dataclass(frozen=True, eq=False)

@@ -48,6 +48,7 @@ TEST(Subspace, AnAnswerAsPointsIsBlendedInPlaceWithTheFullValues) {
   PoseEstimate estimate;
   subspace->estimate(vector_of({1, 1}), Eigen::VectorXf(), estimate);
   EXPECT_NEAR(estimate.key_point_error, std::sqrt(0.1), 1e-6);
+  EXPECT_NEAR(estimate.key_point_max_error, 0.4, 1e-6);  // the worst key: |1 − 0.6| against |1 − 1.2|
   Eigen::VectorXf points(3);
   const PoseEstimate* input = &estimate;
   float* destination = points.data();

@@ -169,7 +169,9 @@ TEST_F(CheckPointsTest, CheckValuesOverturnTheHitOfExactKeyValues) {
   EXPECT_EQ(unchecked.status(), v1::CACHE_STATUS_HIT);
   EXPECT_FALSE(unchecked.checked());
   EXPECT_EQ(unchecked.check_point_error(), 0.0f);
-  EXPECT_EQ(unchecked.error_estimate(), unchecked.key_point_error());
+  // Without check values the estimate is the key term: the worst key's residual (issue #52).
+  EXPECT_EQ(unchecked.error_estimate(), unchecked.key_point_max_error());
+  EXPECT_GE(unchecked.key_point_max_error(), unchecked.key_point_error());
   EXPECT_LT(unchecked.key_point_error(), 1e-4);
 
   // e = max(e_key, e_check) = δ = 0.015: α = (0.015 − 0.01) / (0.02 − 0.01) = 0.5.
@@ -376,6 +378,7 @@ TEST_F(CheckPointsTest, AModelWithoutCheckPointsRefusesCheckValuesAndServesAsBef
   v1::EvaluateKeyPointsResponse response;
   ASSERT_TRUE(evaluate(kOld, {old_pose}, response).ok());
   EXPECT_FALSE(response.results(0).checked());
+  // A model trained before issue #52 keeps e_key as its key term.
   EXPECT_EQ(response.results(0).error_estimate(), response.results(0).key_point_error());
   // An empty array is no check values (a client that always fills the field from an empty list).
   v1::KeyPointPose empty = old_pose;
