@@ -29,6 +29,12 @@ grpc::Status unknown_model(const ModelRegistry& registry, std::string_view name)
   std::vector<std::string> served;
   for (const auto& entry : registry.list()) served.push_back(entry.name);
   std::string message = "model '" + std::string(name) + "' is not loaded";
+  // Issue #54: during start-up the model may only not be loaded yet. UNAVAILABLE is what a client
+  // retries (the health check says NOT_SERVING meanwhile); NOT_FOUND would be final.
+  if (!registry.repository_loaded()) {
+    return {grpc::StatusCode::UNAVAILABLE,
+            message + " yet: the server is still loading its repository (health NOT_SERVING); retry"};
+  }
   if (served.empty()) return not_found(message + "; the server serves no models");
   const std::vector<std::string> near = nearest_names(name, served);
   for (size_t k = 0; k < near.size(); ++k) {

@@ -62,7 +62,11 @@ Result<std::vector<uint64_t>> ModelRegistry::scan_versions(const std::string& na
   return model::list_versions(repository_, name);
 }
 
-int ModelRegistry::load_all() { return scan(true); }
+int ModelRegistry::load_all() {
+  const int loaded = scan(true);
+  repository_loaded_.store(true, std::memory_order_release);
+  return loaded;
+}
 
 int ModelRegistry::load_new_versions() { return scan(false); }
 

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <atomic>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -62,6 +63,9 @@ class ModelRegistry {
   // Scans the repository and loads every model version in it. Returns the number of versions
   // that loaded; refusals are recorded in the entries (and logged).
   int load_all();
+  // Whether load_all() has finished: before, a model that is not loaded may only not be loaded
+  // yet (the daemon's health is NOT_SERVING meanwhile).
+  bool repository_loaded() const { return repository_loaded_.load(std::memory_order_acquire); }
 
   // The repository poll (--poll-interval-s): loads versions that appeared since the last scan.
   // Versions already known — loaded or refused — are left alone, so a refused file is logged
@@ -99,6 +103,7 @@ class ModelRegistry {
   // Version directories under <repository>/<name>, ascending. Errors: kNotFound.
   Result<std::vector<uint64_t>> scan_versions(const std::string& name) const;
 
+  std::atomic<bool> repository_loaded_{false};
   std::filesystem::path repository_;
   mutable std::shared_mutex mutex_;
   std::mutex publish_mutex_;  // one publish at a time, so version numbers never collide

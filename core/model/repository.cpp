@@ -1,6 +1,7 @@
 #include "core/model/repository.h"
 
 #include <algorithm>
+#include <limits>
 #include <charconv>
 #include <system_error>
 
@@ -60,6 +61,14 @@ Result<uint64_t> publish_version(const std::filesystem::path& repository, const 
   if (ec) return make_error(ErrorCode::kIo, "cannot create " + (repository / name).string() + ": " + ec.message());
   auto versions = list_versions(repository, name);
   if (!versions) return versions.error();
+  // Versions cannot wrap (issue #54): one past 2⁶⁴ − 1 would be 0, which is no version, and
+  // "version 0 published" was never loaded.
+  if (!versions->empty() && versions->back() == std::numeric_limits<uint64_t>::max()) {
+    return make_error(ErrorCode::kOutOfRange, "model '" + name + "' already has version " +
+                                                  std::to_string(versions->back()) +
+                                                  ", the largest a version number can be: publish under a new model "
+                                                  "name, or remove that version's directory");
+  }
   const uint64_t version = versions->empty() ? 1 : versions->back() + 1;
   const auto final_dir = repository / name / std::to_string(version);
   const auto staging = repository / name / (".publish-" + std::to_string(version));

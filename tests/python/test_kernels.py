@@ -25,6 +25,7 @@ def test_the_daemon_names_its_kernel_and_batching(client):
 
 def test_the_portable_kernel_gives_the_dispatched_kernels_answers(client, spawn_daemon, demo_arm_transforms):
     with animspace.Client(spawn_daemon("--kernel", "portable", "--max-batch-size", "8")) as portable:
+        portable.wait_until_serving(deadline_s=60)  # its models load after the port opens
         info = portable.server_info()
         assert info.kernel.startswith("eigen:") and info.max_batch_size == 8
         poses = _poses(client, demo_arm_transforms)

@@ -45,7 +45,27 @@ TEST(UnknownModel, NamesTheNearestAndListsTheServedModels) {
 
   testing::TempDir empty;
   ModelRegistry none(empty.path());
+  ASSERT_EQ(none.load_all(), 0);
   EXPECT_EQ(unknown_model(none, "arm").error_message(), "model 'arm' is not loaded; the server serves no models");
+}
+
+// Issue #54: before the repository is loaded, a model that is not loaded may be loaded in a
+// moment: UNAVAILABLE, which clients retry, not the final NOT_FOUND.
+TEST(UnknownModel, IsUnavailableWhileTheRepositoryLoads) {
+  testing::TempDir repo;
+  put(repo.path(), "arm");
+  ModelRegistry registry(repo.path());
+  std::shared_ptr<const LoadedModel> found;
+  v1::ModelRef ref;
+  ref.set_name("arm");
+  const grpc::Status early = find_model(registry, ref, "model", found);
+  EXPECT_EQ(early.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_EQ(early.error_message(),
+            "model 'arm' is not loaded yet: the server is still loading its repository (health NOT_SERVING); retry");
+  ASSERT_EQ(registry.load_all(), 1);
+  EXPECT_TRUE(find_model(registry, ref, "model", found).ok());
+  ref.set_name("crane");
+  EXPECT_EQ(find_model(registry, ref, "model", found).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
 }  // namespace
