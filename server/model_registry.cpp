@@ -145,7 +145,15 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
     }
   }
   for (auto& entry : fresh) {
-    entry = load_version(name, entry.version, repository_ / name / std::to_string(entry.version));
+    const auto dir = repository_ / name / std::to_string(entry.version);
+    // Issue #54: nothing reached through a link out of the repository is read. (A file that is
+    // not there is the loader's to report, as before.)
+    if (Status inside = model::check_inside_repository(repository_, dir / kModelFileName);
+        !inside.ok() && inside.error().code == ErrorCode::kFailedPrecondition) {
+      entry.error = inside.error().message;
+    } else {
+      entry = load_version(name, entry.version, dir);
+    }
     if (entry.model) {
       spdlog::info("model {} version {} loaded: {} ({} points, {} faces, {} frames, {} bytes)", name,
                    entry.version, container::kind_name(entry.model->info.kind), entry.model->info.point_count,

@@ -106,7 +106,7 @@ std::shared_ptr<const Basis> BasisCache::read_file(const std::string& model, uin
                                                    uint64_t checksum) const {
   if (directory_.empty()) return nullptr;
   const auto path = file_of(model, version, checksum);
-  auto bytes = read_whole_file(path);
+  auto bytes = read_regular_file(path);  // a FIFO in its place would hang the client (issue #54)
   if (!bytes || bytes->size() < kHeaderBytes || std::string_view(*bytes).substr(0, kMagic.size()) != kMagic) {
     return nullptr;
   }

@@ -123,8 +123,19 @@ Status write_file_atomically(const std::filesystem::path& path, std::string_view
   return Status::Ok();
 }
 
-Result<std::string> read_whole_file(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+namespace {
+
+const char* file_type_name(mode_t mode) {
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISDIR(mode)) return "a directory";
+  return "not a regular file";
+}
+
+Result<std::string> read_file(const std::filesystem::path& path, bool regular_only) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | (regular_only ? O_NONBLOCK : 0));
   if (fd < 0) {
     const int error_number = errno;
     if (error_number == ENOENT) {
@@ -137,9 +148,13 @@ Result<std::string> read_whole_file(const std::filesystem::path& path) {
   std::string bytes;
   try {
     struct stat info {};
-    if (::fstat(file.get(), &info) == 0 && S_ISREG(info.st_mode) && info.st_size > 0) {
-      bytes.reserve(static_cast<size_t>(info.st_size));
+    const bool stated = ::fstat(file.get(), &info) == 0;
+    if (regular_only && (!stated || !S_ISREG(info.st_mode))) {
+      return make_error(ErrorCode::kFailedPrecondition,
+                        path.string() + " is " + (stated ? file_type_name(info.st_mode) : "of unknown type") +
+                            ", not a regular file: refused");
     }
+    if (stated && S_ISREG(info.st_mode) && info.st_size > 0) bytes.reserve(static_cast<size_t>(info.st_size));
     // Read until end of file rather than trusting st_size: the file may grow or shrink while
     // being read, and pseudo-files report size 0.
     char buffer[1 << 16];
@@ -157,5 +172,11 @@ Result<std::string> read_whole_file(const std::filesystem::path& path) {
   }
   return bytes;
 }
+
+}  // namespace
+
+Result<std::string> read_whole_file(const std::filesystem::path& path) { return read_file(path, false); }
+
+Result<std::string> read_regular_file(const std::filesystem::path& path) { return read_file(path, true); }
 
 }  // namespace animspace

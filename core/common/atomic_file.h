@@ -20,4 +20,10 @@ Status write_file_atomically(const std::filesystem::path& path, std::string_view
 // Reads a whole file. Errors: kNotFound when it does not exist, kIo otherwise (with reason).
 Result<std::string> read_whole_file(const std::filesystem::path& path);
 
+// The same for a file that must be a regular file — a model, a cached basis (issue #54): a FIFO,
+// device or socket in its place is refused without blocking on it (opened non-blocking, then
+// checked), where reading it would wait for a writer that never comes. Errors: as
+// read_whole_file, and kFailedPrecondition naming the path and what it is.
+Result<std::string> read_regular_file(const std::filesystem::path& path);
+
 }  // namespace animspace

@@ -727,7 +727,7 @@ Result<ModelContainer> parse(std::string_view bytes, std::string_view source) {
 }
 
 Result<ModelContainer> read_file(const std::filesystem::path& path) {
-  auto bytes = read_whole_file(path);
+  auto bytes = read_regular_file(path);
   if (!bytes.ok()) return bytes.error();
   return parse(*bytes, path.string());
 }

@@ -53,6 +53,24 @@ Result<std::vector<uint64_t>> list_versions(const std::filesystem::path& reposit
   return versions;
 }
 
+Status check_inside_repository(const std::filesystem::path& repository, const std::filesystem::path& path) {
+  std::error_code ec;
+  const std::filesystem::path root = std::filesystem::canonical(repository, ec);
+  if (ec) return make_error(ErrorCode::kIo, "cannot resolve the repository " + repository.string() + ": " + ec.message());
+  const std::filesystem::path resolved = std::filesystem::canonical(path, ec);
+  if (ec) {
+    return make_error(ec == std::errc::no_such_file_or_directory ? ErrorCode::kNotFound : ErrorCode::kIo,
+                      "cannot resolve " + path.string() + ": " + ec.message());
+  }
+  const auto [inside, rest] = std::mismatch(root.begin(), root.end(), resolved.begin(), resolved.end());
+  if (inside != root.end()) {
+    return make_error(ErrorCode::kFailedPrecondition,
+                      path.string() + " leads to " + resolved.string() + ", outside the repository " + root.string() +
+                          ": a model must be inside it (links are followed only within the repository)");
+  }
+  return Status::Ok();
+}
+
 Result<uint64_t> publish_version(const std::filesystem::path& repository, const std::string& name,
                                  const container::ModelContainer& model) {
   ANIMSPACE_RETURN_IF_ERROR(validate_model_name(name));

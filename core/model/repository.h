@@ -29,6 +29,13 @@ bool parse_version(const std::string& text, uint64_t* version);
 // directory; kIo when it cannot be listed.
 Result<std::vector<uint64_t>> list_versions(const std::filesystem::path& repository, const std::string& name);
 
+// Whether `path` — a model's folder, a version's folder, its model.anim — is inside `repository`
+// with every symbolic link resolved (issue #54): a link out of it (to another user's files, to
+// /etc) is refused before anything is read, so the daemon serves, and reports the bytes of, only
+// what the repository holds. Links within the repository are followed. Errors: kFailedPrecondition
+// naming the path and where it leads; kNotFound or kIo when it cannot be resolved.
+Status check_inside_repository(const std::filesystem::path& repository, const std::filesystem::path& path);
+
 // Writes `model` as the next version (one above the newest present, 1 for a new model) so that
 // nobody ever sees it half-written: into a hidden staging directory first, then renamed into
 // place — a daemon polling the repository sees either no version or the complete one. Callers

@@ -398,8 +398,10 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
   if (out.checked) {
     Eigen::VectorXd estimate = m.check_mean;
     estimate.noalias() += m.check_basis * out.coordinates;
-    Eigen::Map<Eigen::Matrix3Xd> points(estimate.data(), D, C);
-    if (m.aligned) points = (out.alignment.rotation * points).colwise() + out.alignment.translation;
+    if (m.aligned) {  // positions (D = 3): a map of 3 × C is only made for them
+      Eigen::Map<Eigen::Matrix3Xd> points(estimate.data(), 3, C);
+      points = (out.alignment.rotation * points).colwise() + out.alignment.translation;
+    }
     check_errors.resize(static_cast<size_t>(C));
     for (long c = 0; c < C; ++c) {
       check_errors[static_cast<size_t>(c)] =

@@ -597,3 +597,23 @@ def test_a_short_stream_and_another_version_are_protocol_errors(scripted_server,
         ScriptedPoses.script = chunks
         with pytest.raises(animspace.ProtocolError, match="asked for version 2, the chunks are of version 3"):
             client.get_basis("m", 2)
+
+
+def test_a_fifo_in_the_basis_cache_is_not_read(tmp_path):
+    # Issue #54: reading a FIFO at a cached basis's path waited for a writer forever; it is no
+    # cached basis (the client fetches the basis and its write replaces the FIFO).
+    import os
+    import threading
+    path = tmp_path / "1-0000000000000001.basis"
+    os.mkfifo(path)
+    result = []
+    reader = threading.Thread(target=lambda: result.append(coordinates.read_basis_file(path, "arm", 1, 1)),
+                              daemon=True)
+    reader.start()
+    reader.join(timeout=30)
+    if reader.is_alive():
+        with open(path, "wb"):  # a writer that closes at once lets the blocked reader finish
+            pass
+        reader.join(timeout=30)
+        pytest.fail("reading the basis cache blocked on a FIFO")
+    assert result == [None]

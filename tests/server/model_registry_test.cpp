@@ -1,5 +1,7 @@
 #include "server/model_registry.h"
 
+#include <sys/stat.h>
+
 #include <gtest/gtest.h>
 
 #include "tests/support/test_support.h"
@@ -32,6 +34,29 @@ TEST(ValidateModelName, AcceptsOrdinaryNamesAndRefusesEscapes) {
   }
   EXPECT_FALSE(validate_model_name(std::string(129, 'a')).ok());
   EXPECT_TRUE(validate_model_name(std::string(128, 'a')).ok());
+}
+
+// Issue #54: a FIFO named model.anim (which hung start-up) and a model file reached through a
+// link out of the repository are refused with their reasons; the good model loads beside them.
+TEST(ModelRegistry, FifosAndLinksOutOfTheRepositoryAreRefused) {
+  testing::TempDir repo, elsewhere;
+  put(repo.path(), "good", "1", point_model(3));
+  std::filesystem::create_directories(repo.path() / "fifo" / "1");
+  ASSERT_EQ(::mkfifo((repo.path() / "fifo" / "1" / kModelFileName).c_str(), 0600), 0);
+  put(elsewhere.path(), "outside", "1", point_model(4));
+  std::filesystem::create_directory_symlink(elsewhere.path() / "outside", repo.path() / "linked");
+
+  ModelRegistry registry(repo.path());
+  EXPECT_EQ(registry.load_all(), 1);
+  EXPECT_TRUE(registry.find("good", 0).ok());
+  auto fifo = registry.describe("fifo");
+  ASSERT_TRUE(fifo.ok());
+  EXPECT_NE(fifo->versions.at(1).error.find("is a FIFO, not a regular file"), std::string::npos)
+      << fifo->versions.at(1).error;
+  auto linked = registry.describe("linked");
+  ASSERT_TRUE(linked.ok());
+  EXPECT_NE(linked->versions.at(1).error.find("outside the repository"), std::string::npos)
+      << linked->versions.at(1).error;
 }
 
 TEST(ModelRegistry, LoadsEveryVersionAndServesTheNewestByDefault) {

@@ -20,6 +20,7 @@ and then the float32 little-endian values: the N·D mean, then A column by colum
 from __future__ import annotations
 
 import collections
+import stat
 import os
 import pathlib
 import struct
@@ -412,6 +413,9 @@ def read_basis_file(path: pathlib.Path, model: str, model_version: int, checksum
     the header, the values' checksum); None when there is no file. A file that is not right is
     deleted (it is fetched again) and gives None."""
     try:
+        # Only a regular file: reading a FIFO in its place would wait for a writer forever (issue #54).
+        if not stat.S_ISREG(path.stat().st_mode):
+            return None
         data = path.read_bytes()
     except OSError:
         return None

@@ -146,3 +146,32 @@ TEST(AtomicFileTest, ReadDirectoryIsIoError) {
 
 }  // namespace
 }  // namespace animspace
+
+namespace animspace {
+namespace {
+
+// Issue #54: a FIFO named like a model file hung the daemon (open(2) of a FIFO waits for a writer).
+// read_regular_file refuses it, and a directory, at once; read_whole_file keeps reading pipes (a
+// token file may be `<(…)`).
+TEST(ReadRegularFile, RefusesWhatIsNotARegularFileWithoutBlocking) {
+  testing::TempDir dir;
+  const std::filesystem::path fifo = dir / "model.anim";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const auto refused = read_regular_file(fifo);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_EQ(refused.error().message, fifo.string() + " is a FIFO, not a regular file: refused");
+  const auto directory = read_regular_file(dir.path());
+  ASSERT_FALSE(directory.ok());
+  EXPECT_NE(directory.error().message.find("is a directory, not a regular file"), std::string::npos)
+      << directory.error().message;
+  const std::filesystem::path plain = dir / "plain";
+  testing::write_text_file(plain, "bytes");
+  auto read = read_regular_file(plain);
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  EXPECT_EQ(*read, "bytes");
+  EXPECT_EQ(read_regular_file(dir / "absent").error().code, ErrorCode::kNotFound);
+}
+
+}  // namespace
+}  // namespace animspace

@@ -36,5 +36,35 @@ TEST(Repository, VersionNumbersDoNotWrap) {
   }
 }
 
+// Issue #54: a model reached through a link out of the repository is refused before it is read;
+// links within the repository are followed.
+TEST(Repository, LinksAreFollowedOnlyWithinTheRepository) {
+  testing::TempDir repository, elsewhere;
+  std::filesystem::create_directories(repository.path() / "arm" / "1");
+  testing::write_text_file(repository.path() / "arm" / "1" / kModelFileName, "model");
+  testing::write_text_file(elsewhere.path() / "secret", "root:*:");
+  EXPECT_TRUE(check_inside_repository(repository.path(), repository.path() / "arm" / "1" / kModelFileName).ok());
+
+  // A version folder, a model folder and a model file that lead out.
+  std::filesystem::create_directories(repository.path() / "crane");
+  std::filesystem::create_directory_symlink(elsewhere.path(), repository.path() / "crane" / "1");
+  std::filesystem::create_directory_symlink(elsewhere.path(), repository.path() / "horse");
+  std::filesystem::create_directories(repository.path() / "cow" / "1");
+  std::filesystem::create_symlink(elsewhere.path() / "secret", repository.path() / "cow" / "1" / kModelFileName);
+  for (const auto& link : {repository.path() / "crane" / "1" / "secret", repository.path() / "horse" / "secret",
+                           repository.path() / "cow" / "1" / kModelFileName}) {
+    const Status refused = check_inside_repository(repository.path(), link);
+    ASSERT_FALSE(refused.ok()) << link;
+    EXPECT_EQ(refused.error().code, ErrorCode::kFailedPrecondition);
+    EXPECT_NE(refused.error().message.find("outside the repository"), std::string::npos) << refused.error().message;
+    EXPECT_EQ(refused.error().message.find("root:"), std::string::npos) << "never the file's bytes";
+  }
+  // A link from one model's version to another's, inside the repository, is followed.
+  std::filesystem::create_directories(repository.path() / "arm-copy");
+  std::filesystem::create_directory_symlink(repository.path() / "arm" / "1", repository.path() / "arm-copy" / "1");
+  EXPECT_TRUE(
+      check_inside_repository(repository.path(), repository.path() / "arm-copy" / "1" / kModelFileName).ok());
+}
+
 }  // namespace
 }  // namespace animspace::model
