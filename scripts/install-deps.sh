@@ -17,6 +17,8 @@ packages=(
   libosd-dev
   # server and command line
   libspdlog-dev libfmt-dev libcli11-dev libcpp-httplib-dev
+  # SHA-256 of served bases, against which clients check their cached copies (core/common/sha256)
+  libssl-dev
   # headless rendering (Mesa's surfaceless EGL, llvmpipe) and PNG
   libegl-dev libgles-dev libegl1 libgles2 libegl-mesa0 libgl1-mesa-dri libpng-dev
   # tests and benchmarks

@@ -95,6 +95,12 @@ int main(int argc, char** argv) {
   app.add_option("--shutdown-grace-ms", grace_ms, "Time in-flight calls get to finish after SIGTERM/SIGINT")
       ->check(CLI::Range(int64_t{0}, int64_t{600000}))
       ->capture_default_str();
+  int64_t stall_ms = options.stream_stall_timeout.count();
+  app.add_option("--stream-stall-ms", stall_ms,
+                 "A streamed response the client has not taken for this long (its flow-control window shut) ends "
+                 "the stream CANCELLED, freeing its call slot and the message held for it (0: never)")
+      ->check(CLI::Range(int64_t{0}, int64_t{86400000}))
+      ->capture_default_str();
   app.add_option("--work-threads", options.work_threads,
                  "Threads that run request work (evaluation, skinning); 0 = one per core")
       ->check(CLI::Range(0, 1024))
@@ -123,6 +129,7 @@ int main(int argc, char** argv) {
                  "Bearer tokens required for LoadModel, UnloadModel, Retrain and GetStats reset");
   CLI11_PARSE(app, argc, argv);
   options.shutdown_grace = std::chrono::milliseconds(grace_ms);
+  options.stream_stall_timeout = std::chrono::milliseconds(stall_ms);
   options.batch_delay = std::chrono::microseconds(batch_delay_us);
   options.miss_log_fsync_interval = std::chrono::milliseconds(fsync_ms);
 

@@ -1,5 +1,7 @@
 #include "server/model_registry.h"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <chrono>
 #include <charconv>
@@ -182,22 +184,36 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
 }
 
 Status ModelRegistry::unload(const std::string& name, uint64_t version) {
-  std::unique_lock lock(mutex_);
-  auto it = models_.find(name);
-  if (it == models_.end()) return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
-  if (version == 0) {
-    for (const auto& [v, entry] : it->second.versions) dismissed_.insert({name, v});
-    models_.erase(it);
-    spdlog::info("model {} unloaded (all versions)", name);
-    return Status::Ok();
+  std::vector<VersionEntry> dropped;  // destroyed after the lock, then their memory returned
+  {
+    std::unique_lock lock(mutex_);
+    auto it = models_.find(name);
+    if (it == models_.end()) return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
+    if (version == 0) {
+      for (auto& [v, entry] : it->second.versions) {
+        dismissed_.insert({name, v});
+        dropped.push_back(std::move(entry));
+      }
+      models_.erase(it);
+      spdlog::info("model {} unloaded (all versions)", name);
+    } else {
+      const auto at = it->second.versions.find(version);
+      if (at == it->second.versions.end()) {
+        return make_error(ErrorCode::kNotFound,
+                          "model '" + name + "' has no loaded version " + std::to_string(version));
+      }
+      dismissed_.insert({name, version});
+      dropped.push_back(std::move(at->second));
+      it->second.versions.erase(at);
+      if (it->second.versions.empty()) models_.erase(it);
+      spdlog::info("model {} version {} unloaded", name, version);
+    }
   }
-  if (it->second.versions.count(version)) dismissed_.insert({name, version});
-  if (it->second.versions.erase(version) == 0) {
-    return make_error(ErrorCode::kNotFound,
-                      "model '" + name + "' has no loaded version " + std::to_string(version));
-  }
-  if (it->second.versions.empty()) models_.erase(it);
-  spdlog::info("model {} version {} unloaded", name, version);
+  dropped.clear();
+  // glibc keeps freed heap for reuse; an unloaded model's hundreds of megabytes go back to the
+  // system now (issue #54 item 9) — unless a call in flight still holds the version, whose
+  // memory is freed, and kept by the allocator, when that call ends.
+  ::malloc_trim(0);
   return Status::Ok();
 }
 

@@ -23,6 +23,13 @@ struct ServerOptions {
   // the transport resets calls with RESOURCE_EXHAUSTED. 0 = unbounded; otherwise at least twice
   // max_message_bytes, so that a request of the largest size fits while it arrives.
   int64_t grpc_memory_bytes = 256LL << 20;
+  // Calls one HTTP/2 connection may have open at once (its SETTINGS_MAX_CONCURRENT_STREAMS), so
+  // that one connection cannot take every max_concurrent_calls slot (issue #54 item 6).
+  uint32_t max_streams_per_connection = 64;
+  // A streamed response the client has not taken for this long — its flow-control window stays
+  // shut — ends its stream CANCELLED, which frees the call slot and the message held for it
+  // (issue #54 item 6). 0 = never.
+  std::chrono::milliseconds stream_stall_timeout{30000};
   // Largest batch in one evaluation request, poses.
   uint32_t max_batch_poses = 1024;
   // Dynamic batching (server/pose_batcher.h): the most poses reconstructed as one product, and

@@ -86,9 +86,9 @@ void write_coordinates(const LoadedModel& model, const pmsc::PoseEstimate& estim
 }
 
 // Appends a blend or miss to the model's miss log: the key values, and the full values the
-// client sent or the engine computed (a partial frame on the local path). Returns whether it
-// was appended; a failed append leaves the answer right and is logged loudly.
-bool log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& job, const pmsc::PoseAnswer& answer) {
+// client sent or the engine computed (a partial frame on the local path). A failed append
+// leaves the answer right and is logged loudly; its error is returned for the caller to say.
+Status log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& job, const pmsc::PoseAnswer& answer) {
   const pmsc::CachedPose& cached = answer.cached;
   const PoseInput& input = job.input;
   misslog::MissRecord record;
@@ -113,9 +113,9 @@ bool log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob& 
   if (!appended) {
     // The answer is still right; only the retraining data is short. Say so loudly.
     spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
-    return false;
+    return appended.error();
   }
-  return true;
+  return Status::Ok();
 }
 
 }  // namespace
@@ -206,7 +206,11 @@ grpc::Status PoseRun::finish_one(PoseJob& job, v1::PoseResult* out) {
   if (job.options.count_in_statistics) {
     env_->metrics.record_pose(model.name, answer.cached.status, answer.cached.key_point_error);
   }
-  if (answer.cached.status != pmsc::CacheStatus::kHit) job.logged_ = log_miss(*env_, model, job, answer);
+  if (answer.cached.status != pmsc::CacheStatus::kHit) {
+    const Status appended = log_miss(*env_, model, job, answer);
+    job.logged_ = appended.ok();
+    if (!appended.ok()) job.not_logged_reason_ = appended.error().message;
+  }
   return grpc::Status::OK;
 }
 
@@ -216,7 +220,8 @@ bool evaluated_in_place(v1::PointEncoding points_encoding, bool local_fail_throu
 }
 
 grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                           const PoseOptions& options, v1::PoseResult* out, bool* logged) {
+                           const PoseOptions& options, v1::PoseResult* out, bool* logged,
+                           std::string* not_logged_reason) {
   PoseJob job;
   job.input = input;
   job.options = options;
@@ -224,6 +229,7 @@ grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, co
   run.start(env, model, {&job, 1}, {&out, 1});
   grpc::Status status = run.finish();
   if (logged != nullptr) *logged = job.logged();
+  if (not_logged_reason != nullptr) *not_logged_reason = job.not_logged_reason();
   return status;
 }
 

@@ -53,8 +53,10 @@ class PoseJob {
   PoseInput input;
   PoseOptions options;
 
-  // Whether the pose was appended to the miss log (after PoseRun::finish).
+  // Whether the pose was appended to the miss log (after PoseRun::finish), and if a blend or
+  // miss was not, why (the miss log's error).
   bool logged() const { return logged_; }
+  const std::string& not_logged_reason() const { return not_logged_reason_; }
 
  private:
   friend class PoseRun;
@@ -64,6 +66,7 @@ class PoseJob {
   bool in_response_ = false;  // points_ is the response's own float32 bytes
   Eigen::VectorXf scratch_;   // the points when they cannot go straight into the response
   bool logged_ = false;
+  std::string not_logged_reason_;
 };
 
 // Evaluates decoded jobs of one model version into their results (same order).
@@ -105,8 +108,10 @@ class PoseRun {
 bool evaluated_in_place(v1::PointEncoding points_encoding, bool local_fail_through, const v1::KeyPointPose& pose);
 
 // One pose alone through the pipeline (CompleteMiss, thumbnails); `logged` (optional) says
-// whether it was appended to the miss log. Errors: PoseRun::finish's.
+// whether it was appended to the miss log, `not_logged_reason` (optional) why a blend or miss was
+// not. Errors: PoseRun::finish's.
 grpc::Status evaluate_pose(ServiceEnvironment& env, const LoadedModel& model, const PoseInput& input,
-                           const PoseOptions& options, v1::PoseResult* out, bool* logged = nullptr);
+                           const PoseOptions& options, v1::PoseResult* out, bool* logged = nullptr,
+                           std::string* not_logged_reason = nullptr);
 
 }  // namespace animspace::server

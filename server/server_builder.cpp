@@ -33,6 +33,9 @@ std::unique_ptr<grpc::ServerBuilder> make_server_builder(const ServerOptions& op
   // gRPC sets SO_REUSEPORT by default: a second daemon would bind a busy address and take a random
   // share of its connections. One address, one daemon (issue #21).
   builder->AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  // One connection, a share of the call slots (issue #54 item 6): a peer that opens more streams
+  // has them refused by HTTP/2 (a gRPC client queues them until one ends).
+  builder->AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS, static_cast<int>(options.max_streams_per_connection));
   builder->SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
   builder->SetMaxSendMessageSize(static_cast<int>(options.max_message_bytes));
   grpc::ResourceQuota quota("animspaced");

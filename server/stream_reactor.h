@@ -18,6 +18,12 @@
 // StreamKeyPoints was once deleted under a pool thread still inside it: the use-after-free fixed
 // in commit 8510907.)
 //
+// Stalls (issue #54 item 6). A client may stop granting flow-control window and leave a write in
+// flight forever, holding a call slot and the message. A check every half --stream-stall-ms
+// cancels the stream whose write has waited longer than that; each check is its own grpc::Alarm
+// holding the reactor (an alarm may not be set again from its own callback), and OnDone cancels
+// the pending one.
+//
 // Cancellation. OnCancel (the client went away, or the deadline passed) and a failed write stop
 // all scheduling; the call finishes with CANCELLED once the write in flight is done. Finish is
 // called exactly once, and never while another thread is between deciding to start a gRPC
@@ -25,6 +31,7 @@
 // could reach a call gRPC has already freed.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <deque>
@@ -36,7 +43,9 @@
 #include <string_view>
 #include <utility>
 
+#include <grpcpp/alarm.h>
 #include <grpcpp/grpcpp.h>
+#include <spdlog/spdlog.h>
 
 #include "server/admission.h"
 #include "server/auth.h"
@@ -79,8 +88,18 @@ class StreamReactor : public Base {
     pump();
   }
 
-  // Drops gRPC's hold. An override (tests observe the call's end) must end with this one.
-  void OnDone() override { release(); }
+  // Cancels the stall check and drops gRPC's hold. An override (tests observe the call's end)
+  // must end with this one.
+  void OnDone() override {
+    std::unique_ptr<grpc::Alarm> check;
+    {
+      std::lock_guard lock(mutex_);
+      done_ = true;
+      check = std::move(stall_check_);
+    }
+    check.reset();  // outside the lock: its callback (fired false) takes it
+    release();
+  }
 
  protected:
   // `rpc` as in metrics ("PoseService/StreamKeyPoints"). Call from the method handler, which
@@ -95,6 +114,8 @@ class StreamReactor : public Base {
       finish_early(std::move(refused));
       return false;
     }
+    stall_timeout_ = env.options.stream_stall_timeout;
+    if (stall_timeout_.count() > 0) arm_stall_check();
     return true;
   }
 
@@ -258,6 +279,7 @@ class StreamReactor : public Base {
         Slot& front = *slots_.front();
         if (front.response) {
           writing_ = true;
+          write_started_ = std::chrono::steady_clock::now();
           next.write = &*front.response;
         } else if (quiet) {
           next.finish = true;
@@ -294,6 +316,49 @@ class StreamReactor : public Base {
     if (holds_.fetch_sub(1, std::memory_order_acq_rel) == 1) delete this;
   }
 
+  // The next stall check, half a timeout from now; it holds the reactor until its callback.
+  void arm_stall_check() {
+    holds_.fetch_add(1, std::memory_order_relaxed);
+    auto check = std::make_unique<grpc::Alarm>();
+    const auto period = std::max(stall_timeout_ / 2, std::chrono::milliseconds(10));
+    check->Set(std::chrono::system_clock::now() + period, [this](bool fired) { on_stall_check(fired); });
+    std::unique_ptr<grpc::Alarm> previous;  // the alarm whose callback is running, if any
+    {
+      std::lock_guard lock(mutex_);
+      previous = std::move(stall_check_);
+      if (!done_) stall_check_ = std::move(check);
+    }
+    // Both outside the lock: destroying a pending alarm runs its callback, which takes it.
+    check.reset();
+    previous.reset();
+  }
+
+  void on_stall_check(bool fired) {
+    bool stalled = false;
+    bool again = false;
+    if (fired) {
+      std::lock_guard lock(mutex_);
+      if (!finished_ && !cancelled_ && !done_) {
+        stalled = writing_ && std::chrono::steady_clock::now() - write_started_ >= stall_timeout_;
+        // Held like a write being started: no Finish, so context_ stays valid, until TryCancel returns.
+        if (stalled) ++starting_;
+        again = !stalled;
+      }
+    }
+    if (stalled) {
+      spdlog::warn("{}: the client took no data for {} ms; stream cancelled (--stream-stall-ms)", rpc_,
+                   stall_timeout_.count());
+      context_->TryCancel();
+      {
+        std::lock_guard lock(mutex_);
+        --starting_;
+      }
+      pump();
+    }
+    if (again) arm_stall_check();
+    release();
+  }
+
   grpc::CallbackServerContext* const context_;  // gRPC's, valid until OnDone
   const std::chrono::system_clock::time_point deadline_;
   WorkPool& pool_;
@@ -313,6 +378,10 @@ class StreamReactor : public Base {
   bool ended_ = false;       // a slot ends the stream: ask for nothing more
   bool cancelled_ = false;
   bool finished_ = false;
+  bool done_ = false;  // OnDone has run: arm no more stall checks
+  std::chrono::steady_clock::time_point write_started_;  // of the write on the wire
+  std::chrono::milliseconds stall_timeout_{0};
+  std::unique_ptr<grpc::Alarm> stall_check_;  // the pending one
 };
 
 }  // namespace animspace::server

@@ -11,7 +11,8 @@
 
 namespace animspace::server {
 
-// --listen, --port-file, --worker-threads, --max-message-bytes, --grpc-memory-bytes into `options`.
+// --listen, --port-file, --worker-threads, --max-message-bytes, --grpc-memory-bytes,
+// --max-streams-per-connection into `options`.
 inline void add_transport_flags(CLI::App& app, ServerOptions& options) {
   app.add_option("--listen", options.listen_address, "gRPC address, host:port (port 0 picks a free one)")
       ->capture_default_str();
@@ -26,6 +27,11 @@ inline void add_transport_flags(CLI::App& app, ServerOptions& options) {
                  "Memory gRPC may hold for requests being received, all connections together; past it calls "
                  "are reset RESOURCE_EXHAUSTED (0: unbounded; else at least twice --max-message-bytes)")
       ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
+      ->capture_default_str();
+  app.add_option("--max-streams-per-connection", options.max_streams_per_connection,
+                 "Calls one client connection may have open at once (HTTP/2 concurrent streams); more wait in the "
+                 "client's gRPC until one ends, so one connection cannot hold every --max-concurrent-calls slot")
+      ->check(CLI::Range(1u, 100000u))
       ->capture_default_str();
 }
 

@@ -24,6 +24,7 @@ std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk
     return chunk.offset() == 0 ? std::string() : "the first chunk starts at value " + std::to_string(chunk.offset());
   }
   if (chunk.model_version() != basis.model_version || chunk.basis_checksum() != basis.basis_checksum ||
+      chunk.basis_sha256() != basis.basis_sha256 ||
       chunk.point_count() != basis.point_count || chunk.channel_count() != basis.channel_count ||
       chunk.basis_size() != basis.basis_size || chunk.aligned() != basis.aligned) {
     return "chunk at value " + std::to_string(chunk.offset()) + " describes another basis than the first chunk";
@@ -61,6 +62,7 @@ BasisData Client::get_basis(const std::string& model, uint64_t version, std::chr
     if (first) {
       basis.model_version = chunk.model_version();
       basis.basis_checksum = chunk.basis_checksum();
+      basis.basis_sha256 = chunk.basis_sha256();
       basis.point_count = chunk.point_count();
       basis.channel_count = chunk.channel_count();
       basis.basis_size = chunk.basis_size();

@@ -160,6 +160,8 @@ KeyPoints Client::describe_key_points(const std::string& model, uint64_t version
   out.fail_through = response.fail_through();
   out.check_point_indices.assign(response.check_point_indices().begin(), response.check_point_indices().end());
   out.check_point_regions.assign(response.check_point_regions().begin(), response.check_point_regions().end());
+  out.basis_checksum = response.basis_checksum();
+  out.basis_sha256 = response.basis_sha256();
   for (const auto& [what, indices] :
        {std::pair{"key point", &out.indices}, std::pair{"check point", &out.check_point_indices}}) {
     for (uint32_t index : *indices) {
@@ -237,7 +239,7 @@ CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, 
   prepare(&context);
   v1::CompleteMissResponse response;
   check("CompleteMiss", poses_->CompleteMiss(&context, request, &response));
-  return {decode_pose_result(response.result()), response.logged()};
+  return {decode_pose_result(response.result()), response.logged(), response.not_logged_reason()};
 }
 
 SkinningResult Client::evaluate_skeleton_pose(const std::string& model, std::span<const SkeletonPose> poses,

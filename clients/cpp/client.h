@@ -81,6 +81,7 @@ struct Thumbnail {
 struct BasisData {
   uint64_t model_version = 0;
   uint64_t basis_checksum = 0;  // as the server named it (coordinates.h verifies it)
+  std::string basis_sha256;     // likewise, 32 raw bytes (empty from servers before issue #54)
   uint32_t point_count = 0;     // N
   uint32_t channel_count = 0;   // D
   uint32_t basis_size = 0;      // M

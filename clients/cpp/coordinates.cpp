@@ -8,6 +8,7 @@
 
 #include "core/common/atomic_file.h"
 #include "core/common/bytes.h"
+#include "core/common/sha256.h"
 #include "core/pmsc/coordinates.h"
 
 namespace animspace {
@@ -51,6 +52,15 @@ Basis make_basis(const std::string& model, BasisData data) {
     throw std::runtime_error("basis of '" + model + "' version " + std::to_string(data.model_version) +
                              ": its values have checksum " + hex16(computed) + ", the server named " +
                              hex16(data.basis_checksum));
+  }
+  if (!data.basis_sha256.empty()) {
+    const std::string digest = pmsc::basis_sha256(basis.mean, basis.basis);
+    if (digest != data.basis_sha256) {
+      throw std::runtime_error("basis of '" + model + "' version " + std::to_string(data.model_version) +
+                               ": its values have SHA-256 " + hex_digest(digest) + ", the server named " +
+                               hex_digest(data.basis_sha256));
+    }
+    basis.basis_sha256 = std::move(data.basis_sha256);
   }
   return basis;
 }
@@ -102,7 +112,7 @@ std::filesystem::path BasisCache::file_of(const std::string& model, uint64_t ver
   return directory_ / model / (std::to_string(version) + "-" + hex16(checksum) + ".basis");
 }
 
-std::shared_ptr<const Basis> BasisCache::read_file(const std::string& model, uint64_t version,
+std::shared_ptr<const Basis> BasisCache::read_file(Client& client, const std::string& model, uint64_t version,
                                                    uint64_t checksum) const {
   if (directory_.empty()) return nullptr;
   const auto path = file_of(model, version, checksum);
@@ -125,10 +135,22 @@ std::shared_ptr<const Basis> BasisCache::read_file(const std::string& model, uin
   }
   data.values.resize(values);
   std::memcpy(data.values.data(), bytes->data() + kHeaderBytes, values * sizeof(float));
+  // The server's word on the version: its checksum must be the one asked for (else the answer
+  // named a basis the version no longer has, and GetBasis says so), its digest the copy's.
+  KeyPoints described;
+  try {
+    described = client.describe_key_points(model, version);
+  } catch (const RpcError&) {
+    return nullptr;  // the version is gone: GetBasis names the problem
+  }
+  // (A server from before issue #54 names neither: the CRC check alone, as then.)
+  if (!described.basis_sha256.empty() && described.basis_checksum != checksum) return nullptr;
+  data.basis_sha256 = described.basis_sha256;
   try {
     return std::make_shared<const Basis>(make_basis(model, std::move(data)));
   } catch (const std::runtime_error&) {
-    return nullptr;  // a corrupt file: fetched again, and overwritten
+    refused_copies_ += 1;
+    return nullptr;  // corrupt or tampered with: fetched again, and overwritten
   }
 }
 
@@ -164,7 +186,7 @@ std::shared_ptr<const Basis> BasisCache::get(Client& client, const std::string& 
       return found->second.basis;
     }
   }
-  std::shared_ptr<const Basis> basis = read_file(model, version, checksum);
+  std::shared_ptr<const Basis> basis = read_file(client, model, version, checksum);
   if (!basis) {
     fetches_ += 1;
     auto fetched = std::make_shared<const Basis>(make_basis(model, client.get_basis(model, version)));

@@ -13,8 +13,14 @@
 // + pmsc::translation_rounding_bound() · |f̂_c| per coordinate c of a point x (aligned frame).
 //
 // Never silently wrong: every answer names its basis (basis_checksum). A basis is looked up by
-// model, the answer's version and that checksum — in memory, then on disk (verified), then with
-// GetBasis for exactly that version (verified, then stored). A server whose basis for that
+// model, the answer's version and that checksum — in memory, then on disk, then with GetBasis for
+// exactly that version (its SHA-256 checked against the one the server sent, then stored). What
+// the disk cache promises (issue #54 item 8): a copy read back is the basis the server serves for
+// that version, or it is not used. Its CRC catches accidents only (a CRC-32 is forged in four
+// bytes), so a copy from disk is used only after its values' SHA-256 matches the one the server
+// names for the version (DescribeKeyPoints: one small call instead of the basis); one that does
+// not match is fetched again and overwritten. A server from before that digest gets the CRC
+// check alone. A server whose basis for that
 // version has another checksum (the version was replaced), or a result whose shape differs from
 // its basis, is refused with std::runtime_error; the points are never reconstructed with a basis
 // the answer did not name.
@@ -45,6 +51,7 @@ struct Basis {
   std::string model;
   uint64_t model_version = 0;
   uint64_t basis_checksum = 0;
+  std::string basis_sha256;  // 32 raw bytes; empty when its server sent none
   uint32_t channel_count = 0;
   bool aligned = false;
   Eigen::VectorXf mean;   // N·D
@@ -52,7 +59,8 @@ struct Basis {
 };
 
 // `data` (from Client::get_basis) as a Basis, after checking that its values have the checksum
-// the server named (pmsc::basis_checksum). std::runtime_error naming both when they differ.
+// the server named (pmsc::basis_checksum) and, when it named one, the SHA-256
+// (pmsc::basis_sha256). std::runtime_error naming both when they differ.
 Basis make_basis(const std::string& model, BasisData data);
 
 // The points of `result` (its coordinates) reconstructed with `basis` into `out` (N×D float32).
@@ -80,14 +88,18 @@ class BasisCache {
 
   // Where the basis named so lies on disk.
   std::filesystem::path file_of(const std::string& model, uint64_t version, uint64_t checksum) const;
-  // GetBasis calls this cache made (a basis found in memory or on disk makes none).
+  // GetBasis calls this cache made (a basis found in memory or on disk makes none), and copies
+  // on disk refused because their values were not what the server names.
   uint64_t fetch_count() const { return fetches_.load(); }
+  uint64_t refused_copy_count() const { return refused_copies_.load(); }
   // Bases held in memory now, and their bytes (mean and basis values).
   size_t memory_count() const;
   size_t memory_bytes() const;
 
  private:
-  std::shared_ptr<const Basis> read_file(const std::string& model, uint64_t version, uint64_t checksum) const;
+  // The copy on disk, if any, once the server vouches for it (see the header comment).
+  std::shared_ptr<const Basis> read_file(Client& client, const std::string& model, uint64_t version,
+                                         uint64_t checksum) const;
   void write_file(const Basis& basis) const;
 
   using Key = std::tuple<std::string, uint64_t, uint64_t>;
@@ -105,6 +117,7 @@ class BasisCache {
   std::map<Key, Held> bases_;
   size_t bytes_ = 0;
   std::atomic<uint64_t> fetches_{0};
+  mutable std::atomic<uint64_t> refused_copies_{0};
 };
 
 }  // namespace animspace

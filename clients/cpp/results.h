@@ -52,6 +52,10 @@ struct KeyPoints {
   // models without check points.
   std::vector<uint32_t> check_point_indices;
   std::vector<uint32_t> check_point_regions;  // region of each check point, when the model has regions
+  // The version's subspace as GetBasis names it (0 and empty without one): a cached basis is
+  // checked against basis_sha256 before it is used (issue #54 item 8).
+  uint64_t basis_checksum = 0;
+  std::string basis_sha256;
 
   // Gathers a frame's key values from its N×D point-major values (`frame` holds every point).
   std::vector<float> gather(std::span<const float> frame) const;
@@ -137,6 +141,7 @@ struct PoseResult {
 struct CompletedMiss {
   PoseResult result;
   bool logged = false;  // appended to the model's miss log for retraining
+  std::string not_logged_reason;  // why a blend or miss was not (e.g. the log's disk is full)
 };
 
 struct SkinnedPose {

@@ -6,7 +6,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -134,7 +136,38 @@ const char* file_type_name(mode_t mode) {
   return "not a regular file";
 }
 
-Result<std::string> read_file(const std::filesystem::path& path, bool regular_only) {
+using HeadCheck = std::function<Status(std::string_view head, uint64_t size_on_disk)>;
+
+// Appends what `file` holds from its current offset until end of file or until `bytes` holds
+// `limit` bytes. Returns whether the file ended: at the limit, one byte more is read to tell
+// (and lost) when `probe_at_limit`, else the answer is false.
+Result<bool> append_until_end(int file, const std::filesystem::path& path, std::string& bytes,
+                              size_t limit, bool probe_at_limit) {
+  char buffer[1 << 16];
+  while (true) {
+    const size_t room = limit - std::min(limit, bytes.size());
+    if (room == 0) {
+      if (!probe_at_limit) return false;
+      // At the limit: one more byte says whether the file ends here.
+      char probe = 0;
+      ssize_t count;
+      while ((count = ::read(file, &probe, 1)) < 0 && errno == EINTR) {
+      }
+      if (count < 0) return io_error(path, "cannot read", errno);
+      return count == 0;
+    }
+    const ssize_t count = ::read(file, buffer, std::min(sizeof buffer, room));
+    if (count < 0) {
+      if (errno == EINTR) continue;
+      return io_error(path, "cannot read", errno);
+    }
+    if (count == 0) return true;
+    bytes.append(buffer, static_cast<size_t>(count));
+  }
+}
+
+Result<std::string> read_file(const std::filesystem::path& path, bool regular_only,
+                              size_t head_size = 0, const HeadCheck* check_head = nullptr) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | (regular_only ? O_NONBLOCK : 0));
   if (fd < 0) {
     const int error_number = errno;
@@ -154,19 +187,27 @@ Result<std::string> read_file(const std::filesystem::path& path, bool regular_on
                         path.string() + " is " + (stated ? file_type_name(info.st_mode) : "of unknown type") +
                             ", not a regular file: refused");
     }
-    if (stated && S_ISREG(info.st_mode) && info.st_size > 0) bytes.reserve(static_cast<size_t>(info.st_size));
+    const uint64_t size_on_disk = stated && S_ISREG(info.st_mode) ? static_cast<uint64_t>(info.st_size) : 0;
+    if (check_head != nullptr) {
+      auto ended = append_until_end(file.get(), path, bytes, head_size, false);
+      if (!ended.ok()) return ended.error();
+      ANIMSPACE_RETURN_IF_ERROR((*check_head)(bytes, size_on_disk));
+      bytes.reserve(static_cast<size_t>(size_on_disk));
+      // The head vouched for size_on_disk bytes; more than that is a file changing under us.
+      ended = append_until_end(file.get(), path, bytes, static_cast<size_t>(size_on_disk), true);
+      if (!ended.ok()) return ended.error();
+      if (!*ended) {
+        return make_error(ErrorCode::kFailedPrecondition,
+                          path.string() + " grew past " + std::to_string(size_on_disk) +
+                              " bytes while being read: refused");
+      }
+      return bytes;
+    }
+    if (size_on_disk > 0) bytes.reserve(static_cast<size_t>(size_on_disk));
     // Read until end of file rather than trusting st_size: the file may grow or shrink while
     // being read, and pseudo-files report size 0.
-    char buffer[1 << 16];
-    while (true) {
-      const ssize_t count = ::read(file.get(), buffer, sizeof buffer);
-      if (count < 0) {
-        if (errno == EINTR) continue;
-        return io_error(path, "cannot read", errno);
-      }
-      if (count == 0) break;
-      bytes.append(buffer, static_cast<size_t>(count));
-    }
+    auto ended = append_until_end(file.get(), path, bytes, SIZE_MAX, false);
+    if (!ended.ok()) return ended.error();
   } catch (const std::bad_alloc&) {
     return io_error(path, "cannot read", ENOMEM);
   }
@@ -178,5 +219,10 @@ Result<std::string> read_file(const std::filesystem::path& path, bool regular_on
 Result<std::string> read_whole_file(const std::filesystem::path& path) { return read_file(path, false); }
 
 Result<std::string> read_regular_file(const std::filesystem::path& path) { return read_file(path, true); }
+
+Result<std::string> read_regular_file(const std::filesystem::path& path, size_t head_size,
+                                      const HeadCheck& check_head) {
+  return read_file(path, true, head_size, &check_head);
+}
 
 }  // namespace animspace

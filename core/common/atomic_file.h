@@ -1,7 +1,10 @@
 // Durable whole-file writes.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <string>
 #include <string_view>
 
 #include "core/common/result.h"
@@ -25,5 +28,14 @@ Result<std::string> read_whole_file(const std::filesystem::path& path);
 // checked), where reading it would wait for a writer that never comes. Errors: as
 // read_whole_file, and kFailedPrecondition naming the path and what it is.
 Result<std::string> read_regular_file(const std::filesystem::path& path);
+
+// The same, for a format whose first `head_size` bytes say whether the rest is worth reading:
+// `check_head(head, size)` sees them and the file's size on disk before anything more is read,
+// so a 2 GB sparse file or a stranger's file in the model's place costs `head_size` bytes, not
+// its size (issue #54 item 4). A file that grows past that size while being read is refused.
+// Errors: as read_regular_file, then whatever check_head returns.
+Result<std::string> read_regular_file(
+    const std::filesystem::path& path, size_t head_size,
+    const std::function<Status(std::string_view head, uint64_t size_on_disk)>& check_head);
 
 }  // namespace animspace

@@ -238,7 +238,18 @@ struct Parsed {
 
 class Parser {
  public:
-  Parser(std::string_view bytes, std::string_view source) : bytes_(bytes), source_(source) {}
+  Parser(std::string_view bytes, std::string_view source)
+      : bytes_(bytes), source_(source), total_size_(bytes.size()) {}
+
+  // A parser of the first bytes of a file of `total_size` bytes: only check_head may be called.
+  Parser(std::string_view head, uint64_t total_size, std::string_view source)
+      : bytes_(head), source_(source), total_size_(total_size) {}
+
+  // Magic and header against the size on disk, before the rest is read (issue #54 item 4).
+  Status check_head() {
+    ANIMSPACE_RETURN_IF_ERROR(check_magic());
+    return check_header();
+  }
 
   Result<Parsed> run() {
     ANIMSPACE_RETURN_IF_ERROR(check_magic());
@@ -275,7 +286,7 @@ class Parser {
     const std::string_view start = bytes_.substr(0, kMagic.size());
     if (start == kMagic) return Status::Ok();
     if (kMagic.starts_with(start)) {
-      return data_loss(bytes_.size(), "truncated: the file is " + std::to_string(bytes_.size()) +
+      return data_loss(total_size_, "truncated: the file is " + std::to_string(total_size_) +
                                           " bytes, shorter than the " +
                                           std::to_string(kMagic.size()) + "-byte magic");
     }
@@ -290,8 +301,8 @@ class Parser {
   }
 
   Status check_header() {
-    if (bytes_.size() < kHeaderSize) {
-      return data_loss(bytes_.size(), "truncated: the file is " + std::to_string(bytes_.size()) +
+    if (total_size_ < kHeaderSize || bytes_.size() < kHeaderSize) {
+      return data_loss(total_size_, "truncated: the file is " + std::to_string(total_size_) +
                                           " bytes, the header alone is " +
                                           std::to_string(kHeaderSize));
     }
@@ -328,13 +339,13 @@ class Parser {
     }
 
     file_size_ = load_le<uint64_t>(bytes_, kFileSizeAt);
-    if (file_size_ > bytes_.size()) {
-      return data_loss(bytes_.size(), "truncated: the header says the file is " +
+    if (file_size_ > total_size_) {
+      return data_loss(total_size_, "truncated: the header says the file is " +
                                           std::to_string(file_size_) + " bytes, got " +
-                                          std::to_string(bytes_.size()));
+                                          std::to_string(total_size_));
     }
-    if (file_size_ < bytes_.size()) {
-      return data_loss(file_size_, std::to_string(bytes_.size() - file_size_) +
+    if (file_size_ < total_size_) {
+      return data_loss(file_size_, std::to_string(total_size_ - file_size_) +
                                        " unexpected bytes after the end of the file (the header "
                                        "says the file is " +
                                        std::to_string(file_size_) + " bytes)");
@@ -526,6 +537,7 @@ class Parser {
 
   std::string_view bytes_;
   std::string_view source_;
+  uint64_t total_size_;  // the file's size: bytes_.size(), or the size on disk for a head
   uint32_t section_count_ = 0;
   uint64_t file_size_ = 0;
   uint64_t table_end_ = 0;    // first byte after the section table
@@ -727,7 +739,10 @@ Result<ModelContainer> parse(std::string_view bytes, std::string_view source) {
 }
 
 Result<ModelContainer> read_file(const std::filesystem::path& path) {
-  auto bytes = read_regular_file(path);
+  const std::string source = path.string();
+  auto bytes = read_regular_file(path, kHeaderSize, [&](std::string_view head, uint64_t size_on_disk) {
+    return Parser(head, size_on_disk, source).check_head();
+  });
   if (!bytes.ok()) return bytes.error();
   return parse(*bytes, path.string());
 }

@@ -31,6 +31,9 @@ struct Servable {
   // Its mean and basis named exactly (pmsc::basis_checksum), for clients that reconstruct
   // answers sent as coordinates; 0 for other kinds.
   uint64_t basis_checksum = 0;
+  // And named so that it cannot be forged (pmsc::basis_sha256): what a client's cached copy is
+  // checked against (issue #54 item 8); empty for other kinds.
+  std::string basis_sha256;
   // The skinning model of an animation-space model, or the posing engine a PMSC model carries
   // for server fail-through (SPEC "Fail-through"), with its LOD levels (Merry 2007 §7.3; level 0
   // is the model itself) and the sphere eq. 7.2 measures depth to (null otherwise).

@@ -5,6 +5,7 @@
 #include <span>
 
 #include "core/common/kernels.h"
+#include "core/common/sha256.h"
 #include "core/container/crc32.h"
 
 namespace animspace::pmsc {
@@ -19,6 +20,13 @@ uint32_t crc_of(const float* values, long count) {
 
 uint64_t basis_checksum(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis) {
   return (uint64_t{crc_of(mean.data(), mean.size())} << 32) | crc_of(basis.data(), basis.size());
+}
+
+std::string basis_sha256(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis) {
+  Sha256 digest;
+  digest.update(std::as_bytes(std::span<const float>(mean.data(), static_cast<size_t>(mean.size()))));
+  digest.update(std::as_bytes(std::span<const float>(basis.data(), static_cast<size_t>(basis.size()))));
+  return digest.digest();
 }
 
 FloatAlignment float_alignment(const geometry::RigidTransform& alignment) {

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include <Eigen/Core>
 
@@ -15,6 +16,9 @@ namespace animspace::pmsc {
 // Names a subspace exactly: crc32 (zlib's) of the mean's float32 bytes in the high 32 bits, of
 // the basis's (column by column) in the low 32. A client checks a cached basis with it.
 uint64_t basis_checksum(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis);
+// The same subspace named so that it cannot be forged (issue #54 item 8): SHA-256 of the mean's
+// float32 bytes followed by the basis's, exactly the values GetBasis streams (32 raw bytes).
+std::string basis_sha256(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis);
 
 // The alignment of one pose as it travels: R and t in float32 (what reconstruct applies).
 struct FloatAlignment {

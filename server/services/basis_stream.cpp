@@ -59,6 +59,7 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
     v1::BasisChunk chunk;
     chunk.set_model_version(model_->version);
     chunk.set_basis_checksum(model_->basis_checksum);
+    chunk.set_basis_sha256(model_->basis_sha256);
     chunk.set_point_count(static_cast<uint32_t>(m.point_count));
     chunk.set_channel_count(static_cast<uint32_t>(m.channel_count));
     chunk.set_basis_size(static_cast<uint32_t>(m.basis_size()));

@@ -39,6 +39,8 @@ grpc::ServerUnaryReactor* PoseServiceImpl::DescribeKeyPoints(grpc::CallbackServe
         response->set_fail_through(to_proto(model->info.fail_through));
         for (int c : m.check_points) response->add_check_point_indices(static_cast<uint32_t>(c));
         for (int r : m.check_regions) response->add_check_point_regions(static_cast<uint32_t>(r));
+        response->set_basis_checksum(model->basis_checksum);
+        response->set_basis_sha256(model->basis_sha256);
         return grpc::Status::OK;
       });
 }
@@ -148,7 +150,9 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         options.count_in_statistics = false;
         options.points_encoding = request->points_encoding();
         bool logged = false;
-        if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->mutable_result(), &logged); !s.ok()) {
+        if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->mutable_result(), &logged,
+                                           response->mutable_not_logged_reason());
+            !s.ok()) {
           return s;
         }
         response->set_logged(logged);

@@ -3,7 +3,10 @@
 // the float32 answers within the bound the header states — computed here, in double, from the
 // model file read independently — with the same verdicts; GetBasis reassembles the file's mean and
 // basis; the basis cache never reconstructs with a basis the answer did not name.
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <functional>
 #include <fstream>
 
 #include <gtest/gtest.h>
@@ -13,6 +16,9 @@
 #include "clients/cpp/coordinates.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
+#include "core/common/atomic_file.h"
+#include "core/common/sha256.h"
+#include "core/container/crc32.h"
 #include "core/container/model_container.h"
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
@@ -258,6 +264,90 @@ TEST_F(CoordinatesTest, TheCacheReusesVerifiedFilesAndNeverReconstructsWithAnoth
     const auto basis = cache.get(*client_, "bend", 1, answer.coordinates.basis_checksum);
     Points points;
     EXPECT_THROW(reconstruct(*basis, result, points), std::runtime_error);
+  }
+}
+
+// Makes crc32(bytes[begin, end)) equal `target` by choosing the four bytes at `patch_at` (inside
+// the range): the CRC is affine in those 32 bits over GF(2), and that map is invertible, so the
+// 32 columns and one elimination give them — what anyone can do to a CRC-checked file.
+void forge_crc32(std::string& bytes, size_t begin, size_t end, size_t patch_at, uint32_t target) {
+  const auto crc = [&] { return container::crc32(std::string_view(bytes).substr(begin, end - begin)); };
+  std::memset(bytes.data() + patch_at, 0, 4);
+  const uint32_t base = crc();
+  std::vector<uint32_t> columns(32);
+  for (int bit = 0; bit < 32; ++bit) {
+    bytes[patch_at + bit / 8] = static_cast<char>(1 << (bit % 8));
+    columns[static_cast<size_t>(bit)] = crc() ^ base;
+    bytes[patch_at + bit / 8] = 0;
+  }
+  // Solve Σ x_bit · columns[bit] = target ^ base: rows are the CRC's bits, tracked as
+  // (column value, the set of patch bits that made it).
+  std::vector<std::pair<uint32_t, uint32_t>> basis;  // reduced columns with their combinations
+  for (uint32_t bit = 0; bit < 32; ++bit) {
+    uint32_t value = columns[bit], made_of = 1u << bit;
+    for (const auto& [v, m] : basis) {
+      if ((value ^ v) < value) value ^= v, made_of ^= m;  // clear v's leading bit from value
+    }
+    if (value != 0) basis.emplace_back(value, made_of);
+    std::sort(basis.begin(), basis.end(), std::greater<>());
+  }
+  ASSERT_EQ(basis.size(), 32u) << "four consecutive bytes always reach every CRC";
+  uint32_t wanted = target ^ base, patch = 0;
+  for (const auto& [v, m] : basis) {
+    if ((wanted ^ v) < wanted) wanted ^= v, patch ^= m;
+  }
+  ASSERT_EQ(wanted, 0u);
+  for (int byte = 0; byte < 4; ++byte) bytes[patch_at + static_cast<size_t>(byte)] = static_cast<char>(patch >> (8 * byte));
+  ASSERT_EQ(crc(), target);
+}
+
+// Issue #54 item 8: a cached basis with one point moved by 0.5 and its CRC forged to match — which
+// the CRC alone accepted — is refused because its SHA-256 is not the server's, fetched again, and
+// the file overwritten with the true basis.
+TEST_F(CoordinatesTest, ACachedBasisWithAForgedCrcIsRefusedByTheServersDigest) {
+  const KeyPoints keys = client_->describe_key_points("bend");
+  ASSERT_EQ(keys.basis_sha256.size(), 32u);
+  const std::vector<float> values = key_values(keys, 20, 0);
+  EvaluateOptions coordinates;
+  coordinates.points_encoding = v1::POINT_ENCODING_COORDINATES;
+  const PoseResult answer = client_->evaluate_key_points("bend", {values, keys.channel_count}, coordinates);
+  ASSERT_TRUE(answer.coordinates.present);
+  EXPECT_EQ(keys.basis_checksum, answer.coordinates.basis_checksum);
+  const auto directory = work_.path() / "bases";
+  PoseResult truth = answer;
+  ASSERT_TRUE(BasisCache(directory).reconstruct(*client_, "bend", truth));
+  const auto file = BasisCache(directory).file_of("bend", 1, answer.coordinates.basis_checksum);
+  auto original = read_whole_file(file);
+  ASSERT_TRUE(original.ok());
+  EXPECT_EQ(sha256(std::string_view(*original).substr(40)), keys.basis_sha256)
+      << "the digest is SHA-256 of the values as sent";
+
+  std::string forged = *original;
+  uint32_t n = 0, d = 0;
+  std::memcpy(&n, forged.data() + 8, 4);
+  std::memcpy(&d, forged.data() + 12, 4);
+  const size_t mean_end = 40 + 4 * size_t{n} * d;
+  float x = 0;
+  std::memcpy(&x, forged.data() + 40, 4);
+  x += 0.5f;
+  std::memcpy(forged.data() + 40, &x, 4);
+  forge_crc32(forged, 40, mean_end, mean_end - 4, static_cast<uint32_t>(answer.coordinates.basis_checksum >> 32));
+  testing::write_text_file(file, forged);
+  {
+    BasisCache cache(directory);
+    PoseResult result = answer;
+    ASSERT_TRUE(cache.reconstruct(*client_, "bend", result));
+    EXPECT_EQ(result.points.values, truth.points.values);
+    EXPECT_EQ(cache.refused_copy_count(), 1u);
+    EXPECT_EQ(cache.fetch_count(), 1u);
+  }
+  EXPECT_EQ(*read_whole_file(file), *original);
+  {
+    BasisCache cache(directory);  // the true copy: used, one DescribeKeyPoints instead of GetBasis
+    PoseResult result = answer;
+    ASSERT_TRUE(cache.reconstruct(*client_, "bend", result));
+    EXPECT_EQ(cache.fetch_count(), 0u);
+    EXPECT_EQ(cache.refused_copy_count(), 0u);
   }
 }
 

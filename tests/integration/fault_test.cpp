@@ -1104,5 +1104,123 @@ TEST_F(FaultTest, OversizedRequestsAreRefusedAndTheMemoryTheyTakeIsBounded) {
   EXPECT_EQ(again.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << again.error_message();
 }
 
+
+// ---------------------------------------------------------------------------------------------
+// Slow readers (issue #54 item 6): a client that opens GetBasis streams and never takes the data
+// — its flow-control window shut — held every call slot for as long as it liked. Now one
+// connection holds at most --max-streams-per-connection calls, and a stream whose write has
+// waited past --stream-stall-ms is cancelled and its slot freed.
+
+namespace slow_readers {
+
+// A channel of its own (its own connection) that never probes bandwidth, so its window stays at
+// the initial 64 KiB and a basis of more than that stalls once nobody reads.
+std::shared_ptr<grpc::Channel> own_connection(const std::string& address) {
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 1024);
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+}
+
+struct Stalled {
+  grpc::ClientContext context;
+  std::unique_ptr<grpc::ClientReader<v1::BasisChunk>> reader;
+  uint64_t received = 0;  // values read so far
+  uint64_t total = 0;
+};
+
+// Opens a GetBasis stream on `stub`; with `first_chunk`, waits for its first chunk (the server
+// admitted it and wrote) and then reads nothing more.
+std::unique_ptr<Stalled> open_stalled(v1::PoseService::Stub& stub, bool first_chunk) {
+  auto stream = std::make_unique<Stalled>();
+  v1::GetBasisRequest request;
+  request.mutable_model()->set_name("arm-pmsc");
+  stream->reader = stub.GetBasis(&stream->context, request);
+  v1::BasisChunk chunk;
+  if (first_chunk) {
+    EXPECT_TRUE(stream->reader->Read(&chunk)) << "the stream was refused";
+    stream->received = chunk.data().size() / sizeof(float);
+    stream->total = chunk.total_values();
+  }
+  return stream;
+}
+
+grpc::StatusCode describe_code(const std::string& address) {
+  auto stub = v1::PoseService::NewStub(own_connection(address));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  v1::DescribeKeyPointsRequest request;
+  request.mutable_model()->set_name("arm-pmsc");
+  v1::DescribeKeyPointsResponse response;
+  return stub->DescribeKeyPoints(&context, request, &response).error_code();
+}
+
+}  // namespace slow_readers
+
+TEST_F(FaultTest, OneConnectionHoldsAtMostItsShareOfTheCallSlots) {
+  using namespace slow_readers;
+  auto daemon = start(repository({{"arm-pmsc", "arm-pmsc"}}),
+                      {"--max-concurrent-calls", "4", "--max-streams-per-connection", "2", "--stream-stall-ms", "0",
+                       "--max-message-bytes", "16384"});
+  // Four streams on one connection: two are admitted, two wait in the client for a stream to end
+  // (started asynchronously: a synchronous stream's constructor would wait for its turn).
+  auto first = v1::PoseService::NewStub(own_connection(daemon->address()));
+  std::vector<std::unique_ptr<Stalled>> streams;
+  for (int i = 0; i < 2; ++i) streams.push_back(open_stalled(*first, true));
+  grpc::CompletionQueue queue;
+  std::vector<std::unique_ptr<grpc::ClientContext>> waiting;
+  std::vector<std::unique_ptr<grpc::ClientAsyncReader<v1::BasisChunk>>> waiting_readers;
+  for (int i = 0; i < 2; ++i) {
+    waiting.push_back(std::make_unique<grpc::ClientContext>());
+    v1::GetBasisRequest request;
+    request.mutable_model()->set_name("arm-pmsc");
+    waiting_readers.push_back(first->AsyncGetBasis(waiting.back().get(), request, &queue, waiting.back().get()));
+  }
+  EXPECT_EQ(describe_code(daemon->address()), grpc::StatusCode::OK) << "one connection took every slot";
+  // A second connection takes the other two: now every slot is held, and a call is refused —
+  // the stalled streams do hold their slots, the cap is what kept two free.
+  auto second = v1::PoseService::NewStub(own_connection(daemon->address()));
+  for (int i = 0; i < 2; ++i) streams.push_back(open_stalled(*second, true));
+  EXPECT_EQ(describe_code(daemon->address()), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  for (auto& stream : streams) stream->context.TryCancel();
+  for (auto& context : waiting) context->TryCancel();
+  for (size_t i = 0; i < waiting.size(); ++i) {  // each start completes (cancelled); then finish them
+    void* tag = nullptr;
+    bool ok = false;
+    ASSERT_TRUE(queue.Next(&tag, &ok));
+  }
+  std::vector<grpc::Status> finished(waiting_readers.size());
+  for (size_t i = 0; i < waiting_readers.size(); ++i) waiting_readers[i]->Finish(&finished[i], &finished[i]);
+  for (size_t i = 0; i < waiting_readers.size(); ++i) {
+    void* tag = nullptr;
+    bool ok = false;
+    ASSERT_TRUE(queue.Next(&tag, &ok));
+  }
+  queue.Shutdown();
+  void* tag = nullptr;
+  bool ok = false;
+  while (queue.Next(&tag, &ok)) {
+  }
+  EXPECT_TRUE(testing::wait_until([&] { return describe_code(daemon->address()) == grpc::StatusCode::OK; }));
+}
+
+TEST_F(FaultTest, AStreamTheClientStopsReadingIsCancelledAndItsSlotFreed) {
+  using namespace slow_readers;
+  auto daemon = start(repository({{"arm-pmsc", "arm-pmsc"}}),
+                      {"--max-concurrent-calls", "1", "--stream-stall-ms", "1000", "--max-message-bytes", "16384"});
+  auto stub = v1::PoseService::NewStub(own_connection(daemon->address()));
+  const auto stalled = open_stalled(*stub, true);
+  // The one slot is held by a reader that takes nothing; a stall check frees it.
+  EXPECT_TRUE(testing::wait_until([&] { return describe_code(daemon->address()) == grpc::StatusCode::OK; }))
+      << "the stalled stream kept its slot:\n" << daemon->log();
+  v1::BasisChunk chunk;
+  while (stalled->reader->Read(&chunk)) stalled->received += chunk.data().size() / sizeof(float);
+  const grpc::Status status = stalled->reader->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED) << status.error_message();
+  EXPECT_LT(stalled->received, stalled->total) << "the basis was sent whole: the stream never stalled";
+  EXPECT_NE(daemon->log().find("stream cancelled (--stream-stall-ms)"), std::string::npos) << daemon->log();
+}
+
 }  // namespace
 }  // namespace animspace

@@ -6,6 +6,7 @@ Expected values come from independent computations here — zlib over the raw ch
 float64 from the basis and p, the file parsed with struct — never from the client under test."""
 import collections
 import dataclasses
+import hashlib
 import math
 import socket
 import struct
@@ -26,6 +27,7 @@ from test_client import posed_arm
 
 U = 2.0 ** -24  # float32's unit roundoff
 GET_BASIS = "/animspace.v1.PoseService/GetBasis"
+DESCRIBE_KEY_POINTS = "/animspace.v1.PoseService/DescribeKeyPoints"
 
 
 # ----------------------------------------------------------------------------------------------
@@ -76,13 +78,17 @@ def expect_within_bound(reconstructed, exact, mean, A, result):
     assert bound.max() < 1e-4 * np.abs(exact).max()
 
 
-class CountingInterceptor(grpc.UnaryStreamClientInterceptor):
-    """Counts the server-streaming calls a client makes, by method."""
+class CountingInterceptor(grpc.UnaryStreamClientInterceptor, grpc.UnaryUnaryClientInterceptor):
+    """Counts the unary and server-streaming calls a client makes, by method."""
 
     def __init__(self):
         self.calls = collections.Counter()
 
     def intercept_unary_stream(self, continuation, details, request):
+        self.calls[details.method] += 1
+        return continuation(details, request)
+
+    def intercept_unary_unary(self, continuation, details, request):
         self.calls[details.method] += 1
         return continuation(details, request)
 
@@ -368,22 +374,28 @@ def test_the_cache_file_is_the_shared_format_and_spares_the_next_fetch(counted, 
     path = tmp_path / "bases" / "arm-pmsc" / f"{answer.model_version}-{checksum:016x}.basis"
     assert sorted(p.name for p in (tmp_path / "bases" / "arm-pmsc").iterdir()) == [path.name]  # no temporaries
     magic, header, stored = parse_cache_file(path)
+    stored_bytes = path.read_bytes()
     chunks, mean, A = raw_basis(channel, "arm-pmsc")
     N, M = chunks[0].point_count, chunks[0].basis_size
     assert magic == b"ASBASIS1" and header == (N, 3, M, 0, answer.model_version, checksum)
     assert stored.tobytes() == b"".join(c.data for c in chunks)  # the mean, then A column by column
-    # The same client: from memory. A new one: from the file — even with no server to ask.
+    # The same client: from memory. A new one: from the file, once the server vouches for it
+    # (its digest, one DescribeKeyPoints); with no server to ask, the copy is not used.
     np.testing.assert_array_equal(client.reconstruct("arm-pmsc", answer), first)
     assert counter.calls[GET_BASIS] == 1
+    new_counter = CountingInterceptor()
+    with animspace.Client(channel=grpc.intercept_channel(channel, new_counter), basis_cache=tmp_path / "bases") as new:
+        np.testing.assert_array_equal(new.reconstruct("arm-pmsc", answer), first)
+    assert new_counter.calls[GET_BASIS] == 0 and new_counter.calls[DESCRIBE_KEY_POINTS] == 1
     with animspace.Client(f"127.0.0.1:{closed_port()}", basis_cache=tmp_path / "bases", deadline_s=2) as offline:
-        np.testing.assert_array_equal(offline.reconstruct("arm-pmsc", answer), first)
-        with pytest.raises(animspace.Unavailable):  # what an uncached basis meets there
-            offline.get_basis("arm-pmsc")
+        with pytest.raises(animspace.Unavailable):
+            offline.reconstruct("arm-pmsc", answer)
+    assert path.read_bytes() == stored_bytes  # the copy stays for when the server answers
 
 
 def test_a_basis_the_cpp_client_cached_is_read_by_the_python_client(daemon, arm_poses, tmp_path):
     """One cache for both clients: `animspace play --coordinates` (the C++ client) writes the file,
-    and a Python client with no server to ask reconstructs from it."""
+    and a Python client reconstructs from it without fetching the basis."""
     keys, values, _ = arm_poses
     demo = tmp_path / "demo"
     subprocess.run([str(BUILD / "bin" / "animspace"), "demo-repository", str(demo)], check=True,
@@ -397,8 +409,11 @@ def test_a_basis_the_cpp_client_cached_is_read_by_the_python_client(daemon, arm_
         expected = online.evaluate_key_points("arm-pmsc", values[0]).points
     files = list((tmp_path / "bases" / "arm-pmsc").glob(f"{answer.model_version}-*.basis"))
     assert [f.name for f in files] == [f"{answer.model_version}-{answer.coordinates.basis_checksum:016x}.basis"]
-    with animspace.Client(f"127.0.0.1:{closed_port()}", basis_cache=tmp_path / "bases", deadline_s=2) as offline:
-        reconstructed = offline.reconstruct("arm-pmsc", answer)
+    counter = CountingInterceptor()
+    with grpc.insecure_channel(daemon) as channel, \
+            animspace.Client(channel=grpc.intercept_channel(channel, counter), basis_cache=tmp_path / "bases") as fresh:
+        reconstructed = fresh.reconstruct("arm-pmsc", answer)
+    assert counter.calls[GET_BASIS] == 0
     # The stated bound, from the C++-written file's own values: the float32 answer within it.
     _, (n, d, m, _, _, _), stored = parse_cache_file(files[0])
     stored = stored.astype(np.float64)
@@ -432,6 +447,60 @@ def test_a_corrupt_cache_file_is_deleted_and_fetched_again(daemon, arm_poses, tm
         np.testing.assert_array_equal(fresh.reconstruct("arm-pmsc", answer), good)
         assert counter.calls[GET_BASIS] == 1
     assert path.read_bytes() == original  # written again, whole
+
+
+def forge_crc32(data: bytearray, begin: int, end: int, patch_at: int, target: int) -> None:
+    """Makes crc32(data[begin:end]) == target by choosing the 4 bytes at ``patch_at``: the CRC is
+    affine in those 32 bits over GF(2) and the map is invertible — what anyone can do to a file
+    checked by a CRC."""
+    data[patch_at:patch_at + 4] = bytes(4)
+    base = zlib.crc32(data[begin:end])
+    rows = []  # (reduced column, the patch bits that made it), distinct leading bits
+    for bit in range(32):
+        data[patch_at + bit // 8] = 1 << (bit % 8)
+        value, made_of = zlib.crc32(data[begin:end]) ^ base, 1 << bit
+        data[patch_at + bit // 8] = 0
+        for v, m in rows:
+            if value ^ v < value:
+                value, made_of = value ^ v, made_of ^ m
+        if value:
+            rows.append((value, made_of))
+            rows.sort(reverse=True)
+    assert len(rows) == 32
+    wanted, patch = target ^ base, 0
+    for v, m in rows:
+        if wanted ^ v < wanted:
+            wanted, patch = wanted ^ v, patch ^ m
+    assert wanted == 0
+    data[patch_at:patch_at + 4] = patch.to_bytes(4, "little")
+    assert zlib.crc32(data[begin:end]) == target
+
+
+def test_a_cached_basis_with_a_forged_crc_is_refused_by_the_servers_digest(daemon, arm_poses, tmp_path):
+    """Issue #54 item 8: point 0 moved by 0.5 and the CRC forged to match — accepted by the CRC
+    alone — is refused because its SHA-256 is not the server's, fetched again and overwritten."""
+    keys, values, _ = arm_poses
+    with animspace.Client(daemon, basis_cache=tmp_path / "bases") as client:
+        described = client.describe_key_points("arm-pmsc")
+        answer = client.evaluate_key_points("arm-pmsc", values[0], points_encoding="coordinates")
+        good = client.reconstruct("arm-pmsc", answer)
+    path = next((tmp_path / "bases" / "arm-pmsc").iterdir())
+    original = path.read_bytes()
+    assert hashlib.sha256(original[40:]).digest() == described.basis_sha256  # the values as sent
+    assert described.basis_checksum == answer.coordinates.basis_checksum
+    forged = bytearray(original)
+    _, n, d = struct.unpack_from("<8sII", forged)
+    mean_end = 40 + 4 * n * d
+    struct.pack_into("<f", forged, 40, struct.unpack_from("<f", forged, 40)[0] + 0.5)
+    forge_crc32(forged, 40, mean_end, mean_end - 4, answer.coordinates.basis_checksum >> 32)
+    path.write_bytes(bytes(forged))
+    counter = CountingInterceptor()
+    with grpc.insecure_channel(daemon) as channel, \
+            animspace.Client(channel=grpc.intercept_channel(channel, counter), basis_cache=tmp_path / "bases") as fresh:
+        np.testing.assert_array_equal(fresh.reconstruct("arm-pmsc", answer), good)
+        assert counter.calls[GET_BASIS] == 1
+        assert fresh.basis_cache.refused_copies == 1
+    assert path.read_bytes() == original
 
 
 def test_the_cache_directory_follows_the_environment(monkeypatch, tmp_path):

@@ -127,6 +127,8 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   uint64_t completed = 0;
+  uint64_t not_logged = 0;
+  std::string not_logged_reason;  // the first one the server gave
   if (a.complete) {
     ProgressBar completing("complete " + a.model, to_complete.size());
     for (uint64_t frame : to_complete) {
@@ -135,8 +137,14 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       const std::vector<float> checks = keys.gather_check_values(row);
       KeyPointPose pose{values, keys.channel_count};
       pose.check_values = checks;  // the same as evaluated, so the verdict repeats
-      completed += client.complete_miss(a.model, keys.model_version, pose, row).logged ? 1 : 0;
-      completing.update(completed);
+      const CompletedMiss answer = client.complete_miss(a.model, keys.model_version, pose, row);
+      if (answer.logged) {
+        completed += 1;
+      } else if (answer.result.status != v1::CACHE_STATUS_HIT) {
+        not_logged += 1;
+        if (not_logged_reason.empty()) not_logged_reason = answer.not_logged_reason;
+      }
+      completing.update(completed + not_logged);
     }
   }
   const uint64_t played = counts[1] + counts[2] + counts[3];
@@ -162,8 +170,10 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
                 {"mean_key_point_error", mean_error},
                 {"max_key_point_error", max_error},
                 {"poses_per_second", double(played) / seconds},
-                {"completed", completed}});
-    return 0;
+                {"completed", completed},
+                {"not_logged", not_logged},
+                {"not_logged_reason", not_logged_reason}});
+    return not_logged == 0 ? 0 : 1;
   }
   std::printf("%s version %llu: %llu frames in %.2f s (%.0f poses/s)\n", a.model.c_str(),
               static_cast<unsigned long long>(keys.model_version), static_cast<unsigned long long>(played), seconds,
@@ -180,7 +190,16 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   if (a.complete) {
     std::printf("  completed %llu blends/misses with full values (logged for `animspace retrain %s`)\n",
                 static_cast<unsigned long long>(completed), a.model.c_str());
-  } else if (!to_complete.empty()) {
+  }
+  if (not_logged > 0) {
+    // The answers were right; the retraining data is short, and a script must not take it as done.
+    std::fprintf(stderr, "error: %llu of %zu completed misses were not logged by the server, so a retrain will "
+                         "not see them: %s\n",
+                 static_cast<unsigned long long>(not_logged), to_complete.size(),
+                 not_logged_reason.empty() ? "(no reason given)" : not_logged_reason.c_str());
+    return 1;
+  }
+  if (!a.complete && !to_complete.empty()) {
     std::printf("  %zu frames needed the full calculation (--complete sends it)\n", to_complete.size());
   }
   return 0;

@@ -32,7 +32,7 @@ from animspace import health as health_messages
 from animspace import messages, wire
 from animspace.coordinates import Basis, BasisAssembler, BasisCache
 from animspace.coordinates import reconstruct as reconstruct_coordinates
-from animspace.errors import BasisMismatch, DeadlineExceeded, ProtocolError, Unavailable, error_from_grpc
+from animspace.errors import BasisMismatch, DeadlineExceeded, ProtocolError, RpcError, Unavailable, error_from_grpc
 from animspace.lod import FORMS, LodAssembler, LodMesh
 from animspace.messages import (Camera, IlluminationView, KeyPointPose, KeyPoints, MissCompletion, ModelSummary,
                                 PointLight, PoseResult, RetrainResult, ServerInfo, SkinnedPose, Stats, Thumbnail)
@@ -623,7 +623,7 @@ class Client:
             result = PoseResult.from_proto(response.result, "result.points")
         if reconstruct:
             result = self._with_points(model, result, deadline_s)
-        return MissCompletion(result=result, logged=response.logged)
+        return MissCompletion(result=result, logged=response.logged, not_logged_reason=response.not_logged_reason)
 
     # ------------------------------------------------------------------------------------------
     # Answers as coordinates (issue #36): the basis, its cache, the reconstruction
@@ -678,7 +678,9 @@ class Client:
                 raise ValueError("result: it carries neither coordinates nor points (asked with omit_points?)")
             return result.points
         version, checksum = result.model_version, coordinates.basis_checksum
-        basis = self._basis_cache.get(model, version, checksum)
+        basis = self._basis_cache.get(model, version, checksum,
+                                      server_sha256=lambda: self._server_basis_sha256(model, version, checksum,
+                                                                                      deadline_s))
         if basis is None:
             basis = self.get_basis(model, version, deadline_s=deadline_s)
             if basis.basis_checksum != checksum:
@@ -687,6 +689,19 @@ class Client:
             return reconstruct_coordinates(basis, coordinates)
         except ValueError as error:
             raise ProtocolError("reconstruct", str(error)) from error
+
+    def _server_basis_sha256(self, model: str, version: int, checksum: int,
+                             deadline_s: Optional[float]) -> Optional[bytes]:
+        """The SHA-256 the server names for that version's basis (DescribeKeyPoints, one small call):
+        b"" from a server before the digest (the CRC check alone then), None when the version is gone
+        or has another basis (GetBasis then says which)."""
+        try:
+            described = self.describe_key_points(model, version, deadline_s=deadline_s)
+        except RpcError:
+            return None
+        if not described.basis_sha256:
+            return b""
+        return described.basis_sha256 if described.basis_checksum == checksum else None
 
     def _with_points(self, model: str, result: PoseResult, deadline_s: Optional[float]) -> PoseResult:
         """``result`` with its coordinates reconstructed into ``points`` (unchanged without any)."""

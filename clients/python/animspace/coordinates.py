@@ -20,6 +20,8 @@ and then the float32 little-endian values: the N·D mean, then A column by colum
 from __future__ import annotations
 
 import collections
+import dataclasses
+import hashlib
 import stat
 import os
 import pathlib
@@ -28,7 +30,7 @@ import tempfile
 import threading
 import zlib
 from dataclasses import dataclass
-from typing import Optional, Tuple, Union
+from typing import Callable, Optional, Tuple, Union
 
 import numpy as np
 
@@ -42,6 +44,7 @@ __all__ = [
     "BasisCache",
     "SubspaceCoordinates",
     "basis_checksum",
+    "basis_sha256",
     "default_cache_directory",
     "reconstruct",
     "rounding_bound",
@@ -75,6 +78,8 @@ class Basis:
         mean: (N·D,) float32, point-major (as ``PointArray``). Read-only.
         basis: (N·D, M) float32, column j the j-th basis vector, stored column by column
             (Fortran order), as on the wire. Read-only.
+        basis_sha256: SHA-256 of the values as GetBasis sends them (32 bytes; b"" from a server
+            before it): names the subspace so that it cannot be forged.
     """
 
     __repr__ = compact_repr
@@ -88,6 +93,7 @@ class Basis:
     aligned: bool
     mean: np.ndarray
     basis: np.ndarray
+    basis_sha256: bytes = b""
 
     @property
     def nbytes(self) -> int:
@@ -133,15 +139,23 @@ def basis_checksum(mean: np.ndarray, basis: np.ndarray) -> int:
     return (zlib.crc32(mean_bytes) << 32) | zlib.crc32(basis_bytes)
 
 
+def basis_sha256(mean: np.ndarray, basis: np.ndarray) -> bytes:
+    """SHA-256 of the mean's float32 little-endian bytes followed by the basis's, column by column:
+    the values exactly as GetBasis streams them (poses.proto BasisChunk.basis_sha256)."""
+    digest = hashlib.sha256(np.ascontiguousarray(mean, dtype=wire.WIRE_FLOAT).tobytes())
+    digest.update(np.asarray(basis, dtype=wire.WIRE_FLOAT).tobytes(order="F"))
+    return digest.digest()
+
+
 def _basis_from_values(model: str, model_version: int, checksum: int, n: int, d: int, m: int, aligned: bool,
-                       values: np.ndarray) -> Basis:
+                       values: np.ndarray, sha256: bytes = b"") -> Basis:
     """A Basis over ``values`` (N·D·(M+1) float32: the mean, then A column by column), read-only."""
     values.setflags(write=False)
     rows = n * d
     mean = values[:rows]
     basis = values[rows:].reshape((rows, m), order="F")
     return Basis(model=model, model_version=model_version, basis_checksum=checksum, point_count=n, channel_count=d,
-                 basis_size=m, aligned=aligned, mean=mean, basis=basis)
+                 basis_size=m, aligned=aligned, mean=mean, basis=basis, basis_sha256=sha256)
 
 
 class BasisAssembler:
@@ -175,8 +189,8 @@ class BasisAssembler:
             self._values = np.empty(expected, dtype=np.float32)
         else:
             first = self._first
-            for name in ("model_version", "basis_checksum", "point_count", "channel_count", "basis_size", "aligned",
-                         "total_values"):
+            for name in ("model_version", "basis_checksum", "basis_sha256", "point_count", "channel_count",
+                         "basis_size", "aligned", "total_values"):
                 if getattr(chunk, name) != getattr(first, name):
                     return f"{where}: {name} {getattr(chunk, name)} differs from chunk 0's {getattr(first, name)}"
         assert self._values is not None
@@ -206,6 +220,11 @@ class BasisAssembler:
         if checksum != self._first.basis_checksum:
             return (f"the values' checksum {checksum:016x} is not the basis_checksum "
                     f"{self._first.basis_checksum:016x} the chunks carry")
+        if self._first.basis_sha256:
+            digest = hashlib.sha256(self._values.tobytes()).digest()
+            if digest != self._first.basis_sha256:
+                return (f"the values' SHA-256 {digest.hex()} is not the basis_sha256 "
+                        f"{self._first.basis_sha256.hex()} the chunks carry")
         return None
 
     def basis(self, model: str) -> Basis:
@@ -213,7 +232,8 @@ class BasisAssembler:
         first = self._first
         assert first is not None and self._values is not None and self._filled == self._values.size
         return _basis_from_values(model, first.model_version, first.basis_checksum, first.point_count,
-                                  first.channel_count, first.basis_size, first.aligned, self._values)
+                                  first.channel_count, first.basis_size, first.aligned, self._values,
+                                  bytes(first.basis_sha256))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -324,6 +344,8 @@ class BasisCache:
         self._memory_limit_bytes = memory_limit_bytes
         self._memory: "collections.OrderedDict[_Key, Basis]" = collections.OrderedDict()
         self._lock = threading.Lock()
+        #: Files refused because their values were not the basis the server names.
+        self.refused_copies = 0
 
     def __repr__(self) -> str:
         where = str(self._directory) if self._directory is not None else "memory only"
@@ -341,8 +363,17 @@ class BasisCache:
             return None
         return self._directory / model / f"{model_version}-{checksum:016x}.basis"
 
-    def get(self, model: str, model_version: int, checksum: int) -> Optional[Basis]:
-        """The basis from memory, else from its file (kept in memory then), else None."""
+    def get(self, model: str, model_version: int, checksum: int, *,
+            server_sha256: Optional[Callable[[], Optional[bytes]]] = None) -> Optional[Basis]:
+        """The basis from memory, else from its file (kept in memory then), else None.
+
+        What the file promises (issue #54): its CRC catches accidents only — a CRC-32 is forged in
+        four bytes — so a file is used only when its values' SHA-256 is the one ``server_sha256()``
+        returns, the server's digest of that version's basis (the client asks DescribeKeyPoints);
+        a file that differs is deleted and gives None (fetched again). ``server_sha256`` returning
+        b"" (a server before the digest) or left out trusts the CRC alone; returning None (the
+        version is gone or has another basis) gives None.
+        """
         key = (model, model_version, checksum)
         with self._lock:
             basis = self._memory.get(key)
@@ -351,6 +382,19 @@ class BasisCache:
                 return basis
         path = self.path(model, model_version, checksum)
         basis = read_basis_file(path, model, model_version, checksum) if path is not None else None
+        if basis is not None and server_sha256 is not None:
+            expected = server_sha256()
+            if expected is None:
+                return None
+            if expected:
+                if basis_sha256(basis.mean, basis.basis) != expected:
+                    self.refused_copies += 1
+                    try:
+                        path.unlink()
+                    except OSError:
+                        pass
+                    return None
+                basis = dataclasses.replace(basis, basis_sha256=expected)
         if basis is not None:
             self._remember(basis)
         return basis

@@ -387,6 +387,8 @@ class KeyPoints:
     points and sent as ``check_values`` in this order (the projection never uses them; the server
     measures the estimate's error there, and a HIT the key points alone give can become BLEND or
     MISS); empty for a model without check points. ``check_point_regions`` (C,) as ``regions``.
+    ``basis_checksum`` and ``basis_sha256`` name the version's subspace as GetBasis does (0 and
+    b"" without one): a cached basis is checked against the digest before it is used.
     Pin ``model_version`` in later calls to keep using these indices across a retrain.
     """
 
@@ -400,6 +402,8 @@ class KeyPoints:
     fail_through: str
     check_point_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
     check_point_regions: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
+    basis_checksum: int = 0
+    basis_sha256: bytes = b""
 
     @property
     def count(self) -> int:
@@ -442,7 +446,8 @@ class KeyPoints:
                    channel_count=m.channel_count, control_point_count=m.control_point_count,
                    regions=np.array(m.key_point_regions, dtype=np.uint32), fail_through=_fail_through(m.fail_through),
                    check_point_indices=np.array(m.check_point_indices, dtype=np.uint32),
-                   check_point_regions=np.array(m.check_point_regions, dtype=np.uint32))
+                   check_point_regions=np.array(m.check_point_regions, dtype=np.uint32),
+                   basis_checksum=m.basis_checksum, basis_sha256=bytes(m.basis_sha256))
 
 
 @dataclass(frozen=True)
@@ -544,12 +549,15 @@ class PoseResult:
 @dataclass(frozen=True, eq=False)
 class MissCompletion:
     """``Client.complete_miss``'s answer: the blended/full result, and whether the miss was logged
-    for retraining ("train each night, better tomorrow")."""
+    for retraining ("train each night, better tomorrow"); when a blend or miss was not,
+    ``not_logged_reason`` says why (the server's miss log could not be written, e.g. a full disk).
+    """
 
     __repr__ = compact_repr
 
     result: PoseResult
     logged: bool
+    not_logged_reason: str = ""
 
 
 @dataclass(frozen=True, eq=False)

@@ -144,6 +144,7 @@ TEST(AtomicFileTest, ReadDirectoryIsIoError) {
   EXPECT_NE(bytes.error().message.find(dir.path().string()), std::string::npos);
 }
 
+
 }  // namespace
 }  // namespace animspace
 
@@ -171,6 +172,40 @@ TEST(ReadRegularFile, RefusesWhatIsNotARegularFileWithoutBlocking) {
   ASSERT_TRUE(read.ok()) << read.error().message;
   EXPECT_EQ(*read, "bytes");
   EXPECT_EQ(read_regular_file(dir / "absent").error().code, ErrorCode::kNotFound);
+}
+
+// Issue #54 item 4: a sparse gigabyte in a model's place is judged by its first bytes.
+TEST(ReadRegularFile, AHeadCheckSeesTheHeadAndTheSizeBeforeAnythingElseIsRead) {
+  testing::TempDir dir;
+  const std::filesystem::path sparse = dir / "model.anim";
+  testing::write_text_file(sparse, "head-of-file");
+  constexpr uint64_t kSize = uint64_t{1} << 30;
+  ASSERT_EQ(::truncate(sparse.c_str(), static_cast<off_t>(kSize)), 0);
+
+  std::string seen_head;
+  uint64_t seen_size = 0;
+  const auto refused = read_regular_file(sparse, 4, [&](std::string_view head, uint64_t size) {
+    seen_head = head;
+    seen_size = size;
+    return Status(make_error(ErrorCode::kInvalidArgument, "not ours"));
+  });
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().message, "not ours");
+  EXPECT_EQ(seen_head, "head");
+  EXPECT_EQ(seen_size, kSize);
+
+  const std::filesystem::path plain = dir / "plain";
+  testing::write_text_file(plain, "the whole file");
+  auto accepted = read_regular_file(plain, 64, [&](std::string_view head, uint64_t size) {
+    EXPECT_EQ(head, "the whole file");  // shorter than the head: all of it
+    EXPECT_EQ(size, 14U);
+    return Status::Ok();
+  });
+  ASSERT_TRUE(accepted.ok()) << accepted.error().message;
+  EXPECT_EQ(*accepted, "the whole file");
+  accepted = read_regular_file(plain, 3, [](std::string_view, uint64_t) { return Status::Ok(); });
+  ASSERT_TRUE(accepted.ok()) << accepted.error().message;
+  EXPECT_EQ(*accepted, "the whole file");
 }
 
 }  // namespace

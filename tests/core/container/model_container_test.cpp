@@ -1,5 +1,8 @@
 #include "core/container/model_container.h"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -491,6 +494,42 @@ TEST(ModelContainerTest, ReadFileErrorsNameThePath) {
   ASSERT_FALSE(wrong.ok());
   EXPECT_EQ(wrong.error().code, ErrorCode::kInvalidArgument);
   EXPECT_EQ(wrong.error().message.rfind(text_file.string() + ": ", 0), 0U) << wrong.error().message;
+}
+
+// Issue #54 item 4: a container padded to a sparse gigabyte, or a gigabyte that is no container,
+// is refused from its header and the size on disk; neither is read into memory (the peak
+// resident size does not grow by anything like it).
+TEST(ModelContainerTest, AHugeFileIsJudgedByItsHeaderBeforeItIsRead) {
+  TempDir dir;
+  constexpr uint64_t kSize = uint64_t{1} << 30;
+  const auto peak_rss_bytes = [] {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return static_cast<uint64_t>(usage.ru_maxrss) * 1024;
+  };
+  const uint64_t peak_before = peak_rss_bytes();
+
+  const fs::path padded = dir / "padded.anim";
+  const std::string model = serialize(small_container());
+  ASSERT_TRUE(write_file(padded, small_container()).ok());
+  ASSERT_EQ(::truncate(padded.c_str(), static_cast<off_t>(kSize)), 0);
+  auto refused = read_file(padded);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kDataLoss);
+  EXPECT_NE(refused.error().message.find(std::to_string(kSize - model.size()) +
+                                         " unexpected bytes after the end of the file"),
+            std::string::npos)
+      << refused.error().message;
+
+  const fs::path stranger = dir / "stranger.anim";
+  testing::write_text_file(stranger, "root:*:19000:0:99999:7:::\n");
+  ASSERT_EQ(::truncate(stranger.c_str(), static_cast<off_t>(kSize)), 0);
+  refused = read_file(stranger);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(refused.error().message.find("not an animspace model container"), std::string::npos);
+
+  EXPECT_LT(peak_rss_bytes() - peak_before, kSize / 8);
 }
 
 TEST(ModelContainerTest, OneRowIsThatRowOfTheWholeMatrix) {

@@ -20,6 +20,7 @@
 #include "core/container/model_container.h"
 #include "core/container/sections.h"
 #include "core/demo/demo_repository.h"
+#include "core/common/sha256.h"
 #include "core/misslog/miss_log.h"
 #include "core/pmsc/pmsc_io.h"
 #include "tests/server/support/in_process_server.h"
@@ -250,6 +251,71 @@ TEST_F(PoseAndModelServiceTest, PartialFramesReachAnOldMissLogAsCompletedFrames)
   char header[12] = {};
   log.read(header, sizeof header);
   EXPECT_EQ(header[8], 2) << "the log keeps its version";
+}
+
+// Issue #54 item 9: a miss log that cannot be written (here a directory in its place) leaves the
+// answer right and says so — logged false and the log's error — where a client said "completed 0".
+TEST_F(PoseAndModelServiceTest, ACompletedMissThatCannotBeLoggedSaysWhy) {
+  std::filesystem::create_directories(work_.path() / (kPmsc + ".misses"));
+  serve();
+  v1::DescribeKeyPointsResponse keys;
+  {
+    grpc::ClientContext context;
+    v1::DescribeKeyPointsRequest request;
+    request.mutable_model()->set_name(kPmsc);
+    ASSERT_TRUE(poses_->DescribeKeyPoints(&context, request, &keys).ok());
+  }
+  auto stored = container::read_file(repository() / kPmsc / "1" / "model.anim");
+  ASSERT_TRUE(stored.ok());
+  auto model = pmsc::load(*stored, kPmsc);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  Eigen::VectorXf full = model->mean;
+  for (long i = 0; i < full.size(); i += 3) full(i + 1) += 0.05f * static_cast<float>(i % 7);  // off the subspace
+  const Eigen::VectorXf key_values = pmsc::gather_key_values(*model, full);
+  v1::CompleteMissRequest complete;
+  complete.mutable_model()->set_name(kPmsc);
+  *complete.mutable_key_values() = point_array({key_values.data(), key_values.data() + key_values.size()},
+                                               static_cast<uint32_t>(model->key_point_count()), 3);
+  *complete.mutable_full_values() = point_array({full.data(), full.data() + full.size()},
+                                                static_cast<uint32_t>(full.size() / 3), 3);
+  v1::CompleteMissResponse completed;
+  grpc::ClientContext context;
+  const grpc::Status status = poses_->CompleteMiss(&context, complete, &completed);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_NE(completed.result().status(), v1::CACHE_STATUS_HIT);
+  EXPECT_FALSE(completed.logged());
+  EXPECT_NE(completed.not_logged_reason().find((work_.path() / (kPmsc + ".misses")).string()), std::string::npos)
+      << completed.not_logged_reason();
+  EXPECT_EQ(completed.result().points().data().size(), static_cast<size_t>(full.size()) * sizeof(float))
+      << "the answer itself is still sent";
+}
+
+// Issue #54 item 8: DescribeKeyPoints and every GetBasis chunk name the subspace by its SHA-256,
+// which is the digest of the values exactly as the chunks carry them (computed here from the
+// stream, not from the model).
+TEST_F(PoseAndModelServiceTest, TheBasisIsNamedByTheSha256OfTheValuesSent) {
+  serve();
+  v1::DescribeKeyPointsResponse keys;
+  {
+    grpc::ClientContext context;
+    v1::DescribeKeyPointsRequest request;
+    request.mutable_model()->set_name(kPmsc);
+    ASSERT_TRUE(poses_->DescribeKeyPoints(&context, request, &keys).ok());
+  }
+  ASSERT_EQ(keys.basis_sha256().size(), 32u);
+  grpc::ClientContext context;
+  v1::GetBasisRequest request;
+  request.mutable_model()->set_name(kPmsc);
+  auto reader = poses_->GetBasis(&context, request);
+  std::string values;
+  v1::BasisChunk chunk;
+  while (reader->Read(&chunk)) {
+    EXPECT_EQ(chunk.basis_sha256(), keys.basis_sha256());
+    EXPECT_EQ(chunk.basis_checksum(), keys.basis_checksum());
+    values += chunk.data();
+  }
+  ASSERT_TRUE(reader->Finish().ok());
+  EXPECT_EQ(sha256(values), keys.basis_sha256());
 }
 
 }  // namespace
