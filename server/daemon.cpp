@@ -108,7 +108,13 @@ Status Daemon::start() {
   render_service_ = std::make_unique<RenderServiceImpl>(*env_);
   training_service_ = std::make_unique<TrainingServiceImpl>(*env_);
 
-  const auto builder = make_server_builder(options_, *credentials, &port_);
+  raise_descriptor_limit();
+  auto listener = Listener::bind(options_.listen_address);
+  if (!listener) return listener.error();
+  listener_ = std::move(*listener);
+  port_ = listener_->port();
+  std::unique_ptr<grpc::experimental::ExternalConnectionAcceptor> acceptor;
+  const auto builder = make_server_builder(options_, *credentials, &acceptor);
   builder->RegisterService(model_service_.get());
   builder->RegisterService(stats_service_.get());
   builder->RegisterService(pose_service_.get());
@@ -117,10 +123,11 @@ Status Daemon::start() {
   builder->RegisterService(render_service_.get());
   builder->RegisterService(training_service_.get());
   server_ = builder->BuildAndStart();
-  if (!server_ || port_ == 0) {
-    server_.reset();
-    return listen_failure(options_);
+  if (!server_) {
+    listener_.reset();
+    return start_failure(options_);
   }
+  listener_->start(std::move(acceptor));
   // Health is NOT_SERVING until the repository is loaded, so that load balancers and probes
   // wait for a replica that can answer.
   server_->GetHealthCheckService()->SetServingStatus(false);
@@ -231,6 +238,8 @@ void Daemon::shutdown() {
     server_->GetHealthCheckService()->SetServingStatus(false);
     spdlog::info("shutting down: health NOT_SERVING, finishing in-flight calls (grace {} ms)",
                  options_.shutdown_grace.count());
+    // No new connection is handed to a server shutting down (gRPC would neither serve nor close it).
+    listener_->stop();
     const auto deadline = std::chrono::system_clock::now() + options_.shutdown_grace;
     std::thread stopper([this, deadline] { server_->Shutdown(deadline); });
     // gRPC's shutdown also waits for every client connection to close, and an idle synchronous

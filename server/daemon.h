@@ -11,6 +11,7 @@
 #include "core/common/result.h"
 #include "server/admission.h"
 #include "server/auth.h"
+#include "server/listener.h"
 #include "server/metrics.h"
 #include "server/miss_logs.h"
 #include "server/model_registry.h"
@@ -95,6 +96,7 @@ class Daemon {
   std::unique_ptr<LodServiceImpl> lod_service_;
   std::unique_ptr<RenderServiceImpl> render_service_;
   std::unique_ptr<TrainingServiceImpl> training_service_;
+  std::unique_ptr<Listener> listener_;  // accepts for server_ (server/listener.h)
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<httplib::Server> metrics_http_;
   std::thread metrics_thread_;

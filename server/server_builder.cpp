@@ -8,7 +8,6 @@
 #include <grpcpp/health_check_service_interface.h>
 
 #include "server/auth.h"
-#include "server/port_owner.h"
 
 namespace animspace::server {
 
@@ -23,13 +22,15 @@ Status check_transport_options(const ServerOptions& options) {
   return Status::Ok();
 }
 
-std::unique_ptr<grpc::ServerBuilder> make_server_builder(const ServerOptions& options,
-                                                         const std::shared_ptr<grpc::ServerCredentials>& credentials,
-                                                         int* port) {
+std::unique_ptr<grpc::ServerBuilder> make_server_builder(
+    const ServerOptions& options, const std::shared_ptr<grpc::ServerCredentials>& credentials,
+    std::unique_ptr<grpc::experimental::ExternalConnectionAcceptor>* acceptor) {
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   auto builder = std::make_unique<grpc::ServerBuilder>();
-  builder->AddListeningPort(options.listen_address, credentials, port);
+  // Connections come from server/listener.h's accept loop, not gRPC's (issue #54 item 5).
+  *acceptor = builder->experimental().AddExternalConnectionAcceptor(
+      grpc::ServerBuilder::experimental_type::ExternalConnectionType::FROM_FD, credentials);
   // gRPC sets SO_REUSEPORT by default: a second daemon would bind a busy address and take a random
   // share of its connections. One address, one daemon (issue #21).
   builder->AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
@@ -50,15 +51,10 @@ std::unique_ptr<grpc::ServerBuilder> make_server_builder(const ServerOptions& op
   return builder;
 }
 
-Status listen_failure(const ServerOptions& options) {
-  const auto port = port_of_address(options.listen_address);
-  if (auto owner = port ? describe_tcp_listener(*port) : std::nullopt) {
-    return make_error(ErrorCode::kFailedPrecondition,
-                      "--listen: '" + options.listen_address + "' is already in use by " + *owner);
-  }
+Status start_failure(const ServerOptions& options) {
   return make_error(ErrorCode::kInvalidArgument,
-                    "--listen: cannot bind '" + options.listen_address + "' (in use or not a local address?" +
-                        (tls_enabled(options) ? " Or --tls-cert and --tls-key do not belong together?)" : ")"));
+                    "cannot start the gRPC server on '" + options.listen_address + "'" +
+                        (tls_enabled(options) ? ": do --tls-cert and --tls-key belong together?" : ""));
 }
 
 }  // namespace animspace::server

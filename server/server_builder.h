@@ -16,17 +16,16 @@ namespace animspace::server {
 // Checks the transport flags against each other. Errors: kInvalidArgument naming the flag.
 Status check_transport_options(const ServerOptions& options);
 
-// A builder listening on options.listen_address with `credentials` (gRPC writes the bound port to
-// `*port` during BuildAndStart: 0 when the bind failed), with the health and reflection services
-// enabled and every transport setting of `options` applied. The caller registers its services and
-// builds. Enabling health and reflection is process-wide in gRPC; it is repeated harmlessly.
-std::unique_ptr<grpc::ServerBuilder> make_server_builder(const ServerOptions& options,
-                                                         const std::shared_ptr<grpc::ServerCredentials>& credentials,
-                                                         int* port);
+// A builder with the health and reflection services enabled and every transport setting of
+// `options` applied, listening through the daemon's own accept loop (server/listener.h):
+// `*acceptor` is what Listener::start takes once the server is built. The caller registers its
+// services and builds. Enabling health and reflection is process-wide in gRPC; it is repeated
+// harmlessly.
+std::unique_ptr<grpc::ServerBuilder> make_server_builder(
+    const ServerOptions& options, const std::shared_ptr<grpc::ServerCredentials>& credentials,
+    std::unique_ptr<grpc::experimental::ExternalConnectionAcceptor>* acceptor);
 
-// Why BuildAndStart failed to listen on options.listen_address: kFailedPrecondition naming the
-// process that holds the port, else kInvalidArgument (not a local address, or TLS files that do
-// not belong together).
-Status listen_failure(const ServerOptions& options);
+// Why BuildAndStart failed once the address was bound: the credentials (kInvalidArgument).
+Status start_failure(const ServerOptions& options);
 
 }  // namespace animspace::server

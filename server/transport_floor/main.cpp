@@ -27,6 +27,7 @@
 #include "animspace/v1/poses.grpc.pb.h"
 #include "core/common/atomic_file.h"
 #include "server/auth.h"
+#include "server/listener.h"
 #include "server/raw_messages.h"
 #include "server/server_builder.h"
 #include "server/transport_flags.h"
@@ -216,11 +217,15 @@ int run(int argc, char** argv) {
   if (!credentials) return fail(credentials.error().message);
   const CannedResults canned(point_count, channel_count, bytes_per_value, options.max_message_bytes);
   FloorPoseService service(canned, options.max_batch_poses);
-  int port = 0;
-  const auto builder = make_server_builder(options, *credentials, &port);
+  auto listener = Listener::bind(options.listen_address);
+  if (!listener) return fail(listener.error().message);
+  const int port = (*listener)->port();
+  std::unique_ptr<grpc::experimental::ExternalConnectionAcceptor> acceptor;
+  const auto builder = make_server_builder(options, *credentials, &acceptor);
   builder->RegisterService(&service);
   const std::unique_ptr<grpc::Server> server = builder->BuildAndStart();
-  if (!server || port == 0) return fail(listen_failure(options).error().message);
+  if (!server) return fail(start_failure(options).error().message);
+  (*listener)->start(std::move(acceptor));
   std::fprintf(stderr, "animspace-transport-floor: listening on %s (port %d); %zu bytes per PoseResult\n",
                options.listen_address.c_str(), port, canned.result_bytes());
   if (!options.port_file.empty()) {
@@ -230,6 +235,7 @@ int run(int argc, char** argv) {
   }
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
+  (*listener)->stop();
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
   server->Wait();
   return EXIT_SUCCESS;

@@ -231,6 +231,35 @@ TEST_F(CliClientTest, PlayWithCoordinatesReconstructsEveryAnswerFromOneCachedBas
             first["coordinates"]["max_point_distance"].get<double>());
 }
 
+// Issue #54 item 9: misses completed while the server cannot write its miss log (a directory in the
+// log's place, as a full disk would) are answered, but the command says they were not logged and
+// fails, where it printed "completed 0" and exited 0.
+TEST_F(CliClientTest, PlayCompleteFailsWhenTheServerCouldNotLogTheMisses) {
+  const std::filesystem::path log = work_->path() / "arm-pmsc.misses";
+  ASSERT_FALSE(std::filesystem::exists(log)) << "this test's daemon has logged nothing yet";
+  // The arm's frames moved off the subspace, so that they miss.
+  auto arm = container::read_file(arm_frames());
+  ASSERT_TRUE(arm.ok());
+  auto frames = arm->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames.ok());
+  for (Eigen::Index f = 0; f < frames->rows(); ++f) {
+    for (Eigen::Index i = 1; i < frames->cols(); i += 3) (*frames)(f, i) += 0.05f * static_cast<float>((i / 3) % 7);
+  }
+  arm->set_matrix(std::string(container::sections::kSequenceFrames), *frames);
+  const TempDir moved;
+  ASSERT_TRUE(container::write_file(moved / "model.anim", *arm).ok());
+  std::filesystem::create_directories(log);
+  const CliRun run = cli("--json play arm-pmsc " + (moved / "model.anim").string() + " --select 0:20 --complete");
+  std::filesystem::remove_all(log);
+  EXPECT_EQ(run.exit_code, 1) << run.out << run.err;
+  const nlohmann::json report = nlohmann::json::parse(run.out);
+  ASSERT_GT(report["blends"].get<int>() + report["misses"].get<int>(), 0) << "nothing to complete";
+  EXPECT_EQ(report["completed"].get<int>(), 0);
+  EXPECT_EQ(report["not_logged"].get<int>(), report["blends"].get<int>() + report["misses"].get<int>());
+  EXPECT_NE(run.err.find("completed misses were not logged by the server"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find(log.string()), std::string::npos) << run.err;
+}
+
 TEST_F(CliClientTest, PoseWritesTheSkinnedSequenceAsAPointCache) {
   auto file = container::read_file(repo_->path() / "arm-animspace" / "1" / "model.anim");
   ASSERT_TRUE(file.ok());

@@ -4,8 +4,13 @@
 // the ones the same model bytes gave before the fault, or the state of the file system itself;
 // never what the faulty path reports. Measured figures are printed as "[fault] …" lines for
 // docs/RELIABILITY.md.
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
 #include <sys/types.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -1220,6 +1225,46 @@ TEST_F(FaultTest, AStreamTheClientStopsReadingIsCancelledAndItsSlotFreed) {
   EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED) << status.error_message();
   EXPECT_LT(stalled->received, stalled->total) << "the basis was sent whole: the stream never stalled";
   EXPECT_NE(daemon->log().find("stream cancelled (--stream-stall-ms)"), std::string::npos) << daemon->log();
+}
+
+// The listener at the descriptor limit (issue #54 item 5): gRPC 1.51's own listener stopped for
+// good after one EMFILE, and every later client waited for its deadline. The daemon's accept loop
+// refuses what it cannot serve — a client sees UNAVAILABLE at once — and serves again once
+// descriptors are free.
+TEST_F(FaultTest, TheListenerRecoversOnceDescriptorsAreFreeAgain) {
+  auto daemon = start(repository({{"arm-pmsc", "arm-pmsc"}}));
+  const auto open_descriptors = [&] {
+    size_t count = 0;
+    for ([[maybe_unused]] const auto& entry : fs::directory_iterator("/proc/" + std::to_string(daemon->pid()) + "/fd")) {
+      ++count;
+    }
+    return count;
+  };
+  // A limit a little above what the daemon holds now.
+  const rlimit limit{open_descriptors() + 16, open_descriptors() + 16};
+  ASSERT_EQ(::prlimit(daemon->pid(), RLIMIT_NOFILE, &limit, nullptr), 0) << std::strerror(errno);
+
+  // Connections that never speak: each takes a descriptor in the daemon until the limit.
+  std::vector<int> idle;
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<uint16_t>(daemon->port()));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  for (int i = 0; i < 40; ++i) {
+    const int socket = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    ASSERT_GE(socket, 0);
+    ASSERT_EQ(::connect(socket, reinterpret_cast<sockaddr*>(&address), sizeof address), 0) << std::strerror(errno);
+    idle.push_back(socket);
+  }
+  ASSERT_TRUE(testing::wait_until([&] { return daemon->log().find("out of file descriptors") != std::string::npos; }))
+      << daemon->log();
+  // At the limit a new client is refused at once, not left to its deadline.
+  EXPECT_EQ(slow_readers::describe_code(daemon->address()), grpc::StatusCode::UNAVAILABLE);
+
+  for (const int socket : idle) ::close(socket);
+  EXPECT_TRUE(testing::wait_until(
+      [&] { return slow_readers::describe_code(daemon->address()) == grpc::StatusCode::OK; }))
+      << "the listener did not come back:\n" << daemon->log();
 }
 
 }  // namespace

@@ -147,6 +147,13 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       completing.update(completed + not_logged);
     }
   }
+  if (not_logged > 0) {
+    // The answers were right; the retraining data is short, and a script must not take it as done.
+    std::fprintf(stderr, "error: %llu of %zu completed misses were not logged by the server, so a retrain will "
+                         "not see them: %s\n",
+                 static_cast<unsigned long long>(not_logged), to_complete.size(),
+                 not_logged_reason.empty() ? "(no reason given)" : not_logged_reason.c_str());
+  }
   const uint64_t played = counts[1] + counts[2] + counts[3];
   const double hit_rate = played == 0 ? 0.0 : double(counts[1]) / double(played);
   const double mean_error = played ? sum_error / double(played) : 0.0;
@@ -191,14 +198,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
     std::printf("  completed %llu blends/misses with full values (logged for `animspace retrain %s`)\n",
                 static_cast<unsigned long long>(completed), a.model.c_str());
   }
-  if (not_logged > 0) {
-    // The answers were right; the retraining data is short, and a script must not take it as done.
-    std::fprintf(stderr, "error: %llu of %zu completed misses were not logged by the server, so a retrain will "
-                         "not see them: %s\n",
-                 static_cast<unsigned long long>(not_logged), to_complete.size(),
-                 not_logged_reason.empty() ? "(no reason given)" : not_logged_reason.c_str());
-    return 1;
-  }
+  if (not_logged > 0) return 1;
   if (!a.complete && !to_complete.empty()) {
     std::printf("  %zu frames needed the full calculation (--complete sends it)\n", to_complete.size());
   }
