@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 
 #include "bench/suites.h"
+#include "clients/cpp/tools/number_checks.h"
 
 int main(int argc, char** argv) {
   std::string suite = "io";
@@ -56,11 +57,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
   app.add_option("--edge-regularisation", options.skinning.edge_regularisation, "skinning: δ of Merry 2007 eq. 4.4")
-      ->check(CLI::NonNegativeNumber)
+      ->check(animspace::tools::kNonNegative)
       ->capture_default_str();
   app.add_option("--vertex-regularisation", options.skinning.vertex_regularisation,
                  "skinning: λ of Merry 2007 eq. 4.3")
-      ->check(CLI::NonNegativeNumber)
+      ->check(animspace::tools::kNonNegative)
       ->capture_default_str();
   app.add_option("--illumination-points", options.illumination.points, "illumination: surface sample points")
       ->check(CLI::Range(100, 5000000))

@@ -1,5 +1,7 @@
 #include "core/mesh_io/sequence_io.h"
 
+#include "core/common/nearest_names.h"
+
 #include <cctype>
 #include <string>
 
@@ -28,6 +30,28 @@ const char* foreign_cache_name(const std::filesystem::path& path) {
   return nullptr;
 }
 
+// "PATH: no such file or folder", with the names in its folder a typo was probably meant to be
+// (issue #55: a typo'd path got "a reference mesh needs a point cache").
+Error missing(const std::filesystem::path& path) {
+  std::string message = path.string() + ": no such file or folder";
+  const std::filesystem::path folder = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+  std::error_code ec;
+  if (!std::filesystem::is_directory(folder, ec)) {
+    return make_error(ErrorCode::kNotFound, message + " (nor the folder " + folder.string() + ")");
+  }
+  std::vector<std::string> names;
+  for (std::filesystem::directory_iterator entry(folder, ec), end; !ec && entry != end; entry.increment(ec)) {
+    names.push_back(entry->path().filename().string());
+  }
+  const std::vector<std::string> near = nearest_names(path.filename().string(), names);
+  if (!near.empty()) {
+    message += "; did you mean ";
+    for (size_t i = 0; i < near.size(); ++i) message += (i == 0 ? "" : i + 1 == near.size() ? " or " : ", ") + (folder / near[i]).string();
+    message += "?";
+  }
+  return make_error(ErrorCode::kNotFound, message);
+}
+
 }  // namespace
 
 Result<LoadedSequence> load_sequence(const std::filesystem::path& path, const std::filesystem::path& pc2) {
@@ -43,6 +67,9 @@ Result<LoadedSequence> load_sequence(const std::filesystem::path& path, const st
     }
   }
   std::error_code ec;
+  for (const std::filesystem::path& given : {path, pc2}) {
+    if (!given.empty() && !std::filesystem::exists(given, ec)) return missing(given);
+  }
   std::filesystem::path reference_path = path;
   std::filesystem::path cache_path = pc2;
   if (std::filesystem::is_directory(path, ec)) {

@@ -260,6 +260,20 @@ TEST_F(CliClientTest, PlayCompleteFailsWhenTheServerCouldNotLogTheMisses) {
   EXPECT_NE(run.err.find(log.string()), std::string::npos) << run.err;
 }
 
+// Issue #55: a numeric option out of its range says what it must be, not a 300-digit range (and
+// not "0 not in range 0 to …" for a positive one).
+TEST_F(CliClientTest, ANumberOutOfItsRangeSaysWhatItMustBe) {
+  for (const auto& [value, wanted] : {std::pair{"0", "must be > 0, got 0"}, std::pair{"-1", "must be > 0, got -1"},
+                                      std::pair{"x", "expected a number, got 'x'"}}) {
+    const CliRun run = cli(std::string("lod arm-animspace --tolerance-px ") + value);
+    EXPECT_NE(run.exit_code, 0);
+    EXPECT_NE(run.err.find(std::string("--tolerance-px: ") + wanted), std::string::npos) << run.err;
+    EXPECT_LT(run.err.size(), 300u) << run.err;
+  }
+  const CliRun negative = cli("lod arm-animspace --level -1");
+  EXPECT_NE(negative.err.find("--level: must be >= 0, got -1"), std::string::npos) << negative.err;
+}
+
 TEST_F(CliClientTest, PoseWritesTheSkinnedSequenceAsAPointCache) {
   auto file = container::read_file(repo_->path() / "arm-animspace" / "1" / "model.anim");
   ASSERT_TRUE(file.ok());

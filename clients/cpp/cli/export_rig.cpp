@@ -6,6 +6,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/rig_export.h"
 #include "core/atlas/atlas_io.h"
@@ -27,10 +28,10 @@ CLI::App* add_export_rig(CLI::App& app, ExportRigArgs& a) {
       "from the model over those poses");
   cmd->add_option("input", a.input, "An animation-space model.anim")->required()->check(CLI::ExistingFile);
   cmd->add_option("--level", a.level, "Level of detail to write (0 = full detail)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_option("--fps", a.frames_per_second, "Frames per second of the animation")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_option("-o,--output", a.output, "Output: .glb or .gltf")->required();
   return cmd;

@@ -11,6 +11,7 @@
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
 #include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
@@ -51,10 +52,10 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
       ->capture_default_str();
   cmd->add_option("--edge-regularisation", a.edge_regularisation,
                   "δ of eq. 4.4 in unit-box units (0.005 horse, 0.02 arm in the thesis; 0 = off)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_option("--vertex-regularisation", a.vertex_regularisation, "λ of eq. 4.3 in unit-box units")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_option("--rings", a.rings, "--first-pass influence sets: bones of parts within this many edges")
       ->check(CLI::Range(0, 16))
@@ -66,7 +67,7 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
   cmd->add_option("--smoothness", a.smoothness, "Skinning decomposition: μ, pull of each weight towards its neighbours'")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_option("--refinement-rounds", a.refinement_rounds,
                   "Animation space: rounds of {bone motions, model} after the refit")
@@ -76,7 +77,7 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
                 "The pipeline before the skinning decomposition (one least-squares solve on §4.1.4's skeleton), as a "
                 "baseline");
   cmd->add_option("--fps", a.frames_per_second, "--export: frames per second of the animation")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_option("--export", a.export_path,
                   "Also write the linear blend rig as a glTF 2.0 skinned mesh (.glb or .gltf) with the fitted frames as "

@@ -2,6 +2,8 @@
 
 #include <cstdio>
 
+#include "clients/cpp/tools/number_checks.h"
+
 namespace animspace::cli {
 
 void add_heat_scale_options(CLI::App* cmd, HeatScaleArgs& a, CLI::Option* heat) {
@@ -9,7 +11,7 @@ void add_heat_scale_options(CLI::App* cmd, HeatScaleArgs& a, CLI::Option* heat) 
                   "With --heat: the error drawn red, model units (default: the model's error tolerance, the "
                   "per-point error its soft cache was calibrated to flag; else the image's largest error). Give "
                   "one value to compare images on one scale")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->needs(heat);
   cmd->add_flag("--heat-legend", a.heat_legend, "With --heat: draw the scale as a colour bar with its numbers")
       ->needs(heat);

@@ -11,6 +11,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "clients/cpp/tools/pose_file.h"
 #include "core/animspace/animspace_io.h"
 #include "core/atlas/atlas_io.h"
@@ -147,12 +148,12 @@ CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
   cmd->add_option("input", a.input, "An animation-space model.anim with levels (build-lod)")
       ->required()
       ->check(CLI::ExistingFile);
-  auto* level = cmd->add_option("--level", a.level, "Level to write (0 = full detail)")->check(CLI::NonNegativeNumber);
+  auto* level = cmd->add_option("--level", a.level, "Level to write (0 = full detail)")->check(tools::kNonNegative);
   auto* tolerance = cmd->add_option("--tolerance-px", a.tolerance_px, "Pixel error tolerance p (eq. 7.2)")
-                        ->check(CLI::PositiveNumber);
+                        ->check(tools::kPositive);
   cmd->add_option("--distance", a.distance,
                   "With --tolerance-px: camera distance to the model's bounding-sphere centre, model units")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->needs(tolerance);
   cmd->add_option("--fov-deg,--fov", a.fov_degrees,
                   "With --tolerance-px: horizontal field of view 2θ in DEGREES (the API's horizontal_fov_rad is "
@@ -161,11 +162,11 @@ CLI::App* add_export_lod(CLI::App& app, ExportLodArgs& a) {
       ->capture_default_str()
       ->needs(tolerance);
   cmd->add_option("--width", a.viewport_width_px, "With --tolerance-px: viewport width w, pixels")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str()
       ->needs(tolerance);
   cmd->add_option("--frame", a.frame, "Pose: the model's stored training frame K (default: the rest pose)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(tools::kNonNegative);
   cmd->add_option("-o,--output", a.output, "Output mesh: .obj, .ply, .glb or .gltf")->required();
   level->excludes(tolerance);
   return cmd;
@@ -274,22 +275,22 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
   cmd->add_option("model", a.model, "Model name")->required();
   cmd->add_option("--version", a.version, "Model version (default: the served one)");
   auto* selection = cmd->add_option_group("selection", "Which level (exactly one)");
-  selection->add_option("--level", a.level, "Level (0 = full detail)")->check(CLI::NonNegativeNumber);
+  selection->add_option("--level", a.level, "Level (0 = full detail)")->check(tools::kNonNegative);
   auto* tolerance = selection->add_option("--tolerance-px", a.tolerance_px, "Pixel error tolerance p (eq. 7.2)")
-                        ->check(CLI::PositiveNumber);
+                        ->check(tools::kPositive);
   selection->add_option("--max-vertices", a.max_vertices, "Vertex budget: the finest level within it")
-      ->check(CLI::PositiveNumber);
+      ->check(tools::kPositive);
   selection->require_option(1);
   auto* distance =
       cmd->add_option("--distance", a.distance, "With --tolerance-px: camera distance to the bounding-sphere centre")
-          ->check(CLI::PositiveNumber);
+          ->check(tools::kPositive);
   auto* fov = cmd->add_option("--fov-deg,--fov", a.fov_degrees,
                               "With --tolerance-px: horizontal field of view 2θ in DEGREES (the API's "
                               "horizontal_fov_rad is radians; the command line converts)")
                   ->check(CLI::Range(1.0, 179.0))
                   ->capture_default_str();
   auto* width = cmd->add_option("--width", a.viewport_width_px, "With --tolerance-px: viewport width w, pixels")
-                    ->check(CLI::PositiveNumber)
+                    ->check(tools::kPositive)
                     ->capture_default_str();
   tolerance->needs(distance);
   // The view only matters for a pixel tolerance: given without one it would be ignored.
@@ -306,7 +307,7 @@ CLI::App* add_lod(CLI::App& app, LodArgs& a) {
                 "stored them under the atlas) and write it as UVs, the vertices split along its seams (OBJ vt, PLY s "
                 "t, glTF TEXCOORD_0)");
   cmd->add_option("--deadline-s", a.deadline_s, "Deadline for the whole stream")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_option("-o,--output", a.output, "Output mesh: .obj, .ply, .glb or .gltf")->required();
   return cmd;

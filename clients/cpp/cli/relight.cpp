@@ -4,6 +4,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "core/common/atomic_file.h"
 
 namespace animspace::cli {
@@ -30,7 +31,7 @@ CLI::App* add_relight(CLI::App& app, RelightArgs& a) {
       ->check(CLI::IsMember({"total", "indirect"}))
       ->capture_default_str();
   cmd->add_option("--white", a.white, "Radiance drawn white (0: the 99th percentile of each frame)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   auto* heat = cmd->add_flag("--heat", a.heat,
                              "Draw |full − served| instead, the full indirect illumination gathered by the server "

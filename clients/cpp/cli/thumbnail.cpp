@@ -5,6 +5,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "clients/cpp/tools/sequence_frames.h"
 #include "core/common/atomic_file.h"
 
@@ -21,13 +22,13 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
   cmd->add_option("--width", a.width, "Width, pixels")->capture_default_str();
   cmd->add_option("--height", a.height, "Height, pixels")->capture_default_str();
   auto* frame = cmd->add_option("--frame", a.frame, "Draw the model's own stored frame K (sequence.frames)")
-                    ->check(CLI::NonNegativeNumber);
+                    ->check(tools::kNonNegative);
   auto* sequence = cmd->add_option("--sequence", a.sequence,
                                    "PMSC models: pose from the key points of a frame of this sequence (folder with "
                                    "reference.obj + frames.pc2, a mesh with --pc2, or a model.anim)");
   cmd->add_option("--pc2", a.pc2, "Point cache when --sequence is a mesh file");
   cmd->add_option("--sequence-frame", a.sequence_frame, "Which frame of --sequence")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_flag("--key-points", a.key_points, "Draw the key points as dots (PMSC models)");
   auto* heat = cmd->add_flag("--heat", a.heat,
@@ -42,7 +43,7 @@ CLI::App* add_thumbnail(CLI::App& app, ThumbnailArgs& a) {
                       ->excludes(heat);
   cmd->add_option("--checker-squares", a.checker_squares,
                   "With --checker: squares along one unit of texture coordinate (default 16)")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->needs(checker);
   cmd->add_flag("--chart-borders", a.chart_borders, "With --checker: draw the atlas's chart borders")->needs(checker);
   cmd->add_flag("--lambert", a.lambert, "Lambert shading instead of Blinn-Phong");

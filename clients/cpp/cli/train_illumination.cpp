@@ -4,6 +4,7 @@
 
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "core/illumination/surface.h"
 
 namespace animspace::cli {
@@ -67,14 +68,14 @@ CLI::App* add_train_illumination(CLI::App& app, TrainIlluminationArgs& a) {
                   "Soft cache: ε is calibrated so that frames with a point error above this fraction of the "
                   "frame's own largest radiance are flagged (of the training frames' median largest radiance "
                   "with --absolute-tolerance)")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_flag("--absolute-tolerance", a.absolute_tolerance,
                 "One tolerance in radiance units for every frame (models before issue #38), instead of one "
                 "relative to each frame's radiance: a dim light then always hits and a bright one misses");
   cmd->add_option("--error-bound", a.error_bound,
                   "Key selection stops when every training point is within this fraction of the radiance scale")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_option("--false-hit-rate", a.false_hit_rate, "Soft cache: δ of the conformal calibration")
       ->check(CLI::Range(1e-6, 0.999999))

@@ -8,6 +8,7 @@
 #include "clients/cpp/cli/offline_common.h"
 #include "clients/cpp/cli/output.h"
 #include "clients/cpp/tools/frame_selection.h"
+#include "clients/cpp/tools/number_checks.h"
 #include "core/container/model_container.h"
 #include "core/mesh_io/sequence_io.h"
 #include "core/pmsc/pmsc_io.h"
@@ -30,12 +31,12 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
   cmd->add_option("--error-bound-diag", a.error_bound_diag,
                   "Key selection stops when every training point is within this fraction of the bounding-box "
                   "diagonal")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_option("--tolerance-diag", a.tolerance_diag,
                   "Soft cache: ε is calibrated so that poses with a point error above this fraction of the diagonal "
                   "are flagged")
-      ->check(CLI::PositiveNumber)
+      ->check(tools::kPositive)
       ->capture_default_str();
   cmd->add_option("--false-hit-rate", a.false_hit_rate,
                   "Soft cache: δ, the fraction of poses like the held-out training frames that may be called HIT "
@@ -58,7 +59,7 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
       ->check(CLI::IsMember({"linear", "articulated", "auto"}))
       ->capture_default_str();
   cmd->add_option("--bones", a.bones, "Articulated: bones of the skinning model (0: by rule, at most one per 250 points)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_option("--residual-components", a.residual_components,
                   "Articulated: principal components of the skinning's residuals (-1: by the held-out rule)")

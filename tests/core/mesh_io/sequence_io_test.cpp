@@ -2,7 +2,11 @@
 // "a reference mesh needs a point cache").
 #include "core/mesh_io/sequence_io.h"
 
+#include <filesystem>
+
 #include <gtest/gtest.h>
+
+#include "tests/support/test_support.h"
 
 namespace animspace::mesh_io {
 namespace {
@@ -26,10 +30,39 @@ TEST(SequenceIo, CachesOfOtherToolsAreNamedWithTheWayToConvert) {
 }
 
 TEST(SequenceIo, AMeshWithoutItsCacheSaysWhatIsRead) {
-  auto loaded = load_sequence("reference.obj");
+  testing::TempDir dir;
+  testing::write_text_file(dir / "reference.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  auto loaded = load_sequence(dir / "reference.obj");
   ASSERT_FALSE(loaded.ok());
   EXPECT_NE(loaded.error().message.find("needs a point cache (.pc2)"), std::string::npos);
   EXPECT_NE(loaded.error().message.find("a folder of OBJ frames"), std::string::npos);
+}
+
+// Issue #55: a typo'd path is named as missing, with what it was probably meant to be, not
+// taken for a mesh without its cache.
+TEST(SequenceIo, AMissingPathIsNamedWithTheNearestNamesBesideIt) {
+  testing::TempDir dir;
+  std::filesystem::create_directories(dir / "crane");
+  testing::write_text_file(dir / "crane" / "frames.pc2", "");
+  testing::write_text_file(dir / "crane" / "reference.obj", "");
+
+  auto loaded = load_sequence(dir / "crane" / "frames.pc");
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_EQ(loaded.error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(loaded.error().message, (dir / "crane" / "frames.pc").string() + ": no such file or folder; did you mean " +
+                                        (dir / "crane" / "frames.pc2").string() + "?");
+  loaded = load_sequence(dir / "crame");
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_EQ(loaded.error().message,
+            (dir / "crame").string() + ": no such file or folder; did you mean " + (dir / "crane").string() + "?");
+  loaded = load_sequence(dir / "nowhere" / "frames.pc2");
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_EQ(loaded.error().message, (dir / "nowhere" / "frames.pc2").string() + ": no such file or folder (nor the folder " +
+                                        (dir / "nowhere").string() + ")");
+  loaded = load_sequence(dir / "crane" / "reference.obj", dir / "crane" / "frame.pc2");
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_EQ(loaded.error().code, ErrorCode::kNotFound);
+  EXPECT_NE(loaded.error().message.find("did you mean " + (dir / "crane" / "frames.pc2").string()), std::string::npos);
 }
 
 }  // namespace
