@@ -84,6 +84,16 @@ std::vector<double> key_point_error_bounds() {
 
 Metrics::Metrics() : since_(std::chrono::system_clock::now()) {}
 
+namespace {
+
+// Calls that administer a model (load, unload, describe, retrain) rather than serve it: counted
+// among its requests, kept out of its serving latency (issue #55: one Retrain read as a 5 s p99).
+bool administers(std::string_view rpc) {
+  return rpc.starts_with("ModelService/") || rpc.starts_with("TrainingService/");
+}
+
+}  // namespace
+
 void Metrics::record_call(std::string_view rpc, std::string_view model, int code, double seconds) {
   std::lock_guard lock(mutex_);
   ++calls_[CallKey{std::string(rpc), std::string(model), code}];
@@ -92,7 +102,7 @@ void Metrics::record_call(std::string_view rpc, std::string_view model, int code
     auto& stats = models_[std::string(model)];
     ++stats.requests;
     if (code != 0) ++stats.errors;
-    stats.latency_seconds.observe(seconds);
+    if (!administers(rpc)) stats.latency_seconds.observe(seconds);
   }
 }
 

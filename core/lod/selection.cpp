@@ -18,10 +18,15 @@ Result<int> level_for_vertex_budget(const LodLevels& lods, int64_t max_vertices)
   for (int l = 0; l < lods.count(); ++l) {
     if (lods.levels[static_cast<size_t>(l)].model.vertex_count() <= max_vertices) return l;
   }
-  return make_error(ErrorCode::kOutOfRange, "max_vertices: expected at least " +
-                                                std::to_string(lods.levels.back().model.vertex_count()) +
-                                                " (the coarsest level's vertex count), got " +
-                                                std::to_string(max_vertices));
+  std::string message = "max_vertices: expected at least " +
+                        std::to_string(lods.levels.back().model.vertex_count()) +
+                        " (the coarsest level's vertex count), got " + std::to_string(max_vertices);
+  // Issue #55: a model with level 0 alone is the usual reason; say how to give it levels.
+  if (lods.count() == 1) {
+    message += "; the model has only level 0 (full detail): build coarser levels into a new version with "
+               "`animspace build-lod MODEL.anim -o REPOSITORY --model NAME`";
+  }
+  return make_error(ErrorCode::kOutOfRange, message);
 }
 
 Result<geometry::BoundingSphere> model_bounding_sphere(const container::ModelContainer& in,

@@ -99,6 +99,19 @@ TEST(Metrics, CountsCallsPerModelAndRendersPrometheusText) {
   EXPECT_FALSE(metrics.model_statistics().count("arm"));
 }
 
+// Issue #55: a Retrain (or a load) counts among the model's requests but not in its serving
+// latency, which a 5 s retrain made read p99 5 s.
+TEST(Metrics, AdministrationIsKeptOutOfTheModelsLatency) {
+  Metrics metrics;
+  metrics.record_call("PoseService/EvaluateKeyPoints", "arm", 0, 0.002);
+  metrics.record_call("TrainingService/Retrain", "arm", 0, 5.0);
+  metrics.record_call("ModelService/LoadModel", "arm", 0, 0.5);
+  const ModelStatistics stats = metrics.model_statistics().at("arm");
+  EXPECT_EQ(stats.requests, 3u);
+  EXPECT_EQ(stats.latency_seconds.total_count(), 1u);
+  EXPECT_LT(stats.latency_seconds.quantile(0.99), 0.01);
+}
+
 TEST(Metrics, GrpcCodeNames) {
   EXPECT_STREQ(grpc_code_name(0), "OK");
   EXPECT_STREQ(grpc_code_name(3), "INVALID_ARGUMENT");

@@ -85,6 +85,17 @@ TEST(LodSelection, VertexBudgetTakesTheFinestLevelThatFits) {
   EXPECT_EQ(refused.error().code, ErrorCode::kOutOfRange);
   EXPECT_NE(refused.error().message.find("expected at least " + std::to_string(coarsest)), std::string::npos)
       << refused.error().message;
+  EXPECT_EQ(refused.error().message.find("build-lod"), std::string::npos) << "it has levels";
+
+  // Issue #55: a model with level 0 alone says so, and how to build levels.
+  LodLevels alone;
+  alone.levels.push_back(lods.levels.front());
+  const int full = alone.levels.front().model.vertex_count();
+  refused = level_for_vertex_budget(alone, full - 1);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("the model has only level 0 (full detail)"), std::string::npos)
+      << refused.error().message;
+  EXPECT_NE(refused.error().message.find("animspace build-lod"), std::string::npos) << refused.error().message;
 }
 
 TEST(LodSelection, BoundingSphereIsTheStoredOneOrTheRestPoses) {
