@@ -4,6 +4,7 @@
 #include <cassert>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include <limits>
@@ -671,6 +672,32 @@ bool calibration_guarantee_holds(const PmscModel& m) {
   return guarantee_holds(m.calibration.bad_samples, m.calibration.false_hit_rate);
 }
 
+namespace {
+
+// The tolerance the guarantee speaks of, with its scale (issue #55: the sentence named none):
+// "0.0123 model units, 0.45% of the mean pose's bounding-box diagonal", or a fraction of S.
+std::string tolerance_text(const PmscModel& m) {
+  const double tolerance = m.calibration.error_ratio * m.epsilon.epsilon_min;
+  char text[160];
+  if (m.relative_tolerance) {
+    std::snprintf(text, sizeof text, "%.3g of each pose's own scale S", tolerance);
+    return text;
+  }
+  if (m.channel_count == 3 && m.mean.size() >= 3) {
+    const Eigen::Map<const Eigen::Matrix3Xf> points(m.mean.data(), 3, m.mean.size() / 3);
+    const double diagonal = (points.rowwise().maxCoeff() - points.rowwise().minCoeff()).cast<double>().norm();
+    if (diagonal > 0) {
+      std::snprintf(text, sizeof text, "%.3g model units, %.3g%% of the mean pose's bounding-box diagonal", tolerance,
+                    100 * tolerance / diagonal);
+      return text;
+    }
+  }
+  std::snprintf(text, sizeof text, "%.3g model units", tolerance);
+  return text;
+}
+
+}  // namespace
+
 std::string calibration_statement(const PmscModel& m) {
   const PmscModel::Calibration& c = m.calibration;
   if (c.samples.size() == 0) {
@@ -686,7 +713,7 @@ std::string calibration_statement(const PmscModel& m) {
            std::to_string(static_cast<long>(std::ceil(1.0 / c.false_hit_rate - 1.0 - 1e-9))) +
            "); ε sits below every one of them";
   }
-  return "a pose over the tolerance" + checked + " is called HIT with probability at most " +
+  return "a pose over the tolerance (" + tolerance_text(m) + ")" + checked + " is called HIT with probability at most " +
          format_number(c.false_hit_rate) + ", when its error is like the " + std::to_string(c.bad_samples) +
          " over-tolerance held-out samples ε was calibrated on (held-out frames, blocks of motion, sparser training, "
          "residuals extrapolated past the tolerance); void for motion unlike any of the training frames' folds";

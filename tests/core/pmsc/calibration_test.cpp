@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <vector>
 
@@ -362,6 +363,16 @@ TEST(Calibration, TrainingStoresHeldOutSamplesAndDerivesEpsilonFromThem) {
   EXPECT_DOUBLE_EQ(model->epsilon.epsilon_max, o.blend_zone_ratio * epsilon);
   EXPECT_DOUBLE_EQ(model->calibration.error_ratio, o.error_tolerance / epsilon);
   ASSERT_EQ(static_cast<int>(model->region_epsilon.size()), model->region_count);
+
+  // Issue #55: the guarantee names the tolerance it speaks of, in model units and as a share of
+  // the mean pose's bounding-box diagonal (computed here from the training frames' mean).
+  Eigen::VectorXd frames_mean = data.frames.colwise().mean().transpose().cast<double>();
+  const Eigen::Map<const Eigen::Matrix3Xd> points(frames_mean.data(), 3, frames_mean.size() / 3);
+  const double diagonal = (points.rowwise().maxCoeff() - points.rowwise().minCoeff()).norm();
+  char expected[160];
+  std::snprintf(expected, sizeof expected, "a pose over the tolerance (%.3g model units, %.3g%% of the mean pose's",
+                o.error_tolerance, 100 * o.error_tolerance / diagonal);
+  EXPECT_EQ(calibration_statement(*model).rfind(expected, 0), 0u) << calibration_statement(*model);
 }
 
 // End to end on fresh poses from the same generator: of those whose true max error is above the
