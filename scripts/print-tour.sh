@@ -4,7 +4,8 @@ listen=${1:-127.0.0.1:50051}
 metrics=${2:-127.0.0.1:9464}
 cat <<TOUR
 
-animspaced is starting on ${listen} with the bundled demo repository (model "arm").
+animspaced is starting on ${listen} with the bundled demo repository: eight models, the bending
+arm in each kind and the Cornell box (docs/DEMO.md).
 In another terminal:
 
   build/bin/animspace --server ${listen} health          # SERVING once the models are loaded
