@@ -2,7 +2,7 @@
 """Plot animspace-bench lod results: RMS error across poses against the fraction of vertices kept,
 one curve per method, one panel per dataset.
 
-    /usr/bin/python3 scripts/plot_lod.py docs/bench-lod.json docs/lod-error.png
+    /usr/bin/python3 scripts/plot_lod.py docs/results/bench-lod.json docs/lod-error.png
 """
 import json
 import sys
