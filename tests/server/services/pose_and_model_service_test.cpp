@@ -43,6 +43,16 @@ class PoseAndModelServiceTest : public testing::SmallRepositoryTest {
     poses_ = v1::PoseService::NewStub(server_->channel());
   }
 
+  // DescribeKeyPoints of the demo's PMSC model (OK asserted by the caller through `status`).
+  v1::DescribeKeyPointsResponse describe_keys(grpc::Status* status) {
+    grpc::ClientContext context;
+    v1::DescribeKeyPointsRequest request;
+    request.mutable_model()->set_name(kPmsc);
+    v1::DescribeKeyPointsResponse keys;
+    *status = poses_->DescribeKeyPoints(&context, request, &keys);
+    return keys;
+  }
+
   TempDir work_;
   std::unique_ptr<InProcessServer> server_;
   std::unique_ptr<v1::PoseService::Stub> poses_;
@@ -60,13 +70,9 @@ TEST_F(PoseAndModelServiceTest, BadKeyPointRequestsAreRefusedNamingTheField) {
   server::ServerOptions options;
   options.max_batch_poses = 4;
   serve(options);
-  v1::DescribeKeyPointsResponse keys;
-  {
-    grpc::ClientContext context;
-    v1::DescribeKeyPointsRequest request;
-    request.mutable_model()->set_name(kPmsc);
-    ASSERT_TRUE(poses_->DescribeKeyPoints(&context, request, &keys).ok());
-  }
+  grpc::Status described;
+  const v1::DescribeKeyPointsResponse keys = describe_keys(&described);
+  ASSERT_TRUE(described.ok()) << described.error_message();
   const auto K = static_cast<uint32_t>(keys.key_point_indices_size());
   ASSERT_GT(K, 3u);
   const std::vector<float> good(size_t{K} * 3, 0.5f);
@@ -258,13 +264,6 @@ TEST_F(PoseAndModelServiceTest, PartialFramesReachAnOldMissLogAsCompletedFrames)
 TEST_F(PoseAndModelServiceTest, ACompletedMissThatCannotBeLoggedSaysWhy) {
   std::filesystem::create_directories(work_.path() / (kPmsc + ".misses"));
   serve();
-  v1::DescribeKeyPointsResponse keys;
-  {
-    grpc::ClientContext context;
-    v1::DescribeKeyPointsRequest request;
-    request.mutable_model()->set_name(kPmsc);
-    ASSERT_TRUE(poses_->DescribeKeyPoints(&context, request, &keys).ok());
-  }
   auto stored = container::read_file(repository() / kPmsc / "1" / "model.anim");
   ASSERT_TRUE(stored.ok());
   auto model = pmsc::load(*stored, kPmsc);
@@ -295,13 +294,9 @@ TEST_F(PoseAndModelServiceTest, ACompletedMissThatCannotBeLoggedSaysWhy) {
 // stream, not from the model).
 TEST_F(PoseAndModelServiceTest, TheBasisIsNamedByTheSha256OfTheValuesSent) {
   serve();
-  v1::DescribeKeyPointsResponse keys;
-  {
-    grpc::ClientContext context;
-    v1::DescribeKeyPointsRequest request;
-    request.mutable_model()->set_name(kPmsc);
-    ASSERT_TRUE(poses_->DescribeKeyPoints(&context, request, &keys).ok());
-  }
+  grpc::Status described;
+  const v1::DescribeKeyPointsResponse keys = describe_keys(&described);
+  ASSERT_TRUE(described.ok()) << described.error_message();
   ASSERT_EQ(keys.basis_sha256().size(), 32u);
   grpc::ClientContext context;
   v1::GetBasisRequest request;
