@@ -1240,8 +1240,10 @@ TEST_F(FaultTest, TheListenerRecoversOnceDescriptorsAreFreeAgain) {
     }
     return count;
   };
-  // A limit a little above what the daemon holds now.
-  const rlimit limit{open_descriptors() + 16, open_descriptors() + 16};
+  // A limit a little above what the daemon holds now (counted once: its threads may open or close
+  // a descriptor between two counts, and a soft limit above the hard one is refused).
+  const rlim_t held = open_descriptors();
+  const rlimit limit{held + 16, held + 16};
   ASSERT_EQ(::prlimit(daemon->pid(), RLIMIT_NOFILE, &limit, nullptr), 0) << std::strerror(errno);
 
   // Connections that never speak: each takes a descriptor in the daemon until the limit.
