@@ -195,7 +195,7 @@ std::vector<NamedEstimator> calibrated_estimators(const pmsc::PmscModel& model, 
   if (!samples.checked()) return out;
   add("check", [](const Observed& o) { return o.check; });
   // Issue #35's estimator, its weight chosen on e_key as its models chose it.
-  const double w = pmsc::choose_key_weight(samples, tolerance, delta);
+  const double w = pmsc::choose_key_weight(samples, tolerance);
   add("worse", [w](const Observed& o) { return pmsc::combined_error_estimate(w, o.key, o.check); });
   const double a = geometric_exponent(samples, tolerance);
   add("geometric", [a](const Observed& o) {
@@ -205,7 +205,7 @@ std::vector<NamedEstimator> calibrated_estimators(const pmsc::PmscModel& model, 
     // The worst observed point: the worst key's residual, weighted as e_key is, against e_check.
     pmsc::CalibrationSamples worst = samples;
     worst.key_point_errors = samples.key_point_max_errors;
-    const double w_max = pmsc::choose_key_weight(worst, tolerance, delta);
+    const double w_max = pmsc::choose_key_weight(worst, tolerance);
     add("worst_point", [w_max](const Observed& o) { return pmsc::combined_error_estimate(w_max, o.key_max, o.check); });
   }
   return out;

@@ -109,7 +109,7 @@ long good_hits(const Eigen::VectorXd& estimates, const Eigen::VectorXd& max_erro
 
 }  // namespace
 
-double choose_key_weight(const CalibrationSamples& samples, double tolerance, double false_hit_rate) {
+double choose_key_weight(const CalibrationSamples& samples, double tolerance) {
   if (!samples.checked() || samples.size() == 0) return 1;
   std::vector<double> ratios;
   for (Eigen::Index i = 0; i < samples.size(); ++i) {
@@ -132,8 +132,11 @@ double choose_key_weight(const CalibrationSamples& samples, double tolerance, do
   long best_hits = -1;
   for (double weight : candidates) {
     const Eigen::VectorXd estimates = samples.error_estimates(weight);
-    const double epsilon = calibrate_extrapolated(estimates, samples.max_errors, tolerance, false_hit_rate).epsilon_min;
-    const long hits = good_hits(estimates, samples.max_errors, tolerance, epsilon);
+    long hits = 0;  // over the whole operating range, not one δ (see the header)
+    for (double rate : default_false_hit_rates()) {
+      hits += good_hits(estimates, samples.max_errors, tolerance,
+                        calibrate_extrapolated(estimates, samples.max_errors, tolerance, rate).epsilon_min);
+    }
     if (hits > best_hits) {
       best_hits = hits;
       best_weight = weight;
@@ -145,7 +148,7 @@ double choose_key_weight(const CalibrationSamples& samples, double tolerance, do
 OperatingPoint operating_point(const CalibrationSamples& samples, double false_hit_rate, double tolerance) {
   OperatingPoint point;
   point.false_hit_rate = false_hit_rate;
-  const Eigen::VectorXd estimates = samples.error_estimates(choose_key_weight(samples, tolerance, false_hit_rate));
+  const Eigen::VectorXd estimates = samples.error_estimates(choose_key_weight(samples, tolerance));
   const ExtrapolatedEpsilon calibrated = calibrate_extrapolated(estimates, samples.max_errors, tolerance, false_hit_rate);
   point.epsilon_min = calibrated.epsilon_min;
   point.bad_samples = calibrated.bad_samples;

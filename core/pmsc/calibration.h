@@ -33,9 +33,14 @@
 //
 // w is the weight of the candidates w₀·2^k (k = −4 … 4, w₀ the median e_check / e_key of the
 // samples) and 0 (check points alone) whose calibrated ε calls HIT the most held-out samples under
-// the tolerance: the guarantee holds for each candidate, and the choice only trades hits. Ties go
-// to the candidate nearest w₀, check points alone last: a weight that ignores e_key would pass a
-// pose whose keys are off wherever the check points happen to be right.
+// the tolerance, counted over the whole offered range of δ (default_false_hit_rates): the
+// guarantee holds for each candidate, and the choice only trades hits. Ties go to the candidate
+// nearest w₀, check points alone last: a weight that ignores e_key would pass a pose whose keys are
+// off wherever the check points happen to be right. One weight for every δ (issue #55 item 9):
+// chosen afresh for each δ, the operating curve's rows thresholded different estimators, and ε_min
+// and the hits could fall as δ rose (crane --align: ε_min 0.0205 at δ = 0.005, 0.0119 at 0.01).
+// With one estimator, a larger δ admits a later rank of the same sorted bad samples, so ε_min and
+// the hits never fall; `calibrate --false-hit-rate` moves along that curve and keeps the weight.
 //
 // Per region (local fail-through): the same rule on each region's estimate (its key points' RMS
 // error, its check points' worst) and the max error over that region's points.
@@ -108,8 +113,9 @@ ExtrapolatedEpsilon calibrate_extrapolated(const Eigen::Ref<const Eigen::VectorX
 // Whether m bad samples can state a false-hit rate δ: ⌊δ (m + 1)⌋ ≥ 1.
 bool guarantee_holds(long bad_samples, double false_hit_rate);
 
-// The weight w of e_key in the estimate (the header's rule). 1 for samples without check points.
-double choose_key_weight(const CalibrationSamples& samples, double tolerance, double false_hit_rate);
+// The weight w of e_key in the estimate (the header's rule), the same for every δ. 1 for samples
+// without check points.
+double choose_key_weight(const CalibrationSamples& samples, double tolerance);
 
 // The conformal error ratio q for false-hit rate δ ∈ (0, 1) from paired samples (e_key, e_max);
 // samples with e_key < noise_floor are skipped. 1 when no sample is usable (e_key never exceeds
@@ -143,8 +149,8 @@ struct OperatingPoint {
   double worst_hit_error = 0;  // largest e_max among samples called HIT, over the tolerance
 };
 
-// With the rule of the header on the estimates max(w·e_key, e_check), w = choose_key_weight for this
-// δ (e_key alone when the samples have no check points): what apply_calibration would set.
+// With the rule of the header on the estimates max(w·e_key, e_check), w = choose_key_weight
+// (e_key alone when the samples have no check points): what apply_calibration would set.
 OperatingPoint operating_point(const CalibrationSamples& samples, double false_hit_rate, double tolerance);
 
 // The δ an operator is offered by default (train-pmsc, the bench): 0.005 … 0.2.

@@ -568,6 +568,12 @@ void evaluate_cached(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>
   finish_cached(m, estimate, out.points, full_values, full_calculation, out);
 }
 
+CalibrationSamples estimator_samples(const PmscModel& m) {
+  CalibrationSamples samples = m.calibration.samples;
+  if (m.estimator == ErrorEstimator::kWorstPoint) samples.key_point_errors = samples.key_point_max_errors;
+  return samples;
+}
+
 Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio) {
   const CalibrationSamples& samples = m.calibration.samples;
   const double delta = m.calibration.false_hit_rate;
@@ -616,15 +622,10 @@ Status apply_calibration(PmscModel& m, double tolerance, double blend_zone_ratio
   const auto thresholds = [&](double epsilon_min) {
     return SoftCacheThresholds{epsilon_min, epsilon_min * blend_zone_ratio};
   };
-  // The whole pose's key term, as the model's estimator measures it (ErrorEstimator); the
-  // regions' samples are RMS either way.
-  CalibrationSamples worst_point_samples;
-  if (m.estimator == ErrorEstimator::kWorstPoint) {
-    worst_point_samples = samples;
-    worst_point_samples.key_point_errors = samples.key_point_max_errors;
-  }
-  const CalibrationSamples& whole_samples = m.estimator == ErrorEstimator::kWorstPoint ? worst_point_samples : samples;
-  m.key_weight = checked ? choose_key_weight(whole_samples, tolerance, delta) : 1.0;
+  // The whole pose's key term, as the model's estimator measures it; the regions' samples are RMS
+  // either way.
+  const CalibrationSamples whole_samples = estimator_samples(m);
+  m.key_weight = checked ? choose_key_weight(whole_samples, tolerance) : 1.0;
   const ExtrapolatedEpsilon whole =
       calibrate_extrapolated(whole_samples.error_estimates(m.key_weight), samples.max_errors, tolerance, delta);
   m.epsilon = thresholds(whole.epsilon_min);

@@ -337,6 +337,11 @@ inline const SoftCacheThresholds& region_thresholds(const PmscModel& model, int 
   return model.region_epsilon.empty() ? model.epsilon : model.region_epsilon[static_cast<size_t>(region)];
 }
 
+// model.calibration's samples with the whole pose's key term as the model's estimator measures it
+// (key_point_max_errors for kWorstPoint, e_key otherwise): what ε, the key weight and the operating
+// curve are computed on. The samples must hold that term (apply_calibration checks it).
+CalibrationSamples estimator_samples(const PmscModel& model);
+
 // Sets ε (and each region's ε when the samples have regions) from model.calibration's samples
 // and false_hit_rate (calibration.h). Errors: kInvalidArgument for a δ outside (0, 1), a
 // non-positive tolerance, blend_zone_ratio < 1, or samples whose region columns differ from

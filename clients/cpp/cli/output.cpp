@@ -37,7 +37,7 @@ std::vector<double> offered_false_hit_rates(const pmsc::PmscModel& model) {
 }  // namespace
 
 void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int folds) {
-  const pmsc::CalibrationSamples& samples = model.calibration.samples;
+  const pmsc::CalibrationSamples samples = pmsc::estimator_samples(model);
   const long over = pmsc::operating_point(samples, model.calibration.false_hit_rate, tolerance).over_tolerance;
   std::printf("operating curve on %ld held-out frames (every %dth frame, sparser training, blocks of %d, %d and %d; "
               "each predicted by a model trained without it; %ld over the tolerance on their own, every one "
@@ -55,9 +55,10 @@ void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int f
 }
 
 nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double tolerance) {
+  const pmsc::CalibrationSamples samples = pmsc::estimator_samples(model);
   nlohmann::json curve = nlohmann::json::array();
   for (double rate : offered_false_hit_rates(model)) {
-    const pmsc::OperatingPoint p = pmsc::operating_point(model.calibration.samples, rate, tolerance);
+    const pmsc::OperatingPoint p = pmsc::operating_point(samples, rate, tolerance);
     curve.push_back({{"false_hit_rate", rate},
                      {"error_ratio", p.error_ratio},
                      {"epsilon_min", p.epsilon_min},

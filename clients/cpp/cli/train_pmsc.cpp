@@ -214,22 +214,24 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                                                          " training frames allow before held-out poses stop generalising"
                                                    : "";
     std::fprintf(stderr,
-                 "animspace train-pmsc: warning: the basis (M = %d%s) projects the training frames only within %.3g "
-                 "of the diagonal, above the bound (--error-bound-diag %g); more keys bring the reconstruction "
-                 "towards that projection, not within the bound: to reach it, train on more frames%s, or loosen "
-                 "--error-bound-diag to about %.3g (the error reached with the keys); the model was written and "
-                 "serves with the error above\n",
-                 report.basis_size, capped.c_str(), report.projection_error / diagonal, a.error_bound_diag,
-                 report.basis_capped ? "" : " or raise --basis", report.max_training_error / diagonal);
+                 "animspace train-pmsc: warning: the basis (M = %d%s) projects the training frames only within "
+                 "%.3g%% of the diagonal, above the bound of %.3g%% (--error-bound-diag %g); more keys bring the "
+                 "reconstruction towards that projection, not within the bound: to reach it, train on more "
+                 "frames%s, or loosen the bound to about %.3g%% (--error-bound-diag %.3g, the error reached with "
+                 "the keys); the model was written and serves with the error above\n",
+                 report.basis_size, capped.c_str(), 100 * report.projection_error / diagonal,
+                 100 * a.error_bound_diag, a.error_bound_diag, report.basis_capped ? "" : " or raise --basis",
+                 100 * report.max_training_error / diagonal, report.max_training_error / diagonal);
   } else if (!report.converged) {
     // The model is written and serves; its ε is calibrated all the same. What is missing is
     // the bound, and the two knobs that reach it.
     std::fprintf(stderr,
                  "animspace train-pmsc: warning: the key point budget (--max-key-points %d) was spent before every "
-                 "training point came within the bound (--error-bound-diag %g): to reach it, raise "
-                 "--max-key-points, or loosen --error-bound-diag to about %.3g (the error reached); the model "
-                 "was written and serves with the error above\n",
-                 a.max_key_points, a.error_bound_diag, report.max_training_error / diagonal);
+                 "training point came within the bound of %.3g%% of the diagonal (--error-bound-diag %g): to reach "
+                 "it, raise --max-key-points, or loosen the bound to about %.3g%% (--error-bound-diag %.3g, the "
+                 "error reached); the model was written and serves with the error above\n",
+                 a.max_key_points, 100 * a.error_bound_diag, a.error_bound_diag,
+                 100 * report.max_training_error / diagonal, report.max_training_error / diagonal);
   }
   return 0;
 }
