@@ -46,6 +46,12 @@ DaemonProcess::DaemonProcess(const std::filesystem::path& binary, const std::vec
   if (std::find(extra_args.begin(), extra_args.end(), "--listen") == extra_args.end()) {
     args.insert(args.end(), {"--listen", "127.0.0.1:0"});
   }
+  // A test decides when its daemon sees new versions: no repository poll unless it asks for one
+  // (animspaced polls every 30 s by default; other binaries, the transport floor, have no poll).
+  if (name.rfind("animspaced", 0) == 0 &&
+      std::find(extra_args.begin(), extra_args.end(), "--poll-interval-s") == extra_args.end()) {
+    args.insert(args.end(), {"--poll-interval-s", "0"});
+  }
   args.insert(args.end(), extra_args.begin(), extra_args.end());
 
   pid_ = ::fork();

@@ -113,6 +113,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--batch", workload_args.batch, "Poses per unary call")->check(CLI::Range(1u, 1024u))->capture_default_str();
   app.add_flag("--with-points", with_points, "Ask for the reconstructed points too (default: verdicts only)");
+  app.add_flag("--log-misses", workload_args.log_misses,
+               "Let the load's blends and misses into the model's miss log (default: kept out, as test traffic "
+               "that must not reach retraining)");
   app.add_flag("--coordinates", workload_args.coordinates,
                "Ask for the answers as subspace coordinates (M values each, reconstructed by clients; issue #36)");
   app.add_option("--concurrency", concurrency, "Closed loop: callers per step, e.g. 1,2,4,8,16,32")

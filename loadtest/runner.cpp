@@ -111,6 +111,7 @@ void unary_call(const Workload& w, Client& client, size_t cursor, Clock::time_po
     options.version = w.version;
     options.omit_points = w.omit_points;
     options.points_encoding = w.points_encoding;
+    options.skip_miss_log = w.skip_miss_log;
     const std::vector<PoseResult> results = client.evaluate_key_points_batch(w.model, poses, options);
     const auto done = Clock::now();
     t.success(sent, done, step_start);
@@ -133,6 +134,7 @@ void stream_caller(const Workload& w, Client& client, const StepPlan& plan, size
     options.version = w.version;
     options.omit_points = w.omit_points;
     options.points_encoding = w.points_encoding;
+    options.skip_miss_log = w.skip_miss_log;
     options.window = plan.stream_window;
     auto stream = client.open_stream(w.model, options);
     std::mutex mutex;

@@ -34,6 +34,7 @@ Result<Workload> make_workload(Client& client, const WorkloadArgs& a) {
   w.rpc = a.rpc;
   w.batch = a.batch;
   w.omit_points = a.omit_points && !a.coordinates;
+  w.skip_miss_log = !a.log_misses;
   if (a.coordinates) {
     if (a.rpc == Rpc::kSkinning) return invalid("--coordinates: skeleton poses are answered as points; leave it out");
     w.points_encoding = v1::POINT_ENCODING_COORDINATES;

@@ -37,6 +37,9 @@ struct WorkloadArgs {
   // instead of N·D points; the load tester does not reconstruct them (`animspace play
   // --coordinates` measures the client's side).
   bool coordinates = false;
+  // A load test is test traffic: its blends and misses stay out of the production miss log
+  // (skip_miss_log) unless --log-misses asks to load the logging path too (issue #55 item 6).
+  bool log_misses = false;
 };
 
 struct Workload {
@@ -45,6 +48,7 @@ struct Workload {
   Rpc rpc = Rpc::kEvaluate;
   uint32_t batch = 1;
   bool omit_points = true;
+  bool skip_miss_log = true;
   v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
   uint32_t channel_count = 3;
   std::vector<std::vector<float>> key_frames;  // kEvaluate, kStream: K·D values per frame

@@ -81,7 +81,8 @@ Status Daemon::start() {
   if (!std::filesystem::is_directory(miss_log_dir, ec)) {
     return make_error(ErrorCode::kNotFound, "--miss-log-dir: '" + miss_log_dir.string() + "' is not a directory");
   }
-  miss_logs_ = std::make_unique<MissLogs>(miss_log_dir, *fsync_policy, options_.miss_log_fsync_interval);
+  miss_logs_ = std::make_unique<MissLogs>(miss_log_dir, *fsync_policy, options_.miss_log_fsync_interval,
+                                          options_.miss_log_max_bytes);
   Kernel kernel = Kernel::kBlas;
   if (!parse_kernel(options_.kernel, kernel)) {
     return make_error(ErrorCode::kInvalidArgument, "--kernel: expected blas or portable, got '" + options_.kernel + "'");

@@ -106,7 +106,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
   app.add_option("--poll-interval-s", options.poll_interval_s,
-                 "Poll the repository for new model versions every this many seconds (0 = never)")
+                 "Poll the repository for new model versions every this many seconds, so that a version built "
+                 "into it is served without `animspace load` (0 = never)")
       ->check(CLI::Range(0.0, 86400.0))
       ->capture_default_str();
   app.add_option("--miss-log-dir", options.miss_log_dir,
@@ -118,6 +119,10 @@ int main(int argc, char** argv) {
   int64_t fsync_ms = options.miss_log_fsync_interval.count();
   app.add_option("--miss-log-fsync-interval-ms", fsync_ms, "With --miss-log-fsync interval: longest time between fsyncs")
       ->check(CLI::Range(int64_t{1}, int64_t{3600000}))
+      ->capture_default_str();
+  app.add_option("--miss-log-max-bytes", options.miss_log_max_bytes,
+                 "The most bytes one model's miss log may hold (0 = no bound); past it, blends and misses are "
+                 "served but not logged, and animspace_misses_not_logged_total{reason=\"full\"} counts them")
       ->capture_default_str();
   app.add_option("--tls-cert", options.tls_cert, "TLS: server certificate chain (PEM); with --tls-key");
   app.add_option("--tls-key", options.tls_key, "TLS: server private key (PEM)");

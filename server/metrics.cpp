@@ -148,6 +148,16 @@ void Metrics::reset_model_statistics(std::string_view model) {
   }
 }
 
+void Metrics::record_miss_not_logged(std::string_view model, NotLogged reason) {
+  std::lock_guard lock(mutex_);
+  ++not_logged_[{std::string(model), reason}];
+}
+
+void Metrics::set_miss_log_bytes(std::string_view model, uint64_t bytes) {
+  std::lock_guard lock(mutex_);
+  miss_log_bytes_[std::string(model)] = bytes;
+}
+
 std::chrono::system_clock::time_point Metrics::statistics_since() const {
   std::lock_guard lock(mutex_);
   return since_;
@@ -193,6 +203,19 @@ std::string Metrics::prometheus_text() const {
     for (const auto& [model, stats] : models_) {
       out << name << "{model=\"" << escape_label(model) << "\"} " << stats.*member << '\n';
     }
+  }
+  out << "# HELP animspace_misses_not_logged_total Blends and misses served but not in the miss log: "
+         "reason skipped (the request set skip_miss_log), full (--miss-log-max-bytes), error (the append failed).\n"
+      << "# TYPE animspace_misses_not_logged_total counter\n";
+  for (const auto& [key, count] : not_logged_) {
+    static constexpr const char* kReasons[] = {"skipped", "full", "error"};
+    out << "animspace_misses_not_logged_total{model=\"" << escape_label(key.first) << "\",reason=\""
+        << kReasons[static_cast<int>(key.second)] << "\"} " << count << '\n';
+  }
+  out << "# HELP animspace_miss_log_bytes Size of the model's miss log file (bounded by --miss-log-max-bytes).\n"
+      << "# TYPE animspace_miss_log_bytes gauge\n";
+  for (const auto& [model, bytes] : miss_log_bytes_) {
+    out << "animspace_miss_log_bytes{model=\"" << escape_label(model) << "\"} " << bytes << '\n';
   }
   out << "# HELP animspace_key_point_error Soft-cache key-point RMS error, model units.\n"
       << "# TYPE animspace_key_point_error histogram\n";

@@ -11,6 +11,7 @@
 #include <mutex>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/pmsc/soft_cache.h"
@@ -69,6 +70,12 @@ class Metrics {
   void record_call(std::string_view rpc, std::string_view model, int code, double seconds);
   // One pose through the soft cache.
   void record_pose(std::string_view model, pmsc::CacheStatus status, double key_point_error);
+  // A blend or miss served but not appended to the model's miss log, and why: the request set
+  // skip_miss_log (test traffic), the log reached --miss-log-max-bytes, or the append failed.
+  enum class NotLogged { kSkipped, kFull, kError };
+  void record_miss_not_logged(std::string_view model, NotLogged reason);
+  // The size of the model's miss log file after an append (animspace_miss_log_bytes).
+  void set_miss_log_bytes(std::string_view model, uint64_t bytes);
   // Skeleton poses evaluated (SkinningService): counted as poses, with no verdict.
   void record_skeleton_poses(std::string_view model, uint64_t count);
   void set_models_loaded(int count);
@@ -107,6 +114,9 @@ class Metrics {
   std::chrono::system_clock::time_point since_;
   int models_loaded_ = 0;
   std::vector<ServedVersion> served_versions_;
+  // Not reset with the statistics: Prometheus counters only grow.
+  std::map<std::pair<std::string, NotLogged>, uint64_t> not_logged_;
+  std::map<std::string, uint64_t> miss_log_bytes_;
   std::atomic<int64_t> in_flight_{0};
 };
 

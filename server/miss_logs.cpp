@@ -7,8 +7,8 @@
 namespace animspace::server {
 
 MissLogs::MissLogs(std::filesystem::path directory, misslog::FsyncPolicy policy,
-                   std::chrono::milliseconds fsync_interval)
-    : directory_(std::move(directory)), policy_(policy), fsync_interval_(fsync_interval) {}
+                   std::chrono::milliseconds fsync_interval, uint64_t max_bytes)
+    : directory_(std::move(directory)), policy_(policy), fsync_interval_(fsync_interval), max_bytes_(max_bytes) {}
 
 std::filesystem::path MissLogs::path_of(const std::string& model) const { return directory_ / (model + ".misses"); }
 
@@ -18,6 +18,7 @@ Result<misslog::MissLog*> MissLogs::open(const std::string& model) {
   if (it != logs_.end()) return it->second.get();
   auto log = misslog::MissLog::open(path_of(model), policy_, fsync_interval_);
   if (!log) return log.error();
+  (*log)->set_max_bytes(max_bytes_);
   const auto& recovery = (*log)->recovery();
   if (recovery.truncated_bytes > 0) {
     spdlog::warn("miss log {}: recovered {} records, cut {} bytes of torn tail ({})", path_of(model).string(),
@@ -48,7 +49,22 @@ Result<uint64_t> MissLogs::append(const std::string& model, const pmsc::PmscMode
   auto log = open(model);
   if (!log) return log.error();
   misslog::fit_to_format(evaluated, (*log)->format_version(), record);
-  return (*log)->append(record);
+  auto appended = (*log)->append(record);
+  if (!appended && appended.error().code == ErrorCode::kResourceExhausted) {
+    std::string message = appended.error().message +
+                          " (--miss-log-max-bytes): blends and misses are served but not logged until the daemon "
+                          "restarts with a larger bound (docs/OPERATIONS.md, \"Miss logs\")";
+    // The first refusal is the one an operator needs to read; the metric counts every one.
+    if (!full_warned_.exchange(true)) spdlog::warn("miss log of {}: {}", model, message);
+    return make_error(ErrorCode::kResourceExhausted, std::move(message));
+  }
+  return appended;
+}
+
+uint64_t MissLogs::size_bytes(const std::string& model) {
+  std::lock_guard lock(mutex_);
+  const auto it = logs_.find(model);
+  return it == logs_.end() ? 0 : it->second->size_bytes();
 }
 
 void MissLogs::sync_all() {

@@ -60,13 +60,18 @@ struct ServerOptions {
   // core. gRPC's own threads only receive and send.
   int work_threads = 0;
   // Poll the repository for new model versions every this many seconds (0 = never).
-  double poll_interval_s = 0;
+  // Every 30 s by default, so that a version built into the repository (train-pmsc, build-lod,
+  // retrain-offline) is served without a manual LoadModel (issue #55 item 8); 0 = never.
+  double poll_interval_s = 30;
   // Where per-model miss logs live (<dir>/<model>.misses); empty = the repository itself.
   std::filesystem::path miss_log_dir;
   // Miss log durability: "always" (fsync every record), "interval" (fsync at most every
   // miss_log_fsync_interval), "never" (leave it to the OS).
   std::string miss_log_fsync = "interval";
   std::chrono::milliseconds miss_log_fsync_interval{1000};
+  // The most bytes one model's miss log may hold (0 = no bound): past it, blends and misses are
+  // served but not logged, counted in animspace_misses_not_logged_total{reason="full"}.
+  uint64_t miss_log_max_bytes = uint64_t{1} << 30;
   // TLS: server certificate chain and private key (PEM). Both empty: plaintext.
   std::filesystem::path tls_cert;
   std::filesystem::path tls_key;

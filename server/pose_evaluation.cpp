@@ -112,9 +112,12 @@ Status log_miss(ServiceEnvironment& env, const LoadedModel& model, const PoseJob
   auto appended = env.miss_logs.append(model.name, *model.pmsc, record);
   if (!appended) {
     // The answer is still right; only the retraining data is short. Say so loudly.
-    spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
+    if (appended.error().code != ErrorCode::kResourceExhausted) {
+      spdlog::error("miss log of {}: cannot append: {}", model.name, appended.error().message);
+    }
     return appended.error();
   }
+  env.metrics.set_miss_log_bytes(model.name, env.miss_logs.size_bytes(model.name));
   return Status::Ok();
 }
 
@@ -206,10 +209,18 @@ grpc::Status PoseRun::finish_one(PoseJob& job, v1::PoseResult* out) {
   if (job.options.count_in_statistics) {
     env_->metrics.record_pose(model.name, answer.cached.status, answer.cached.key_point_error);
   }
-  if (answer.cached.status != pmsc::CacheStatus::kHit) {
+  if (answer.cached.status != pmsc::CacheStatus::kHit && !job.options.log_misses) {
+    job.not_logged_reason_ = "the request set skip_miss_log (test traffic: kept out of retraining)";
+    env_->metrics.record_miss_not_logged(model.name, Metrics::NotLogged::kSkipped);
+  } else if (answer.cached.status != pmsc::CacheStatus::kHit) {
     const Status appended = log_miss(*env_, model, job, answer);
     job.logged_ = appended.ok();
-    if (!appended.ok()) job.not_logged_reason_ = appended.error().message;
+    if (!appended.ok()) {
+      job.not_logged_reason_ = appended.error().message;
+      env_->metrics.record_miss_not_logged(model.name, appended.error().code == ErrorCode::kResourceExhausted
+                                                           ? Metrics::NotLogged::kFull
+                                                           : Metrics::NotLogged::kError);
+    }
   }
   return grpc::Status::OK;
 }

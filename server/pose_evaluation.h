@@ -45,6 +45,8 @@ struct PoseOptions {
   v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
   // CompleteMiss answers a pose that EvaluateKeyPoints already counted: log it, don't count it.
   bool count_in_statistics = true;
+  // Test traffic (skip_miss_log on the wire): a blend or miss is served but not logged.
+  bool log_misses = true;
 };
 
 // One pose: its decoded input and options (the caller fills both), and the pipeline's state.

@@ -189,6 +189,7 @@ std::vector<PoseResult> Client::evaluate_key_points_batch(const std::string& mod
   request.set_omit_points(options.omit_points);
   request.set_include_region_errors(options.include_region_errors);
   request.set_local_fail_through(options.local_fail_through);
+  request.set_skip_miss_log(options.skip_miss_log);
   request.set_points_encoding(options.points_encoding);
   for (const KeyPointPose& pose : poses) *request.add_poses() = encode_key_point_pose(pose);
   grpc::ClientContext context;

@@ -31,6 +31,7 @@ bool KeyPointStream::write(const KeyPointPose& pose, uint64_t sequence) {
   frame.set_sequence(sequence);
   frame.set_omit_points(options_.omit_points);
   frame.set_local_fail_through(options_.local_fail_through);
+  frame.set_skip_miss_log(options_.skip_miss_log);
   frame.set_points_encoding(options_.points_encoding);
   {
     std::unique_lock lock(mutex_);

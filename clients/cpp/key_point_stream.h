@@ -35,6 +35,7 @@ struct StreamOptions {
   bool omit_points = false;
   bool local_fail_through = false;  // as EvaluateOptions::local_fail_through, for every frame
   v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;  // as EvaluateOptions', every frame
+  bool skip_miss_log = false;  // as EvaluateOptions::skip_miss_log, for every frame
   // Most frames written and not yet answered-and-read (≥ 1).
   uint32_t window = 16;
   // Deadline for the whole stream; 0 = none (a sequence plays as long as it plays).

@@ -166,6 +166,9 @@ struct EvaluateOptions {
   // to float32 by decode_points, Points::max_error saying what was lost (common.proto) — or
   // COORDINATES: M values instead of N·D, reconstructed by the caller (clients/cpp/coordinates.h).
   v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED;
+  // Test traffic (load tests, benchmarks): blends and misses are served but kept out of the
+  // model's miss log, and so out of retraining.
+  bool skip_miss_log = false;
 };
 
 struct SkinningOptions {

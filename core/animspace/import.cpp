@@ -45,11 +45,28 @@ Status append_vertex(RawInfluences& raw, double sum_tolerance, const WeightOptio
       merged.emplace_back(bone, w);
     }
   }
+  // The budget: the smallest weights, in order, while their sum stays within it.
+  std::vector<char> in_budget(merged.size(), 0);
+  if (options.drop_budget > 0) {
+    std::vector<size_t> order(merged.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return std::abs(merged[a].second) < std::abs(merged[b].second); });
+    double spent = 0;
+    for (size_t k = 0; k + 1 < order.size(); ++k) {  // the largest weight always stays
+      const double w = std::abs(merged[order[k]].second);
+      if (w < options.drop_below) continue;  // dropped by the threshold already, not from the budget
+      if (spent + w > options.drop_budget) break;
+      spent += w;
+      in_budget[order[k]] = 1;
+    }
+  }
   double kept_sum = 0, dropped_sum = 0;
   const size_t first = rig.model.influences.bones.size();
-  for (const auto& [bone, w] : merged) {
+  for (size_t i = 0; i < merged.size(); ++i) {
+    const auto& [bone, w] = merged[i];
     if (w == 0.0) continue;
-    if (std::abs(w) < options.drop_below) {
+    if (std::abs(w) < options.drop_below || in_budget[i]) {
       ++rig.dropped_weights;
       dropped_sum += std::abs(w);
       continue;

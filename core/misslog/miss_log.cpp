@@ -661,6 +661,16 @@ Result<std::unique_ptr<MissLog>> MissLog::open(const std::filesystem::path& path
   return log;
 }
 
+void MissLog::set_max_bytes(uint64_t max_bytes) {
+  std::lock_guard lock(mutex_);
+  max_bytes_ = max_bytes;
+}
+
+uint64_t MissLog::size_bytes() const {
+  std::lock_guard lock(mutex_);
+  return end_offset_;
+}
+
 Result<uint64_t> MissLog::append(MissRecord& record) {
   auto length = check_record(view_of(record, format_version_));
   if (!length.ok()) return length.error();
@@ -672,6 +682,12 @@ Result<uint64_t> MissLog::append(MissRecord& record) {
   }
 
   std::lock_guard lock(mutex_);
+  if (max_bytes_ > 0 && end_offset_ + framed.size() > max_bytes_) {
+    return make_error(ErrorCode::kResourceExhausted,
+                      path_.string() + ": the miss log is full: it holds " + std::to_string(end_offset_) +
+                          " bytes and a record of " + std::to_string(framed.size()) +
+                          " bytes would pass its bound of " + std::to_string(max_bytes_) + " bytes");
+  }
   if (needs_truncate_) {
     if (int e = ftruncate_retrying(fd_, end_offset_); e != 0) {
       return io_error(path_, "cannot truncate the remains of a failed append", e);

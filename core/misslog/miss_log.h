@@ -114,9 +114,16 @@ class MissLog {
   // poison retraining (channels 0, value counts not multiples of channels, full_points not
   // ascending or not matching the full values, a payload over kMaxPayloadBytes, status hit,
   // non-finite numbers); kFailedPrecondition for a partial record (full_points) in a log of a
-  // format version before kFirstPartialFormatVersion; kIo naming the path
+  // format version before kFirstPartialFormatVersion; kResourceExhausted when the record would
+  // take the file past the bound of set_max_bytes (the file is untouched); kIo naming the path
   // (disk full, file size limit, fsync failure).
   Result<uint64_t> append(MissRecord& record);
+
+  // Bounds the file's size: an append that would take it past `max_bytes` is refused (0: no
+  // bound, the default). A log is tomorrow's training data, not an archive: one busy client can
+  // otherwise fill a disk with misses no retrain will ever read (issue #55 item 6). Thread-safe.
+  void set_max_bytes(uint64_t max_bytes);
+  uint64_t size_bytes() const;  // the file header and every good record
 
   // Forces every appended record to stable storage (whatever the policy). Thread-safe.
   // Errors: kIo naming the path.
@@ -144,6 +151,7 @@ class MissLog {
 
   mutable std::mutex mutex_;
   uint64_t end_offset_ = 0;       // end of the last good record: where the next one goes
+  uint64_t max_bytes_ = 0;        // 0: unbounded
   uint64_t record_count_ = 0;
   uint64_t last_sequence_ = 0;
   bool dirty_ = false;            // bytes written since the last successful fdatasync

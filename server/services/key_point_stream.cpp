@@ -59,6 +59,7 @@ void KeyPointStream::OnReadDone(bool ok) {
   pose->frame = std::move(frame);
   pose->job.options.omit_points = pose->frame.omit_points();
   pose->job.options.local_fail_through = pose->frame.local_fail_through();
+  pose->job.options.log_misses = !pose->frame.skip_miss_log();
   pose->job.options.points_encoding = pose->frame.points_encoding();
   // An answer as coordinates with no engine input is one projection (no f̂, no full calculation):
   // evaluated right here, as the frame arrives.

@@ -85,6 +85,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::EvaluateKeyPoints(grpc::CallbackServe
           job.options.omit_points = request->omit_points();
           job.options.points_encoding = request->points_encoding();
           job.options.local_fail_through = request->local_fail_through();
+          job.options.log_misses = !request->skip_miss_log();
           results.push_back(response->add_results());
         }
         // The request's poses wait in the batcher together (with any other call's for this model):
@@ -149,6 +150,7 @@ grpc::ServerUnaryReactor* PoseServiceImpl::CompleteMiss(grpc::CallbackServerCont
         PoseOptions options;
         options.count_in_statistics = false;
         options.points_encoding = request->points_encoding();
+        options.log_misses = !request->skip_miss_log();
         bool logged = false;
         if (grpc::Status s = evaluate_pose(env_, *model, input, options, response->mutable_result(), &logged,
                                            response->mutable_not_logged_reason());

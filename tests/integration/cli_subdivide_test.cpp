@@ -52,6 +52,33 @@ TEST(CliSubdivide, RefusesBadLevelsNamingTheFlag) {
       << scheme.err;
 }
 
+// Issue #55 item 8: a version written into a served repository is served without `animspace
+// load` — the command says how, and the daemon's repository poll picks it up.
+TEST(CliSubdivide, AVersionWrittenIntoAServedRepositoryIsServedAtTheNextPoll) {
+  TempDir dir;
+  ASSERT_TRUE(demo::write_demo_repository(dir / "demo").ok());
+  const std::string arm = (dir / "demo" / "arm-animspace" / "1" / "model.anim").string();
+  const std::filesystem::path repo = dir / "repo";
+  ASSERT_EQ(cli("subdivide " + arm + " --levels 1 -o " + repo.string() + " --model arm-sub", dir).exit_code, 0);
+  harness::DaemonProcess daemon({"--model-repository", repo.string(), "--renderer", "none", "--poll-interval-s", "0.1"},
+                                dir.path());
+  Client client(daemon.address());
+  ASSERT_TRUE(testing::wait_until_serving(client));
+
+  const CliRun second = cli("subdivide " + arm + " --levels 2 -o " + repo.string() + " --model arm-sub", dir);
+  ASSERT_EQ(second.exit_code, 0) << second.err;
+  EXPECT_NE(second.out.find("wrote " + (repo / "arm-sub" / "2" / "model.anim").string()), std::string::npos)
+      << second.out;
+  EXPECT_NE(second.out.find("loads it at its next poll"), std::string::npos) << second.out;
+  EXPECT_NE(second.out.find("`animspace load arm-sub`"), std::string::npos) << second.out;
+  EXPECT_TRUE(testing::wait_until([&] {
+    for (const auto& summary : client.list_models()) {
+      if (summary.name() == "arm-sub") return summary.default_version() == 2;
+    }
+    return false;
+  })) << "version 2 was never served";
+}
+
 TEST(CliSubdivide, TheDaemonServesASubdividedModelPosedAsTheControlMeshSubdivided) {
   TempDir dir;
   ASSERT_TRUE(demo::write_demo_repository(dir / "demo").ok());

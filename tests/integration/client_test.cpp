@@ -24,6 +24,7 @@
 #include "animspace/v1/poses.grpc.pb.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
+#include "tests/support/metrics_scrape.h"
 #include "tests/support/pmsc_fixtures.h"
 #include "tests/support/test_support.h"
 
@@ -286,6 +287,38 @@ TEST_F(ClientTest, CompleteMissBlendsTheCallersFullValuesByAlpha) {
   }
   EXPECT_THROW(client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, std::span(full).first(10)),
                std::invalid_argument);
+}
+
+// Issue #55 item 6: a miss log at its bound (--miss-log-max-bytes) takes no more records; the pose
+// is still answered, the completion says why it was not logged, and the metric counts it.
+TEST_F(ClientTest, AFullMissLogServesThePoseAndSaysWhyItWasNotLogged) {
+  TempDir work;
+  const int metrics_port = testing::free_tcp_port();
+  // 17 bytes: the 16-byte file header and no room for any record.
+  DaemonProcess daemon({"--model-repository", repo_->path().string(), "--miss-log-dir", work.path().string(),
+                        "--renderer", "none", "--miss-log-max-bytes", "17", "--metrics-listen",
+                        "127.0.0.1:" + std::to_string(metrics_port)},
+                       work.path());
+  Client client(daemon.address());
+  ASSERT_TRUE(testing::wait_until_serving(client));
+  const KeyPoints keys = client.describe_key_points(kPmsc);
+  const std::vector<float> full = perturbed_frame(5);
+  const std::vector<float> v = keys.gather(full);
+  const PoseResult evaluated = client.evaluate_key_points(kPmsc, {v, 3});
+  ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
+  const CompletedMiss completed = client.complete_miss(kPmsc, evaluated.model_version, {v, 3}, full);
+  EXPECT_FALSE(completed.logged);
+  EXPECT_NE(completed.not_logged_reason.find("the miss log is full"), std::string::npos) << completed.not_logged_reason;
+  EXPECT_NE(completed.not_logged_reason.find("--miss-log-max-bytes"), std::string::npos) << completed.not_logged_reason;
+  EXPECT_EQ(completed.result.points.values.size(), full.size()) << "the answer is served all the same";
+  auto records = misslog::read_records(work.path() / (kPmsc + ".misses"), 0, nullptr);
+  ASSERT_TRUE(records.ok()) << records.error().message;
+  EXPECT_TRUE(records->empty());
+  const auto page = testing::scrape_metrics(metrics_port);
+  ASSERT_TRUE(page.has_value());
+  EXPECT_EQ(testing::metric_value(*page, "animspace_misses_not_logged_total{model=\"" + kPmsc + "\",reason=\"full\"}"),
+            2.0)
+      << *page;
 }
 
 // Issue #21: the tour sent an all-zero "full pose" and the server logged it as tomorrow's

@@ -15,8 +15,14 @@
 
 #include "clients/cpp/client.h"
 #include "core/demo/demo_repository.h"
+#include "core/container/model_container.h"
+#include "core/container/sections.h"
+#include "core/mesh_io/pc2.h"
+#include "core/mesh_io/triangle_mesh_io.h"
+#include "core/misslog/miss_log.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
+#include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -36,13 +42,14 @@ class LoadtestTest : public ::testing::Test {
     repo_ = nullptr;
   }
 
-  std::unique_ptr<DaemonProcess> start_daemon() {
-    const auto dir = work_.path() / ("daemon-" + std::to_string(daemons_++));
+  // Each daemon writes its miss logs into its own folder, `daemon_dir(i)` for the i-th started.
+  std::unique_ptr<DaemonProcess> start_daemon(const std::vector<std::string>& extra = {}) {
+    const auto dir = daemon_dir(daemons_++);
     std::filesystem::create_directories(dir);
-    auto daemon = std::make_unique<DaemonProcess>(
-        std::vector<std::string>{"--model-repository", repo_->path().string(), "--miss-log-dir", dir.string(),
-                                 "--renderer", "none"},
-        dir);
+    std::vector<std::string> args{"--model-repository", repo_->path().string(), "--miss-log-dir", dir.string(),
+                                  "--renderer", "none"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    auto daemon = std::make_unique<DaemonProcess>(args, dir);
     Client client(daemon->address());
     EXPECT_TRUE(testing::wait_until_serving(client));
     return daemon;
@@ -60,6 +67,33 @@ class LoadtestTest : public ::testing::Test {
     std::ifstream out(work_.path() / "out.txt");
     output_.assign(std::istreambuf_iterator<char>(out), {});
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+
+  std::filesystem::path daemon_dir(int i) const { return work_.path() / ("daemon-" + std::to_string(i)); }
+
+  // The arm's frames with their points pushed along y, as a sequence folder (reference.obj +
+  // frames.pc2): far from anything trained, so the cache blends or misses them.
+  std::string pushed_arm_sequence() const {
+    const auto folder = work_.path() / "pushed-arm";
+    if (std::filesystem::exists(folder)) return folder.string();
+    std::filesystem::create_directories(folder);
+    auto arm = container::read_file(arm_frames());
+    EXPECT_TRUE(arm.ok());
+    auto frames = arm->float_matrix(container::sections::kSequenceFrames);
+    EXPECT_TRUE(frames.ok());
+    mesh_io::PointCache cache;
+    cache.num_points = static_cast<int>(frames->cols() / 3);
+    cache.samples = *frames;
+    for (Eigen::Index f = 0; f < cache.samples.rows(); ++f) {
+      for (Eigen::Index i = 0; i < cache.samples.cols(); i += 3) cache.samples(f, i + 1) += 0.05f * static_cast<float>(i % 7);
+    }
+    EXPECT_TRUE(mesh_io::write_pc2(folder / "frames.pc2", cache).ok());
+    TriangleMesh reference;
+    reference.V = Eigen::Map<const PointMatrix>(frames->row(0).data(), cache.num_points, 3);
+    reference.F.resize(1, 3);
+    reference.F << 0, 1, 2;
+    EXPECT_TRUE(mesh_io::write_triangle_mesh(folder / "reference.obj", reference).ok());
+    return folder.string();
   }
 
   static std::string arm_frames() { return (repo_->path() / "arm" / "1" / "model.anim").string(); }
@@ -117,6 +151,47 @@ TEST_F(LoadtestTest, ClosedLoopStepsAddUpAndMatchTheServersCounters) {
     EXPECT_EQ(delta["misses"].get<uint64_t>(), step["misses"].get<uint64_t>());
   }
   EXPECT_EQ(report["steps"][1]["concurrency"].get<int>(), 3);
+}
+
+// Issue #55 item 6: a load test is test traffic. Its blends and misses are served and counted but
+// kept out of the miss log — and so out of retraining — unless --log-misses asks for them; the
+// metric says how many were kept out and why.
+TEST_F(LoadtestTest, ALoadTestLeavesTheMissLogUnchangedUnlessAsked) {
+  const int metrics_port = testing::free_tcp_port();
+  auto daemon = start_daemon({"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
+  const auto log = daemon_dir(0) / "arm-pmsc.misses";
+  const auto records_in_log = [&]() -> size_t {
+    if (!std::filesystem::exists(log)) return 0;
+    auto records = misslog::read_records(log, 0, nullptr);
+    EXPECT_TRUE(records.ok()) << records.error().message;
+    return records.ok() ? records->size() : 0;
+  };
+  const std::string run = "--server " + daemon->address() + " --model arm-pmsc --sequence " + pushed_arm_sequence() +
+                          " --batch 4 --concurrency 1 --duration-s 20 --max-requests 15";
+  const auto not_hits = [](const nlohmann::json& report) {
+    uint64_t n = 0;
+    for (const auto& step : report["steps"]) n += step["blends"].get<uint64_t>() + step["misses"].get<uint64_t>();
+    return n;
+  };
+
+  nlohmann::json report;
+  uint64_t skipped = 0;
+  for (const char* rpc : {"evaluate", "stream"}) {
+    ASSERT_EQ(loadtest(run + " --rpc " + rpc, &report), 0) << output_;
+    ASSERT_GT(not_hits(report), 0u) << "the pushed frames must give blends or misses for the test to mean anything";
+    EXPECT_EQ(records_in_log(), 0u) << rpc << ": the load test's misses reached the miss log";
+    skipped += not_hits(report);
+  }
+  const auto page = testing::scrape_metrics(metrics_port);
+  ASSERT_TRUE(page.has_value());
+  EXPECT_EQ(testing::metric_value(*page, "animspace_misses_not_logged_total{model=\"arm-pmsc\",reason=\"skipped\"}")
+                .value_or(0),
+            static_cast<double>(skipped))
+      << *page;
+
+  // Asked for, every blend and miss is logged.
+  ASSERT_EQ(loadtest(run + " --log-misses", &report), 0) << output_;
+  EXPECT_EQ(records_in_log(), not_hits(report));
 }
 
 TEST_F(LoadtestTest, StreamsAndOpenLoopAddUpToo) {

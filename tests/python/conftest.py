@@ -45,6 +45,9 @@ def run_animspaced(work, *arguments):
     --model-repository it serves a copy of the bundled demo (demo_repository_copy)."""
     if "--model-repository" not in arguments:
         arguments = ("--model-repository", str(demo_repository_copy(work)), *arguments)
+    if "--poll-interval-s" not in arguments:
+        # A test decides when its daemon sees new versions: no repository poll unless it asks.
+        arguments = (*arguments, "--poll-interval-s", "0")
     port_file = work / "port"
     log = open(work / "animspaced.log", "w")
     process = subprocess.Popen(

@@ -653,3 +653,25 @@ def test_an_unreachable_server_is_unavailable():
         assert error.value.code == grpc.StatusCode.UNAVAILABLE
         with pytest.raises(animspace.DeadlineExceeded, match="not SERVING"):
             client.wait_until_serving(deadline_s=0.3)
+
+
+def test_skip_miss_log_serves_test_traffic_and_keeps_it_out_of_retraining(spawn_daemon, tmp_path, arm_transforms):
+    """Issue #55 item 6: a load test's blends and misses must not become training data."""
+    misses = tmp_path / "misses"
+    misses.mkdir()
+    with animspace.Client(spawn_daemon("--miss-log-dir", str(misses))) as client:
+        client.wait_until_serving(deadline_s=60)
+        keys = client.describe_key_points("arm-pmsc")
+        poses = [posed_arm(client, arm_transforms(elbow)) for elbow in np.linspace(0.1, 3.0, 30)]
+        frames = [animspace.KeyPointPose(p[keys.indices], check_values=p[keys.check_point_indices]) for p in poses]
+        log = misses / "arm-pmsc.misses"
+        skipped = [client.evaluate_key_points("arm-pmsc", f.key_values, check_values=f.check_values,
+                                              skip_miss_log=True) for f in frames]
+        skipped += list(client.stream_key_points("arm-pmsc", frames, skip_miss_log=True))
+        not_hits = sum(r.status != "HIT" for r in skipped)
+        assert not_hits > 0, "the bent elbows must give blends or misses for the test to mean anything"
+        assert not log.exists() or log.stat().st_size == 16, "skipped traffic reached the miss log"
+        # The same stream without the flag is logged, one record per blend or miss.
+        logged = list(client.stream_key_points("arm-pmsc", frames))
+        assert log.stat().st_size > 16
+        assert sum(r.status != "HIT" for r in logged) == not_hits // 2

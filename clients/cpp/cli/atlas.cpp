@@ -84,6 +84,7 @@ int run_atlas(const AtlasArgs& a, bool json) {
     std::printf("atlas (%s): %d charts, L2 stretch %.4f, L∞ %.3f (%s), utilisation %.3f, %.2f s\nwrote %s\n",
                 metric_name.c_str(), built->atlas.chart_count, built->l2, built->linf,
                 a.rest_pose ? "rest pose" : "across the model's poses", built->utilisation, seconds, path.c_str());
+    print_serving_hint(a.model);
     if (stale_level_uvs > 0) {
       std::printf("dropped the UVs of %d levels of detail (made under the previous atlas); run build-lod for new "
                   "ones\n",

@@ -59,6 +59,7 @@ int run_calibrate(const CalibrateArgs& a, bool json) {
               a.false_hit_rate, model->calibration.error_ratio);
   print_operating_curve(*model, options->error_tolerance, options->calibration_folds);
   std::printf("wrote %s\n", path.c_str());
+  print_serving_hint(a.model);
   return 0;
 }
 

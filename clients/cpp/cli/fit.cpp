@@ -13,6 +13,7 @@
 #include "clients/cpp/tools/frame_selection.h"
 #include "clients/cpp/tools/number_checks.h"
 #include "core/animspace/animspace_io.h"
+#include "core/animspace/bone_motions.h"
 #include "core/animspace/fit_sequence.h"
 #include "core/animspace/import.h"
 #include "core/animspace/rig_export.h"
@@ -47,6 +48,9 @@ CLI::App* add_fit(CLI::App& app, FitArgs& a) {
       ->required();
   cmd->add_option("--pc2", a.pc2, "Point cache when SEQUENCE is a mesh file");
   cmd->add_option("--select", a.select, "Example frames as a slice start:stop:step (e.g. ::2)")->capture_default_str();
+  cmd->add_option("--test-select", a.test_select,
+                  "Held-out frames as a slice (e.g. 1::2, or 60: after --select :60): report the error on frames the fit "
+                  "did not see, each frame's bone motions solved with the model fixed");
   cmd->add_option("--bones", a.bones, "Rigid parts to find (bones besides the fixed root)")
       ->check(CLI::Range(1, 500))
       ->capture_default_str();
@@ -107,6 +111,21 @@ int run_fit(const FitArgs& a, bool json) {
   const auto selected = tools::parse_frame_selection(a.select, sequence->frames.num_frames(), &error);
   if (selected.empty()) return fail("fit", error);
   const FrameMatrix frames = tools::select_rows(sequence->frames.samples, selected);
+  std::vector<int> test_selected;
+  if (!a.test_select.empty()) {
+    test_selected = tools::parse_frame_selection(a.test_select, sequence->frames.num_frames(), &error);
+    if (test_selected.empty()) return fail("fit", "--test-select: " + error);
+    // A frame in both would be a training error reported as a held-out one.
+    std::vector<char> training(static_cast<size_t>(sequence->frames.num_frames()), 0);
+    for (int f : selected) training[static_cast<size_t>(f)] = 1;
+    for (int f : test_selected) {
+      if (training[static_cast<size_t>(f)]) {
+        return fail("fit", "--test-select " + a.test_select + ": frame " + std::to_string(f) +
+                               " is also a training frame (--select " + a.select + "); held-out frames must be ones "
+                               "the fit does not see");
+      }
+    }
+  }
 
   animation_space::SequenceFitOptions options;
   options.segmentation.bone_count = a.bones;
@@ -120,16 +139,15 @@ int run_fit(const FitArgs& a, bool json) {
   options.decomposition.weights.smoothness = a.smoothness;
   options.refinement_rounds = a.refinement_rounds;
   animation_space::SequenceFitReport report;
-  // Stages, each one call into the core: rigid parts, decomposition and skeleton; the model fit
-  // (§4.1) and its refinement; tangent planes and metrics.
-  std::optional<ProgressBar> progress(std::in_place, "fit", 3);
-  progress->update(0, "rigid parts and skeleton");
-  const ProgressCallback on_progress = [&](std::string_view stage, int64_t done, int64_t total) {
-    progress->update(0, std::string(stage) + " " + std::to_string(done) + "/" + std::to_string(total));
-  };
+  // One bar per stage, each with its own count and time left (issue #55 item 15: one bar of three
+  // stages sat at 0/3 through the decomposition, most of the time, and its estimate rose after).
+  // The core reports the decomposition and the refinement; the other stages are one step each.
+  std::optional<ProgressCallback> progress(progress_bars("fit"));
+  const ProgressCallback& on_progress = *progress;
   auto skeleton = animation_space::fit_sequence_skeleton(sequence->reference, frames, options, &report, on_progress);
   if (!skeleton) return fail("fit", skeleton.error().message);
-  progress->update(1, a.linear_blend ? "linear blend weights" : "animation space");
+  const char* model_stage = a.linear_blend ? "linear blend weights" : "animation space model";
+  on_progress(model_stage, 0, 1);
   const auto start = std::chrono::steady_clock::now();
   auto lbs = animation_space::fit_sequence_linear_blend(sequence->reference, frames, *skeleton, options.fit,
                                                         a.linear_blend ? &report.fit : nullptr);
@@ -141,19 +159,30 @@ int run_fit(const FitArgs& a, bool json) {
   } else {
     model = animation_space::fit_sequence_model(sequence->reference, frames, *skeleton, options.fit, &report.fit);
     if (model && options.decompose && options.refinement_rounds > 0) {
-      model = animation_space::refine_animation_space(
-          frames, std::move(*model), poses, options.fit, options.refinement_rounds, &report.fit,
-          [&](std::string_view stage, int64_t done, int64_t total) {
-            progress->update(1, std::string(stage) + " " + std::to_string(done) + "/" + std::to_string(total));
-          });
+      on_progress(model_stage, 1, 1);
+      model = animation_space::refine_animation_space(frames, std::move(*model), poses, options.fit,
+                                                      options.refinement_rounds, &report.fit, on_progress);
     }
   }
   if (!model) return fail("fit", model.error().message);
   report.fit_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  progress->update(2, "tangent planes and metrics");
+  on_progress("tangent planes and metrics", 0, 1);
   if (auto added = add_tangents(*model); !added.ok()) return fail("fit", added.error().message);
 
   const auto training_error = animation_space::reconstruction_error(*model, poses, frames);
+  // Held-out frames: each one's bone motions solved with the model fixed (bone_motions.h, Dem
+  // Bones' protocol, as `animspace-bench skinning` measures generalisation).
+  std::optional<animation_space::ReconstructionError> test_error;
+  if (!test_selected.empty()) {
+    const FrameMatrix test_frames = tools::select_rows(sequence->frames.samples, test_selected);
+    std::vector<animation_space::TransformList> test_poses;
+    for (Eigen::Index f = 0; f < test_frames.rows(); ++f) {
+      on_progress("held-out frames", f, test_frames.rows());
+      test_poses.push_back(animation_space::solve_pose(*model, test_frames.row(f)));
+    }
+    on_progress("held-out frames", test_frames.rows(), test_frames.rows());
+    test_error = animation_space::reconstruction_error(*model, test_poses, test_frames);
+  }
   const double rms = training_error.rms, max_error = training_error.max;
   const double diagonal =
       (sequence->reference.V.colwise().maxCoeff() - sequence->reference.V.colwise().minCoeff()).cast<double>().norm();
@@ -178,8 +207,8 @@ int run_fit(const FitArgs& a, bool json) {
     bone_rows.row(f) = animation_space::pose_row(poses[static_cast<size_t>(f)]);
   }
   out.set_matrix(container::sections::kSequenceBoneTransforms, bone_rows);
-  progress->update(3);
-  progress.reset();
+  on_progress("tangent planes and metrics", 1, 1);
+  progress.reset();  // ends the last bar's line before anything else is printed
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("fit", written.error().message);
   // glTF skins are linear blend skinning (§3.7.3), so the rig exported is the linear blend one,
@@ -214,6 +243,11 @@ int run_fit(const FitArgs& a, bool json) {
                 {"rms_over_diagonal", rms / diagonal},
                 {"e_rms", e_rms(rms)},
                 {"lbs_rms_over_diagonal", lbs_error.rms / diagonal},
+                {"test_frames", test_selected.size()},
+                {"test_rms_error", test_error ? nlohmann::json(test_error->rms) : nlohmann::json(nullptr)},
+                {"test_max_error", test_error ? nlohmann::json(test_error->max) : nlohmann::json(nullptr)},
+                {"test_rms_over_diagonal",
+                 test_error ? nlohmann::json(test_error->rms / diagonal) : nlohmann::json(nullptr)},
                 {"segmentation_seconds", report.segmentation_seconds},
                 {"skeleton_seconds", report.skeleton_seconds},
                 {"fit_seconds", report.fit_seconds},
@@ -239,7 +273,14 @@ int run_fit(const FitArgs& a, bool json) {
                 a.linear_blend ? "linear blend weights" : "animation space");
     std::printf("training error: RMS %.4g (%.3f%% of the diagonal, E_RMS %.2f), max %.4g (%.3f%%)\n", rms,
                 100 * rms / diagonal, e_rms(rms), max_error, 100 * max_error / diagonal);
+    if (test_error) {
+      std::printf("held-out error on %zu frames the fit did not see (--test-select %s): RMS %.4g (%.3f%% of the "
+                  "diagonal, E_RMS %.2f), max %.4g (%.3f%%)\n",
+                  test_selected.size(), a.test_select.c_str(), test_error->rms, 100 * test_error->rms / diagonal,
+                  e_rms(test_error->rms), test_error->max, 100 * test_error->max / diagonal);
+    }
     std::printf("wrote %s\n", path.c_str());
+    print_serving_hint(a.model);
     if (!a.export_path.empty()) {
       std::printf("wrote %s (linear blend rig, %d joints, %d frames; RMS %.3f%% of the diagonal)\n", a.export_path.c_str(),
                   lbs->skeleton.bone_count(), static_cast<int>(frames.rows()), 100 * lbs_error.rms / diagonal);
@@ -258,6 +299,12 @@ CLI::App* add_import_rig(CLI::App& app, ImportRigArgs& a) {
   cmd->add_option("--dmat", a.dmat, "libigl rig: weights (DMAT, #V × #bones)");
   cmd->add_option("--gltf", a.gltf, "A glTF 2.0 file (.gltf or .glb) with a skinned mesh");
   cmd->add_option("--description", a.description, "One-line description stored in the model");
+  cmd->add_option("--drop-weights", a.drop_weights,
+                  "Drop each vertex's smallest weights up to this total and renormalise the rest: a vertex then "
+                  "moves by at most this fraction of the distance between where its bones carry it (1e-4: "
+                  "invisible at any size); 0 keeps every non-zero weight, exact to the file")
+      ->check(tools::kNonNegative)
+      ->capture_default_str();
   add_model_output_options(cmd, a.output, a.model, a.version);
   return cmd;
 }
@@ -271,11 +318,15 @@ int run_import_rig(const ImportRigArgs& a, bool json) {
   animation_space::ImportedRig rig;
   Eigen::MatrixX3d normals;
   if (libigl) {
-    auto read = animation_space::read_libigl_rig(a.mesh, a.tgf, a.dmat);
+    animation_space::WeightOptions weights;
+    weights.drop_budget = a.drop_weights;
+    auto read = animation_space::read_libigl_rig(a.mesh, a.tgf, a.dmat, weights);
     if (!read) return fail("import-rig", read.error().message);
     rig = std::move(*read);
   } else {
-    auto read = animation_space::read_gltf_rig(a.gltf);
+    animation_space::GltfImportOptions options;
+    options.weights.drop_budget = a.drop_weights;
+    auto read = animation_space::read_gltf_rig(a.gltf, options);
     if (!read) return fail("import-rig", read.error().message);
     rig = std::move(read->rig);
     normals = std::move(read->rest_normals);
@@ -299,11 +350,20 @@ int run_import_rig(const ImportRigArgs& a, bool json) {
     print_json({{"output", path.string()},
                 {"vertices", model.vertex_count()},
                 {"bones", model.bone_count() - 1},
-                {"influences", model.influences.influence_count()}});
+                {"influences", model.influences.influence_count()},
+                {"dropped_weights", rig.dropped_weights},
+                {"max_dropped_weight_sum", rig.max_dropped_weight_sum}});
   } else {
-    std::printf("imported %d vertices, %d bones + root, %d influences (%.2f per vertex)\nwrote %s\n",
-                model.vertex_count(), model.bone_count() - 1, model.influences.influence_count(),
-                static_cast<double>(model.influences.influence_count()) / model.vertex_count(), path.c_str());
+    std::printf("imported %d vertices, %d bones + root, %d influences (%.2f per vertex)\n", model.vertex_count(),
+                model.bone_count() - 1, model.influences.influence_count(),
+                static_cast<double>(model.influences.influence_count()) / model.vertex_count());
+    if (rig.dropped_weights > 0) {
+      std::printf("dropped %lld negligible weights (at most %.3g of one vertex's weight, --drop-weights %g) and "
+                  "renormalised the rest\n",
+                  static_cast<long long>(rig.dropped_weights), rig.max_dropped_weight_sum, a.drop_weights);
+    }
+    std::printf("wrote %s\n", path.c_str());
+    print_serving_hint(a.model);
   }
   return 0;
 }

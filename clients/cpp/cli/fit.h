@@ -15,6 +15,9 @@ struct FitArgs {
   std::string sequence;  // folder (reference.obj + frames.pc2, or OBJ frames) or reference mesh
   std::string pc2;
   std::string select = "::";
+  // Frames the fit does not see, to report the error a new shot of the character would get
+  // (empty: none).
+  std::string test_select;
   int bones = 20;
   double edge_regularisation = 0.005;
   double vertex_regularisation = 1e-6;
@@ -39,6 +42,9 @@ struct ImportRigArgs {
   std::string dmat;
   std::string gltf;
   std::string description;
+  // Each vertex's smallest weights, up to this total, are dropped and the rest renormalised
+  // (animation_space::WeightOptions::drop_budget).
+  double drop_weights = 1e-4;
   std::string output;
   std::string model;
   unsigned version = 0;

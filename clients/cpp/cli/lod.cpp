@@ -136,6 +136,7 @@ int run_build_lod(const BuildLodArgs& a, bool json) {
       std::printf("\n");
     }
     std::printf("wrote %s\n", path.c_str());
+    print_serving_hint(a.model);
   }
   return 0;
 }

@@ -50,6 +50,13 @@ Status write_model_file(const std::filesystem::path& path, const container::Mode
   return container::write_file(path, model);
 }
 
+void print_serving_hint(const std::string& model) {
+  if (model.empty()) return;
+  std::printf("a daemon serving this repository loads it at its next poll (every 30 s unless it runs with "
+              "--poll-interval-s 0), or at once with `animspace load %s`\n",
+              model.c_str());
+}
+
 void add_model_output_options(CLI::App* cmd, std::string& output, std::string& model, unsigned& version) {
   cmd->add_option("-o,--output", output, "Output model.anim file, or the repository folder with --model")->required();
   cmd->add_option("--model", model, "Model name: write <output>/<model>/<version>/model.anim");

@@ -26,6 +26,10 @@ std::string check_output_extension(const std::string& output, std::initializer_l
 // <output>/<model>/<version>/model.anim with version 0 meaning one above the newest present.
 std::filesystem::path model_output_path(const std::string& output, const std::string& model, unsigned version);
 
+// After "wrote …" into a repository (--model given): how a daemon serving it comes to serve the new
+// version (issue #55 item 8: a version built and never served looked like a failed build).
+void print_serving_hint(const std::string& model);
+
 // The options every command that writes a model shares: -o/--output (required), --model and
 // --version, read by model_output_path.
 void add_model_output_options(CLI::App* cmd, std::string& output, std::string& model, unsigned& version);

@@ -106,6 +106,7 @@ int run_subdivide(const SubdivideArgs& a, bool json) {
       std::printf("not carried over (tied to the control mesh):%s\n", names.c_str());
     }
     std::printf("wrote %s\n", path.c_str());
+    print_serving_hint(a.model);
   }
   return 0;
 }

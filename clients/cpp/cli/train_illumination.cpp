@@ -170,6 +170,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                   report.peak_to_rms_ratio);
     }
     std::printf("wrote %s\n", path.c_str());
+    print_serving_hint(a.model);
   }
   return 0;
 }

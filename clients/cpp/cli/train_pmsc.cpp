@@ -204,6 +204,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
     std::printf("guarantee: %s\n", pmsc::calibration_statement(*model).c_str());
     print_operating_curve(*model, options.error_tolerance, options.calibration_folds);
     std::printf("wrote %s\n", path.c_str());
+    print_serving_hint(a.model);
   }
   if (!report.converged && report.projection_error > options.error_bound) {
     // No key budget reaches a bound the basis itself misses: the keys estimate the coordinates

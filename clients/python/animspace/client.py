@@ -370,7 +370,7 @@ class Client:
                             skeleton_pose: Optional[npt.ArrayLike] = None, space: str = "global",
                             include_region_errors: bool = False, omit_points: bool = False,
                             local_fail_through: bool = False, points_encoding: str = "float32",
-                            reconstruct: bool = False,
+                            reconstruct: bool = False, skip_miss_log: bool = False,
                             deadline_s: Optional[float] = None) -> Union[PoseResult, List[PoseResult]]:
         """Key points in, the whole pose out, through the soft cache.
 
@@ -392,6 +392,8 @@ class Client:
             local_fail_through: on a blend or miss, name in ``PoseResult.full_points`` only the
                 points that need the full calculation (those of the regions whose key points
                 fail); complete them with ``complete_miss(..., full_points=...)``.
+            skip_miss_log: test traffic (load tests, benchmarks): blends and misses are served but
+                kept out of the model's miss log, and so out of retraining.
             points_encoding: how the answer's points travel: "float32" (exact), "float16"
                 (IEEE binary16: half the bytes, relative error ≤ 2^-11; refused with OutOfRange for
                 a pose with a value beyond ±65504) or "fixed16" (per-channel 16-bit fixed point:
@@ -443,7 +445,7 @@ class Client:
                                                      include_region_errors=include_region_errors,
                                                      omit_points=omit_points,
                                                      local_fail_through=local_fail_through,
-                                                     points_encoding=encoding)
+                                                     points_encoding=encoding, skip_miss_log=skip_miss_log)
         for i in range(poses.shape[0]):
             pose = request.poses.add()
             pose.key_values.CopyFrom(_point_array(poses[i]))
@@ -511,7 +513,8 @@ class Client:
     def stream_key_points(self, model: str, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]], *,
                           version: int = 0, omit_points: bool = False, first_sequence: int = 0,
                           local_fail_through: bool = False, points_encoding: str = "float32",
-                          reconstruct: bool = False, deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
+                          reconstruct: bool = False, skip_miss_log: bool = False,
+                          deadline_s: Optional[float] = None) -> Iterator[PoseResult]:
         """Plays a sequence through the soft cache over one StreamKeyPoints call: one result per
         frame, yielded in frame order as they arrive.
 
@@ -525,7 +528,7 @@ class Client:
 
         The call starts when iteration starts; ``deadline_s`` (or the client's deadline) bounds the
         whole stream — pass a generous one for a long sequence. Stopping the iteration early
-        cancels the call. ``local_fail_through``, ``points_encoding`` and ``reconstruct`` are
+        cancels the call. ``local_fail_through``, ``points_encoding``, ``reconstruct`` and ``skip_miss_log`` are
         ``evaluate_key_points``' for every frame (the basis is fetched, once, when the first
         answer as coordinates arrives).
 
@@ -539,7 +542,7 @@ class Client:
         encoding = wire.points_encoding("points_encoding", points_encoding)
         _check_reconstruct(reconstruct, encoding)
         requests = _FrameRequests(_model_ref(model, version), frames, omit_points, first_sequence, local_fail_through,
-                                  encoding)
+                                  encoding, skip_miss_log)
         self._deadline(deadline_s)
         return self._stream_key_points(requests, first_sequence, deadline_s, model if reconstruct else None)
 
@@ -970,13 +973,14 @@ class _FrameRequests:
 
     def __init__(self, model: common_pb2.ModelRef, frames: Iterable[Union[npt.ArrayLike, KeyPointPose]],
                  omit_points: bool, first_sequence: int, local_fail_through: bool = False,
-                 points_encoding: int = common_pb2.POINT_ENCODING_UNSPECIFIED) -> None:
+                 points_encoding: int = common_pb2.POINT_ENCODING_UNSPECIFIED, skip_miss_log: bool = False) -> None:
         first_sequence = wire.as_uint("first_sequence", first_sequence, 64)
         self._model = model
         self._frames = frames
         self._omit_points = omit_points
         self._points_encoding = points_encoding
         self._local_fail_through = local_fail_through
+        self._skip_miss_log = skip_miss_log
         self._first_sequence = first_sequence
         self.sent = 0
         self.failure: Optional[BaseException] = None
@@ -994,7 +998,8 @@ class _FrameRequests:
                                      f"got {wire.shape_text(values.shape)}")
                 message = poses_pb2.KeyPointFrame(sequence=self._first_sequence + i, omit_points=self._omit_points,
                                                   local_fail_through=self._local_fail_through,
-                                                  points_encoding=self._points_encoding)
+                                                  points_encoding=self._points_encoding,
+                                                  skip_miss_log=self._skip_miss_log)
                 if i == 0:
                     message.model.CopyFrom(self._model)  # later frames keep the stream's model
                 message.pose.CopyFrom(

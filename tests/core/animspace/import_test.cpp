@@ -306,6 +306,37 @@ TEST(ImportLibiglTest, DropBelowCountsAndRenormalises) {
   EXPECT_TRUE(contains(none.error().message, "row 0 (vertex 0): no influence left")) << none.error().message;
 }
 
+// drop_budget (issue #55 item 11): a vertex's smallest weights go while their sum stays within the
+// budget, the largest never; the rest are renormalised, and the vertex moves by exactly the dropped
+// sum times the distance between where its dropped and its kept bones carry it.
+TEST(ImportLibiglTest, DropBudgetDropsTheSmallestWeightsUpToTheirSum) {
+  SmallLibiglRig files = small_libigl_rig(72);
+  files.weights.row(4) << 4e-5, 5e-5, 1 - 9e-5;  // 9e-5 ≤ 1e-4: both small ones go
+  files.weights.row(6) << 6e-5, 7e-5, 1 - 1.3e-4;  // 6e-5 goes; 6e-5 + 7e-5 > 1e-4: 7e-5 stays
+  files.weights.row(8) << 0.5, 0.5, 0.0;           // nothing small: nothing goes
+  WeightOptions options;
+  options.drop_budget = 1e-4;
+  auto rig = rig_from_libigl(files.rest, files.tgf, files.weights, {}, options);
+  ASSERT_TRUE(rig.ok()) << rig.error().message;
+  const auto count = [&](int v) { return rig->model.influences.end(v) - rig->model.influences.begin(v); };
+  EXPECT_EQ(count(4), 1);
+  EXPECT_EQ(count(6), 2);
+  EXPECT_EQ(count(8), 2);
+  EXPECT_DOUBLE_EQ(rig->max_dropped_weight_sum, 9e-5);
+  for (int v : {4, 6, 8}) {
+    double sum = 0;
+    for (int k = rig->model.influences.begin(v); k < rig->model.influences.end(v); ++k) sum += rig->model.weights(k);
+    EXPECT_NEAR(sum, 1.0, 1e-15) << "vertex " << v;
+  }
+  // A budget as large as the whole weight still keeps the largest.
+  options.drop_budget = 1.0;
+  auto most = rig_from_libigl(files.rest, files.tgf, files.weights, {}, options);
+  ASSERT_TRUE(most.ok()) << most.error().message;
+  for (int v = 0; v < most->model.vertex_count(); ++v) {
+    EXPECT_EQ(most->model.influences.end(v) - most->model.influences.begin(v), 1) << "vertex " << v;
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // glTF 2.0 skins
 

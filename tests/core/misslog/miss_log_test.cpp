@@ -266,6 +266,47 @@ TEST(MissLog, InvalidRecordsAreRefusedWithoutUsingASequence) {
   EXPECT_EQ(fs::file_size(path), kFileHeaderSize + record_size(6, 6));
 }
 
+// Issue #55 item 6: a bounded log refuses the record that would pass its bound, leaves the file as
+// it was and uses no sequence; records that fit still go in, and a larger bound takes more.
+TEST(MissLog, ABoundedLogRefusesTheRecordThatWouldPassItsBound) {
+  TempDir dir;
+  const fs::path path = dir / "m.misses";
+  auto log = open_or_die(path);
+  ASSERT_NE(log, nullptr);
+  const uint64_t one = record_size(6, 6);
+  log->set_max_bytes(kFileHeaderSize + 2 * one);  // room for exactly two records
+  for (uint64_t i = 1; i <= 2; ++i) {
+    MissRecord record = make_record(i, 6, 6);
+    auto sequence = log->append(record);
+    ASSERT_TRUE(sequence.ok()) << sequence.error().message;
+    EXPECT_EQ(*sequence, i);
+  }
+  EXPECT_EQ(log->size_bytes(), kFileHeaderSize + 2 * one);
+  MissRecord third = make_record(3, 6, 6);
+  auto refused = log->append(third);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kResourceExhausted);
+  EXPECT_NE(refused.error().message.find("the miss log is full: it holds " + std::to_string(kFileHeaderSize + 2 * one) +
+                                         " bytes and a record of " + std::to_string(one) +
+                                         " bytes would pass its bound of " +
+                                         std::to_string(kFileHeaderSize + 2 * one) + " bytes"),
+            std::string::npos)
+      << refused.error().message;
+  EXPECT_EQ(third.sequence, 0U);
+  EXPECT_EQ(fs::file_size(path), kFileHeaderSize + 2 * one);
+  // A smaller record that fits still goes in (the bound is on bytes, not records).
+  log->set_max_bytes(kFileHeaderSize + 2 * one + record_size(3, 0));
+  MissRecord small = make_record(4, 3, 0);
+  EXPECT_FALSE(log->append(third).ok());
+  auto fitted = log->append(small);
+  ASSERT_TRUE(fitted.ok()) << fitted.error().message;
+  EXPECT_EQ(*fitted, 3U);
+  log->set_max_bytes(0);  // unbounded
+  EXPECT_TRUE(log->append(third).ok());
+  log.reset();
+  EXPECT_EQ(read_or_die(path).size(), 4U);
+}
+
 // Cutting the file anywhere inside the last record is a torn write: recovery keeps the records
 // before it, cuts the file back to their end, and appending works again.
 TEST(MissLogRecovery, TornLastRecordAtEveryByteOffset) {
