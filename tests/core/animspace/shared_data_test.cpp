@@ -146,6 +146,33 @@ TEST_F(AnimationSpaceSharedData, CowRigWithTinyWeightsDropped) {
   }
 }
 
+// `import-rig`'s rule (issue #55 item 11): each vertex's smallest weights up to 1e-4 of its total
+// dropped and the rest renormalised. A vertex then moves by at most the dropped sum times the
+// distance between where its dropped and kept bones carry it — a few times the diagonal at most —
+// so the posed files are matched within a few 1e-4 of the diagonal.
+TEST_F(AnimationSpaceSharedData, CowRigWithImportRigsWeightBudget) {
+  WeightOptions options;
+  options.drop_budget = 1e-4;
+  auto rig = read_rig(options);
+  ASSERT_TRUE(rig.ok()) << rig.error().message;
+  const AnimationSpaceModel model = from_linear_blend(rig->model);
+  std::printf("cow, drop_budget 1e-4: dropped %lld weights (at most %.3g per vertex), %.2f influences per vertex\n",
+              static_cast<long long>(rig->dropped_weights), rig->max_dropped_weight_sum,
+              static_cast<double>(model.influences.influence_count()) / model.vertex_count());
+  EXPECT_LE(rig->max_dropped_weight_sum, 1e-4);
+  PointMatrix posed;
+  for (int k = 1; k <= kPoses; ++k) {
+    auto pose = read_tmat_pose(*rig, pose_file(k, ".Tmat"));
+    ASSERT_TRUE(pose.ok());
+    auto expected = mesh_io::read_triangle_mesh(pose_file(k, ".obj"));
+    ASSERT_TRUE(expected.ok());
+    evaluate(model, *pose, posed);
+    const double deviation = relative_deviation(posed, expected->V);
+    std::printf("cow-%d (drop_budget 1e-4): max deviation %.3g of the diagonal\n", k, deviation);
+    EXPECT_LT(deviation, 3e-4) << "pose " << k;
+  }
+}
+
 // Normals on real data: eq. 4.8 tangent planes reproduce SSD's M⁻ᵀ n̂ exactly, and planes
 // fitted to the geometry (§4.3.1) stay close to the area-weighted normals of the posed meshes.
 TEST_F(AnimationSpaceSharedData, CowNormals) {
