@@ -370,6 +370,7 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
                         TINYGLTF_TYPE_VEC4, vertex_count);
     }
     tinygltf::Mesh mesh;
+    mesh.name = c.name;
     mesh.primitives.push_back(std::move(primitive));
     model.meshes.push_back(std::move(mesh));
 
@@ -386,6 +387,7 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
       std::copy(single.data(), single.data() + 16, inverse_binds.begin() + static_cast<std::ptrdiff_t>(16 * j));
     }
     tinygltf::Skin skin;
+    skin.name = c.name + " rig";
     skin.inverseBindMatrices =
         append_vector(model, inverse_binds, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_MAT4, joint_count);
 
@@ -408,7 +410,7 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
       }
     }
     tinygltf::Node mesh_node;
-    mesh_node.name = "mesh";
+    mesh_node.name = c.name;
     mesh_node.mesh = 0;
     mesh_node.skin = 0;
     model.nodes.push_back(std::move(mesh_node));
@@ -421,7 +423,7 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
       scene.nodes.push_back(root_joints.front());
     } else {
       tinygltf::Node common_root;
-      common_root.name = "skeleton";
+      common_root.name = c.name + " rig";
       common_root.children = root_joints;
       model.nodes.push_back(std::move(common_root));
       skin.skeleton = static_cast<int>(joint_count) + 1;

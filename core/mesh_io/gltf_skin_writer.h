@@ -53,6 +53,10 @@ struct SkinnedCharacter {
   std::vector<Matrix4dList> frame_globals;
   double frames_per_second = 24;  // finite, > 0 (checked only when there are frames)
   std::string animation_name = "sequence";
+  // What the character is called (the model's name): its mesh node and mesh carry it, and its
+  // skin and joints' root "<name> rig", so that an importer names the objects after the model
+  // (Blender 3.4 names the mesh object after the node and the armature after the skin).
+  std::string name = "character";
 };
 
 // The character with a UV per vertex from UVs per face corner (3·#F × 2, row 3f + k corner k of

@@ -39,6 +39,7 @@ for name, path in config["files"].items():
         "meshes": [{"vertices": len(o.data.vertices), "faces": len(o.data.polygons),
                     "skinned": any(m.type == "ARMATURE" for m in o.modifiers)} for o in made if o.type == "MESH"],
         "armatures": [len(o.data.bones) for o in made if o.type == "ARMATURE"],
+        "names": sorted(o.name for o in made),
         "action_frames": [list(a.frame_range) for a in actions],
     }
 open(config["out"], "w").write(json.dumps(results))
@@ -119,6 +120,8 @@ def test_every_gltf_file_we_write_imports_in_blender(daemon, tmp_path):
 
     rig = results["rig"]
     assert rig["armatures"] == [3], "the fitted root and two bones"
+    # Issue #55 item 13: the objects are named after the model (tube.anim), not "mesh" and "Armature".
+    assert rig["names"] == ["tube", "tube rig"]
     assert len(rig["meshes"]) == 1 and rig["meshes"][0]["skinned"]
     assert rig["meshes"][0]["faces"] == faces
     assert rig["action_frames"] and max(end for _, end in rig["action_frames"]) >= frames - 1

@@ -90,6 +90,7 @@ int run_export_rig(const ExportRigArgs& a, bool json) {
 
   auto character = as::skinned_character(*rig, poses, a.frames_per_second);
   if (!character) return fail(command, character.error().message);
+  character->name = model_name_of(a.input);
   // The atlas (animspace atlas): level 0 carries its UVs, a coarser level those build-lod stored
   // with it (lod/chart_atlas.h); the vertices split along its seams with their joints and weights.
   bool with_uvs = false;

@@ -217,6 +217,7 @@ int run_fit(const FitArgs& a, bool json) {
   if (!a.export_path.empty()) {
     auto character = animation_space::skinned_character(*lbs, skeleton->training_poses, a.frames_per_second);
     if (!character) return fail("fit", character.error().message);
+    character->name = a.model.empty() ? model_name_of(path) : a.model;
     if (auto written = mesh_io::write_skinned_character(export_path, *character); !written.ok()) {
       return fail("fit", written.error().message);
     }

@@ -50,6 +50,17 @@ Status write_model_file(const std::filesystem::path& path, const container::Mode
   return container::write_file(path, model);
 }
 
+std::string model_name_of(const std::filesystem::path& model_file) {
+  const std::filesystem::path version = model_file.parent_path();
+  const std::string digits = version.filename().string();
+  if (model_file.filename() == "model.anim" && !digits.empty() &&
+      digits.find_first_not_of("0123456789") == std::string::npos && version.has_parent_path() &&
+      !version.parent_path().filename().empty()) {
+    return version.parent_path().filename().string();
+  }
+  return model_file.stem().string();
+}
+
 void print_serving_hint(const std::string& model) {
   if (model.empty()) return;
   std::printf("a daemon serving this repository loads it at its next poll (every 30 s unless it runs with "

@@ -26,6 +26,10 @@ std::string check_output_extension(const std::string& output, std::initializer_l
 // <output>/<model>/<version>/model.anim with version 0 meaning one above the newest present.
 std::filesystem::path model_output_path(const std::string& output, const std::string& model, unsigned version);
 
+// The name of the model a file holds: <model> for <repository>/<model>/<version>/model.anim,
+// else the file's stem (exported characters are named after it).
+std::string model_name_of(const std::filesystem::path& model_file);
+
 // After "wrote …" into a repository (--model given): how a daemon serving it comes to serve the new
 // version (issue #55 item 8: a version built and never served looked like a failed build).
 void print_serving_hint(const std::string& model);

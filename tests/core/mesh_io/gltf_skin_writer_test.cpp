@@ -282,6 +282,11 @@ TEST(GltfSkinWriterTest, DocumentLayout) {
   EXPECT_TRUE(mesh_node.translation.empty() && mesh_node.rotation.empty() && mesh_node.matrix.empty());
   const tinygltf::Node& common_root = model.nodes[joint_count + 1];
   EXPECT_EQ(common_root.children, (std::vector<int>{0, 6}));
+  // Named after the character: importers name their objects after these (issue #55 item 13).
+  EXPECT_EQ(mesh_node.name, c.name);
+  EXPECT_EQ(model.meshes.at(0).name, c.name);
+  EXPECT_EQ(model.skins.at(0).name, c.name + " rig");
+  EXPECT_EQ(common_root.name, c.name + " rig");
   EXPECT_TRUE(common_root.translation.empty() && common_root.rotation.empty() && common_root.matrix.empty());
   ASSERT_EQ(model.scenes.size(), 1u);
   EXPECT_EQ(model.scenes[0].nodes,
