@@ -349,7 +349,9 @@ nlohmann::json run_atlas_suite(const SuiteOptions& suite) {
     std::printf("atlas: needs --data (cow-rig, horse-gallop); skipped\n");
     return rows;
   }
+  RowProgress progress("atlas");
   for (const std::string& name : suite.atlas_datasets) {
+    progress.starting(name);
     std::optional<Dataset> d = name == "cow-rig"              ? cow_dataset(*suite.data)
                                : name == "horse-gallop-block" ? horse_block_dataset(*suite.data, suite.skinning)
                                                               : std::nullopt;

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <optional>
@@ -24,6 +25,24 @@ inline double median_seconds(int repetitions, const std::function<void()>& work)
   }
   return tools::quantile(std::move(times), 0.5);
 }
+
+// One line on stderr as each row (or dataset) of a suite starts: what runs, the rows started and
+// how long the suite has run (issue #55 item 15: suites were silent for minutes). The table stays
+// on stdout, so `> table.txt` still captures only the table.
+class RowProgress {
+ public:
+  explicit RowProgress(std::string suite) : suite_(std::move(suite)), start_(std::chrono::steady_clock::now()) {}
+  void starting(const std::string& row) {
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    std::fprintf(stderr, "animspace-bench %s: %d. %s (%.0f s in)\n", suite_.c_str(), ++rows_, row.c_str(), seconds);
+    std::fflush(stderr);
+  }
+
+ private:
+  std::string suite_;
+  std::chrono::steady_clock::time_point start_;
+  int rows_ = 0;
+};
 
 // Keeps the optimiser from discarding a computed value.
 template <typename T>

@@ -501,7 +501,9 @@ nlohmann::json run_lod_suite(const SuiteOptions& suite) {
     std::printf("lod: needs --data (cow-rig, horse-gallop); skipped\n");
     return rows;
   }
+  RowProgress progress("lod");
   for (const std::string& name : suite.lod_datasets) {
+    progress.starting(name);
     std::optional<Dataset> d = name == "cow-rig"              ? cow_dataset(*suite.data)
                                : name == "horse-gallop"       ? horse_dataset(*suite.data, suite.skinning, false)
                                : name == "horse-gallop-block" ? horse_dataset(*suite.data, suite.skinning, true)

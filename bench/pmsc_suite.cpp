@@ -710,6 +710,7 @@ nlohmann::json run_pmsc_suite(const SuiteOptions& options) {
               "dataset", "split", "al", "M", "keys", "train", "cal s", "test", "p50 %dg", "p95 %dg", "oracle", "floor",
               "hit", "recall", "FH", "worst", "b.hit", "b.rec", "bFH", "worst", "loc/gl", "l.rec", "or/gl", "recon us",
               "gemv us", "batch64/s");
+  RowProgress progress("pmsc");
   for (const std::string& dataset : options.datasets) {
     if (dataset == "cow-rig") continue;  // a rig, not a sequence: its own rows below
     auto sequence = mesh_io::load_sequence(*options.data / dataset);
@@ -725,8 +726,10 @@ nlohmann::json run_pmsc_suite(const SuiteOptions& options) {
     }
     for (const auto& split : splits) {
       for (bool aligned : {false, true}) {
+        progress.starting(dataset + " " + split.name + (aligned ? " linear, aligned" : " linear"));
         results.push_back(run_one(dataset, *sequence, split, aligned, pmsc::SubspaceKind::kLinear, options));
       }
+      progress.starting(dataset + " " + split.name + " articulated");
       results.push_back(run_one(dataset, *sequence, split, false, pmsc::SubspaceKind::kArticulated, options));
     }
   }
@@ -734,6 +737,8 @@ nlohmann::json run_pmsc_suite(const SuiteOptions& options) {
     for (pmsc::SubspaceKind kind : {pmsc::SubspaceKind::kLinear, pmsc::SubspaceKind::kArticulated}) {
       for (bool secondary : {false, true}) {
         for (bool cross_fitted : {false, true}) {
+          progress.starting(std::string("cow-rig ") + pmsc::subspace_kind_name(kind) +
+                            (secondary ? ", secondary motion" : "") + (cross_fitted ? ", cross-fitted" : ""));
           for (nlohmann::json& row : run_cow_extrapolation(*options.data, kind, secondary, cross_fitted, options)) {
             results.push_back(std::move(row));
           }

@@ -302,7 +302,9 @@ nlohmann::json run_skinning_suite(const SuiteOptions& suite) {
   const auto has = [&](const char* dataset) {
     return std::find(suite.skinning.datasets.begin(), suite.skinning.datasets.end(), dataset) != suite.skinning.datasets.end();
   };
+  RowProgress progress("skinning");
   for (const std::string& dataset : suite.skinning.datasets) {
+    progress.starting(dataset);
     if (dataset != "horse-gallop" && dataset != "crane" && dataset != "cow-rig") {
       std::printf("%s: unknown dataset (skipped)\n", dataset.c_str());
     }

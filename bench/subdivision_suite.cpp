@@ -251,7 +251,9 @@ nlohmann::json run_subdivision_suite(const SuiteOptions& options) {
   std::printf("%-8s %-9s %2s %8s %7s %12s %10s %12s %10s %8s\n", "dataset", "method", "k", "vertices", "infl/v",
               "max err/diag", "eval µs", "refine µs", "ctrl µs", "build s");
   nlohmann::json rows = nlohmann::json::array();
+  RowProgress progress("subdivide");
   for (const Dataset& d : datasets) {
+    progress.starting(d.name);
     for (auto& row : run_dataset(d, options.repetitions)) rows.push_back(std::move(row));
   }
   std::printf("eval: the subdivided model posed. refine: the control model posed, then OpenSubdiv's stencils applied "

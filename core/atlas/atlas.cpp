@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <unordered_map>
@@ -160,7 +161,12 @@ Result<AtlasReport> flatten_split_pack(const FaceMatrix& faces, const FaceMetric
       }
       local[static_cast<size_t>(c)] = local_chart(faces, metrics, std::move(members[static_cast<size_t>(c)]));
     }
-    parallel_for_chunks(static_cast<int64_t>(todo.size()), 1, [&](int64_t begin, int64_t end) {
+    const char* stage = round == 0 ? "flatten charts" : "flatten split charts";
+    const auto to_flatten = static_cast<int64_t>(todo.size());
+    int64_t flattened = 0;
+    std::mutex progress_mutex;  // one report at a time (core/common/progress.h)
+    report_progress(options.progress, stage, 0, to_flatten);
+    parallel_for_chunks(to_flatten, 1, [&](int64_t begin, int64_t end) {
       for (int64_t i = begin; i < end; ++i) {
         const auto c = static_cast<size_t>(todo[static_cast<size_t>(i)]);
         auto map = flatten_chart(local[c].faces, local[c].vertex_count, local[c].metrics, options.flatten);
@@ -170,6 +176,10 @@ Result<AtlasReport> flatten_split_pack(const FaceMatrix& faces, const FaceMetric
           maps[c] = std::move(*map);
         } else {
           failures[c] = map.error().message;
+        }
+        if (options.progress) {
+          std::lock_guard lock(progress_mutex);
+          options.progress(stage, ++flattened, to_flatten);
         }
       }
     });
@@ -210,8 +220,10 @@ Result<AtlasReport> flatten_split_pack(const FaceMatrix& faces, const FaceMetric
     uv[static_cast<size_t>(c)] = m.uv * (to_surface * std::sqrt(std::max(m.l2, 1.0)));
     local_faces[static_cast<size_t>(c)] = local[static_cast<size_t>(c)].faces;
   }
+  report_progress(options.progress, "pack charts", 0, 1);
   auto packed = pack_charts(uv, local_faces, options.pack);
   if (!packed) return packed.error();
+  report_progress(options.progress, "pack charts", 1, 1);
   report.pack_seconds = seconds_since(start);
   report.utilisation = packed->utilisation;
 
@@ -254,8 +266,10 @@ Result<AtlasReport> build_atlas(const as::AnimationSpaceModel& model, const as::
   const NormalisedFaces nf = normalised_faces(model.faces, normalised_vertices(model, *W));
   ChartOptions chart_options = options.charts;
   chart_options.chart_count = options.chart_count > 0 ? options.chart_count : default_chart_count(model);
+  report_progress(options.progress, "segment charts", 0, 1);
   auto charts = segment_charts(model.faces, nf, chart_options);
   if (!charts) return charts.error();
+  report_progress(options.progress, "segment charts", 1, 1);
   const double segment_seconds = seconds_since(start);
   auto report = flatten_split_pack(model.faces, grams(nf), std::move(*charts), options, &nf);
   if (!report) return report.error();

@@ -19,6 +19,7 @@
 #include "core/atlas/flatten.h"
 #include "core/atlas/pack.h"
 #include "core/atlas/stretch.h"
+#include "core/common/progress.h"
 #include "core/common/result.h"
 
 namespace animspace::atlas {
@@ -41,6 +42,9 @@ struct AtlasOptions {
   double split_stretch = 0.1;
   int min_split_faces = 16;
   int max_split_rounds = 6;
+  // Stages "segment charts", "flatten charts" (per chart; again for each split round) and "pack
+  // charts", for a command line's bar (a cow's atlas takes tens of seconds).
+  ProgressCallback progress;
 };
 
 struct AtlasReport {

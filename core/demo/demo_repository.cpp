@@ -368,11 +368,18 @@ Status write_demo_articulated(const std::filesystem::path& repository) {
   return write_model(repository, kDemoArticulatedModelName, *model);
 }
 
-Status write_bundled_demo(const std::filesystem::path& repository) {
+Status write_bundled_demo(const std::filesystem::path& repository, const ProgressCallback& progress) {
+  constexpr const char* kStage = "demo models";
+  report_progress(progress, kStage, 0, 4);
   ANIMSPACE_RETURN_IF_ERROR(write_demo_repository(repository));
+  report_progress(progress, kStage, 1, 4);
   ANIMSPACE_RETURN_IF_ERROR(write_demo_illumination(repository));
+  report_progress(progress, kStage, 2, 4);
   ANIMSPACE_RETURN_IF_ERROR(write_demo_articulated(repository));
-  return write_demo_smooth(repository);
+  report_progress(progress, kStage, 3, 4);
+  ANIMSPACE_RETURN_IF_ERROR(write_demo_smooth(repository));
+  report_progress(progress, kStage, 4, 4);
+  return Status::Ok();
 }
 
 std::filesystem::path demo_model_path(const std::filesystem::path& repository) {

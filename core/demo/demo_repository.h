@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <string_view>
 
+#include "core/common/progress.h"
 #include "core/common/result.h"
 #include "core/container/model_container.h"
 #include "core/demo/bending_arm.h"
@@ -124,8 +125,9 @@ Result<container::ModelContainer> make_demo_articulated_container(int frames = k
 Status write_demo_articulated(const std::filesystem::path& repository);
 
 // What `animspaced` serves without --model-repository and `animspace demo-repository` writes:
-// write_demo_repository, write_demo_illumination, write_demo_smooth and write_demo_articulated.
-Status write_bundled_demo(const std::filesystem::path& repository);
+// write_demo_repository, write_demo_illumination, write_demo_smooth and write_demo_articulated,
+// each a step of `progress`'s stage "demo models" (the whole takes seconds).
+Status write_bundled_demo(const std::filesystem::path& repository, const ProgressCallback& progress = {});
 
 // The path of the demo model's file inside `repository`.
 std::filesystem::path demo_model_path(const std::filesystem::path& repository);

@@ -56,7 +56,9 @@ int run_atlas(const AtlasArgs& a, bool json) {
   atlas::AtlasOptions options;
   options.chart_count = a.charts;
   const auto start = std::chrono::steady_clock::now();
+  options.progress = progress_bars("atlas");
   auto built = atlas::build_atlas(*model, metrics, options);
+  options.progress = nullptr;  // ends the last bar's line before the report
   if (!built) return fail("atlas", a.input + ": " + built.error().message);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   atlas::store_atlas(built->atlas, metric_name, out);

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -381,7 +382,10 @@ int run_inspect(const Globals& g, const std::string& path) {
 }
 
 int run_demo_repository(const std::string& dir) {
-  if (auto status = animspace::demo::write_bundled_demo(dir); !status.ok()) {
+  std::optional<animspace::ProgressCallback> progress(animspace::cli::progress_bars("demo-repository"));
+  const animspace::Status status = animspace::demo::write_bundled_demo(dir, *progress);
+  progress.reset();  // ends the bar's line before the report
+  if (!status.ok()) {
     std::fprintf(stderr, "animspace demo-repository: %s\n", status.error().message.c_str());
     return 2;
   }

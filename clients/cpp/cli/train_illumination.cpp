@@ -129,6 +129,7 @@ int run_train_illumination(const TrainIlluminationArgs& a, bool json) {
                             : a.description;
   illumination::IlluminationTrainingReport report;
   auto container = illumination::train_illumination(**engine, options, description, &report);
+  options.pmsc.progress = nullptr;  // ends the last bar's line before the report
   if (!container) return fail("train-illumination", container.error().message);
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, *container); !written.ok()) {

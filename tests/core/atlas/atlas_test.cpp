@@ -270,6 +270,35 @@ TEST(Atlas, OfATubeIsOneToOneWithDiscCharts) {
   }
 }
 
+// Issue #55 item 15: the atlas reports its stages for a command line's bar — segmentation, then
+// every chart flattened (one report per chart, the count reaching the chart count), then packing —
+// each count within its total.
+TEST(Atlas, ReportsItsStagesAsItGoes) {
+  const testing::ArticulatedTube tube = testing::make_tube(3, 4, 1, 3);
+  const auto model = rigid_model(tube.rest, tube.faces);
+  auto metrics = rest_pose_metrics(model.skeleton);
+  ASSERT_TRUE(metrics.ok());
+  std::vector<std::string> stages;
+  int64_t flattened = 0;
+  AtlasOptions options;
+  options.chart_count = 3;
+  options.progress = [&](std::string_view stage, int64_t done, int64_t total) {
+    EXPECT_LE(done, total) << stage;
+    if (stages.empty() || stages.back() != stage) stages.emplace_back(stage);
+    if (stage == "flatten charts") flattened = std::max(flattened, done);
+  };
+  auto built = build_atlas(model, *metrics, options);
+  ASSERT_TRUE(built.ok()) << built.error().message;
+  ASSERT_GE(stages.size(), 3u);
+  EXPECT_EQ(stages.front(), "segment charts");
+  EXPECT_EQ(stages[1], "flatten charts");
+  EXPECT_EQ(stages.back(), "pack charts");
+  EXPECT_GE(flattened, 1);
+  // Round 0 flattens every segmented chart; split rounds only add charts.
+  EXPECT_EQ(built->split_rounds == 0, flattened == built->atlas.chart_count);
+  EXPECT_LE(flattened, built->atlas.chart_count);
+}
+
 // A strip [0, 2] × [0, 1] skinned to two bones: bone 1 slides along x by up to 1.5 in the poses,
 // bone 0 stays; across the blend band x ∈ [0.6, 1.4] the surface stretches up to ×(1 + 1.5/0.8)
 // along x, elsewhere it moves rigidly. The rest pose does not show it.
