@@ -5,6 +5,7 @@
 #include <numbers>
 #include <string>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 #include "core/common/format.h"
@@ -31,6 +32,27 @@ constexpr double kFramingMargin = 1.05;
 // Up to this sine of the angle between up and the view direction, they count as parallel: the
 // basis would be dominated by rounding.
 constexpr double kParallelSine = 1e-6;
+
+// The level view direction (unit, in the xz plane; the camera sits at centre + distance · d) that
+// shows `points` at their widest: the horizontal axis along which they spread least. Seen along
+// it, the picture spans the vertical extent times the largest horizontal one, the most a level
+// camera can show (issue #55 item 13: a dancer facing +x was drawn side-on from +z). Of its two
+// signs, the one toward +z (glTF's front) when the axis is nearer z than x, else toward +x; a
+// spread with no preferred axis (a turntable-symmetric model) keeps +z.
+Eigen::Vector3d widest_level_view(const PointMatrix& points, const Eigen::Vector3d& centre) {
+  Eigen::Matrix2d spread = Eigen::Matrix2d::Zero();  // second moments of (x, z) about the centre
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    const Eigen::Vector2d q(points(i, 0) - centre.x(), points(i, 2) - centre.z());
+    spread += q * q.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(spread);
+  const Eigen::Vector2d values = eigen.eigenvalues();  // ascending
+  if (!(values(1) > 0) || values(1) - values(0) <= 1e-6 * values(1)) return Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d d(eigen.eigenvectors()(0, 0), 0.0, eigen.eigenvectors()(1, 0));
+  d.normalize();
+  if ((std::abs(d.z()) >= std::abs(d.x()) ? d.z() : d.x()) < 0) d = -d;
+  return d;
+}
 
 std::string vector_text(const Eigen::Vector3d& v) {
   return "(" + format_number(v.x()) + ", " + format_number(v.y()) + ", " + format_number(v.z()) + ")";
@@ -109,7 +131,7 @@ Result<Camera> frame_bounding_box(const PointMatrix& points, double aspect) {
   camera.vertical_fov_rad = 0.8;
   // The sphere fits a cone of half-angle fov/2 when distance · sin(fov/2) ≥ radius.
   const double fov = std::min(camera.vertical_fov_rad, horizontal_fov(camera, aspect));
-  camera.eye = sphere.centre + Eigen::Vector3d(0, 0, radius * kFramingMargin / std::sin(fov / 2));
+  camera.eye = sphere.centre + widest_level_view(points, sphere.centre) * (radius * kFramingMargin / std::sin(fov / 2));
   return camera;
 }
 
@@ -128,7 +150,7 @@ Result<Camera> frame_in_columns(const PointMatrix& points, int width, int height
   const double shift_px = 0.5 * (width - columns);
   const double depth = (camera->eye - camera->target).norm();
   const double focal_px = 0.5 * height / std::tan(camera->vertical_fov_rad / 2);
-  const Eigen::Vector3d right = Eigen::Vector3d::UnitX();  // frame_bounding_box looks down −z, up +y
+  const Eigen::Vector3d right = basis(*camera).s;
   camera->eye += shift_px * depth / focal_px * right;
   camera->target += shift_px * depth / focal_px * right;
   return camera;

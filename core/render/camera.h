@@ -28,9 +28,10 @@ Projected project_to_pixel(const Camera& camera, int width, int height, const Ei
 // The horizontal field of view of `camera` on an image of `aspect` = width / height.
 double horizontal_fov(const Camera& camera, double aspect);
 
-// A camera that sees the whole of `points`: it looks at the centre of their bounding sphere
-// (geometry::bounding_sphere) from the front (+z, up +y), far
-// enough that the sphere fits the narrower field of view with a small margin.
+// A camera that sees the whole of `points`: level (up +y), it looks at the centre of their bounding
+// sphere (geometry::bounding_sphere) along the horizontal axis of least spread, so that the view
+// shows the model at its widest (a dancer facing +x from +x, a horse from its side), from the +z
+// side of that axis; far enough that the sphere fits the narrower field of view with a small margin.
 // Errors: kInvalidArgument for no points or non-finite points.
 Result<Camera> frame_bounding_box(const PointMatrix& points, double aspect);
 

@@ -101,11 +101,13 @@ TEST(CameraTest, FrameBoundingBoxKeepsEveryPointInsideTheImage) {
     SCOPED_TRACE(std::to_string(width) + " × " + std::to_string(height));
     Result<Camera> camera = frame_bounding_box(points, static_cast<double>(width) / height);
     ASSERT_TRUE(camera.ok()) << camera.error().message;
-    // Looks at the bounding-box centre from +z with +y up.
+    // Looks at the bounding-box centre, level (+y up), along the horizontal axis the points spread
+    // least on: x (uniform over 8 units) against z (over 16), so from +x.
     const Eigen::Vector3d centre =
         ((points.colwise().minCoeff() + points.colwise().maxCoeff()).cast<double>() / 2).transpose();
     EXPECT_TRUE(camera->target.isApprox(centre, 1e-9));
-    EXPECT_NEAR((camera->eye - camera->target).normalized().z(), 1, 1e-12);
+    EXPECT_NEAR((camera->eye - camera->target).normalized().x(), 1, 1e-3);
+    EXPECT_NEAR((camera->eye - camera->target).normalized().y(), 0, 1e-12);
     EXPECT_TRUE(camera->up.isApprox(Eigen::Vector3d::UnitY()));
     EXPECT_TRUE(validate_camera(*camera, "camera").ok());
     const testing::Pinhole pinhole(camera->eye, camera->target, camera->up, camera->vertical_fov_rad, width,
@@ -120,6 +122,51 @@ TEST(CameraTest, FrameBoundingBoxKeepsEveryPointInsideTheImage) {
                          height - projected.pixel.y()});
     }
     EXPECT_GT(margin, 0);
+  }
+}
+
+// Issue #55 item 13: the automatic camera shows a model at its widest. A figure facing +x (thin
+// along x, arms spread along z) is seen from +x, one facing +z from +z; whatever the facing, the
+// framed picture covers at least the bounding-box area of any other level view's, measured with
+// the independent pinhole.
+TEST(CameraTest, FrameBoundingBoxShowsTheModelAtItsWidest) {
+  std::mt19937 engine(3);
+  std::uniform_real_distribution<double> unit(-1, 1);
+  const auto figure = [&](double facing_rad) {
+    PointMatrix points(2000, 3);
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+      const double depth = 0.15 * unit(engine), width = 0.8 * unit(engine), height = 1.8 * unit(engine);
+      // facing_rad 0: thin along z; π/2: thin along x.
+      points.row(i) << static_cast<float>(width * std::cos(facing_rad) + depth * std::sin(facing_rad)),
+          static_cast<float>(height), static_cast<float>(-width * std::sin(facing_rad) + depth * std::cos(facing_rad));
+    }
+    return points;
+  };
+  const auto image_area = [](const PointMatrix& points, const Camera& camera) {
+    const testing::Pinhole pinhole(camera.eye, camera.target, camera.up, camera.vertical_fov_rad, 200, 200);
+    Eigen::Vector2d low = Eigen::Vector2d::Constant(1e300), high = -low;
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+      const Eigen::Vector2d q = pinhole.project(points.row(i).cast<double>().transpose());
+      low = low.cwiseMin(q);
+      high = high.cwiseMax(q);
+    }
+    return (high - low).prod();
+  };
+  for (double facing : {0.0, std::numbers::pi / 2, 0.6}) {
+    SCOPED_TRACE("facing " + std::to_string(facing));
+    const PointMatrix points = figure(facing);
+    Result<Camera> camera = frame_bounding_box(points, 1.0);
+    ASSERT_TRUE(camera.ok()) << camera.error().message;
+    const Eigen::Vector3d view = (camera->eye - camera->target).normalized();
+    // The figure's thin axis, (sin φ, 0, cos φ), up to sign.
+    EXPECT_GT(std::abs(view.dot(Eigen::Vector3d(std::sin(facing), 0, std::cos(facing)))), 0.99);
+    const double ours = image_area(points, *camera);
+    for (int k = 0; k < 12; ++k) {
+      Camera other = *camera;
+      const double a = k * std::numbers::pi / 12;
+      other.eye = other.target + (camera->eye - camera->target).norm() * Eigen::Vector3d(std::sin(a), 0, std::cos(a));
+      EXPECT_GE(ours, 0.98 * image_area(points, other)) << "view angle " << a;
+    }
   }
 }
 
