@@ -178,12 +178,12 @@ Result<container::ModelContainer> make_demo_illumination_container(const DemoIll
   for (const Eigen::Vector3d& p : illumination::light_grid(illumination::cornell_room(), grid)) {
     training.lights.push_back({p, Eigen::Vector3d::Ones()});
   }
-  // The demo keeps the small gather it has always shipped (a few rays, a shadow ray from every
-  // hit), so that `make run` and the tour stay quick; the converged gather (issue #38: 2,048 rays,
-  // the direct light read from the vertices) is train-illumination's default at the papers' size.
-  // Each vertex's value is the irradiance at the vertex, not the training default's mean over its
-  // cell: 16 rays spread over a cell (~2 cm across at 3,000 points) add the cell's variation to
-  // their noise, and the tour's relit light turned from a HIT into a blend with it.
+  // The demo keeps a short gather (options.samples rays, a shadow ray from every hit), so that
+  // `make run` and the tour stay quick; the converged gather (issue #38: 2,048 rays, the direct
+  // light read from the vertices) is train-illumination's default at the papers' size. Each
+  // vertex's value is the irradiance at the vertex, not the training default's mean over its
+  // cell: a few rays spread over a cell (~2 cm across at 3,000 points) add the cell's variation
+  // to their noise, and the tour's relit light turned from a HIT into a blend with it (at 16 rays).
   training.gather.samples = options.samples;
   training.gather.direct_from_vertices = false;
   training.gather.cell_average = false;

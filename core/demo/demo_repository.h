@@ -85,10 +85,13 @@ inline constexpr std::string_view kDemoIlluminationModelName = "cornell";
 // indirect illumination for the 12 × 12 grid of point lights under its ceiling, as a PMSC model of
 // RGB radiance that carries its illumination engine (illumination::train_illumination). Sized for
 // a demo that must start in moments (measured in docs/BENCHMARKS.md): a few thousand surface
-// points and few gather rays; the bench and `animspace train-illumination` use the papers' sizes.
+// points and a short gather; the bench and `animspace train-illumination` use the papers' sizes.
+// 128 rays a point (issue #55 item 14): with 16 the relit walls were visibly mottled — each point's
+// noise is the same under every light (its ray directions are fixed), so the subspace keeps it as
+// blotches; 8× the rays is √8 ≈ 2.8× less of it, for about 2 s more of `make run`'s start.
 struct DemoIlluminationOptions {
   int points = 3000;
-  int samples = 16;
+  int samples = 128;
   int lights_x = 12;
   int lights_z = 12;
 };

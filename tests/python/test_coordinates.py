@@ -215,9 +215,10 @@ def test_a_stream_as_coordinates_reconstructs_the_float32_answer_within_the_boun
 
 
 def test_relight_answers_as_coordinates_within_the_bound(client, channel, tmp_path):
-    # The Cornell box: M = 100, 2990 RGB points; the server gathers the key values itself.
+    # The Cornell box: M ≈ 100, 2990 RGB points; the server gathers the key values itself. The
+    # tour's first light, a HIT (what a client reconstructs from coordinates).
     _, mean, A = raw_basis(channel, "cornell")
-    light = [0.3, 0.44, 0.45]
+    light = [0.1, 0.44, 0.45]
     exact = client.relight("cornell", light)
     with animspace.Client(channel=client.channel, basis_cache=tmp_path) as own:
         answer = own.relight("cornell", light, points_encoding="coordinates", reconstruct=True)
