@@ -5,9 +5,14 @@
 // folded in exactly once more.
 #include <sys/wait.h>
 
+#include <signal.h>
+
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <map>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -16,12 +21,18 @@
 #include <nlohmann/json.hpp>
 
 #include "clients/cpp/client.h"
+#include "clients/cpp/coordinates.h"
+#include "clients/cpp/key_point_stream.h"
 #include "core/container/model_container.h"
 #include "core/demo/demo_repository.h"
 #include "core/container/sections.h"
+#include "core/misslog/miss_log.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/retrain.h"
 #include "harness/daemon_process.h"
 #include "tests/support/integration_support.h"
+#include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -31,6 +42,13 @@ using harness::DaemonProcess;
 using testing::TempDir;
 
 const std::string kModel(demo::kDemoPmscModelName);
+
+// The client side of several replicas (docs/DEPLOY.md): a call that fails UNAVAILABLE — its
+// replica gone — is tried again, on another replica, up to twice.
+constexpr const char* kRoundRobinRetries = R"({"methodConfig": [{
+  "name": [{"service": "animspace.v1.PoseService"}, {"service": "animspace.v1.ModelService"}],
+  "retryPolicy": {"maxAttempts": 3, "initialBackoff": "0.01s", "maxBackoff": "0.2s", "backoffMultiplier": 2,
+                  "retryableStatusCodes": ["UNAVAILABLE"]}}]})";
 
 struct Replica {
   std::unique_ptr<DaemonProcess> daemon;
@@ -53,6 +71,20 @@ nlohmann::json retrain_offline(const std::filesystem::path& repo, const std::fil
     ADD_FAILURE() << "not JSON: " << text;
     return {};
   }
+}
+
+// A completed miss, acknowledged: frame `frame` of the arm with its points pushed `push` along
+// `axis` (so that a later miss can be unlike what an earlier one taught), evaluated on the version
+// `client` serves now with that version's key points (a retrain may choose others), its full
+// values sent back and logged.
+void complete_one_miss(Client& client, const FrameMatrix& frames, int frame, float push, size_t axis = 1) {
+  const KeyPoints keys = client.describe_key_points(kModel);
+  std::vector<float> full(frames.row(frame).data(), frames.row(frame).data() + frames.cols());
+  for (size_t i = 0; i < full.size(); i += 3) full[i + axis] += push * static_cast<float>(i % 7);
+  const std::vector<float> values = keys.gather(full);
+  const PoseResult r = client.evaluate_key_points(kModel, {values, 3}, {.version = keys.model_version});
+  ASSERT_NE(r.status, v1::CACHE_STATUS_HIT);
+  ASSERT_TRUE(client.complete_miss(kModel, r.model_version, {values, 3}, full).logged);
 }
 
 bool wait_for_default_version(Client& client, uint64_t version) {
@@ -87,16 +119,8 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
 
   // Completed misses: frames bent off what was trained, their full values sent back.
   int completed = 0;
-  // `axis`: the coordinate pushed, so that a later miss can be unlike what the earlier taught.
   auto complete_one = [&](Replica& replica, int frame, float push, size_t axis = 1) {
-    // The key points of the version served now (a retrain may choose others), pinned to it.
-    const KeyPoints keys = replica.client->describe_key_points(kModel);
-    std::vector<float> full(frames->row(frame).data(), frames->row(frame).data() + frames->cols());
-    for (size_t i = 0; i < full.size(); i += 3) full[i + axis] += push * static_cast<float>(i % 7);
-    const std::vector<float> values = keys.gather(full);
-    const PoseResult r = replica.client->evaluate_key_points(kModel, {values, 3}, {.version = keys.model_version});
-    ASSERT_NE(r.status, v1::CACHE_STATUS_HIT);
-    ASSERT_TRUE(replica.client->complete_miss(kModel, r.model_version, {values, 3}, full).logged);
+    complete_one_miss(*replica.client, *frames, frame, push, axis);
     ++completed;
   };
   complete_one(replicas[0], 3, 0.05f);
@@ -142,6 +166,186 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
   for (const auto& entry : std::filesystem::directory_iterator(repo.path() / kModel)) {
     EXPECT_NE(entry.path().filename().string().rfind(".publish-", 0), 0u) << entry.path();
   }
+}
+
+// Issue #53 item 5, the step before Kubernetes (docs/DEPLOY.md maps it to deploy/): three replicas
+// on loopback share one repository, each logging its own misses; one client balances round-robin
+// over the three (gRPC's round_robin, with the retry policy docs/DEPLOY.md gives) and plays poses
+// pinned to a version, as coordinates it reconstructs itself. Through the nightly job
+// (retrain-offline folding all three logs into version 2) and each replica's swap at its poll,
+// every answer names the version it was pinned to and is reconstructed with that version's basis
+// (checked against the version's file, computed here); a replica killed with SIGKILL under a
+// stream ends that stream only: the client's next calls are answered by the others, and the
+// misses the killed replica acknowledged are all in its log.
+TEST(RetrainOffline, ThreeReplicasSwapVersionsUnderARoundRobinClientAndSurviveAKill) {
+  TempDir repo, logs, scratch;
+  ASSERT_TRUE(demo::write_demo_repository(repo.path()).ok());
+  auto arm = container::read_file(repo.path() / "arm" / "1" / "model.anim");
+  ASSERT_TRUE(arm.ok());
+  auto frames = arm->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames.ok());
+
+  struct Served {
+    Replica replica;
+    std::string name;
+    int metrics_port = 0;
+    int acknowledged = 0;  // completed misses it answered `logged`
+  };
+  std::vector<Served> replicas;
+  std::string targets;
+  for (const char* name : {"replica-a", "replica-b", "replica-c"}) {
+    std::filesystem::create_directories(logs.path() / name);
+    std::filesystem::create_directories(scratch.path() / name);
+    const int metrics_port = testing::free_tcp_port();
+    auto daemon = std::make_unique<DaemonProcess>(
+        std::vector<std::string>{"--model-repository", repo.path().string(), "--miss-log-dir",
+                                 (logs.path() / name).string(), "--poll-interval-s", "0.2", "--renderer", "none",
+                                 "--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)},
+        scratch.path() / name);
+    auto client = std::make_unique<Client>(daemon->address());
+    ASSERT_TRUE(testing::wait_until_serving(*client));
+    targets += (targets.empty() ? "ipv4:" : ",") + daemon->address();
+    replicas.push_back({{std::move(daemon), std::move(client)}, name, metrics_port, 0});
+  }
+  for (Served& served : replicas) {
+    complete_one_miss(*served.replica.client, *frames, 3, 0.05f);
+    ++served.acknowledged;
+  }
+
+  grpc::ChannelArguments args;
+  args.SetLoadBalancingPolicyName("round_robin");
+  args.SetServiceConfigJSON(kRoundRobinRetries);
+  Client balanced(grpc::CreateCustomChannel(targets, grpc::InsecureChannelCredentials(), args));
+
+  // The player: frame after frame, pinned to `pin`, answered as coordinates and reconstructed.
+  std::atomic<uint64_t> pin{1};
+  std::atomic<bool> stop{false};
+  std::atomic<long> answered[3] = {0, 0, 0};  // by version
+  std::mutex failures_mutex;
+  std::vector<std::string> failures;
+  std::atomic<bool> failed{false};
+  const auto fail = [&](const std::string& what) {
+    std::lock_guard lock(failures_mutex);
+    failures.push_back(what);
+    failed = true;
+  };
+  BasisCache bases("");  // in memory: fetched from whichever replica answers GetBasis
+  std::thread player([&] {
+    std::map<uint64_t, pmsc::PmscModel> files;  // each version's model, read from the repository
+    uint64_t version = 0;
+    KeyPoints keys;
+    for (long f = 0; !stop.load(); ++f) {
+      try {
+        if (pin.load() != version) {
+          version = pin.load();
+          keys = balanced.describe_key_points(kModel, version);
+          auto file = container::read_file(repo.path() / kModel / std::to_string(version) / "model.anim");
+          auto model = file.ok() ? pmsc::load(*file, kModel) : Result<pmsc::PmscModel>(file.error());
+          if (!model.ok() || !pmsc::prepare_projection(*model).ok()) return fail("version " + std::to_string(version));
+          files[version] = std::move(*model);
+        }
+        const auto row = frames->row(f % frames->rows());
+        const std::vector<float> full(row.data(), row.data() + row.size());
+        const std::vector<float> values = keys.gather(full), checks = keys.gather_check_values(full);
+        PoseResult r = balanced.evaluate_key_points(
+            kModel, {values, 3, nullptr, {}, checks},
+            {.version = version, .points_encoding = v1::POINT_ENCODING_COORDINATES});
+        if (r.model_version != version) {
+          fail("frame " + std::to_string(f) + ": answered by version " + std::to_string(r.model_version) +
+               ", pinned to " + std::to_string(version));
+        }
+        if (bases.reconstruct(balanced, kModel, r)) {
+          pmsc::PoseEstimate expected;
+          pmsc::evaluate(files.at(version), Eigen::Map<const Eigen::VectorXf>(values.data(), values.size()), expected);
+          const float scale = expected.points.cwiseAbs().maxCoeff();
+          const Eigen::Map<const Eigen::VectorXf> got(r.points.values.data(), static_cast<long>(r.points.values.size()));
+          if (got.size() != expected.points.size() || (got - expected.points).cwiseAbs().maxCoeff() > 1e-4f * scale) {
+            fail("frame " + std::to_string(f) + ": not version " + std::to_string(version) + "'s reconstruction");
+          }
+        }
+        ++answered[version];
+      } catch (const std::exception& e) {
+        fail("frame " + std::to_string(f) + ": " + e.what());
+      }
+    }
+  });
+  const auto wait_for_answers = [&](uint64_t version, long count) {
+    return testing::wait_until([&] { return answered[version].load() >= count || failed.load(); });
+  };
+
+  // Version 1 everywhere; then the nightly job folds every replica's log into version 2, and each
+  // replica swaps it in at its poll; the player moves to it once every replica serves it.
+  EXPECT_TRUE(wait_for_answers(1, 30));
+  const nlohmann::json retrained = retrain_offline(repo.path(), logs.path(), scratch.path());
+  EXPECT_EQ(retrained["logs"].get<int>(), 3);
+  EXPECT_EQ(retrained["misses"].get<int>(), 3);
+  ASSERT_EQ(retrained["published_version"].get<uint64_t>(), 2u);
+  EXPECT_TRUE(wait_for_answers(1, 60)) << "the player kept going through the publish";
+  for (Served& served : replicas) {
+    EXPECT_TRUE(wait_for_default_version(*served.replica.client, 2)) << served.name << " never swapped";
+  }
+  pin = 2;
+  EXPECT_TRUE(wait_for_answers(2, 30));
+  stop = true;
+  player.join();
+  for (const std::string& failure : failures) ADD_FAILURE() << failure;
+  EXPECT_GE(answered[1].load(), 60);
+  EXPECT_GE(answered[2].load(), 30);
+
+  // A stream through the balancer lands on one replica: the one with a call in flight.
+  const KeyPoints keys = balanced.describe_key_points(kModel, 2);
+  const auto pose_of = [&](long f) {
+    const auto row = frames->row(f % frames->rows());
+    return keys.gather(std::vector<float>(row.data(), row.data() + row.size()));
+  };
+  auto stream = balanced.open_stream(kModel, {.version = 2, .window = 1});
+  const std::vector<float> first = pose_of(0);
+  ASSERT_TRUE(stream->write({first, 3}, 0));
+  ASSERT_TRUE(stream->read().has_value());
+  Served* carrier = nullptr;
+  ASSERT_TRUE(testing::wait_until([&] {
+    for (Served& served : replicas) {
+      const auto page = testing::scrape_metrics(served.metrics_port);
+      if (page && testing::metric_value(*page, "animspace_calls_in_flight").value_or(0) >= 1) carrier = &served;
+    }
+    return carrier != nullptr;
+  }));
+  // One more acknowledged miss on it (pushed along z: unlike what version 2 learned), then SIGKILL.
+  complete_one_miss(*carrier->replica.client, *frames, 21, 0.07f, 2);
+  ASSERT_FALSE(HasFatalFailure());
+  ++carrier->acknowledged;
+  carrier->replica.daemon->send_signal(SIGKILL);
+  EXPECT_NE(carrier->replica.daemon->wait_for_exit(std::chrono::seconds(30)), -1);
+
+  // The stream ends with the replica (its next frame finds the connection gone) ...
+  const std::vector<float> second = pose_of(1);
+  if (stream->write({second, 3}, 1)) {
+    EXPECT_FALSE(stream->read().has_value());
+  }
+  EXPECT_THROW(stream->finish(), RpcError);
+  // ... and the client's next calls, unary and streamed, are answered by the other two.
+  for (long f = 0; f < 20; ++f) {
+    const std::vector<float> values = pose_of(f);
+    EXPECT_EQ(balanced.evaluate_key_points(kModel, {values, 3}, {.version = 2}).model_version, 2u) << "frame " << f;
+  }
+  auto next = balanced.open_stream(kModel, {.version = 2});
+  for (uint64_t f = 0; f < 5; ++f) {
+    const std::vector<float> values = pose_of(static_cast<long>(f));
+    ASSERT_TRUE(next->write({values, 3}, f));
+    const auto answer = next->read();
+    ASSERT_TRUE(answer.has_value());
+    EXPECT_EQ(answer->model_version, 2u);
+  }
+  next->writes_done();
+  EXPECT_FALSE(next->read().has_value());
+  next->finish();
+
+  // Nothing it acknowledged is lost: each completion it answered `logged` is in its log.
+  auto records = misslog::read_records(logs.path() / carrier->name / (kModel + ".misses"), 0, nullptr);
+  ASSERT_TRUE(records.ok()) << records.error().message;
+  int completions = 0;
+  for (const auto& record : *records) completions += record.full_values.empty() ? 0 : 1;
+  EXPECT_EQ(completions, carrier->acknowledged) << carrier->name;
 }
 
 }  // namespace
