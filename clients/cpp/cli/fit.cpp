@@ -170,19 +170,6 @@ int run_fit(const FitArgs& a, bool json) {
   if (auto added = add_tangents(*model); !added.ok()) return fail("fit", added.error().message);
 
   const auto training_error = animation_space::reconstruction_error(*model, poses, frames);
-  // Held-out frames: each one's bone motions solved with the model fixed (bone_motions.h, Dem
-  // Bones' protocol, as `animspace-bench skinning` measures generalisation).
-  std::optional<animation_space::ReconstructionError> test_error;
-  if (!test_selected.empty()) {
-    const FrameMatrix test_frames = tools::select_rows(sequence->frames.samples, test_selected);
-    std::vector<animation_space::TransformList> test_poses;
-    for (Eigen::Index f = 0; f < test_frames.rows(); ++f) {
-      on_progress("held-out frames", f, test_frames.rows());
-      test_poses.push_back(animation_space::solve_pose(*model, test_frames.row(f)));
-    }
-    on_progress("held-out frames", test_frames.rows(), test_frames.rows());
-    test_error = animation_space::reconstruction_error(*model, test_poses, test_frames);
-  }
   const double rms = training_error.rms, max_error = training_error.max;
   const double diagonal =
       (sequence->reference.V.colwise().maxCoeff() - sequence->reference.V.colwise().minCoeff()).cast<double>().norm();
@@ -208,6 +195,19 @@ int run_fit(const FitArgs& a, bool json) {
   }
   out.set_matrix(container::sections::kSequenceBoneTransforms, bone_rows);
   on_progress("tangent planes and metrics", 1, 1);
+  // Held-out frames: each one's bone motions solved with the model fixed (bone_motions.h, Dem
+  // Bones' protocol, as `animspace-bench skinning` measures generalisation).
+  std::optional<animation_space::ReconstructionError> test_error;
+  if (!test_selected.empty()) {
+    const FrameMatrix test_frames = tools::select_rows(sequence->frames.samples, test_selected);
+    std::vector<animation_space::TransformList> test_poses;
+    for (Eigen::Index f = 0; f < test_frames.rows(); ++f) {
+      on_progress("held-out frames", f, test_frames.rows());
+      test_poses.push_back(animation_space::solve_pose(*model, test_frames.row(f)));
+    }
+    on_progress("held-out frames", test_frames.rows(), test_frames.rows());
+    test_error = animation_space::reconstruction_error(*model, test_poses, test_frames);
+  }
   progress.reset();  // ends the last bar's line before anything else is printed
   const auto path = model_output_path(a.output, a.model, a.version);
   if (auto written = write_model_file(path, out); !written.ok()) return fail("fit", written.error().message);
