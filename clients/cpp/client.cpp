@@ -214,7 +214,7 @@ std::unique_ptr<KeyPointStream> Client::open_stream(const std::string& model, co
 
 CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
                                     std::span<const float> full_values, std::span<const uint32_t> full_points,
-                                    v1::PointEncoding points_encoding) {
+                                    v1::PointEncoding points_encoding, bool skip_miss_log) {
   v1::CompleteMissRequest request;
   request.mutable_model()->set_name(model);
   request.mutable_model()->set_version(version);
@@ -236,6 +236,7 @@ CompletedMiss Client::complete_miss(const std::string& model, uint64_t version, 
       make_point_array(full_values.data(), static_cast<uint32_t>(full_values.size() / channels), channels);
   request.mutable_full_points()->Add(full_points.begin(), full_points.end());
   request.set_points_encoding(points_encoding);
+  request.set_skip_miss_log(skip_miss_log);
   grpc::ClientContext context;
   prepare(&context);
   v1::CompleteMissResponse response;

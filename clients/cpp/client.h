@@ -136,9 +136,11 @@ class Client {
   // fail-through — the values of `full_points` only (|full_points|×D, in that order; at least the
   // PoseResult::full_points of this pose): the answer is then blended point by point, its points in
   // `points_encoding` (as EvaluateOptions::points_encoding).
+  // `skip_miss_log`: test traffic (EvaluateOptions::skip_miss_log), answered but not logged.
   CompletedMiss complete_miss(const std::string& model, uint64_t version, const KeyPointPose& pose,
                               std::span<const float> full_values, std::span<const uint32_t> full_points = {},
-                              v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED);
+                              v1::PointEncoding points_encoding = v1::POINT_ENCODING_UNSPECIFIED,
+                              bool skip_miss_log = false);
   // Skinning through an animation-space model (Merry 2007 §3.1): one result per pose, in order.
   SkinningResult evaluate_skeleton_pose(const std::string& model, std::span<const SkeletonPose> poses,
                                         const SkinningOptions& options = {});

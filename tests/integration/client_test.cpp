@@ -321,6 +321,31 @@ TEST_F(ClientTest, AFullMissLogServesThePoseAndSaysWhyItWasNotLogged) {
       << *page;
 }
 
+// Issue #55 item 6: a completion sent as test traffic is answered — the same blend — but not logged,
+// and says why.
+TEST_F(ClientTest, ACompletionSentAsTestTrafficIsAnsweredButNotLogged) {
+  const KeyPoints keys = client_->describe_key_points(kPmsc);
+  const std::vector<float> full = perturbed_frame(7);
+  const std::vector<float> v = keys.gather(full);
+  const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3}, {.skip_miss_log = true});
+  ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
+  const auto log_path = work_->path() / (kPmsc + ".misses");
+  auto logged_records = [&] {
+    auto records = misslog::read_records(log_path, 0, nullptr);
+    return records.ok() ? records->size() : size_t{0};
+  };
+  const size_t before = logged_records();
+  const CompletedMiss skipped =
+      client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, full, {}, v1::POINT_ENCODING_UNSPECIFIED, true);
+  EXPECT_FALSE(skipped.logged);
+  EXPECT_NE(skipped.not_logged_reason.find("skip_miss_log"), std::string::npos) << skipped.not_logged_reason;
+  EXPECT_EQ(logged_records(), before) << "test traffic reached the miss log";
+  const CompletedMiss logged = client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, full);
+  EXPECT_TRUE(logged.logged);
+  EXPECT_EQ(logged_records(), before + 1);
+  EXPECT_EQ(skipped.result.points.values, logged.result.points.values) << "the same blend either way";
+}
+
 // Issue #21: the tour sent an all-zero "full pose" and the server logged it as tomorrow's
 // training example. Full values must repeat the key values at the key points.
 TEST_F(ClientTest, CompleteMissRefusesFullValuesThatAreNotTheKeyPoseAndNeverLogsThem) {

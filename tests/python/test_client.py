@@ -671,6 +671,12 @@ def test_skip_miss_log_serves_test_traffic_and_keeps_it_out_of_retraining(spawn_
         not_hits = sum(r.status != "HIT" for r in skipped)
         assert not_hits > 0, "the bent elbows must give blends or misses for the test to mean anything"
         assert not log.exists() or log.stat().st_size == 16, "skipped traffic reached the miss log"
+        # A completion sent as test traffic is answered but not logged either.
+        blend = next(i for i, r in enumerate(skipped[:len(frames)]) if r.status != "HIT")
+        completion = client.complete_miss("arm-pmsc", frames[blend].key_values, poses[blend],
+                                          check_values=frames[blend].check_values, skip_miss_log=True)
+        assert not completion.logged and "skip_miss_log" in completion.not_logged_reason
+        assert not log.exists() or log.stat().st_size == 16
         # The same stream without the flag is logged, one record per blend or miss.
         logged = list(client.stream_key_points("arm-pmsc", frames))
         assert log.stat().st_size > 16

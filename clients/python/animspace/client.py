@@ -577,7 +577,7 @@ class Client:
     @_renamed_keywords(timeout="deadline_s")
     def complete_miss(self, model: str, key_values: npt.ArrayLike, full_values: npt.ArrayLike, *, version: int = 0,
                       check_values: Optional[npt.ArrayLike] = None, full_points: Optional[npt.ArrayLike] = None,
-                      points_encoding: str = "float32", reconstruct: bool = False,
+                      points_encoding: str = "float32", reconstruct: bool = False, skip_miss_log: bool = False,
                       deadline_s: Optional[float] = None) -> MissCompletion:
         """Completes a blend or miss with the full pose from the client's posing engine
         (fail-through "CLIENT"), and logs it for retraining.
@@ -594,6 +594,8 @@ class Client:
 
         ``points_encoding`` and ``reconstruct`` are ``evaluate_key_points``' for the answer's points
         (with "coordinates" only a HIT comes as coordinates: the server blends a blend or miss).
+        ``skip_miss_log``: test traffic; the blend is answered but not logged (``logged`` False,
+        ``not_logged_reason`` says so).
 
         Raises:
             ValueError: ``full_values`` rows differ from ``full_points``, or an unknown
@@ -618,7 +620,8 @@ class Client:
         checks = messages.check_point_array("check_values", check_values)
         request = poses_pb2.CompleteMissRequest(model=_model_ref(model, version), key_values=_point_array(keys),
                                                 full_values=_point_array(full),
-                                                full_points=[int(p) for p in points], points_encoding=encoding)
+                                                full_points=[int(p) for p in points], points_encoding=encoding,
+                                                skip_miss_log=skip_miss_log)
         if checks is not None:
             request.check_values.CopyFrom(checks)
         response = self._unary("CompleteMiss", self._poses.CompleteMiss, request, deadline_s)
