@@ -63,8 +63,8 @@ std::string model_name_of(const std::filesystem::path& model_file) {
 
 void print_serving_hint(const std::string& model) {
   if (model.empty()) return;
-  std::printf("a daemon serving this repository loads it at its next poll (every 30 s unless it runs with "
-              "--poll-interval-s 0), or at once with `animspace load %s`\n",
+  std::printf("a daemon serving this repository loads it at its next poll (its --poll-interval-s, 30 s by "
+              "default; 0 never polls), or at once with `animspace load %s`\n",
               model.c_str());
 }
 
