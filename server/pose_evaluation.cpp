@@ -209,18 +209,19 @@ grpc::Status PoseRun::finish_one(PoseJob& job, v1::PoseResult* out) {
   if (job.options.count_in_statistics) {
     env_->metrics.record_pose(model.name, answer.cached.status, answer.cached.key_point_error);
   }
-  if (answer.cached.status != pmsc::CacheStatus::kHit && !job.options.log_misses) {
+  if (answer.cached.status == pmsc::CacheStatus::kHit) return grpc::Status::OK;
+  if (!job.options.log_misses) {
     job.not_logged_reason_ = "the request set skip_miss_log (test traffic: kept out of retraining)";
     env_->metrics.record_miss_not_logged(model.name, Metrics::NotLogged::kSkipped);
-  } else if (answer.cached.status != pmsc::CacheStatus::kHit) {
-    const Status appended = log_miss(*env_, model, job, answer);
-    job.logged_ = appended.ok();
-    if (!appended.ok()) {
-      job.not_logged_reason_ = appended.error().message;
-      env_->metrics.record_miss_not_logged(model.name, appended.error().code == ErrorCode::kResourceExhausted
-                                                           ? Metrics::NotLogged::kFull
-                                                           : Metrics::NotLogged::kError);
-    }
+    return grpc::Status::OK;
+  }
+  const Status appended = log_miss(*env_, model, job, answer);
+  job.logged_ = appended.ok();
+  if (!appended.ok()) {
+    job.not_logged_reason_ = appended.error().message;
+    env_->metrics.record_miss_not_logged(model.name, appended.error().code == ErrorCode::kResourceExhausted
+                                                         ? Metrics::NotLogged::kFull
+                                                         : Metrics::NotLogged::kError);
   }
   return grpc::Status::OK;
 }

@@ -145,10 +145,11 @@ double choose_key_weight(const CalibrationSamples& samples, double tolerance) {
   return best_weight;
 }
 
-OperatingPoint operating_point(const CalibrationSamples& samples, double false_hit_rate, double tolerance) {
+OperatingPoint operating_point(const CalibrationSamples& samples, double key_weight, double false_hit_rate,
+                               double tolerance) {
   OperatingPoint point;
   point.false_hit_rate = false_hit_rate;
-  const Eigen::VectorXd estimates = samples.error_estimates(choose_key_weight(samples, tolerance));
+  const Eigen::VectorXd estimates = samples.error_estimates(key_weight);
   const ExtrapolatedEpsilon calibrated = calibrate_extrapolated(estimates, samples.max_errors, tolerance, false_hit_rate);
   point.epsilon_min = calibrated.epsilon_min;
   point.bad_samples = calibrated.bad_samples;

@@ -149,9 +149,11 @@ struct OperatingPoint {
   double worst_hit_error = 0;  // largest e_max among samples called HIT, over the tolerance
 };
 
-// With the rule of the header on the estimates max(w·e_key, e_check), w = choose_key_weight
-// (e_key alone when the samples have no check points): what apply_calibration would set.
-OperatingPoint operating_point(const CalibrationSamples& samples, double false_hit_rate, double tolerance);
+// With the rule of the header on the estimates max(w·e_key, e_check) (e_key alone when the samples
+// have no check points): the ε_min that false-hit rate gives, and what it does on the samples. With
+// w the model's own key_weight this is the model's curve, the same weight for every δ.
+OperatingPoint operating_point(const CalibrationSamples& samples, double key_weight, double false_hit_rate,
+                               double tolerance);
 
 // The δ an operator is offered by default (train-pmsc, the bench): 0.005 … 0.2.
 std::vector<double> default_false_hit_rates();

@@ -84,6 +84,12 @@ class ClientTest : public ::testing::Test {
     return full;
   }
 
+  // Records in the miss log of kPmsc that this suite's daemon writes (0 before its first miss).
+  static size_t logged_records() {
+    auto records = misslog::read_records(work_->path() / (kPmsc + ".misses"), 0, nullptr);
+    return records.ok() ? records->size() : size_t{0};
+  }
+
   // What the soft cache makes of frame f, computed in-process from the model file.
   static pmsc::PoseEstimate expected_estimate(int f) {
     pmsc::PoseEstimate estimate;
@@ -329,11 +335,6 @@ TEST_F(ClientTest, ACompletionSentAsTestTrafficIsAnsweredButNotLogged) {
   const std::vector<float> v = keys.gather(full);
   const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3}, {.skip_miss_log = true});
   ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
-  const auto log_path = work_->path() / (kPmsc + ".misses");
-  auto logged_records = [&] {
-    auto records = misslog::read_records(log_path, 0, nullptr);
-    return records.ok() ? records->size() : size_t{0};
-  };
   const size_t before = logged_records();
   const CompletedMiss skipped =
       client_->complete_miss(kPmsc, evaluated.model_version, {v, 3}, full, {}, v1::POINT_ENCODING_UNSPECIFIED, true);
@@ -354,11 +355,6 @@ TEST_F(ClientTest, CompleteMissRefusesFullValuesThatAreNotTheKeyPoseAndNeverLogs
   const std::vector<float> v = keys.gather(full);
   const PoseResult evaluated = client_->evaluate_key_points(kPmsc, {v, 3});
   ASSERT_NE(evaluated.status, v1::CACHE_STATUS_HIT) << "the perturbed pose should not be a hit";
-  const auto log_path = work_->path() / (kPmsc + ".misses");
-  auto logged_records = [&] {
-    auto records = misslog::read_records(log_path, 0, nullptr);
-    return records.ok() ? records->size() : size_t{0};
-  };
   const size_t before = logged_records();
 
   auto refusal = [&](const std::vector<float>& wrong) {

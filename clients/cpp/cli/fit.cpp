@@ -302,8 +302,8 @@ CLI::App* add_import_rig(CLI::App& app, ImportRigArgs& a) {
   cmd->add_option("--description", a.description, "One-line description stored in the model");
   cmd->add_option("--drop-weights", a.drop_weights,
                   "Drop each vertex's smallest weights up to this total and renormalise the rest: a vertex then "
-                  "moves by at most this fraction of the distance between where its bones carry it (1e-4: "
-                  "invisible at any size); 0 keeps every non-zero weight, exact to the file")
+                  "moves by at most this fraction of the distance between where its bones carry it, whatever "
+                  "the character's size; 0 keeps every non-zero weight, exact to the file")
       ->check(tools::kNonNegative)
       ->capture_default_str();
   add_model_output_options(cmd, a.output, a.model, a.version);

@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "core/mesh_io/text_io.h"
+#include "core/model/repository.h"
 
 namespace animspace::cli {
 
@@ -51,12 +52,11 @@ Status write_model_file(const std::filesystem::path& path, const container::Mode
 }
 
 std::string model_name_of(const std::filesystem::path& model_file) {
-  const std::filesystem::path version = model_file.parent_path();
-  const std::string digits = version.filename().string();
-  if (model_file.filename() == "model.anim" && !digits.empty() &&
-      digits.find_first_not_of("0123456789") == std::string::npos && version.has_parent_path() &&
-      !version.parent_path().filename().empty()) {
-    return version.parent_path().filename().string();
+  const std::filesystem::path version_dir = model_file.parent_path();
+  uint64_t version = 0;
+  if (model_file.filename() == model::kModelFileName && model::parse_version(version_dir.filename().string(), &version) &&
+      !version_dir.parent_path().filename().empty()) {
+    return version_dir.parent_path().filename().string();
   }
   return model_file.stem().string();
 }

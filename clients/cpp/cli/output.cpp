@@ -38,7 +38,7 @@ std::vector<double> offered_false_hit_rates(const pmsc::PmscModel& model) {
 
 void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int folds) {
   const pmsc::CalibrationSamples samples = pmsc::estimator_samples(model);
-  const long over = pmsc::operating_point(samples, model.calibration.false_hit_rate, tolerance).over_tolerance;
+  const long over = pmsc::operating_point(samples, model.key_weight, model.calibration.false_hit_rate, tolerance).over_tolerance;
   std::printf("operating curve on %ld held-out frames (every %dth frame, sparser training, blocks of %d, %d and %d; "
               "each predicted by a model trained without it; %ld over the tolerance on their own, every one "
               "extrapolated past it; * = this model's δ):\n",
@@ -47,7 +47,7 @@ void print_operating_curve(const pmsc::PmscModel& model, double tolerance, int f
   std::printf("  %8s %8s %11s %9s %12s %15s\n", "δ", "ratio q", "ε_min", "hit rate", "miss recall",
               "worst hit/tol");
   for (double rate : offered_false_hit_rates(model)) {
-    const pmsc::OperatingPoint p = pmsc::operating_point(samples, rate, tolerance);
+    const pmsc::OperatingPoint p = pmsc::operating_point(samples, model.key_weight, rate, tolerance);
     std::printf("%s %8.3g %8.3g %11.4g %9.3f %12s %15.3f\n", rate == model.calibration.false_hit_rate ? "*" : " ",
                 rate, p.error_ratio, p.epsilon_min, p.hit_rate,
                 p.over_tolerance > 0 ? format_fixed(p.miss_recall).c_str() : "n/a", p.worst_hit_error);
@@ -58,7 +58,7 @@ nlohmann::json operating_curve_json(const pmsc::PmscModel& model, double toleran
   const pmsc::CalibrationSamples samples = pmsc::estimator_samples(model);
   nlohmann::json curve = nlohmann::json::array();
   for (double rate : offered_false_hit_rates(model)) {
-    const pmsc::OperatingPoint p = pmsc::operating_point(samples, rate, tolerance);
+    const pmsc::OperatingPoint p = pmsc::operating_point(samples, model.key_weight, rate, tolerance);
     curve.push_back({{"false_hit_rate", rate},
                      {"error_ratio", p.error_ratio},
                      {"epsilon_min", p.epsilon_min},

@@ -147,7 +147,7 @@ TEST(Calibration, OperatingPointCountsHitsAndMissesOnTheSamples) {
   s.fold_family = {0, 0, 0, 0, 0, 0};
   // Tolerance 10: every residual extrapolated to e_max = 10 has e_key 10·e_key/e_max = 5, 3.33,
   // 2.5, 2, 3.33, 1 (m = 6). δ = 0.3 → r = ⌊0.3·7⌋ = 2 → ε_min the 2nd smallest, 2.
-  const OperatingPoint p = operating_point(s, 0.3, 10.0);
+  const OperatingPoint p = operating_point(s, 1.0, 0.3, 10.0);
   EXPECT_DOUBLE_EQ(p.epsilon_min, 2.0);
   EXPECT_EQ(p.bad_samples, 6);
   EXPECT_DOUBLE_EQ(p.error_ratio, 10.0 / p.epsilon_min);
@@ -223,7 +223,7 @@ TEST(Calibration, KeyWeightIsOneOfTheCandidatesAndCheckPointsAloneWhenKeysSeeNot
   }
   const double w = choose_key_weight(s, 1.0);
   EXPECT_LT(w, 0.5);  // e_key, noise, barely counts
-  const OperatingPoint p = operating_point(s, 0.05, 1.0);
+  const OperatingPoint p = operating_point(s, w, 0.05, 1.0);
   EXPECT_DOUBLE_EQ(p.miss_recall, 1.0);
   long good = 0;
   for (int i = 0; i < n; ++i) good += s.max_errors(i) <= 1.0;
@@ -260,7 +260,7 @@ TEST(Calibration, TheOperatingCurveIsMonotonicInTheFalseHitRate) {
     OperatingPoint previous;
     bool first = true;
     for (double delta : default_false_hit_rates()) {
-      const OperatingPoint p = operating_point(s, delta, tolerance);
+      const OperatingPoint p = operating_point(s, choose_key_weight(s, tolerance), delta, tolerance);
       if (!first) {
         EXPECT_GE(p.epsilon_min, previous.epsilon_min) << "seed " << seed << ", δ " << delta;
         EXPECT_GE(p.hit_rate, previous.hit_rate) << "seed " << seed << ", δ " << delta;
@@ -403,7 +403,7 @@ TEST(Calibration, TrainingStoresHeldOutSamplesAndDerivesEpsilonFromThem) {
   ASSERT_EQ(static_cast<int>(model->region_epsilon.size()), model->region_count);
   // The operating curve's row at the model's δ is the model: it measures the estimator the verdict
   // uses (the worst key), not e_key (issue #55 item 9).
-  const OperatingPoint at_delta = operating_point(estimator_samples(*model), o.false_hit_rate, o.error_tolerance);
+  const OperatingPoint at_delta = operating_point(estimator_samples(*model), model->key_weight, o.false_hit_rate, o.error_tolerance);
   EXPECT_DOUBLE_EQ(at_delta.epsilon_min, epsilon);
 
   // Issue #55: the guarantee names the tolerance it speaks of, in model units and as a share of
