@@ -118,6 +118,14 @@ struct IlluminationSuiteOptions {
   int grid = 0;
 };
 
+// scale (issue #53): the cow rig at studio sizes.
+struct ScaleSuiteOptions {
+  std::vector<int> levels{0, 1, 2};  // subdivision levels (0, the baseline, always runs)
+  int frames = 2000;                 // random poses per level
+  int models = 20;                   // copies of each trained model one daemon serves
+  std::vector<std::string> kinds{"linear"};
+};
+
 struct SuiteOptions {
   std::optional<std::filesystem::path> data;  // ../shared/data, when present
   int repetitions = 21;
@@ -133,6 +141,7 @@ struct SuiteOptions {
   // atlas: datasets (the horse is fitted with the skinning options above, on its training block).
   std::vector<std::string> atlas_datasets{"cow-rig", "horse-gallop-block"};
   IlluminationSuiteOptions illumination;
+  ScaleSuiteOptions scale;
 };
 
 }  // namespace animspace::bench

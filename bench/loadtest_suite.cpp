@@ -13,29 +13,24 @@
 // fractions up to the partial last pass over the frames: the suite prints the largest difference.
 // Client and daemon share this machine's cores, so past 2 callers the sweep measures how the
 // server queues, not how it scales.
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "bench/child_process.h"
 #include "bench/crane_split.h"
 #include "bench/serving.h"
 #include "bench/suites.h"
 #include "clients/cpp/client.h"
 #include "core/pmsc/pmsc_model.h"
 #include "harness/daemon_process.h"
-
-extern char** environ;
 
 namespace animspace::bench {
 namespace {
@@ -70,29 +65,6 @@ InProcess measure_in_process(const CraneSplit& split, int passes) {
                                    }) /
                     static_cast<double>(keys.size());
   return out;
-}
-
-// Runs `argv` with stdout and stderr into `log`; returns its exit status (-1 when it did not run).
-int run_program(const std::vector<std::string>& argv, const std::filesystem::path& log) {
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
-  std::vector<char*> args;
-  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  pid_t pid = -1;
-  const int spawned = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (spawned != 0) return -1;
-  int status = 0;
-  if (waitpid(pid, &status, 0) != pid) return -1;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string read_text(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
 }  // namespace
@@ -133,7 +105,8 @@ nlohmann::json run_loadtest_suite(const SuiteOptions& options) {
                                   "--sequence", (*options.data / "crane").string(), "--select", "1::2",
                                   "--with-points", "--concurrency", kSweep, "--duration-s",
                                   std::to_string(kStepSeconds), "--json", report_path.string()},
-                                 log_path);
+                                 log_path)
+                           .exit_status;
   if (status != 0) {
     std::printf("loadtest: animspace-loadtest exited with %d:\n%s\n", status, read_text(log_path).c_str());
     return results;

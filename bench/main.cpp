@@ -21,8 +21,10 @@ int main(int argc, char** argv) {
                   "simplifiers (error across poses); subdivide: subdivision in animation space vs refining each posed mesh at run time (exactness, the linear blend alternative, posing cost); atlas: a texture atlas balanced across poses vs the rest-pose atlas and Blender's unwrappers (stretch on held-out poses); serve: a real animspaced on loopback (unary and streamed PMSC "
                   "poses against in-process evaluation); render: thumbnails and LOD streaming from a real animspaced against "
                   "in-process drawing; loadtest: animspace-loadtest's concurrency sweep and hit rates on crane against in-process evaluation; illumination: the Cornell box's indirect illumination from key points against the full final "
-                  "gather (accuracy on novel lights, soft-cache flags, speed-up in process and served)")
-      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "subdivide", "atlas", "serve", "render", "loadtest", "illumination"}))
+                  "gather (accuracy on novel lights, soft-cache flags, speed-up in process and served); scale: the cow rig "
+                  "subdivided to studio sizes and posed at thousands of random rotations (training time and peak memory, LOD "
+                  "building against meshoptimizer, many models served, GetBasis and the client's reconstruction)")
+      ->check(CLI::IsMember({"io", "pmsc", "skinning", "lod", "subdivide", "atlas", "serve", "render", "loadtest", "illumination", "scale"}))
       ->capture_default_str();
   app.add_option("--data", data_dir, "Reference data folder (../shared/data)")->capture_default_str();
   app.add_option("--json", json_path, "Write results as JSON to this file");
@@ -144,6 +146,20 @@ int main(int argc, char** argv) {
                  "filtered one")
       ->check(CLI::Range(1, 65536))
       ->capture_default_str();
+  app.add_option("--scale-levels", options.scale.levels,
+                 "scale: subdivision levels of the cow rig (0: the rig itself, always run as the baseline: 11,666 points; 1 "
+                 "and 2: about 47k and 186k)")
+      ->check(CLI::Range(0, 4))
+      ->capture_default_str();
+  app.add_option("--scale-frames", options.scale.frames, "scale: random poses per level (the training sequence)")
+      ->check(CLI::Range(2, 1000000))
+      ->capture_default_str();
+  app.add_option("--scale-models", options.scale.models, "scale: copies of each trained model one animspaced serves")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  app.add_option("--scale-kinds", options.scale.kinds, "scale: subspace kinds trained (train-pmsc --subspace)")
+      ->check(CLI::IsMember({"linear", "articulated"}))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   if (std::filesystem::is_directory(data_dir)) {
@@ -160,6 +176,7 @@ int main(int argc, char** argv) {
                            : suite == "render" ? animspace::bench::run_render_suite(options)
                            : suite == "loadtest" ? animspace::bench::run_loadtest_suite(options)
                            : suite == "illumination" ? animspace::bench::run_illumination_suite(options)
+                           : suite == "scale" ? animspace::bench::run_scale_suite(options)
                                               : animspace::bench::run_skinning_suite(options);
   if (!json_path.empty()) {
     std::ofstream json(json_path);

@@ -17,5 +17,6 @@ nlohmann::json run_serve_suite(const SuiteOptions& options);
 nlohmann::json run_render_suite(const SuiteOptions& options);
 nlohmann::json run_loadtest_suite(const SuiteOptions& options);
 nlohmann::json run_illumination_suite(const SuiteOptions& options);
+nlohmann::json run_scale_suite(const SuiteOptions& options);
 
 }  // namespace animspace::bench

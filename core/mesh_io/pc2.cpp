@@ -144,17 +144,24 @@ Result<PointCache> read_pc2(const std::filesystem::path& path) {
   return parse_pc2(*bytes, path.string());
 }
 
+std::string pc2_header(int num_points, int num_samples, float start_frame, float sample_rate) {
+  assert(num_points > 0 && num_samples > 0);
+  std::string bytes;
+  bytes.append(kMagic);
+  store<int32_t>(bytes, 1);
+  store<int32_t>(bytes, num_points);
+  store<float>(bytes, start_frame);
+  store<float>(bytes, sample_rate);
+  store<int32_t>(bytes, num_samples);
+  return bytes;
+}
+
 std::string serialize_pc2(const PointCache& cache) {
   assert(cache.num_points > 0 && cache.samples.rows() > 0 &&
          cache.samples.cols() == 3 * Eigen::Index{cache.num_points});
-  std::string bytes;
+  std::string bytes =
+      pc2_header(cache.num_points, static_cast<int>(cache.samples.rows()), cache.start_frame, cache.sample_rate);
   bytes.reserve(kHeaderBytes + sizeof(float) * static_cast<size_t>(cache.samples.size()));
-  bytes.append(kMagic);
-  store<int32_t>(bytes, 1);
-  store<int32_t>(bytes, cache.num_points);
-  store<float>(bytes, cache.start_frame);
-  store<float>(bytes, cache.sample_rate);
-  store<int32_t>(bytes, static_cast<int32_t>(cache.samples.rows()));
   bytes.append(reinterpret_cast<const char*>(cache.samples.data()), sizeof(float) * static_cast<size_t>(cache.samples.size()));
   return bytes;
 }

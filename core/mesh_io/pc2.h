@@ -50,6 +50,11 @@ Result<PointCache> read_pc2(const std::filesystem::path& path);
 // untrusted data.
 std::string serialize_pc2(const PointCache& cache);
 
+// The 32 header bytes of a PC2 file of `num_samples` samples of `num_points` points: what a
+// writer that streams a long sequence sample by sample (never holding it whole) puts first.
+// Precondition (asserted): both counts > 0.
+std::string pc2_header(int num_points, int num_samples, float start_frame = 0, float sample_rate = 1);
+
 // Writes `cache` to `path` atomically (write_file_atomically).
 // Errors: kInvalidArgument when `cache` would not read back (a count ≤ 0, samples.cols() ≠
 // 3·num_points, a non-finite value, a sample rate ≤ 0); kIo from the write.
