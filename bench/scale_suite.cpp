@@ -223,6 +223,14 @@ Serving measure_serving(const std::filesystem::path& model_file, const Character
     return serving;
   }
   serving.registry_rss_bytes = resident_bytes(daemon->pid());
+  // Every copy must be served for the figure to mean what it says.
+  int served = 0;
+  for (const auto& summary : Client(daemon->address()).list_models()) served += summary.default_version() != 0 ? 1 : 0;
+  if (served != models) {
+    serving.status = "only " + std::to_string(served) + " of " + std::to_string(models) + " copies loaded:\n" +
+                     daemon->log();
+    return serving;
+  }
 
   ClientOptions client_options;
   client_options.deadline = std::chrono::minutes(10);

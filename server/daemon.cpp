@@ -57,7 +57,7 @@ Result<std::pair<std::string, int>> split_host_port(const std::string& address, 
 Daemon::Daemon(ServerOptions options, MakeRenderer make_renderer)
     : options_(std::move(options)),
       make_renderer_(std::move(make_renderer)),
-      registry_(options_.repository),
+      registry_(options_.repository, options_.resident_section_bytes),
       admission_(options_.max_concurrent_calls) {}
 
 Daemon::~Daemon() { shutdown(); }

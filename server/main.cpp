@@ -124,6 +124,11 @@ int main(int argc, char** argv) {
                  "The most bytes one model's miss log may hold (0 = no bound); past it, blends and misses are "
                  "served but not logged, and animspace_misses_not_logged_total{reason=\"full\"} counts them")
       ->capture_default_str();
+  app.add_option("--resident-section-bytes", options.resident_section_bytes,
+                 "Model file sections larger than this (a PMSC model's training frames, large meshes) stay on disk, "
+                 "checked at load and read again when a request needs them, instead of held in memory for every "
+                 "loaded version")
+      ->capture_default_str();
   app.add_option("--tls-cert", options.tls_cert, "TLS: server certificate chain (PEM); with --tls-key");
   app.add_option("--tls-key", options.tls_key, "TLS: server private key (PEM)");
   app.add_option("--tls-client-ca", options.tls_client_ca,

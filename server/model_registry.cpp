@@ -30,14 +30,15 @@ uint64_t ModelEntry::default_version() const {
   return 0;
 }
 
-ModelRegistry::ModelRegistry(std::filesystem::path repository) : repository_(std::move(repository)) {}
+ModelRegistry::ModelRegistry(std::filesystem::path repository, uint64_t resident_section_limit)
+    : repository_(std::move(repository)), resident_section_limit_(resident_section_limit) {}
 
 VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t version,
-                                         const std::filesystem::path& dir) {
+                                         const std::filesystem::path& dir) const {
   VersionEntry entry;
   entry.version = version;
   const auto path = dir / kModelFileName;
-  auto container = container::read_file(path);
+  auto container = container::read_file(path, container::ReadOptions{resident_section_limit_});
   if (!container) {
     entry.error = container.error().message;
     return entry;

@@ -28,6 +28,14 @@ namespace animspace::server {
 
 using model::kModelFileName;
 
+// Sections of a model file larger than this stay on disk once the file has been checked
+// (container::ReadOptions; --resident-section-bytes): what a loaded version holds is its runtime,
+// built from the file at load, not a second copy of the file — a studio model's training frames
+// (sequence.frames, read only by Retrain) are gigabytes (issue #53). What requests read from the
+// container (faces, rest points, an atlas, one stored frame for a thumbnail) is read from the
+// file when asked; 1 MiB keeps a typical character's faces and rest points in memory.
+inline constexpr uint64_t kDefaultResidentSectionLimit = uint64_t{1} << 20;
+
 // One loaded, immutable model version: the servable core made of its file (runtimes, engine,
 // info), and where and when it was loaded.
 struct LoadedModel : model::Servable {
@@ -56,7 +64,8 @@ using model::validate_model_name;  // core/model/repository.h
 
 class ModelRegistry {
  public:
-  explicit ModelRegistry(std::filesystem::path repository);
+  explicit ModelRegistry(std::filesystem::path repository,
+                         uint64_t resident_section_limit = kDefaultResidentSectionLimit);
 
   const std::filesystem::path& repository() const { return repository_; }
 
@@ -98,13 +107,13 @@ class ModelRegistry {
  private:
   int scan(bool retry_known);
   // Reads and checks one version file; never throws.
-  static VersionEntry load_version(const std::string& name, uint64_t version,
-                                   const std::filesystem::path& dir);
+  VersionEntry load_version(const std::string& name, uint64_t version, const std::filesystem::path& dir) const;
   // Version directories under <repository>/<name>, ascending. Errors: kNotFound.
   Result<std::vector<uint64_t>> scan_versions(const std::string& name) const;
 
   std::atomic<bool> repository_loaded_{false};
   std::filesystem::path repository_;
+  uint64_t resident_section_limit_;
   mutable std::shared_mutex mutex_;
   std::mutex publish_mutex_;  // one publish at a time, so version numbers never collide
   std::map<std::string, ModelEntry> models_;

@@ -72,6 +72,9 @@ struct ServerOptions {
   // The most bytes one model's miss log may hold (0 = no bound): past it, blends and misses are
   // served but not logged, counted in animspace_misses_not_logged_total{reason="full"}.
   uint64_t miss_log_max_bytes = uint64_t{1} << 30;
+  // Model file sections larger than this are read from the file when asked instead of held in
+  // memory per loaded version (model_registry.h).
+  uint64_t resident_section_bytes = uint64_t{1} << 20;
   // TLS: server certificate chain and private key (PEM). Both empty: plaintext.
   std::filesystem::path tls_cert;
   std::filesystem::path tls_key;

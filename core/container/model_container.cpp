@@ -9,6 +9,9 @@
 
 #include "core/common/posix_file.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <bit>
 #include <charconv>
@@ -174,43 +177,6 @@ Result<const Section*> find_section(const std::map<std::string, Section, std::le
   return &it->second;
 }
 
-template <typename Matrix>
-Result<Matrix> read_matrix(const std::map<std::string, Section, std::less<>>& sections,
-                           std::string_view name, SectionType wanted, int expected_cols) {
-  auto found = find_section(sections, name, wanted);
-  if (!found.ok()) return found.error();
-  const Section& section = **found;
-  if (expected_cols >= 0 && section.cols != static_cast<uint32_t>(expected_cols)) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "section '" + std::string(name) + "': expected " + type_phrase(wanted) +
-                          " with " + std::to_string(expected_cols) + " columns, got " +
-                          shape_phrase(section));
-  }
-  // parse() and set_* guarantee rows·cols·element size == bytes.size().
-  assert(static_cast<uint64_t>(section.rows) * section.cols * sizeof(typename Matrix::Scalar) ==
-         section.bytes.size());
-  Matrix m(static_cast<Eigen::Index>(section.rows), static_cast<Eigen::Index>(section.cols));
-  if (!section.bytes.empty()) std::memcpy(m.data(), section.bytes.data(), section.bytes.size());
-  return m;
-}
-
-// One row of a matrix section, copied alone (a frame of a long sequence without the rest).
-template <typename Matrix>
-Result<Matrix> read_matrix_row(const std::map<std::string, Section, std::less<>>& sections,
-                               std::string_view name, SectionType wanted, int64_t row) {
-  auto found = find_section(sections, name, wanted);
-  if (!found.ok()) return found.error();
-  const Section& section = **found;
-  if (row < 0 || row >= static_cast<int64_t>(section.rows)) {
-    return make_error(ErrorCode::kOutOfRange, "section '" + std::string(name) + "': row " + std::to_string(row) +
-                                                  " out of range (" + std::to_string(section.rows) + " rows)");
-  }
-  const size_t row_bytes = size_t{section.cols} * sizeof(typename Matrix::Scalar);
-  Matrix m(1, static_cast<Eigen::Index>(section.cols));
-  if (row_bytes > 0) std::memcpy(m.data(), section.bytes.data() + static_cast<size_t>(row) * row_bytes, row_bytes);
-  return m;
-}
-
 // --- Metadata as JSON --------------------------------------------------------------------------
 
 std::string metadata_to_json(const std::map<std::string, std::string>& metadata) {
@@ -251,7 +217,10 @@ class Parser {
     return check_header();
   }
 
-  Result<Parsed> run() {
+  // Sections whose payload is larger than `limit` are checked but not copied: they are left on
+  // disk (ReadOptions::resident_section_limit).
+  Result<Parsed> run(uint64_t resident_section_limit = std::numeric_limits<uint64_t>::max()) {
+    resident_section_limit_ = resident_section_limit;
     ANIMSPACE_RETURN_IF_ERROR(check_magic());
     ANIMSPACE_RETURN_IF_ERROR(check_header());
     ANIMSPACE_RETURN_IF_ERROR(check_footer());
@@ -504,7 +473,14 @@ class Parser {
         ANIMSPACE_RETURN_IF_ERROR(parse_metadata(payload, entry.offset, parsed.metadata));
         continue;
       }
-      entry.section.bytes.assign(payload);
+      if (entry.size > resident_section_limit_) {
+        entry.section.on_disk = true;
+        entry.section.disk_offset = entry.offset;
+        entry.section.disk_size = entry.size;
+        entry.section.disk_crc = entry.crc;
+      } else {
+        entry.section.bytes.assign(payload);
+      }
       parsed.sections.emplace_back(std::string(entry.name), std::move(entry.section));
     }
     return parsed;
@@ -542,6 +518,7 @@ class Parser {
   uint64_t file_size_ = 0;
   uint64_t table_end_ = 0;    // first byte after the section table
   uint64_t payload_end_ = 0;  // first byte of the footer
+  uint64_t resident_section_limit_ = std::numeric_limits<uint64_t>::max();
 };
 
 }  // namespace
@@ -567,12 +544,18 @@ std::string ModelContainer::metadata_value(const std::string& key,
 
 void ModelContainer::set_bytes(const std::string& name, std::string bytes) {
   assert(can_add_section(sections_, name));
-  sections_[name] = Section{SectionType::kBytes, 0, 0, std::move(bytes)};
+  Section section;
+  section.type = SectionType::kBytes;
+  section.bytes = std::move(bytes);
+  sections_[name] = std::move(section);
 }
 
 void ModelContainer::set_text(const std::string& name, std::string text) {
   assert(can_add_section(sections_, name));
-  sections_[name] = Section{SectionType::kText, 0, 0, std::move(text)};
+  Section section;
+  section.type = SectionType::kText;
+  section.bytes = std::move(text);
+  sections_[name] = std::move(section);
 }
 
 void ModelContainer::set_matrix(const std::string& name, const FrameMatrix& m) {
@@ -604,6 +587,11 @@ bool ModelContainer::has_section(std::string_view name) const {
   return sections_.find(name) != sections_.end();
 }
 
+void ModelContainer::copy_section(const ModelContainer& from, const std::string& name) {
+  assert(from.has_section(name) && can_add_section(sections_, name));
+  sections_[name] = from.sections_.find(name)->second;
+}
+
 void ModelContainer::remove_section(std::string_view name) {
   if (const auto at = sections_.find(name); at != sections_.end()) sections_.erase(at);
 }
@@ -615,41 +603,187 @@ std::vector<std::string> ModelContainer::section_names() const {
   return names;
 }
 
+struct FileIdentity {
+  std::filesystem::path path;
+  uint64_t device = 0;
+  uint64_t inode = 0;
+  uint64_t size = 0;
+  int64_t modified_ns = 0;
+};
+
+namespace {
+
+FileIdentity identify(const std::filesystem::path& path, const struct stat& status) {
+  FileIdentity identity;
+  identity.path = path;
+  identity.device = static_cast<uint64_t>(status.st_dev);
+  identity.inode = static_cast<uint64_t>(status.st_ino);
+  identity.size = static_cast<uint64_t>(status.st_size);
+  identity.modified_ns = int64_t{status.st_mtim.tv_sec} * 1'000'000'000 + status.st_mtim.tv_nsec;
+  return identity;
+}
+
+Result<FileIdentity> identify(const std::filesystem::path& path) {
+  struct stat status {};
+  if (::stat(path.c_str(), &status) != 0) return io_error(path, "stat", errno);
+  return identify(path, status);
+}
+
+bool same_file(const FileIdentity& a, const FileIdentity& b) {
+  return a.device == b.device && a.inode == b.inode && a.size == b.size && a.modified_ns == b.modified_ns;
+}
+
+std::string describe(const FileIdentity& f) {
+  return "inode " + std::to_string(f.inode) + ", " + std::to_string(f.size) + " bytes";
+}
+
+}  // namespace
+
+Result<std::string> ModelContainer::payload_range(std::string_view name, const Section& section, uint64_t offset,
+                                                  uint64_t length) const {
+  assert(offset <= section.size() && length <= section.size() - offset);
+  if (!section.on_disk) return section.bytes.substr(static_cast<size_t>(offset), static_cast<size_t>(length));
+  assert(section.disk_file != nullptr);
+  const FileIdentity& file = *section.disk_file;
+  const std::filesystem::path& path = file.path;
+  const std::string what = "section '" + std::string(name) + "'";
+  FileDescriptor fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
+  if (fd.get() < 0) return io_error(path, "open to read " + what + " again", errno);
+  struct stat status {};
+  if (::fstat(fd.get(), &status) != 0) return io_error(path, "fstat", errno);
+  const FileIdentity now = identify(path, status);
+  if (!same_file(now, file)) {
+    return make_error(ErrorCode::kFailedPrecondition,
+                      path.string() + ": changed since it was loaded (" +  describe(file) + " then, " + describe(now) +
+                          " now), so its " + what + " cannot be read: load the version again");
+  }
+  std::string out(static_cast<size_t>(length), '\0');
+  uint64_t done = 0;
+  while (done < length) {
+    const ssize_t got = ::pread(fd.get(), out.data() + done, static_cast<size_t>(length - done),
+                                static_cast<off_t>(section.disk_offset + offset + done));
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) return io_error(path, "read " + what, errno);
+    if (got == 0) {
+      return make_error(ErrorCode::kDataLoss, path.string() + ": byte " +
+                                                  std::to_string(section.disk_offset + offset + done) + ": " + what +
+                                                  " ends early: expected " + std::to_string(length) +
+                                                  " bytes, got " + std::to_string(done));
+    }
+    done += static_cast<uint64_t>(got);
+  }
+  return out;
+}
+
+Result<std::string> ModelContainer::payload(std::string_view name, const Section& section) const {
+  auto bytes = payload_range(name, section, 0, section.size());
+  if (!bytes.ok() || !section.on_disk) return bytes;
+  if (const uint32_t computed = crc32(*bytes); kVerifyChecksums && computed != section.disk_crc) {
+     return make_error(ErrorCode::kDataLoss, section.disk_file->path.string() + ": byte " + std::to_string(section.disk_offset) +
+                                                ": section '" + std::string(name) +
+                                                "' checksum mismatch when read again: stored " +
+                                                hex32(section.disk_crc) + ", computed " + hex32(computed));
+  }
+  return bytes;
+}
+
+template <typename Matrix>
+Result<Matrix> ModelContainer::read_matrix(std::string_view name, SectionType wanted, int expected_cols) const {
+  auto found = find_section(sections_, name, wanted);
+  if (!found.ok()) return found.error();
+  const Section& section = **found;
+  if (expected_cols >= 0 && section.cols != static_cast<uint32_t>(expected_cols)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "section '" + std::string(name) + "': expected " + type_phrase(wanted) +
+                          " with " + std::to_string(expected_cols) + " columns, got " +
+                          shape_phrase(section));
+  }
+  // parse() and set_* guarantee rows·cols·element size == the payload's size.
+  assert(static_cast<uint64_t>(section.rows) * section.cols * sizeof(typename Matrix::Scalar) == section.size());
+  Matrix m(static_cast<Eigen::Index>(section.rows), static_cast<Eigen::Index>(section.cols));
+  if (!section.on_disk) {
+    if (!section.bytes.empty()) std::memcpy(m.data(), section.bytes.data(), section.bytes.size());
+    return m;
+  }
+  auto bytes = payload(name, section);
+  if (!bytes.ok()) return bytes.error();
+  if (!bytes->empty()) std::memcpy(m.data(), bytes->data(), bytes->size());
+  return m;
+}
+
+// One row of a matrix section, copied alone (a frame of a long sequence without the rest; from
+// the file, one row's bytes).
+template <typename Matrix>
+Result<Matrix> ModelContainer::read_matrix_row(std::string_view name, SectionType wanted, int64_t row) const {
+  auto found = find_section(sections_, name, wanted);
+  if (!found.ok()) return found.error();
+  const Section& section = **found;
+  if (row < 0 || row >= static_cast<int64_t>(section.rows)) {
+    return make_error(ErrorCode::kOutOfRange, "section '" + std::string(name) + "': row " + std::to_string(row) +
+                                                  " out of range (" + std::to_string(section.rows) + " rows)");
+  }
+  const size_t row_bytes = size_t{section.cols} * sizeof(typename Matrix::Scalar);
+  Matrix m(1, static_cast<Eigen::Index>(section.cols));
+  if (row_bytes == 0) return m;
+  auto bytes = payload_range(name, section, static_cast<uint64_t>(row) * row_bytes, row_bytes);
+  if (!bytes.ok()) return bytes.error();
+  std::memcpy(m.data(), bytes->data(), row_bytes);
+  return m;
+}
+
+uint64_t ModelContainer::bytes_on_disk() const {
+  uint64_t total = 0;
+  for (const auto& [name, section] : sections_) total += section.on_disk ? section.disk_size : 0;
+  return total;
+}
+
+Status ModelContainer::load_sections() {
+  for (auto& [name, section] : sections_) {
+    if (!section.on_disk) continue;
+    auto bytes = payload(name, section);
+    if (!bytes.ok()) return bytes.error();
+    section.bytes = std::move(*bytes);
+    section.on_disk = false;
+    section.disk_file.reset();
+  }
+  return Status::Ok();
+}
+
 Result<std::string> ModelContainer::bytes(std::string_view name) const {
   auto found = find_section(sections_, name, SectionType::kBytes);
   if (!found.ok()) return found.error();
-  return (*found)->bytes;
+  return payload(name, **found);
 }
 
 Result<std::string> ModelContainer::text(std::string_view name) const {
   auto found = find_section(sections_, name, SectionType::kText);
   if (!found.ok()) return found.error();
-  return (*found)->bytes;
+  return payload(name, **found);
 }
 
 Result<FrameMatrix> ModelContainer::float_matrix(std::string_view name, int expected_cols) const {
-  return read_matrix<FrameMatrix>(sections_, name, SectionType::kFloat32Matrix, expected_cols);
+  return read_matrix<FrameMatrix>(name, SectionType::kFloat32Matrix, expected_cols);
 }
 
 Result<FrameMatrix> ModelContainer::float_matrix_row(std::string_view name, int64_t row) const {
-  return read_matrix_row<FrameMatrix>(sections_, name, SectionType::kFloat32Matrix, row);
+  return read_matrix_row<FrameMatrix>(name, SectionType::kFloat32Matrix, row);
 }
 
 Result<Int32Matrix> ModelContainer::int_matrix(std::string_view name, int expected_cols) const {
-  return read_matrix<Int32Matrix>(sections_, name, SectionType::kInt32Matrix, expected_cols);
+  return read_matrix<Int32Matrix>(name, SectionType::kInt32Matrix, expected_cols);
 }
 
 Result<Float64Matrix> ModelContainer::double_matrix(std::string_view name,
                                                     int expected_cols) const {
-  return read_matrix<Float64Matrix>(sections_, name, SectionType::kFloat64Matrix, expected_cols);
+  return read_matrix<Float64Matrix>(name, SectionType::kFloat64Matrix, expected_cols);
 }
 
 Result<PointMatrix> ModelContainer::points(std::string_view name) const {
-  return read_matrix<PointMatrix>(sections_, name, SectionType::kFloat32Matrix, 3);
+  return read_matrix<PointMatrix>(name, SectionType::kFloat32Matrix, 3);
 }
 
 Result<FaceMatrix> ModelContainer::faces(std::string_view name) const {
-  return read_matrix<FaceMatrix>(sections_, name, SectionType::kInt32Matrix, 3);
+  return read_matrix<FaceMatrix>(name, SectionType::kInt32Matrix, 3);
 }
 
 // --- Serialisation -----------------------------------------------------------------------------
@@ -670,7 +804,7 @@ std::string serialize(const ModelContainer& container) {
   planned.reserve(container.sections().size() + 1);
   planned.push_back({kMetadataSectionName, SectionType::kText, 0, 0, metadata_json, 0});
   for (const auto& [name, section] : container.sections()) {
-    assert(is_valid_section_name(name) && name != kMetadataSectionName);
+    assert(is_valid_section_name(name) && name != kMetadataSectionName && !section.on_disk);
     planned.push_back({name, section.type, section.rows, section.cols, section.bytes, 0});
   }
   assert(planned.size() <= kMaxSections);
@@ -738,17 +872,53 @@ Result<ModelContainer> parse(std::string_view bytes, std::string_view source) {
   }
 }
 
-Result<ModelContainer> read_file(const std::filesystem::path& path) {
+Result<ModelContainer> read_file(const std::filesystem::path& path, const ReadOptions& options) {
   const std::string source = path.string();
+  const bool keep_on_disk = options.resident_section_limit != std::numeric_limits<uint64_t>::max();
+  // What the file is before and after it is read: sections left on disk are read again only from
+  // this very file.
+  Result<FileIdentity> before = FileIdentity{};
+  if (keep_on_disk) before = identify(path);
   auto bytes = read_regular_file(path, kHeaderSize, [&](std::string_view head, uint64_t size_on_disk) {
     return Parser(head, size_on_disk, source).check_head();
   });
   if (!bytes.ok()) return bytes.error();
-  return parse(*bytes, path.string());
+  if (!before.ok()) return before.error();
+  try {
+    auto parsed = Parser(*bytes, source).run(options.resident_section_limit);
+    if (!parsed.ok()) return parsed.error();
+    bytes->clear();
+    bytes->shrink_to_fit();
+    ModelContainer container;
+    container.metadata_ = std::move(parsed->metadata);
+    std::shared_ptr<const FileIdentity> file;
+    for (auto& [name, section] : parsed->sections) {
+      if (section.on_disk && file == nullptr) {
+        auto after = identify(path);
+        if (!after.ok()) return after.error();
+        if (!same_file(*before, *after)) {
+          return make_error(ErrorCode::kFailedPrecondition, source + ": changed while it was being read (" +
+                                                                describe(*before) + " before, " + describe(*after) +
+                                                                " after): read it again");
+        }
+        file = std::make_shared<const FileIdentity>(std::move(*after));
+      }
+      if (section.on_disk) section.disk_file = file;
+      container.sections_.emplace(std::move(name), std::move(section));
+    }
+    return container;
+  } catch (const std::bad_alloc&) {
+    return make_error(ErrorCode::kResourceExhausted, source + ": out of memory while reading the model container");
+  }
 }
 
 Status write_file(const std::filesystem::path& path, const ModelContainer& container) {
   try {
+    if (container.bytes_on_disk() > 0) {
+      ModelContainer resident = container;
+      ANIMSPACE_RETURN_IF_ERROR(resident.load_sections());
+      return write_file_atomically(path, serialize(resident));
+    }
     return write_file_atomically(path, serialize(container));
   } catch (const std::bad_alloc&) {
     return make_error(ErrorCode::kResourceExhausted,

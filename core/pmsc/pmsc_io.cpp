@@ -581,27 +581,8 @@ Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, 
 
 void copy_sections(const container::ModelContainer& in, const std::function<bool(const std::string&)>& keep,
                    container::ModelContainer& out) {
-  using container::SectionType;
   for (const auto& [name, section] : in.sections()) {
-    if (!keep(name)) continue;
-    // Each read below is of the section's own type, so it cannot fail.
-    switch (section.type) {
-      case SectionType::kBytes:
-        out.set_bytes(name, *in.bytes(name));
-        break;
-      case SectionType::kText:
-        out.set_text(name, *in.text(name));
-        break;
-      case SectionType::kFloat32Matrix:
-        out.set_matrix(name, *in.float_matrix(name));
-        break;
-      case SectionType::kInt32Matrix:
-        out.set_matrix(name, *in.int_matrix(name));
-        break;
-      case SectionType::kFloat64Matrix:
-        out.set_matrix(name, *in.double_matrix(name));
-        break;
-    }
+    if (keep(name)) out.copy_section(in, name);
   }
 }
 

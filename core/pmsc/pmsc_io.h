@@ -113,9 +113,8 @@ Status attach_posing_engine(const animation_space::AnimationSpaceModel& engine, 
 // model::describe checks the sections' shapes, animation_space::load their values.
 bool has_posing_engine(const container::ModelContainer& in);
 
-// Copies every section of `in` whose name `keep` accepts into `out` (type and shape kept; a
-// section of the same name in `out` is replaced). Metadata is not copied. ModelContainer has no
-// way to remove a section, so dropping sections means copying the others into a new container.
+// Copies every section of `in` whose name `keep` accepts into `out` as it is (a section left on
+// disk stays there; a section of the same name in `out` is replaced). Metadata is not copied.
 void copy_sections(const container::ModelContainer& in, const std::function<bool(const std::string&)>& keep,
                    container::ModelContainer& out);
 

@@ -38,6 +38,7 @@
 #include "clients/cpp/client.h"
 #include "core/container/crc32.h"
 #include "core/container/model_container.h"
+#include "core/container/sections.h"
 #include "core/demo/bending_arm.h"
 #include "core/demo/demo_repository.h"
 #include "core/misslog/miss_log.h"
@@ -1162,6 +1163,41 @@ grpc::StatusCode describe_code(const std::string& address) {
 }
 
 }  // namespace slow_readers
+
+// Issue #53: a loaded version holds its runtime, not a second copy of its file. A version whose
+// training frames are 128 MiB (what Retrain reads, and nothing else) is loaded by a daemon with
+// the default --resident-section-bytes and by one that holds every section in memory: the second
+// grows by the frames, the first does not — measured as the difference, which a sanitizer's
+// quarantine of the file's transient read buffer cannot blur (both daemons read the file whole).
+TEST_F(FaultTest, AVersionsTrainingFramesStayOnDiskUnlessAskedToBeHeld) {
+  const fs::path repo = repository({{"arm", "arm-pmsc"}});
+  auto stored = container::read_file(repo / "arm" / "1" / "model.anim");
+  ASSERT_TRUE(stored.ok()) << stored.error().message;
+  const auto frames_before = stored->float_matrix(container::sections::kSequenceFrames);
+  ASSERT_TRUE(frames_before.ok());
+  constexpr int64_t kFramesBytes = int64_t{128} << 20;
+  const Eigen::Index rows = kFramesBytes / static_cast<int64_t>(sizeof(float) * frames_before->cols());
+  stored->set_matrix(container::sections::kSequenceFrames, FrameMatrix(FrameMatrix::Random(rows, frames_before->cols())));
+  const std::string big = container::serialize(*stored);
+  stored = container::ModelContainer();
+
+  const auto growth_kb = [&](const std::vector<std::string>& extra) {
+    auto daemon = start(repo, extra);
+    Client client(daemon->address());
+    const ProcessUsage before = usage_of(daemon->pid());
+    publish_file(repo, "arm", 2, big);
+    EXPECT_EQ(client.load_model("arm", 2).default_version(), 2u);
+    const ProcessUsage after = usage_of(daemon->pid());
+    fs::remove_all(repo / "arm" / "2");
+    return after.rss_kb - before.rss_kb;
+  };
+  const int64_t on_disk = growth_kb({});
+  const int64_t held = growth_kb({"--resident-section-bytes", std::to_string(int64_t{1} << 40)});
+  std::printf("[fault] loading a version with %.0f MiB of training frames: RSS +%.1f MiB with them on disk, +%.1f MiB "
+              "held in memory\n",
+              mib(kFramesBytes / 1024), mib(on_disk), mib(held));
+  EXPECT_GT(held - on_disk, kFramesBytes / 1024 / 2);
+}
 
 TEST_F(FaultTest, OneConnectionHoldsAtMostItsShareOfTheCallSlots) {
   using namespace slow_readers;

@@ -402,11 +402,19 @@ TEST_F(ServeTest, BadRequestsGetTheExactStatusAndNameTheField) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Miss → complete → retrain → hit.
+// Miss → complete → retrain → hit: with the model file's sections held in memory (the default
+// limit keeps this small model whole), and with every section left on disk and read from the
+// file when asked (--resident-section-bytes 0, what a studio model's training frames get: issue
+// #53), which must not change a single answer.
 
-TEST_F(ServeTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
+class ServeRetrainTest : public ServeTest, public ::testing::WithParamInterface<const char*> {};
+
+INSTANTIATE_TEST_SUITE_P(SectionsInMemoryOrOnDisk, ServeRetrainTest, ::testing::Values("1048576", "0"));
+
+TEST_P(ServeRetrainTest, AMissCompletedByTheClientIsLearnedByRetrainAndThenHits) {
   const int metrics_port = testing::free_tcp_port();
-  auto daemon = start({"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
+  auto daemon = start({"--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port), "--resident-section-bytes",
+                       GetParam()});
   auto ch = channel(*daemon);
   auto poses = v1::PoseService::NewStub(ch);
   auto training = v1::TrainingService::NewStub(ch);

@@ -359,7 +359,7 @@ int run_inspect(const Globals& g, const std::string& path) {
   if (g.json) {
     nlohmann::json sections = nlohmann::json::array();
     for (const auto& [name, section] : container->sections()) {
-      sections.push_back({{"name", name}, {"rows", section.rows}, {"cols", section.cols}, {"bytes", section.bytes.size()}});
+      sections.push_back({{"name", name}, {"rows", section.rows}, {"cols", section.cols}, {"bytes", section.size()}});
     }
     animspace::cli::print_json({{"file", path},
                                 {"metadata", container->metadata()},
@@ -371,7 +371,7 @@ int run_inspect(const Globals& g, const std::string& path) {
     for (const auto& [key, value] : container->metadata()) std::printf("  %s = %s\n", key.c_str(), value.c_str());
     for (const auto& [name, section] : container->sections()) {
       std::printf("  section %-32s %8u × %-6u %10zu bytes\n", name.c_str(), section.rows, section.cols,
-                  section.bytes.size());
+                  section.size());
     }
   }
   if (!info) {

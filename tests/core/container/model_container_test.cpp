@@ -1,10 +1,13 @@
 #include "core/container/model_container.h"
 
+#include <fcntl.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <random>
@@ -555,6 +558,116 @@ TEST(ModelContainerTest, OneRowIsThatRowOfTheWholeMatrix) {
   EXPECT_EQ(c.float_matrix_row("missing", 0).error().code, ErrorCode::kNotFound);
   c.set_matrix("ints", Int32Matrix(Int32Matrix::Zero(2, 2)));
   EXPECT_EQ(c.float_matrix_row("ints", 0).error().code, ErrorCode::kInvalidArgument);
+}
+
+// Issue #53: a container read with a resident limit keeps the small sections in memory and leaves
+// the large ones on disk; every typed read of either gives what was written, whole or one row, and
+// the container writes out unchanged.
+TEST(ModelContainerTest, SectionsLeftOnDiskReadBackAsTheyWere) {
+  TempDir dir;
+  ModelContainer written = full_container();
+  FrameMatrix frames(40, 30);
+  for (Eigen::Index r = 0; r < frames.rows(); ++r) {
+    for (Eigen::Index k = 0; k < frames.cols(); ++k) frames(r, k) = static_cast<float>(r) - 0.125f * static_cast<float>(k);
+  }
+  written.set_matrix("sequence.frames", frames);  // 4,800 bytes
+  const fs::path path = dir / "model.anim";
+  ASSERT_TRUE(write_file(path, written).ok());
+
+  constexpr uint64_t kLimit = 64;
+  auto lazy = read_file(path, ReadOptions{kLimit});
+  ASSERT_TRUE(lazy.ok()) << lazy.error().message;
+  uint64_t expected_on_disk = 0;
+  for (const auto& [name, section] : written.sections()) {
+    const Section& read = lazy->sections().at(name);
+    EXPECT_EQ(read.on_disk, section.bytes.size() > kLimit) << name;
+    EXPECT_EQ(read.size(), section.bytes.size()) << name;
+    EXPECT_EQ(read.bytes.empty(), read.on_disk || section.bytes.empty()) << name;
+    if (read.on_disk) expected_on_disk += section.bytes.size();
+  }
+  EXPECT_GT(expected_on_disk, frames.size() * sizeof(float) - 1);
+  EXPECT_EQ(lazy->bytes_on_disk(), expected_on_disk);
+  EXPECT_EQ(lazy->metadata(), written.metadata());
+  EXPECT_EQ(*lazy->float_matrix("sequence.frames"), frames);
+  for (int64_t r : {int64_t{0}, int64_t{17}, int64_t{39}}) EXPECT_EQ(*lazy->float_matrix_row("sequence.frames", r), frames.row(r));
+  EXPECT_EQ(lazy->float_matrix_row("sequence.frames", 40).error().code, ErrorCode::kOutOfRange);
+
+  // A copy of a section on disk stays on disk and reads the same; writing reads it from the file.
+  ModelContainer copied;
+  copied.copy_section(*lazy, "sequence.frames");
+  EXPECT_TRUE(copied.sections().at("sequence.frames").on_disk);
+  EXPECT_EQ(*copied.float_matrix("sequence.frames"), frames);
+  const fs::path again = dir / "again.anim";
+  ASSERT_TRUE(write_file(again, *lazy).ok());
+  auto whole = read_file(again);
+  ASSERT_TRUE(whole.ok()) << whole.error().message;
+  EXPECT_EQ(whole->bytes_on_disk(), 0U);
+  EXPECT_EQ(serialize(*whole), serialize(written));
+  ModelContainer loaded = *lazy;
+  ASSERT_TRUE(loaded.load_sections().ok());
+  EXPECT_EQ(loaded.bytes_on_disk(), 0U);
+  EXPECT_EQ(serialize(loaded), serialize(written));
+}
+
+// A file changed after it was read (rewritten in place, replaced by rename, or damaged with its
+// size and time kept) makes the reads of the sections left there fail with an error naming the
+// file — never a crash, never the new file's values — while the resident sections still read.
+TEST(ModelContainerTest, AFileChangedSinceItWasReadFailsTheReadsOfWhatIsLeftThere) {
+  TempDir dir;
+  ModelContainer written = small_container();
+  FrameMatrix frames = FrameMatrix::Constant(50, 20, 1.5f);
+  written.set_matrix("sequence.frames", frames);
+  const fs::path path = dir / "model.anim";
+  const auto read_lazily = [&] {
+    EXPECT_TRUE(write_file(path, written).ok());
+    auto lazy = read_file(path, ReadOptions{1024});
+    EXPECT_TRUE(lazy.ok() && lazy->sections().at("sequence.frames").on_disk);
+    return std::move(lazy).value();
+  };
+
+  {  // truncated in place (what `cp other.anim model.anim` does first)
+    const ModelContainer lazy = read_lazily();
+    ASSERT_EQ(::truncate(path.c_str(), 100), 0);
+    auto read = lazy.float_matrix("sequence.frames");
+    ASSERT_FALSE(read.ok());
+    EXPECT_EQ(read.error().code, ErrorCode::kFailedPrecondition);
+    EXPECT_EQ(read.error().message.rfind(path.string() + ": changed since it was loaded", 0), 0U) << read.error().message;
+    EXPECT_EQ(lazy.float_matrix_row("sequence.frames", 3).error().code, ErrorCode::kFailedPrecondition);
+    EXPECT_TRUE(lazy.float_matrix("a").ok());  // resident
+    ModelContainer copy = lazy;
+    EXPECT_EQ(copy.load_sections().error().code, ErrorCode::kFailedPrecondition);
+    EXPECT_EQ(write_file(dir / "out.anim", lazy).error().code, ErrorCode::kFailedPrecondition);
+  }
+  {  // replaced by another file of the same size (a new inode)
+    const ModelContainer lazy = read_lazily();
+    ModelContainer other = written;
+    other.set_matrix("sequence.frames", FrameMatrix(FrameMatrix::Constant(50, 20, -7.0f)));
+    ASSERT_TRUE(write_file(path, other).ok());
+    ASSERT_EQ(fs::file_size(path), serialize(written).size());
+    EXPECT_EQ(lazy.float_matrix("sequence.frames").error().code, ErrorCode::kFailedPrecondition);
+  }
+  {  // damaged in place with its size and modification time kept: the section's CRC catches it
+    const ModelContainer lazy = read_lazily();
+    struct stat before {};
+    ASSERT_EQ(::stat(path.c_str(), &before), 0);
+    const uint64_t at = lazy.sections().at("sequence.frames").disk_offset + 8;
+    {
+      std::fstream file(path, std::ios::in | std::ios::out | std::ios::binary);
+      file.seekp(static_cast<std::streamoff>(at));
+      file.put('\x7f');
+    }
+    const timespec times[2] = {before.st_atim, before.st_mtim};
+    ASSERT_EQ(::utimensat(AT_FDCWD, path.c_str(), times, 0), 0);
+    auto read = lazy.float_matrix("sequence.frames");
+    ASSERT_FALSE(read.ok());
+    EXPECT_EQ(read.error().code, ErrorCode::kDataLoss);
+    EXPECT_NE(read.error().message.find("checksum mismatch when read again"), std::string::npos) << read.error().message;
+  }
+  {  // removed
+    const ModelContainer lazy = read_lazily();
+    ASSERT_TRUE(fs::remove(path));
+    EXPECT_EQ(lazy.float_matrix("sequence.frames").error().code, ErrorCode::kIo);
+  }
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include "core/model/model_info.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/pmsc_io.h"
+#include "tests/support/test_support.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -322,6 +323,34 @@ TEST(PmscRetrain, AMissFoldedInBecomesAHit) {
   EXPECT_DOUBLE_EQ(retrained->hit_rate, hits_of(*after) / rows);
   EXPECT_LT(retrained->previous_hit_rate, 1.0) << "the old version misses the twisted frame";
   EXPECT_DOUBLE_EQ(retrained->hit_rate, 1.0);
+}
+
+// Issue #53: the daemon holds a version's large sections on disk (container::ReadOptions). A
+// retrain of such a container reads the training frames from the file and writes a new version
+// byte for byte equal to the retrain of the same file read whole.
+TEST(PmscRetrain, AContainerWhoseSectionsWereLeftOnDiskRetrainsAsTheWholeFile) {
+  testing::TempDir dir;
+  const auto path = dir.path() / "model.anim";
+  ASSERT_TRUE(container::write_file(path, sheet_container(bend_only_frames(), sheet_options())).ok());
+  auto whole = container::read_file(path);
+  auto on_disk = container::read_file(path, container::ReadOptions{0});
+  ASSERT_TRUE(whole.ok() && on_disk.ok());
+  ASSERT_TRUE(on_disk->sections().at("sequence.frames").on_disk);
+  ASSERT_EQ(whole->bytes_on_disk(), 0U);
+
+  FrameMatrix misses(1, 3 * kPoints);
+  misses.row(0) = sheet(0.6, 0.8).transpose();
+  auto from_whole = retrain(*whole, 1, misses, 17, {}, "sheet/1");
+  auto from_disk = retrain(*on_disk, 1, misses, 17, {}, "sheet/1");
+  ASSERT_TRUE(from_whole.ok()) << from_whole.error().message;
+  ASSERT_TRUE(from_disk.ok()) << from_disk.error().message;
+  EXPECT_GT(from_disk->container.bytes_on_disk(), 0U) << "sections carried over stay on disk until written";
+  for (auto* result : {&*from_whole, &*from_disk}) {
+    ASSERT_TRUE(result->container.load_sections().ok());
+    auto& metadata = result->container.metadata();
+    std::erase_if(metadata, [](const auto& entry) { return entry.first.find("seconds") != std::string::npos; });
+  }
+  EXPECT_EQ(container::serialize(from_whole->container), container::serialize(from_disk->container));
 }
 
 TEST(PmscRetrain, KeepsMetadataAndRecordsWhereTheMissLogWasRead) {
