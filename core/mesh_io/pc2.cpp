@@ -1,5 +1,10 @@
 #include "core/mesh_io/pc2.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <bit>
 #include <cassert>
 #include <cmath>
@@ -8,6 +13,7 @@
 #include <new>
 
 #include "core/common/atomic_file.h"
+#include "core/common/posix_file.h"
 #include "core/common/bytes.h"
 
 namespace animspace::mesh_io {
@@ -74,24 +80,35 @@ PointMatrix PointCache::frame(int index) const {
   return Eigen::Map<const PointMatrix>(samples.row(index).data(), num_points, 3);
 }
 
-Result<PointCache> parse_pc2(std::string_view bytes, std::string_view source) {
-  if (bytes.size() < kHeaderBytes) {
-    return at_byte(ErrorCode::kDataLoss, source, bytes.size(),
+namespace {
+
+// The header's fields, checked, and the payload size they promise, checked against the real size
+// of the data (`total_size`: the file's, or the bytes') before anything is allocated.
+struct Pc2Header {
+  PointCache cache;  // counts and frame numbers; samples not yet allocated
+  int32_t num_samples = 0;
+  uint64_t payload_bytes = 0;
+};
+
+Result<Pc2Header> parse_header(std::string_view head, uint64_t total_size, std::string_view source) {
+  if (head.size() < kHeaderBytes) {
+    return at_byte(ErrorCode::kDataLoss, source, head.size(),
                    "truncated header: expected " + std::to_string(kHeaderBytes) + " bytes, got " +
-                       std::to_string(bytes.size()));
+                       std::to_string(head.size()));
   }
-  if (bytes.substr(0, kMagic.size()) != kMagic) {
+  if (head.substr(0, kMagic.size()) != kMagic) {
     return at_byte(ErrorCode::kInvalidArgument, source, 0, "expected the magic \"POINTCACHE2\\0\", not a PC2 file");
   }
-  if (const auto version = load_le<int32_t>(bytes, kVersionOffset); version != 1) {
+  if (const auto version = load_le<int32_t>(head, kVersionOffset); version != 1) {
     return at_byte(ErrorCode::kFailedPrecondition, source, kVersionOffset,
                    "unsupported version " + std::to_string(version) + ", expected 1");
   }
-  PointCache cache;
-  cache.num_points = load_le<int32_t>(bytes, kNumPointsOffset);
-  cache.start_frame = load_le<float>(bytes, kStartFrameOffset);
-  cache.sample_rate = load_le<float>(bytes, kSampleRateOffset);
-  const int32_t num_samples = load_le<int32_t>(bytes, kNumSamplesOffset);
+  Pc2Header header;
+  PointCache& cache = header.cache;
+  cache.num_points = load_le<int32_t>(head, kNumPointsOffset);
+  cache.start_frame = load_le<float>(head, kStartFrameOffset);
+  cache.sample_rate = load_le<float>(head, kSampleRateOffset);
+  const int32_t num_samples = load_le<int32_t>(head, kNumSamplesOffset);
   if (cache.num_points <= 0) {
     return at_byte(ErrorCode::kInvalidArgument, source, kNumPointsOffset,
                    "expected numPoints > 0, got " + std::to_string(cache.num_points));
@@ -114,34 +131,92 @@ Result<PointCache> parse_pc2(std::string_view bytes, std::string_view source) {
   uint64_t payload_bytes = 0;
   const bool overflows = __builtin_mul_overflow(frame_bytes, static_cast<uint64_t>(num_samples), &payload_bytes) ||
                          payload_bytes > UINT64_MAX - kHeaderBytes;
-  if (overflows || payload_bytes + kHeaderBytes != bytes.size()) {
-    const bool truncated = overflows || payload_bytes + kHeaderBytes > bytes.size();
-    return at_byte(ErrorCode::kDataLoss, source, bytes.size(),
+  if (overflows || payload_bytes + kHeaderBytes != total_size) {
+    const bool truncated = overflows || payload_bytes + kHeaderBytes > total_size;
+    return at_byte(ErrorCode::kDataLoss, source, total_size,
                    std::string(truncated ? "truncated" : "trailing bytes") + ": the header's " +
                        std::to_string(num_samples) + " samples × " + std::to_string(cache.num_points) +
                        " points need " + (overflows ? "more than 2^64" : std::to_string(payload_bytes + kHeaderBytes)) +
-                       " bytes, the data has " + std::to_string(bytes.size()));
+                       " bytes, the data has " + std::to_string(total_size));
   }
+  header.num_samples = num_samples;
+  header.payload_bytes = payload_bytes;
+  return header;
+}
 
+// The header's samples allocated (the row-major matrix has the file's layout), or
+// kResourceExhausted.
+Status allocate_samples(Pc2Header& header, std::string_view source) {
   try {
-    cache.samples.resize(num_samples, 3 * Eigen::Index{cache.num_points});
+    header.cache.samples.resize(header.num_samples, 3 * Eigen::Index{header.cache.num_points});
   } catch (const std::bad_alloc&) {
     return make_error(ErrorCode::kResourceExhausted, std::string(source) + ": out of memory for " +
-                                                         std::to_string(payload_bytes) + " bytes of samples");
+                                                         std::to_string(header.payload_bytes) + " bytes of samples");
   }
-  // The row-major samples matrix has the file's layout, so the payload is one copy.
-  std::memcpy(cache.samples.data(), bytes.data() + kHeaderBytes, payload_bytes);
+  return Status::Ok();
+}
+
+Status check_samples_finite(const PointCache& cache, std::string_view source) {
   if (const Eigen::Index bad = first_non_finite(cache.samples); bad >= 0) {
     return at_byte(ErrorCode::kInvalidArgument, source, kHeaderBytes + sizeof(float) * static_cast<size_t>(bad),
                    "non-finite value at " + describe_value(bad, cache.num_points));
   }
-  return cache;
+  return Status::Ok();
 }
 
+}  // namespace
+
+Result<PointCache> parse_pc2(std::string_view bytes, std::string_view source) {
+  auto header = parse_header(bytes.substr(0, kHeaderBytes), bytes.size(), source);
+  if (!header.ok()) return header.error();
+  ANIMSPACE_RETURN_IF_ERROR(allocate_samples(*header, source));
+  std::memcpy(header->cache.samples.data(), bytes.data() + kHeaderBytes, header->payload_bytes);
+  ANIMSPACE_RETURN_IF_ERROR(check_samples_finite(header->cache, source));
+  return std::move(header->cache);
+}
+
+// The samples are read straight into their matrix: a long cache (a studio sequence is gigabytes,
+// issue #53) is held once, never also as the file's bytes.
 Result<PointCache> read_pc2(const std::filesystem::path& path) {
-  const auto bytes = read_whole_file(path);
-  if (!bytes.ok()) return bytes.error();
-  return parse_pc2(*bytes, path.string());
+  const std::string source = path.string();
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const int error_number = errno;
+    if (error_number == ENOENT) return make_error(ErrorCode::kNotFound, source + ": no such file");
+    return io_error(path, "cannot open", error_number);
+  }
+  FileDescriptor file(fd);
+  struct stat info {};
+  if (::fstat(file.get(), &info) != 0) return io_error(path, "cannot stat", errno);
+  // Reads `count` bytes at `offset` into `out`; returns how many there were.
+  const auto read_at = [&](char* out, uint64_t count, uint64_t offset) -> Result<uint64_t> {
+    uint64_t done = 0;
+    while (done < count) {
+      const ssize_t got = ::pread(file.get(), out + done, static_cast<size_t>(std::min<uint64_t>(count - done, 1 << 30)),
+                                  static_cast<off_t>(offset + done));
+      if (got < 0 && errno == EINTR) continue;
+      if (got < 0) return io_error(path, "cannot read", errno);
+      if (got == 0) break;
+      done += static_cast<uint64_t>(got);
+    }
+    return done;
+  };
+  std::string head(kHeaderBytes, '\0');
+  auto got = read_at(head.data(), kHeaderBytes, 0);
+  if (!got.ok()) return got.error();
+  head.resize(static_cast<size_t>(*got));
+  auto header = parse_header(head, static_cast<uint64_t>(info.st_size), source);
+  if (!header.ok()) return header.error();
+  ANIMSPACE_RETURN_IF_ERROR(allocate_samples(*header, source));
+  got = read_at(reinterpret_cast<char*>(header->cache.samples.data()), header->payload_bytes, kHeaderBytes);
+  if (!got.ok()) return got.error();
+  if (*got != header->payload_bytes) {
+    return at_byte(ErrorCode::kDataLoss, source, kHeaderBytes + *got,
+                   "truncated while being read: expected " + std::to_string(header->payload_bytes + kHeaderBytes) +
+                       " bytes");
+  }
+  ANIMSPACE_RETURN_IF_ERROR(check_samples_finite(header->cache, source));
+  return std::move(header->cache);
 }
 
 std::string pc2_header(int num_points, int num_samples, float start_frame, float sample_rate) {

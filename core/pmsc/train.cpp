@@ -892,10 +892,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // its residual components.
   const auto pca_start = std::chrono::steady_clock::now();
   const Eigen::VectorXd mean = T.rowwise().mean();
-  const Eigen::MatrixXd centred = T.colwise() - mean;
+  Eigen::MatrixXd centred = T.colwise() - mean;
   const int max_basis = static_cast<int>(std::min<long>(o.max_basis, F - 1));
   const int chosen_cap = std::max(1, std::min(max_basis, static_cast<int>(o.max_basis_fraction * static_cast<double>(F))));
-  const PcaBasis pca = thin_pca(centred, max_basis);
+  PcaBasis pca = thin_pca(centred, max_basis);
   if (pca.basis.cols() == 0) return invalid("the training frames are all identical: there is no motion to model");
   Eigen::MatrixXd gram(F, F);
   gram_lower_serial(T.rows(), F, T.data(), T.rows(), gram.data(), F);
@@ -933,6 +933,10 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
 
   // Regions for local fail-through (the keys index the same points only without cross).
   if (!cross && o.region_count > 0) assign_regions(pca, basis, articulated, o, model);
+  // Neither is read again: the centred training matrix and the full PCA go before the
+  // calibration folds allocate theirs (issue #53: each is the size of the frames in double).
+  centred = Eigen::MatrixXd();
+  pca = PcaBasis{};
 
   // Calibration (calibration.h) and check points.
   const auto calibration_start = std::chrono::steady_clock::now();

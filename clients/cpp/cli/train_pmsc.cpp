@@ -86,7 +86,8 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   if (selected.empty()) {
     return fail("train-pmsc", error);
   }
-  const FrameMatrix frames = tools::select_rows(sequence->frames.samples, selected);
+  // The selected frames, and the point cache let go: a long sequence is held once (issue #53).
+  const FrameMatrix frames = tools::take_rows(sequence->frames.samples, selected);
 
   std::optional<mesh_io::LoadedSequence> control;
   FrameMatrix control_frames;
@@ -100,7 +101,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                    loaded->frames.num_frames(), sequence->frames.num_frames());
       return 2;
     }
-    control_frames = tools::select_rows(loaded->frames.samples, selected);
+    control_frames = tools::take_rows(loaded->frames.samples, selected);
     control = std::move(*loaded);
   }
 

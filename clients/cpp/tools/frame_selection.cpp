@@ -51,4 +51,12 @@ FrameMatrix select_rows(const FrameMatrix& frames, const std::vector<int>& rows)
   return out;
 }
 
+FrameMatrix take_rows(FrameMatrix& frames, const std::vector<int>& rows) {
+  bool every_row = static_cast<Eigen::Index>(rows.size()) == frames.rows();
+  for (size_t i = 0; every_row && i < rows.size(); ++i) every_row = rows[i] == static_cast<int>(i);
+  FrameMatrix out = every_row ? std::move(frames) : select_rows(frames, rows);
+  frames = FrameMatrix();
+  return out;
+}
+
 }  // namespace animspace::tools

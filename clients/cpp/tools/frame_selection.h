@@ -15,5 +15,8 @@ std::vector<int> parse_frame_selection(const std::string& text, int count, std::
 
 // The rows of `frames` listed in `rows`, in that order.
 FrameMatrix select_rows(const FrameMatrix& frames, const std::vector<int>& rows);
+// The same, taking `frames` (left empty): when `rows` is every row in order they move, so a long
+// sequence is never held twice.
+FrameMatrix take_rows(FrameMatrix& frames, const std::vector<int>& rows);
 
 }  // namespace animspace::tools
