@@ -41,6 +41,7 @@ bench: build
 	$(BUILD_DIR)/bin/animspace-bench subdivide --data ../shared/data --json $(BUILD_DIR)/bench-subdivide.json
 	$(BUILD_DIR)/bin/animspace-bench serve --data ../shared/data --json $(BUILD_DIR)/bench-serve.json
 	$(BUILD_DIR)/bin/animspace-bench loadtest --data ../shared/data --json $(BUILD_DIR)/bench-loadtest.json
+	$(BUILD_DIR)/bin/animspace-bench scale --data ../shared/data --scale-levels 1 --json $(BUILD_DIR)/bench-scale.json
 
 # Every test under AddressSanitizer + UndefinedBehaviorSanitizer, leak checks included: each ctest
 # (core, server, loadtest, integration against the ASan-built daemon), then pytest against the

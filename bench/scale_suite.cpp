@@ -191,13 +191,16 @@ struct Serving {
   std::string status;  // "" when measured, else why not
 };
 
-Serving measure_serving(const std::filesystem::path& model_file, const Character& character, int models,
-                        int repetitions, const std::filesystem::path& work) {
+// The daemon holds a version's runtime (about twice its basis), not its training frames, which
+// stay on disk (--resident-section-bytes): `frames_bytes` of the file are not counted.
+Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames_bytes, const Character& character,
+                        int models, int repetitions, const std::filesystem::path& work) {
   Serving serving;
-  const uint64_t needed = file_bytes(model_file) * static_cast<uint64_t>(models);
+  const uint64_t file = file_bytes(model_file);
+  const uint64_t needed = 2 * (file - std::min(file, frames_bytes)) * static_cast<uint64_t>(models);
   if (const uint64_t available = available_memory_bytes(); needed > available / 10 * 8) {
-    serving.status = "not measured: " + std::to_string(models) + " copies of a " +
-                     std::to_string(file_bytes(model_file) >> 20) + " MiB model file exceed 80% of the " +
+    serving.status = "not measured: " + std::to_string(models) + " copies of a model whose runtime is about " +
+                     std::to_string(needed / static_cast<uint64_t>(models) >> 20) + " MiB exceed 80% of the " +
                      std::to_string(available >> 20) + " MiB this machine has available";
     return serving;
   }
@@ -367,7 +370,7 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
       const auto serve_work = work / ("serve-" + kind);
       std::filesystem::create_directories(serve_work);
       const Serving serving =
-          measure_serving(model_file, *character, scale.models, options.repetitions, serve_work);
+          measure_serving(model_file, input_bytes, *character, scale.models, options.repetitions, serve_work);
       if (serving.status.empty()) {
         row["registry_rss_bytes"] = serving.registry_rss_bytes;
         row["get_basis_bytes"] = serving.get_basis_bytes;

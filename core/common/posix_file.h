@@ -46,6 +46,22 @@ class FileDescriptor {
   int fd_;
 };
 
+// Reads up to `count` bytes at `offset` of `fd` into `out`, retrying short reads and EINTR;
+// returns how many there were (fewer only at end of file). kIo naming `path` on a read error.
+inline Result<uint64_t> read_at(int fd, const std::filesystem::path& path, char* out, uint64_t count,
+                                uint64_t offset) {
+  uint64_t done = 0;
+  while (done < count) {
+    const uint64_t chunk = count - done < (uint64_t{1} << 30) ? count - done : (uint64_t{1} << 30);
+    const ssize_t got = ::pread(fd, out + done, static_cast<size_t>(chunk), static_cast<off_t>(offset + done));
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) return io_error(path, "cannot read", errno);
+    if (got == 0) break;
+    done += static_cast<uint64_t>(got);
+  }
+  return done;
+}
+
 // "0x1234abcd".
 inline std::string hex32(uint32_t value) {
   char text[11];

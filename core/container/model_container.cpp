@@ -658,19 +658,12 @@ Result<std::string> ModelContainer::payload_range(std::string_view name, const S
                           " now), so its " + what + " cannot be read: load the version again");
   }
   std::string out(static_cast<size_t>(length), '\0');
-  uint64_t done = 0;
-  while (done < length) {
-    const ssize_t got = ::pread(fd.get(), out.data() + done, static_cast<size_t>(length - done),
-                                static_cast<off_t>(section.disk_offset + offset + done));
-    if (got < 0 && errno == EINTR) continue;
-    if (got < 0) return io_error(path, "read " + what, errno);
-    if (got == 0) {
-      return make_error(ErrorCode::kDataLoss, path.string() + ": byte " +
-                                                  std::to_string(section.disk_offset + offset + done) + ": " + what +
-                                                  " ends early: expected " + std::to_string(length) +
-                                                  " bytes, got " + std::to_string(done));
-    }
-    done += static_cast<uint64_t>(got);
+  auto done = read_at(fd.get(), path, out.data(), length, section.disk_offset + offset);
+  if (!done.ok()) return done.error();
+  if (*done != length) {
+    return make_error(ErrorCode::kDataLoss, path.string() + ": byte " + std::to_string(section.disk_offset + offset + *done) +
+                                                ": " + what + " ends early: expected " + std::to_string(length) +
+                                                " bytes, got " + std::to_string(*done));
   }
   return out;
 }

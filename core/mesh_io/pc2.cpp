@@ -4,7 +4,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <bit>
 #include <cassert>
 #include <cmath>
@@ -188,27 +187,15 @@ Result<PointCache> read_pc2(const std::filesystem::path& path) {
   FileDescriptor file(fd);
   struct stat info {};
   if (::fstat(file.get(), &info) != 0) return io_error(path, "cannot stat", errno);
-  // Reads `count` bytes at `offset` into `out`; returns how many there were.
-  const auto read_at = [&](char* out, uint64_t count, uint64_t offset) -> Result<uint64_t> {
-    uint64_t done = 0;
-    while (done < count) {
-      const ssize_t got = ::pread(file.get(), out + done, static_cast<size_t>(std::min<uint64_t>(count - done, 1 << 30)),
-                                  static_cast<off_t>(offset + done));
-      if (got < 0 && errno == EINTR) continue;
-      if (got < 0) return io_error(path, "cannot read", errno);
-      if (got == 0) break;
-      done += static_cast<uint64_t>(got);
-    }
-    return done;
-  };
   std::string head(kHeaderBytes, '\0');
-  auto got = read_at(head.data(), kHeaderBytes, 0);
+  auto got = read_at(file.get(), path, head.data(), kHeaderBytes, 0);
   if (!got.ok()) return got.error();
   head.resize(static_cast<size_t>(*got));
   auto header = parse_header(head, static_cast<uint64_t>(info.st_size), source);
   if (!header.ok()) return header.error();
   ANIMSPACE_RETURN_IF_ERROR(allocate_samples(*header, source));
-  got = read_at(reinterpret_cast<char*>(header->cache.samples.data()), header->payload_bytes, kHeaderBytes);
+  got = read_at(file.get(), path, reinterpret_cast<char*>(header->cache.samples.data()), header->payload_bytes,
+                kHeaderBytes);
   if (!got.ok()) return got.error();
   if (*got != header->payload_bytes) {
     return at_byte(ErrorCode::kDataLoss, source, kHeaderBytes + *got,
