@@ -17,7 +17,8 @@
 //                                    repository: registry_rss_bytes (VmRSS once SERVING),
 //                                    get_basis_bytes (one GetBasis as received) and
 //                                    client_reconstruct_us (the C++ client's reconstruction of one
-//                                    answer sent as coordinates, median)
+//                                    answer sent as coordinates, median), thumbnail_p50_ms (a
+//                                    256² thumbnail of a stored frame drawn by the daemon)
 // Level 0 is the baseline: every figure of a larger level is also printed as a ratio to it.
 #include <sys/resource.h>
 
@@ -39,6 +40,7 @@
 #include "bench/suites.h"
 #include "clients/cpp/client.h"
 #include "clients/cpp/coordinates.h"
+#include "clients/cpp/tools/quantile.h"
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
 #include "core/animspace/skeleton.h"
@@ -57,6 +59,7 @@ namespace as = animation_space;
 constexpr double kMaxJointAngle = 45;  // degrees: the pmsc suite's cow rows test up to 60
 constexpr uint64_t kPoseSeed = 53;
 constexpr int kLodSamplePoses = 200;
+constexpr uint32_t kThumbnailPx = 256;
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -188,6 +191,8 @@ struct Serving {
   uint64_t get_basis_bytes = 0;
   double get_basis_seconds = 0;
   double client_reconstruct_us = 0;
+  double thumbnail_p50_ms = -1;  // < 0: not drawn (no renderer), thumbnail_status says why
+  std::string thumbnail_status;
   std::string status;  // "" when measured, else why not
 };
 
@@ -272,6 +277,25 @@ Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames
                                     });
   } catch (const std::exception& e) {
     serving.status = std::string("serving failed: ") + e.what();
+    return serving;
+  }
+  // A 256² thumbnail of a stored frame, drawn by the daemon (its one row read from the file).
+  v1::RenderThumbnailRequest thumbnail;
+  thumbnail.mutable_model()->set_name("scale-00");
+  thumbnail.set_width_px(kThumbnailPx);
+  thumbnail.set_height_px(kThumbnailPx);
+  thumbnail.set_sequence_frame(0);
+  std::vector<double> thumbnail_ms;
+  try {
+    for (int i = 0; i <= repetitions; ++i) {  // the first draws the mesh into the renderer's caches
+      const auto start = std::chrono::steady_clock::now();
+      const Thumbnail drawn = client.render_thumbnail(thumbnail);
+      if (i > 0) thumbnail_ms.push_back(1e3 * seconds_since(start));
+      do_not_optimize(drawn.png.size());
+    }
+    serving.thumbnail_p50_ms = tools::quantile(std::move(thumbnail_ms), 0.5);
+  } catch (const std::exception& e) {
+    serving.thumbnail_status = e.what();
   }
   return serving;
 }
@@ -303,9 +327,9 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
   std::sort(levels.begin(), levels.end());
   std::printf("scale: the cow rig subdivided in animation space, %d random poses (joints up to %g°), %d served copies\n",
               scale.frames, kMaxJointAngle, scale.models);
-  std::printf("\n%-6s %-12s %8s %6s %9s %9s %9s %7s %9s %9s %9s %10s %10s %9s\n", "level", "kind", "points", "frames",
-              "input GB", "train s", "peak GB", "peak/in", "lod s", "meshopt s", "basis MB", "recon us", "serve GB",
-              "×base");
+  std::printf("\n%-6s %-12s %8s %6s %9s %9s %9s %7s %9s %9s %9s %10s %10s %9s %9s\n", "level", "kind", "points",
+              "frames", "input GB", "train s", "peak GB", "peak/in", "lod s", "meshopt s", "basis MB", "recon us",
+              "serve GB", "thumb ms", "×base");
   nlohmann::json baseline;
   for (const int level : levels) {
     const auto work = scratch.path() / ("level-" + std::to_string(level));
@@ -376,6 +400,12 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
         row["get_basis_bytes"] = serving.get_basis_bytes;
         row["get_basis_seconds"] = serving.get_basis_seconds;
         row["client_reconstruct_us"] = serving.client_reconstruct_us;
+        if (serving.thumbnail_p50_ms >= 0) {
+          row["thumbnail_p50_ms"] = serving.thumbnail_p50_ms;
+        } else {
+          row["thumbnail_status"] = serving.thumbnail_status;
+          std::printf("scale: level %d: no thumbnail: %s\n", level, serving.thumbnail_status.c_str());
+        }
       } else {
         row["serving_status"] = serving.status;
         std::printf("scale: level %d: %s\n", level, serving.status.c_str());
@@ -390,11 +420,11 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
       row["peak_rss_over_input"] = peak_over_input;
       if (level == 0 && kind == scale.kinds.front()) baseline = row;
       const double base_train = baseline.is_object() ? baseline.value("train_seconds", std::nan("")) : std::nan("");
-      std::printf("%-6d %-12s %8d %6d %9.3f %9.1f %9.3f %7.2f %9.2f %9.3f %9.1f %10.1f %10.3f %9.1f\n", level,
+      std::printf("%-6d %-12s %8d %6d %9.3f %9.1f %9.3f %7.2f %9.2f %9.3f %9.1f %10.1f %10.3f %9.1f %9.1f\n", level,
                   kind.c_str(), points, scale.frames, gb(input_bytes), value("train_seconds"),
                   value("peak_rss_bytes") / 1e9, peak_over_input, value("lod_build_seconds"), value("meshopt_seconds"),
                   value("get_basis_bytes") / 1e6, value("client_reconstruct_us"), value("registry_rss_bytes") / 1e9,
-                  value("train_seconds") / base_train);
+                  value("thumbnail_p50_ms"), value("train_seconds") / base_train);
       std::fflush(stdout);
       results.push_back(row);
     }
