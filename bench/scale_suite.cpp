@@ -18,7 +18,9 @@
 //                                    get_basis_bytes (one GetBasis as received) and
 //                                    client_reconstruct_us (the C++ client's reconstruction of one
 //                                    answer sent as coordinates, median), thumbnail_p50_ms (a
-//                                    256² thumbnail of a stored frame drawn by the daemon)
+//                                    256² thumbnail of a stored frame drawn by the daemon), and
+//                                    get_lod_bytes / get_lod_chunks / get_lod_ms (GetLod of
+//                                    build-lod's level 0 in animation-space form, median)
 // Level 0 is the baseline: every figure of a larger level is also printed as a ratio to it.
 #include <sys/resource.h>
 
@@ -193,13 +195,19 @@ struct Serving {
   double client_reconstruct_us = 0;
   double thumbnail_p50_ms = -1;  // < 0: not drawn (no renderer), thumbnail_status says why
   std::string thumbnail_status;
+  // GetLod of the levels build-lod made, level 0 (every vertex) in animation-space form.
+  uint64_t get_lod_bytes = 0;
+  uint64_t get_lod_chunks = 0;
+  double get_lod_ms = -1;  // < 0: not measured, get_lod_status says why
+  std::string get_lod_status;
   std::string status;  // "" when measured, else why not
 };
 
 // The daemon holds a version's runtime (about twice its basis), not its training frames, which
 // stay on disk (--resident-section-bytes): `frames_bytes` of the file are not counted.
 Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames_bytes, const Character& character,
-                        int models, int repetitions, const std::filesystem::path& work) {
+                        const std::filesystem::path& lod_file, int models, int repetitions,
+                        const std::filesystem::path& work) {
   Serving serving;
   const uint64_t file = file_bytes(model_file);
   const uint64_t needed = 2 * (file - std::min(file, frames_bytes)) * static_cast<uint64_t>(models);
@@ -296,6 +304,26 @@ Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames
     serving.thumbnail_p50_ms = tools::quantile(std::move(thumbnail_ms), 0.5);
   } catch (const std::exception& e) {
     serving.thumbnail_status = e.what();
+  }
+  // The levels of detail, loaded after the RSS above was read (they are not one of the copies).
+  if (!std::filesystem::exists(lod_file)) {
+    serving.get_lod_status = "build-lod made no levels";
+    return serving;
+  }
+  std::filesystem::create_directories(repository / "scale-lod" / "1");
+  std::filesystem::create_hard_link(lod_file, repository / "scale-lod" / "1" / "model.anim");
+  try {
+    client.load_model("scale-lod");
+    v1::GetLodRequest request;
+    request.mutable_model()->set_name("scale-lod");
+    request.set_level(0);
+    request.set_form(v1::GetLodRequest::FORM_ANIMATION_SPACE);
+    LodMesh mesh;
+    serving.get_lod_ms = 1e3 * median_seconds(repetitions, [&] { mesh = client.get_lod(request); });
+    serving.get_lod_bytes = mesh.bytes_received;
+    serving.get_lod_chunks = mesh.chunk_count;
+  } catch (const std::exception& e) {
+    serving.get_lod_status = e.what();
   }
   return serving;
 }
@@ -394,7 +422,8 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
       const auto serve_work = work / ("serve-" + kind);
       std::filesystem::create_directories(serve_work);
       const Serving serving =
-          measure_serving(model_file, input_bytes, *character, scale.models, options.repetitions, serve_work);
+          measure_serving(model_file, input_bytes, *character, work / "lod.anim", scale.models, options.repetitions,
+                          serve_work);
       if (serving.status.empty()) {
         row["registry_rss_bytes"] = serving.registry_rss_bytes;
         row["get_basis_bytes"] = serving.get_basis_bytes;
@@ -405,6 +434,14 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
         } else {
           row["thumbnail_status"] = serving.thumbnail_status;
           std::printf("scale: level %d: no thumbnail: %s\n", level, serving.thumbnail_status.c_str());
+        }
+        if (serving.get_lod_ms >= 0) {
+          row["get_lod_bytes"] = serving.get_lod_bytes;
+          row["get_lod_chunks"] = serving.get_lod_chunks;
+          row["get_lod_ms"] = serving.get_lod_ms;
+        } else {
+          row["get_lod_status"] = serving.get_lod_status;
+          std::printf("scale: level %d: no GetLod: %s\n", level, serving.get_lod_status.c_str());
         }
       } else {
         row["serving_status"] = serving.status;
@@ -425,6 +462,11 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
                   value("peak_rss_bytes") / 1e9, peak_over_input, value("lod_build_seconds"), value("meshopt_seconds"),
                   value("get_basis_bytes") / 1e6, value("client_reconstruct_us"), value("registry_rss_bytes") / 1e9,
                   value("thumbnail_p50_ms"), value("train_seconds") / base_train);
+      if (row.contains("get_lod_ms")) {
+        std::printf("%-6s GetLod level 0 (animation space, %d vertices): %.1f MB in %lu chunks, %.1f ms\n", "",
+                    points, value("get_lod_bytes") / 1e6, static_cast<unsigned long>(row["get_lod_chunks"].get<uint64_t>()),
+                    value("get_lod_ms"));
+      }
       std::fflush(stdout);
       results.push_back(row);
     }
