@@ -9,13 +9,28 @@ namespace animspace::pmsc {
 std::vector<int> select_check_points(const Eigen::MatrixXf& point_errors, const Eigen::VectorXd& max_errors,
                                      const std::vector<int>& key_points, const std::vector<int>& point_regions,
                                      int region_count, int count, double noise_floor) {
-  const long N = point_errors.cols();
   assert(max_errors.size() == point_errors.rows());
-  assert(point_regions.empty() || static_cast<long>(point_regions.size()) == N);
-  std::vector<long> usable;
+  std::vector<Eigen::VectorXf> rows(static_cast<size_t>(point_errors.rows()));
+  std::vector<long> samples(rows.size());
   for (long i = 0; i < point_errors.rows(); ++i) {
+    rows[static_cast<size_t>(i)] = point_errors.row(i).transpose();
+    samples[static_cast<size_t>(i)] = i;
+  }
+  return select_check_points(rows, samples, max_errors, key_points, point_regions, region_count, count, noise_floor);
+}
+
+std::vector<int> select_check_points(const std::vector<Eigen::VectorXf>& sample_errors, const std::vector<long>& samples,
+                                     const Eigen::VectorXd& max_errors, const std::vector<int>& key_points,
+                                     const std::vector<int>& point_regions, int region_count, int count,
+                                     double noise_floor) {
+  std::vector<long> usable;
+  for (long i : samples) {
+    assert(i >= 0 && i < static_cast<long>(sample_errors.size()) && i < max_errors.size());
     if (max_errors(i) >= noise_floor && max_errors(i) > 0) usable.push_back(i);
   }
+  if (usable.empty()) return {};
+  const long N = sample_errors[static_cast<size_t>(usable.front())].size();
+  assert(point_regions.empty() || static_cast<long>(point_regions.size()) == N);
   std::vector<char> taken(static_cast<size_t>(N), 0);
   for (int k : key_points) taken[static_cast<size_t>(k)] = 1;
   const long free_points = N - static_cast<long>(std::count(taken.begin(), taken.end(), 1));
@@ -27,7 +42,9 @@ std::vector<int> select_check_points(const Eigen::MatrixXf& point_errors, const 
   const long n = static_cast<long>(usable.size());
   Eigen::MatrixXf u(n, N);
   for (long s = 0; s < n; ++s) {
-    u.row(s) = point_errors.row(usable[static_cast<size_t>(s)]) / static_cast<float>(max_errors(usable[static_cast<size_t>(s)]));
+    const long i = usable[static_cast<size_t>(s)];
+    assert(sample_errors[static_cast<size_t>(i)].size() == N);
+    u.row(s) = sample_errors[static_cast<size_t>(i)].transpose() / static_cast<float>(max_errors(i));
   }
   Eigen::VectorXf coverage = Eigen::VectorXf::Zero(n);
   const auto take = [&](long j) {

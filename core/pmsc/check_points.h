@@ -22,9 +22,17 @@ namespace animspace::pmsc {
 // most a quarter more points for the client to pose).
 inline constexpr double kCheckPointFraction = 0.2;
 
-// `point_errors`: n × N per-point errors of n held-out samples; `max_errors`: their row maxima
-// (n); samples with max below `noise_floor` are skipped. `point_regions` (N, or empty) and
-// `region_count` (0 without regions). Returns min(count, N − K) point indices in selection order.
+// `sample_errors`: the per-point errors of held-out samples, one N-vector each, as the calibration
+// folds produce them (no n × N copy of them is made: at 186k points × 2,500 samples one is
+// 1.9 GB, issue #53); `samples`: the ones to judge by, indices into `sample_errors` and
+// `max_errors` (their maxima); samples with max below `noise_floor` are skipped. `point_regions`
+// (N, or empty) and `region_count` (0 without regions). Returns min(count, N − K) point indices
+// in selection order.
+std::vector<int> select_check_points(const std::vector<Eigen::VectorXf>& sample_errors, const std::vector<long>& samples,
+                                     const Eigen::VectorXd& max_errors, const std::vector<int>& key_points,
+                                     const std::vector<int>& point_regions, int region_count, int count,
+                                     double noise_floor);
+// The same for n × N errors, every row a sample (`max_errors`: n).
 std::vector<int> select_check_points(const Eigen::MatrixXf& point_errors, const Eigen::VectorXd& max_errors,
                                      const std::vector<int>& key_points, const std::vector<int>& point_regions,
                                      int region_count, int count, double noise_floor);

@@ -788,7 +788,6 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
 void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const TrainingOptions& o, bool cross,
                    PmscModel& model) {
   const long R_count = model.region_count;
-  const long N_out = model.point_count;
   CalibrationSamples& samples = model.calibration.samples;
   const long n = static_cast<long>(folds.key.size());
   samples.key_point_errors = Eigen::Map<const Eigen::VectorXd>(folds.key.data(), n);
@@ -805,13 +804,15 @@ void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const Tra
   const int check_count =
       cross ? 0 : static_cast<int>(std::ceil(o.check_point_fraction * static_cast<double>(model.key_point_count()) - 1e-9));
   if (check_count == 0 || n == 0) return;
-  Eigen::MatrixXf point_errors(n, N_out);
-  for (long i = 0; i < n; ++i) point_errors.row(i) = folds.point_errors[static_cast<size_t>(i)].transpose();
-  folds.point_errors.clear();
+  // The samples' point errors stay as the folds made them (one N-vector each): the largest thing
+  // training holds at studio sizes, so never copied whole (issue #53).
+  const std::vector<Eigen::VectorXf>& point_errors = folds.point_errors;
   const double noise_floor = kCalibrationNoiseFraction * o.error_tolerance;
   // The served check points: from every sample's residuals.
-  model.check_points = select_check_points(point_errors, samples.max_errors, model.key_points, model.point_regions,
-                                           model.region_count, check_count, noise_floor);
+  std::vector<long> every_sample(static_cast<size_t>(n));
+  std::iota(every_sample.begin(), every_sample.end(), 0L);
+  model.check_points = select_check_points(point_errors, every_sample, samples.max_errors, model.key_points,
+                                           model.point_regions, model.region_count, check_count, noise_floor);
   const long C = model.check_point_count();
   if (C == 0) return;
   for (int point : model.check_points) {
@@ -828,15 +829,9 @@ void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const Tra
       for (long i = 0; i < n; ++i) {
         if (folds.half[static_cast<size_t>(i)] != h) others.push_back(i);
       }
-      Eigen::MatrixXf other_errors(static_cast<long>(others.size()), N_out);
-      Eigen::VectorXd other_max(static_cast<long>(others.size()));
-      for (size_t k = 0; k < others.size(); ++k) {
-        other_errors.row(static_cast<long>(k)) = point_errors.row(others[k]);
-        other_max(static_cast<long>(k)) = samples.max_errors(others[k]);
-      }
       checks_of_half[static_cast<size_t>(h)] =
-          select_check_points(other_errors, other_max, crossfit.keys[static_cast<size_t>(1 - h)], model.point_regions,
-                              model.region_count, static_cast<int>(C), noise_floor);
+          select_check_points(point_errors, others, samples.max_errors, crossfit.keys[static_cast<size_t>(1 - h)],
+                              model.point_regions, model.region_count, static_cast<int>(C), noise_floor);
     }
   }
   samples.check_point_errors = Eigen::VectorXd::Zero(n);
@@ -844,7 +839,7 @@ void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const Tra
   for (long i = 0; i < n; ++i) {
     const int h = halves ? folds.half[static_cast<size_t>(i)] : 0;
     for (int point : checks_of_half[static_cast<size_t>(h)]) {
-      const double error = static_cast<double>(point_errors(i, point));
+      const double error = static_cast<double>(point_errors[static_cast<size_t>(i)](point));
       samples.check_point_errors(i) = std::max(samples.check_point_errors(i), error);
       if (R_count > 0) {
         double& region = samples.region_check_point_errors(i, model.point_regions[static_cast<size_t>(point)]);
