@@ -654,16 +654,17 @@ Result<std::string> ModelContainer::payload_range(std::string_view name, const S
   const FileIdentity now = identify(path, status);
   if (!same_file(now, file)) {
     return make_error(ErrorCode::kFailedPrecondition,
-                      path.string() + ": changed since it was loaded (" +  describe(file) + " then, " + describe(now) +
+                      path.string() + ": changed since it was loaded (" + describe(file) + " then, " + describe(now) +
                           " now), so its " + what + " cannot be read: load the version again");
   }
   std::string out(static_cast<size_t>(length), '\0');
   auto done = read_at(fd.get(), path, out.data(), length, section.disk_offset + offset);
   if (!done.ok()) return done.error();
   if (*done != length) {
-    return make_error(ErrorCode::kDataLoss, path.string() + ": byte " + std::to_string(section.disk_offset + offset + *done) +
-                                                ": " + what + " ends early: expected " + std::to_string(length) +
-                                                " bytes, got " + std::to_string(*done));
+    return make_error(ErrorCode::kDataLoss, path.string() + ": byte " +
+                                                std::to_string(section.disk_offset + offset + *done) + ": " + what +
+                                                " ends early: expected " + std::to_string(length) + " bytes, got " +
+                                                std::to_string(*done));
   }
   return out;
 }
@@ -672,10 +673,10 @@ Result<std::string> ModelContainer::payload(std::string_view name, const Section
   auto bytes = payload_range(name, section, 0, section.size());
   if (!bytes.ok() || !section.on_disk) return bytes;
   if (const uint32_t computed = crc32(*bytes); kVerifyChecksums && computed != section.disk_crc) {
-     return make_error(ErrorCode::kDataLoss, section.disk_file->path.string() + ": byte " + std::to_string(section.disk_offset) +
-                                                ": section '" + std::string(name) +
-                                                "' checksum mismatch when read again: stored " +
-                                                hex32(section.disk_crc) + ", computed " + hex32(computed));
+    return make_error(ErrorCode::kDataLoss,
+                      section.disk_file->path.string() + ": byte " + std::to_string(section.disk_offset) +
+                          ": section '" + std::string(name) + "' checksum mismatch when read again: stored " +
+                          hex32(section.disk_crc) + ", computed " + hex32(computed));
   }
   return bytes;
 }
@@ -902,6 +903,9 @@ Result<ModelContainer> read_file(const std::filesystem::path& path, const ReadOp
     return container;
   } catch (const std::bad_alloc&) {
     return make_error(ErrorCode::kResourceExhausted, source + ": out of memory while reading the model container");
+  } catch (const std::exception& e) {
+    return make_error(ErrorCode::kInternal,
+                      source + ": unexpected error while reading the model container: " + e.what());
   }
 }
 

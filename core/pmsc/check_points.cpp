@@ -19,8 +19,8 @@ std::vector<int> select_check_points(const Eigen::MatrixXf& point_errors, const 
   return select_check_points(rows, samples, max_errors, key_points, point_regions, region_count, count, noise_floor);
 }
 
-std::vector<int> select_check_points(const std::vector<Eigen::VectorXf>& sample_errors, const std::vector<long>& samples,
-                                     const Eigen::VectorXd& max_errors, const std::vector<int>& key_points,
+std::vector<int> select_check_points(const std::vector<Eigen::VectorXf>& sample_errors,
+                                     const std::vector<long>& samples, const Eigen::VectorXd& max_errors, const std::vector<int>& key_points,
                                      const std::vector<int>& point_regions, int region_count, int count,
                                      double noise_floor) {
   std::vector<long> usable;
