@@ -31,16 +31,10 @@ v1::ServerEngine to_proto(model::ServerEngine engine) {
   return v1::SERVER_ENGINE_UNSPECIFIED;
 }
 
-void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
-  out->set_version(entry.version);
-  if (!entry.model) {
-    out->set_state(v1::VERSION_STATE_FAILED);
-    out->set_error(entry.error);
-    return;
-  }
-  const LoadedModel& m = *entry.model;
-  const model::ModelInfo& info = m.info;
-  out->set_state(v1::VERSION_STATE_AVAILABLE);
+namespace {
+
+// What a version is, from its info: the same whether it is loaded now or evicted.
+void set_description(const model::ModelInfo& info, v1::ModelVersion* out) {
   out->set_kind(to_proto(info.kind));
   out->set_description(info.description);
   out->set_point_count(static_cast<uint32_t>(info.point_count));
@@ -66,8 +60,30 @@ void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
   }
   out->set_subspace_bone_count(static_cast<uint32_t>(info.subspace_bone_count));
   out->set_residual_components(static_cast<uint32_t>(info.residual_components));
+}
+
+}  // namespace
+
+void to_proto(const VersionEntry& entry, v1::ModelVersion* out) {
+  out->set_version(entry.version);
+  if (entry.evicted) {
+    out->set_state(v1::VERSION_STATE_EVICTED);
+    set_description(entry.evicted_info, out);
+    out->set_file_size_bytes(entry.evicted_file_size_bytes);
+    out->set_resident_bytes(entry.evicted_resident_bytes);
+    return;
+  }
+  if (!entry.model) {
+    out->set_state(v1::VERSION_STATE_FAILED);
+    out->set_error(entry.error);
+    return;
+  }
+  const LoadedModel& m = *entry.model;
+  out->set_state(v1::VERSION_STATE_AVAILABLE);
+  set_description(m.info, out);
   out->set_file_size_bytes(m.file_size_bytes);
   out->set_loaded_at_unix_s(m.loaded_at_unix_s);
+  out->set_resident_bytes(m.resident_bytes);
   for (const auto& [key, value] : m.container.metadata()) (*out->mutable_metadata())[key] = value;
   for (const auto& name : m.container.section_names()) out->add_sections(name);
 }

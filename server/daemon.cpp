@@ -57,7 +57,7 @@ Result<std::pair<std::string, int>> split_host_port(const std::string& address, 
 Daemon::Daemon(ServerOptions options, MakeRenderer make_renderer)
     : options_(std::move(options)),
       make_renderer_(std::move(make_renderer)),
-      registry_(options_.repository, options_.resident_section_bytes),
+      registry_(options_.repository, options_.resident_section_bytes, options_.memory_budget_bytes),
       admission_(options_.max_concurrent_calls) {}
 
 Daemon::~Daemon() { shutdown(); }
@@ -191,6 +191,8 @@ Status Daemon::start_metrics_endpoint() {
     ::setsockopt(socket, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
   });
   metrics_http_->Get("/metrics", [this](const httplib::Request&, httplib::Response& response) {
+    const RegistryMemory memory = registry_.memory();
+    metrics_.set_registry_memory(memory.budget_bytes, memory.resident_bytes, memory.evictions, memory.reloads);
     response.set_content(metrics_.prometheus_text(), "text/plain; version=0.0.4");
   });
   const auto& [host, port] = *host_port;

@@ -129,6 +129,12 @@ int main(int argc, char** argv) {
                  "checked at load and read again when a request needs them, instead of held in memory for every "
                  "loaded version")
       ->capture_default_str();
+  app.add_option("--memory-budget", options.memory_budget_bytes,
+                 "The heap the loaded model versions may hold together, bytes or with a unit (16GiB, 512MB; 0 = no "
+                 "bound): past it, the least recently used versions are evicted, and the next request for one "
+                 "loads it again, waiting within its deadline or getting UNAVAILABLE with a retry hint")
+      ->transform(CLI::AsSizeValue(false))
+      ->capture_default_str();
   app.add_option("--tls-cert", options.tls_cert, "TLS: server certificate chain (PEM); with --tls-key");
   app.add_option("--tls-key", options.tls_key, "TLS: server private key (PEM)");
   app.add_option("--tls-client-ca", options.tls_client_ca,

@@ -153,6 +153,15 @@ void Metrics::record_miss_not_logged(std::string_view model, NotLogged reason) {
   ++not_logged_[{std::string(model), reason}];
 }
 
+void Metrics::set_registry_memory(uint64_t budget_bytes, uint64_t resident_bytes, uint64_t evictions,
+                                  uint64_t reloads) {
+  std::lock_guard lock(mutex_);
+  memory_budget_bytes_ = budget_bytes;
+  resident_bytes_ = resident_bytes;
+  evictions_ = evictions;
+  reloads_ = reloads;
+}
+
 void Metrics::set_miss_log_bytes(std::string_view model, uint64_t bytes) {
   std::lock_guard lock(mutex_);
   miss_log_bytes_[std::string(model)] = bytes;
@@ -166,12 +175,24 @@ std::chrono::system_clock::time_point Metrics::statistics_since() const {
 std::string Metrics::prometheus_text() const {
   std::lock_guard lock(mutex_);
   std::ostringstream out;
-  out << "# HELP animspace_models_loaded Model versions loaded and serving.\n"
+  out << "# HELP animspace_models_loaded Model versions serving: loaded, or evicted under --memory-budget and loaded again on request.\n"
       << "# TYPE animspace_models_loaded gauge\n"
       << "animspace_models_loaded " << models_loaded_ << '\n'
       << "# HELP animspace_calls_in_flight RPC handlers running now.\n"
       << "# TYPE animspace_calls_in_flight gauge\n"
-      << "animspace_calls_in_flight " << calls_in_flight() << '\n';
+      << "animspace_calls_in_flight " << calls_in_flight() << '\n'
+      << "# HELP animspace_registry_resident_bytes Heap held by the model versions loaded now, as measured at their loads.\n"
+      << "# TYPE animspace_registry_resident_bytes gauge\n"
+      << "animspace_registry_resident_bytes " << resident_bytes_ << '\n'
+      << "# HELP animspace_registry_memory_budget_bytes --memory-budget (0: none).\n"
+      << "# TYPE animspace_registry_memory_budget_bytes gauge\n"
+      << "animspace_registry_memory_budget_bytes " << memory_budget_bytes_ << '\n'
+      << "# HELP animspace_registry_evictions_total Versions unloaded to keep within --memory-budget.\n"
+      << "# TYPE animspace_registry_evictions_total counter\n"
+      << "animspace_registry_evictions_total " << evictions_ << '\n'
+      << "# HELP animspace_registry_reloads_total Evicted versions loaded again on request.\n"
+      << "# TYPE animspace_registry_reloads_total counter\n"
+      << "animspace_registry_reloads_total " << reloads_ << '\n';
   out << "# HELP animspace_model_version_serving Model versions loaded and serving (1 each); default=\"1\" "
          "marks the version a request for version 0 gets.\n"
       << "# TYPE animspace_model_version_serving gauge\n";

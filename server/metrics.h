@@ -79,6 +79,9 @@ class Metrics {
   // Skeleton poses evaluated (SkinningService): counted as poses, with no verdict.
   void record_skeleton_poses(std::string_view model, uint64_t count);
   void set_models_loaded(int count);
+  // The registry's memory under --memory-budget (ModelRegistry::memory): budget (0 = none),
+  // bytes resident, and versions evicted and loaded again since start.
+  void set_registry_memory(uint64_t budget_bytes, uint64_t resident_bytes, uint64_t evictions, uint64_t reloads);
   // Versions serving now, per model, and the default of each (animspace_model_versions).
   struct ServedVersion {
     std::string model;
@@ -113,6 +116,10 @@ class Metrics {
   std::map<std::string, ModelStatistics> models_;
   std::chrono::system_clock::time_point since_;
   int models_loaded_ = 0;
+  uint64_t memory_budget_bytes_ = 0;
+  uint64_t resident_bytes_ = 0;
+  uint64_t evictions_ = 0;
+  uint64_t reloads_ = 0;
   std::vector<ServedVersion> served_versions_;
   // Not reset with the statistics: Prometheus counters only grow.
   std::map<std::pair<std::string, NotLogged>, uint64_t> not_logged_;

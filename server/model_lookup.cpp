@@ -9,11 +9,21 @@
 
 namespace animspace::server {
 
-grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
-                        std::shared_ptr<const LoadedModel>& out, const CallControl* call) {
+grpc::Status find_model(ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
+                        std::shared_ptr<const LoadedModel>& out, const CallControl* call,
+                        std::chrono::system_clock::time_point deadline) {
   if (grpc::Status valid = check_model_ref(ref, field); !valid.ok()) return valid;
-  auto found = registry.find(ref.name(), ref.version());
+  if (call != nullptr && call->context() != nullptr) deadline = std::min(deadline, call->context()->deadline());
+  ReloadHint reloading;
+  auto found = registry.find(ref.name(), ref.version(), deadline, &reloading);
   if (!found) {
+    if (reloading.after.count() > 0) {
+      // gRPC's client retry policy waits this long before its next attempt (gRFC A6 pushback).
+      if (call != nullptr && call->context() != nullptr) {
+        call->context()->AddTrailingMetadata("grpc-retry-pushback-ms", std::to_string(reloading.after.count()));
+      }
+      return {grpc::StatusCode::UNAVAILABLE, found.error().message};
+    }
     // A wrong version already lists the versions; a wrong name gets the names.
     if (found.error().code == ErrorCode::kNotFound && !registry.describe(ref.name())) {
       return unknown_model(registry, ref.name());

@@ -2,6 +2,7 @@
 // path-like name is refused before it reaches the registry), then the registry is asked.
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -17,8 +18,13 @@ namespace animspace::server {
 
 // OK and `out` set (and the call labelled with the model), or INVALID_ARGUMENT naming
 // `field`.name / NOT_FOUND (for an unknown name, unknown_model's message) / FAILED_PRECONDITION.
-grpc::Status find_model(const ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
-                        std::shared_ptr<const LoadedModel>& out, const CallControl* call = nullptr);
+// A version evicted under --memory-budget is loaded again, waited for until the earlier of
+// `deadline` and the call's own; past it, UNAVAILABLE saying how long its last load took, and —
+// for a unary call — that many milliseconds in the grpc-retry-pushback-ms trailer, which a client
+// with a retry policy for UNAVAILABLE waits before it tries again (issue #53).
+grpc::Status find_model(ModelRegistry& registry, const v1::ModelRef& ref, std::string_view field,
+                        std::shared_ptr<const LoadedModel>& out, const CallControl* call = nullptr,
+                        std::chrono::system_clock::time_point deadline = std::chrono::system_clock::time_point::max());
 
 // NOT_FOUND for a model name the registry does not serve, with the nearest names and what it
 // serves: "model 'crnae' is not loaded; did you mean 'crane'? models: arm, arm-pmsc, crane"

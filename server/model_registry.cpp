@@ -1,6 +1,9 @@
 #include "server/model_registry.h"
 
 #include <malloc.h>
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#include <sanitizer/allocator_interface.h>
+#endif
 
 #include <algorithm>
 #include <chrono>
@@ -21,23 +24,43 @@ int64_t unix_now_s() {
       .count();
 }
 
+// Bytes the allocator has handed out and not had back: glibc's arenas and mmapped blocks, or the
+// sanitizer's own allocator, which replaces glibc's under ASan and TSan.
+uint64_t heap_in_use() {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  return __sanitizer_get_current_allocated_bytes();
+#else
+  const struct mallinfo2 info = ::mallinfo2();
+  return info.uordblks + info.hblkhd;
+#endif
+}
+
+std::string mebibytes(uint64_t bytes) { return fmt::format("{:.1f} MiB", static_cast<double>(bytes) / (1 << 20)); }
+
 }  // namespace
 
 uint64_t ModelEntry::default_version() const {
   for (auto it = versions.rbegin(); it != versions.rend(); ++it) {
-    if (it->second.model) return it->first;
+    if (it->second.servable()) return it->first;
   }
   return 0;
 }
 
-ModelRegistry::ModelRegistry(std::filesystem::path repository, uint64_t resident_section_limit)
-    : repository_(std::move(repository)), resident_section_limit_(resident_section_limit) {}
+ModelRegistry::ModelRegistry(std::filesystem::path repository, uint64_t resident_section_limit,
+                             uint64_t memory_budget_bytes)
+    : repository_(std::move(repository)),
+      resident_section_limit_(resident_section_limit),
+      memory_budget_bytes_(memory_budget_bytes) {}
 
 VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t version,
                                          const std::filesystem::path& dir) const {
   VersionEntry entry;
   entry.version = version;
   const auto path = dir / kModelFileName;
+  std::lock_guard loading(load_mutex_);
+  if (before_load_) before_load_(name, version);
+  const auto started = std::chrono::steady_clock::now();
+  const uint64_t heap_before = heap_in_use();
   auto container = container::read_file(path, container::ReadOptions{resident_section_limit_});
   if (!container) {
     entry.error = container.error().message;
@@ -57,7 +80,15 @@ VersionEntry ModelRegistry::load_version(const std::string& name, uint64_t versi
   loaded->file_size_bytes = std::filesystem::file_size(path, ec);
   loaded->loaded_at_unix_s = unix_now_s();
   loaded->container = std::move(*container);
+  // What the load left on the heap is what this version holds: the file's bytes, read whole for
+  // the checksum, are freed by now. Loads are one at a time; a request running meanwhile adds
+  // its own few allocations to the figure.
+  const uint64_t heap_after = heap_in_use();
+  loaded->resident_bytes = heap_after > heap_before ? heap_after - heap_before : 0;
+  loaded->load_time =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - started);
   entry.model = std::move(loaded);
+  entry.last_use->store(++use_clock_, std::memory_order_relaxed);
   return entry;
 }
 
@@ -86,6 +117,9 @@ int ModelRegistry::scan(bool retry_known) {
     names.push_back(name);
   }
   if (ec) spdlog::error("repository: cannot list {}: {}", repository_.string(), ec.message());
+  // By name, not in the directory's order: the log reads the same on every machine, and under a
+  // --memory-budget the models evicted at start-up are the first by name.
+  std::sort(names.begin(), names.end());
   int loaded = 0;
   for (const auto& name : names) {
     if (retry_known) {
@@ -144,7 +178,9 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
       const bool already_loaded = existing != models_.end() && existing->second.versions.count(v) &&
                                   existing->second.versions.at(v).model;
       if (version == 0 && already_loaded) continue;
-      fresh.push_back({v, nullptr, ""});
+      VersionEntry entry;
+      entry.version = v;
+      fresh.push_back(std::move(entry));
     }
   }
   for (auto& entry : fresh) {
@@ -167,21 +203,149 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
     }
   }
 
-  std::unique_lock lock(mutex_);
-  ModelEntry& model = models_[name];
-  model.name = name;
-  for (auto& entry : fresh) {
-    auto& slot = model.versions[entry.version];
-    // A refused reload of a version that is serving keeps the serving copy (nothing stored is
-    // lost); the refusal is still reported to the caller below.
-    if (!entry.model && slot.model) continue;
-    slot = entry;
+  std::set<std::pair<std::string, uint64_t>> just_loaded;
+  {
+    std::unique_lock lock(mutex_);
+    ModelEntry& model = models_[name];
+    model.name = name;
+    for (auto& entry : fresh) {
+      auto& slot = model.versions[entry.version];
+      // A refused reload of a version that is serving keeps the serving copy (nothing stored is
+      // lost); the refusal is still reported to the caller below.
+      if (!entry.model && slot.model) continue;
+      if (entry.model) just_loaded.insert({name, entry.version});
+      slot = entry;
+    }
   }
+  keep_within_budget(just_loaded);
   if (version != 0) {
     const auto& named = fresh.front();
     if (!named.model) return make_error(ErrorCode::kFailedPrecondition, named.error);
   }
-  return model;
+  std::shared_lock lock(mutex_);
+  auto now = models_.find(name);
+  if (now == models_.end()) return make_error(ErrorCode::kNotFound, "model '" + name + "' was unloaded while it loaded");
+  ModelEntry entry = now->second;
+  // The versions this call loaded, as it loaded them, even if a concurrent load evicted one since.
+  for (const auto& loaded : fresh) {
+    if (loaded.model) entry.versions[loaded.version] = loaded;
+  }
+  return entry;
+}
+
+void ModelRegistry::keep_within_budget(const std::set<std::pair<std::string, uint64_t>>& keep) {
+  if (memory_budget_bytes_ == 0) return;
+  std::vector<std::shared_ptr<const LoadedModel>> evicted;  // freed after the lock
+  {
+    std::unique_lock lock(mutex_);
+    uint64_t resident = 0;
+    struct Candidate {
+      uint64_t last_use;
+      const std::string* name;
+      VersionEntry* entry;
+    };
+    std::vector<Candidate> candidates;
+    for (auto& [name, model] : models_) {
+      for (auto& [version, entry] : model.versions) {
+        if (!entry.model) continue;
+        resident += entry.model->resident_bytes;
+        if (!keep.count({name, version})) {
+          candidates.push_back({entry.last_use->load(std::memory_order_relaxed), &name, &entry});
+        }
+      }
+    }
+    std::sort(candidates.begin(), candidates.end(),
+              [](const Candidate& a, const Candidate& b) { return a.last_use < b.last_use; });
+    for (const Candidate& c : candidates) {
+      if (resident <= memory_budget_bytes_) break;
+      VersionEntry& entry = *c.entry;
+      const LoadedModel& m = *entry.model;
+      resident -= m.resident_bytes;
+      spdlog::info("model {} version {} evicted ({} resident) to keep within --memory-budget {}: {} resident now; "
+                   "the next request for it loads it again",
+                   *c.name, entry.version, mebibytes(m.resident_bytes), mebibytes(memory_budget_bytes_),
+                   mebibytes(resident));
+      entry.evicted = true;
+      entry.evicted_info = m.info;
+      entry.evicted_file_size_bytes = m.file_size_bytes;
+      entry.evicted_resident_bytes = m.resident_bytes;
+      entry.evicted_load_time = m.load_time;
+      evicted.push_back(std::move(entry.model));
+      entry.model = nullptr;
+      evictions_.fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+  if (evicted.empty()) return;
+  evicted.clear();
+  ::malloc_trim(0);  // as in unload(): give the evicted versions' memory back to the system now
+}
+
+void ModelRegistry::touch(const VersionEntry& entry) const {
+  if (memory_budget_bytes_ != 0) entry.last_use->store(++use_clock_, std::memory_order_relaxed);
+}
+
+Result<std::shared_ptr<const LoadedModel>> ModelRegistry::reload(const std::string& name, uint64_t version,
+                                                                 std::chrono::system_clock::time_point deadline,
+                                                                 ReloadHint* hint) {
+  const auto key = std::make_pair(name, version);
+  const std::string which = "model '" + name + "' version " + std::to_string(version);
+  {
+    std::unique_lock waiting(reload_mutex_);
+    const auto loaded_elsewhere = [&] { return reloading_.count(key) == 0; };
+    if (deadline == std::chrono::system_clock::time_point::max()) {
+      reloaded_.wait(waiting, loaded_elsewhere);
+    } else if (!reloaded_.wait_until(waiting, deadline, loaded_elsewhere)) {
+      std::chrono::milliseconds last_load{0};
+      {
+        std::shared_lock lock(mutex_);
+        if (auto m = models_.find(name); m != models_.end()) {
+          if (auto v = m->second.versions.find(version); v != m->second.versions.end()) {
+            last_load = v->second.evicted_load_time;
+          }
+        }
+      }
+      const auto after = std::max(last_load, std::chrono::milliseconds{1});
+      if (hint != nullptr) hint->after = after;
+      return make_error(ErrorCode::kFailedPrecondition,
+                        which + " is being loaded again (it was evicted to keep within the server's --memory-budget) "
+                        "and the call's deadline came first; its last load took " +
+                            std::to_string(last_load.count()) + " ms: retry after that");
+    }
+    // Nobody is loading it now: it is ours to load, unless a load we waited for left it loaded
+    // (or refused, or unloaded).
+    {
+      std::shared_lock lock(mutex_);
+      auto m = models_.find(name);
+      const VersionEntry* entry = nullptr;
+      if (m != models_.end()) {
+        if (auto v = m->second.versions.find(version); v != m->second.versions.end()) entry = &v->second;
+      }
+      if (entry == nullptr) return make_error(ErrorCode::kNotFound, which + " was unloaded");
+      if (entry->model) {
+        touch(*entry);
+        return entry->model;
+      }
+      if (!entry->evicted) return make_error(ErrorCode::kFailedPrecondition, which + " was refused: " + entry->error);
+    }
+    reloading_.insert(key);
+  }
+  struct Done {
+    ModelRegistry& registry;
+    const std::pair<std::string, uint64_t>& key;
+    ~Done() {
+      {
+        std::lock_guard waiting(registry.reload_mutex_);
+        registry.reloading_.erase(key);
+      }
+      registry.reloaded_.notify_all();
+    }
+  } done{*this, key};
+  auto loaded = load(name, version);
+  if (!loaded) return loaded.error();
+  reloads_.fetch_add(1, std::memory_order_relaxed);
+  spdlog::info("{} loaded again on request ({} resident)", which,
+               mebibytes(loaded->versions.at(version).model->resident_bytes));
+  return loaded->versions.at(version).model;
 }
 
 Status ModelRegistry::unload(const std::string& name, uint64_t version) {
@@ -218,32 +382,40 @@ Status ModelRegistry::unload(const std::string& name, uint64_t version) {
   return Status::Ok();
 }
 
-Result<std::shared_ptr<const LoadedModel>> ModelRegistry::find(const std::string& name,
-                                                                uint64_t version) const {
+Result<std::shared_ptr<const LoadedModel>> ModelRegistry::find(const std::string& name, uint64_t version,
+                                                                std::chrono::system_clock::time_point deadline,
+                                                                ReloadHint* hint) {
+  uint64_t wanted = 0;
+  {
   std::shared_lock lock(mutex_);
   auto it = models_.find(name);
   if (it == models_.end()) {
     return make_error(ErrorCode::kNotFound, "model '" + name + "' is not loaded");
   }
   const ModelEntry& model = it->second;
-  const uint64_t wanted = version == 0 ? model.default_version() : version;
+  wanted = version == 0 ? model.default_version() : version;
   auto v = model.versions.find(wanted);
   if (wanted == 0 || v == model.versions.end()) {
     std::string available;
     for (const auto& [n, entry] : model.versions) {
-      if (!entry.model) continue;
+      if (!entry.servable()) continue;
       available += (available.empty() ? "" : ", ") + std::to_string(n);
     }
     return make_error(ErrorCode::kNotFound,
                       "model '" + name + "' has no servable version " + std::to_string(version) +
                           " (available: " + (available.empty() ? "none" : available) + ")");
   }
-  if (!v->second.model) {
+  if (v->second.model) {
+    touch(v->second);
+    return v->second.model;
+  }
+  if (!v->second.evicted) {
     return make_error(ErrorCode::kFailedPrecondition, "model '" + name + "' version " +
                                                           std::to_string(wanted) +
                                                           " was refused: " + v->second.error);
   }
-  return v->second.model;
+  }
+  return reload(name, wanted, deadline, hint);
 }
 
 Result<ModelEntry> ModelRegistry::describe(const std::string& name) const {
@@ -259,6 +431,20 @@ std::vector<ModelEntry> ModelRegistry::list() const {
   out.reserve(models_.size());
   for (const auto& [name, entry] : models_) out.push_back(entry);
   return out;
+}
+
+RegistryMemory ModelRegistry::memory() const {
+  RegistryMemory memory;
+  memory.budget_bytes = memory_budget_bytes_;
+  memory.evictions = evictions_.load(std::memory_order_relaxed);
+  memory.reloads = reloads_.load(std::memory_order_relaxed);
+  std::shared_lock lock(mutex_);
+  for (const auto& [name, entry] : models_) {
+    for (const auto& [v, version] : entry.versions) {
+      if (version.model) memory.resident_bytes += version.model->resident_bytes;
+    }
+  }
+  return memory;
 }
 
 int ModelRegistry::loaded_version_count() const {

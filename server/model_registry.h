@@ -9,7 +9,10 @@
 
 #include <cstdint>
 #include <atomic>
+#include <chrono>
+#include <condition_variable>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -44,28 +47,67 @@ struct LoadedModel : model::Servable {
   std::filesystem::path path;
   uint64_t file_size_bytes = 0;
   int64_t loaded_at_unix_s = 0;
+  // The heap the version holds (its runtimes and resident sections), measured as the growth of
+  // the allocator's bytes in use across its load: what --memory-budget counts.
+  uint64_t resident_bytes = 0;
+  // How long its load took: the retry hint of a request that finds it loading again.
+  std::chrono::milliseconds load_time{0};
   container::ModelContainer container;
 };
 
 struct VersionEntry {
   uint64_t version = 0;
-  std::shared_ptr<const LoadedModel> model;  // null when the version was refused
+  std::shared_ptr<const LoadedModel> model;  // null when the version was refused or evicted
   std::string error;                         // why it was refused
+  // Issue #53: the version loaded, and was later unloaded to keep the registry within its
+  // --memory-budget. It is still served: the next request for it loads it again. What it was
+  // stays known for listing: its info, file size and the last measured load.
+  bool evicted = false;
+  model::ModelInfo evicted_info;
+  uint64_t evicted_file_size_bytes = 0;
+  uint64_t evicted_resident_bytes = 0;
+  std::chrono::milliseconds evicted_load_time{0};
+  // The registry's use clock at the version's last lookup: the least recently used loaded
+  // version is evicted first. Shared by the entry's copies, bumped under a shared lock.
+  std::shared_ptr<std::atomic<uint64_t>> last_use = std::make_shared<std::atomic<uint64_t>>(0);
+
+  // Loaded now, or evicted and loaded again on request.
+  bool servable() const { return model != nullptr || evicted; }
 };
 
 struct ModelEntry {
   std::string name;
   std::map<uint64_t, VersionEntry> versions;
-  // Newest version that loaded, 0 when none did.
+  // Newest servable version (loaded or evicted), 0 when none loaded.
   uint64_t default_version() const;
+};
+
+// What find() tells a caller whose deadline came while the version it asked for was being
+// loaded again: retry after about `after` (the version's last load time). Zero otherwise.
+struct ReloadHint {
+  std::chrono::milliseconds after{0};
+};
+
+// The registry's memory as --memory-budget sees it (animspace_registry_* metrics).
+struct RegistryMemory {
+  uint64_t budget_bytes = 0;    // 0: no budget
+  uint64_t resident_bytes = 0;  // Σ resident_bytes of the versions loaded now
+  uint64_t evictions = 0;       // versions unloaded to keep within the budget, since start
+  uint64_t reloads = 0;         // evicted versions loaded again on request, since start
 };
 
 using model::validate_model_name;  // core/model/repository.h
 
 class ModelRegistry {
  public:
+  // memory_budget_bytes (--memory-budget; 0 = none): after every load, the least recently used
+  // loaded versions are evicted until the resident bytes of those left are within it. The
+  // version just loaded is never evicted by its own load, so a budget smaller than one version
+  // serves one version at a time; and an evicted version a call in flight still holds is freed
+  // when that call ends.
   explicit ModelRegistry(std::filesystem::path repository,
-                         uint64_t resident_section_limit = kDefaultResidentSectionLimit);
+                         uint64_t resident_section_limit = kDefaultResidentSectionLimit,
+                         uint64_t memory_budget_bytes = 0);
 
   const std::filesystem::path& repository() const { return repository_; }
 
@@ -98,11 +140,26 @@ class ModelRegistry {
 
   // The version to serve: `version`, or the default when 0. Errors: kNotFound naming the model
   // or the version (and which versions exist), kFailedPrecondition for a refused version.
-  Result<std::shared_ptr<const LoadedModel>> find(const std::string& name, uint64_t version) const;
+  //
+  // An evicted version is loaded again here (issue #53): the first caller loads it on its own
+  // thread, whatever its deadline; callers meanwhile wait for that load until `deadline`. One
+  // whose deadline comes first gets kFailedPrecondition "… is being loaded again …" with
+  // `hint->after` set to the version's last load time — for the server, UNAVAILABLE with that
+  // retry hint (model_lookup.h). A load that fails makes the version refused, as at start-up.
+  Result<std::shared_ptr<const LoadedModel>> find(
+      const std::string& name, uint64_t version,
+      std::chrono::system_clock::time_point deadline = std::chrono::system_clock::time_point::max(),
+      ReloadHint* hint = nullptr);
 
   Result<ModelEntry> describe(const std::string& name) const;
   std::vector<ModelEntry> list() const;  // sorted by name
   int loaded_version_count() const;
+  RegistryMemory memory() const;
+
+  // Test seam: called on the loading thread before every version file is read.
+  void set_before_load_for_testing(std::function<void(const std::string& name, uint64_t version)> hook) {
+    before_load_ = std::move(hook);
+  }
 
  private:
   int scan(bool retry_known);
@@ -110,10 +167,29 @@ class ModelRegistry {
   VersionEntry load_version(const std::string& name, uint64_t version, const std::filesystem::path& dir) const;
   // Version directories under <repository>/<name>, ascending. Errors: kNotFound.
   Result<std::vector<uint64_t>> scan_versions(const std::string& name) const;
+  // Loads an evicted version again for find(), or waits for the load another caller started.
+  Result<std::shared_ptr<const LoadedModel>> reload(const std::string& name, uint64_t version,
+                                                    std::chrono::system_clock::time_point deadline,
+                                                    ReloadHint* hint);
+  // Evicts least recently used versions, other than `keep`, until the resident bytes are within
+  // the budget. Takes the lock; frees what it evicted after releasing it.
+  void keep_within_budget(const std::set<std::pair<std::string, uint64_t>>& keep);
+  void touch(const VersionEntry& entry) const;
 
   std::atomic<bool> repository_loaded_{false};
   std::filesystem::path repository_;
   uint64_t resident_section_limit_;
+  uint64_t memory_budget_bytes_;
+  std::function<void(const std::string&, uint64_t)> before_load_;
+  // One version file is read at a time, so that each load's heap growth is its own.
+  mutable std::mutex load_mutex_;
+  mutable std::atomic<uint64_t> use_clock_{0};
+  std::atomic<uint64_t> evictions_{0};
+  std::atomic<uint64_t> reloads_{0};
+  // Evicted versions being loaded again, and the condition their waiters wait on.
+  std::mutex reload_mutex_;
+  std::condition_variable reloaded_;
+  std::set<std::pair<std::string, uint64_t>> reloading_;
   mutable std::shared_mutex mutex_;
   std::mutex publish_mutex_;  // one publish at a time, so version numbers never collide
   std::map<std::string, ModelEntry> models_;

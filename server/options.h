@@ -75,6 +75,10 @@ struct ServerOptions {
   // Model file sections larger than this are read from the file when asked instead of held in
   // memory per loaded version (model_registry.h).
   uint64_t resident_section_bytes = uint64_t{1} << 20;
+  // The heap the loaded model versions may hold together (0 = no bound): past it, the least
+  // recently used versions are evicted and loaded again by the next request for them
+  // (model_registry.h, issue #53).
+  uint64_t memory_budget_bytes = 0;
   // TLS: server certificate chain and private key (PEM). Both empty: plaintext.
   std::filesystem::path tls_cert;
   std::filesystem::path tls_key;

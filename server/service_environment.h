@@ -43,7 +43,7 @@ inline void refresh_model_gauges(ServiceEnvironment& env) {
   for (const auto& entry : env.registry.list()) {
     const uint64_t default_version = entry.default_version();
     for (const auto& [version, v] : entry.versions) {
-      if (!v.model) continue;
+      if (!v.servable()) continue;
       served.push_back({entry.name, version, version == default_version});
       ++count;
     }

@@ -107,6 +107,9 @@ class StreamReactor : public Base {
   StreamReactor(grpc::CallbackServerContext* context, WorkPool& pool, Metrics& metrics, std::string_view rpc)
       : context_(context), deadline_(context->deadline()), pool_(pool), scope_(metrics, rpc), rpc_(rpc) {}
 
+  // The call's deadline (time_point::max() when the client set none).
+  std::chrono::system_clock::time_point deadline() const { return deadline_; }
+
   // Authenticates and admits the call as unary calls are (server/unary_call.h). False when
   // refused: the call is then finished.
   bool admit(ServiceEnvironment& env, Access access) {

@@ -41,7 +41,7 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
 
   Outcome build_next() {
     if (!model_) {
-      if (grpc::Status s = find_model(env_.registry, request_.model(), "model", model_); !s.ok()) {
+      if (grpc::Status s = find_model(env_.registry, request_.model(), "model", model_, nullptr, deadline()); !s.ok()) {
         return Outcome::end(std::move(s));
       }
       set_model(model_->name);

@@ -41,7 +41,8 @@ void KeyPointStream::OnReadDone(bool ok) {
     const bool same =
         model_ && frame.model().name() == model_ref_.name() && frame.model().version() == model_ref_.version();
     if (!same) {
-      resolved = find_model(env_.registry, frame.model(), frame_field(frame.sequence()) + ".model", model_);
+      resolved = find_model(env_.registry, frame.model(), frame_field(frame.sequence()) + ".model", model_, nullptr,
+                            deadline());
       if (resolved.ok()) resolved = require_pmsc(*model_);
       model_ref_ = frame.model();
       if (index == 0 && model_) set_model(model_->name);

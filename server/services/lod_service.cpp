@@ -114,7 +114,7 @@ grpc::Status LodStream::prepare() {
                             ") or 1.." + std::to_string(kMaxVerticesPerChunk) + ", got " +
                             std::to_string(r.vertices_per_chunk()));
   }
-  if (grpc::Status s = find_model(env_.registry, r.model(), "model", model_); !s.ok()) return s;
+  if (grpc::Status s = find_model(env_.registry, r.model(), "model", model_, nullptr, deadline()); !s.ok()) return s;
   set_model(model_->name);
   if (grpc::Status s = select_lod_level(*model_, r, &choice_); !s.ok()) return s;
   if (r.include_texture_coordinates()) {

@@ -1199,6 +1199,64 @@ TEST_F(FaultTest, AVersionsTrainingFramesStayOnDiskUnlessAskedToBeHeld) {
   EXPECT_GT(held - on_disk, kFramesBytes / 1024 / 2);
 }
 
+// Issue #53, --memory-budget: three models under a budget that holds one at a time. Played in
+// turn, every answer equals the answer of a daemon without a budget; the versions not in memory
+// are listed EVICTED with what they held; the metrics count each eviction and reload, and the
+// resident gauge is the one loaded version's heap.
+TEST_F(FaultTest, AMemoryBudgetServesEveryModelWhileHoldingOneAtATime) {
+  const fs::path repo = repository({{"a", "arm-pmsc"}, {"b", "arm-pmsc"}, {"c", "arm-pmsc"}});
+  std::vector<std::vector<float>> key_values;
+  std::vector<KeyPointPose> poses;
+  std::vector<PoseResult> reference;
+  uint32_t key_point_count = 0;
+  {
+    auto daemon = start(repo);
+    Client client(daemon->address());
+    key_values = demo_key_values(client.describe_key_points("a"), 5);
+    poses = as_poses(key_values);
+    reference = client.evaluate_key_points_batch("a", poses);
+    key_point_count = client.describe_model("a").versions(0).key_point_count();
+  }
+  const int metrics_port = testing::free_tcp_port();
+  auto daemon = start(repo, {"--memory-budget", "1", "--metrics-listen", "127.0.0.1:" + std::to_string(metrics_port)});
+  Client client(daemon->address());
+  constexpr int kRounds = 3;
+  for (int round = 0; round < kRounds; ++round) {
+    for (const char* name : {"a", "b", "c"}) {
+      const auto got = client.evaluate_key_points_batch(name, poses);
+      ASSERT_EQ(got.size(), reference.size());
+      for (size_t i = 0; i < got.size(); ++i) {
+        EXPECT_EQ(got[i].model_version, 1u);
+        EXPECT_TRUE(same_answer(got[i], reference[i])) << name << " pose " << i << " round " << round;
+      }
+    }
+  }
+  uint64_t resident = 0;
+  int available = 0, evicted = 0;
+  for (const auto& model : client.list_models()) {
+    EXPECT_EQ(model.default_version(), 1u) << model.name();
+    const auto& v = model.versions(0);
+    EXPECT_GT(v.resident_bytes(), 0u) << model.name();
+    EXPECT_EQ(v.key_point_count(), key_point_count) << model.name() << ": an evicted version is still described";
+    if (v.state() == v1::VERSION_STATE_AVAILABLE) {
+      ++available;
+      resident = v.resident_bytes();
+      EXPECT_EQ(model.name(), "c") << "the last model asked for stays";
+    }
+    evicted += v.state() == v1::VERSION_STATE_EVICTED;
+  }
+  EXPECT_EQ(available, 1);
+  EXPECT_EQ(evicted, 2);
+  const auto page = testing::scrape_metrics(metrics_port);
+  ASSERT_TRUE(page.has_value());
+  // Start-up loads a, b, c (two evictions); then every call of the 3 × 3 loads its model again
+  // and evicts the one before.
+  EXPECT_EQ(testing::metric_value(*page, "animspace_registry_reloads_total"), kRounds * 3);
+  EXPECT_EQ(testing::metric_value(*page, "animspace_registry_evictions_total"), 2 + kRounds * 3);
+  EXPECT_EQ(testing::metric_value(*page, "animspace_registry_resident_bytes"), static_cast<double>(resident));
+  EXPECT_EQ(testing::metric_value(*page, "animspace_models_loaded"), 3);
+}
+
 TEST_F(FaultTest, OneConnectionHoldsAtMostItsShareOfTheCallSlots) {
   using namespace slow_readers;
   auto daemon = start(repository({{"arm-pmsc", "arm-pmsc"}}),

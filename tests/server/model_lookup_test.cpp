@@ -1,5 +1,8 @@
 #include "server/model_lookup.h"
 
+#include <condition_variable>
+#include <future>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -66,6 +69,48 @@ TEST(UnknownModel, IsUnavailableWhileTheRepositoryLoads) {
   EXPECT_TRUE(find_model(registry, ref, "model", found).ok());
   ref.set_name("crane");
   EXPECT_EQ(find_model(registry, ref, "model", found).error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+// Issue #53: a request for a version being loaded again under --memory-budget, whose deadline
+// comes before the load ends, gets UNAVAILABLE (which clients retry), saying why.
+TEST(FindModel, IsUnavailableWhileAnEvictedVersionLoadsAgain) {
+  testing::TempDir repo;
+  for (const char* name : {"a", "b"}) put(repo.path(), name);
+  ModelRegistry registry(repo.path(), kDefaultResidentSectionLimit, 1);  // one version at a time
+  ASSERT_EQ(registry.load_all(), 2);
+  std::mutex mutex;
+  std::condition_variable changed;
+  bool loading = false, release = false;
+  registry.set_before_load_for_testing([&](const std::string& name, uint64_t) {
+    if (name != "a") return;
+    std::unique_lock lock(mutex);
+    loading = true;
+    changed.notify_all();
+    changed.wait(lock, [&] { return release; });
+  });
+  v1::ModelRef ref;
+  ref.set_name("a");
+  std::shared_ptr<const LoadedModel> first;
+  auto loader = std::async(std::launch::async, [&] { return find_model(registry, ref, "model", first); });
+  {
+    std::unique_lock lock(mutex);
+    changed.wait(lock, [&] { return loading; });
+  }
+  std::shared_ptr<const LoadedModel> second;
+  const grpc::Status waiting = find_model(registry, ref, "model", second, nullptr,
+                                          std::chrono::system_clock::now() + std::chrono::milliseconds(20));
+  EXPECT_EQ(waiting.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_NE(waiting.error_message().find("model 'a' version 1 is being loaded again"), std::string::npos)
+      << waiting.error_message();
+  EXPECT_EQ(second, nullptr);
+  {
+    std::lock_guard lock(mutex);
+    release = true;
+  }
+  changed.notify_all();
+  EXPECT_TRUE(loader.get().ok());
+  ASSERT_NE(first, nullptr);
+  EXPECT_EQ(first->name, "a");
 }
 
 }  // namespace

@@ -2,6 +2,12 @@
 
 #include <sys/stat.h>
 
+#include <condition_variable>
+#include <future>
+#include <limits>
+#include <mutex>
+#include <thread>
+
 #include <gtest/gtest.h>
 
 #include "tests/support/test_support.h"
@@ -139,6 +145,109 @@ TEST(ModelRegistry, InconsistentSectionsAreRefusedWithTheSectionName) {
   const std::string& error = entry->versions.at(1).error;
   EXPECT_NE(error.find("sequence.frames"), std::string::npos) << error;
   EXPECT_NE(error.find("F×9"), std::string::npos) << error;
+}
+
+// Issue #53, --memory-budget: models of ~4 MiB each under a budget of 2.5 of them. The registry
+// keeps the two most recently used and loads the third again when it is asked for.
+TEST(ModelRegistry, AMemoryBudgetEvictsTheLeastRecentlyUsedAndLoadsItAgainOnRequest) {
+  testing::TempDir repo;
+  constexpr int kPoints = 350'000;
+  const uint64_t rest_bytes = uint64_t{kPoints} * 3 * sizeof(float);
+  for (const char* name : {"a", "b", "c"}) put(repo.path(), name, "1", point_model(kPoints));
+  constexpr uint64_t kAllResident = std::numeric_limits<uint64_t>::max();  // every section held in memory
+
+  {  // Without a budget every version stays, each holding at least its points.
+    ModelRegistry registry(repo.path(), kAllResident);
+    ASSERT_EQ(registry.load_all(), 3);
+    for (const char* name : {"a", "b", "c"}) {
+      auto found = registry.find(name, 0);
+      ASSERT_TRUE(found.ok());
+      EXPECT_GE((*found)->resident_bytes, rest_bytes) << name;
+      EXPECT_LT((*found)->resident_bytes, 2 * rest_bytes) << name;
+    }
+    EXPECT_EQ(registry.memory().evictions, 0u);
+  }
+
+  ModelRegistry registry(repo.path(), kAllResident, rest_bytes * 5 / 2);
+  ASSERT_EQ(registry.load_all(), 3);  // a, b, c in order: c's load evicts a
+  const auto state = [&](const std::string& name) {
+    const VersionEntry& v = registry.describe(name)->versions.at(1);
+    return v.model ? "loaded" : v.evicted ? "evicted" : "refused";
+  };
+  EXPECT_STREQ(state("a"), "evicted");
+  EXPECT_STREQ(state("b"), "loaded");
+  EXPECT_STREQ(state("c"), "loaded");
+  const VersionEntry a = registry.describe("a")->versions.at(1);
+  EXPECT_EQ(a.evicted_info.point_count, kPoints);
+  EXPECT_GE(a.evicted_resident_bytes, rest_bytes);
+  EXPECT_EQ(registry.describe("a")->default_version(), 1u) << "an evicted version is still served";
+
+  ASSERT_TRUE(registry.find("b", 0).ok());  // b is now more recent than c
+  auto again = registry.find("a", 0);       // a comes back; c, the least recently used, goes
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_EQ((*again)->info.point_count, kPoints);
+  EXPECT_STREQ(state("a"), "loaded");
+  EXPECT_STREQ(state("b"), "loaded");
+  EXPECT_STREQ(state("c"), "evicted");
+  const RegistryMemory memory = registry.memory();
+  EXPECT_EQ(memory.evictions, 2u);
+  EXPECT_EQ(memory.reloads, 1u);
+  EXPECT_LE(memory.resident_bytes, memory.budget_bytes);
+  EXPECT_EQ(registry.loaded_version_count(), 2);
+
+  // An explicit unload of an evicted version drops it for good: no reload brings it back.
+  ASSERT_TRUE(registry.unload("c", 0).ok());
+  EXPECT_EQ(registry.find("c", 0).error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(registry.memory().reloads, 1u);
+}
+
+// A budget smaller than one version serves one version at a time. While one caller loads an
+// evicted version again, a second waits for that load — or, when its deadline comes first, is
+// told the version is loading and how long its last load took.
+TEST(ModelRegistry, ACallerWaitsForAReloadWithinItsDeadlineOrIsToldToRetry) {
+  testing::TempDir repo;
+  put(repo.path(), "a", "1", point_model(1000));
+  put(repo.path(), "b", "1", point_model(1000));
+  ModelRegistry registry(repo.path(), kDefaultResidentSectionLimit, 1);
+  ASSERT_EQ(registry.load_all(), 2);
+  ASSERT_TRUE(registry.describe("a")->versions.at(1).evicted);
+
+  std::mutex mutex;
+  std::condition_variable changed;
+  bool loading_a = false, release = false;
+  registry.set_before_load_for_testing([&](const std::string& name, uint64_t) {
+    if (name != "a") return;
+    std::unique_lock lock(mutex);
+    loading_a = true;
+    changed.notify_all();
+    changed.wait(lock, [&] { return release; });
+  });
+  auto loader = std::async(std::launch::async, [&] { return registry.find("a", 0); });
+  {
+    std::unique_lock lock(mutex);
+    changed.wait(lock, [&] { return loading_a; });
+  }
+  ReloadHint hint;
+  auto impatient = registry.find("a", 0, std::chrono::system_clock::now() + std::chrono::milliseconds(20), &hint);
+  ASSERT_FALSE(impatient.ok());
+  EXPECT_NE(impatient.error().message.find("model 'a' version 1 is being loaded again"), std::string::npos)
+      << impatient.error().message;
+  EXPECT_NE(impatient.error().message.find("--memory-budget"), std::string::npos);
+  EXPECT_GE(hint.after.count(), 1);
+
+  auto patient = std::async(std::launch::async, [&] { return registry.find("a", 0); });
+  {
+    std::lock_guard lock(mutex);
+    release = true;
+  }
+  changed.notify_all();
+  auto loaded = loader.get();
+  auto waited = patient.get();
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  ASSERT_TRUE(waited.ok()) << waited.error().message;
+  EXPECT_EQ(loaded->get(), waited->get()) << "the waiting caller gets the load it waited for";
+  EXPECT_EQ(registry.memory().reloads, 1u);
+  EXPECT_TRUE(registry.describe("b")->versions.at(1).evicted);
 }
 
 }  // namespace

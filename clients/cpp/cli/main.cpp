@@ -110,9 +110,14 @@ void print_summary(const animspace::v1::ModelSummary& model) {
   std::printf("%s (default version %llu)\n", model.name().c_str(),
               static_cast<unsigned long long>(model.default_version()));
   for (const auto& v : model.versions()) {
-    if (v.state() != animspace::v1::VERSION_STATE_AVAILABLE) {
+    if (v.state() == animspace::v1::VERSION_STATE_FAILED) {
       std::printf("  version %llu  REFUSED: %s\n", static_cast<unsigned long long>(v.version()), v.error().c_str());
       continue;
+    }
+    if (v.state() == animspace::v1::VERSION_STATE_EVICTED) {
+      std::printf("  version %llu  EVICTED (%.1f MiB when loaded; unloaded under the server's --memory-budget, loaded "
+                  "again by the next request for it)\n",
+                  static_cast<unsigned long long>(v.version()), static_cast<double>(v.resident_bytes()) / (1 << 20));
     }
     std::printf("  version %llu  %s  %u points × %u channels, %u faces, %u bones, %u frames", 
                 static_cast<unsigned long long>(v.version()), kind_label(v.kind()).c_str(), v.point_count(),

@@ -198,7 +198,9 @@ def check_point_array(name: str, check_values: Optional[npt.ArrayLike]) -> Optio
 class ModelVersion:
     """One version of a model as the registry holds it (models.proto ModelVersion).
 
-    ``state`` is "AVAILABLE" or "FAILED" (then ``error`` says why); ``kind`` is "PMSC",
+    ``state`` is "AVAILABLE", "FAILED" (then ``error`` says why) or "EVICTED" (served, but unloaded
+    to keep the server within its ``--memory-budget``: the next request for it loads it again;
+    issue #53); ``resident_bytes`` is the heap the version holds while loaded. ``kind`` is "PMSC",
     "CROSS_PMSC", "ANIMATION_SPACE" or "MESH_SEQUENCE"; ``fail_through`` is "SERVER", "CLIENT",
     "IMPOSSIBLE" or "UNSPECIFIED" (a model without a soft cache); with "SERVER", ``server_engine``
     says which full calculation the server runs: "ANIMATION_SPACE" (send skeleton poses) or
@@ -248,6 +250,7 @@ class ModelVersion:
     subspace_kind: str = "UNSPECIFIED"
     subspace_bone_count: int = 0
     residual_components: int = 0
+    resident_bytes: int = 0
 
     @classmethod
     def from_proto(cls, m: models_pb2.ModelVersion) -> "ModelVersion":
@@ -266,7 +269,8 @@ class ModelVersion:
                    calibration_statement=m.calibration_statement,
                    relative_tolerance=m.relative_tolerance,
                    subspace_kind=enum_name(models_pb2.SubspaceKind, m.subspace_kind, "SUBSPACE_KIND_"),
-                   subspace_bone_count=m.subspace_bone_count, residual_components=m.residual_components)
+                   subspace_bone_count=m.subspace_bone_count, residual_components=m.residual_components,
+                   resident_bytes=m.resident_bytes)
 
 
 @dataclass(frozen=True)
