@@ -2,19 +2,38 @@
 // against the first (a stream that changed version, shape or checksum midway, or skipped or
 // repeated values, is refused rather than pieced together).
 #include <cstring>
+#include <span>
 #include <stdexcept>
 #include <string>
 
 #include "clients/cpp/client.h"
+#include "core/common/point_codec.h"
+#include "core/common/sha256.h"
 
 namespace animspace {
 namespace {
 
 // The problem with `chunk` given what came before, or empty.
+// Bytes a value of `chunk` takes: FLOAT16 2, else 4 (FLOAT32, or unset from servers before it);
+// 0 for an encoding GetBasis never sends.
+size_t value_bytes(const v1::BasisChunk& chunk) {
+  switch (chunk.values_encoding()) {
+    case v1::POINT_ENCODING_UNSPECIFIED:
+    case v1::POINT_ENCODING_FLOAT32: return sizeof(float);
+    case v1::POINT_ENCODING_FLOAT16: return 2;
+    default: return 0;
+  }
+}
+
 std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk& chunk) {
-  if (chunk.data().size() % sizeof(float) != 0) {
+  const size_t bytes = value_bytes(chunk);
+  if (bytes == 0) {
+    return "chunk at value " + std::to_string(chunk.offset()) + " has values_encoding " +
+           v1::PointEncoding_Name(chunk.values_encoding()) + ", not FLOAT32 or FLOAT16";
+  }
+  if (chunk.data().size() % bytes != 0) {
     return "chunk at value " + std::to_string(chunk.offset()) + " holds " + std::to_string(chunk.data().size()) +
-           " bytes, not whole float32 values";
+           " bytes, not whole " + (bytes == 2 ? "float16" : "float32") + " values";
   }
   if (first) {
     const uint64_t expected = uint64_t{chunk.point_count()} * chunk.channel_count() * (uint64_t{chunk.basis_size()} + 1);
@@ -26,7 +45,8 @@ std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk
   if (chunk.model_version() != basis.model_version || chunk.basis_checksum() != basis.basis_checksum ||
       chunk.basis_sha256() != basis.basis_sha256 ||
       chunk.point_count() != basis.point_count || chunk.channel_count() != basis.channel_count ||
-      chunk.basis_size() != basis.basis_size || chunk.aligned() != basis.aligned) {
+      chunk.basis_size() != basis.basis_size || chunk.aligned() != basis.aligned ||
+      value_bytes(chunk) != (basis.values_encoding == v1::POINT_ENCODING_FLOAT16 ? 2 : sizeof(float))) {
     return "chunk at value " + std::to_string(chunk.offset()) + " describes another basis than the first chunk";
   }
   if (chunk.offset() != basis.values.size()) {
@@ -38,21 +58,26 @@ std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk
 
 }  // namespace
 
-BasisData Client::get_basis(const std::string& model, uint64_t version, std::chrono::milliseconds deadline) {
+BasisData Client::get_basis(const std::string& model, uint64_t version, std::chrono::milliseconds deadline,
+                            v1::PointEncoding values_encoding) {
   grpc::ClientContext context;
   prepare(&context, deadline.count() > 0 ? deadline : options_.deadline);
   v1::GetBasisRequest request;
   request.mutable_model()->set_name(model);
   request.mutable_model()->set_version(version);
+  request.set_values_encoding(values_encoding);
   auto reader = poses_->GetBasis(&context, request);
   BasisData basis;
   uint64_t total = 0;
   std::string problem;
+  std::string values_sha256;
+  Sha256 sent;  // over the values as they came, checked against values_sha256
   v1::BasisChunk chunk;
   while (reader->Read(&chunk)) {
     const bool first = basis.chunk_count == 0;
     problem = check_chunk(basis, first, chunk);
-    if (problem.empty() && chunk.offset() + chunk.data().size() / sizeof(float) > (first ? chunk.total_values() : total)) {
+    const size_t bytes = value_bytes(chunk);
+    if (problem.empty() && chunk.offset() + chunk.data().size() / bytes > (first ? chunk.total_values() : total)) {
       problem = "chunk at value " + std::to_string(chunk.offset()) + " runs past total_values";
     }
     if (!problem.empty()) {
@@ -67,12 +92,21 @@ BasisData Client::get_basis(const std::string& model, uint64_t version, std::chr
       basis.channel_count = chunk.channel_count();
       basis.basis_size = chunk.basis_size();
       basis.aligned = chunk.aligned();
+      basis.values_encoding = bytes == 2 ? v1::POINT_ENCODING_FLOAT16 : v1::POINT_ENCODING_FLOAT32;
+      basis.values_max_error = chunk.values_max_error();
+      values_sha256 = chunk.values_sha256();
       total = chunk.total_values();
       basis.values.reserve(total);
     }
     const size_t at = basis.values.size();
-    basis.values.resize(at + chunk.data().size() / sizeof(float));
-    std::memcpy(basis.values.data() + at, chunk.data().data(), chunk.data().size());
+    basis.values.resize(at + chunk.data().size() / bytes);
+    if (bytes == 2) {
+      sent.update(std::as_bytes(std::span<const char>(chunk.data())));
+      point_codec::decode_float16(std::span<const char>(chunk.data()),
+                                  std::span<float>(basis.values.data() + at, chunk.data().size() / 2));
+    } else {
+      std::memcpy(basis.values.data() + at, chunk.data().data(), chunk.data().size());
+    }
     basis.chunk_count += 1;
     basis.bytes_received += chunk.ByteSizeLong();
   }
@@ -82,6 +116,15 @@ BasisData Client::get_basis(const std::string& model, uint64_t version, std::chr
   if (basis.chunk_count == 0 || basis.values.size() != total) {
     throw std::runtime_error("GetBasis: the stream ended after " + std::to_string(basis.values.size()) + " of " +
                              std::to_string(total) + " values");
+  }
+  // A float32 basis is checked against basis_sha256 by make_basis; float16 values can only be
+  // checked as they came.
+  if (basis.values_encoding == v1::POINT_ENCODING_FLOAT16) {
+    const std::string digest = sent.digest();
+    if (digest != values_sha256) {
+      throw std::runtime_error("GetBasis: the float16 values have SHA-256 " + hex_digest(digest) +
+                               ", the server named " + hex_digest(values_sha256));
+    }
   }
   return basis;
 }

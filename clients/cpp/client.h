@@ -89,6 +89,10 @@ struct BasisData {
   std::vector<float> values;    // N·D·(M + 1)
   uint64_t chunk_count = 0;
   uint64_t bytes_received = 0;
+  // How the values came (issue #53): FLOAT32, exact; or FLOAT16, widened here, each within
+  // values_max_error of the float32 basis that basis_checksum and basis_sha256 name.
+  v1::PointEncoding values_encoding = v1::POINT_ENCODING_FLOAT32;
+  float values_max_error = 0;
 };
 
 struct ClientOptions {
@@ -153,7 +157,11 @@ class Client {
   // The subspace answers sent as coordinates are reconstructed with (once per model version;
   // clients/cpp/coordinates.h caches it). Throws std::runtime_error for chunks out of order or
   // inconsistent with each other. `deadline` 0 = the client's default.
-  BasisData get_basis(const std::string& model, uint64_t version = 0, std::chrono::milliseconds deadline = {});
+  // `values_encoding` FLOAT16 asks for half the bytes (GetBasisRequest.values_encoding): the
+  // values are checked against the SHA-256 of what was sent, and a basis made of them reconstructs
+  // within the bound poses.proto states (about 2^-11·(|mean_i| + Σ_j |A_ij p_j|) more than float32).
+  BasisData get_basis(const std::string& model, uint64_t version = 0, std::chrono::milliseconds deadline = {},
+                      v1::PointEncoding values_encoding = v1::POINT_ENCODING_FLOAT32);
   // A render waits behind others on the daemon's render thread: `deadline` 0 = the client's default.
   Thumbnail render_thumbnail(const v1::RenderThumbnailRequest& request, std::chrono::milliseconds deadline = {});
 

@@ -47,6 +47,11 @@ Basis make_basis(const std::string& model, BasisData data) {
   basis.aligned = data.aligned;
   basis.mean = Eigen::Map<const Eigen::VectorXf>(data.values.data(), rows);
   basis.basis = Eigen::Map<const Eigen::MatrixXf>(data.values.data() + rows, rows, columns);
+  if (data.values_encoding == v1::POINT_ENCODING_FLOAT16) {
+    basis.basis_sha256 = std::move(data.basis_sha256);
+    basis.values_max_error = data.values_max_error;
+    return basis;
+  }
   const uint64_t computed = pmsc::basis_checksum(basis.mean, basis.basis);
   if (computed != data.basis_checksum) {
     throw std::runtime_error("basis of '" + model + "' version " + std::to_string(data.model_version) +

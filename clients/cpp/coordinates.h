@@ -56,11 +56,17 @@ struct Basis {
   bool aligned = false;
   Eigen::VectorXf mean;   // N·D
   Eigen::MatrixXf basis;  // N·D × M
+  // 0 for the float32 basis; for one fetched as FLOAT16, the largest |value − float32 value|.
+  // Each value is within 2^-11 of its own size, so reconstruct() is within about
+  // 2^-11·(|mean_i| + Σ_j |A_ij p_j|) more per value (BasisChunk.values_max_error states it exactly).
+  float values_max_error = 0;
 };
 
 // `data` (from Client::get_basis) as a Basis, after checking that its values have the checksum
 // the server named (pmsc::basis_checksum) and, when it named one, the SHA-256
-// (pmsc::basis_sha256). std::runtime_error naming both when they differ.
+// (pmsc::basis_sha256). std::runtime_error naming both when they differ. FLOAT16 data, checked
+// as it came by get_basis, keeps the names of the float32 basis its answers belong to; a
+// BasisCache holds only float32 bases.
 Basis make_basis(const std::string& model, BasisData data);
 
 // The points of `result` (its coordinates) reconstructed with `basis` into `out` (N×D float32).

@@ -21,6 +21,11 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     servable.pmsc = std::make_shared<const pmsc::PmscModel>(std::move(*runtime));
     servable.basis_checksum = pmsc::basis_checksum(servable.pmsc->mean, servable.pmsc->basis);
     servable.basis_sha256 = pmsc::basis_sha256(servable.pmsc->mean, servable.pmsc->basis);
+    if (auto half = pmsc::float16_basis(servable.pmsc->mean, servable.pmsc->basis)) {
+      servable.float16_basis = std::move(*half);
+    } else {
+      servable.float16_refusal = half.error().message;
+    }
     auto subspace = pmsc::make_subspace(servable.pmsc);
     if (!subspace) return make_error(subspace.error().code, source + ": " + subspace.error().message);
     servable.subspace = std::move(*subspace);

@@ -14,6 +14,7 @@
 #include "core/lod/levels.h"
 #include "core/model/engine.h"
 #include "core/model/model_info.h"
+#include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/subspace.h"
 
@@ -34,6 +35,11 @@ struct Servable {
   // And named so that it cannot be forged (pmsc::basis_sha256): what a client's cached copy is
   // checked against (issue #54 item 8); empty for other kinds.
   std::string basis_sha256;
+  // The same subspace as GetBasis sends it in float16 (pmsc::float16_basis, issue #53): its
+  // digest and largest rounding error; `float16_refusal` says why it cannot be sent so (a value
+  // beyond ±65504), and the digest is then empty.
+  pmsc::Float16Basis float16_basis;
+  std::string float16_refusal;
   // The skinning model of an animation-space model, or the posing engine a PMSC model carries
   // for server fail-through (SPEC "Fail-through"), with its LOD levels (Merry 2007 §7.3; level 0
   // is the model itself) and the sphere eq. 7.2 measures depth to (null otherwise).

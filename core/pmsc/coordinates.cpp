@@ -2,9 +2,13 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cmath>
 #include <span>
+#include <string>
+#include <vector>
 
 #include "core/common/kernels.h"
+#include "core/common/point_codec.h"
 #include "core/common/sha256.h"
 #include "core/container/crc32.h"
 
@@ -27,6 +31,41 @@ std::string basis_sha256(const Eigen::VectorXf& mean, const Eigen::MatrixXf& bas
   digest.update(std::as_bytes(std::span<const float>(mean.data(), static_cast<size_t>(mean.size()))));
   digest.update(std::as_bytes(std::span<const float>(basis.data(), static_cast<size_t>(basis.size()))));
   return digest.digest();
+}
+
+Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis) {
+  Float16Basis out;
+  Sha256 digest;
+  // In blocks, so that a basis of hundreds of megabytes needs no second copy.
+  constexpr size_t kBlock = size_t{1} << 20;
+  std::vector<char> halves(2 * kBlock);
+  size_t index = 0;  // of the first value of the span being encoded, mean then basis
+  for (const std::span<const float> values : {std::span<const float>(mean.data(), static_cast<size_t>(mean.size())),
+                                             std::span<const float>(basis.data(), static_cast<size_t>(basis.size()))}) {
+    for (size_t at = 0; at < values.size(); at += kBlock) {
+      const auto block = values.subspan(at, std::min(kBlock, values.size() - at));
+      const auto encoded = std::span<char>(halves.data(), 2 * block.size());
+      auto error = point_codec::encode_float16(block, 1, encoded);
+      if (!error) {
+        // Name the value by where it lies in the subspace, not the codec's point and channel.
+        const auto bad = std::find_if(block.begin(), block.end(),
+                                      [](float v) { return !(std::abs(v) <= point_codec::kMaxFloat16); });
+        const size_t i = index + at + static_cast<size_t>(bad - block.begin());
+        const auto rows = static_cast<size_t>(mean.size());
+        const std::string where = i < rows ? "mean value " + std::to_string(i)
+                                           : "basis value " + std::to_string((i - rows) % rows) + " of column " +
+                                                 std::to_string((i - rows) / rows);
+        return make_error(ErrorCode::kOutOfRange,
+                          "the subspace cannot be sent as float16: its " + where + " is " +
+                              std::to_string(bad == block.end() ? 0.0f : *bad) + ", beyond binary16's ±65504");
+      }
+      out.max_error = std::max(out.max_error, *error);
+      digest.update(std::as_bytes(std::span<const char>(encoded)));
+    }
+    index += values.size();
+  }
+  out.sha256 = digest.digest();
+  return out;
 }
 
 FloatAlignment float_alignment(const geometry::RigidTransform& alignment) {

@@ -9,6 +9,8 @@
 
 #include <Eigen/Core>
 
+#include "core/common/result.h"
+
 #include "core/pmsc/pmsc_model.h"
 
 namespace animspace::pmsc {
@@ -19,6 +21,15 @@ uint64_t basis_checksum(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basi
 // The same subspace named so that it cannot be forged (issue #54 item 8): SHA-256 of the mean's
 // float32 bytes followed by the basis's, exactly the values GetBasis streams (32 raw bytes).
 std::string basis_sha256(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis);
+
+// The subspace as GetBasis sends it in float16 (issue #53): every mean and basis value rounded to
+// the nearest binary16 (core/common/point_codec.h), in the order of basis_sha256.
+struct Float16Basis {
+  std::string sha256;    // SHA-256 of the binary16 values' bytes (32 raw bytes)
+  float max_error = 0;   // the largest |binary16 − float32| over the values
+};
+// kOutOfRange naming the first value beyond ±65504, which binary16 cannot hold.
+Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis);
 
 // The alignment of one pose as it travels: R and t in float32 (what reconstruct applies).
 struct FloatAlignment {

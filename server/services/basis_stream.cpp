@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "animspace/v1/poses.pb.h"
+#include "core/common/point_codec.h"
 #include "server/model_lookup.h"
 #include "server/pose_input.h"
 #include "server/raw_messages.h"
@@ -48,11 +49,24 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
       if (grpc::Status s = require_pmsc(*model_, "it has no subspace to send"); !s.ok()) {
         return Outcome::end(std::move(s));
       }
+      switch (request_.values_encoding()) {
+        case v1::POINT_ENCODING_UNSPECIFIED:
+        case v1::POINT_ENCODING_FLOAT32: half_ = false; break;
+        case v1::POINT_ENCODING_FLOAT16: half_ = true; break;
+        default:
+          return Outcome::end(invalid_argument("values_encoding: expected FLOAT32 or FLOAT16, got " +
+                                               v1::PointEncoding_Name(request_.values_encoding())));
+      }
+      if (half_ && !model_->float16_refusal.empty()) {
+        return Outcome::end({grpc::StatusCode::FAILED_PRECONDITION,
+                             "values_encoding: model '" + model_->name + "' version " + std::to_string(model_->version) +
+                                 ": " + model_->float16_refusal + "; ask for FLOAT32"});
+      }
       const pmsc::PmscModel& m = *model_->pmsc;
       total_ = static_cast<uint64_t>(m.mean.size()) * static_cast<uint64_t>(m.basis_size() + 1);
       chunk_values_ = static_cast<uint64_t>(
           std::max<int64_t>(1, std::min(kMaxChunkBytes, env_.options.max_message_bytes / 4)) /
-          static_cast<int64_t>(sizeof(float)));
+          static_cast<int64_t>(value_bytes()));
     }
     if (sent_ == total_ && sent_any_) return Outcome::end(grpc::Status::OK);
     const pmsc::PmscModel& m = *model_->pmsc;
@@ -66,9 +80,12 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
     chunk.set_aligned(m.aligned);
     chunk.set_total_values(total_);
     chunk.set_offset(sent_);
+    chunk.set_values_encoding(half_ ? v1::POINT_ENCODING_FLOAT16 : v1::POINT_ENCODING_FLOAT32);
+    chunk.set_values_sha256(half_ ? model_->float16_basis.sha256 : model_->basis_sha256);
+    chunk.set_values_max_error(half_ ? model_->float16_basis.max_error : 0.0f);
     const uint64_t count = std::min(chunk_values_, total_ - sent_);
     std::string* data = chunk.mutable_data();
-    data->resize(count * sizeof(float));
+    data->resize(count * value_bytes());
     // The mean, then the basis column by column: one span of values, cut anywhere.
     const auto mean_values = static_cast<uint64_t>(m.mean.size());
     uint64_t written = 0;
@@ -76,7 +93,14 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
       const uint64_t at = sent_ + written;
       const float* source = at < mean_values ? m.mean.data() + at : m.basis.data() + (at - mean_values);
       const uint64_t run = std::min(count - written, at < mean_values ? mean_values - at : total_ - at);
-      std::memcpy(data->data() + written * sizeof(float), source, run * sizeof(float));
+      if (half_) {
+        // In range: float16_refusal is empty (checked at load, the values are immutable).
+        const auto encoded = point_codec::encode_float16(
+            std::span<const float>(source, run), 1, std::span<char>(data->data() + written * 2, run * 2));
+        if (!encoded) return Outcome::end(to_grpc_status(encoded.error()));
+      } else {
+        std::memcpy(data->data() + written * sizeof(float), source, run * sizeof(float));
+      }
       written += run;
     }
     sent_ += count;
@@ -94,6 +118,8 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
   uint64_t chunk_values_ = 0;
   uint64_t sent_ = 0;
   bool sent_any_ = false;
+  bool half_ = false;  // values_encoding FLOAT16
+  size_t value_bytes() const { return half_ ? 2 : sizeof(float); }
 };
 
 }  // namespace

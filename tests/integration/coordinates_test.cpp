@@ -17,6 +17,7 @@
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
 #include "core/common/atomic_file.h"
+#include "core/common/point_codec.h"
 #include "core/common/sha256.h"
 #include "core/container/crc32.h"
 #include "core/container/model_container.h"
@@ -87,20 +88,25 @@ class CoordinatesTest : public ::testing::Test {
 };
 
 // The header's bound between a client reconstruction and the float32 answer, value by value.
+// With a basis fetched as FLOAT16 (`float16`), each value is within 2^-11 of its size: the bound
+// before the alignment is poses.proto's for FLOAT16.
 void expect_within_bound(const pmsc::PmscModel& m, const SubspaceCoordinates& c, const std::vector<float>& client,
-                         const std::vector<float>& server, const std::string& what) {
+                         const std::vector<float>& server, const std::string& what, bool float16 = false) {
   ASSERT_EQ(client.size(), server.size()) << what;
   const Eigen::VectorXd p = Eigen::Map<const Eigen::VectorXf>(c.p.data(), static_cast<long>(c.p.size())).cast<double>();
   const Eigen::VectorXd size = m.mean.cast<double>().cwiseAbs() + m.basis.cast<double>().cwiseAbs() * p.cwiseAbs();
   const double gamma = pmsc::coordinates_rounding_bound(m.basis_size());
+  const Eigen::VectorXd before_alignment =
+      float16 ? Eigen::VectorXd(((gamma + 0x1p-11) * (1 + 0x1p-10) * size).array() + 0x1p-24 * (1 + p.cwiseAbs().sum()))
+              : Eigen::VectorXd(gamma * size);
   for (size_t i = 0; i < client.size(); ++i) {
-    double allowed = gamma * size(static_cast<long>(i));
+    double allowed = before_alignment(static_cast<long>(i));
     if (m.aligned) {
       const long point = static_cast<long>(i) / 3;
       // x, the point in the aligned frame: the answer less the translation (R keeps its norm).
       const Eigen::Vector3d x = Eigen::Vector3d(server[3 * point], server[3 * point + 1], server[3 * point + 2]) -
                                 Eigen::Vector3d(c.translation[0], c.translation[1], c.translation[2]);
-      allowed = gamma * size.segment(3 * point, 3).norm() + pmsc::aligned_rounding_bound() * x.norm() +
+      allowed = before_alignment.segment(3 * point, 3).norm() + pmsc::aligned_rounding_bound() * x.norm() +
                 pmsc::translation_rounding_bound() * std::abs(static_cast<double>(server[i]));
     }
     ASSERT_LE(std::abs(static_cast<double>(client[i]) - server[i]), allowed) << what << ", value " << i;
@@ -216,6 +222,49 @@ TEST_F(CoordinatesTest, GetBasisSendsTheFilesMeanAndBasisInChunks) {
   EXPECT_EQ(testing::code_of([&] { client_->get_basis("bend", 9); }), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(testing::code_of([&] { client_->get_basis(std::string(demo::kDemoModelName)); }),
             grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+// Issue #53: GetBasis in float16 — half the bytes, each value the float32 one rounded to nearest
+// binary16, checked against the digest of what was sent; answers reconstructed with it are the
+// float32 answers within the bound poses.proto states for FLOAT16.
+TEST_F(CoordinatesTest, AFloat16BasisIsHalfTheBytesAndReconstructsWithinItsStatedBound) {
+  for (const std::string name : {"bend", "bend-aligned"}) {
+    const pmsc::PmscModel m = model_file(name);
+    const BasisData exact = client_->get_basis(name);
+    const BasisData half = client_->get_basis(name, 0, {}, v1::POINT_ENCODING_FLOAT16);
+    EXPECT_EQ(exact.values_encoding, v1::POINT_ENCODING_FLOAT32);
+    ASSERT_EQ(half.values_encoding, v1::POINT_ENCODING_FLOAT16) << name;
+    EXPECT_LT(half.bytes_received, exact.bytes_received * 55 / 100) << name;
+    ASSERT_EQ(half.values.size(), exact.values.size());
+    double largest = 0;
+    for (size_t i = 0; i < exact.values.size(); ++i) {
+      const float rounded = point_codec::half_to_float(point_codec::float_to_half(exact.values[i]));
+      ASSERT_EQ(half.values[i], rounded) << name << ", value " << i;
+      largest = std::max(largest, std::abs(static_cast<double>(rounded) - exact.values[i]));
+    }
+    EXPECT_EQ(half.values_max_error, static_cast<float>(largest)) << name;
+    EXPECT_EQ(half.basis_checksum, exact.basis_checksum) << "the float32 basis's name, which answers carry";
+    const Basis basis = make_basis(name, half);
+    EXPECT_EQ(basis.values_max_error, half.values_max_error);
+
+    const KeyPoints keys = client_->describe_key_points(name);
+    std::vector<std::vector<float>> values;
+    for (double elbow : {3.0, 31.0, 70.0}) values.push_back(key_values(keys, elbow, 10));
+    std::vector<KeyPointPose> poses;
+    for (const auto& v : values) poses.push_back({v, keys.channel_count});
+    EvaluateOptions coordinates;
+    coordinates.points_encoding = v1::POINT_ENCODING_COORDINATES;
+    const auto expected = client_->evaluate_key_points_batch(name, poses, {});
+    auto answered = client_->evaluate_key_points_batch(name, poses, coordinates);
+    for (size_t i = 0; i < poses.size(); ++i) {
+      ASSERT_TRUE(answered[i].coordinates.present);
+      reconstruct(basis, answered[i], answered[i].points);
+      expect_within_bound(m, answered[i].coordinates, answered[i].points.values, expected[i].points.values,
+                          name + " pose " + std::to_string(i), true);
+    }
+  }
+  EXPECT_EQ(testing::code_of([&] { client_->get_basis("bend", 0, {}, v1::POINT_ENCODING_FIXED16); }),
+            grpc::StatusCode::INVALID_ARGUMENT);
 }
 
 TEST_F(CoordinatesTest, TheCacheReusesVerifiedFilesAndNeverReconstructsWithAnotherBasis) {

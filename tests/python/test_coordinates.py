@@ -148,6 +148,63 @@ def test_get_basis_assembles_the_chunks_and_its_checksum_is_zlibs(counted, chann
     assert client.get_basis("arm-pmsc", version.version).basis_checksum == basis.basis_checksum
 
 
+def test_a_float16_basis_is_half_the_bytes_and_reconstructs_within_its_stated_bound(counted, channel, arm_poses):
+    """Issue #53: GetBasis in float16. The values are float32's rounded to nearest binary16 (numpy's
+    own rounding, here), named by the SHA-256 of the bytes sent, with the largest error sent; an
+    answer reconstructed with them is within values_max_error·(1 + Σ|p_j|) of the float32 one."""
+    client, counter = counted
+    chunks, mean, A = raw_basis(channel, "arm-pmsc")
+    request = poses_pb2.GetBasisRequest(values_encoding=common_pb2.POINT_ENCODING_FLOAT16)
+    request.model.name = "arm-pmsc"
+    half_chunks = list(poses_pb2_grpc.PoseServiceStub(channel).GetBasis(request, timeout=30))
+    raw32 = b"".join(c.data for c in chunks)
+    raw16 = b"".join(c.data for c in half_chunks)
+    assert len(raw16) * 2 == len(raw32)
+    values32 = np.frombuffer(raw32, "<f4")
+    expected16 = values32.astype("<f2")
+    assert raw16 == expected16.tobytes()
+    first = half_chunks[0]
+    assert first.values_encoding == common_pb2.POINT_ENCODING_FLOAT16
+    assert first.values_sha256 == hashlib.sha256(raw16).digest()
+    assert first.basis_sha256 == chunks[0].basis_sha256 and first.basis_checksum == chunks[0].basis_checksum
+    error = np.abs(expected16.astype(np.float64) - values32.astype(np.float64)).max()
+    assert first.values_max_error == np.float32(error)
+    assert 0 < error <= 2.0 ** -11 * np.abs(values32).max()
+
+    gets = counter.calls[GET_BASIS]
+    basis = client.get_basis("arm-pmsc", values_encoding="float16")
+    assert counter.calls[GET_BASIS] == gets + 1
+    assert basis.values_encoding == "float16" and basis.values_max_error == first.values_max_error
+    np.testing.assert_array_equal(basis.mean, expected16[:mean.size].astype(np.float32))
+    keys, values, checks = arm_poses
+    exact = client.evaluate_key_points("arm-pmsc", values[0], check_values=checks[0], version=keys.model_version)
+    answer = client.evaluate_key_points("arm-pmsc", values[0], check_values=checks[0], version=keys.model_version,
+                                        points_encoding="coordinates")
+    assert answer.status == "HIT"
+    c = answer.coordinates
+    # poses.proto's FLOAT16 bound over the float32 values: each value within 2⁻¹¹ of its size.
+    p = np.abs(c.p.astype(np.float64))
+    M = A.shape[1]
+    gamma = (M + 2) * U / (1 - (M + 2) * U)
+    size = (np.abs(mean) + np.abs(A) @ p).reshape(exact.points.shape)
+    stated = (2 * gamma + 2.0 ** -11) * (1 + 2.0 ** -10) * size + 2.0 ** -24 * (1 + p.sum())
+    error = np.abs(coordinates.reconstruct(basis, c).astype(np.float64) - exact.points.astype(np.float64))
+    assert np.all(error <= stated), float((error - stated).max())
+    assert np.all(error <= coordinates.rounding_bound(basis, c))
+    print("float16 bound", stated.max(), "error", error.max(), "points", np.abs(exact.points).max())
+    assert stated.max() < 2e-3 * np.abs(exact.points).max()
+    # Not cached: the next reconstruction fetches the float32 basis its checksum names.
+    client.reconstruct("arm-pmsc", answer)
+    assert counter.calls[GET_BASIS] == gets + 2
+    with pytest.raises(ValueError, match="values_encoding"):
+        client.get_basis("arm-pmsc", values_encoding="fixed16")
+    request.values_encoding = common_pb2.POINT_ENCODING_FIXED16
+    with pytest.raises(grpc.RpcError) as invalid:
+        list(poses_pb2_grpc.PoseServiceStub(channel).GetBasis(request, timeout=30))
+    assert invalid.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+    assert "values_encoding: expected FLOAT32 or FLOAT16, got POINT_ENCODING_FIXED16" in invalid.value.details()
+
+
 def test_bad_basis_requests_name_their_status(client, channel, arm_poses):
     with pytest.raises(animspace.NotFound):
         client.get_basis("no-such-model")

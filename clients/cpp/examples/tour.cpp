@@ -132,6 +132,20 @@ int main(int argc, char** argv) try {
   std::printf("coordinates: %s, %zu values reconstructed into %u points, within %.3g of float32\n",
               animspace::cache_status_name(answer.status), sent, answer.points.point_count, largest);
 
+  // A studio character's basis is hundreds of megabytes: fetched in float16 it is half the bytes,
+  // each value within 2^-11 of its size from float32, and the answer within about
+  // 2^-11·(|mean_i| + Σ_j |A_ij p_j|) more (poses.proto states it exactly).
+  const animspace::Basis half = animspace::make_basis(
+      "arm-pmsc", client.get_basis("arm-pmsc", 0, {}, animspace::v1::POINT_ENCODING_FLOAT16));
+  animspace::PoseResult half_answer = client.evaluate_key_points("arm-pmsc", posed_keys, coordinate_options);
+  animspace::reconstruct(half, half_answer, half_answer.points);
+  float half_largest = 0;
+  for (size_t i = 0; i < half_answer.points.values.size(); ++i) {
+    half_largest = std::max(half_largest, std::abs(half_answer.points.values[i] - float32.points.values[i]));
+  }
+  std::printf("float16 basis: each value within %.3g, the answer within %.3g of float32\n",
+              static_cast<double>(half.values_max_error), static_cast<double>(half_largest));
+
   // Two kinds of subspace (issue #51): arm-articulated was trained on the same frames as arm-pmsc,
   // but its basis is the arm's skinning — its coordinates are the bones' affine transforms, 12
   // numbers each, then residual components — so the unseen swing stays inside it. Its answer is

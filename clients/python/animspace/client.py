@@ -634,11 +634,18 @@ class Client:
     # ------------------------------------------------------------------------------------------
     # Answers as coordinates (issue #36): the basis, its cache, the reconstruction
 
-    def get_basis(self, model: str, version: int = 0, *, deadline_s: Optional[float] = None) -> Basis:
+    def get_basis(self, model: str, version: int = 0, *, values_encoding: str = "float32",
+                  deadline_s: Optional[float] = None) -> Basis:
         """The subspace of a PMSC model version — N·D mean and N·D × M basis, float32 — streamed in
         chunks by GetBasis, assembled and checked (order, shape, checksum), and kept in
         :attr:`basis_cache` for :meth:`reconstruct`. Always asks the server (version 0: the
         version served now; ``Basis.model_version`` says which).
+
+        ``values_encoding="float16"`` (issue #53) halves the bytes sent: the values are checked
+        against the SHA-256 of what was sent, widened to float32, and the Basis says how far each
+        may be from the float32 basis (``values_max_error``); it is returned, not cached.
+        ``animspace.coordinates.reconstruct`` with it is within about
+        ``2⁻¹¹·(|mean_i| + Σ_j |A_ij p_j|)`` more per value (``rounding_bound`` computes it). A basis with a value beyond ±65504 raises FailedPrecondition.
 
         Raises:
             NotFound: an unknown model or version. FailedPrecondition: a model without key points
@@ -647,14 +654,19 @@ class Client:
                 checksum mid-stream, values whose checksum is not the one they carry, or another
                 version than the one asked for.
         """
-        request = poses_pb2.GetBasisRequest(model=_model_ref(model, version))
+        encodings = {"float32": common_pb2.POINT_ENCODING_FLOAT32, "float16": common_pb2.POINT_ENCODING_FLOAT16}
+        if values_encoding not in encodings:
+            raise ValueError(f"values_encoding: expected 'float32' or 'float16', got {values_encoding!r}")
+        request = poses_pb2.GetBasisRequest(model=_model_ref(model, version),
+                                            values_encoding=encodings[values_encoding])
         call = self._poses.GetBasis(request, timeout=self._deadline(deadline_s), metadata=self._metadata)
         assembler = _assemble("GetBasis", call, BasisAssembler())
         basis = assembler.basis(model)
         if version != 0 and basis.model_version != version:
             raise ProtocolError("GetBasis", f"asked for version {version}, the chunks are of version "
                                             f"{basis.model_version}")
-        self._basis_cache.put(basis)
+        if basis.values_encoding == "float32":
+            self._basis_cache.put(basis)
         return basis
 
     def reconstruct(self, model: str, result: PoseResult, *, deadline_s: Optional[float] = None) -> np.ndarray:

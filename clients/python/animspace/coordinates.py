@@ -36,7 +36,7 @@ import numpy as np
 
 from animspace import wire
 from animspace.display import compact_repr
-from animspace.v1 import poses_pb2
+from animspace.v1 import common_pb2, poses_pb2
 
 __all__ = [
     "Basis",
@@ -80,6 +80,11 @@ class Basis:
             (Fortran order), as on the wire. Read-only.
         basis_sha256: SHA-256 of the values as GetBasis sends them (32 bytes; b"" from a server
             before it): names the subspace so that it cannot be forged.
+        values_encoding: "float32", the basis itself; or "float16" (``get_basis(...,
+            values_encoding="float16")``, issue #53): half the bytes on the wire, each value
+            within ``values_max_error`` of the float32 basis the checksum and SHA-256 name, so
+            :func:`reconstruct` is within ``values_max_error·(1 + Σ_j |p_j|)`` more per value
+            (:func:`rounding_bound` includes it). A float16 basis is never cached.
     """
 
     __repr__ = compact_repr
@@ -94,6 +99,8 @@ class Basis:
     mean: np.ndarray
     basis: np.ndarray
     basis_sha256: bytes = b""
+    values_encoding: str = "float32"
+    values_max_error: float = 0.0
 
     @property
     def nbytes(self) -> int:
@@ -148,14 +155,21 @@ def basis_sha256(mean: np.ndarray, basis: np.ndarray) -> bytes:
 
 
 def _basis_from_values(model: str, model_version: int, checksum: int, n: int, d: int, m: int, aligned: bool,
-                       values: np.ndarray, sha256: bytes = b"") -> Basis:
+                       values: np.ndarray, sha256: bytes = b"", values_encoding: str = "float32",
+                       values_max_error: float = 0.0) -> Basis:
     """A Basis over ``values`` (N·D·(M+1) float32: the mean, then A column by column), read-only."""
     values.setflags(write=False)
     rows = n * d
     mean = values[:rows]
     basis = values[rows:].reshape((rows, m), order="F")
     return Basis(model=model, model_version=model_version, basis_checksum=checksum, point_count=n, channel_count=d,
-                 basis_size=m, aligned=aligned, mean=mean, basis=basis, basis_sha256=sha256)
+                 basis_size=m, aligned=aligned, mean=mean, basis=basis, basis_sha256=sha256,
+                 values_encoding=values_encoding, values_max_error=values_max_error)
+
+
+# Bytes a value of a BasisChunk takes, by its values_encoding (unset: a server before issue #53).
+_VALUE_BYTES = {common_pb2.POINT_ENCODING_UNSPECIFIED: 4, common_pb2.POINT_ENCODING_FLOAT32: 4,
+                common_pb2.POINT_ENCODING_FLOAT16: 2}
 
 
 class BasisAssembler:
@@ -171,10 +185,14 @@ class BasisAssembler:
         self._values: Optional[np.ndarray] = None
         self._filled = 0
         self._chunks = 0
+        self._sent = hashlib.sha256()  # over float16 values as they came
 
     def take(self, chunk: poses_pb2.BasisChunk) -> Optional[str]:
         where = f"chunk {self._chunks}"
         self._chunks += 1
+        value_bytes = _VALUE_BYTES.get(chunk.values_encoding)
+        if value_bytes is None:
+            return f"{where}: values_encoding {chunk.values_encoding}, not FLOAT32 or FLOAT16"
         if self._first is None:
             n, d, m = chunk.point_count, chunk.channel_count, chunk.basis_size
             if n == 0 or d == 0:
@@ -190,30 +208,46 @@ class BasisAssembler:
         else:
             first = self._first
             for name in ("model_version", "basis_checksum", "basis_sha256", "point_count", "channel_count",
-                         "basis_size", "aligned", "total_values"):
+                         "basis_size", "aligned", "total_values", "values_encoding", "values_sha256"):
                 if getattr(chunk, name) != getattr(first, name):
                     return f"{where}: {name} {getattr(chunk, name)} differs from chunk 0's {getattr(first, name)}"
         assert self._values is not None
         if chunk.offset != self._filled:
             return (f"{where}: offset {chunk.offset}, expected {self._filled} (chunks arrive in order and cover "
                     "the values once)")
-        if len(chunk.data) % 4 != 0:
-            return f"{where}: {len(chunk.data)} bytes of data, not whole float32 values"
-        count = len(chunk.data) // 4
+        kind = "float16" if value_bytes == 2 else "float32"
+        if len(chunk.data) % value_bytes != 0:
+            return f"{where}: {len(chunk.data)} bytes of data, not whole {kind} values"
+        count = len(chunk.data) // value_bytes
         if count == 0:
             return f"{where}: no values"
         if self._filled + count > self._values.size:
             return (f"{where}: values {self._filled}..{self._filled + count} run past total_values "
                     f"{self._values.size}")
-        self._values[self._filled:self._filled + count] = np.frombuffer(chunk.data, dtype=wire.WIRE_FLOAT)
+        if value_bytes == 2:
+            self._sent.update(chunk.data)
+            values = np.frombuffer(chunk.data, dtype=np.dtype("<f2")).astype(np.float32)  # exact
+        else:
+            values = np.frombuffer(chunk.data, dtype=wire.WIRE_FLOAT)
+        self._values[self._filled:self._filled + count] = values
         self._filled += count
         return None
+
+    def _half(self) -> bool:
+        return self._first is not None and self._first.values_encoding == common_pb2.POINT_ENCODING_FLOAT16
 
     def complete(self) -> Optional[str]:
         if self._first is None or self._values is None:
             return "the stream ended without a chunk"
         if self._filled != self._values.size:
             return f"the stream ended after {self._filled} of {self._values.size} values"
+        if self._half():
+            # The names are the float32 basis's; float16 values are checked as they came.
+            digest = self._sent.digest()
+            if digest != self._first.values_sha256:
+                return (f"the float16 values' SHA-256 {digest.hex()} is not the values_sha256 "
+                        f"{self._first.values_sha256.hex()} the chunks carry")
+            return None
         rows = self._first.point_count * self._first.channel_count
         checksum = basis_checksum(self._values[:rows],
                                   self._values[rows:].reshape((rows, self._first.basis_size), order="F"))
@@ -233,7 +267,8 @@ class BasisAssembler:
         assert first is not None and self._values is not None and self._filled == self._values.size
         return _basis_from_values(model, first.model_version, first.basis_checksum, first.point_count,
                                   first.channel_count, first.basis_size, first.aligned, self._values,
-                                  bytes(first.basis_sha256))
+                                  bytes(first.basis_sha256), "float16" if self._half() else "float32",
+                                  float(first.values_max_error) if self._half() else 0.0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -289,7 +324,13 @@ def rounding_bound(basis: Basis, coordinates: SubspaceCoordinates) -> np.ndarray
     mean = basis.mean.astype(np.float64)
     A = basis.basis.astype(np.float64)
     p = coordinates.p.astype(np.float64)
-    bound = (2 * gamma * (np.abs(mean) + np.abs(A) @ np.abs(p))).reshape(basis.point_count, basis.channel_count)
+    size = np.abs(mean) + np.abs(A) @ np.abs(p)
+    if basis.values_encoding == "float16":
+        # Each value within 2⁻¹¹ of its own size (2⁻²⁵ below 2⁻¹⁴) of the float32 one (poses.proto).
+        bound = (2 * gamma + 2.0 ** -11) * (1 + 2.0 ** -10) * size + 2.0 ** -24 * (1 + np.abs(p).sum())
+    else:
+        bound = 2 * gamma * size
+    bound = bound.reshape(basis.point_count, basis.channel_count)
     if not basis.aligned:
         return bound
     x = (mean + A @ p).reshape(-1, 3)
@@ -401,7 +442,10 @@ class BasisCache:
 
     def put(self, basis: Basis) -> None:
         """Keeps ``basis`` in memory and writes its file unless one is there already (a file that is
-        there is checked when it is read)."""
+        there is checked when it is read). A float16 basis is not the one its names name: refused."""
+        if basis.values_encoding != "float32":
+            raise ValueError(f"basis of '{basis.model}' version {basis.model_version}: a {basis.values_encoding} "
+                             "copy is not cached (the cache holds the float32 basis its checksum names)")
         self._remember(basis)
         path = self.path(basis.model, basis.model_version, basis.basis_checksum)
         if path is not None and not path.is_file():

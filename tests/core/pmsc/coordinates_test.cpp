@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 
 #include "core/common/kernels.h"
+#include "core/common/point_codec.h"
+#include "core/common/sha256.h"
 #include "core/container/crc32.h"
 #include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_model.h"
@@ -96,6 +98,42 @@ TEST(BasisChecksum, NamesTheMeanInTheHighHalfAndTheBasisInTheLowHalf) {
   Eigen::VectorXf mean = m.mean;
   mean(0) += 1;
   EXPECT_NE(basis_checksum(mean, m.basis), checksum);
+}
+
+// Issue #53: the float16 form GetBasis sends — each value rounded to the nearest binary16, named
+// by the SHA-256 of those bytes, with the largest rounding error — and a value binary16 cannot
+// hold named by where it lies.
+TEST(Float16Basis, IsNamedByItsBytesAndCarriesItsLargestRoundingError) {
+  std::mt19937 random(11);
+  const PmscModel m = testing::random_model(random, 40, 3, 6, false);
+  auto half = float16_basis(m.mean, m.basis);
+  ASSERT_TRUE(half.ok()) << half.error().message;
+  std::string bytes;
+  double largest = 0;
+  std::vector<float> values(m.mean.data(), m.mean.data() + m.mean.size());  // mean, then basis by column
+  values.insert(values.end(), m.basis.data(), m.basis.data() + m.basis.size());
+  {
+    for (const float v : values) {
+      const uint16_t h = point_codec::float_to_half(v);
+      bytes.push_back(static_cast<char>(h & 0xff));  // little-endian
+      bytes.push_back(static_cast<char>(h >> 8));
+      largest = std::max(largest, std::abs(static_cast<double>(point_codec::half_to_float(h)) - v));
+    }
+  }
+  EXPECT_EQ(half->sha256, sha256(bytes));
+  EXPECT_EQ(half->max_error, static_cast<float>(largest));
+  EXPECT_GT(half->max_error, 0.0f);
+
+  Eigen::MatrixXf big = m.basis;
+  big(5, 2) = 70000.0f;
+  auto refused = float16_basis(m.mean, big);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kOutOfRange);
+  EXPECT_NE(refused.error().message.find("basis value 5 of column 2 is 70000"), std::string::npos)
+      << refused.error().message;
+  Eigen::VectorXf mean = m.mean;
+  mean(7) = -1e6f;
+  EXPECT_NE(float16_basis(mean, m.basis).error().message.find("mean value 7 is -1000000"), std::string::npos);
 }
 
 }  // namespace
