@@ -2,7 +2,9 @@
 
 #include <malloc.h>
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-#include <sanitizer/allocator_interface.h>
+// The sanitizer runtimes' allocator statistics (LLVM's sanitizer/allocator_interface.h, which
+// GCC 12 does not install; libasan and libtsan both export the function).
+extern "C" size_t __sanitizer_get_current_allocated_bytes();
 #endif
 
 #include <algorithm>
