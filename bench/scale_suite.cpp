@@ -20,7 +20,12 @@
 //                                    answer sent as coordinates, median), thumbnail_p50_ms (a
 //                                    256² thumbnail of a stored frame drawn by the daemon), and
 //                                    get_lod_bytes / get_lod_chunks / get_lod_ms (GetLod of
-//                                    build-lod's level 0 in animation-space form, median)
+//                                    build-lod's level 0 in animation-space form, median),
+//                                    get_basis_float16_bytes, and a second daemon whose
+//                                    --memory-budget holds 3 copies serving every copy in turn
+//                                    (budget_peak_rss_bytes, budget_reload_ms)
+//   the error across 20 other random poses of build-lod's level nearest a tenth of the vertices
+//   and of meshoptimizer's rest-pose simplification to as many (lod_rms_error_over_diag, …)
 // Level 0 is the baseline: every figure of a larger level is also printed as a ratio to it.
 #include <sys/resource.h>
 
@@ -37,6 +42,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/child_process.h"
+#include "bench/lod_comparison.h"
 #include "bench/scratch_directory.h"
 #include "bench/serving.h"
 #include "bench/suites.h"
@@ -73,12 +79,13 @@ uint64_t file_bytes(const std::filesystem::path& path) {
   return error ? 0 : static_cast<uint64_t>(size);
 }
 
-// The resident memory of a running process now (VmRSS), bytes; 0 when it cannot be read.
-uint64_t resident_bytes(pid_t pid) {
+// A memory figure of a running process from /proc/<pid>/status, bytes: VmRSS (resident now) or
+// VmHWM (its peak); 0 when it cannot be read.
+uint64_t process_memory_bytes(pid_t pid, const std::string& field = "VmRSS") {
   std::ifstream in("/proc/" + std::to_string(pid) + "/status");
   std::string line;
   while (std::getline(in, line)) {
-    if (line.starts_with("VmRSS:")) return static_cast<uint64_t>(std::stoll(line.substr(6))) * 1024;
+    if (line.starts_with(field + ":")) return static_cast<uint64_t>(std::stoll(line.substr(field.size() + 1))) * 1024;
   }
   return 0;
 }
@@ -187,12 +194,61 @@ std::vector<int> level_vertex_counts(const std::filesystem::path& file) {
   return counts;
 }
 
+// The error across poses (Merry 2007 §8.5) of build-lod's level nearest a tenth of the vertices
+// and of meshoptimizer's rest-pose simplification to the same vertex count, over kErrorPoses
+// random poses that build-lod's own sample poses are not (another seed): the lod suite's measure.
+constexpr int kErrorPoses = 20;
+
+struct LodError {
+  int vertices = 0;  // of the level compared
+  int meshopt_vertices = 0;
+  SurfaceError lod;
+  SurfaceError meshopt;
+};
+
+std::optional<LodError> lod_error(const as::AnimationSpaceModel& character, const std::filesystem::path& lod_file) {
+  auto container = container::read_file(lod_file);
+  if (!container) return std::nullopt;
+  auto model = as::load(*container, lod_file.string());
+  if (!model) return std::nullopt;
+  auto levels = lod::load_levels(*container, *model, lod_file.string());
+  if (!levels || levels->count() < 2) return std::nullopt;
+  const int target = character.vertex_count() / 10;
+  int nearest = 1;
+  for (int l = 1; l < levels->count(); ++l) {
+    const auto distance = [&](int at) { return std::abs(levels->levels[static_cast<size_t>(at)].model.vertex_count() - target); };
+    if (distance(l) < distance(nearest)) nearest = l;
+  }
+  const as::AnimationSpaceModel& level = levels->levels[static_cast<size_t>(nearest)].model;
+  const auto poses = as::random_joint_rotation_poses(character.skeleton, kErrorPoses,
+                                                     kMaxJointAngle * std::numbers::pi / 180, kPoseSeed + 2);
+  const double diagonal = rest_diagonal(character);
+  const Simplified meshopt = meshoptimizer_rest(character, level.vertex_count());
+  LodError error;
+  error.vertices = level.vertex_count();
+  error.meshopt_vertices = meshopt.model.vertex_count();
+  error.lod = measure_across_poses(character, level, poses, diagonal);
+  error.meshopt = measure_across_poses(character, meshopt.model, poses, diagonal);
+  return error;
+}
+
 // What serving `models` copies of one trained model costs.
 struct Serving {
   uint64_t registry_rss_bytes = 0;
   uint64_t get_basis_bytes = 0;
   double get_basis_seconds = 0;
   double client_reconstruct_us = 0;
+  // The same basis asked for in float16, and the largest difference it makes to the answer's
+  // reconstruction, over the rest pose's diagonal.
+  uint64_t get_basis_float16_bytes = 0;
+  double float16_reconstruct_max_error_over_diag = -1;
+  // The copies served again by a daemon with --memory-budget of kBudgetVersions versions' resident
+  // bytes: its peak RSS (VmHWM) over the whole round, and the median time of a call that finds
+  // its version evicted and loads it again (< 0: not measured, budget_status says why).
+  uint64_t memory_budget_bytes = 0;
+  uint64_t budget_peak_rss_bytes = 0;
+  double budget_reload_ms = -1;
+  std::string budget_status;
   double thumbnail_p50_ms = -1;  // < 0: not drawn (no renderer), thumbnail_status says why
   std::string thumbnail_status;
   // GetLod of the levels build-lod made, level 0 (every vertex) in animation-space form.
@@ -202,6 +258,51 @@ struct Serving {
   std::string get_lod_status;
   std::string status;  // "" when measured, else why not
 };
+
+// Versions a budget holds in the memory-budget round: a render farm's working set, smaller than
+// the copies served.
+constexpr int kBudgetVersions = 3;
+
+// The copies of `repository` (scale-00 …) served by a daemon whose --memory-budget holds
+// kBudgetVersions of them (issue #53; `one_version`: a copy's resident bytes as a daemon without a
+// budget measured them): one call to each copy in turn, every one of which finds its version
+// evicted and loads it again.
+void measure_budget(const std::filesystem::path& repository, int models, uint64_t one_version,
+                    const std::filesystem::path& work, Serving& serving) {
+  if (models <= kBudgetVersions) {
+    serving.budget_status = "not measured: " + std::to_string(models) + " copies fit a budget of " +
+                            std::to_string(kBudgetVersions);
+    return;
+  }
+  std::filesystem::remove_all(repository / "scale-lod");
+  serving.memory_budget_bytes = kBudgetVersions * one_version;
+  std::filesystem::create_directories(work / "budget");
+  harness::DaemonProcess daemon({"--model-repository", repository.string(), "--log-level", "warn",
+                                 "--poll-interval-s", "0", "--memory-budget", std::to_string(serving.memory_budget_bytes)},
+                                work / "budget");
+  if (!wait_until_serving(daemon.address(), std::chrono::seconds(1800))) {
+    serving.budget_status = "the daemon never answered SERVING:\n" + daemon.log();
+    return;
+  }
+  ClientOptions options;
+  options.deadline = std::chrono::minutes(10);
+  Client client(daemon.address(), options);
+  std::vector<double> reload_ms;
+  char name[32];
+  try {
+    for (int m = 0; m < models; ++m) {  // the first kBudgetVersions by name were evicted at start-up
+      std::snprintf(name, sizeof name, "scale-%02d", m);
+      const auto start = std::chrono::steady_clock::now();
+      client.describe_key_points(name);
+      reload_ms.push_back(1e3 * seconds_since(start));
+    }
+  } catch (const std::exception& e) {
+    serving.budget_status = std::string("serving under the budget failed: ") + e.what();
+    return;
+  }
+  serving.budget_peak_rss_bytes = process_memory_bytes(daemon.pid(), "VmHWM");
+  serving.budget_reload_ms = tools::quantile(std::move(reload_ms), 0.5);
+}
 
 // The daemon holds a version's runtime (about twice its basis), not its training frames, which
 // stay on disk (--resident-section-bytes): `frames_bytes` of the file are not counted.
@@ -238,10 +339,14 @@ Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames
     serving.status = "the daemon never answered SERVING:\n" + daemon->log();
     return serving;
   }
-  serving.registry_rss_bytes = resident_bytes(daemon->pid());
+  serving.registry_rss_bytes = process_memory_bytes(daemon->pid());
   // Every copy must be served for the figure to mean what it says.
   int served = 0;
-  for (const auto& summary : Client(daemon->address()).list_models()) served += summary.default_version() != 0 ? 1 : 0;
+  uint64_t one_version = 0;  // the heap one copy holds, as the daemon measured it
+  for (const auto& summary : Client(daemon->address()).list_models()) {
+    served += summary.default_version() != 0 ? 1 : 0;
+    for (const auto& version : summary.versions()) one_version = std::max(one_version, version.resident_bytes());
+  }
   if (served != models) {
     serving.status = "only " + std::to_string(served) + " of " + std::to_string(models) + " copies loaded:\n" +
                      daemon->log();
@@ -283,6 +388,16 @@ Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames
                                       reconstruct(basis, result, points);
                                       do_not_optimize(points.values.data());
                                     });
+    // Half the bytes: the float16 basis, and what it changes in this answer.
+    BasisData half = client.get_basis("scale-00", 0, {}, v1::POINT_ENCODING_FLOAT16);
+    serving.get_basis_float16_bytes = half.bytes_received;
+    Points half_points;
+    reconstruct(make_basis("scale-00", std::move(half)), result, half_points);
+    double largest = 0;
+    for (size_t i = 0; i < points.values.size(); ++i) {
+      largest = std::max(largest, std::abs(static_cast<double>(half_points.values[i]) - points.values[i]));
+    }
+    serving.float16_reconstruct_max_error_over_diag = largest / rest_diagonal(character.model);
   } catch (const std::exception& e) {
     serving.status = std::string("serving failed: ") + e.what();
     return serving;
@@ -325,6 +440,7 @@ Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames
   } catch (const std::exception& e) {
     serving.get_lod_status = e.what();
   }
+  measure_budget(repository, models, one_version, work, serving);
   return serving;
 }
 
@@ -383,10 +499,20 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
     progress.starting("level " + std::to_string(level) + ": build-lod");
     nlohmann::json lod = nullptr;
     double meshopt = 0;
+    std::optional<LodError> lod_across_poses;
     if (auto built = run_cli({"build-lod", character_file.string(), "--sample-poses", std::to_string(kLodSamplePoses), "-o", (work / "lod.anim").string()},
                              work / "build-lod.txt", "build-lod")) {
       lod = built->seconds;
       meshopt = meshopt_seconds(character->model, level_vertex_counts(work / "lod.anim"));
+      progress.starting("level " + std::to_string(level) + ": LOD error across " + std::to_string(kErrorPoses) +
+                        " poses, build-lod and meshoptimizer");
+      lod_across_poses = lod_error(character->model, work / "lod.anim");
+      if (lod_across_poses) {
+        std::printf("%-6d LOD error across %d poses at %d vertices (RMS, max over the diagonal): build-lod %.5f, %.5f; "
+                    "meshoptimizer (rest pose, %d vertices) %.5f, %.5f\n",
+                    level, kErrorPoses, lod_across_poses->vertices, lod_across_poses->lod.rms, lod_across_poses->lod.max,
+                    lod_across_poses->meshopt_vertices, lod_across_poses->meshopt.rms, lod_across_poses->meshopt.max);
+      }
     }
 
     for (const std::string& kind : scale.kinds) {
@@ -402,6 +528,15 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
                          {"meshopt_seconds", lod.is_null() ? nlohmann::json(nullptr) : nlohmann::json(meshopt)},
                          {"models", scale.models},
                          {"baseline", level == 0}};
+      if (lod_across_poses) {
+        row["lod_error_poses"] = kErrorPoses;
+        row["lod_error_vertices"] = lod_across_poses->vertices;
+        row["lod_rms_error_over_diag"] = lod_across_poses->lod.rms;
+        row["lod_max_error_over_diag"] = lod_across_poses->lod.max;
+        row["meshopt_error_vertices"] = lod_across_poses->meshopt_vertices;
+        row["meshopt_rms_error_over_diag"] = lod_across_poses->meshopt.rms;
+        row["meshopt_max_error_over_diag"] = lod_across_poses->meshopt.max;
+      }
       const auto trained = run_cli({"train-pmsc", sequence.string(), "--subspace", kind, "-o", model_file.string()},
                                    work / ("train-" + kind + ".txt"), "train-pmsc");
       if (!trained) {
@@ -429,6 +564,15 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
         row["get_basis_bytes"] = serving.get_basis_bytes;
         row["get_basis_seconds"] = serving.get_basis_seconds;
         row["client_reconstruct_us"] = serving.client_reconstruct_us;
+        row["get_basis_float16_bytes"] = serving.get_basis_float16_bytes;
+        row["float16_reconstruct_max_error_over_diag"] = serving.float16_reconstruct_max_error_over_diag;
+        if (serving.budget_reload_ms >= 0) {
+          row["memory_budget_bytes"] = serving.memory_budget_bytes;
+          row["budget_peak_rss_bytes"] = serving.budget_peak_rss_bytes;
+          row["budget_reload_ms"] = serving.budget_reload_ms;
+        } else {
+          row["budget_status"] = serving.budget_status;
+        }
         if (serving.thumbnail_p50_ms >= 0) {
           row["thumbnail_p50_ms"] = serving.thumbnail_p50_ms;
         } else {
@@ -462,6 +606,16 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
                   value("peak_rss_bytes") / 1e9, peak_over_input, value("lod_build_seconds"), value("meshopt_seconds"),
                   value("get_basis_bytes") / 1e6, value("client_reconstruct_us"), value("registry_rss_bytes") / 1e9,
                   value("thumbnail_p50_ms"), value("train_seconds") / base_train);
+      if (row.contains("get_basis_float16_bytes")) {
+        std::printf("%-6s GetBasis float16: %.1f MB, the answer within %.2g of the diagonal of float32's\n", "",
+                    value("get_basis_float16_bytes") / 1e6, value("float16_reconstruct_max_error_over_diag"));
+      }
+      if (row.contains("budget_reload_ms")) {
+        std::printf("%-6s --memory-budget %.2f GB (%d versions) serving %d copies in turn: peak RSS %.2f GB, a call "
+                    "that loads its version again %.0f ms (median)\n",
+                    "", value("memory_budget_bytes") / 1e9, kBudgetVersions, scale.models,
+                    value("budget_peak_rss_bytes") / 1e9, value("budget_reload_ms"));
+      }
       if (row.contains("get_lod_ms")) {
         std::printf("%-6s GetLod level 0 (animation space, %d vertices): %.1f MB in %lu chunks, %.1f ms\n", "",
                     points, value("get_lod_bytes") / 1e6, static_cast<unsigned long>(row["get_lod_chunks"].get<uint64_t>()),
