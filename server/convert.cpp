@@ -52,6 +52,7 @@ void set_description(const model::ModelInfo& info, v1::ModelVersion* out) {
   out->set_check_point_count(static_cast<uint32_t>(info.check_point_count));
   out->set_false_hit_rate(info.false_hit_rate);
   out->set_calibration_bad_samples(static_cast<uint64_t>(info.calibration_bad_samples));
+  out->set_calibration_real_bad_samples(static_cast<uint64_t>(info.calibration_real_bad_samples));
   out->set_calibration_guarantee_holds(info.calibration_guarantee_holds);
   out->set_calibration_statement(info.calibration_statement);
   out->set_relative_tolerance(info.relative_tolerance);

@@ -43,6 +43,8 @@ struct ModelInfo {
   int check_point_count = 0;
   double false_hit_rate = 0;
   long calibration_bad_samples = 0;
+  // Of those, held-out frames over the tolerance themselves (the rest extrapolated; issue #52).
+  long calibration_real_bad_samples = 0;
   bool calibration_guarantee_holds = false;
   std::string calibration_statement;
   bool relative_tolerance = false;  // pmsc::PmscModel::relative_tolerance (issue #38)

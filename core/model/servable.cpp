@@ -1,5 +1,6 @@
 #include "core/model/servable.h"
 
+#include <algorithm>
 #include <utility>
 
 #include "core/animspace/animspace_io.h"
@@ -33,6 +34,7 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     info->check_point_count = m.check_point_count();
     info->false_hit_rate = m.calibration.false_hit_rate;
     info->calibration_bad_samples = m.calibration.bad_samples;
+    info->calibration_real_bad_samples = std::min(m.calibration.over_tolerance, m.calibration.bad_samples);
     info->calibration_guarantee_holds = pmsc::calibration_guarantee_holds(m);
     info->calibration_statement = pmsc::calibration_statement(m);
     info->relative_tolerance = m.relative_tolerance;

@@ -714,10 +714,18 @@ std::string calibration_statement(const PmscModel& m) {
            std::to_string(static_cast<long>(std::ceil(1.0 / c.false_hit_rate - 1.0 - 1e-9))) +
            "); ε sits below every one of them";
   }
+  // Issue #52 item 3: what the rate rests on — held-out frames that were over the tolerance
+  // themselves, or residuals under it scaled up to it — and so when it says nothing.
+  const long real = std::min(c.over_tolerance, c.bad_samples);
+  const std::string rests_on =
+      real == 0 ? "none of them from a held-out frame over the tolerance itself: the rate rests on residuals scaled up "
+                  "to the tolerance alone, and is void for errors unlike theirs"
+                : std::to_string(real) + " of them from held-out frames over the tolerance themselves, the other " +
+                      std::to_string(c.bad_samples - real) + " from residuals under it, scaled up to it";
   return "a pose over the tolerance (" + tolerance_text(m) + ")" + checked + " is called HIT with probability at most " +
          format_number(c.false_hit_rate) + ", when its error is like the " + std::to_string(c.bad_samples) +
-         " over-tolerance held-out samples ε was calibrated on (held-out frames, blocks of motion, sparser training, "
-         "residuals extrapolated past the tolerance); void for motion unlike any of the training frames' folds";
+         " over-tolerance held-out samples ε was calibrated on (held-out frames, blocks of motion, sparser training; " +
+         rests_on + "); void for motion unlike any of the training frames' folds";
 }
 
 double hit_rate(const PmscModel& m, const FrameMatrix& control_frames) {

@@ -47,6 +47,10 @@ def test_describe_key_points_lists_check_points_apart_from_the_key_points(client
     version = client.describe_model(MODEL).default
     assert version.check_point_count == C
     assert version.calibration_statement
+    # What the guarantee rests on (issue #52): real over-tolerance frames among its samples.
+    assert 0 <= version.calibration_real_bad_samples <= version.calibration_bad_samples
+    assert f"the other {version.calibration_bad_samples - version.calibration_real_bad_samples}" in \
+        version.calibration_statement or "none of them from a held-out frame" in version.calibration_statement
 
 
 def test_check_values_far_off_overturn_the_hit_of_exact_key_values(client, trained_pose):

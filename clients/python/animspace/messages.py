@@ -209,7 +209,9 @@ class ModelVersion:
 
     ``check_point_count`` is C, the check points a client sends beside the key points (0 for a
     model without them). ``false_hit_rate`` is the δ ε was calibrated for (0: not calibrated),
-    ``calibration_bad_samples`` the over-tolerance samples it rests on,
+    ``calibration_bad_samples`` the over-tolerance samples it rests on (of which
+    ``calibration_real_bad_samples`` held-out frames over the tolerance themselves, the rest
+    residuals under it scaled up to it),
     ``calibration_guarantee_holds`` whether they back δ, and ``calibration_statement`` the
     server's sentence for operators: what a HIT means for this model, or why nothing is
     guaranteed. ``relative_tolerance`` (issue #38): ε and every error a ``PoseResult`` reports are
@@ -244,6 +246,7 @@ class ModelVersion:
     check_point_count: int = 0
     false_hit_rate: float = 0.0
     calibration_bad_samples: int = 0
+    calibration_real_bad_samples: int = 0
     calibration_guarantee_holds: bool = False
     calibration_statement: str = ""
     relative_tolerance: bool = False
@@ -265,6 +268,7 @@ class ModelVersion:
                    server_engine=enum_name(models_pb2.ServerEngine, m.server_engine, "SERVER_ENGINE_"),
                    check_point_count=m.check_point_count, false_hit_rate=m.false_hit_rate,
                    calibration_bad_samples=m.calibration_bad_samples,
+                   calibration_real_bad_samples=m.calibration_real_bad_samples,
                    calibration_guarantee_holds=m.calibration_guarantee_holds,
                    calibration_statement=m.calibration_statement,
                    relative_tolerance=m.relative_tolerance,

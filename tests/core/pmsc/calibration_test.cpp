@@ -415,6 +415,15 @@ TEST(Calibration, TrainingStoresHeldOutSamplesAndDerivesEpsilonFromThem) {
   std::snprintf(expected, sizeof expected, "a pose over the tolerance (%.3g model units, %.3g%% of the mean pose's",
                 o.error_tolerance, 100 * o.error_tolerance / diagonal);
   EXPECT_EQ(calibration_statement(*model).rfind(expected, 0), 0u) << calibration_statement(*model);
+  // Issue #52: it says how many of its samples were held-out frames over the tolerance themselves
+  // (counted here from the samples) and how many were scaled up to it.
+  long real = 0;
+  for (long i = 0; i < s.size(); ++i) real += s.max_errors(i) > o.error_tolerance ? 1 : 0;
+  ASSERT_GT(real, 0);
+  EXPECT_NE(calibration_statement(*model).find(std::to_string(real) + " of them from held-out frames over the tolerance themselves, the other " +
+                                               std::to_string(bad.size() - static_cast<size_t>(real)) + " from residuals under it"),
+            std::string::npos)
+      << calibration_statement(*model);
 }
 
 // End to end on fresh poses from the same generator: of those whose true max error is above the

@@ -412,6 +412,8 @@ TEST_F(CheckPointsTest, ModelVersionCarriesTheCheckPointsAndTheCalibrationStatem
     EXPECT_EQ(v.check_point_count(), name == kChecked ? static_cast<uint32_t>(kCheckPointCount) : 0u);
     EXPECT_EQ(v.false_hit_rate(), loaded->calibration.false_hit_rate);
     EXPECT_EQ(v.calibration_bad_samples(), static_cast<uint64_t>(loaded->calibration.bad_samples));
+    EXPECT_EQ(v.calibration_real_bad_samples(), static_cast<uint64_t>(std::min(loaded->calibration.over_tolerance,
+                                                                               loaded->calibration.bad_samples)));
     EXPECT_EQ(v.calibration_guarantee_holds(), pmsc::calibration_guarantee_holds(*loaded));
     EXPECT_FALSE(v.calibration_statement().empty());
     EXPECT_EQ(v.calibration_statement(), pmsc::calibration_statement(*loaded));
