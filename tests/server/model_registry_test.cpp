@@ -171,7 +171,7 @@ TEST(ModelRegistry, AMemoryBudgetEvictsTheLeastRecentlyUsedAndLoadsItAgainOnRequ
   ModelRegistry registry(repo.path(), kAllResident, rest_bytes * 5 / 2);
   ASSERT_EQ(registry.load_all(), 3);  // a, b, c in order: c's load evicts a
   const auto state = [&](const std::string& name) {
-    const VersionEntry& v = registry.describe(name)->versions.at(1);
+    const VersionEntry v = registry.describe(name)->versions.at(1);  // a copy: describe() returns one
     return v.model ? "loaded" : v.evicted ? "evicted" : "refused";
   };
   EXPECT_STREQ(state("a"), "evicted");
