@@ -13,12 +13,15 @@
 #include <cmath>
 #include <cstdint>
 #include <exception>
+#include <limits>
 #include <new>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <Eigen/SVD>
 
 #include "core/common/atomic_file.h"
 #include "core/common/format.h"
@@ -65,6 +68,56 @@ std::string rigid_problem(const Eigen::Matrix4d& transform) {
   const double determinant = rotation.determinant();
   if (!(determinant > 0)) return "is not a rotation: det R = " + format_number(determinant) + ", expected > 0";
   return {};
+}
+
+// Empty when `transform` is an invertible affine map (finite, last row exactly 0 0 0 1, σ_min of
+// the linear part above kSingularRatio σ_max), else the reason: what two nodes can carry (T·U·Σ
+// and Vᵀ) and what has an inverse bind matrix.
+constexpr double kSingularRatio = 1e-12;
+std::string affine_problem(const Eigen::Matrix4d& transform) {
+  if (!transform.allFinite()) return "has a non-finite entry";
+  if (transform.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) {
+    return "has last row " + row_text(transform.row(3)) + ", expected 0 0 0 1";
+  }
+  const Eigen::Vector3d singular = Eigen::JacobiSVD<Eigen::Matrix3d>(transform.topLeftCorner<3, 3>()).singularValues();
+  if (!(singular(2) > kSingularRatio * singular(0))) {
+    return "is singular: its linear part's singular values are " + format_number(singular(0)) + ", " +
+           format_number(singular(1)) + ", " + format_number(singular(2)) + ", expected the smallest above 1e-12 "
+           "of the largest";
+  }
+  return {};
+}
+
+std::string transform_problem(const SkinnedCharacter& c, const Eigen::Matrix4d& transform) {
+  return c.affine_joints ? affine_problem(transform) : rigid_problem(transform);
+}
+
+Status check_morph_targets(const SkinnedCharacter& c, const std::string& destination) {
+  const size_t target_count = c.morph_targets.size();
+  for (size_t k = 0; k < target_count; ++k) {
+    if (c.morph_targets[k].rows() != c.bind_points.rows()) {
+      return invalid(destination, "morph_targets[" + std::to_string(k) + "] has " +
+                                      std::to_string(c.morph_targets[k].rows()) + " rows, expected #V = " +
+                                      std::to_string(c.bind_points.rows()));
+    }
+    if (!c.morph_targets[k].allFinite()) {
+      return invalid(destination, "morph_targets[" + std::to_string(k) + "] has a non-finite offset");
+    }
+  }
+  if (!c.morph_target_names.empty() && c.morph_target_names.size() != target_count) {
+    return invalid(destination, "morph_target_names has " + std::to_string(c.morph_target_names.size()) +
+                                    " names, expected 0 or one per target (" + std::to_string(target_count) + ")");
+  }
+  const Eigen::Index expected_rows = target_count == 0 ? 0 : static_cast<Eigen::Index>(c.frame_globals.size());
+  if (c.frame_morph_weights.rows() != expected_rows ||
+      (expected_rows != 0 && c.frame_morph_weights.cols() != static_cast<Eigen::Index>(target_count))) {
+    return invalid(destination, "frame_morph_weights is " + std::to_string(c.frame_morph_weights.rows()) + "×" +
+                                    std::to_string(c.frame_morph_weights.cols()) + ", expected " +
+                                    std::to_string(expected_rows) + "×" + std::to_string(target_count) +
+                                    " (frames × morph targets)");
+  }
+  if (!c.frame_morph_weights.allFinite()) return invalid(destination, "frame_morph_weights has a non-finite weight");
+  return Status::Ok();
 }
 
 // Every condition the writer relies on; `destination` ("glb", "gltf" or the path) prefixes the
@@ -135,7 +188,7 @@ Status check_character(const SkinnedCharacter& c, const std::string& destination
                                     " transforms, expected J = " + std::to_string(joint_count));
   }
   for (size_t j = 0; j < joint_count; ++j) {
-    const std::string problem = rigid_problem(c.bind_globals[j]);
+    const std::string problem = transform_problem(c, c.bind_globals[j]);
     if (!problem.empty()) return invalid(destination, "bind_globals[" + std::to_string(j) + "] " + problem);
   }
 
@@ -203,6 +256,8 @@ Status check_character(const SkinnedCharacter& c, const std::string& destination
     }
   }
 
+  ANIMSPACE_RETURN_IF_ERROR(check_morph_targets(c, destination));
+
   // The animation.
   if (c.frame_globals.empty()) return Status::Ok();
   if (!std::isfinite(c.frames_per_second) || !(c.frames_per_second > 0)) {
@@ -216,7 +271,7 @@ Status check_character(const SkinnedCharacter& c, const std::string& destination
                                       " transforms, expected J = " + std::to_string(joint_count));
     }
     for (size_t j = 0; j < joint_count; ++j) {
-      const std::string problem = rigid_problem(frame[j]);
+      const std::string problem = transform_problem(c, frame[j]);
       if (!problem.empty()) {
         return invalid(destination, "frame_globals[" + std::to_string(k) + "][" + std::to_string(j) + "] " + problem);
       }
@@ -269,6 +324,71 @@ std::vector<RigidTrs> local_pose(const std::vector<int32_t>& parents, const Matr
   return locals;
 }
 
+// An affine joint's local transform as its two nodes: the shape node's T, U, Σ and the joint
+// node's Vᵀ, with T · U Σ Vᵀ the transform (U, V rotations; Σ's last entry negative for a
+// reflection). The SVD's columns may flip in pairs without changing U Σ Vᵀ; the pair nearest
+// `previous` (the last frame's) is taken, so that LINEAR keys between frames turn the short way.
+struct AffineTrs {
+  Eigen::Vector3d translation;
+  Eigen::Quaterniond outer;
+  Eigen::Vector3d scale;
+  Eigen::Quaterniond inner;
+  Eigen::Matrix3d u, v;  // the rotations, for the next frame's choice
+};
+
+AffineTrs affine_trs(const Eigen::Matrix4d& local, const AffineTrs* previous) {
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(local.topLeftCorner<3, 3>(), Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d u = svd.matrixU(), v = svd.matrixV();
+  Eigen::Vector3d scale = svd.singularValues();
+  const Eigen::Matrix3d flip_last = Eigen::Vector3d(1, 1, -1).asDiagonal();
+  if (u.determinant() < 0) {
+    u = u * flip_last;
+    scale(2) = -scale(2);
+  }
+  if (v.determinant() < 0) {
+    v = v * flip_last;
+    scale(2) = -scale(2);
+  }
+  if (previous != nullptr) {
+    double best = -std::numeric_limits<double>::infinity();
+    Eigen::Matrix3d best_flip = Eigen::Matrix3d::Identity();
+    for (const Eigen::Vector3d& signs : {Eigen::Vector3d(1, 1, 1), Eigen::Vector3d(-1, -1, 1),
+                                         Eigen::Vector3d(-1, 1, -1), Eigen::Vector3d(1, -1, -1)}) {
+      const Eigen::Matrix3d flip = signs.asDiagonal();
+      const double closeness = (previous->u.transpose() * u * flip).trace() + (previous->v.transpose() * v * flip).trace();
+      if (closeness > best) {
+        best = closeness;
+        best_flip = flip;
+      }
+    }
+    u = u * best_flip;
+    v = v * best_flip;
+  }
+  AffineTrs out{local.topRightCorner<3, 1>(), Eigen::Quaterniond(u), scale, Eigen::Quaterniond(Eigen::Matrix3d(v.transpose())),
+                u, v};
+  out.outer.normalize();
+  out.inner.normalize();
+  return out;
+}
+
+std::vector<AffineTrs> affine_pose(const std::vector<int32_t>& parents, const Matrix4dList& globals,
+                                   const std::vector<AffineTrs>* previous) {
+  std::vector<AffineTrs> locals;
+  locals.reserve(parents.size());
+  for (size_t j = 0; j < parents.size(); ++j) {
+    const Eigen::Matrix4d local =
+        parents[j] < 0 ? globals[j] : Eigen::Matrix4d(globals[static_cast<size_t>(parents[j])].inverse() * globals[j]);
+    locals.push_back(affine_trs(local, previous != nullptr ? &(*previous)[j] : nullptr));
+  }
+  return locals;
+}
+
+// The sign of q nearest `previous` (q and −q are the same rotation).
+Eigen::Quaterniond near_sign(Eigen::Quaterniond q, const Eigen::Quaterniond& previous) {
+  if (q.coeffs().dot(previous.coeffs()) < 0) q.coeffs() = -q.coeffs();
+  return q;
+}
+
 template <typename T>
 int append_vector(tinygltf::Model& model, const std::vector<T>& values, int target, int component_type, int type,
                   size_t count) {
@@ -293,7 +413,9 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
   // adds at most 3 per accessor).
   const double bytes = static_cast<double>(vertex_count) * (2 * 12 + (c.uvs.rows() != 0 ? 8 : 0) + static_cast<double>(set_count) * (8 + 16)) +
                        static_cast<double>(face_count) * 12 + static_cast<double>(joint_count) * 64 +
-                       static_cast<double>(frame_count) * (4 + static_cast<double>(joint_count) * (12 + 16)) +
+                       static_cast<double>(frame_count) * (4 + static_cast<double>(joint_count) * (2 * 12 + 2 * 16)) +
+                       static_cast<double>(c.morph_targets.size()) * (static_cast<double>(vertex_count) * 12 +
+                                                                     static_cast<double>(frame_count) * 4 + 4) +
                        4.0 * (6 + static_cast<double>(set_count) * 2 + static_cast<double>(joint_count) * 2);
   if (bytes > static_cast<double>(gltf_writing::kMaxBufferBytes)) {
     return invalid(destination, "a character of " + std::to_string(vertex_count) + " vertices, " +
@@ -369,20 +491,48 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
           append_vector(model, slot_weights, TINYGLTF_TARGET_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_FLOAT,
                         TINYGLTF_TYPE_VEC4, vertex_count);
     }
+    // 2b. The morph targets (§3.7.2.2): float32 POSITION offsets with the min/max §3.6.2.5 asks
+    //     of every POSITION accessor.
+    const size_t target_count = c.morph_targets.size();
+    for (size_t k = 0; k < target_count; ++k) {
+      const PointMatrix offsets = c.morph_targets[k].cast<float>();
+      const int target = gltf_writing::append_accessor(model, offsets.data(), sizeof(float) * 3 * vertex_count,
+                                                       TINYGLTF_TARGET_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                                       TINYGLTF_TYPE_VEC3, vertex_count);
+      const Eigen::RowVector3f target_lo = offsets.colwise().minCoeff(), target_hi = offsets.colwise().maxCoeff();
+      model.accessors[static_cast<size_t>(target)].minValues = {target_lo.x(), target_lo.y(), target_lo.z()};
+      model.accessors[static_cast<size_t>(target)].maxValues = {target_hi.x(), target_hi.y(), target_hi.z()};
+      primitive.targets.push_back({{"POSITION", target}});
+    }
     tinygltf::Mesh mesh;
     mesh.name = c.name;
     mesh.primitives.push_back(std::move(primitive));
+    if (target_count != 0) {
+      mesh.weights.assign(target_count, 0.0);
+      // Not in the specification, but the convention its exporters and importers share (Blender's
+      // shape key names, three.js's morphTargetDictionary).
+      tinygltf::Value::Array names;
+      for (size_t k = 0; k < target_count; ++k) {
+        names.emplace_back(c.morph_target_names.empty() || c.morph_target_names[k].empty()
+                               ? "target_" + std::to_string(k)
+                               : c.morph_target_names[k]);
+      }
+      mesh.extras = tinygltf::Value(tinygltf::Value::Object{{"targetNames", tinygltf::Value(std::move(names))}});
+    }
     model.meshes.push_back(std::move(mesh));
 
     // 3. The skin (§3.7.3.1): joint j is node j; inverse bind matrices (float MAT4, column-major,
-    //    last row 0 0 0 1) are the exact inverses [Rᵀ, −Rᵀt] of the rigid bind globals, computed
-    //    in double before rounding.
+    //    last row 0 0 0 1) are the exact inverses of the bind globals, computed in double before
+    //    rounding: [Rᵀ, −Rᵀt] of rigid ones, Eigen's general inverse of affine ones.
     std::vector<float> inverse_binds(16 * joint_count);
     for (size_t j = 0; j < joint_count; ++j) {
       Eigen::Matrix4d inverse = Eigen::Matrix4d::Identity();
-      const Eigen::Matrix3d rotation_t = c.bind_globals[j].topLeftCorner<3, 3>().transpose();
-      inverse.topLeftCorner<3, 3>() = rotation_t;
-      inverse.topRightCorner<3, 1>() = -rotation_t * c.bind_globals[j].topRightCorner<3, 1>();
+      if (c.affine_joints) {
+        inverse.topLeftCorner<3, 3>() = c.bind_globals[j].topLeftCorner<3, 3>().inverse();
+      } else {
+        inverse.topLeftCorner<3, 3>() = c.bind_globals[j].topLeftCorner<3, 3>().transpose();
+      }
+      inverse.topRightCorner<3, 1>() = -inverse.topLeftCorner<3, 3>() * c.bind_globals[j].topRightCorner<3, 1>();
       const Eigen::Matrix4f single = inverse.cast<float>();  // column-major, as glTF stores it
       std::copy(single.data(), single.data() + 16, inverse_binds.begin() + static_cast<std::ptrdiff_t>(16 * j));
     }
@@ -392,21 +542,45 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
         append_vector(model, inverse_binds, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_MAT4, joint_count);
 
     // 4. The nodes: joints with their bind-pose local TRS, children by joint_parents; the mesh
-    //    node (J) at the scene root without a transform, as §3.7.3.2 ignores it anyway.
-    const std::vector<RigidTrs> bind_locals = local_pose(c.joint_parents, c.bind_globals);
+    //    node (J) at the scene root without a transform, as §3.7.3.2 ignores it anyway. Affine
+    //    joints: joint j's node holds Vᵀ, under its shape node J + 2 + j (T, U, Σ), which hangs
+    //    from the parent joint's node or from the common root J + 1.
+    const auto joint_name = [&](size_t j) {
+      return c.joint_names.empty() || c.joint_names[j].empty() ? "joint_" + std::to_string(j) : c.joint_names[j];
+    };
+    const std::vector<RigidTrs> bind_locals =
+        c.affine_joints ? std::vector<RigidTrs>() : local_pose(c.joint_parents, c.bind_globals);
+    const std::vector<AffineTrs> bind_affine =
+        c.affine_joints ? affine_pose(c.joint_parents, c.bind_globals, nullptr) : std::vector<AffineTrs>();
     std::vector<int> root_joints;
     for (size_t j = 0; j < joint_count; ++j) {
       tinygltf::Node node;
-      node.name = c.joint_names.empty() || c.joint_names[j].empty() ? "joint_" + std::to_string(j) : c.joint_names[j];
-      const RigidTrs& local = bind_locals[j];
-      node.translation = {local.translation.x(), local.translation.y(), local.translation.z()};
-      node.rotation = {local.rotation.x(), local.rotation.y(), local.rotation.z(), local.rotation.w()};
+      node.name = joint_name(j);
+      if (c.affine_joints) {
+        const Eigen::Quaterniond& inner = bind_affine[j].inner;
+        node.rotation = {inner.x(), inner.y(), inner.z(), inner.w()};
+      } else {
+        const RigidTrs& local = bind_locals[j];
+        node.translation = {local.translation.x(), local.translation.y(), local.translation.z()};
+        node.rotation = {local.rotation.x(), local.rotation.y(), local.rotation.z(), local.rotation.w()};
+      }
       model.nodes.push_back(std::move(node));
       skin.joints.push_back(static_cast<int>(j));
+      if (c.affine_joints) continue;  // hung below its shape node, after the common root
       if (c.joint_parents[j] < 0) {
         root_joints.push_back(static_cast<int>(j));
       } else {
         model.nodes[static_cast<size_t>(c.joint_parents[j])].children.push_back(static_cast<int>(j));
+      }
+    }
+    const auto shape_node = [&](size_t j) { return static_cast<int>(joint_count + 2 + j); };
+    if (c.affine_joints) {
+      for (size_t j = 0; j < joint_count; ++j) {
+        if (c.joint_parents[j] < 0) {
+          root_joints.push_back(shape_node(j));
+        } else {
+          model.nodes[static_cast<size_t>(c.joint_parents[j])].children.push_back(shape_node(j));
+        }
       }
     }
     tinygltf::Node mesh_node;
@@ -416,9 +590,10 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
     model.nodes.push_back(std::move(mesh_node));
     tinygltf::Scene scene;
     scene.nodes.push_back(static_cast<int>(joint_count));
-    // §3.7.3.2: a skin's joints MUST have a common root node. One root joint is it; several get
-    // an untransformed "skeleton" node above them (node J + 1), which leaves every global as is.
-    if (root_joints.size() == 1) {
+    // §3.7.3.2: a skin's joints MUST have a common root node. One root joint is it; several (or
+    // shape nodes above the joints) get an untransformed "skeleton" node above them (node J + 1),
+    // which leaves every global as is.
+    if (root_joints.size() == 1 && !c.affine_joints) {
       skin.skeleton = root_joints.front();
       scene.nodes.push_back(root_joints.front());
     } else {
@@ -429,13 +604,24 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
       skin.skeleton = static_cast<int>(joint_count) + 1;
       scene.nodes.push_back(skin.skeleton);
     }
+    for (size_t j = 0; c.affine_joints && j < joint_count; ++j) {
+      tinygltf::Node shape;
+      shape.name = joint_name(j) + " shape";
+      const AffineTrs& local = bind_affine[j];
+      shape.translation = {local.translation.x(), local.translation.y(), local.translation.z()};
+      shape.rotation = {local.outer.x(), local.outer.y(), local.outer.z(), local.outer.w()};
+      shape.scale = {local.scale.x(), local.scale.y(), local.scale.z()};
+      shape.children = {static_cast<int>(j)};
+      model.nodes.push_back(std::move(shape));
+    }
     model.skins.push_back(std::move(skin));
     model.scenes.push_back(std::move(scene));
     model.defaultScene = 0;
 
     // 5. The animation (§3.11): one time accessor (float seconds k / fps, with the min/max an
     //    input must have), per joint a translation (VEC3) and a rotation (VEC4, x y z w) sampler
-    //    of the local transforms, LINEAR.
+    //    of the local transforms, LINEAR (affine joints: the shape node's translation, rotation
+    //    and scale, the joint node's rotation), and the morph weights' sampler.
     if (frame_count != 0) {
       tinygltf::Animation animation;
       animation.name = c.animation_name;
@@ -447,45 +633,87 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
           append_vector(model, times, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR, frame_count);
       model.accessors[static_cast<size_t>(input)].minValues = {times.front()};
       model.accessors[static_cast<size_t>(input)].maxValues = {times.back()};
+      const auto add_channel = [&](int node, const char* path, int output) {
+        tinygltf::AnimationSampler sampler;
+        sampler.input = input;
+        sampler.output = output;
+        sampler.interpolation = "LINEAR";
+        animation.samplers.push_back(std::move(sampler));
+        tinygltf::AnimationChannel channel;
+        channel.sampler = static_cast<int>(animation.samplers.size() - 1);
+        channel.target_node = node;
+        channel.target_path = path;
+        animation.channels.push_back(std::move(channel));
+      };
+      const auto add_vec3 = [&](const std::vector<float>& values) {
+        return append_vector(model, values, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, frame_count);
+      };
+      const auto add_vec4 = [&](const std::vector<float>& values) {
+        return append_vector(model, values, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC4, frame_count);
+      };
+      const auto put3 = [](std::vector<float>& out, size_t k, const Eigen::Vector3d& value) {
+        for (size_t axis = 0; axis < 3; ++axis) out[3 * k + axis] = static_cast<float>(value(static_cast<Eigen::Index>(axis)));
+      };
+      // Eigen's coeffs() are x y z w, glTF's order.
+      const auto put4 = [](std::vector<float>& out, size_t k, const Eigen::Quaterniond& q) {
+        for (size_t e = 0; e < 4; ++e) out[4 * k + e] = static_cast<float>(q.coeffs()(static_cast<Eigen::Index>(e)));
+      };
 
-      std::vector<std::vector<RigidTrs>> locals(frame_count);
-      for (size_t k = 0; k < frame_count; ++k) locals[k] = local_pose(c.joint_parents, c.frame_globals[k]);
       std::vector<float> translations(3 * frame_count), rotations(4 * frame_count);
-      for (size_t j = 0; j < joint_count; ++j) {
-        // q and −q are the same rotation. Appendix C's slerp takes the short arc whatever the
-        // signs, but the spec lets clients approximate it (e.g. normalised lerp of components),
-        // which turns the long way round between quaternions with a negative dot product; so each
-        // frame's sign follows the previous frame's (the first follows the bind pose's, for
-        // clients that blend from the rest pose into the animation).
-        Eigen::Quaterniond previous = bind_locals[j].rotation;
+      if (!c.affine_joints) {
+        std::vector<std::vector<RigidTrs>> locals(frame_count);
+        for (size_t k = 0; k < frame_count; ++k) locals[k] = local_pose(c.joint_parents, c.frame_globals[k]);
+        for (size_t j = 0; j < joint_count; ++j) {
+          // q and −q are the same rotation. Appendix C's slerp takes the short arc whatever the
+          // signs, but the spec lets clients approximate it (e.g. normalised lerp of components),
+          // which turns the long way round between quaternions with a negative dot product; so each
+          // frame's sign follows the previous frame's (the first follows the bind pose's, for
+          // clients that blend from the rest pose into the animation).
+          Eigen::Quaterniond previous = bind_locals[j].rotation;
+          for (size_t k = 0; k < frame_count; ++k) {
+            const RigidTrs& local = locals[k][j];
+            previous = near_sign(local.rotation, previous);
+            put3(translations, k, local.translation);
+            put4(rotations, k, previous);
+          }
+          add_channel(static_cast<int>(j), "translation", add_vec3(translations));
+          add_channel(static_cast<int>(j), "rotation", add_vec4(rotations));
+        }
+      } else {
+        std::vector<std::vector<AffineTrs>> locals(frame_count);
         for (size_t k = 0; k < frame_count; ++k) {
-          const RigidTrs& local = locals[k][j];
-          Eigen::Quaterniond rotation = local.rotation;
-          if (rotation.coeffs().dot(previous.coeffs()) < 0) rotation.coeffs() = -rotation.coeffs();
-          previous = rotation;
-          for (int axis = 0; axis < 3; ++axis)
-            translations[3 * k + static_cast<size_t>(axis)] = static_cast<float>(local.translation(axis));
-          // Eigen's coeffs() are x y z w, glTF's order.
-          for (int q = 0; q < 4; ++q)
-            rotations[4 * k + static_cast<size_t>(q)] = static_cast<float>(rotation.coeffs()(q));
+          locals[k] = affine_pose(c.joint_parents, c.frame_globals[k], k == 0 ? &bind_affine : &locals[k - 1]);
         }
-        const int translation_output =
-            append_vector(model, translations, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, frame_count);
-        const int rotation_output =
-            append_vector(model, rotations, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC4, frame_count);
-        for (const auto& [path, output] : {std::pair<const char*, int>{"translation", translation_output},
-                                           std::pair<const char*, int>{"rotation", rotation_output}}) {
-          tinygltf::AnimationSampler sampler;
-          sampler.input = input;
-          sampler.output = output;
-          sampler.interpolation = "LINEAR";
-          animation.samplers.push_back(std::move(sampler));
-          tinygltf::AnimationChannel channel;
-          channel.sampler = static_cast<int>(animation.samplers.size() - 1);
-          channel.target_node = static_cast<int>(j);
-          channel.target_path = path;
-          animation.channels.push_back(std::move(channel));
+        std::vector<float> scales(3 * frame_count), inner_rotations(4 * frame_count);
+        for (size_t j = 0; j < joint_count; ++j) {
+          Eigen::Quaterniond previous_outer = bind_affine[j].outer, previous_inner = bind_affine[j].inner;
+          for (size_t k = 0; k < frame_count; ++k) {
+            const AffineTrs& local = locals[k][j];
+            previous_outer = near_sign(local.outer, previous_outer);
+            previous_inner = near_sign(local.inner, previous_inner);
+            put3(translations, k, local.translation);
+            put4(rotations, k, previous_outer);
+            put3(scales, k, local.scale);
+            put4(inner_rotations, k, previous_inner);
+          }
+          add_channel(shape_node(j), "translation", add_vec3(translations));
+          add_channel(shape_node(j), "rotation", add_vec4(rotations));
+          add_channel(shape_node(j), "scale", add_vec3(scales));
+          add_channel(static_cast<int>(j), "rotation", add_vec4(inner_rotations));
         }
+      }
+      if (target_count != 0) {
+        // §3.11: a "weights" output holds every target's weight of frame 0, then of frame 1, ….
+        std::vector<float> weights(frame_count * target_count);
+        for (size_t k = 0; k < frame_count; ++k) {
+          for (size_t t = 0; t < target_count; ++t) {
+            weights[k * target_count + t] =
+                static_cast<float>(c.frame_morph_weights(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(t)));
+          }
+        }
+        add_channel(static_cast<int>(joint_count), "weights",
+                    append_vector(model, weights, 0, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR,
+                                  frame_count * target_count));
       }
       model.animations.push_back(std::move(animation));
     }
@@ -515,6 +743,7 @@ SkinnedCharacter split_seams(const SkinnedCharacter& character, const UvMatrix& 
   out.uvs = std::move(split.uvs);
   out.bind_points.resize(n, 3);
   out.normals.resize(normals.rows() != 0 ? n : 0, 3);
+  for (Eigen::MatrixX3d& target : out.morph_targets) target.resize(n, 3);
   out.offsets.assign(1, 0);
   out.joints.clear();
   out.weights.clear();
@@ -522,6 +751,7 @@ SkinnedCharacter split_seams(const SkinnedCharacter& character, const UvMatrix& 
     const int32_t v = split.source[static_cast<size_t>(o)];
     out.bind_points.row(o) = character.bind_points.row(v);
     if (normals.rows() != 0) out.normals.row(o) = normals.row(v);
+    for (size_t k = 0; k < out.morph_targets.size(); ++k) out.morph_targets[k].row(o) = character.morph_targets[k].row(v);
     for (int32_t i = character.offsets[static_cast<size_t>(v)]; i < character.offsets[static_cast<size_t>(v) + 1]; ++i) {
       out.joints.push_back(character.joints[static_cast<size_t>(i)]);
       out.weights.push_back(character.weights[static_cast<size_t>(i)]);

@@ -8,6 +8,14 @@
 // untransformed node "skeleton" (node J + 1) above their roots, because §3.7.3.2 requires a
 // common root; when there are frames, one animation with a translation and a rotation channel
 // per joint. The reader of such files is gltf_skin.h.
+//
+// Affine joints (a bone that shears or scales, as the articulated subspace's do: pmsc/articulated.h)
+// have no single node: §3.5.3 gives a node T · R · S, no shear. Each such joint j is two nodes,
+// an outer "shape" node (node J + 2 + j: translation t, rotation U, scale Σ) and the joint node j
+// below it (rotation Vᵀ), so that the joint's local transform is T · U Σ Vᵀ for the singular value
+// decomposition of its linear part — any invertible affine map, a reflection as a negative last
+// scale. Morph targets (§3.7.2.2) are offsets of the bind positions, added before skinning, with
+// their weights on the mesh node animated per frame (§3.11 "weights").
 #pragma once
 
 #include <cstdint>
@@ -53,6 +61,16 @@ struct SkinnedCharacter {
   std::vector<Matrix4dList> frame_globals;
   double frames_per_second = 24;  // finite, > 0 (checked only when there are frames)
   std::string animation_name = "sequence";
+  // Joints may be any invertible affine map (finite, last row 0 0 0 1, the linear part's smallest
+  // singular value above 1e-12 of its largest), not only rigid: written as two nodes each, above.
+  // False: every transform must be rigid (checked), one node per joint.
+  bool affine_joints = false;
+  // Morph targets: each #V × 3 finite position offsets in the bind pose, their names (empty, or
+  // one per target), and per frame their weights (frame_globals.size() × targets, finite; empty
+  // when there are no frames). Without frames the mesh's default weights are 0.
+  std::vector<Eigen::MatrixX3d> morph_targets;
+  std::vector<std::string> morph_target_names;
+  Eigen::MatrixXd frame_morph_weights;
   // What the character is called (the model's name): its mesh node and mesh carry it, and its
   // skin and joints' root "<name> rig", so that an importer names the objects after the model
   // (Blender 3.4 names the mesh object after the node and the armature after the skin).
@@ -77,7 +95,11 @@ SkinnedCharacter split_seams(const SkinnedCharacter& character, const UvMatrix& 
 // translation and unit rotation, parent_global⁻¹ · global of the bind pose (no scale); one shared
 // time accessor k / fps and per joint LINEAR "translation" and "rotation" channels of the local
 // transforms, each quaternion's sign chosen so that it is on the short arc from the previous
-// frame's.
+// frame's. Affine joints: the inverse bind matrices are general inverses, and each joint's shape
+// node has "translation", "rotation" and "scale" channels and its joint node a "rotation" one,
+// the decomposition's signs chosen per frame to stay near the previous frame's. Morph targets:
+// POSITION offsets (float32, with min/max), mesh weights 0, their names in the mesh's
+// extras.targetNames (what Blender and three.js read), and one LINEAR "weights" channel.
 // Errors: kInvalidArgument naming the field, the index and what was expected (sizes, non-finite
 // values, parents not parents-first, joints out of range, negative weights or sums not 1,
 // non-rigid transforms, frames with the wrong joint count, fps ≤ 0 or so large that float32

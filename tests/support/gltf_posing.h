@@ -131,6 +131,10 @@ inline Matrix4dList node_globals(const tinygltf::Model& model, const tinygltf::A
         translation.at(n) = value;
       } else if (channel.target_path == "rotation") {
         rotation.at(n) = Eigen::Quaterniond(value(3), value(0), value(1), value(2));
+      } else if (channel.target_path == "scale") {
+        scale.at(n) = value;
+      } else if (channel.target_path == "weights") {
+        continue;  // morph weights: morph_weights_at
       } else {
         ADD_FAILURE() << "unexpected channel path " << channel.target_path;
       }
@@ -152,10 +156,53 @@ inline Matrix4dList node_globals(const tinygltf::Model& model, const tinygltf::A
   return globals;
 }
 
+// The skinned mesh's morph weights at time t (§3.7.2.2, §3.11): the animation's "weights"
+// channel, LINEAR between keyframes — its output holds every target's weight of a keyframe in
+// turn — or the mesh's default weights (0 for each target when it has none).
+inline std::vector<double> morph_weights_at(const tinygltf::Model& model, const tinygltf::Animation* animation,
+                                            double t) {
+  const auto mesh_node = std::find_if(model.nodes.begin(), model.nodes.end(),
+                                      [](const tinygltf::Node& n) { return n.mesh >= 0 && n.skin >= 0; });
+  if (mesh_node == model.nodes.end()) return {};
+  const tinygltf::Mesh& mesh = model.meshes.at(static_cast<size_t>(mesh_node->mesh));
+  const size_t targets = mesh.primitives.empty() ? 0 : mesh.primitives[0].targets.size();
+  std::vector<double> weights(targets, 0.0);
+  if (mesh.weights.size() == targets) weights = mesh.weights;
+  if (animation == nullptr) return weights;
+  for (const tinygltf::AnimationChannel& channel : animation->channels) {
+    if (channel.target_path != "weights") continue;
+    EXPECT_EQ(channel.target_node, static_cast<int>(mesh_node - model.nodes.begin()));
+    const tinygltf::AnimationSampler& sampler = animation->samplers.at(static_cast<size_t>(channel.sampler));
+    EXPECT_EQ(sampler.interpolation, "LINEAR");
+    const std::vector<float> times =
+        accessor_values<float>(model, sampler.input, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR);
+    const std::vector<float> values =
+        accessor_values<float>(model, sampler.output, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR);
+    EXPECT_EQ(values.size(), times.size() * targets);
+    if (values.size() != times.size() * targets || times.empty()) return weights;
+    size_t k = 0;
+    double u = 0;
+    if (t >= times.back()) {
+      k = times.size() - 1;
+    } else if (t > times.front()) {
+      while (!(t >= times[k] && t < times[k + 1])) ++k;
+      u = (t - times[k]) / (static_cast<double>(times[k + 1]) - times[k]);
+    }
+    for (size_t target = 0; target < targets; ++target) {
+      const double a = values[k * targets + target];
+      const double b = k + 1 < times.size() ? values[(k + 1) * targets + target] : a;
+      weights[target] = (1 - u) * a + u * b;
+    }
+  }
+  return weights;
+}
+
 // Linear blend skinning as §3.7.3.3 defines it, from the file alone: joint matrix = global of
 // the joint's node · its inverse bind matrix, v = Σ over every JOINTS_n / WEIGHTS_n slot of
-// w · M_joint · v̂ (the skinned mesh node's own transform ignored, §3.7.3.2).
-inline Eigen::MatrixX3d skin_from_file(const tinygltf::Model& model, const Matrix4dList& globals) {
+// w · M_joint · (v̂ + Σ_k weight_k · target_k) (the morph targets' POSITION offsets added before
+// skinning, §3.7.2.2; the skinned mesh node's own transform ignored, §3.7.3.2).
+inline Eigen::MatrixX3d skin_from_file(const tinygltf::Model& model, const Matrix4dList& globals,
+                                       const std::vector<double>& morph_weights = {}) {
   const auto mesh_node = std::find_if(model.nodes.begin(), model.nodes.end(),
                                       [](const tinygltf::Node& n) { return n.mesh >= 0 && n.skin >= 0; });
   if (mesh_node == model.nodes.end()) {
@@ -177,6 +224,14 @@ inline Eigen::MatrixX3d skin_from_file(const tinygltf::Model& model, const Matri
   const std::vector<float> positions = accessor_values<float>(model, primitive.attributes.at("POSITION"),
                                                               TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3);
   const size_t vertex_count = positions.size() / 3;
+  std::vector<double> morphed(positions.begin(), positions.end());
+  EXPECT_TRUE(morph_weights.empty() || morph_weights.size() == primitive.targets.size());
+  for (size_t k = 0; k < primitive.targets.size() && k < morph_weights.size(); ++k) {
+    const std::vector<float> offsets = accessor_values<float>(model, primitive.targets[k].at("POSITION"),
+                                                              TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3);
+    EXPECT_EQ(offsets.size(), positions.size());
+    for (size_t e = 0; e < offsets.size() && e < morphed.size(); ++e) morphed[e] += morph_weights[k] * offsets[e];
+  }
   Eigen::MatrixX3d out = Eigen::MatrixX3d::Zero(static_cast<Eigen::Index>(vertex_count), 3);
   for (int set = 0; primitive.attributes.count("JOINTS_" + std::to_string(set)) != 0; ++set) {
     const std::vector<uint16_t> joints =
@@ -188,7 +243,7 @@ inline Eigen::MatrixX3d skin_from_file(const tinygltf::Model& model, const Matri
     EXPECT_EQ(joints.size(), 4 * vertex_count);
     EXPECT_EQ(weights.size(), 4 * vertex_count);
     for (size_t v = 0; v < vertex_count; ++v) {
-      const Eigen::Vector4d rest(positions[3 * v], positions[3 * v + 1], positions[3 * v + 2], 1);
+      const Eigen::Vector4d rest(morphed[3 * v], morphed[3 * v + 1], morphed[3 * v + 2], 1);
       for (size_t slot = 4 * v; slot < 4 * v + 4; ++slot) {
         const Eigen::Vector4d moved = weights[slot] * (joint_matrices.at(joints[slot]) * rest);
         out.row(static_cast<Eigen::Index>(v)) += moved.head<3>().transpose();

@@ -13,10 +13,132 @@
 #include "core/container/sections.h"
 #include "core/lod/lod_io.h"
 #include "core/mesh_io/gltf_skin_writer.h"
+#include "core/pmsc/articulated_rig.h"
+#include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/subspace.h"
 
 namespace animspace::cli {
 
 namespace as = animation_space;
+
+namespace {
+
+// An articulated pmsc model (issue #51) as a glTF skinned mesh with morph targets: the rig its
+// basis holds (pmsc/articulated_rig.h), one affine joint per bone, one morph target per residual
+// component, and as the animation the answers the model gives its own training frames from their
+// key points — the joint matrices and morph weights of each answer, exactly what a client sets
+// in an engine. Prints how far that glTF plays from the model's answers (the residual turned with
+// the bones, articulated_rig.h).
+int export_articulated(const container::ModelContainer& in, const ExportRigArgs& a, bool json) {
+  const char* command = "export-rig";
+  if (a.level != 0) {
+    return fail(command, "--level: a pmsc model has one level of detail (0), got " + std::to_string(a.level));
+  }
+  auto loaded = pmsc::load(in, a.input);
+  if (!loaded) return fail(command, loaded.error().message);
+  const auto model = std::make_shared<const pmsc::PmscModel>(std::move(*loaded));
+  const long N = model->point_count;
+  Eigen::MatrixX3d placement;
+  if (in.has_section(container::sections::kRestPoints)) {
+    auto rest = in.points(container::sections::kRestPoints);
+    if (!rest) return fail(command, rest.error().message);
+    if (rest->rows() == N) placement = rest->cast<double>();
+  }
+  auto rig = pmsc::articulated_rig(*model, placement.rows() == N ? &placement : nullptr);
+  if (!rig) return fail(command, a.input + ": " + rig.error().message);
+  if (!in.has_section(container::sections::kFaces)) {
+    return fail(command, a.input + " has no faces (section mesh.faces): a glTF mesh is made of triangles");
+  }
+  auto faces = in.faces(container::sections::kFaces);
+  if (!faces) return fail(command, faces.error().message);
+  auto subspace = pmsc::make_subspace(model);
+  if (!subspace) return fail(command, a.input + ": " + subspace.error().message);
+
+  // The joints: the bones some point depends on, in order.
+  std::vector<int32_t> joint_of(static_cast<size_t>(model->bone_count), -1);
+  std::vector<int> bones;
+  for (int j = 0; j < model->bone_count; ++j) {
+    if (!rig->bone_used[static_cast<size_t>(j)]) continue;
+    joint_of[static_cast<size_t>(j)] = static_cast<int32_t>(bones.size());
+    bones.push_back(j);
+  }
+  mesh_io::SkinnedCharacter character;
+  character.name = model_name_of(a.input);
+  character.animation_name = "training frames";
+  character.frames_per_second = a.frames_per_second;
+  character.affine_joints = true;
+  character.bind_points = rig->bind_points;
+  character.faces = *faces;
+  character.offsets = rig->offsets;
+  character.weights = rig->weights;
+  for (const int32_t bone : rig->bones) character.joints.push_back(joint_of[static_cast<size_t>(bone)]);
+  for (const int j : bones) {
+    character.joint_parents.push_back(-1);
+    character.joint_names.push_back("bone_" + std::to_string(j));
+    Eigen::Matrix4d bind = Eigen::Matrix4d::Identity();
+    bind.topRightCorner<3, 1>() = rig->centres.row(j).transpose();
+    character.bind_globals.push_back(bind);
+  }
+  character.morph_targets = rig->residual_targets;
+  for (size_t k = 0; k < rig->residual_targets.size(); ++k) {
+    character.morph_target_names.push_back("residual_" + std::to_string(k));
+  }
+
+  // The animation: each stored training frame answered from its key points.
+  FrameMatrix frames;
+  if (in.has_section(container::sections::kSequenceFrames)) {
+    auto stored = in.float_matrix(container::sections::kSequenceFrames, static_cast<int>(3 * N));
+    if (!stored) return fail(command, stored.error().message);
+    frames = std::move(*stored);
+  }
+  const long K = static_cast<long>(model->key_points.size());
+  character.frame_morph_weights.resize(frames.rows(), model->residual_components);
+  double deviation = 0, diagonal = 0;
+  Eigen::VectorXf key_values(3 * K), answer(3 * N);
+  for (Eigen::Index f = 0; f < frames.rows(); ++f) {
+    for (long k = 0; k < K; ++k) {
+      key_values.segment<3>(3 * k) = frames.row(f).segment<3>(3 * model->key_points[static_cast<size_t>(k)]).transpose();
+    }
+    pmsc::PoseEstimate estimate;
+    (*subspace)->estimate(key_values, Eigen::VectorXf(), estimate);
+    mesh_io::Matrix4dList globals;
+    for (const int j : bones) {
+      globals.push_back(pmsc::bone_world_transform(*model, estimate.coordinates, estimate.alignment, j));
+    }
+    character.frame_globals.push_back(std::move(globals));
+    character.frame_morph_weights.row(f) = estimate.coordinates.tail(model->residual_components).transpose();
+    const pmsc::PoseEstimate* one[] = {&estimate};
+    float* destination[] = {answer.data()};
+    (*subspace)->reconstruct(one, destination);
+    const Eigen::MatrixX3d posed = pmsc::pose_rig(*model, *rig, estimate.coordinates, estimate.alignment);
+    const auto points = Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>>(answer.data(), N, 3);
+    deviation = std::max(deviation, (posed - points.cast<double>()).rowwise().norm().maxCoeff());
+    diagonal = std::max(diagonal, (points.colwise().maxCoeff() - points.colwise().minCoeff()).cast<double>().norm());
+  }
+  if (auto written = mesh_io::write_skinned_character(a.output, character); !written.ok()) {
+    return fail(command, written.error().message);
+  }
+  if (json) {
+    print_json({{"output", a.output},
+                {"subspace_kind", "articulated"},
+                {"vertices", N},
+                {"joints", bones.size()},
+                {"morph_targets", model->residual_components},
+                {"frames", frames.rows()},
+                {"max_deviation", deviation},
+                {"max_deviation_over_diagonal", diagonal > 0 ? deviation / diagonal : 0.0}});
+  } else {
+    std::printf("articulated model: %ld points, %zu bones as affine joints, %d residual components as morph "
+                "targets, %lld training frames answered from their %ld key points\n",
+                N, bones.size(), model->residual_components, static_cast<long long>(frames.rows()), K);
+    std::printf("the glTF plays those answers within %.4g of the model's points (%.3g%% of the diagonal): glTF "
+                "adds a morph target before skinning, so each residual turns with its point's bones\nwrote %s\n",
+                deviation, diagonal > 0 ? 100 * deviation / diagonal : 0.0, a.output.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
 
 CLI::App* add_export_rig(CLI::App& app, ExportRigArgs& a) {
   auto* cmd = app.add_subcommand(
@@ -25,8 +147,10 @@ CLI::App* add_export_rig(CLI::App& app, ExportRigArgs& a) {
       "as a glTF 2.0 skinned character: its linear blend rig (weights p̲_j, bind pose the rest pose), the stored "
       "training poses as its animation, the atlas's UVs at the level (TEXCOORD_0, seams split; a coarser level's as "
       "build-lod stored them under the atlas); prints how far the rig is "
-      "from the model over those poses");
-  cmd->add_option("input", a.input, "An animation-space model.anim")->required()->check(CLI::ExistingFile);
+      "from the model over those poses. An articulated pmsc model (train-pmsc --subspace articulated) is written as "
+      "its skinning's affine bones plus its residual components as morph targets, animated by its answers to its "
+      "own training frames");
+  cmd->add_option("input", a.input, "An animation-space model.anim, or an articulated pmsc model")->required()->check(CLI::ExistingFile);
   cmd->add_option("--level", a.level, "Level of detail to write (0 = full detail)")
       ->check(tools::kNonNegative)
       ->capture_default_str();
@@ -45,6 +169,9 @@ int run_export_rig(const ExportRigArgs& a, bool json) {
   }
   auto in = container::read_file(a.input);
   if (!in) return fail(command, in.error().message);
+  if (in->metadata_value("kind") == container::kind_name(container::ModelKind::kPmsc)) {
+    return export_articulated(*in, a, json);
+  }
   auto model = as::load(*in, a.input);
   if (!model) return fail(command, model.error().message);
   auto levels = lod::load_levels(*in, *model, a.input);

@@ -1,7 +1,8 @@
 // `animspace export-rig`: any animation-space model file — fitted, imported from a rig
 // (import-rig), subdivided, or one of its levels of detail (build-lod) — written as a glTF 2.0
 // skinned character: its linear blend rig (animation_space::linear_blend_rig), the stored
-// training poses as the animation, and how far that rig is from the model over those poses.
+// training poses as the animation, and how far that rig is from the model over those poses; or an
+// articulated pmsc model as its bones and residual morph targets (pmsc/articulated_rig.h).
 #pragma once
 
 #include <string>

@@ -27,6 +27,7 @@ using animspace::testing::keyframe_times;
 using animspace::testing::load_gltf;
 using animspace::testing::LoadedGltf;
 using animspace::testing::max_distance;
+using animspace::testing::morph_weights_at;
 using animspace::testing::node_globals;
 using animspace::testing::only_animation;
 using animspace::testing::Rotations;
@@ -470,6 +471,79 @@ TEST(GltfSkinWriterTest, WithoutAnimationOneRootAndGivenNormals) {
   EXPECT_EQ(loaded_without.model.meshes.at(0).primitives.at(0).attributes.count("NORMAL"), 0u);
 }
 
+// Issue #51: joints that shear, scale and reflect (an articulated model's bones), each written as
+// a shape node (T, U, Σ) above its joint node (Vᵀ), and morph targets added before skinning,
+// their weights animated: every keyframe posed from the file alone — TRS with scale, morph
+// weights, §3.7.2.2 and §3.7.3.3 — against skinning computed here from the character.
+TEST(GltfSkinWriterTest, AffineJointsAndMorphTargetsPoseEveryFrame) {
+  SkinnedCharacter c = make_character(1);
+  c.affine_joints = true;
+  // Joint j's global gets a shear and an uneven scale that change with the frame; joint 4 is
+  // mirrored (det < 0, a negative scale in the file); the bind pose is sheared too.
+  const auto deform = [](size_t j, double k) {
+    Eigen::Matrix4d d = Eigen::Matrix4d::Identity();
+    d(0, 1) = 0.3 * std::sin(0.7 * k + static_cast<double>(j));
+    d(2, 0) = -0.2 * std::cos(0.4 * k + static_cast<double>(j));
+    d(1, 1) = 1.0 + 0.25 * std::sin(0.5 * k + 2.0 * static_cast<double>(j));
+    if (j == 4) d(0, 0) = -1.2;
+    return d;
+  };
+  for (size_t j = 0; j < c.bind_globals.size(); ++j) c.bind_globals[j] = c.bind_globals[j] * deform(j, -1);
+  for (size_t k = 0; k < c.frame_globals.size(); ++k) {
+    for (size_t j = 0; j < c.frame_globals[k].size(); ++j) {
+      c.frame_globals[k][j] = c.frame_globals[k][j] * deform(j, static_cast<double>(k));
+    }
+  }
+  std::mt19937 random(11);
+  std::uniform_real_distribution<double> offset(-0.2, 0.2);
+  for (int t = 0; t < 2; ++t) {
+    Eigen::MatrixX3d target(c.bind_points.rows(), 3);
+    for (Eigen::Index v = 0; v < target.rows(); ++v) target.row(v) << offset(random), offset(random), offset(random);
+    c.morph_targets.push_back(target);
+  }
+  c.morph_target_names = {"bulge", ""};
+  c.frame_morph_weights.resize(kFrames, 2);
+  for (int k = 0; k < kFrames; ++k) c.frame_morph_weights.row(k) << std::sin(0.9 * k), 1.5 - 0.4 * k;
+
+  const auto bytes = serialize_skinned_glb(c);
+  ASSERT_TRUE(bytes.ok()) << bytes.error().message;
+  const LoadedGltf loaded = load_gltf(*bytes, true);
+  ASSERT_TRUE(loaded.ok) << loaded.error;
+  const tinygltf::Model& model = loaded.model;
+  const size_t J = c.joint_parents.size();
+  ASSERT_EQ(model.nodes.size(), 2 * J + 2) << "a joint node and a shape node per joint, the mesh, the common root";
+  EXPECT_EQ(model.nodes[J + 2 + 4].scale.size(), 3u);
+  const tinygltf::Mesh& mesh = model.meshes.at(0);
+  ASSERT_EQ(mesh.primitives.at(0).targets.size(), 2u);
+  EXPECT_EQ(mesh.weights, std::vector<double>({0.0, 0.0}));
+  const tinygltf::Value& names = mesh.extras.Get("targetNames");
+  ASSERT_TRUE(names.IsArray());
+  EXPECT_EQ(names.Get(0).Get<std::string>(), "bulge");
+  EXPECT_EQ(names.Get(1).Get<std::string>(), "target_1");
+
+  const double tolerance = 1e-5 * size_of(c);
+  const Eigen::MatrixX3d bind =
+      skin_from_file(model, node_globals(model, nullptr, 0, Rotations::kSpecSlerp), morph_weights_at(model, nullptr, 0));
+  EXPECT_LE(max_distance(bind, c.bind_points), tolerance) << "bind pose";
+  const tinygltf::Animation* animation = only_animation(model);
+  ASSERT_NE(animation, nullptr);
+  const std::vector<float> times = keyframe_times(model, *animation);
+  ASSERT_EQ(times.size(), static_cast<size_t>(kFrames));
+  for (size_t k = 0; k < times.size(); ++k) {
+    SkinnedCharacter morphed = c;
+    for (size_t t = 0; t < 2; ++t) {
+      morphed.bind_points += c.frame_morph_weights(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(t)) *
+                             c.morph_targets[t];
+    }
+    const Eigen::MatrixX3d expected = skin_directly(morphed, c.frame_globals[k]);
+    for (const Rotations rotations : {Rotations::kSpecSlerp, Rotations::kNaiveNlerp}) {
+      const Eigen::MatrixX3d posed = skin_from_file(model, node_globals(model, animation, times[k], rotations),
+                                                    morph_weights_at(model, animation, times[k]));
+      EXPECT_LE(max_distance(posed, expected), tolerance) << "frame " << k;
+    }
+  }
+}
+
 TEST(GltfSkinWriterTest, RefusesBadCharactersNamingTheField) {
   const SkinnedCharacter good = make_character(1);
   struct Case {
@@ -534,6 +608,31 @@ TEST(GltfSkinWriterTest, RefusesBadCharactersNamingTheField) {
       {"fps negative", [](SkinnedCharacter& c) { c.frames_per_second = -24; }, "frames_per_second = -24"},
       {"fps NaN", [](SkinnedCharacter& c) { c.frames_per_second = kNaN; }, "frames_per_second"},
       {"fps too high", [](SkinnedCharacter& c) { c.frames_per_second = 1e50; }, "same float32 time"},
+      {"affine singular",
+       [](SkinnedCharacter& c) {
+         c.affine_joints = true;
+         c.frame_globals[3][2].row(1).head<3>().setZero();
+       },
+       "frame_globals[3][2] is singular"},
+      {"morph target rows",
+       [](SkinnedCharacter& c) {
+         c.morph_targets = {Eigen::MatrixX3d::Zero(5, 3)};
+         c.frame_morph_weights = Eigen::MatrixXd::Zero(kFrames, 1);
+       },
+       "morph_targets[0] has 5 rows"},
+      {"morph weights shape",
+       [](SkinnedCharacter& c) {
+         c.morph_targets = {Eigen::MatrixX3d::Zero(c.bind_points.rows(), 3)};
+         c.frame_morph_weights = Eigen::MatrixXd::Zero(kFrames - 1, 1);
+       },
+       "frame_morph_weights is 6×1, expected 7×1"},
+      {"morph NaN",
+       [](SkinnedCharacter& c) {
+         c.morph_targets = {Eigen::MatrixX3d::Zero(c.bind_points.rows(), 3)};
+         c.morph_targets[0](2, 2) = kNaN;
+         c.frame_morph_weights = Eigen::MatrixXd::Zero(kFrames, 1);
+       },
+       "morph_targets[0] has a non-finite"},
   };
   for (const Case& test : cases) {
     SkinnedCharacter c = good;

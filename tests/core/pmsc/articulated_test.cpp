@@ -12,6 +12,7 @@
 #include "core/common/parallel.h"
 #include "core/container/model_container.h"
 #include "core/demo/bending_arm.h"
+#include "core/pmsc/articulated_rig.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/retrain.h"
 #include "core/pmsc/subspace.h"
@@ -322,6 +323,72 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
   EXPECT_NE(refused.error().message.find("point 5, bone 0"), std::string::npos) << refused.error().message;
+}
+
+// Issue #51: the rig an engine plays (articulated_rig.h). Its weights are the basis's, its bind
+// pose the training rest pose (frame 0) plus the residual mean, and posed at an answer it differs
+// from the model's f̂ = mean + A p exactly by the residual turned with the point's blended bone
+// map, (Σ_j w_ij A_j − I)(μ_i + Σ_k p_k R_ik) — computed here from the basis's columns.
+TEST(ArticulatedSubspace, TheRigPosesAnAnswerAsAnEngineDoes) {
+  const ArmCase arm;
+  auto model = train(arm.training, arm.options(SubspaceKind::kArticulated), nullptr);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  ASSERT_GT(model->residual_components, 0);
+  const long N = model->point_count;
+  const int B = model->bone_count;
+  const long skinning = 12L * B;
+  const Eigen::MatrixX3d rest =
+      Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>>(arm.training.row(0).data(), N, 3)
+          .cast<double>();
+  auto rig = articulated_rig(*model, &rest);
+  ASSERT_TRUE(rig.ok()) << rig.error().message;
+  const double tolerance = 1e-5 * arm.diagonal;
+  const Eigen::MatrixXd A = model->basis.cast<double>();
+  for (long i = 0; i < N; ++i) {
+    // Weights: the basis's h_ij(3) where the term is not zero, summing to 1.
+    double sum = 0;
+    for (int32_t e = rig->offsets[static_cast<size_t>(i)]; e < rig->offsets[static_cast<size_t>(i) + 1]; ++e) {
+      const int j = rig->bones[static_cast<size_t>(e)];
+      EXPECT_NEAR(rig->weights[static_cast<size_t>(e)], A(3 * i, 12 * j + 3), 1e-6) << "point " << i;
+      sum += rig->weights[static_cast<size_t>(e)];
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-12) << "point " << i;
+    // The bind pose: frame 0 (the arm's bones share points: one set, placed on `rest`) plus μ.
+    const Eigen::RowVector3d mean = model->mean.segment<3>(3 * i).cast<double>().transpose();
+    EXPECT_LE((rig->bind_points.row(i) - mean - rest.row(i)).norm(), tolerance) << "point " << i;
+  }
+  for (long f = 0; f < arm.new_shot.rows(); f += 5) {
+    PoseEstimate estimate;
+    estimate_coordinates(*model, gather_key_values(*model, arm.new_shot.row(f).transpose()), estimate);
+    const Eigen::VectorXd& p = estimate.coordinates;
+    const Eigen::VectorXd exact = model->mean.cast<double>() + A * p;
+    const Eigen::MatrixX3d posed = pose_rig(*model, *rig, p, estimate.alignment);
+    double turned_most = 0;
+    for (long i = 0; i < N; ++i) {
+      Eigen::Matrix3d blended = Eigen::Matrix3d::Zero();
+      for (int j = 0; j < B; ++j) {
+        Eigen::Matrix3d linear;
+        for (int r = 0; r < 3; ++r) linear.row(r) = p.segment<3>(12 * j + 4 * r).transpose();
+        blended += A(3 * i, 12 * j + 3) * linear;
+      }
+      const Eigen::Vector3d residual =
+          model->mean.segment<3>(3 * i).cast<double>() + A.block(3 * i, skinning, 3, model->residual_components) *
+                                                             p.tail(model->residual_components);
+      const Eigen::Vector3d expected = exact.segment<3>(3 * i) + (blended - Eigen::Matrix3d::Identity()) * residual;
+      EXPECT_LE((posed.row(i).transpose() - expected).norm(), tolerance) << "frame " << f << ", point " << i;
+      turned_most = std::max(turned_most, ((blended - Eigen::Matrix3d::Identity()) * residual).norm());
+    }
+    // The elbow at 80–120°: the turned residual is not nothing, so the check above has teeth.
+    EXPECT_GT(turned_most, 100 * tolerance) << "frame " << f;
+  }
+
+  // A linear model holds no rig.
+  auto linear = train(arm.training, arm.options(SubspaceKind::kLinear), nullptr);
+  ASSERT_TRUE(linear.ok()) << linear.error().message;
+  const auto refused = articulated_rig(*linear);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_NE(refused.error().message.find("articulated"), std::string::npos) << refused.error().message;
 }
 
 // "Train each night": misses of a new shot folded into an articulated model keep it articulated
