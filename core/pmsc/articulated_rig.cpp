@@ -2,8 +2,12 @@
 
 #include <cmath>
 #include <deque>
+#include <limits>
 #include <string>
 
+#include <Eigen/Cholesky>
+
+#include "core/common/parallel.h"
 #include "core/pmsc/articulated.h"
 
 namespace animspace::pmsc {
@@ -17,9 +21,53 @@ Eigen::Vector4d skinning_term(const PmscModel& m, long i, int j) {
   return m.basis.block<1, 4>(3 * i, static_cast<long>(kBoneCoordinates) * j).transpose().cast<double>();
 }
 
+// B_i = Σ_j w_ij A_j of point i at one answer.
+Eigen::Matrix3d blended_linear_map(const ArticulatedRig& rig, const Eigen::VectorXd& p, long i) {
+  Eigen::Matrix3d blended = Eigen::Matrix3d::Zero();
+  for (int32_t e = rig.offsets[static_cast<size_t>(i)]; e < rig.offsets[static_cast<size_t>(i) + 1]; ++e) {
+    const long column = static_cast<long>(kBoneCoordinates) * rig.bones[static_cast<size_t>(e)];
+    for (int r = 0; r < 3; ++r) blended.row(r) += rig.weights[static_cast<size_t>(e)] * p.segment<3>(column + 4 * r).transpose();
+  }
+  return blended;
+}
+
+// The least-squares morphs of articulated_rig.h for point i: unknowns x = (μ'_i, d_i1 … d_ir),
+// each answer's rows B (μ' + Σ p_k d_k) against μ_i + Σ p_k R_ik, normal equations assembled as
+// Σ (κ κᵀ) ⊗ (BᵀB) with κ = (1, p_1 … p_r), ridge toward (μ_i, R_i·).
+void fit_point_targets(const PmscModel& m, const ArticulatedRig& rig, const std::vector<Eigen::VectorXd>& poses,
+                       double relative_ridge, long i, Eigen::VectorXd& x) {
+  const int r = m.residual_components;
+  const long skinning = static_cast<long>(kBoneCoordinates) * m.bone_count;
+  const int n = 3 * (r + 1);
+  Eigen::VectorXd plain(n);
+  plain.head<3>() = m.mean.segment<3>(3 * i).cast<double>();
+  for (int k = 0; k < r; ++k) plain.segment<3>(3 * (k + 1)) = m.basis.block<3, 1>(3 * i, skinning + k).cast<double>();
+  Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+  Eigen::VectorXd kappa(r + 1);
+  for (const Eigen::VectorXd& p : poses) {
+    const Eigen::Matrix3d B = blended_linear_map(rig, p, i);
+    const Eigen::Matrix3d BtB = B.transpose() * B;
+    kappa(0) = 1;
+    kappa.tail(r) = p.tail(r);
+    Eigen::Vector3d target = plain.head<3>();
+    for (int k = 0; k < r; ++k) target += kappa(k + 1) * plain.segment<3>(3 * (k + 1));
+    const Eigen::Vector3d Bt_target = B.transpose() * target;
+    for (int a = 0; a <= r; ++a) {
+      rhs.segment<3>(3 * a) += kappa(a) * Bt_target;
+      for (int b = 0; b <= a; ++b) normal.block<3, 3>(3 * a, 3 * b) += (kappa(a) * kappa(b)) * BtB;
+    }
+  }
+  const double ridge = relative_ridge * normal.diagonal().mean() + std::numeric_limits<double>::min();
+  normal.diagonal().array() += ridge;
+  rhs += ridge * plain;
+  x = normal.selfadjointView<Eigen::Lower>().ldlt().solve(rhs);
+}
+
 }  // namespace
 
-Result<ArticulatedRig> articulated_rig(const PmscModel& m, const Eigen::MatrixX3d* placement) {
+Result<ArticulatedRig> articulated_rig(const PmscModel& m, const Eigen::MatrixX3d* placement,
+                                       const std::vector<Eigen::VectorXd>* fit_to, double ridge) {
   if (m.subspace_kind != SubspaceKind::kArticulated) {
     return make_error(ErrorCode::kFailedPrecondition,
                       "a skinned rig is held only by an articulated model (subspace_kind articulated); this one is "
@@ -114,7 +162,77 @@ Result<ArticulatedRig> articulated_rig(const PmscModel& m, const Eigen::MatrixX3
     for (long i = 0; i < N; ++i) target.row(i) = m.basis.block<3, 1>(3 * i, skinning + k).cast<double>().transpose();
     rig.residual_targets.push_back(std::move(target));
   }
+  if (fit_to == nullptr || fit_to->empty()) return rig;
+  for (size_t f = 0; f < fit_to->size(); ++f) {
+    if ((*fit_to)[f].size() != m.basis_size()) {
+      return invalid("fit_to[" + std::to_string(f) + "] has " + std::to_string((*fit_to)[f].size()) +
+                     " coordinates, expected M = " + std::to_string(m.basis_size()));
+    }
+  }
+  parallel_for_chunks(N, 64, [&](int64_t begin, int64_t end) {
+    Eigen::VectorXd x;
+    for (long i = begin; i < end; ++i) {
+      fit_point_targets(m, rig, *fit_to, ridge, i, x);
+      rig.bind_points.row(i) = rest.row(i) + x.head<3>().transpose();
+      for (int k = 0; k < m.residual_components; ++k) rig.residual_targets[static_cast<size_t>(k)].row(i) = x.segment<3>(3 * (k + 1)).transpose();
+    }
+  });
   return rig;
+}
+
+namespace {
+
+// The worst point distance between the rig posed at each answer and the model's f̂ there
+// (mean + A p in double, moved to the world), over answers [begin, end).
+double worst_deviation(const PmscModel& m, const ArticulatedRig& rig, const std::vector<PoseEstimate>& answers,
+                       size_t begin, size_t end) {
+  const Eigen::MatrixXd A = m.basis.cast<double>();
+  double worst = 0;
+  for (size_t f = begin; f < end; ++f) {
+    const Eigen::VectorXd model_points = m.mean.cast<double>() + A * answers[f].coordinates;
+    const Eigen::MatrixX3d posed = pose_rig(m, rig, answers[f].coordinates, answers[f].alignment);
+    for (long i = 0; i < m.point_count; ++i) {
+      Eigen::Vector3d expected = model_points.segment<3>(3 * i);
+      if (m.aligned) expected = answers[f].alignment.apply(expected);
+      worst = std::max(worst, (posed.row(i).transpose() - expected).norm());
+    }
+  }
+  return worst;
+}
+
+}  // namespace
+
+Result<ArticulatedRig> fit_articulated_rig(const PmscModel& m, const Eigen::MatrixX3d* placement,
+                                           const std::vector<PoseEstimate>& answers, RigFit& report) {
+  report = RigFit{};
+  auto plain = articulated_rig(m, placement);
+  if (!plain) return plain;
+  report.ridge = std::numeric_limits<double>::infinity();
+  report.plain_max_deviation = report.max_deviation = worst_deviation(m, *plain, answers, 0, answers.size());
+  const size_t seen = static_cast<size_t>(static_cast<double>(answers.size()) * kTargetFitShare);
+  if (answers.size() < 5 || seen == 0 || seen == answers.size()) return plain;
+  std::vector<Eigen::VectorXd> first, all;
+  for (size_t f = 0; f < answers.size(); ++f) {
+    all.push_back(answers[f].coordinates);
+    if (f < seen) first.push_back(answers[f].coordinates);
+  }
+  report.held_out = static_cast<long>(answers.size() - seen);
+  report.held_out_plain_max_deviation = report.held_out_max_deviation =
+      worst_deviation(m, *plain, answers, seen, answers.size());
+  for (const double ridge : kTargetRidges) {
+    auto candidate = articulated_rig(m, placement, &first, ridge);
+    if (!candidate) return candidate;
+    const double held_out = worst_deviation(m, *candidate, answers, seen, answers.size());
+    if (held_out < report.held_out_max_deviation) {
+      report.held_out_max_deviation = held_out;
+      report.ridge = ridge;
+    }
+  }
+  if (!std::isfinite(report.ridge)) return plain;
+  auto fitted = articulated_rig(m, placement, &all, report.ridge);
+  if (!fitted) return fitted;
+  report.max_deviation = worst_deviation(m, *fitted, answers, 0, answers.size());
+  return fitted;
 }
 
 Eigen::Matrix4d bone_world_transform(const PmscModel& m, const Eigen::VectorXd& coordinates,

@@ -1,6 +1,7 @@
 #include "clients/cpp/cli/export_rig.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <vector>
 
@@ -44,8 +45,6 @@ int export_articulated(const container::ModelContainer& in, const ExportRigArgs&
     if (!rest) return fail(command, rest.error().message);
     if (rest->rows() == N) placement = rest->cast<double>();
   }
-  auto rig = pmsc::articulated_rig(*model, placement.rows() == N ? &placement : nullptr);
-  if (!rig) return fail(command, a.input + ": " + rig.error().message);
   if (!in.has_section(container::sections::kFaces)) {
     return fail(command, a.input + " has no faces (section mesh.faces): a glTF mesh is made of triangles");
   }
@@ -53,6 +52,38 @@ int export_articulated(const container::ModelContainer& in, const ExportRigArgs&
   if (!faces) return fail(command, faces.error().message);
   auto subspace = pmsc::make_subspace(model);
   if (!subspace) return fail(command, a.input + ": " + subspace.error().message);
+
+  // The animation: each stored training frame answered from its key points, as a server answers.
+  FrameMatrix frames;
+  if (in.has_section(container::sections::kSequenceFrames)) {
+    auto stored = in.float_matrix(container::sections::kSequenceFrames, static_cast<int>(3 * N));
+    if (!stored) return fail(command, stored.error().message);
+    frames = std::move(*stored);
+  }
+  const long K = static_cast<long>(model->key_points.size());
+  std::vector<pmsc::PoseEstimate> answers(static_cast<size_t>(frames.rows()));
+  Eigen::VectorXf key_values(3 * K);
+  for (Eigen::Index f = 0; f < frames.rows(); ++f) {
+    for (long k = 0; k < K; ++k) {
+      key_values.segment<3>(3 * k) = frames.row(f).segment<3>(3 * model->key_points[static_cast<size_t>(k)]).transpose();
+    }
+    (*subspace)->estimate(key_values, Eigen::VectorXf(), answers[static_cast<size_t>(f)]);
+  }
+  // The rig, its morph targets fitted to those answers with a ridge chosen on the last 40% of
+  // them (pmsc/articulated_rig.h), and how far each rig plays from the model's points.
+  pmsc::RigFit fit;
+  auto rig = pmsc::fit_articulated_rig(*model, placement.rows() == N ? &placement : nullptr, answers, fit);
+  if (!rig) return fail(command, a.input + ": " + rig.error().message);
+  double diagonal = 0;
+  for (const pmsc::PoseEstimate& estimate : answers) {
+    Eigen::VectorXf points(3 * N);
+    const pmsc::PoseEstimate* one[] = {&estimate};
+    float* destination[] = {points.data()};
+    (*subspace)->reconstruct(one, destination);
+    const auto xyz = Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>>(points.data(), N, 3);
+    diagonal = std::max(diagonal, static_cast<double>((xyz.colwise().maxCoeff() - xyz.colwise().minCoeff()).norm()));
+  }
+  const auto percent = [&](double distance) { return diagonal > 0 ? 100 * distance / diagonal : 0.0; };
 
   // The joints: the bones some point depends on, in order.
   std::vector<int32_t> joint_of(static_cast<size_t>(model->bone_count), -1);
@@ -83,37 +114,15 @@ int export_articulated(const container::ModelContainer& in, const ExportRigArgs&
   for (size_t k = 0; k < rig->residual_targets.size(); ++k) {
     character.morph_target_names.push_back("residual_" + std::to_string(k));
   }
-
-  // The animation: each stored training frame answered from its key points.
-  FrameMatrix frames;
-  if (in.has_section(container::sections::kSequenceFrames)) {
-    auto stored = in.float_matrix(container::sections::kSequenceFrames, static_cast<int>(3 * N));
-    if (!stored) return fail(command, stored.error().message);
-    frames = std::move(*stored);
-  }
-  const long K = static_cast<long>(model->key_points.size());
   character.frame_morph_weights.resize(frames.rows(), model->residual_components);
-  double deviation = 0, diagonal = 0;
-  Eigen::VectorXf key_values(3 * K), answer(3 * N);
-  for (Eigen::Index f = 0; f < frames.rows(); ++f) {
-    for (long k = 0; k < K; ++k) {
-      key_values.segment<3>(3 * k) = frames.row(f).segment<3>(3 * model->key_points[static_cast<size_t>(k)]).transpose();
-    }
-    pmsc::PoseEstimate estimate;
-    (*subspace)->estimate(key_values, Eigen::VectorXf(), estimate);
+  for (size_t f = 0; f < answers.size(); ++f) {
     mesh_io::Matrix4dList globals;
     for (const int j : bones) {
-      globals.push_back(pmsc::bone_world_transform(*model, estimate.coordinates, estimate.alignment, j));
+      globals.push_back(pmsc::bone_world_transform(*model, answers[f].coordinates, answers[f].alignment, j));
     }
     character.frame_globals.push_back(std::move(globals));
-    character.frame_morph_weights.row(f) = estimate.coordinates.tail(model->residual_components).transpose();
-    const pmsc::PoseEstimate* one[] = {&estimate};
-    float* destination[] = {answer.data()};
-    (*subspace)->reconstruct(one, destination);
-    const Eigen::MatrixX3d posed = pmsc::pose_rig(*model, *rig, estimate.coordinates, estimate.alignment);
-    const auto points = Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>>(answer.data(), N, 3);
-    deviation = std::max(deviation, (posed - points.cast<double>()).rowwise().norm().maxCoeff());
-    diagonal = std::max(diagonal, (points.colwise().maxCoeff() - points.colwise().minCoeff()).cast<double>().norm());
+    character.frame_morph_weights.row(static_cast<Eigen::Index>(f)) =
+        answers[f].coordinates.tail(model->residual_components).transpose();
   }
   if (auto written = mesh_io::write_skinned_character(a.output, character); !written.ok()) {
     return fail(command, written.error().message);
@@ -125,15 +134,32 @@ int export_articulated(const container::ModelContainer& in, const ExportRigArgs&
                 {"joints", bones.size()},
                 {"morph_targets", model->residual_components},
                 {"frames", frames.rows()},
-                {"max_deviation", deviation},
-                {"max_deviation_over_diagonal", diagonal > 0 ? deviation / diagonal : 0.0}});
+                {"max_deviation", fit.max_deviation},
+                {"max_deviation_over_diagonal", diagonal > 0 ? fit.max_deviation / diagonal : 0.0},
+                {"unfitted_max_deviation", fit.plain_max_deviation},
+                {"morph_ridge", std::isfinite(fit.ridge) ? nlohmann::json(fit.ridge) : nlohmann::json(nullptr)},
+                {"held_out_frames", fit.held_out},
+                {"held_out_max_deviation", fit.held_out_max_deviation},
+                {"held_out_unfitted_max_deviation", fit.held_out_plain_max_deviation}});
   } else {
     std::printf("articulated model: %ld points, %zu bones as affine joints, %d residual components as morph "
                 "targets, %lld training frames answered from their %ld key points\n",
                 N, bones.size(), model->residual_components, static_cast<long long>(frames.rows()), K);
-    std::printf("the glTF plays those answers within %.4g of the model's points (%.3g%% of the diagonal): glTF "
-                "adds a morph target before skinning, so each residual turns with its point's bones\nwrote %s\n",
-                deviation, diagonal > 0 ? 100 * deviation / diagonal : 0.0, a.output.c_str());
+    // glTF adds a morph target before skinning, the model its residual after: the targets are
+    // fitted to the answers, so each figure says how far an engine's point is from the model's.
+    if (std::isfinite(fit.ridge)) {
+      std::printf("morph targets fitted to the answers (glTF morphs before skinning, the model adds its residual "
+                  "after), ridge %.3g chosen on the last %ld frames: within %.4g of the model's points there "
+                  "(%.3g%% of the diagonal), against %.4g (%.3g%%) with the residual components as they are\n",
+                  fit.ridge, fit.held_out, fit.held_out_max_deviation, percent(fit.held_out_max_deviation),
+                  fit.held_out_plain_max_deviation, percent(fit.held_out_plain_max_deviation));
+    } else if (fit.held_out > 0) {
+      std::printf("morph targets are the residual components as they are: no fit to the answers did better on the "
+                  "last %ld frames (%.4g, %.3g%% of the diagonal)\n",
+                  fit.held_out, fit.held_out_plain_max_deviation, percent(fit.held_out_plain_max_deviation));
+    }
+    std::printf("the glTF plays every answer within %.4g of the model's points (%.3g%% of the diagonal)\nwrote %s\n",
+                fit.max_deviation, percent(fit.max_deviation), a.output.c_str());
   }
   return 0;
 }
