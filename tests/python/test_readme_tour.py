@@ -108,6 +108,11 @@ def test_the_new_shots_of_the_tour_hit_where_the_linear_kind_misses(tmp_path):
     done = run(train, tmp_path, timeout=1800)
     assert done.returncode == 0, done.stderr
     assert re.search(r"articulated: \d+ bones \(12 coordinates each\) \+ \d+ residual components", done.stdout), done.stdout
+    # The glTF export of the same model (issue #51), as written.
+    export = next(line for line in lines if " export-rig " in line)
+    done = run(export, tmp_path, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "morph targets" in done.stdout and (tmp_path / "crane-articulated.glb").stat().st_size > 0, done.stdout
     # The linear kind on the same frames, as the nightly block trains it, beside it in the same run.
     linear = train.replace(" --subspace articulated", " --align").replace("repo-new-shots", "repo-linear")
     done = run(linear, tmp_path)
