@@ -37,7 +37,9 @@ for name, path in config["files"].items():
     actions = [bpy.data.actions[n] for n in sorted(set(bpy.data.actions.keys()) - actions_before)]
     results[name] = {
         "meshes": [{"vertices": len(o.data.vertices), "faces": len(o.data.polygons),
-                    "skinned": any(m.type == "ARMATURE" for m in o.modifiers)} for o in made if o.type == "MESH"],
+                    "skinned": any(m.type == "ARMATURE" for m in o.modifiers),
+                    "shape_keys": sorted(k.name for k in o.data.shape_keys.key_blocks) if o.data.shape_keys else []}
+                   for o in made if o.type == "MESH"],
         "armatures": [len(o.data.bones) for o in made if o.type == "ARMATURE"],
         "names": sorted(o.name for o in made),
         "action_frames": [list(a.frame_range) for a in actions],
@@ -95,8 +97,12 @@ def test_every_gltf_file_we_write_imports_in_blender(daemon, tmp_path):
     _run("demo-repository", str(tmp_path / "demo"))
     _run("export-lod", str(tmp_path / "demo" / "arm-animspace" / "1" / "model.anim"), "--level", "2",
          "-o", str(tmp_path / "lod.glb"))
+    # An articulated model (issue #51): affine joints as shape and joint nodes, residual morph targets.
+    _run("export-rig", str(tmp_path / "demo" / "arm-articulated" / "1" / "model.anim"), "-o",
+         str(tmp_path / "articulated.glb"))
     with animspace.Client(daemon) as client:
         client.wait_until_serving(deadline_s=60)
+        residual_components = client.describe_model("arm-articulated").default.residual_components
         level2 = client.get_lod("arm-animspace", level=2)
         arm = client.get_lod("arm-animspace", level=0)
     G = _arm_transforms(1.0)
@@ -105,7 +111,7 @@ def test_every_gltf_file_we_write_imports_in_blender(daemon, tmp_path):
          "-o", str(tmp_path / "pose.glb"))
 
     config = {"zip": str(ZIP), "out": str(tmp_path / "imported.json"),
-              "files": {name: str(tmp_path / f"{name}.glb") for name in ("rig", "lod", "pose")}}
+              "files": {name: str(tmp_path / f"{name}.glb") for name in ("rig", "lod", "pose", "articulated")}}
     (tmp_path / "config.json").write_text(json.dumps(config))
     (tmp_path / "import.py").write_text(SCRIPT)
     environment = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "user-scripts"),
@@ -129,3 +135,10 @@ def test_every_gltf_file_we_write_imports_in_blender(daemon, tmp_path):
         meshes = results[name]["meshes"]
         assert len(meshes) == 1 and meshes[0]["faces"] == len(expected.indices), name
         assert meshes[0]["vertices"] == len(expected.positions), name
+    articulated = results["articulated"]
+    assert len(articulated["meshes"]) == 1 and articulated["meshes"][0]["skinned"], articulated
+    assert articulated["meshes"][0]["vertices"] == 1154, articulated
+    # Blender's importer names the shape keys after the targets, with its own "Basis" first.
+    keys = articulated["meshes"][0]["shape_keys"]
+    assert sorted(k for k in keys if k.startswith("residual_")) == sorted(
+        f"residual_{k}" for k in range(residual_components)), keys
