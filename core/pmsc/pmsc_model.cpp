@@ -15,6 +15,7 @@
 
 #include "core/common/format.h"
 #include "core/common/kernels.h"
+#include "core/pmsc/articulated_rig.h"
 #include "core/pmsc/coordinates.h"
 #include "core/pmsc/local_fail_through.h"
 
@@ -676,7 +677,9 @@ bool calibration_guarantee_holds(const PmscModel& m) {
 namespace {
 
 // The tolerance the guarantee speaks of, with its scale (issue #55: the sentence named none):
-// "0.0123 model units, 0.45% of the mean pose's bounding-box diagonal", or a fraction of S.
+// "0.0123 model units, 0.45% of the mean pose's bounding-box diagonal", or a fraction of S. An
+// articulated model's mean is the residual's mean, no pose: its scale is the rest pose's, read
+// back off the skinning terms (articulated_rig.h).
 std::string tolerance_text(const PmscModel& m) {
   const double tolerance = m.calibration.error_ratio * m.epsilon.epsilon_min;
   char text[160];
@@ -685,11 +688,20 @@ std::string tolerance_text(const PmscModel& m) {
     return text;
   }
   if (m.channel_count == 3 && m.mean.size() >= 3) {
-    const Eigen::Map<const Eigen::Matrix3Xf> points(m.mean.data(), 3, m.mean.size() / 3);
-    const double diagonal = (points.rowwise().maxCoeff() - points.rowwise().minCoeff()).cast<double>().norm();
+    double diagonal = 0;
+    const char* pose = "mean";
+    if (m.subspace_kind == SubspaceKind::kArticulated) {
+      pose = "rest";
+      if (auto rig = articulated_rig(m); rig.ok()) {
+        diagonal = (rig->bind_points.colwise().maxCoeff() - rig->bind_points.colwise().minCoeff()).norm();
+      }
+    } else {
+      const Eigen::Map<const Eigen::Matrix3Xf> points(m.mean.data(), 3, m.mean.size() / 3);
+      diagonal = (points.rowwise().maxCoeff() - points.rowwise().minCoeff()).cast<double>().norm();
+    }
     if (diagonal > 0) {
-      std::snprintf(text, sizeof text, "%.3g model units, %.3g%% of the mean pose's bounding-box diagonal", tolerance,
-                    100 * tolerance / diagonal);
+      std::snprintf(text, sizeof text, "%.3g model units, %.3g%% of the %s pose's bounding-box diagonal", tolerance,
+                    100 * tolerance / diagonal, pose);
       return text;
     }
   }

@@ -4,6 +4,7 @@
 #include "core/pmsc/articulated.h"
 
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <random>
 
@@ -408,6 +409,17 @@ TEST(ArticulatedSubspace, TheRigPosesAnAnswerAsAnEngineDoes) {
   // The skinning is untouched by the fit: same weights and centres.
   EXPECT_EQ(fitted->weights, rig->weights);
   EXPECT_EQ(fitted->centres, rig->centres);
+
+  // The guarantee's tolerance as a share of the rest pose's diagonal (an articulated model's mean
+  // is the residual's, no pose): here frame 0's, the rest the rig stands on.
+  const double guaranteed = model->calibration.error_ratio * model->epsilon.epsilon_min;
+  const double rest_diagonal = (rest.colwise().maxCoeff() - rest.colwise().minCoeff()).norm();
+  char expected[160];
+  std::snprintf(expected, sizeof expected, "(%.3g model units, %.3g%% of the rest pose's bounding-box diagonal)",
+                guaranteed, 100 * guaranteed / rest_diagonal);
+  PmscModel stated = *model;  // the arm's few folds state no guarantee; the sentence's scale is the point
+  stated.calibration.bad_samples = 1000;
+  EXPECT_NE(calibration_statement(stated).find(expected), std::string::npos) << calibration_statement(stated);
 
   // A linear model holds no rig.
   auto linear = train(arm.training, arm.options(SubspaceKind::kLinear), nullptr);
