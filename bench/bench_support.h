@@ -124,6 +124,9 @@ struct ScaleSuiteOptions {
   int frames = 2000;                 // random poses per level
   int models = 20;                   // copies of each trained model one daemon serves
   std::vector<std::string> kinds{"linear"};
+  // What is subdivided: "cow-rig" (imported, exact at any joint rotation) or "horse-gallop" (fitted
+  // to the capture with `animspace fit`, then exact for its own bones at any rotation).
+  std::string character = "cow-rig";
 };
 
 struct SuiteOptions {

@@ -151,6 +151,11 @@ int main(int argc, char** argv) {
                  "and 2: about 47k and 186k)")
       ->check(CLI::Range(0, 4))
       ->capture_default_str();
+  app.add_option("--scale-character", options.scale.character,
+                 "scale: the character subdivided: cow-rig (import-rig of the rig) or horse-gallop (fit to the capture: "
+                 "8,431 points; 1 and 2 levels about 34k and 135k)")
+      ->check(CLI::IsMember({"cow-rig", "horse-gallop"}))
+      ->capture_default_str();
   app.add_option("--scale-frames", options.scale.frames, "scale: random poses per level (the training sequence)")
       ->check(CLI::Range(2, 1000000))
       ->capture_default_str();

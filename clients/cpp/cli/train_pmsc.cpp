@@ -180,7 +180,8 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 {"calibration_guarantee_holds", pmsc::calibration_guarantee_holds(*model)},
                 {"calibration_statement", pmsc::calibration_statement(*model)},
                 {"operating_curve", operating_curve_json(*model, options.error_tolerance)},
-                {"seconds", report.seconds}});
+                {"seconds", report.seconds},
+                {"step_seconds", {{"basis", report.pca_seconds}, {"skinning", report.skinning_seconds}, {"key_points", report.key_selection_seconds}, {"calibration", report.calibration_seconds}}}});
   } else {
     std::printf("trained on %d frames in %.2f s: basis M = %d, %d key points%s\n", report.frames, report.seconds,
                 report.basis_size, report.key_points, control ? " (cross-PMSC)" : "");
