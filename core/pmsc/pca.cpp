@@ -165,45 +165,13 @@ double residual_pass(const MatrixXd& X, const MatrixXd& A, const MatrixXd& C, in
   const Index blocks = (R + block_rows - 1) / block_rows;
   std::vector<double> block_max(static_cast<size_t>(blocks), 0.0);
   const MatrixXd negated = -C;
-  // The columns of A not zero on rows [r0, r0 + n).
-  const auto active_columns = [&](Index r0, Index n, std::vector<Index>& active) {
-    active.clear();
-    for (Index c = 0; c < M; ++c) {
-      if ((A.col(c).segment(r0, n).array() != 0).any()) active.push_back(c);
-    }
-  };
   parallel_for_chunks(blocks, 1, [&](int64_t first, int64_t last) {
     MatrixXd E(std::min(block_rows, R), F);  // one block of the residual, in cache
-    std::vector<Index> active;
-    MatrixXd sparse_A, sparse_C;
     for (int64_t b = first; b < last; ++b) {
       const Index r0 = b * block_rows;
       const Index n = std::min(block_rows, R - r0);
       E.topRows(n) = X.middleRows(r0, n);
-      active_columns(r0, n, active);
-      if (static_cast<Index>(active.size()) == M) {
-        gemm_serial(n, M, F, A.data() + r0, A.outerStride(), negated.data(), negated.rows(), 1.0, E.data(), E.rows());
-      } else {
-        // A basis with columns that vanish on whole groups of points — an articulated basis has
-        // 12 a bone, and nearby points depend on few bones (articulated.h) — needs only its
-        // columns that do not vanish there: each sub-block of kSparsePoints points is the
-        // product of those (the others' terms are exact zeros).
-        constexpr Index kSparsePoints = 128;
-        const Index sub_rows = kSparsePoints * channels;
-        for (Index s0 = 0; s0 < n; s0 += sub_rows) {
-          const Index m = std::min(sub_rows, n - s0);
-          active_columns(r0 + s0, m, active);
-          const Index k = static_cast<Index>(active.size());
-          if (k == 0) continue;
-          sparse_A.resize(m, k);
-          sparse_C.resize(k, F);
-          for (Index j = 0; j < k; ++j) {
-            sparse_A.col(j) = A.col(active[static_cast<size_t>(j)]).segment(r0 + s0, m);
-            sparse_C.row(j) = negated.row(active[static_cast<size_t>(j)]);
-          }
-          gemm_serial(m, k, F, sparse_A.data(), m, sparse_C.data(), k, 1.0, E.data() + s0, E.rows());
-        }
-      }
+      gemm_serial(n, M, F, A.data() + r0, A.outerStride(), negated.data(), negated.rows(), 1.0, E.data(), E.rows());
       for (Index f = 0; f < F; ++f) {
         const Eigen::Map<const MatrixXd, 0, Eigen::OuterStride<>> frame(E.col(f).data(), channels, n / channels,
                                                                          Eigen::OuterStride<>(channels));
