@@ -17,6 +17,8 @@ packages=(
   libosd-dev
   # server and command line
   libspdlog-dev libfmt-dev libcli11-dev libcpp-httplib-dev
+  # the model file's CRC-32 (core/container/crc32)
+  zlib1g-dev
   # SHA-256 of served bases, against which clients check their cached copies (core/common/sha256)
   libssl-dev
   # headless rendering (Mesa's surfaceless EGL, llvmpipe) and PNG

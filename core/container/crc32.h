@@ -2,8 +2,7 @@
 // bit-reflected as 0xEDB88320, initial value and final xor 0xFFFFFFFF). Check value:
 // crc32("123456789") == 0xCBF43926.
 //
-// Written here rather than linked from zlib because core/ depends only on Eigen and OpenMesh,
-// and a table-driven CRC is thirty lines.
+// zlib's own (crc32_z): a byte-at-a-time table was most of the time a big model took to load.
 #pragma once
 
 #include <cstddef>
