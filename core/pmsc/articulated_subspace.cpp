@@ -7,8 +7,11 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Cholesky>
+
 #include "core/common/kernels.h"
 #include "core/pmsc/articulated.h"
+#include "core/pmsc/key_projection.h"
 #include "core/pmsc/subspace.h"
 
 namespace animspace::pmsc {
@@ -57,10 +60,37 @@ Result<SkinningTerms> read_skinning_terms(const PmscModel& m) {
   return out;
 }
 
+// Eq. 2 through the same terms: p = (A_keyᵀ A_key + λI)⁻¹ A_keyᵀ (f_key − key_mean), with
+// A_keyᵀ c and A_key p read off each key's few skinning terms and the residual columns, and the
+// M × M inverse formed once at load — a few hundred thousand multiplications a pose where the
+// dense P (M × K·D, 425 × 1,914 on crane) and A_key cost 1.6 million. Mathematically the dense
+// projection (pmsc_model.h: P = V diag(σ/(σ² + λ)) Uᵀ is that inverse times A_keyᵀ); the normal
+// equations lose up to κ² of precision where P loses κ, so only a basis whose A_key has κ up
+// to kSparseKeyCondition takes this path (p then within ~1e-8 of P's, relatively).
+constexpr double kSparseKeyCondition = 1e4;
+
 class ArticulatedSubspace final : public Subspace {
  public:
   ArticulatedSubspace(std::shared_ptr<const PmscModel> model, SkinningTerms skinning)
-      : Subspace(std::move(model)), skinning_(std::move(skinning)) {}
+      : Subspace(std::move(model)), skinning_(std::move(skinning)) {
+    const PmscModel& m = this->model();
+    if (m.cross || !(m.condition_number <= kSparseKeyCondition) || !read_key_terms()) return;
+    const long M = m.basis.cols();
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(M, M);
+    gram.selfadjointView<Eigen::Lower>().rankUpdate(m.key_basis.transpose());
+    gram.diagonal().array() += m.regularization;
+    inverse_gram_ = gram.selfadjointView<Eigen::Lower>().ldlt().solve(Eigen::MatrixXd::Identity(M, M));
+  }
+
+  void estimate(const Eigen::Ref<const Eigen::VectorXf>& key_values, const Eigen::Ref<const Eigen::VectorXf>& check_values,
+                PoseEstimate& out) const override {
+    if (inverse_gram_.size() == 0) {
+      Subspace::estimate(key_values, check_values, out);
+      return;
+    }
+    estimate_coordinates_with(model(), key_values, check_values, out,
+                              [this](Eigen::VectorXd centred, Eigen::VectorXd& p) { return project(std::move(centred), p); });
+  }
 
   // The residual columns as the linear kind's product (a block of rows at a time, for the whole
   // batch), then each point's bones from its skinning terms.
@@ -108,7 +138,70 @@ class ArticulatedSubspace final : public Subspace {
   }
 
  private:
+  // The key rows' skinning terms as P was made of them: A_key in double (pmsc.key_basis, the
+  // training basis before the float32 it is served in), in the form read_skinning_terms checks.
+  // False (the dense projection is used) for key rows of any other form.
+  bool read_key_terms() {
+    const PmscModel& m = model();
+    const long K = static_cast<long>(m.key_points.size());
+    key_offsets_.assign(1, 0);
+    for (long k = 0; k < K; ++k) {
+      for (int j = 0; j < m.bone_count; ++j) {
+        const auto block = m.key_basis.block(3 * k, static_cast<long>(kBoneCoordinates) * j, 3, kBoneCoordinates);
+        const Eigen::RowVector4d h = block.block<1, 4>(0, 0);
+        for (int r = 0; r < 3; ++r) {
+          for (int c = 0; c < kBoneCoordinates; ++c) {
+            if (block(r, c) != (c / 4 == r ? h(c % 4) : 0.0)) return false;
+          }
+        }
+        if ((h.array() == 0.0).all()) continue;
+        key_bones_.push_back(j);
+        key_terms_.insert(key_terms_.end(), h.data(), h.data() + 4);
+      }
+      key_offsets_.push_back(static_cast<int32_t>(key_bones_.size()));
+    }
+    return true;
+  }
+
+  // The key projection above: p from the centred key values, and the key residual.
+  Eigen::VectorXd project(Eigen::VectorXd centred, Eigen::VectorXd& p) const {
+    const PmscModel& m = model();
+    const long M = m.basis.cols();
+    const long K = static_cast<long>(m.key_points.size());
+    const long r = m.residual_components;
+    const auto residual_rows = m.key_basis.rightCols(r);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(M);
+    for (long k = 0; k < K; ++k) {
+      for (int32_t e = key_offsets_[static_cast<size_t>(k)]; e < key_offsets_[static_cast<size_t>(k) + 1]; ++e) {
+        const double* h = key_terms_.data() + 4L * e;
+        double* column = rhs.data() + static_cast<long>(kBoneCoordinates) * key_bones_[static_cast<size_t>(e)];
+        for (int row = 0; row < 3; ++row) {
+          for (int c = 0; c < 4; ++c) column[4 * row + c] += h[c] * centred(3 * k + row);
+        }
+      }
+    }
+    if (r > 0) rhs.tail(r).noalias() = residual_rows.transpose() * centred;
+    p.noalias() = inverse_gram_ * rhs;
+    for (long k = 0; k < K; ++k) {
+      for (int32_t e = key_offsets_[static_cast<size_t>(k)]; e < key_offsets_[static_cast<size_t>(k) + 1]; ++e) {
+        const double* h = key_terms_.data() + 4L * e;
+        const double* M_j = p.data() + static_cast<long>(kBoneCoordinates) * key_bones_[static_cast<size_t>(e)];
+        for (int row = 0; row < 3; ++row) {
+          double f = 0;
+          for (int c = 0; c < 4; ++c) f += h[c] * M_j[4 * row + c];
+          centred(3 * k + row) -= f;
+        }
+      }
+    }
+    if (r > 0) centred.noalias() -= residual_rows * p.tail(r);
+    return centred;
+  }
+
   SkinningTerms skinning_;
+  // Key k's bones key_bones_[key_offsets_[k] … key_offsets_[k + 1]) with their h (4 each).
+  std::vector<int32_t> key_offsets_, key_bones_;
+  std::vector<double> key_terms_;
+  Eigen::MatrixXd inverse_gram_;  // (A_keyᵀ A_key + λI)⁻¹, M × M; empty: the dense projection
 };
 
 }  // namespace

@@ -17,6 +17,7 @@
 #include "core/common/kernels.h"
 #include "core/pmsc/articulated_rig.h"
 #include "core/pmsc/coordinates.h"
+#include "core/pmsc/key_projection.h"
 #include "core/pmsc/local_fail_through.h"
 
 namespace animspace::pmsc {
@@ -371,10 +372,23 @@ void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::Vect
 
 void estimate_coordinates(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
                           const Eigen::Ref<const Eigen::VectorXf>& check_values, PoseEstimate& out) {
+  estimate_coordinates_with(m, key_values, check_values, out, KeyProjection());
+}
+
+void estimate_coordinates_with(const PmscModel& m, const Eigen::Ref<const Eigen::VectorXf>& key_values,
+                               const Eigen::Ref<const Eigen::VectorXf>& check_values, PoseEstimate& out,
+                               const KeyProjection& projection) {
   assert(key_values.size() == m.key_mean.size());
   assert(check_values.size() == 0 || check_values.size() == m.check_mean.size());
   assert(m.projection.rows() == m.basis.cols());
-  const Eigen::VectorXd key_residual = project_keys(m, key_values, out.coordinates, out.alignment);
+  assert(!projection || !m.aligned);
+  Eigen::VectorXd key_residual;
+  if (projection) {
+    out.alignment = geometry::RigidTransform();
+    key_residual = projection(key_values.cast<double>() - m.key_mean, out.coordinates);
+  } else {
+    key_residual = project_keys(m, key_values, out.coordinates, out.alignment);
+  }
   // Errors in model units, or as fractions of the pose's scale S (relative_tolerance).
   out.scale = m.relative_tolerance ? pose_scale(m, out.coordinates) : 1.0;
   const auto measured = [scale = out.scale](double error) {

@@ -283,7 +283,7 @@ TEST(ArticulatedSubspace, TrainingIsDeterministic) {
 // The server reconstructs an articulated answer from each point's skinning terms (its kind's
 // runtime, subspace.h), a client from the whole basis (coordinates.h): both are f̂ = mean + A p,
 // here against that sum in double, alone and in a batch, within the bound pmsc_model.h states
-// for any order of the float additions.
+// for any order of the float additions. And it estimates p through the same terms.
 TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
   const ArmCase arm;
   auto model = train(arm.training, arm.options(SubspaceKind::kArticulated), nullptr);
@@ -314,6 +314,28 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
     EXPECT_TRUE(((points.col(f).cast<double>() - exact).cwiseAbs().array() <= bound.array()).all())
         << "frame " << f << ": " << ((points.col(f).cast<double>() - exact).cwiseAbs() - bound).maxCoeff() << " over";
     EXPECT_TRUE(((alone.cast<double>() - exact).cwiseAbs().array() <= bound.array()).all()) << "frame " << f;
+  }
+
+  // Eq. 2 through the skinning terms (the runtime's estimate) against the dense projection P every
+  // client and the reference use: the same p, errors and verdict inputs, within the precision the
+  // normal equations keep at A_key's condition number (κ² · 2⁻⁵², relative).
+  ASSERT_LE(model->condition_number, 1e4) << "the arm's keys take the runtime's own solve";
+  const double precision = 1e4 * model->condition_number * model->condition_number * 0x1p-52;
+  for (long f = 0; f < arm.new_shot.rows(); ++f) {
+    const Eigen::VectorXf frame = arm.new_shot.row(f).transpose();
+    Eigen::VectorXf checks(3 * model->check_point_count());
+    for (int c = 0; c < model->check_point_count(); ++c) {
+      checks.segment<3>(3 * c) = frame.segment<3>(3 * model->check_points[static_cast<size_t>(c)]);
+    }
+    PoseEstimate dense, served;
+    estimate_coordinates(*model, gather_key_values(*model, frame), checks, dense);
+    runtime.estimate(gather_key_values(*model, frame), checks, served);
+    EXPECT_LE((served.coordinates - dense.coordinates).norm(), precision * dense.coordinates.norm()) << "frame " << f;
+    EXPECT_NEAR(served.key_point_error, dense.key_point_error, precision * arm.diagonal) << "frame " << f;
+    EXPECT_NEAR(served.key_point_max_error, dense.key_point_max_error, precision * arm.diagonal) << "frame " << f;
+    EXPECT_NEAR(served.check_point_error, dense.check_point_error, precision * arm.diagonal) << "frame " << f;
+    EXPECT_NEAR(served.error_estimate, dense.error_estimate, precision * arm.diagonal) << "frame " << f;
+    EXPECT_EQ(served.checked, dense.checked);
   }
 
   // A basis whose bone columns are not of the skinning form is refused, naming the point.
