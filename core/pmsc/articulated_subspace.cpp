@@ -126,12 +126,10 @@ class ArticulatedSubspace final : public Subspace {
       for (long i = 0; i < m.point_count; ++i) {
         for (int32_t k = skinning_.offsets[static_cast<size_t>(i)]; k < skinning_.offsets[static_cast<size_t>(i) + 1];
              ++k) {
-          const float* h = skinning_.terms.data() + 4L * k;
-          const float* M_j = p + static_cast<long>(kBoneCoordinates) * skinning_.bones[static_cast<size_t>(k)];
-          for (int row = 0; row < 3; ++row) {
-            f[3 * i + row] +=
-                h[0] * M_j[4 * row] + h[1] * M_j[4 * row + 1] + h[2] * M_j[4 * row + 2] + h[3] * M_j[4 * row + 3];
-          }
+          const Eigen::Map<const Eigen::Vector4f> h(skinning_.terms.data() + 4L * k);
+          const Eigen::Map<const Eigen::Matrix<float, 3, 4, Eigen::RowMajor>> M_j(
+              p + static_cast<long>(kBoneCoordinates) * skinning_.bones[static_cast<size_t>(k)]);
+          Eigen::Map<Eigen::Vector3f>(f + 3 * i).noalias() += M_j * h;
         }
       }
     }
