@@ -389,6 +389,20 @@ Eigen::Quaterniond near_sign(Eigen::Quaterniond q, const Eigen::Quaterniond& pre
   return q;
 }
 
+// #V × 3 positions (or offsets) as a float32 VEC3 accessor with the min/max §3.6.2.5 asks of
+// every POSITION accessor, a morph target's included.
+int append_positions(tinygltf::Model& model, const Eigen::MatrixX3d& values) {
+  const PointMatrix points = values.cast<float>();
+  const auto count = static_cast<size_t>(points.rows());
+  const int accessor = gltf_writing::append_accessor(model, points.data(), sizeof(float) * 3 * count,
+                                                     TINYGLTF_TARGET_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                                     TINYGLTF_TYPE_VEC3, count);
+  const Eigen::RowVector3f lo = points.colwise().minCoeff(), hi = points.colwise().maxCoeff();
+  model.accessors[static_cast<size_t>(accessor)].minValues = {lo.x(), lo.y(), lo.z()};
+  model.accessors[static_cast<size_t>(accessor)].maxValues = {hi.x(), hi.y(), hi.z()};
+  return accessor;
+}
+
 template <typename T>
 int append_vector(tinygltf::Model& model, const std::vector<T>& values, int target, int component_type, int type,
                   size_t count) {
@@ -432,14 +446,7 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
     //    normals, uint32 indices.
     tinygltf::Primitive primitive;
     primitive.mode = TINYGLTF_MODE_TRIANGLES;
-    const PointMatrix points = c.bind_points.cast<float>();
-    const int position = gltf_writing::append_accessor(model, points.data(), sizeof(float) * 3 * vertex_count,
-                                                       TINYGLTF_TARGET_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_FLOAT,
-                                                       TINYGLTF_TYPE_VEC3, vertex_count);
-    const Eigen::RowVector3f lo = points.colwise().minCoeff(), hi = points.colwise().maxCoeff();
-    model.accessors[static_cast<size_t>(position)].minValues = {lo.x(), lo.y(), lo.z()};
-    model.accessors[static_cast<size_t>(position)].maxValues = {hi.x(), hi.y(), hi.z()};
-    primitive.attributes["POSITION"] = position;
+    primitive.attributes["POSITION"] = append_positions(model, c.bind_points);
     PointMatrix normals;
     if (c.normals.rows() != 0) {
       // Within 1e-3 of unit length (checked); normalised in double so that float32 holds them
@@ -491,18 +498,10 @@ Result<std::string> serialize_character(const SkinnedCharacter& c, bool binary, 
           append_vector(model, slot_weights, TINYGLTF_TARGET_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_FLOAT,
                         TINYGLTF_TYPE_VEC4, vertex_count);
     }
-    // 2b. The morph targets (§3.7.2.2): float32 POSITION offsets with the min/max §3.6.2.5 asks
-    //     of every POSITION accessor.
+    // 2b. The morph targets (§3.7.2.2): POSITION offsets, written as the positions are.
     const size_t target_count = c.morph_targets.size();
     for (size_t k = 0; k < target_count; ++k) {
-      const PointMatrix offsets = c.morph_targets[k].cast<float>();
-      const int target = gltf_writing::append_accessor(model, offsets.data(), sizeof(float) * 3 * vertex_count,
-                                                       TINYGLTF_TARGET_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_FLOAT,
-                                                       TINYGLTF_TYPE_VEC3, vertex_count);
-      const Eigen::RowVector3f target_lo = offsets.colwise().minCoeff(), target_hi = offsets.colwise().maxCoeff();
-      model.accessors[static_cast<size_t>(target)].minValues = {target_lo.x(), target_lo.y(), target_lo.z()};
-      model.accessors[static_cast<size_t>(target)].maxValues = {target_hi.x(), target_hi.y(), target_hi.z()};
-      primitive.targets.push_back({{"POSITION", target}});
+      primitive.targets.push_back({{"POSITION", append_positions(model, c.morph_targets[k])}});
     }
     tinygltf::Mesh mesh;
     mesh.name = c.name;

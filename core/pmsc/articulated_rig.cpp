@@ -182,20 +182,32 @@ Result<ArticulatedRig> articulated_rig(const PmscModel& m, const Eigen::MatrixX3
 
 namespace {
 
-// The worst point distance between the rig posed at each answer and the model's f̂ there
-// (mean + A p in double, moved to the world), over answers [begin, end).
-double worst_deviation(const PmscModel& m, const ArticulatedRig& rig, const std::vector<PoseEstimate>& answers,
-                       size_t begin, size_t end) {
+// The model's f̂ of each answer (mean + A p in double, moved to the world), N × 3 each: what
+// every candidate rig is measured against, made once.
+std::vector<Eigen::MatrixX3d> model_points(const PmscModel& m, const std::vector<PoseEstimate>& answers) {
   const Eigen::MatrixXd A = m.basis.cast<double>();
+  std::vector<Eigen::MatrixX3d> out;
+  out.reserve(answers.size());
+  for (const PoseEstimate& answer : answers) {
+    const Eigen::VectorXd f = m.mean.cast<double>() + A * answer.coordinates;
+    Eigen::MatrixX3d points(m.point_count, 3);
+    for (long i = 0; i < m.point_count; ++i) {
+      const Eigen::Vector3d x = f.segment<3>(3 * i);
+      points.row(i) = (m.aligned ? answer.alignment.apply(x) : x).transpose();
+    }
+    out.push_back(std::move(points));
+  }
+  return out;
+}
+
+// The worst point distance between the rig posed at each answer and `expected` (model_points),
+// over answers [begin, end).
+double worst_deviation(const PmscModel& m, const ArticulatedRig& rig, const std::vector<PoseEstimate>& answers,
+                       const std::vector<Eigen::MatrixX3d>& expected, size_t begin, size_t end) {
   double worst = 0;
   for (size_t f = begin; f < end; ++f) {
-    const Eigen::VectorXd model_points = m.mean.cast<double>() + A * answers[f].coordinates;
     const Eigen::MatrixX3d posed = pose_rig(m, rig, answers[f].coordinates, answers[f].alignment);
-    for (long i = 0; i < m.point_count; ++i) {
-      Eigen::Vector3d expected = model_points.segment<3>(3 * i);
-      if (m.aligned) expected = answers[f].alignment.apply(expected);
-      worst = std::max(worst, (posed.row(i).transpose() - expected).norm());
-    }
+    worst = std::max(worst, (posed - expected[f]).rowwise().norm().maxCoeff());
   }
   return worst;
 }
@@ -208,7 +220,8 @@ Result<ArticulatedRig> fit_articulated_rig(const PmscModel& m, const Eigen::Matr
   auto plain = articulated_rig(m, placement);
   if (!plain) return plain;
   report.ridge = std::numeric_limits<double>::infinity();
-  report.plain_max_deviation = report.max_deviation = worst_deviation(m, *plain, answers, 0, answers.size());
+  const std::vector<Eigen::MatrixX3d> expected = model_points(m, answers);
+  report.plain_max_deviation = report.max_deviation = worst_deviation(m, *plain, answers, expected, 0, answers.size());
   const size_t seen = static_cast<size_t>(static_cast<double>(answers.size()) * kTargetFitShare);
   if (answers.size() < 5 || seen == 0 || seen == answers.size()) return plain;
   std::vector<Eigen::VectorXd> first, all;
@@ -218,11 +231,11 @@ Result<ArticulatedRig> fit_articulated_rig(const PmscModel& m, const Eigen::Matr
   }
   report.held_out = static_cast<long>(answers.size() - seen);
   report.held_out_plain_max_deviation = report.held_out_max_deviation =
-      worst_deviation(m, *plain, answers, seen, answers.size());
+      worst_deviation(m, *plain, answers, expected, seen, answers.size());
   for (const double ridge : kTargetRidges) {
     auto candidate = articulated_rig(m, placement, &first, ridge);
     if (!candidate) return candidate;
-    const double held_out = worst_deviation(m, *candidate, answers, seen, answers.size());
+    const double held_out = worst_deviation(m, *candidate, answers, expected, seen, answers.size());
     if (held_out < report.held_out_max_deviation) {
       report.held_out_max_deviation = held_out;
       report.ridge = ridge;
@@ -231,7 +244,7 @@ Result<ArticulatedRig> fit_articulated_rig(const PmscModel& m, const Eigen::Matr
   if (!std::isfinite(report.ridge)) return plain;
   auto fitted = articulated_rig(m, placement, &all, report.ridge);
   if (!fitted) return fitted;
-  report.max_deviation = worst_deviation(m, *fitted, answers, 0, answers.size());
+  report.max_deviation = worst_deviation(m, *fitted, answers, expected, 0, answers.size());
   return fitted;
 }
 
