@@ -64,6 +64,11 @@ int choose_from_vector(const Eigen::VectorXd& v, int channels, int candidate_cou
 }  // namespace
 
 Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eigen::MatrixXd& basis,
+                                            const KeyPointOptions& options) {
+  return select_key_points(TrainingMatrix(T), basis, options);
+}
+
+Result<KeyPointSelection> select_key_points(const TrainingMatrix& T, const Eigen::MatrixXd& basis,
                                             const KeyPointOptions& o) {
   const int D = o.channel_count;
   if (D < 1 || T.rows() % D != 0) {
@@ -103,11 +108,8 @@ Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eige
   // residual's energy whenever the keys are worth choosing; the σ_i and the basis are still
   // measured on E itself, by residual_pass.)
   const long R = T.rows(), F = T.cols(), M = basis.cols();
-  Eigen::MatrixXd gram_T = Eigen::MatrixXd::Zero(F, F);
-  gram_lower_serial(R, F, T.data(), T.outerStride(), gram_T.data(), F);
-  gram_T = gram_T.selfadjointView<Eigen::Lower>();
-  Eigen::MatrixXd H(M, F);
-  gemm_transposed_serial(M, R, F, basis.data(), basis.outerStride(), T.data(), T.outerStride(), 0.0, H.data(), M);
+  const Eigen::MatrixXd gram_T = T.gram();
+  const Eigen::MatrixXd H = T.transposed_times(basis);
   Eigen::MatrixXd gram_A = Eigen::MatrixXd::Zero(M, M);
   gram_lower_serial(R, M, basis.data(), basis.outerStride(), gram_A.data(), M);
   gram_A = gram_A.selfadjointView<Eigen::Lower>();
@@ -115,7 +117,7 @@ Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eige
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(M, F);
   const auto update_coordinates = [&](const std::vector<int>& keys) {
     const Eigen::MatrixXd P = least_squares_projection(gather_key_rows(basis, keys, D), kMaxConditionNumber, nullptr, nullptr);
-    C.noalias() = P * gather_key_rows(T, keys, D);
+    C.noalias() = P * T.gather_rows(keys, D);
   };
 
   if (!out.key_points.empty()) update_coordinates(out.key_points);

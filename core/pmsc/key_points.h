@@ -20,6 +20,7 @@
 
 #include "core/common/progress.h"
 #include "core/common/result.h"
+#include "core/pmsc/training_matrix.h"
 
 namespace animspace::pmsc {
 
@@ -50,6 +51,10 @@ struct KeyPointSelection {
 // T: R × F mean-centred training matrix (R = points·D, point-major rows); basis: R × M runtime
 // basis from T. Errors: kInvalidArgument naming the option for bad sizes or seeds outside the
 // candidates.
+// T may be a TrainingMatrix over the frames themselves (training_matrix.h): the selection holds
+// nothing the size of the frames, only the basis and a block of the residual per core.
+Result<KeyPointSelection> select_key_points(const TrainingMatrix& T, const Eigen::MatrixXd& basis,
+                                            const KeyPointOptions& options);
 Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eigen::MatrixXd& basis,
                                             const KeyPointOptions& options);
 

@@ -56,12 +56,17 @@ void reorthonormalize(MatrixXd& U) {
     if (llt.info() == Eigen::Success) {
       // U L⁻ᵀ as one product with the explicit inverse (upper triangular, κ ≤ √3, so forming it
       // costs no accuracy) through the dispatched kernel rather than Eigen/SSE2's triangular
-      // solve: 300k × 256² for the papers' 100k illumination points.
+      // solve: 300k × 256² for the papers' 100k illumination points. A block of rows at a time,
+      // in place: at studio sizes U is the largest thing the PCA holds (issue #53).
       MatrixXd inverse = MatrixXd::Identity(k, k);
       llt.matrixU().solveInPlace(inverse);
-      MatrixXd product(U.rows(), k);
-      gemm_serial(U.rows(), k, k, U.data(), U.outerStride(), inverse.data(), k, 0.0, product.data(), U.rows());
-      U = std::move(product);
+      const Index block_rows = TrainingMatrix::kBlockRows;
+      MatrixXd product(std::min(block_rows, U.rows()), k);
+      for (Index r0 = 0; r0 < U.rows(); r0 += block_rows) {
+        const Index n = std::min(block_rows, U.rows() - r0);
+        gemm_serial(n, k, k, U.data() + r0, U.outerStride(), inverse.data(), k, 0.0, product.data(), product.rows());
+        U.middleRows(r0, n) = product.topRows(n);
+      }
       return;
     }
   }
@@ -88,8 +93,9 @@ void fix_signs(MatrixXd& U) {
 
 // Steps 2 and 3 of a thin PCA from its candidate directions U (R × k, columns X v_i) and their
 // σ_i: order by σ (‖X v_i‖ can swap neighbours of a near-degenerate pair), drop directions below
-// the floor, a_i = X v_i / σ_i, then one re-orthonormalisation and the sign convention.
-PcaBasis basis_from_directions(const MatrixXd& U, const VectorXd& sigma) {
+// the floor, a_i = X v_i / σ_i, then one re-orthonormalisation and the sign convention. In U's
+// own storage.
+PcaBasis basis_from_directions(MatrixXd U, const VectorXd& sigma) {
   const Index R = U.rows(), candidates = U.cols();
   PcaBasis pca{MatrixXd(R, 0), VectorXd(0)};
   if (candidates == 0) return pca;
@@ -102,13 +108,18 @@ PcaBasis basis_from_directions(const MatrixXd& U, const VectorXd& sigma) {
   const double sigma_floor = kRelativeSingularValueFloor * sigma_0;
   const auto kept = static_cast<Index>(
       std::count_if(order.begin(), order.end(), [&](Index i) { return sigma(i) > sigma_floor; }));
-  pca.basis.resize(R, kept);
+  // Column j of the result is column order[j] of U: a permutation applied in place follows its
+  // cycles, column by column.
+  Eigen::PermutationMatrix<Eigen::Dynamic> permutation(candidates);
+  for (Index j = 0; j < candidates; ++j) permutation.indices()(j) = static_cast<int>(order[static_cast<size_t>(j)]);
+  U = U * permutation;
   pca.singular_values.resize(kept);
   for (Index j = 0; j < kept; ++j) {
-    const Index i = order[static_cast<size_t>(j)];
-    pca.singular_values(j) = sigma(i);
-    pca.basis.col(j) = U.col(i) / sigma(i);
+    pca.singular_values(j) = sigma(order[static_cast<size_t>(j)]);
+    U.col(j) /= pca.singular_values(j);
   }
+  if (kept < candidates) U.conservativeResize(R, kept);
+  pca.basis = std::move(U);
   reorthonormalize(pca.basis);
   fix_signs(pca.basis);
   return pca;
@@ -127,11 +138,12 @@ MatrixXd leading_gram_eigenvectors(const MatrixXd& gram, int count) {
   return eigen.eigenvectors().rightCols(k).rowwise().reverse();
 }
 
-PcaBasis pca_from_directions(const MatrixXd& directions) {
-  return basis_from_directions(directions, directions.colwise().norm().transpose());
+PcaBasis pca_from_directions(MatrixXd directions) {
+  const VectorXd sigma = directions.colwise().norm().transpose();
+  return basis_from_directions(std::move(directions), sigma);
 }
 
-PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
+PcaBasis thin_pca(const TrainingMatrix& X, int max_vectors) {
   assert(max_vectors >= 0);
   const Index R = X.rows(), F = X.cols();
   const Index candidates = std::min<Index>(max_vectors, std::min(R, F));
@@ -140,21 +152,23 @@ PcaBasis thin_pca(const MatrixXd& X, int max_vectors) {
     // Only the lower triangle of XᵀX is formed (SYRK, R·F²/2 flops). X V through the dispatched
     // kernel: in Eigen/SSE2, products of this shape were 15% of the key selection's profile at
     // the papers' 100k illumination points (300k × 324 × 12, once per iteration).
-    MatrixXd gram = MatrixXd::Zero(F, F);
-    gram_lower_serial(R, F, X.data(), X.outerStride(), gram.data(), F);
-    const MatrixXd V = leading_gram_eigenvectors(gram, static_cast<int>(candidates));
-    MatrixXd U(R, candidates);
-    gemm_serial(R, F, candidates, X.data(), X.outerStride(), V.data(), V.rows(), 0.0, U.data(), R);
-    return pca_from_directions(U);
+    const MatrixXd V = leading_gram_eigenvectors(X.gram(), static_cast<int>(candidates));
+    MatrixXd U;
+    X.times(V, U);
+    return pca_from_directions(std::move(U));
   }
   // Wide (or square) X: the Gram matrix on either side is no smaller than X itself, so take the
   // SVD directly; its U is already orthonormal and σ_i accurate to eps·σ_0.
-  const Eigen::BDCSVD<MatrixXd> svd(X, Eigen::ComputeThinU);
+  MatrixXd dense(R, F);
+  X.rows_into(0, R, dense);
+  const Eigen::BDCSVD<MatrixXd> svd(dense, Eigen::ComputeThinU);
   const VectorXd sigma = svd.singularValues().head(candidates);
   return basis_from_directions(svd.matrixU().leftCols(candidates) * sigma.asDiagonal(), sigma);  // X v_i, as above
 }
 
-double residual_pass(const MatrixXd& X, const MatrixXd& A, const MatrixXd& C, int channels,
+PcaBasis thin_pca(const MatrixXd& X, int max_vectors) { return thin_pca(TrainingMatrix(X), max_vectors); }
+
+double residual_pass(const TrainingMatrix& X, const MatrixXd& A, const MatrixXd& C, int channels,
                      const MatrixXd& directions, MatrixXd* projected) {
   assert(channels >= 1 && X.rows() % channels == 0);
   assert(A.rows() == X.rows() && C.rows() == A.cols() && C.cols() == X.cols());
@@ -170,7 +184,7 @@ double residual_pass(const MatrixXd& X, const MatrixXd& A, const MatrixXd& C, in
     for (int64_t b = first; b < last; ++b) {
       const Index r0 = b * block_rows;
       const Index n = std::min(block_rows, R - r0);
-      E.topRows(n) = X.middleRows(r0, n);
+      X.rows_into(r0, n, E);
       gemm_serial(n, M, F, A.data() + r0, A.outerStride(), negated.data(), negated.rows(), 1.0, E.data(), E.rows());
       for (Index f = 0; f < F; ++f) {
         const Eigen::Map<const MatrixXd, 0, Eigen::OuterStride<>> frame(E.col(f).data(), channels, n / channels,
@@ -207,26 +221,58 @@ double max_point_error(const MatrixXd& residual, int channels) {
   return errors.size() == 0 ? 0.0 : errors.maxCoeff();
 }
 
-int choose_basis_size(const MatrixXd& X, const PcaBasis& pca, int channels,
-                      double point_error_bound, int max_basis) {
+double residual_pass(const MatrixXd& X, const MatrixXd& A, const MatrixXd& C, int channels,
+                     const MatrixXd& directions, MatrixXd* projected) {
+  return residual_pass(TrainingMatrix(X), A, C, channels, directions, projected);
+}
+
+int choose_basis_size(const TrainingMatrix& X, const PcaBasis& pca, int channels, double point_error_bound,
+                      int max_basis) {
   assert(channels >= 1 && X.rows() % channels == 0);
   assert(pca.basis.rows() == X.rows());
   assert(point_error_bound >= 0.0 && max_basis >= 1);
   const int limit = static_cast<int>(std::min<Index>(max_basis, pca.basis.cols()));
   if (limit == 0) return 0;
 
-  // E_{m+1} = E_m − a_m (a_mᵀ E_m): with orthonormal a's this equals X − A_{m+1} A_{m+1}ᵀ X,
-  // and taking the coefficients from E rather than X (modified rather than classical
-  // Gram–Schmidt) keeps it so even if the columns are orthogonal only to rounding.
-  MatrixXd residual = X;
-  Eigen::RowVectorXd coefficients(X.cols());
+  // E_{m+1} = E_m − a_m c_m with c_m = a_mᵀ X, the coefficients of every frame formed once over
+  // all rows; with orthonormal a's (thin_pca re-orthonormalises them to ~1e-15) this equals
+  // X − A_{m+1} A_{m+1}ᵀ X. Each block of points then runs every m on its own rows, and
+  // largest(m) is the worst point over the blocks after m + 1 directions.
+  const Index R = X.rows(), F = X.cols();
+  const MatrixXd A = pca.basis.leftCols(limit);
+  const MatrixXd coefficients = X.transposed_times(A);  // limit × F
+  // A block small enough to stay in a core's cache through its `limit` updates (~256 KB).
+  const Index block_points = std::max<Index>(1, (Index{1} << 15) / (F * channels));
+  const Index block_rows = block_points * channels;
+  const Index blocks = (R + block_rows - 1) / block_rows;
+  MatrixXd largest = MatrixXd::Zero(limit, blocks);  // squared
+  parallel_for_chunks(blocks, 1, [&](int64_t first, int64_t last) {
+    MatrixXd E(std::min(block_rows, R), F);
+    for (int64_t b = first; b < last; ++b) {
+      const Index r0 = b * block_rows;
+      const Index n = std::min(block_rows, R - r0);
+      X.rows_into(r0, n, E);
+      for (int m = 0; m < limit; ++m) {
+        E.topRows(n).noalias() -= A.col(m).segment(r0, n) * coefficients.row(m);
+        double worst = 0;
+        for (Index f = 0; f < F; ++f) {
+          const Eigen::Map<const MatrixXd, 0, Eigen::OuterStride<>> frame(E.col(f).data(), channels, n / channels,
+                                                                           Eigen::OuterStride<>(channels));
+          worst = std::max(worst, frame.colwise().squaredNorm().maxCoeff());
+        }
+        largest(m, b) = worst;
+      }
+    }
+  });
+  const double bound_squared = point_error_bound * point_error_bound;
   for (int m = 0; m < limit; ++m) {
-    const auto a = pca.basis.col(m);
-    coefficients.noalias() = a.transpose() * residual;
-    residual.noalias() -= a * coefficients;
-    if (max_point_error(residual, channels) <= point_error_bound) return m + 1;
+    if (largest.row(m).maxCoeff() <= bound_squared) return m + 1;
   }
   return limit;
+}
+
+int choose_basis_size(const MatrixXd& X, const PcaBasis& pca, int channels, double point_error_bound, int max_basis) {
+  return choose_basis_size(TrainingMatrix(X), pca, channels, point_error_bound, max_basis);
 }
 
 }  // namespace animspace::pmsc

@@ -17,6 +17,8 @@
 
 #include <Eigen/Core>
 
+#include "core/pmsc/training_matrix.h"
+
 namespace animspace::pmsc {
 
 // σ_i below this fraction of σ_0 are treated as zero: thin_pca keeps only directions with
@@ -41,7 +43,10 @@ struct PcaBasis {
 // For R > F it eigen-decomposes the F × F Gram matrix XᵀX = V Λ Vᵀ and forms a_i = X v_i / σ_i
 // with σ_i = ‖X v_i‖, then re-orthonormalises the columns once. Cost: R·F²/2 (Gram) + R·F·k
 // (X V) + 2·R·k² (re-orthonormalisation) flops, plus O(F³); memory R·k + F². For F >= R it
-// takes the thin U of a bidiagonal divide-and-conquer SVD of X instead.
+// takes the thin U of a bidiagonal divide-and-conquer SVD of X instead. X may be a TrainingMatrix
+// over the frames themselves (training_matrix.h): then the only R-sized storage is the R × k
+// result (the directions are scaled, ordered and re-orthonormalised in place).
+PcaBasis thin_pca(const TrainingMatrix& X, int max_vectors);
 PcaBasis thin_pca(const Eigen::MatrixXd& X, int max_vectors);
 
 // thin_pca in two halves, for a caller that has XᵀX without forming it from X (key_points.cpp:
@@ -51,7 +56,7 @@ PcaBasis thin_pca(const Eigen::MatrixXd& X, int max_vectors);
 //   pca_from_directions        from U = X V (R × k): σ_i = ‖X v_i‖ and the basis thin_pca returns
 //                              (order by σ, floor, a_i = X v_i / σ_i, re-orthonormalised, signs).
 Eigen::MatrixXd leading_gram_eigenvectors(const Eigen::MatrixXd& gram, int count);
-PcaBasis pca_from_directions(const Eigen::MatrixXd& directions);
+PcaBasis pca_from_directions(Eigen::MatrixXd directions);
 
 // Points per row block of residual_pass: a block of the residual (kResidualBlockPoints · D rows
 // by F frames) stays in cache between its product and its reads (2.5 MB for D = 3, F = 324).
@@ -62,6 +67,8 @@ inline constexpr long kResidualBlockPoints = 1024;
 // E·directions (R × k) to `projected`. Blocks of kResidualBlockPoints points run on all cores;
 // the blocks do not depend on the thread count, so neither does any bit of the result. For the
 // key selection's residual at the papers' 100k illumination points, 777 MB never written.
+double residual_pass(const TrainingMatrix& X, const Eigen::MatrixXd& A, const Eigen::MatrixXd& C, int channels,
+                     const Eigen::MatrixXd& directions = Eigen::MatrixXd(), Eigen::MatrixXd* projected = nullptr);
 double residual_pass(const Eigen::MatrixXd& X, const Eigen::MatrixXd& A, const Eigen::MatrixXd& C, int channels,
                      const Eigen::MatrixXd& directions = Eigen::MatrixXd(), Eigen::MatrixXd* projected = nullptr);
 
@@ -74,7 +81,10 @@ double residual_pass(const Eigen::MatrixXd& X, const Eigen::MatrixXd& A, const E
 // X: R × F, the matrix `pca` was computed from (or any matrix with R rows); channels >= 1
 // divides R; point_error_bound >= 0; max_basis >= 1. Incremental: the residual loses one rank-1
 // term a_m (a_mᵀ E) per step, so the cost is ~5·R·F flops per candidate M (O(M·R·F) in all,
-// not O(M²·R·F)) and one R × F copy of X.
+// not O(M²·R·F)). A point's residual depends on its own rows only, so the pass runs a block of
+// rows at a time, each block as far as it must (memory: one block, never a copy of X).
+int choose_basis_size(const TrainingMatrix& X, const PcaBasis& pca, int channels, double point_error_bound,
+                      int max_basis);
 int choose_basis_size(const Eigen::MatrixXd& X, const PcaBasis& pca, int channels,
                       double point_error_bound, int max_basis);
 

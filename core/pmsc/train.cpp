@@ -145,16 +145,20 @@ FoldWeights fold_weights(const Eigen::MatrixXd& G, long F, const std::vector<lon
 // papers' 100k illumination points a fold's basis is 300k × 136 doubles, and faulting in fresh
 // pages for it, its linear copy and the model's float copy in every fold was a third of the
 // calibration's profile.
-void fold_subspace(const Eigen::MatrixXd& T, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M,
+// G may be the Gram matrix of X or of X less any one vector: the double-centred fold Gram and
+// W (whose columns sum to zero over `kept`) do not see it. So is X's offset, but for the mean.
+void fold_subspace(const TrainingMatrix& X, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M,
                    TrainingBasis& out) {
-  const FoldWeights weights = fold_weights(G, T.cols(), kept, M);
-  out.mean.noalias() = T * weights.mean_weights;
+  const FoldWeights weights = fold_weights(G, X.cols(), kept, M);
+  Eigen::MatrixXd mean;
+  X.times(weights.mean_weights, mean);
+  out.mean = mean.col(0);
+  if (X.offset().size() > 0) out.mean += X.offset();
   // The R × F by F × M product through the dispatched kernel (kernels.h): OpenBLAS's dgemm took
   // 0.07 s against Eigen/SSE2's 0.38 s for the 20,000-point Cornell box (60,000 × 144 × 100),
-  // once per calibration fold (issue #38 item 3).
-  out.basis.resize(T.rows(), weights.W.cols());  // keeps its storage when the size repeats
-  gemm_serial(T.rows(), T.cols(), weights.W.cols(), T.data(), T.rows(), weights.W.data(), weights.W.rows(), 0.0,
-              out.basis.data(), out.basis.rows());
+  // once per calibration fold (issue #38 item 3). out.basis keeps its storage when the size
+  // repeats.
+  X.times(weights.W, out.basis);
   out.sigma = weights.sigma;
 }
 
@@ -386,10 +390,8 @@ struct ChosenBasis {
   int M = 0;
   double projection_error = 0;          // of the training frames (report)
   std::vector<double> held_out_rms;     // the linear held-out rule's curve (report)
-  // Articulated (articulated.h): the frames less the subspace's mean (what the key selection
-  // reconstructs), the skinning, and the residuals' Gram matrix, which takes the place of T's in
-  // the calibration's folds.
-  Eigen::MatrixXd articulated_centred;
+  // Articulated (articulated.h): the skinning, and the residuals' Gram matrix, which takes the
+  // place of T's in the calibration's folds.
   ArticulatedSkinning skinning;
   Eigen::MatrixXd residual_gram;
   int residual_count = 0;
@@ -398,10 +400,11 @@ struct ChosenBasis {
 
 // The linear kind (2007 §2.1): the leading principal components of the centred frames, as many
 // as the held-out rule or the error bound asks.
-ChosenBasis linear_basis(const Eigen::VectorXd& mean, const Eigen::MatrixXd& centred, const PcaBasis& pca,
-                         const Eigen::MatrixXd& gram, const HeldOutSets& held, int chosen_cap, const TrainingOptions& o) {
+// `pca` is spent: its first M directions become the basis in place (issue #53: at studio sizes
+// the directions are the largest thing the PCA makes).
+ChosenBasis linear_basis(const TrainingMatrix& centred, PcaBasis pca, const Eigen::MatrixXd& gram,
+                         const HeldOutSets& held, int chosen_cap, const TrainingOptions& o) {
   const int D = o.channel_count;
-  const long F = centred.cols();
   ChosenBasis out;
   int M = o.basis_size > 0 ? std::min<int>(o.basis_size, static_cast<int>(pca.basis.cols())) : 0;
   std::vector<double>& held_out_rms = out.held_out_rms;
@@ -430,11 +433,10 @@ ChosenBasis linear_basis(const Eigen::VectorXd& mean, const Eigen::MatrixXd& cen
   // measure (only then: at the papers' 100k illumination points its passes over the centred
   // frames cost more than the rest of the PCA).
   if (M == 0) M = choose_basis_size(centred, pca, D, 0.5 * o.error_bound, chosen_cap);
-  out.subspace = TrainingBasis{mean, pca.basis.leftCols(M), pca.singular_values.head(M)};
+  pca.basis.conservativeResize(Eigen::NoChange, M);
+  out.subspace = TrainingBasis{centred.offset(), std::move(pca.basis), pca.singular_values.head(M)};
   // The projection's error through the dispatched kernels, never forming the R × F residual.
-  Eigen::MatrixXd projection_coordinates(M, F);
-  gemm_transposed_serial(M, centred.rows(), F, out.subspace.basis.data(), out.subspace.basis.outerStride(),
-                         centred.data(), centred.outerStride(), 0.0, projection_coordinates.data(), M);
+  const Eigen::MatrixXd projection_coordinates = centred.transposed_times(out.subspace.basis);
   out.projection_error = residual_pass(centred, out.subspace.basis, projection_coordinates, D);
   out.M = M;
   return out;
@@ -442,7 +444,7 @@ ChosenBasis linear_basis(const Eigen::VectorXd& mean, const Eigen::MatrixXd& cen
 
 // The articulated kind (articulated.h): the skinning columns L fitted to the frames, then the
 // principal components of what they leave, as many as the held-out rule keeps.
-Result<ChosenBasis> articulated_basis(const FrameMatrix& control_frames, const Eigen::MatrixXd& T,
+Result<ChosenBasis> articulated_basis(const FrameMatrix& control_frames, const TrainingMatrix& T,
                                       const HeldOutSets& held, int chosen_cap, const TrainingOptions& o) {
   const int D = o.channel_count;
   const long F = T.cols();
@@ -486,7 +488,8 @@ Result<ChosenBasis> articulated_basis(const FrameMatrix& control_frames, const E
     std::vector<long> every_frame(static_cast<size_t>(F));
     std::iota(every_frame.begin(), every_frame.end(), 0L);
     TrainingBasis residual;
-    fold_subspace(skinning.residuals, residual_gram, every_frame, std::max(residual_count, 1), residual);
+    fold_subspace(TrainingMatrix(skinning.residuals), residual_gram, every_frame, std::max(residual_count, 1),
+                  residual);
     if (residual_count == 0) residual.basis.resize(rows, 0);
     residual_count = static_cast<int>(residual.basis.cols());
     out.residual_count = residual_count;
@@ -494,7 +497,6 @@ Result<ChosenBasis> articulated_basis(const FrameMatrix& control_frames, const E
     out.subspace.basis.resize(rows, skinning.columns.cols() + residual_count);
     out.subspace.basis << skinning.columns, residual.basis;
     out.M = static_cast<int>(out.subspace.basis.cols());
-    out.articulated_centred = T.colwise() - out.subspace.mean;
     // The residual components are orthogonal to L's columns (every frame's residual is), so the
     // projection onto [L | R] leaves what R leaves of E.
     const Eigen::MatrixXd residual_centred = skinning.residuals.colwise() - residual.mean;
@@ -568,12 +570,12 @@ void assign_regions(const PcaBasis& pca, const ChosenBasis& basis, bool articula
 // the same skinning columns with the residual components of those frames alone (articulated).
 // `residual` is scratch; writes out.mean and out.basis (reused storage, as fold_subspace's).
 // Returns the residual components kept (articulated), or −1 when the frames are too few.
-int subset_basis(const Eigen::MatrixXd& T, const Eigen::MatrixXd& gram, const ChosenBasis& basis, bool articulated,
+int subset_basis(const TrainingMatrix& T, const Eigen::MatrixXd& gram, const ChosenBasis& basis, bool articulated,
                  const std::vector<long>& frames, TrainingBasis& residual, TrainingBasis& out) {
   if (articulated) {
     const ArticulatedSkinning& skinning = basis.skinning;
     const int residuals = static_cast<int>(std::min<long>(basis.residual_count, static_cast<long>(frames.size()) - 1));
-    fold_subspace(skinning.residuals, basis.residual_gram, frames, std::max(residuals, 1), residual);
+    fold_subspace(TrainingMatrix(skinning.residuals), basis.residual_gram, frames, std::max(residuals, 1), residual);
     const long kept = residuals > 0 ? residual.basis.cols() : 0;
     out.mean = residual.mean;
     out.basis.resize(T.rows(), skinning.columns.cols() + kept);
@@ -600,7 +602,7 @@ struct CrossFittedKeys {
   std::array<std::vector<int>, 2> keys;  // chosen on each half's frames alone
 };
 
-Result<CrossFittedKeys> cross_fitted_keys(const Eigen::MatrixXd& T, const Eigen::MatrixXd& gram, const ChosenBasis& basis,
+Result<CrossFittedKeys> cross_fitted_keys(const TrainingMatrix& T, const Eigen::MatrixXd& gram, const ChosenBasis& basis,
                                           bool articulated, KeyPointOptions options, long block, int key_count) {
   const long F = T.cols();
   CrossFittedKeys out;
@@ -621,7 +623,9 @@ Result<CrossFittedKeys> cross_fitted_keys(const Eigen::MatrixXd& T, const Eigen:
     const std::vector<long>& mine = frames[static_cast<size_t>(h)];
     if (subset_basis(T, gram, basis, articulated, mine, residual, half_basis) < 0) return CrossFittedKeys();
     Eigen::MatrixXd columns(T.rows(), static_cast<long>(mine.size()));
-    for (size_t j = 0; j < mine.size(); ++j) columns.col(static_cast<long>(j)) = T.col(mine[j]) - half_basis.mean;
+    const Eigen::VectorXd shift = (T.offset().size() > 0 ? Eigen::VectorXd(T.offset()) : Eigen::VectorXd::Zero(T.rows())) -
+                                  half_basis.mean;
+    for (size_t j = 0; j < mine.size(); ++j) columns.col(static_cast<long>(j)) = T.col(mine[j]) + shift;
     auto selection = select_key_points(columns, half_basis.basis, options);
     if (!selection) return selection.error();
     out.keys[static_cast<size_t>(h)] = std::move(selection->key_points);
@@ -646,7 +650,7 @@ struct FoldSamples {
   // at three lengths, dealt to the folds in turn (motion the rest of the training never saw); and
   // sparse folds, trained on every other frame an interleaved fold keeps (a model that saw less).
 FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
-                                const Eigen::MatrixXd& T, const Eigen::MatrixXd& gram, const HeldOutSets& held_sets,
+                                const TrainingMatrix& T, const Eigen::MatrixXd& gram, const HeldOutSets& held_sets,
                                 const ChosenBasis& basis, const CrossFittedKeys& crossfit, bool articulated,
                                 PmscModel& model, const TrainingOptions& o) {
   const int D = o.channel_count;
@@ -859,12 +863,18 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   const long control_points = control_frames.cols() / D;
   const bool articulated = o.subspace_kind == SubspaceKind::kArticulated;
 
-  // T: R × F, control rows first, in double: PCA and least squares at training time deserve it.
+  // T: R × F, control rows first, read in double (PCA and least squares at training time deserve
+  // it) from the frames themselves (training_matrix.h): the caller's F × R row-major float32
+  // frames are T's bytes. Only what must change them takes a double copy: the control and output
+  // rows of a cross model stacked, the frames with their rigid motion removed.
   const long control_rows = control_frames.cols();
   const long rows = control_rows + (cross ? output_frames->cols() : 0);
-  Eigen::MatrixXd T(rows, F);
-  T.topRows(control_rows) = control_frames.transpose().cast<double>();
-  if (cross) T.bottomRows(rows - control_rows) = output_frames->transpose().cast<double>();
+  Eigen::MatrixXd stacked;
+  if (cross || o.remove_rigid_motion) {
+    stacked.resize(rows, F);
+    stacked.topRows(control_rows) = control_frames.transpose().cast<double>();
+    if (cross) stacked.bottomRows(rows - control_rows) = output_frames->transpose().cast<double>();
+  }
 
   PmscModel model;
   model.channel_count = D;
@@ -878,30 +888,31 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   // flagged and more good ones hit on new shots of the articulated kind, the same on the linear.
   model.estimator = ErrorEstimator::kWorstPoint;
   if (o.remove_rigid_motion) {
-    const auto transforms = rigid_motion_per_frame(T, control_points);
-    for (long f = 0; f < F; ++f) apply_inverse(transforms[static_cast<size_t>(f)], T.col(f));
+    const auto transforms = rigid_motion_per_frame(stacked, control_points);
+    for (long f = 0; f < F; ++f) apply_inverse(transforms[static_cast<size_t>(f)], stacked.col(f));
   }
+  const TrainingMatrix T = stacked.size() > 0 ? TrainingMatrix(stacked) : TrainingMatrix(control_frames.data(), rows, F);
   const HeldOutSets held = held_out_sets(F, o);
 
   // The basis: principal components of the training matrix (2007 §2.1), or the skinning and
   // its residual components.
   const auto pca_start = std::chrono::steady_clock::now();
-  const Eigen::VectorXd mean = T.rowwise().mean();
-  Eigen::MatrixXd centred = T.colwise() - mean;
+  const Eigen::VectorXd mean = T.value_mean();
+  const TrainingMatrix centred = T.with_offset(mean);
   const int max_basis = static_cast<int>(std::min<long>(o.max_basis, F - 1));
   const int chosen_cap = std::max(1, std::min(max_basis, static_cast<int>(o.max_basis_fraction * static_cast<double>(F))));
   PcaBasis pca = thin_pca(centred, max_basis);
   if (pca.basis.cols() == 0) return invalid("the training frames are all identical: there is no motion to model");
-  Eigen::MatrixXd gram(F, F);
-  gram_lower_serial(T.rows(), F, T.data(), T.rows(), gram.data(), F);
-  gram = gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
+  // The folds' Gram matrix (fold_subspace): of the centred frames, which it cannot tell from T's
+  // but for rounding, and rounds less.
+  const Eigen::MatrixXd gram = centred.gram();
   ChosenBasis basis;
   if (articulated) {
     auto fitted = articulated_basis(control_frames, T, held, chosen_cap, o);
     if (!fitted) return fitted.error();
     basis = std::move(*fitted);
   } else {
-    basis = linear_basis(mean, centred, pca, gram, held, chosen_cap, o);
+    basis = linear_basis(centred, std::move(pca), gram, held, chosen_cap, o);
   }
   const int M = basis.M;
   const double pca_seconds = seconds_since(pca_start);
@@ -910,13 +921,14 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   const auto key_start = std::chrono::steady_clock::now();
   auto key_options = key_point_options(o, basis, mean, control_points, articulated);
   if (!key_options) return key_options.error();
-  auto selection =
-      select_key_points(articulated ? basis.articulated_centred : centred, basis.subspace.basis, *key_options);
+  // What the key selection reconstructs: the frames less the subspace's mean (the linear kind's is
+  // the frames' mean).
+  auto selection = select_key_points(T.with_offset(basis.subspace.mean), basis.subspace.basis, *key_options);
   if (!selection) return selection.error();
   // The keys of each half of the frames, when the calibration is cross-fitted (CrossFittedKeys).
   Result<CrossFittedKeys> crossfit = CrossFittedKeys();
   if (o.cross_fitted_calibration == 1) {
-    crossfit = cross_fitted_keys(T, gram, basis, articulated, *key_options, held.block,
+    crossfit = cross_fitted_keys(centred, gram, basis, articulated, *key_options, held.block,
                                  static_cast<int>(selection->key_points.size()));
     if (!crossfit) return crossfit.error();
   }
@@ -928,15 +940,14 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
 
   // Regions for local fail-through (the keys index the same points only without cross).
   if (!cross && o.region_count > 0) assign_regions(pca, basis, articulated, o, model);
-  // Neither is read again: the centred training matrix and the full PCA go before the
-  // calibration folds allocate theirs (issue #53: each is the size of the frames in double).
-  centred = Eigen::MatrixXd();
+  // Not read again: the articulated kind's full PCA goes before the calibration folds allocate
+  // theirs (issue #53).
   pca = PcaBasis{};
 
   // Calibration (calibration.h) and check points.
   const auto calibration_start = std::chrono::steady_clock::now();
   FoldSamples folds =
-      calibration_samples(control_frames, output_frames, T, gram, held, basis, *crossfit, articulated, model, o);
+      calibration_samples(control_frames, output_frames, centred, gram, held, basis, *crossfit, articulated, model, o);
   const long n = static_cast<long>(folds.key.size());
   store_samples(std::move(folds), *crossfit, o, cross, model);
   model.calibration.false_hit_rate = o.false_hit_rate;
