@@ -20,6 +20,7 @@
 #include "core/pmsc/key_points.h"
 #include "core/pmsc/local_fail_through.h"
 #include "core/pmsc/pca.h"
+#include "core/pmsc/relative_point_errors.h"
 #include "core/pmsc/regions.h"
 #include "core/pmsc/subspace.h"
 #include "core/geometry/rigid_fit.h"
@@ -640,7 +641,8 @@ struct FoldSamples {
   std::vector<char> half;  // the cross-fitting half of each sample's frame (CrossFittedKeys)
   std::vector<char> family;
   std::vector<Eigen::VectorXd> region_key, region_max;
-  std::vector<Eigen::VectorXf> point_errors;  // N each (check point selection; not cross)
+  // Each sample's row of the point errors (RelativePointErrors), when they are kept.
+  std::vector<long> error_row;
 };
 
   // ε from held-out training frames only (calibration.h): retrain the subspace without each
@@ -652,13 +654,21 @@ struct FoldSamples {
 FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
                                 const TrainingMatrix& T, const Eigen::MatrixXd& gram, const HeldOutSets& held_sets,
                                 const ChosenBasis& basis, const CrossFittedKeys& crossfit, bool articulated,
-                                PmscModel& model, const TrainingOptions& o) {
+                                PmscModel& model, const TrainingOptions& o, RelativePointErrors* errors) {
   const int D = o.channel_count;
   const bool cross = output_frames != nullptr;
   const long control_rows = control_frames.cols();
   const std::vector<HeldOutSet>& sets = held_sets.sets;
   const long R_count = model.region_count;
   const long N_out = model.point_count;
+  // The row of the point errors of a set's first held-out frame: a frame's row is fixed before any
+  // fold runs, so that the sets write theirs in parallel (a frame a fold could not judge leaves
+  // its row unread).
+  std::vector<long> first_row(sets.size() + 1, 0);
+  for (size_t set = 0; set < sets.size(); ++set) {
+    first_row[set + 1] = first_row[set] + static_cast<long>(sets[set].held_out.size());
+  }
+  if (errors != nullptr) errors->u.setZero(first_row.back(), N_out);
   // Every set is independent of the others (issue #38 item 3): the sets run on all cores, each
   // worker taking the next set not yet taken (their costs differ: a sparse fold trains on half
   // the frames), each writing its own samples; they are joined in set order afterwards, so the
@@ -693,9 +703,10 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
     // other half; without cross-fitting, the served keys.
     const int halves = crossfit.half.empty() ? 1 : 2;
     for (int h = 0; h < halves; ++h) {
-      std::vector<long> judged;
-      for (long f : held.held_out) {
-        if (halves == 1 || crossfit.half[static_cast<size_t>(f)] == h) judged.push_back(f);
+      std::vector<long> judged;  // positions in held.held_out
+      for (size_t p = 0; p < held.held_out.size(); ++p) {
+        const long f = held.held_out[p];
+        if (halves == 1 || crossfit.half[static_cast<size_t>(f)] == h) judged.push_back(static_cast<long>(p));
       }
       if (judged.empty()) continue;
       const std::vector<int>& keys = halves == 1 ? model.key_points : crossfit.keys[static_cast<size_t>(1 - h)];
@@ -723,7 +734,7 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
         std::vector<float*> destinations(static_cast<size_t>(batch));
         for (long b = 0; b < batch; ++b) {
           // Held-out frames enter in the world frame, as at run time.
-          const long f = judged[static_cast<size_t>(first + b)];
+          const long f = held.held_out[static_cast<size_t>(judged[static_cast<size_t>(first + b)])];
           const Eigen::VectorXf control = control_frames.row(f).transpose();
           fold_runtime.estimate(gather_key_values(fold_model, control), Eigen::VectorXf(),
                                 work.estimates[static_cast<size_t>(b)]);
@@ -732,7 +743,8 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
         }
         fold_runtime.reconstruct(estimates, destinations);
         for (long b = 0; b < batch; ++b) {
-          const long f = judged[static_cast<size_t>(first + b)];
+          const long position = judged[static_cast<size_t>(first + b)];
+          const long f = held.held_out[static_cast<size_t>(position)];
           const PoseEstimate& estimate = work.estimates[static_cast<size_t>(b)];
           const Eigen::VectorXf truth =
               cross ? Eigen::VectorXf(output_frames->row(f).transpose()) : Eigen::VectorXf(control_frames.row(f).transpose());
@@ -743,8 +755,15 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
               static_cast<float>(estimate.scale);
           out.key.push_back(estimate.key_point_error);
           out.key_max.push_back(estimate.key_point_max_error);
-          out.max.push_back(static_cast<double>(point_errors.maxCoeff()));
-          if (!cross) out.point_errors.push_back(point_errors);
+          const float largest = point_errors.maxCoeff();
+          out.max.push_back(static_cast<double>(largest));
+          if (errors != nullptr) {
+            const long row = first_row[set] + position;
+            out.error_row.push_back(row);
+            for (long i = 0; i < N_out && largest > 0; ++i) {
+              errors->u(row, i) = RelativePointErrors::quantise(point_errors(i), largest);
+            }
+          }
           if (R_count > 0) {
             Eigen::VectorXd region_max = Eigen::VectorXd::Zero(R_count);
             for (long i = 0; i < N_out; ++i) {
@@ -780,17 +799,22 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
     joined.half.insert(joined.half.end(), out.half.begin(), out.half.end());
     for (auto& v : out.region_key) joined.region_key.push_back(std::move(v));
     for (auto& v : out.region_max) joined.region_max.push_back(std::move(v));
-    for (auto& v : out.point_errors) joined.point_errors.push_back(std::move(v));
+    joined.error_row.insert(joined.error_row.end(), out.error_row.begin(), out.error_row.end());
     out = FoldSamples();
   }
   report_progress(o.progress, "calibration", static_cast<int>(sets.size()), static_cast<int>(sets.size()));
   return joined;
 }
 
+// ⌈fraction · K⌉ check points (none for a cross model).
+int check_point_count(const TrainingOptions& o, bool cross, long key_points) {
+  return cross ? 0 : static_cast<int>(std::ceil(o.check_point_fraction * static_cast<double>(key_points) - 1e-9));
+}
+
 // The samples into the model's calibration, then check points (check_points.h) from the
 // held-out residuals and each sample's e_check.
-void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const TrainingOptions& o, bool cross,
-                   PmscModel& model) {
+void store_samples(FoldSamples folds, const RelativePointErrors& errors, const CrossFittedKeys& crossfit,
+                   const TrainingOptions& o, bool cross, PmscModel& model) {
   const long R_count = model.region_count;
   CalibrationSamples& samples = model.calibration.samples;
   const long n = static_cast<long>(folds.key.size());
@@ -805,17 +829,21 @@ void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const Tra
   }
   samples.fold_family = std::move(folds.family);
 
-  const int check_count =
-      cross ? 0 : static_cast<int>(std::ceil(o.check_point_fraction * static_cast<double>(model.key_point_count()) - 1e-9));
+  const int check_count = check_point_count(o, cross, model.key_point_count());
   if (check_count == 0 || n == 0) return;
-  // The samples' point errors stay as the folds made them (one N-vector each): the largest thing
-  // training holds at studio sizes, so never copied whole (issue #53).
-  const std::vector<Eigen::VectorXf>& point_errors = folds.point_errors;
+  // The samples' point errors as the folds left them (RelativePointErrors: the largest thing
+  // training holds at studio sizes), by row; the selection counts the rows of `samples`.
+  const long rows = errors.u.rows();
+  Eigen::VectorXd row_max = Eigen::VectorXd::Zero(rows);
+  for (long i = 0; i < n; ++i) row_max(folds.error_row[static_cast<size_t>(i)]) = samples.max_errors(i);
+  const auto rows_of = [&](const auto& counts) {
+    std::vector<char> counted(static_cast<size_t>(rows), 0);
+    for (long i = 0; i < n; ++i) counted[static_cast<size_t>(folds.error_row[static_cast<size_t>(i)])] = counts(i);
+    return counted;
+  };
   const double noise_floor = kCalibrationNoiseFraction * o.error_tolerance;
   // The served check points: from every sample's residuals.
-  std::vector<long> every_sample(static_cast<size_t>(n));
-  std::iota(every_sample.begin(), every_sample.end(), 0L);
-  model.check_points = select_check_points(point_errors, every_sample, samples.max_errors, model.key_points,
+  model.check_points = select_check_points(errors, rows_of([](long) { return true; }), row_max, model.key_points,
                                            model.point_regions, model.region_count, check_count, noise_floor);
   const long C = model.check_point_count();
   if (C == 0) return;
@@ -829,13 +857,10 @@ void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const Tra
   std::array<std::vector<int>, 2> checks_of_half = {model.check_points, model.check_points};
   if (halves) {
     for (int h = 0; h < 2; ++h) {
-      std::vector<long> others;
-      for (long i = 0; i < n; ++i) {
-        if (folds.half[static_cast<size_t>(i)] != h) others.push_back(i);
-      }
+      const auto others = rows_of([&](long i) { return folds.half[static_cast<size_t>(i)] != h; });
       checks_of_half[static_cast<size_t>(h)] =
-          select_check_points(point_errors, others, samples.max_errors, crossfit.keys[static_cast<size_t>(1 - h)],
-                              model.point_regions, model.region_count, static_cast<int>(C), noise_floor);
+          select_check_points(errors, others, row_max, crossfit.keys[static_cast<size_t>(1 - h)], model.point_regions,
+                              model.region_count, static_cast<int>(C), noise_floor);
     }
   }
   samples.check_point_errors = Eigen::VectorXd::Zero(n);
@@ -843,7 +868,8 @@ void store_samples(FoldSamples folds, const CrossFittedKeys& crossfit, const Tra
   for (long i = 0; i < n; ++i) {
     const int h = halves ? folds.half[static_cast<size_t>(i)] : 0;
     for (int point : checks_of_half[static_cast<size_t>(h)]) {
-      const double error = static_cast<double>(point_errors[static_cast<size_t>(i)](point));
+      const double error =
+          RelativePointErrors::error(errors.u(folds.error_row[static_cast<size_t>(i)], point), samples.max_errors(i));
       samples.check_point_errors(i) = std::max(samples.check_point_errors(i), error);
       if (R_count > 0) {
         double& region = samples.region_check_point_errors(i, model.point_regions[static_cast<size_t>(point)]);
@@ -940,16 +966,21 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
 
   // Regions for local fail-through (the keys index the same points only without cross).
   if (!cross && o.region_count > 0) assign_regions(pca, basis, articulated, o, model);
-  // Not read again: the articulated kind's full PCA goes before the calibration folds allocate
-  // theirs (issue #53).
+  // Not read again: the articulated kind's full PCA and the served basis in double (the model has
+  // it in float; the folds make their own) go before the calibration folds allocate theirs
+  // (issue #53: at 186k points and M = 133 the basis alone is 0.6 GB).
   pca = PcaBasis{};
+  basis.subspace.basis = Eigen::MatrixXd();
 
   // Calibration (calibration.h) and check points.
   const auto calibration_start = std::chrono::steady_clock::now();
-  FoldSamples folds =
-      calibration_samples(control_frames, output_frames, centred, gram, held, basis, *crossfit, articulated, model, o);
+  RelativePointErrors errors;
+  const bool keep_errors = check_point_count(o, cross, model.key_point_count()) > 0;
+  FoldSamples folds = calibration_samples(control_frames, output_frames, centred, gram, held, basis, *crossfit,
+                                          articulated, model, o, keep_errors ? &errors : nullptr);
   const long n = static_cast<long>(folds.key.size());
-  store_samples(std::move(folds), *crossfit, o, cross, model);
+  store_samples(std::move(folds), errors, *crossfit, o, cross, model);
+  errors = RelativePointErrors();
   model.calibration.false_hit_rate = o.false_hit_rate;
   model.calibration.block_frames = static_cast<int>(held.block);
   ANIMSPACE_RETURN_IF_ERROR(apply_calibration(model, o.error_tolerance, o.blend_zone_ratio));

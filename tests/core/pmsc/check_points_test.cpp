@@ -1,7 +1,10 @@
 // Check point selection (issue #35, core/pmsc/check_points.h) on hand-worked cases.
 #include "core/pmsc/check_points.h"
 
+#include <cmath>
 #include <random>
+
+#include "core/pmsc/relative_point_errors.h"
 
 #include <gtest/gtest.h>
 
@@ -92,6 +95,51 @@ TEST(CheckPoints, TheLazySelectionTakesWhatAFullScanTakes) {
     const Eigen::VectorXd max = Eigen::VectorXd::Ones(n);
     const std::vector<int> keys = {0};
     EXPECT_EQ(select_check_points(e, max, keys, {}, 0, 25, 1e-6), greedy_by_scan(e, keys, 25)) << "trial " << trial;
+  }
+}
+
+// The 16-bit form training keeps (issue #53): an error read back is below the true one by less
+// than 2⁻¹⁶ of its sample's largest, never above it.
+TEST(RelativePointErrors, AnErrorReadBackIsNeverAboveTheTruthAndWithinOneStep) {
+  std::mt19937 random(11);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int trial = 0; trial < 10000; ++trial) {
+    const float largest = std::ldexp(unit(random) + 0.5f, static_cast<int>(random() % 40) - 20);
+    const float error = trial % 100 == 0 ? largest : unit(random) * largest;
+    const double back = RelativePointErrors::error(RelativePointErrors::quantise(error, largest), largest);
+    EXPECT_LE(back, static_cast<double>(error) * (1 + 1e-12)) << error << " of " << largest;
+    EXPECT_GE(back, static_cast<double>(error) - static_cast<double>(largest) / 65535.0 * (1 + 1e-6));
+  }
+  EXPECT_EQ(RelativePointErrors::quantise(2.0f, 2.0f), 65535);
+  EXPECT_EQ(RelativePointErrors::quantise(0.0f, 2.0f), 0);
+}
+
+// The selection on the 16-bit form takes what the greedy step's definition takes (a full scan,
+// here in the form's own integer units, where sums are exact and ties tie), over the rows counted
+// and above the noise floor only; levels on a coarse grid, so that gains tie often.
+TEST(RelativePointErrors, TheSelectionTakesWhatAFullScanTakesOverTheRowsCounted) {
+  std::mt19937 random(5);
+  std::uniform_int_distribution<int> level(0, 5);
+  for (int trial = 0; trial < 20; ++trial) {
+    const long n = 14, N = 40;
+    RelativePointErrors errors;
+    errors.u.resize(n, N);
+    Eigen::VectorXd max = Eigen::VectorXd::Ones(n);
+    for (long i = 0; i < n; ++i) {
+      for (long j = 0; j < N; ++j) {
+        errors.u(i, j) = j == 0 ? 65535 : static_cast<std::uint16_t>(13107 * level(random));  // 65535 / 5
+      }
+    }
+    // Rows 3 and 9 not counted; row 5 below the noise floor.
+    std::vector<char> counted(static_cast<size_t>(n), 1);
+    counted[3] = counted[9] = 0;
+    max(5) = 1e-9;
+    Eigen::MatrixXf judged(n - 3, N);
+    for (long i = 0, row = 0; i < n; ++i) {
+      if (i != 3 && i != 5 && i != 9) judged.row(row++) = errors.u.row(i).cast<float>();
+    }
+    EXPECT_EQ(select_check_points(errors, counted, max, {0}, {}, 0, 12, 1e-6), greedy_by_scan(judged, {0}, 12))
+        << "trial " << trial;
   }
 }
 

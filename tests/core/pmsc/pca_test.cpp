@@ -349,5 +349,75 @@ TEST(PcaChooseBasisSize, EmptyBasisGivesZero) {
   EXPECT_EQ(choose_basis_size(X, thin_pca(X, 4), 3, 0.1, 4), 0);
 }
 
+// ---------------------------------------------------------------------------------------------
+// TrainingMatrix (issue #53): the frames read in place, a block of rows promoted at a time
+
+// Float frames F × R row-major (as a point cache is read), over more rows than one block, against
+// their explicit double copy less the mean: every value, every product and what the PCA, the
+// choice of M and the residual pass make of them.
+TEST(TrainingMatrixTest, FloatFramesReadInPlaceAreTheirCentredDoubleCopy) {
+  const Index points = 1100, D = 3, R = points * D, F = 24;
+  ASSERT_GT(R, TrainingMatrix::kBlockRows);
+  const MatrixXd low_rank = random_orthonormal(R, 5, 91) * (10.0 * gaussian_matrix(5, F, 92)) +
+                            0.01 * gaussian_matrix(R, F, 93) + MatrixXd::Constant(R, F, 3.0);
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> frames =
+      low_rank.transpose().cast<float>();
+  const MatrixXd T = frames.transpose().cast<double>();
+  const VectorXd mean = T.rowwise().mean();
+  const MatrixXd X = T.colwise() - mean;
+
+  const TrainingMatrix values(frames.data(), R, F);
+  EXPECT_LT((values.value_mean() - mean).cwiseAbs().maxCoeff(), 1e-12);
+  const TrainingMatrix centred = values.with_offset(mean);
+  ASSERT_EQ(centred.rows(), R);
+  ASSERT_EQ(centred.cols(), F);
+  EXPECT_EQ(centred.col(7), X.col(7));
+  MatrixXd block(10, F);
+  centred.rows_into(R - 10, 10, block);
+  EXPECT_EQ(block, X.bottomRows(10));
+  const std::vector<int> points_asked = {0, 1099, 512};
+  for (size_t k = 0; k < points_asked.size(); ++k) {
+    EXPECT_EQ(centred.gather_rows(points_asked, 3).middleRows(static_cast<Index>(k) * 3, 3),
+              X.middleRows(points_asked[k] * 3, 3));
+  }
+  const double scale = X.squaredNorm();
+  EXPECT_LT((centred.gram() - X.transpose() * X).cwiseAbs().maxCoeff(), 1e-13 * scale);
+  const MatrixXd W = gaussian_matrix(F, 4, 94);
+  MatrixXd product;
+  centred.times(W, product);
+  EXPECT_LT((product - X * W).cwiseAbs().maxCoeff(), 1e-12 * (X * W).cwiseAbs().maxCoeff());
+  const MatrixXd A = random_orthonormal(R, 4, 95);
+  EXPECT_LT((centred.transposed_times(A) - A.transpose() * X).cwiseAbs().maxCoeff(), 1e-12 * std::sqrt(scale));
+
+  const PcaBasis from_view = thin_pca(centred, 8);
+  const PcaBasis from_copy = thin_pca(X, 8);
+  ASSERT_EQ(from_view.basis.cols(), from_copy.basis.cols());
+  EXPECT_LT((from_view.singular_values - from_copy.singular_values).cwiseAbs().maxCoeff(),
+            1e-10 * from_copy.singular_values(0));
+  // The five signal directions are well separated: the same vectors, signs fixed alike.
+  EXPECT_LT((from_view.basis.leftCols(5) - from_copy.basis.leftCols(5)).cwiseAbs().maxCoeff(), 1e-9);
+
+  // The choice of M against its definition: the worst point of X − A_M A_Mᵀ X, for each M.
+  const MatrixXd& basis = from_copy.basis;
+  std::vector<double> worst;
+  for (Index m = 1; m <= basis.cols(); ++m) {
+    const MatrixXd residual = X - basis.leftCols(m) * (basis.leftCols(m).transpose() * X);
+    worst.push_back(max_point_error(residual, 3));
+  }
+  for (const double bound : {worst[2] * 1.01, worst[4] * 1.01, worst[6] * 1.01, worst.back() * 0.5}) {
+    const int by_definition =
+        static_cast<int>(std::find_if(worst.begin(), worst.end(), [&](double w) { return w <= bound; }) - worst.begin()) + 1;
+    EXPECT_EQ(choose_basis_size(centred, from_copy, 3, bound, 8), std::min<int>(by_definition, 8)) << bound;
+  }
+
+  // The residual pass reads the same residual.
+  const MatrixXd C = basis.leftCols(3).transpose() * X;
+  const MatrixXd directions = gaussian_matrix(F, 2, 96);
+  MatrixXd from_view_projected, from_copy_projected;
+  EXPECT_NEAR(residual_pass(centred, basis.leftCols(3), C, 3, directions, &from_view_projected),
+              residual_pass(X, basis.leftCols(3), C, 3, directions, &from_copy_projected), 1e-12);
+  EXPECT_LT((from_view_projected - from_copy_projected).cwiseAbs().maxCoeff(), 1e-10);
+}
+
 }  // namespace
 }  // namespace animspace::pmsc
