@@ -63,6 +63,11 @@ int fsync_retrying(int fd) {
 }  // namespace
 
 Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes) {
+  return write_file_atomically(path, [&](const AppendPiece& append) { append(bytes); });
+}
+
+Status write_file_atomically(const std::filesystem::path& path,
+                             const std::function<void(const AppendPiece& append)>& write_pieces) {
   const std::string target_name = path.filename().string();
   if (target_name.empty() || target_name == "." || target_name == "..") {
     return make_error(ErrorCode::kIo, path.string() + ": not a file path");
@@ -96,9 +101,12 @@ Status write_file_atomically(const std::filesystem::path& path, std::string_view
       return fail("cannot copy permissions to temporary file", errno);
     }
   }
-  if (int error_number = write_all(file.get(), bytes); error_number != 0) {
-    return fail("cannot write temporary file", error_number);
-  }
+  int write_error = 0;
+  write_pieces([&](std::string_view piece) {
+    if (write_error == 0) write_error = write_all(file.get(), piece);
+    return write_error == 0;
+  });
+  if (write_error != 0) return fail("cannot write temporary file", write_error);
   // The data must be on disk before the rename makes it visible, or a crash could leave `path`
   // naming an empty or partial file (the classic ext4 delayed-allocation zero-length file).
   if (int error_number = fsync_retrying(file.get()); error_number != 0) {

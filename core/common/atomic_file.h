@@ -20,6 +20,14 @@ namespace animspace {
 // Errors: kIo naming the path, the step that failed and the operating system's reason.
 Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes);
 
+// The same for a file made in pieces, so that a large one is never whole in memory (a model file
+// with its training frames, issue #53): `write_pieces(append)` hands each piece to append in
+// order; append returns false once a write has failed, and write_pieces should then stop (the
+// error is the one returned).
+using AppendPiece = std::function<bool(std::string_view piece)>;
+Status write_file_atomically(const std::filesystem::path& path,
+                             const std::function<void(const AppendPiece& append)>& write_pieces);
+
 // Reads a whole file. Errors: kNotFound when it does not exist, kIo otherwise (with reason).
 Result<std::string> read_whole_file(const std::filesystem::path& path);
 

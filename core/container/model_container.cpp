@@ -782,7 +782,12 @@ Result<FaceMatrix> ModelContainer::faces(std::string_view name) const {
 
 // --- Serialisation -----------------------------------------------------------------------------
 
-std::string serialize(const ModelContainer& container) {
+namespace {
+
+// The file as pieces in order (header and section table, each payload, padding, footer), the
+// checksums computed before or as they go, so that writing a file never holds it whole (issue #53:
+// a model with 1.1 GB of training frames was serialised into a second 1.1 GB string).
+void emit(const ModelContainer& container, const AppendPiece& append) {
   struct Planned {
     std::string_view name;
     SectionType type;
@@ -802,7 +807,8 @@ std::string serialize(const ModelContainer& container) {
     planned.push_back({name, section.type, section.rows, section.cols, section.bytes, 0});
   }
   assert(planned.size() <= kMaxSections);
-  uint64_t cursor = kHeaderSize + kEntrySize * planned.size();
+  const uint64_t table_end = kHeaderSize + kEntrySize * planned.size();
+  uint64_t cursor = table_end;
   for (Planned& p : planned) {
     p.offset = cursor;
     cursor = align_up(cursor + p.payload.size());
@@ -810,39 +816,60 @@ std::string serialize(const ModelContainer& container) {
   const uint64_t payload_end = cursor;
   const uint64_t file_size = payload_end + kFooterSize;
 
-  // Zero-filled, so padding and reserved bytes need no code.
-  std::string out(static_cast<size_t>(file_size), '\0');
-
-  // Section table and payloads.
+  // Header and section table, zero-filled so that reserved bytes need no code.
+  std::string head(static_cast<size_t>(table_end), '\0');
   for (size_t i = 0; i < planned.size(); ++i) {
     const Planned& p = planned[i];
     const size_t entry_at = kHeaderSize + kEntrySize * i;
     // min() keeps a release build (asserts off) from writing past the name field.
-    std::memcpy(out.data() + entry_at + kNameAt, p.name.data(),
-                std::min(p.name.size(), kMaxSectionNameLength));
-    store_le<uint32_t>(out, entry_at + kTypeAt, static_cast<uint32_t>(p.type));
-    store_le<uint32_t>(out, entry_at + kRowsAt, p.rows);
-    store_le<uint32_t>(out, entry_at + kColsAt, p.cols);
-    store_le<uint32_t>(out, entry_at + kPayloadCrcAt, crc32(p.payload));
-    store_le<uint64_t>(out, entry_at + kOffsetAt, p.offset);
-    store_le<uint64_t>(out, entry_at + kSizeAt, p.payload.size());
-    if (!p.payload.empty()) {
-      std::memcpy(out.data() + p.offset, p.payload.data(), p.payload.size());
-    }
+    std::memcpy(head.data() + entry_at + kNameAt, p.name.data(), std::min(p.name.size(), kMaxSectionNameLength));
+    store_le<uint32_t>(head, entry_at + kTypeAt, static_cast<uint32_t>(p.type));
+    store_le<uint32_t>(head, entry_at + kRowsAt, p.rows);
+    store_le<uint32_t>(head, entry_at + kColsAt, p.cols);
+    store_le<uint32_t>(head, entry_at + kPayloadCrcAt, crc32(p.payload));
+    store_le<uint64_t>(head, entry_at + kOffsetAt, p.offset);
+    store_le<uint64_t>(head, entry_at + kSizeAt, p.payload.size());
   }
+  std::memcpy(head.data() + kMagicAt, kMagic.data(), kMagic.size());
+  store_le<uint32_t>(head, kVersionAt, kFormatVersion);
+  store_le<uint32_t>(head, kHeaderSizeAt, static_cast<uint32_t>(kHeaderSize));
+  store_le<uint64_t>(head, kFileSizeAt, file_size);
+  store_le<uint32_t>(head, kSectionCountAt, static_cast<uint32_t>(planned.size()));
+  store_le<uint32_t>(head, kEntrySizeAt, static_cast<uint32_t>(kEntrySize));
+  store_le<uint32_t>(head, kHeaderCrcAt, crc32(std::string_view(head).substr(0, kHeaderCrcAt)));
 
-  // Header, then its checksum over bytes [0, 60).
-  std::memcpy(out.data() + kMagicAt, kMagic.data(), kMagic.size());
-  store_le<uint32_t>(out, kVersionAt, kFormatVersion);
-  store_le<uint32_t>(out, kHeaderSizeAt, static_cast<uint32_t>(kHeaderSize));
-  store_le<uint64_t>(out, kFileSizeAt, file_size);
-  store_le<uint32_t>(out, kSectionCountAt, static_cast<uint32_t>(planned.size()));
-  store_le<uint32_t>(out, kEntrySizeAt, static_cast<uint32_t>(kEntrySize));
-  store_le<uint32_t>(out, kHeaderCrcAt, crc32(std::string_view(out).substr(0, kHeaderCrcAt)));
+  // The footer's CRC runs over every byte before it, piece by piece.
+  uint32_t file_crc = 0;
+  const auto write = [&](std::string_view piece) {
+    file_crc = crc32_update(file_crc, piece);
+    return append(piece);
+  };
+  if (!write(head)) return;
+  static constexpr char kZeros[8] = {};
+  uint64_t written = table_end;
+  for (const Planned& p : planned) {
+    assert(written == p.offset);
+    if (!write(p.payload)) return;
+    written += p.payload.size();
+    const uint64_t padding = align_up(written) - written;
+    if (padding > 0 && !write(std::string_view(kZeros, static_cast<size_t>(padding)))) return;
+    written += padding;
+  }
+  assert(written == payload_end);
+  std::string footer(static_cast<size_t>(kFooterSize), '\0');
+  store_le<uint32_t>(footer, 0, file_crc);
+  std::memcpy(footer.data() + 4, kFooterMarker.data(), kFooterMarker.size());
+  append(footer);
+}
 
-  // Footer: CRC of everything before it, then the end marker.
-  store_le<uint32_t>(out, payload_end, crc32(std::string_view(out).substr(0, payload_end)));
-  std::memcpy(out.data() + payload_end + 4, kFooterMarker.data(), kFooterMarker.size());
+}  // namespace
+
+std::string serialize(const ModelContainer& container) {
+  std::string out;
+  emit(container, [&](std::string_view piece) {
+    out.append(piece);
+    return true;
+  });
   return out;
 }
 
@@ -914,9 +941,9 @@ Status write_file(const std::filesystem::path& path, const ModelContainer& conta
     if (container.bytes_on_disk() > 0) {
       ModelContainer resident = container;
       ANIMSPACE_RETURN_IF_ERROR(resident.load_sections());
-      return write_file_atomically(path, serialize(resident));
+      return write_file_atomically(path, [&](const AppendPiece& append) { emit(resident, append); });
     }
-    return write_file_atomically(path, serialize(container));
+    return write_file_atomically(path, [&](const AppendPiece& append) { emit(container, append); });
   } catch (const std::bad_alloc&) {
     return make_error(ErrorCode::kResourceExhausted,
                       path.string() + ": out of memory while serialising the model container");

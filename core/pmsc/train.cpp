@@ -92,11 +92,17 @@ std::vector<int> grid_seeds(const PointMatrix& positions, int cells) {
   return seeds;
 }
 
-struct TrainingBasis {
-  Eigen::VectorXd mean;    // R
-  Eigen::MatrixXd basis;   // R × M
-  Eigen::VectorXd sigma;   // M
+// A subspace as training makes it: the served one in double; a calibration fold's in float, the
+// precision its model serves it in (issue #53: two workers' double fold bases were 1.2 GB at 186k
+// points), its mean and the key rows taken in double all the same.
+template <typename Scalar>
+struct SubspaceBasis {
+  Eigen::VectorXd mean;                                             // R
+  Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> basis;      // R × M
+  Eigen::VectorXd sigma;                                            // M
 };
+using TrainingBasis = SubspaceBasis<double>;
+using FoldBasis = SubspaceBasis<float>;
 
 // The subspace of the frames `kept` (columns of T) for a calibration fold, through the Gram
 // matrix G = TᵀT of all frames: the fold's centred Gram matrix is G restricted to `kept` and
@@ -148,8 +154,9 @@ FoldWeights fold_weights(const Eigen::MatrixXd& G, long F, const std::vector<lon
 // calibration's profile.
 // G may be the Gram matrix of X or of X less any one vector: the double-centred fold Gram and
 // W (whose columns sum to zero over `kept`) do not see it. So is X's offset, but for the mean.
+template <typename Scalar>
 void fold_subspace(const TrainingMatrix& X, const Eigen::MatrixXd& G, const std::vector<long>& kept, int M,
-                   TrainingBasis& out) {
+                   SubspaceBasis<Scalar>& out) {
   const FoldWeights weights = fold_weights(G, X.cols(), kept, M);
   Eigen::MatrixXd mean;
   X.times(weights.mean_weights, mean);
@@ -215,32 +222,35 @@ int smallest_within_slack(const std::vector<double>& rms, int first, double slac
 // already in the span. The basis and this direction span the affine subspace with one more
 // dimension, through the origin, so s·keys then give exactly s·f̂. O(R·M): a QR of every fold's
 // R × (M + 1) rows doubled the calibration's time on the Cornell box.
-Eigen::VectorXd mean_direction(const TrainingBasis& s) {
+template <typename Scalar>
+Eigen::VectorXd mean_direction(const SubspaceBasis<Scalar>& s) {
+  // A block of rows at a time, so that a float basis is never promoted whole.
+  const long R = s.basis.rows(), block = TrainingMatrix::kBlockRows;
   Eigen::VectorXd direction = s.mean;
-  for (int pass = 0; pass < 2; ++pass) direction -= s.basis * (s.basis.transpose() * direction);
+  for (int pass = 0; pass < 2; ++pass) {
+    Eigen::VectorXd coefficients = Eigen::VectorXd::Zero(s.basis.cols());
+    for (long r0 = 0; r0 < R; r0 += block) {
+      const long n = std::min(block, R - r0);
+      coefficients.noalias() += s.basis.middleRows(r0, n).template cast<double>().transpose() * direction.segment(r0, n);
+    }
+    for (long r0 = 0; r0 < R; r0 += block) {
+      const long n = std::min(block, R - r0);
+      direction.segment(r0, n).noalias() -= s.basis.middleRows(r0, n).template cast<double>() * coefficients;
+    }
+  }
   const double norm = direction.norm();
   if (!(norm > 1e-9 * s.mean.norm())) return Eigen::VectorXd();
   return direction / norm;
 }
 
-// Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
-// A relative-tolerance model is served linear: mean 0 and the mean's direction as one more basis
-// column. Written straight into the model's own storage (the calibration's workers reuse it).
-Status assemble(const TrainingBasis& affine, long control_rows, bool cross, const std::vector<int>& keys, PmscModel& m) {
-  const Eigen::VectorXd extra = m.relative_tolerance ? mean_direction(affine) : Eigen::VectorXd();
+// The key rows of a subspace (mean, basis, and the relative-tolerance model's extra column when
+// `extra` has rows) into a runtime model, then its projection.
+template <typename Scalar>
+Status place_keys(const Eigen::VectorXd& mean, const Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>& basis,
+                  const Eigen::VectorXd& extra, const std::vector<int>& keys, PmscModel& m) {
   const long D = m.channel_count;
-  const long M_affine = affine.basis.cols();
+  const long M_affine = basis.cols();
   const long M = M_affine + (extra.size() > 0 ? 1 : 0);
-  const long output_first = cross ? control_rows : 0;
-  const long output_rows = affine.mean.size() - output_first;
-  if (m.relative_tolerance) {
-    m.mean.setZero(output_rows);
-  } else {
-    m.mean = affine.mean.segment(output_first, output_rows).cast<float>();
-  }
-  m.basis.resize(output_rows, M);
-  m.basis.leftCols(M_affine) = affine.basis.middleRows(output_first, output_rows).cast<float>();
-  if (M > M_affine) m.basis.col(M_affine) = extra.segment(output_first, output_rows).cast<float>();
   m.key_points = keys;
   const long K = static_cast<long>(keys.size());
   m.key_mean.resize(K * D);
@@ -250,12 +260,34 @@ Status assemble(const TrainingBasis& affine, long control_rows, bool cross, cons
     if (m.relative_tolerance) {
       m.key_mean.segment(k * D, D).setZero();
     } else {
-      m.key_mean.segment(k * D, D) = affine.mean.segment(row, D);
+      m.key_mean.segment(k * D, D) = mean.segment(row, D);
     }
-    m.key_basis.block(k * D, 0, D, M_affine) = affine.basis.middleRows(row, D);
+    m.key_basis.block(k * D, 0, D, M_affine) = basis.middleRows(row, D).template cast<double>();
     if (M > M_affine) m.key_basis.block(k * D, M_affine, D, 1) = extra.segment(row, D);
   }
   return prepare_projection(m);
+}
+
+// Copies the output rows and the key rows of a subspace into a runtime model and prepares it.
+// A relative-tolerance model is served linear: mean 0 and the mean's direction as one more basis
+// column. Written straight into the model's own storage (the calibration's workers reuse it).
+template <typename Scalar>
+Status assemble(const SubspaceBasis<Scalar>& affine, long control_rows, bool cross, const std::vector<int>& keys,
+                PmscModel& m) {
+  const Eigen::VectorXd extra = m.relative_tolerance ? mean_direction(affine) : Eigen::VectorXd();
+  const long M_affine = affine.basis.cols();
+  const long M = M_affine + (extra.size() > 0 ? 1 : 0);
+  const long output_first = cross ? control_rows : 0;
+  const long output_rows = affine.mean.size() - output_first;
+  if (m.relative_tolerance) {
+    m.mean.setZero(output_rows);
+  } else {
+    m.mean = affine.mean.segment(output_first, output_rows).template cast<float>();
+  }
+  m.basis.resize(output_rows, M);
+  m.basis.leftCols(M_affine) = affine.basis.middleRows(output_first, output_rows).template cast<float>();
+  if (M > M_affine) m.basis.col(M_affine) = extra.segment(output_first, output_rows).cast<float>();
+  return place_keys(affine.mean, affine.basis, extra, keys, m);
 }
 
 // The held-out sets of the calibration (and of the held-out rules for M and for r): every
@@ -571,8 +603,9 @@ void assign_regions(const PcaBasis& pca, const ChosenBasis& basis, bool articula
 // the same skinning columns with the residual components of those frames alone (articulated).
 // `residual` is scratch; writes out.mean and out.basis (reused storage, as fold_subspace's).
 // Returns the residual components kept (articulated), or −1 when the frames are too few.
+template <typename Scalar>
 int subset_basis(const TrainingMatrix& T, const Eigen::MatrixXd& gram, const ChosenBasis& basis, bool articulated,
-                 const std::vector<long>& frames, TrainingBasis& residual, TrainingBasis& out) {
+                 const std::vector<long>& frames, TrainingBasis& residual, SubspaceBasis<Scalar>& out) {
   if (articulated) {
     const ArticulatedSkinning& skinning = basis.skinning;
     const int residuals = static_cast<int>(std::min<long>(basis.residual_count, static_cast<long>(frames.size()) - 1));
@@ -580,8 +613,8 @@ int subset_basis(const TrainingMatrix& T, const Eigen::MatrixXd& gram, const Cho
     const long kept = residuals > 0 ? residual.basis.cols() : 0;
     out.mean = residual.mean;
     out.basis.resize(T.rows(), skinning.columns.cols() + kept);
-    out.basis.leftCols(skinning.columns.cols()) = skinning.columns;
-    out.basis.rightCols(kept) = residual.basis.leftCols(kept);
+    out.basis.leftCols(skinning.columns.cols()) = skinning.columns.template cast<Scalar>();
+    out.basis.rightCols(kept) = residual.basis.leftCols(kept).template cast<Scalar>();
     return static_cast<int>(kept);
   }
   // M < F must hold for the subset too; fewer frames give a smaller subspace.
@@ -687,7 +720,7 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
   model.basis = std::move(served_basis);
   model.mean = std::move(served_mean);
   struct Workspace {
-    TrainingBasis fold;
+    FoldBasis fold;
     TrainingBasis residual;  // articulated: the fold's residual components
     PmscModel model;
     Eigen::MatrixXf points;
@@ -699,6 +732,15 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
     const int kept_residuals = subset_basis(T, gram, basis, articulated, held.train, work.residual, work.fold);
     if (kept_residuals < 0) return;
     if (articulated) work.model.residual_components = kept_residuals;
+    PmscModel& fold_model = work.model;
+    // The fold's float basis is already the model's rows unless a cross model's control rows or a
+    // relative model's extra column come between: then it is lent to the model, not copied (one
+    // R × M buffer per worker, handed back below for the next fold to reuse).
+    const bool lent = !cross && !fold_model.relative_tolerance;
+    if (lent) {
+      fold_model.mean = work.fold.mean.cast<float>();
+      fold_model.basis.swap(work.fold.basis);
+    }
     // Each held-out frame is judged with keys that never saw it (CrossFittedKeys): those of the
     // other half; without cross-fitting, the served keys.
     const int halves = crossfit.half.empty() ? 1 : 2;
@@ -710,8 +752,9 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
       }
       if (judged.empty()) continue;
       const std::vector<int>& keys = halves == 1 ? model.key_points : crossfit.keys[static_cast<size_t>(1 - h)];
-      PmscModel& fold_model = work.model;
-      if (!assemble(work.fold, control_rows, cross, keys, fold_model).ok()) continue;
+      const Status placed = lent ? place_keys(work.fold.mean, fold_model.basis, Eigen::VectorXd(), keys, fold_model)
+                                 : assemble(work.fold, control_rows, cross, keys, fold_model);
+      if (!placed.ok()) continue;
       if (R_count > 0) {
         fold_model.key_regions.resize(keys.size());
         for (size_t k = 0; k < keys.size(); ++k) {
@@ -777,10 +820,11 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
         }
       }
     }
+    if (lent) fold_model.basis.swap(work.fold.basis);
   };
   report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
   parallel_for_chunks(static_cast<int64_t>(sets.size()), 1, [&](int64_t, int64_t) {
-    Workspace work{TrainingBasis(), TrainingBasis(), shell, Eigen::MatrixXf(), {}};
+    Workspace work{FoldBasis(), TrainingBasis(), shell, Eigen::MatrixXf(), {}};
     for (size_t set = next_set++; set < sets.size(); set = next_set++) {
       calibrate_set(set, work);
       const std::lock_guard<std::mutex> lock(progress_mutex);

@@ -104,6 +104,22 @@ void TrainingMatrix::times(const Eigen::MatrixXd& W, Eigen::MatrixXd& out) const
   }
 }
 
+void TrainingMatrix::times(const Eigen::MatrixXd& W, Eigen::MatrixXf& out) const {
+  assert(W.rows() == cols_);
+  const long F = cols_, k = W.cols();
+  out.resize(rows_, k);
+  if (k == 0) return;
+  Eigen::MatrixXd block(std::min(kBlockRows, rows_), F);
+  Eigen::MatrixXd product(block.rows(), k);
+  for (long r0 = 0; r0 < rows_; r0 += kBlockRows) {
+    const long n = std::min(kBlockRows, rows_ - r0);
+    rows_into(r0, n, block);
+    gemm_serial(n, F, k, block.data(), block.outerStride(), W.data(), W.outerStride(), 0.0, product.data(),
+                product.outerStride());
+    out.middleRows(r0, n) = product.topRows(n).cast<float>();
+  }
+}
+
 Eigen::MatrixXd TrainingMatrix::transposed_times(const Eigen::MatrixXd& A) const {
   assert(A.rows() == rows_);
   const long F = cols_, k = A.cols();

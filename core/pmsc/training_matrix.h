@@ -41,6 +41,8 @@ class TrainingMatrix {
   Eigen::MatrixXd gram() const;
   // X·W (R × k) into `out` (resized; its storage kept when the size repeats).
   void times(const Eigen::MatrixXd& W, Eigen::MatrixXd& out) const;
+  // The same product rounded to float as each block is made: never a double R × k.
+  void times(const Eigen::MatrixXd& W, Eigen::MatrixXf& out) const;
   // Aᵀ·X (k × F) for A R × k.
   Eigen::MatrixXd transposed_times(const Eigen::MatrixXd& A) const;
   // The rows of `points` ((K·D) × F), point-major as gather_key_rows.

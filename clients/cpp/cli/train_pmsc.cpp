@@ -87,7 +87,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
     return fail("train-pmsc", error);
   }
   // The selected frames, and the point cache let go: a long sequence is held once (issue #53).
-  const FrameMatrix frames = tools::take_rows(sequence->frames.samples, selected);
+  FrameMatrix frames = tools::take_rows(sequence->frames.samples, selected);
 
   std::optional<mesh_io::LoadedSequence> control;
   FrameMatrix control_frames;
@@ -147,6 +147,9 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                             : a.description;
   auto container = pmsc::make_container(sequence->reference, frames, control ? &control_frames : nullptr, *model,
                                         report, description);
+  // The container has its own copy of the frames, and the file is written a piece at a time.
+  frames = FrameMatrix();
+  control_frames = FrameMatrix();
   // Kept so that the daemon can retrain the model from its frames and logged misses.
   pmsc::store_training_options(options, container);
   const auto path = model_output_path(a.output, a.model, a.version);

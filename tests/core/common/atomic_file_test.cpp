@@ -62,6 +62,25 @@ TEST(AtomicFileTest, RoundTripsLargeAndEmptyContent) {
   EXPECT_EQ(read_or_die(dir / "empty"), "");
 }
 
+// Issue #53: a file written a piece at a time is the pieces in order; a writer stops at the first
+// failed piece, and nothing replaces the file then.
+TEST(AtomicFileTest, AFileWrittenInPiecesIsThePiecesInOrder) {
+  TempDir dir;
+  const std::vector<std::string> pieces = {"head", "", std::string(3 * 1024 * 1024, 'x'), std::string("\0tail", 5)};
+  int handed = 0;
+  ASSERT_TRUE(write_file_atomically(dir / "pieces",
+                                    [&](const AppendPiece& append) {
+                                      for (const std::string& piece : pieces) {
+                                        EXPECT_TRUE(append(piece));
+                                        ++handed;
+                                      }
+                                    })
+                  .ok());
+  EXPECT_EQ(handed, 4);
+  EXPECT_EQ(read_or_die(dir / "pieces"), pieces[0] + pieces[1] + pieces[2] + pieces[3]);
+  EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"pieces"});
+}
+
 TEST(AtomicFileTest, KeepsPermissionsOfReplacedFile) {
   TempDir dir;
   const fs::path path = dir / "secret";

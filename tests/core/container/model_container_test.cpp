@@ -16,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/common/atomic_file.h"
 #include "core/container/crc32.h"
 #include "tests/support/test_support.h"
 
@@ -468,6 +469,10 @@ TEST(ModelContainerTest, WriteFileReadFileRoundTrip) {
   const fs::path path = dir / "model.anim";
   const ModelContainer original = full_container();
   ASSERT_TRUE(write_file(path, original).ok());
+  // Written a piece at a time (issue #53), the file is byte for byte what serialize makes whole.
+  const auto on_disk = read_whole_file(path);
+  ASSERT_TRUE(on_disk.ok());
+  EXPECT_EQ(*on_disk, serialize(original));
   auto loaded = read_file(path);
   ASSERT_TRUE(loaded.ok()) << loaded.error().message;
   EXPECT_EQ(serialize(*loaded), serialize(original));
