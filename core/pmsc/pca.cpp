@@ -236,37 +236,48 @@ int choose_basis_size(const TrainingMatrix& X, const PcaBasis& pca, int channels
 
   // E_{m+1} = E_m − a_m c_m with c_m = a_mᵀ X, the coefficients of every frame formed once over
   // all rows; with orthonormal a's (thin_pca re-orthonormalises them to ~1e-15) this equals
-  // X − A_{m+1} A_{m+1}ᵀ X. Each block of points then runs every m on its own rows, and
-  // largest(m) is the worst point over the blocks after m + 1 directions.
+  // X − A_{m+1} A_{m+1}ᵀ X. Each block of points then runs its own rows, and largest(m) is the
+  // worst point over the blocks after m + 1 directions. In stages of directions, so that the
+  // search ends near the answer rather than at `limit`: each stage starts every block afresh at
+  // E = X − A_{m0} C_{m0} (one product), then steps through the stage's directions.
   const Index R = X.rows(), F = X.cols();
   const MatrixXd A = pca.basis.leftCols(limit);
   const MatrixXd coefficients = X.transposed_times(A);  // limit × F
-  // A block small enough to stay in a core's cache through its `limit` updates (~256 KB).
+  const MatrixXd negated = -coefficients;
+  // A block small enough to stay in a core's cache through a stage (~256 KB).
   const Index block_points = std::max<Index>(1, (Index{1} << 15) / (F * channels));
   const Index block_rows = block_points * channels;
   const Index blocks = (R + block_rows - 1) / block_rows;
-  MatrixXd largest = MatrixXd::Zero(limit, blocks);  // squared
-  parallel_for_chunks(blocks, 1, [&](int64_t first, int64_t last) {
-    MatrixXd E(std::min(block_rows, R), F);
-    for (int64_t b = first; b < last; ++b) {
-      const Index r0 = b * block_rows;
-      const Index n = std::min(block_rows, R - r0);
-      X.rows_into(r0, n, E);
-      for (int m = 0; m < limit; ++m) {
-        E.topRows(n).noalias() -= A.col(m).segment(r0, n) * coefficients.row(m);
-        double worst = 0;
-        for (Index f = 0; f < F; ++f) {
-          const Eigen::Map<const MatrixXd, 0, Eigen::OuterStride<>> frame(E.col(f).data(), channels, n / channels,
-                                                                           Eigen::OuterStride<>(channels));
-          worst = std::max(worst, frame.colwise().squaredNorm().maxCoeff());
-        }
-        largest(m, b) = worst;
-      }
-    }
-  });
   const double bound_squared = point_error_bound * point_error_bound;
-  for (int m = 0; m < limit; ++m) {
-    if (largest.row(m).maxCoeff() <= bound_squared) return m + 1;
+  for (int m0 = 0; m0 < limit;) {
+    const int m1 = std::min(limit, m0 + std::max(16, m0 / 2));
+    MatrixXd largest = MatrixXd::Zero(m1 - m0, blocks);  // squared
+    parallel_for_chunks(blocks, 1, [&](int64_t first, int64_t last) {
+      MatrixXd E(std::min(block_rows, R), F);
+      for (int64_t b = first; b < last; ++b) {
+        const Index r0 = b * block_rows;
+        const Index n = std::min(block_rows, R - r0);
+        X.rows_into(r0, n, E);
+        if (m0 > 0) {
+          gemm_serial(n, m0, F, A.data() + r0, A.outerStride(), negated.data(), negated.outerStride(), 1.0, E.data(),
+                      E.outerStride());
+        }
+        for (int m = m0; m < m1; ++m) {
+          E.topRows(n).noalias() -= A.col(m).segment(r0, n) * coefficients.row(m);
+          double worst = 0;
+          for (Index f = 0; f < F; ++f) {
+            const Eigen::Map<const MatrixXd, 0, Eigen::OuterStride<>> frame(E.col(f).data(), channels, n / channels,
+                                                                             Eigen::OuterStride<>(channels));
+            worst = std::max(worst, frame.colwise().squaredNorm().maxCoeff());
+          }
+          largest(m - m0, b) = worst;
+        }
+      }
+    });
+    for (int m = m0; m < m1; ++m) {
+      if (largest.row(m - m0).maxCoeff() <= bound_squared) return m + 1;
+    }
+    m0 = m1;
   }
   return limit;
 }
