@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cassert>
-#include <cmath>
 #include <numeric>
 
 #include "core/pmsc/relative_point_errors.h"
@@ -101,15 +100,6 @@ bool above_noise(const Eigen::VectorXd& max_errors, long i, double noise_floor) 
 }
 
 }  // namespace
-
-std::uint16_t RelativePointErrors::quantise(float error, float max_error) {
-  const double scaled = std::floor(static_cast<double>(error) / static_cast<double>(max_error) * kScale);
-  auto relative = static_cast<std::uint16_t>(std::clamp(scaled, 0.0, static_cast<double>(kScale)));
-  // The quotient may round up across a step: then the step below, so that what error() reads
-  // back is never above the error.
-  while (relative > 0 && RelativePointErrors::error(relative, max_error) > static_cast<double>(error)) --relative;
-  return relative;
-}
 
 std::vector<int> select_check_points(const RelativePointErrors& errors, const std::vector<char>& counted,
                                      const Eigen::VectorXd& max_errors, const std::vector<int>& key_points,

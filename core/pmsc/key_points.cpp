@@ -15,12 +15,7 @@
 namespace animspace::pmsc {
 
 Eigen::MatrixXd gather_key_rows(const Eigen::MatrixXd& rows, const std::vector<int>& key_points, int channels) {
-  Eigen::MatrixXd out(static_cast<long>(key_points.size()) * channels, rows.cols());
-  for (size_t k = 0; k < key_points.size(); ++k) {
-    out.middleRows(static_cast<long>(k) * channels, channels) =
-        rows.middleRows(static_cast<long>(key_points[k]) * channels, channels);
-  }
-  return out;
+  return TrainingMatrix(rows).gather_rows(key_points, channels);
 }
 
 namespace {

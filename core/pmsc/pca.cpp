@@ -241,7 +241,7 @@ int choose_basis_size(const TrainingMatrix& X, const PcaBasis& pca, int channels
   // search ends near the answer rather than at `limit`: each stage starts every block afresh at
   // E = X − A_{m0} C_{m0} (one product), then steps through the stage's directions.
   const Index R = X.rows(), F = X.cols();
-  const MatrixXd A = pca.basis.leftCols(limit);
+  const auto A = pca.basis.leftCols(limit);  // no copy: at studio sizes it is a gigabyte
   const MatrixXd coefficients = X.transposed_times(A);  // limit × F
   const MatrixXd negated = -coefficients;
   // A block small enough to stay in a core's cache through a stage (~256 KB).

@@ -9,6 +9,8 @@
 // for the calibration: a sample whose error the check points see as smaller makes ε smaller.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -22,11 +24,19 @@ struct RelativePointErrors {
   // selection reads them). Rows no sample filled stay zero and are left out by the selection.
   Eigen::Matrix<std::uint16_t, Eigen::Dynamic, Eigen::Dynamic> u;
 
-  // floor(e / e_max · kScale); e_max > 0, 0 ≤ e ≤ e_max.
-  static std::uint16_t quantise(float error, float max_error);
   // The point's error as read back: never above the error quantised.
   static double error(std::uint16_t relative, double max_error) {
     return static_cast<double>(relative) / static_cast<double>(kScale) * max_error;
+  }
+  // floor(e / e_max · kScale); e_max > 0, 0 ≤ e ≤ e_max. Inline: training quantises every point of
+  // every held-out sample, and the quotient's divisor is the same along a sample.
+  static std::uint16_t quantise(float value, float max_error) {
+    const double scaled = std::floor(static_cast<double>(value) * (static_cast<double>(kScale) / max_error));
+    auto relative = static_cast<std::uint16_t>(std::clamp(scaled, 0.0, static_cast<double>(kScale)));
+    // The product may round up across a step: then the step below, so that what error() reads
+    // back is never above the error.
+    while (relative > 0 && error(relative, max_error) > static_cast<double>(value)) --relative;
+    return relative;
   }
 };
 

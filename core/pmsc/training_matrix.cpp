@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <type_traits>
 #include <utility>
 
 #include "core/common/kernels.h"
@@ -86,41 +87,47 @@ Eigen::MatrixXd TrainingMatrix::gram() const {
   return gram.selfadjointView<Eigen::Lower>();
 }
 
-void TrainingMatrix::times(const Eigen::MatrixXd& W, Eigen::MatrixXd& out) const {
+// Each block of rows promoted, multiplied and written; into a float result through a double block
+// (the product is formed in double, then rounded once).
+template <typename Scalar>
+void TrainingMatrix::times_into(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                                Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>& out) const {
   assert(W.rows() == cols_);
+  constexpr bool kDouble = std::is_same_v<Scalar, double>;
   const long F = cols_, k = W.cols();
   out.resize(rows_, k);
   if (k == 0) return;
-  if (doubles_ != nullptr && offset_.size() == 0) {
-    gemm_serial(rows_, F, k, doubles_, stride_, W.data(), W.outerStride(), 0.0, out.data(), out.outerStride());
-    return;
+  if constexpr (kDouble) {
+    if (doubles_ != nullptr && offset_.size() == 0) {
+      gemm_serial(rows_, F, k, doubles_, stride_, W.data(), W.outerStride(), 0.0, out.data(), out.outerStride());
+      return;
+    }
   }
   Eigen::MatrixXd block(std::min(kBlockRows, rows_), F);
+  Eigen::MatrixXd product(kDouble ? 0 : block.rows(), kDouble ? 0 : k);
   for (long r0 = 0; r0 < rows_; r0 += kBlockRows) {
     const long n = std::min(kBlockRows, rows_ - r0);
     rows_into(r0, n, block);
-    gemm_serial(n, F, k, block.data(), block.outerStride(), W.data(), W.outerStride(), 0.0, out.data() + r0,
-                out.outerStride());
+    if constexpr (kDouble) {
+      gemm_serial(n, F, k, block.data(), block.outerStride(), W.data(), W.outerStride(), 0.0, out.data() + r0,
+                  out.outerStride());
+    } else {
+      gemm_serial(n, F, k, block.data(), block.outerStride(), W.data(), W.outerStride(), 0.0, product.data(),
+                  product.outerStride());
+      out.middleRows(r0, n) = product.topRows(n).template cast<Scalar>();
+    }
   }
 }
 
-void TrainingMatrix::times(const Eigen::MatrixXd& W, Eigen::MatrixXf& out) const {
-  assert(W.rows() == cols_);
-  const long F = cols_, k = W.cols();
-  out.resize(rows_, k);
-  if (k == 0) return;
-  Eigen::MatrixXd block(std::min(kBlockRows, rows_), F);
-  Eigen::MatrixXd product(block.rows(), k);
-  for (long r0 = 0; r0 < rows_; r0 += kBlockRows) {
-    const long n = std::min(kBlockRows, rows_ - r0);
-    rows_into(r0, n, block);
-    gemm_serial(n, F, k, block.data(), block.outerStride(), W.data(), W.outerStride(), 0.0, product.data(),
-                product.outerStride());
-    out.middleRows(r0, n) = product.topRows(n).cast<float>();
-  }
+void TrainingMatrix::times(const Eigen::Ref<const Eigen::MatrixXd>& W, Eigen::MatrixXd& out) const {
+  times_into(W, out);
 }
 
-Eigen::MatrixXd TrainingMatrix::transposed_times(const Eigen::MatrixXd& A) const {
+void TrainingMatrix::times(const Eigen::Ref<const Eigen::MatrixXd>& W, Eigen::MatrixXf& out) const {
+  times_into(W, out);
+}
+
+Eigen::MatrixXd TrainingMatrix::transposed_times(const Eigen::Ref<const Eigen::MatrixXd>& A) const {
   assert(A.rows() == rows_);
   const long F = cols_, k = A.cols();
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(k, F);

@@ -40,11 +40,11 @@ class TrainingMatrix {
   // XᵀX (F × F, both triangles).
   Eigen::MatrixXd gram() const;
   // X·W (R × k) into `out` (resized; its storage kept when the size repeats).
-  void times(const Eigen::MatrixXd& W, Eigen::MatrixXd& out) const;
+  void times(const Eigen::Ref<const Eigen::MatrixXd>& W, Eigen::MatrixXd& out) const;
   // The same product rounded to float as each block is made: never a double R × k.
-  void times(const Eigen::MatrixXd& W, Eigen::MatrixXf& out) const;
+  void times(const Eigen::Ref<const Eigen::MatrixXd>& W, Eigen::MatrixXf& out) const;
   // Aᵀ·X (k × F) for A R × k.
-  Eigen::MatrixXd transposed_times(const Eigen::MatrixXd& A) const;
+  Eigen::MatrixXd transposed_times(const Eigen::Ref<const Eigen::MatrixXd>& A) const;
   // The rows of `points` ((K·D) × F), point-major as gather_key_rows.
   Eigen::MatrixXd gather_rows(const std::vector<int>& points, int channels) const;
 
@@ -58,6 +58,10 @@ class TrainingMatrix {
   long cols_ = 0;
   long stride_ = 0;  // leading dimension of the values
   Eigen::VectorXd offset_;
+
+  template <typename Scalar>
+  void times_into(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                  Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>& out) const;
 };
 
 }  // namespace animspace::pmsc
