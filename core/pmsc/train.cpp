@@ -499,43 +499,44 @@ Result<ChosenBasis> articulated_basis(const FrameMatrix& control_frames, const T
   gram_lower_serial(rows, F, skinning.residuals.data(), rows, residual_gram.data(), F);
   residual_gram = residual_gram.selfadjointView<Eigen::Lower>().toDenseMatrix();
   int residual_count = 0;
-    // r: given, or the smallest count whose held-out projection error is within
-    // kResidualHeldOutSlack of the largest count's (a component the held-out frames do not share
-    // is noise of the training frames, and one more coordinate to estimate from the keys). No
-    // floor on the residual's size: what the skinning leaves at the training poses is mostly its
-    // weights' error, which grows with the rotation at new poses (the arm of articulated_test.cpp
-    // went from under 1% to 1.25% of the diagonal at 80–120° without its residual components).
-    const int residual_cap = std::min<int>(chosen_cap, static_cast<int>(F - 1));
-    if (o.residual_components >= 0) {
-      residual_count = std::min(o.residual_components, residual_cap);
-    } else {
-      double centred_energy = 0;
-      const Eigen::VectorXd curve =
-          held_out_projection_curve(residual_gram, held_out_frames, kept_frames, residual_cap, centred_energy);
-      residual_count = residual_cap;
-      if (centred_energy > 0) {
-        std::vector<double> rms(static_cast<size_t>(residual_cap + 1));
-        for (int k = 0; k <= residual_cap; ++k) rms[static_cast<size_t>(k)] = std::sqrt(curve(k) / centred_energy);
-        residual_count = smallest_within_slack(rms, 0, kResidualHeldOutSlack);
-      }
+  // r: given, or the smallest count whose held-out projection error is within
+  // kResidualHeldOutSlack of the largest count's (a component the held-out frames do not share
+  // is noise of the training frames, and one more coordinate to estimate from the keys). No
+  // floor on the residual's size: what the skinning leaves at the training poses is mostly its
+  // weights' error, which grows with the rotation at new poses (the arm of articulated_test.cpp
+  // went from under 1% to 1.25% of the diagonal at 80–120° without its residual components).
+  const int residual_cap = std::min<int>(chosen_cap, static_cast<int>(F - 1));
+  if (o.residual_components >= 0) {
+    residual_count = std::min(o.residual_components, residual_cap);
+  } else {
+    double centred_energy = 0;
+    const Eigen::VectorXd curve =
+        held_out_projection_curve(residual_gram, held_out_frames, kept_frames, residual_cap, centred_energy);
+    residual_count = residual_cap;
+    if (centred_energy > 0) {
+      std::vector<double> rms(static_cast<size_t>(residual_cap + 1));
+      for (int k = 0; k <= residual_cap; ++k) rms[static_cast<size_t>(k)] = std::sqrt(curve(k) / centred_energy);
+      residual_count = smallest_within_slack(rms, 0, kResidualHeldOutSlack);
     }
-    std::vector<long> every_frame(static_cast<size_t>(F));
-    std::iota(every_frame.begin(), every_frame.end(), 0L);
-    TrainingBasis residual;
-    fold_subspace(TrainingMatrix(skinning.residuals), residual_gram, every_frame, std::max(residual_count, 1),
-                  residual);
-    if (residual_count == 0) residual.basis.resize(rows, 0);
-    residual_count = static_cast<int>(residual.basis.cols());
-    out.residual_count = residual_count;
-    out.subspace.mean = residual.mean;
-    out.subspace.basis.resize(rows, skinning.columns.cols() + residual_count);
-    out.subspace.basis << skinning.columns, residual.basis;
-    out.M = static_cast<int>(out.subspace.basis.cols());
-    // The residual components are orthogonal to L's columns (every frame's residual is), so the
-    // projection onto [L | R] leaves what R leaves of E.
-    const Eigen::MatrixXd residual_centred = skinning.residuals.colwise() - residual.mean;
-    const Eigen::MatrixXd coordinates = residual.basis.transpose() * residual_centred;
-    out.projection_error = residual_pass(residual_centred, residual.basis, coordinates, D);
+  }
+  std::vector<long> every_frame(static_cast<size_t>(F));
+  std::iota(every_frame.begin(), every_frame.end(), 0L);
+  TrainingBasis residual;
+  fold_subspace(TrainingMatrix(skinning.residuals), residual_gram, every_frame, std::max(residual_count, 1),
+                residual);
+  if (residual_count == 0) residual.basis.resize(rows, 0);
+  residual_count = static_cast<int>(residual.basis.cols());
+  out.residual_count = residual_count;
+  out.subspace.mean = residual.mean;
+  out.subspace.basis.resize(rows, skinning.columns.cols() + residual_count);
+  out.subspace.basis << skinning.columns, residual.basis;
+  out.M = static_cast<int>(out.subspace.basis.cols());
+  // The residual components are orthogonal to L's columns (every frame's residual is), so the
+  // projection onto [L | R] leaves what R leaves of E.
+  // (Read less their mean a block at a time, not copied: the residuals are R × F in double.)
+  const TrainingMatrix residual_centred = TrainingMatrix(skinning.residuals).with_offset(residual.mean);
+  out.projection_error =
+      residual_pass(residual_centred, residual.basis, residual_centred.transposed_times(residual.basis), D);
   return out;
 }
 
@@ -675,9 +676,77 @@ struct FoldSamples {
   std::vector<char> half;  // the cross-fitting half of each sample's frame (CrossFittedKeys)
   std::vector<char> family;
   std::vector<Eigen::VectorXd> region_key, region_max;
-  // Each sample's row of the point errors (RelativePointErrors), when they are kept.
+  // Each sample's row of its point errors (HeldOutPointErrors), when they are kept: of the whole
+  // errors when whole_row, else of the errors at the watched points.
   std::vector<long> error_row;
+  std::vector<char> whole_row;
 };
+
+// The held-out samples' per-point errors as the folds keep them for the check points (issue #53
+// item 2): whole rows (RelativePointErrors) for the samples the check points are chosen on, and
+// for the other samples their errors at the chosen points only.
+struct HeldOutPointErrors {
+  RelativePointErrors whole;
+  std::vector<int> watched;    // ascending: every point a check set of the model draws from
+  Eigen::MatrixXf at_watched;  // rows × watched.size(), exact, in the samples' units
+
+  // Sample i's error at `point` (of `watched` when the row is not whole).
+  double error(const FoldSamples& folds, long i, int point, double max_error) const {
+    const long row = folds.error_row[static_cast<size_t>(i)];
+    if (folds.whole_row[static_cast<size_t>(i)]) return RelativePointErrors::error(whole.u(row, point), max_error);
+    const auto at = std::lower_bound(watched.begin(), watched.end(), point);
+    return static_cast<double>(at_watched(row, static_cast<long>(at - watched.begin())));
+  }
+};
+
+// Which held-out sets keep their samples' whole point errors, and where each set's rows start.
+// The check points are chosen on those samples. The selection needs a few hundred samples, while
+// the whole errors grow with points × frames (186k points × 2,000 frames: 10,000 samples, 3.7 GB
+// beside 4.5 GB of positions), so they are kept whole while they fit in max(kWholeErrorFloorBytes,
+// kWholeErrorShare of the training positions' bytes) or the caller's budget; past that each fold
+// family keeps the share of its sets that fits (at least one), strided along the family so that
+// its block lengths and folds are all drawn on. The other sets run after the choice.
+constexpr double kWholeErrorFloorBytes = 256.0 * (1 << 20);
+constexpr double kWholeErrorShare = 1.0 / 8;
+struct PointErrorPlan {
+  std::vector<char> whole;      // per set
+  std::vector<long> first_row;  // per set: its first held-out frame's row in the store it writes
+  long whole_rows = 0, watched_rows = 0;
+};
+
+PointErrorPlan point_error_plan(const HeldOutSets& held, long points, double positions_bytes, long long budget_option) {
+  const std::vector<HeldOutSet>& sets = held.sets;
+  PointErrorPlan plan;
+  plan.whole.assign(sets.size(), 1);
+  long samples = 0;
+  for (const HeldOutSet& set : sets) samples += static_cast<long>(set.held_out.size());
+  const double budget = budget_option > 0 ? static_cast<double>(budget_option)
+                                          : std::max(kWholeErrorFloorBytes, kWholeErrorShare * positions_bytes);
+  const double whole_bytes = static_cast<double>(samples) * static_cast<double>(points) * sizeof(std::uint16_t);
+  if (whole_bytes > budget) {
+    const double share = budget / whole_bytes;
+    for (char family : {kInterleavedFold, kSparseFold, kBlockFold}) {
+      std::vector<size_t> members;
+      for (size_t s = 0; s < sets.size(); ++s) {
+        if (sets[s].family == family) members.push_back(s);
+      }
+      if (members.empty()) continue;
+      const auto count = static_cast<double>(members.size());
+      const auto keep = static_cast<size_t>(std::clamp(std::floor(share * count), 1.0, count));
+      for (size_t s : members) plan.whole[s] = 0;
+      for (size_t j = 0; j < keep; ++j) {
+        plan.whole[members[static_cast<size_t>((static_cast<double>(j) + 0.5) * count / static_cast<double>(keep))]] = 1;
+      }
+    }
+  }
+  plan.first_row.resize(sets.size());
+  for (size_t s = 0; s < sets.size(); ++s) {
+    long& rows = plan.whole[s] ? plan.whole_rows : plan.watched_rows;
+    plan.first_row[s] = rows;
+    rows += static_cast<long>(sets[s].held_out.size());
+  }
+  return plan;
+}
 
   // ε from held-out training frames only (calibration.h): retrain the subspace without each
   // fold (same keys, same M), evaluate its frames through the runtime, and keep (e_key, true max
@@ -685,33 +754,29 @@ struct FoldSamples {
   // families: every `folds`-th frame (poses between training poses); blocks of consecutive frames
   // at three lengths, dealt to the folds in turn (motion the rest of the training never saw); and
   // sparse folds, trained on every other frame an interleaved fold keeps (a model that saw less).
-FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMatrix* output_frames,
-                                const TrainingMatrix& T, const Eigen::MatrixXd& gram, const HeldOutSets& held_sets,
-                                const ChosenBasis& basis, const CrossFittedKeys& crossfit, bool articulated,
-                                PmscModel& model, const TrainingOptions& o, RelativePointErrors* errors) {
+  // Runs the sets `run` into per_set[set]; each held-out sample's point errors go to `errors` (when
+  // not null) where `plan` says: whole, or at errors->watched. Progress counts on from `already`.
+void calibration_samples(const FrameMatrix& control_frames, const FrameMatrix* output_frames, const TrainingMatrix& T,
+                         const Eigen::MatrixXd& gram, const HeldOutSets& held_sets, const ChosenBasis& basis,
+                         const CrossFittedKeys& crossfit, bool articulated, PmscModel& model, const TrainingOptions& o,
+                         const std::vector<size_t>& run, const PointErrorPlan& plan, HeldOutPointErrors* errors,
+                         std::vector<FoldSamples>& per_set, size_t already) {
   const int D = o.channel_count;
   const bool cross = output_frames != nullptr;
   const long control_rows = control_frames.cols();
   const std::vector<HeldOutSet>& sets = held_sets.sets;
   const long R_count = model.region_count;
   const long N_out = model.point_count;
-  // The row of the point errors of a set's first held-out frame: a frame's row is fixed before any
-  // fold runs, so that the sets write theirs in parallel (a frame a fold could not judge leaves
-  // its row unread).
-  std::vector<long> first_row(sets.size() + 1, 0);
-  for (size_t set = 0; set < sets.size(); ++set) {
-    first_row[set + 1] = first_row[set] + static_cast<long>(sets[set].held_out.size());
-  }
-  if (errors != nullptr) errors->u.setZero(first_row.back(), N_out);
+  // A held-out frame's row of the point errors is fixed by the plan before any fold runs, so that
+  // the sets write theirs in parallel (a frame a fold could not judge leaves its row unread).
   // Every set is independent of the others (issue #38 item 3): the sets run on all cores, each
   // worker taking the next set not yet taken (their costs differ: a sparse fold trains on half
   // the frames), each writing its own samples; they are joined in set order afterwards, so the
   // model is the same whatever the thread count. The products inside a set are not split again
   // (parallel.h), so a set computes exactly what a one-thread training computes.
-  std::vector<FoldSamples> per_set(sets.size());
   std::atomic<size_t> next_set{0};
   std::mutex progress_mutex;
-  size_t sets_done = 0;
+  size_t sets_done = already;
   // What a worker keeps from one set to the next (fold_subspace): the fold's subspace, its model
   // (the trained model's members without the basis, which assemble replaces) and the batch's
   // reconstructed points.
@@ -802,10 +867,17 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
           const float largest = point_errors.maxCoeff();
           out.max.push_back(static_cast<double>(largest));
           if (errors != nullptr) {
-            const long row = first_row[set] + position;
+            const long row = plan.first_row[set] + position;
             out.error_row.push_back(row);
-            for (long i = 0; i < N_out && largest > 0; ++i) {
-              errors->u(row, i) = RelativePointErrors::quantise(point_errors(i), largest);
+            out.whole_row.push_back(plan.whole[set]);
+            if (plan.whole[set]) {
+              for (long i = 0; i < N_out && largest > 0; ++i) {
+                errors->whole.u(row, i) = RelativePointErrors::quantise(point_errors(i), largest);
+              }
+            } else {
+              for (size_t w = 0; w < errors->watched.size(); ++w) {
+                errors->at_watched(row, static_cast<long>(w)) = point_errors(errors->watched[w]);
+              }
             }
           }
           if (R_count > 0) {
@@ -823,17 +895,21 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
     }
     if (lent) fold_model.basis.swap(work.fold.basis);
   };
-  report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
-  parallel_for_chunks(static_cast<int64_t>(sets.size()), 1, [&](int64_t, int64_t) {
+  if (already == 0) report_progress(o.progress, "calibration", 0, static_cast<int>(sets.size()));
+  parallel_for_chunks(static_cast<int64_t>(run.size()), 1, [&](int64_t, int64_t) {
     Workspace work{FoldBasis(), TrainingBasis(), shell, Eigen::MatrixXf(), {}};
-    for (size_t set = next_set++; set < sets.size(); set = next_set++) {
-      calibrate_set(set, work);
+    for (size_t next = next_set++; next < run.size(); next = next_set++) {
+      calibrate_set(run[next], work);
       const std::lock_guard<std::mutex> lock(progress_mutex);
       if (++sets_done < sets.size()) {
         report_progress(o.progress, "calibration", static_cast<int>(sets_done), static_cast<int>(sets.size()));
       }
     }
   });
+}
+
+// Every set's samples, joined in set order (whatever order the sets ran in).
+FoldSamples join_samples(std::vector<FoldSamples>& per_set, const std::vector<HeldOutSet>& sets) {
   FoldSamples joined;
   for (size_t set = 0; set < sets.size(); ++set) {
     FoldSamples& out = per_set[set];
@@ -845,9 +921,9 @@ FoldSamples calibration_samples(const FrameMatrix& control_frames, const FrameMa
     for (auto& v : out.region_key) joined.region_key.push_back(std::move(v));
     for (auto& v : out.region_max) joined.region_max.push_back(std::move(v));
     joined.error_row.insert(joined.error_row.end(), out.error_row.begin(), out.error_row.end());
+    joined.whole_row.insert(joined.whole_row.end(), out.whole_row.begin(), out.whole_row.end());
     out = FoldSamples();
   }
-  report_progress(o.progress, "calibration", static_cast<int>(sets.size()), static_cast<int>(sets.size()));
   return joined;
 }
 
@@ -856,10 +932,65 @@ int check_point_count(const TrainingOptions& o, bool cross, long key_points) {
   return cross ? 0 : static_cast<int>(std::ceil(o.check_point_fraction * static_cast<double>(key_points) - 1e-9));
 }
 
-// The samples into the model's calibration, then check points (check_points.h) from the
-// held-out residuals and each sample's e_check.
-void store_samples(FoldSamples folds, const RelativePointErrors& errors, const CrossFittedKeys& crossfit,
-                   const TrainingOptions& o, bool cross, PmscModel& model) {
+// The check points (check_points.h): the served ones, chosen on every sample whose whole point
+// errors were kept, and, when the keys were cross-fitted (CrossFittedKeys), those of each half:
+// chosen on the other half's samples, which were judged with its keys, so that a sample's e_check
+// comes from check points chosen without it.
+struct CheckPointChoice {
+  std::vector<int> served;
+  std::array<std::vector<int>, 2> of_half;  // the check points that measure each half's samples
+  long samples = 0;                         // the samples chosen on
+};
+
+CheckPointChoice choose_check_points(const std::vector<FoldSamples>& per_set, const PointErrorPlan& plan,
+                                     const RelativePointErrors& errors, const CrossFittedKeys& crossfit,
+                                     const TrainingOptions& o, const PmscModel& model, int count) {
+  CheckPointChoice choice;
+  const long rows = errors.u.rows();
+  // By row of the whole errors: each sample's max, its half, and whether it was judged at all.
+  Eigen::VectorXd row_max = Eigen::VectorXd::Zero(rows);
+  std::vector<char> judged(static_cast<size_t>(rows), 0), half(static_cast<size_t>(rows), 0);
+  for (size_t set = 0; set < per_set.size(); ++set) {
+    if (!plan.whole[set]) continue;
+    const FoldSamples& samples = per_set[set];
+    for (size_t i = 0; i < samples.error_row.size(); ++i) {
+      const auto row = static_cast<size_t>(samples.error_row[i]);
+      row_max(static_cast<long>(row)) = samples.max[i];
+      judged[row] = 1;
+      half[row] = samples.half[i];
+      ++choice.samples;
+    }
+  }
+  const double noise_floor = kCalibrationNoiseFraction * o.error_tolerance;
+  choice.served = select_check_points(errors, judged, row_max, model.key_points, model.point_regions,
+                                      model.region_count, count, noise_floor);
+  choice.of_half = {choice.served, choice.served};
+  if (crossfit.half.empty() || choice.served.empty()) return choice;
+  for (int h = 0; h < 2; ++h) {
+    std::vector<char> others(static_cast<size_t>(rows));
+    for (size_t row = 0; row < others.size(); ++row) others[row] = judged[row] && half[row] != h;
+    std::vector<int> chosen =
+        select_check_points(errors, others, row_max, crossfit.keys[static_cast<size_t>(1 - h)], model.point_regions,
+                            model.region_count, static_cast<int>(choice.served.size()), noise_floor);
+    // (A half whose other half kept no whole errors is measured by the served check points.)
+    if (!chosen.empty()) choice.of_half[static_cast<size_t>(h)] = std::move(chosen);
+  }
+  return choice;
+}
+
+// Every point a check set of the choice draws from, ascending.
+std::vector<int> watched_points(const CheckPointChoice& choice) {
+  std::vector<int> points = choice.served;
+  for (const auto& checks : choice.of_half) points.insert(points.end(), checks.begin(), checks.end());
+  std::sort(points.begin(), points.end());
+  points.erase(std::unique(points.begin(), points.end()), points.end());
+  return points;
+}
+
+// The samples into the model's calibration, with the chosen check points and each sample's
+// e_check (and its regions') from the check points of its half.
+void store_samples(FoldSamples folds, const HeldOutPointErrors& errors, const CheckPointChoice& choice,
+                   const CrossFittedKeys& crossfit, PmscModel& model) {
   const long R_count = model.region_count;
   CalibrationSamples& samples = model.calibration.samples;
   const long n = static_cast<long>(folds.key.size());
@@ -874,47 +1005,18 @@ void store_samples(FoldSamples folds, const RelativePointErrors& errors, const C
   }
   samples.fold_family = std::move(folds.family);
 
-  const int check_count = check_point_count(o, cross, model.key_point_count());
-  if (check_count == 0 || n == 0) return;
-  // The samples' point errors as the folds left them (RelativePointErrors: the largest thing
-  // training holds at studio sizes), by row; the selection counts the rows of `samples`.
-  const long rows = errors.u.rows();
-  Eigen::VectorXd row_max = Eigen::VectorXd::Zero(rows);
-  for (long i = 0; i < n; ++i) row_max(folds.error_row[static_cast<size_t>(i)]) = samples.max_errors(i);
-  const auto rows_of = [&](const auto& counts) {
-    std::vector<char> counted(static_cast<size_t>(rows), 0);
-    for (long i = 0; i < n; ++i) counted[static_cast<size_t>(folds.error_row[static_cast<size_t>(i)])] = counts(i);
-    return counted;
-  };
-  const double noise_floor = kCalibrationNoiseFraction * o.error_tolerance;
-  // The served check points: from every sample's residuals.
-  model.check_points = select_check_points(errors, rows_of([](long) { return true; }), row_max, model.key_points,
-                                           model.point_regions, model.region_count, check_count, noise_floor);
-  const long C = model.check_point_count();
-  if (C == 0) return;
+  model.check_points = choice.served;
+  if (model.check_points.empty() || n == 0) return;
   for (int point : model.check_points) {
     if (R_count > 0) model.check_regions.push_back(model.point_regions[static_cast<size_t>(point)]);
   }
-  // Each sample's e_check (and its regions'), from check points that were chosen without it when
-  // the keys were cross-fitted (CrossFittedKeys): those chosen on the other half's samples, which
-  // were judged with its keys — else the served ones, chosen on the same samples they measure.
   const bool halves = !crossfit.half.empty();
-  std::array<std::vector<int>, 2> checks_of_half = {model.check_points, model.check_points};
-  if (halves) {
-    for (int h = 0; h < 2; ++h) {
-      const auto others = rows_of([&](long i) { return folds.half[static_cast<size_t>(i)] != h; });
-      checks_of_half[static_cast<size_t>(h)] =
-          select_check_points(errors, others, row_max, crossfit.keys[static_cast<size_t>(1 - h)], model.point_regions,
-                              model.region_count, static_cast<int>(C), noise_floor);
-    }
-  }
   samples.check_point_errors = Eigen::VectorXd::Zero(n);
   samples.region_check_point_errors = Eigen::MatrixXd::Zero(R_count > 0 ? n : 0, R_count);
   for (long i = 0; i < n; ++i) {
     const int h = halves ? folds.half[static_cast<size_t>(i)] : 0;
-    for (int point : checks_of_half[static_cast<size_t>(h)]) {
-      const double error =
-          RelativePointErrors::error(errors.u(folds.error_row[static_cast<size_t>(i)], point), samples.max_errors(i));
+    for (int point : choice.of_half[static_cast<size_t>(h)]) {
+      const double error = errors.error(folds, i, point, samples.max_errors(i));
       samples.check_point_errors(i) = std::max(samples.check_point_errors(i), error);
       if (R_count > 0) {
         double& region = samples.region_check_point_errors(i, model.point_regions[static_cast<size_t>(point)]);
@@ -1017,15 +1119,36 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   pca = PcaBasis{};
   basis.subspace.basis = Eigen::MatrixXd();
 
-  // Calibration (calibration.h) and check points.
+  // Calibration (calibration.h) and check points: the sets that keep their samples' whole point
+  // errors first, then the check points chosen on them, then the other sets, which keep their
+  // samples' errors at the chosen points (point_error_plan).
   const auto calibration_start = std::chrono::steady_clock::now();
-  RelativePointErrors errors;
-  const bool keep_errors = check_point_count(o, cross, model.key_point_count()) > 0;
-  FoldSamples folds = calibration_samples(control_frames, output_frames, centred, gram, held, basis, *crossfit,
-                                          articulated, model, o, keep_errors ? &errors : nullptr);
+  const int check_count = check_point_count(o, cross, model.key_point_count());
+  const double positions_bytes =
+      static_cast<double>(control_frames.size() + (cross ? output_frames->size() : 0)) * sizeof(float);
+  const PointErrorPlan plan = point_error_plan(held, model.point_count, positions_bytes, o.point_error_budget_bytes);
+  HeldOutPointErrors errors;
+  std::vector<FoldSamples> per_set(held.sets.size());
+  std::vector<size_t> whole_sets, watched_sets;
+  for (size_t set = 0; set < held.sets.size(); ++set) (plan.whole[set] ? whole_sets : watched_sets).push_back(set);
+  const auto run_sets = [&](const std::vector<size_t>& run, size_t already) {
+    calibration_samples(control_frames, output_frames, centred, gram, held, basis, *crossfit, articulated, model, o,
+                        run, plan, check_count > 0 ? &errors : nullptr, per_set, already);
+  };
+  if (check_count > 0) errors.whole.u.setZero(plan.whole_rows, model.point_count);
+  run_sets(whole_sets, 0);
+  CheckPointChoice choice;
+  if (check_count > 0) {
+    choice = choose_check_points(per_set, plan, errors.whole, *crossfit, o, model, check_count);
+    errors.watched = watched_points(choice);
+    errors.at_watched.setZero(plan.watched_rows, static_cast<long>(errors.watched.size()));
+  }
+  run_sets(watched_sets, whole_sets.size());
+  report_progress(o.progress, "calibration", static_cast<int>(held.sets.size()), static_cast<int>(held.sets.size()));
+  FoldSamples folds = join_samples(per_set, held.sets);
   const long n = static_cast<long>(folds.key.size());
-  store_samples(std::move(folds), errors, *crossfit, o, cross, model);
-  errors = RelativePointErrors();
+  store_samples(std::move(folds), errors, choice, *crossfit, model);
+  errors = HeldOutPointErrors();
   model.calibration.false_hit_rate = o.false_hit_rate;
   model.calibration.block_frames = static_cast<int>(held.block);
   ANIMSPACE_RETURN_IF_ERROR(apply_calibration(model, o.error_tolerance, o.blend_zone_ratio));
@@ -1072,6 +1195,7 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     report->error_ratio = model.calibration.error_ratio;
     report->calibration_frames = static_cast<int>(n);
     report->check_points = model.check_point_count();
+    report->check_point_samples = static_cast<int>(choice.samples);
     report->bones = model.bone_count;
     report->residual_components = model.residual_components;
     report->skinning_rms = skinning.rms;

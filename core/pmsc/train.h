@@ -77,6 +77,12 @@ struct TrainingOptions {
   // halves by alternating blocks — so that the calibration sees what a new shot's errors look like
   // to keys that never saw them (train.cpp, CrossFittedKeys); 0: the served keys and check points.
   int cross_fitted_calibration = 0;
+  // Issue #53 item 2: bytes for the held-out samples' whole per-point errors, from which the check
+  // points are chosen (RelativePointErrors, 2 bytes per point per sample). 0: by rule (train.cpp,
+  // point_error_budget): every sample's while they fit, else whole held-out sets of each fold
+  // family, strided, as many as fit, whose samples choose the check points; the other sets run
+  // after the choice and keep their samples' errors at the chosen points only. > 0: this budget.
+  long long point_error_budget_bytes = 0;
   // ε_max / ε_min (the papers' example uses [0.1, 0.15]).
   double blend_zone_ratio = 1.5;
   // Regions for local fail-through (0 = none; cross-PMSC models have none).
@@ -106,6 +112,7 @@ struct TrainingReport {
   double error_ratio = 0;
   int calibration_frames = 0;
   int check_points = 0;                // C
+  int check_point_samples = 0;         // of calibration_frames, those the check points were chosen on
   // Articulated models: B, r, the skinning's RMS error on the training frames (model units,
   // each frame's bone transforms fitted to all its points) and the decomposition's time.
   int bones = 0;

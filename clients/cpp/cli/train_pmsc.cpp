@@ -178,6 +178,7 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 {"error_ratio", model->calibration.error_ratio},
                 {"calibration_frames", report.calibration_frames},
                 {"check_points", report.check_points},
+                {"check_point_samples", report.check_point_samples},
                 {"key_weight", model->key_weight},
                 {"calibration_bad_samples", report.calibration_bad_samples},
                 {"calibration_guarantee_holds", pmsc::calibration_guarantee_holds(*model)},
@@ -199,8 +200,13 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
                 100 * report.max_training_error / diagonal, 100 * a.error_bound_diag);
     std::printf("A_key condition number %.3g%s\n", report.condition_number,
                 report.regularization > 0 ? " (regularised)" : "");
-    std::printf("%d check points (the client poses %d points in all: %d keys + %d checks)\n", report.check_points,
+    std::printf("%d check points (the client poses %d points in all: %d keys + %d checks)", report.check_points,
                 report.key_points + report.check_points, report.key_points, report.check_points);
+    if (report.check_points > 0 && report.check_point_samples < report.calibration_frames) {
+      // Issue #53 item 2: past a memory budget only some held-out sets keep every point's error.
+      std::printf(", chosen on %d of the %d held-out frames", report.check_point_samples, report.calibration_frames);
+    }
+    std::printf("\n");
     std::printf("soft cache ε = [%.4g, %.4g] on max(%.3g·e_key, e_check): false-hit rate δ = %g, error ratio %.3g "
                 "from %d held-out frames, %ld over-tolerance samples\n",
                 model->epsilon.epsilon_min, model->epsilon.epsilon_max, model->key_weight,

@@ -1,6 +1,7 @@
 #include "core/pmsc/train.h"
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 #include <set>
 #include <string_view>
@@ -15,6 +16,7 @@
 #include "core/container/model_container.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/relative_point_errors.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -475,6 +477,58 @@ TEST(PmscTrain, TheModelIsTheSameOnOneThreadAndOnTwo) {
   EXPECT_EQ(a.calibration.samples.fold_family, b.calibration.samples.fold_family);
   EXPECT_EQ(a.epsilon.epsilon_min, b.epsilon.epsilon_min);
   EXPECT_EQ(a.epsilon.epsilon_max, b.epsilon.epsilon_max);
+}
+
+// Issue #53 item 2: past a memory budget only some held-out sets keep every point's error; the
+// check points are chosen on them, and the other sets' samples are measured at the chosen points
+// only. Frames of a rank-3 motion plus a jiggle at a few points of its own per frame, amplitudes
+// halving from point to point (the basis has the motion only, so the jiggle is what every
+// held-out frame gets wrong, and its largest points are where check points belong on any share
+// of the samples). Trained with the whole errors kept and with a budget that keeps one set per
+// fold family: the same check points, and each sample's e_check the same to the 16-bit step of
+// the whole errors (exact at the chosen points, where the whole errors round down).
+TEST(PmscTrain, CheckPointsChosenOnSomeHeldOutSetsMeasureEverySampleAtThem) {
+  constexpr int kPoints = 400;
+  SyntheticSet data = exact_subspace(kPoints, 60, 3, 1.0, 17);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal;
+  for (long f = 0; f < data.frames.rows(); ++f) {
+    for (int j = 0; j < 8; ++j) {
+      data.frames(f, 3 * (23 + 47 * j) + 1) += static_cast<float>(std::ldexp(0.5, -j) * normal(rng));
+    }
+  }
+  TrainingOptions o = options_for(1.0);
+  o.basis_size = 3;
+  o.max_key_points = 10;
+  o.region_count = 0;
+  o.error_tolerance = 0.01;
+  TrainingReport whole_report, budget_report;
+  auto whole = train(data.frames, o, &whole_report);
+  ASSERT_TRUE(whole.ok()) << whole.error().message;
+  o.point_error_budget_bytes = 1;
+  auto budget = train(data.frames, o, &budget_report);
+  ASSERT_TRUE(budget.ok()) << budget.error().message;
+
+  EXPECT_EQ(whole_report.check_point_samples, whole_report.calibration_frames) << "a small model keeps them all";
+  EXPECT_GT(budget_report.check_point_samples, 0);
+  EXPECT_LT(budget_report.check_point_samples, budget_report.calibration_frames / 2);
+  ASSERT_EQ(whole->key_points, budget->key_points);
+  const CalibrationSamples& a = whole->calibration.samples;
+  const CalibrationSamples& b = budget->calibration.samples;
+  ASSERT_EQ(a.max_errors, b.max_errors) << "the same folds judge the same frames";
+  std::vector<int> a_checks = whole->check_points, b_checks = budget->check_points;
+  std::sort(a_checks.begin(), a_checks.end());
+  std::sort(b_checks.begin(), b_checks.end());
+  ASSERT_EQ(a_checks.size(), 2u);
+  ASSERT_EQ(a_checks, b_checks) << "the fixture's largest jiggles are found on any share of the samples";
+  long seen = 0;
+  for (long i = 0; i < a.size(); ++i) {
+    const double step = a.max_errors(i) / RelativePointErrors::kScale;
+    EXPECT_GE(b.check_point_errors(i), a.check_point_errors(i) - 1e-12) << "sample " << i;
+    EXPECT_LE(b.check_point_errors(i), a.check_point_errors(i) + 1.001 * step + 1e-12) << "sample " << i;
+    seen += b.check_point_errors(i) > 0.1 * b.max_errors(i) ? 1 : 0;
+  }
+  EXPECT_GT(seen, a.size() / 2) << "the check points see most samples' jiggle";
 }
 
 }  // namespace
