@@ -10,7 +10,9 @@
 #include "core/common/posix_file.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <bit>
@@ -561,6 +563,36 @@ void ModelContainer::set_text(const std::string& name, std::string text) {
 void ModelContainer::set_matrix(const std::string& name, const FrameMatrix& m) {
   assert(can_add_section(sections_, name));
   sections_[name] = matrix_section(SectionType::kFloat32Matrix, m);
+}
+
+void ModelContainer::set_matrix(const std::string& name, FrameMatrix&& m) {
+  assert(can_add_section(sections_, name));
+  assert(static_cast<uint64_t>(m.rows()) <= std::numeric_limits<uint32_t>::max());
+  assert(static_cast<uint64_t>(m.cols()) <= std::numeric_limits<uint32_t>::max());
+  Section section;
+  section.type = SectionType::kFloat32Matrix;
+  section.rows = static_cast<uint32_t>(m.rows());
+  section.cols = static_cast<uint32_t>(m.cols());
+  const size_t total = static_cast<size_t>(m.size()) * sizeof(float);
+  // Reserved, not resized: a resize would write (and so hold) every page before the copy does.
+  section.bytes.reserve(total);
+  const char* source = reinterpret_cast<const char*>(m.data());
+  const auto page = static_cast<uintptr_t>(::sysconf(_SC_PAGESIZE));
+  // Only pages wholly inside the matrix are released (its first and last may hold the
+  // allocator's bookkeeping); they are never read again before the matrix is freed.
+  uintptr_t released = (reinterpret_cast<uintptr_t>(source) + page - 1) / page * page;
+  constexpr size_t kBlock = size_t{64} << 20;
+  for (size_t done = 0; done < total; done += kBlock) {
+    const size_t n = std::min(kBlock, total - done);
+    section.bytes.append(source + done, n);
+    const uintptr_t copied = (reinterpret_cast<uintptr_t>(source) + done + n) / page * page;
+    if (copied > released) {
+      ::madvise(reinterpret_cast<void*>(released), copied - released, MADV_DONTNEED);
+      released = copied;
+    }
+  }
+  m = FrameMatrix();
+  sections_[name] = std::move(section);
 }
 
 void ModelContainer::set_matrix(const std::string& name, const Int32Matrix& m) {

@@ -100,6 +100,10 @@ class ModelContainer {
   void set_bytes(const std::string& name, std::string bytes);
   void set_text(const std::string& name, std::string text);
   void set_matrix(const std::string& name, const FrameMatrix& m);
+  // The same, taking the matrix: it is copied a block at a time and each block's pages go back to
+  // the system once copied, so that a matrix of gigabytes (a studio sequence's training frames,
+  // issue #53) is never held twice. `m` is empty afterwards.
+  void set_matrix(const std::string& name, FrameMatrix&& m);
   void set_matrix(const std::string& name, const Int32Matrix& m);
   void set_matrix(const std::string& name, const Float64Matrix& m);
   void set_points(const std::string& name, const PointMatrix& m);

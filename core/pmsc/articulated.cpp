@@ -9,6 +9,7 @@
 #include "core/animspace/segmentation.h"
 #include "core/animspace/skinning_decomposition.h"
 #include "core/common/kernels.h"
+#include "core/pmsc/training_matrix.h"
 
 namespace animspace::pmsc {
 namespace {
@@ -145,18 +146,18 @@ Result<ArticulatedSkinning> fit_articulated_skinning(const FrameMatrix& frames, 
 
   // (3) Every frame's transforms by least squares over all its points, Q = (LᵀL)⁻¹ LᵀT, and what
   // they leave. A ridge of 1e-12 of the Gram's trace keeps a bone without weights solvable.
+  // T is read from the frames' own bytes (training_matrix.h), not copied to double: beside the
+  // residuals it would be a second R × F double (issue #53 item 2).
   const long R = 3 * N, P = out.columns.cols();
-  const Eigen::MatrixXd T = frames.transpose().cast<double>();
+  const TrainingMatrix T(frames.data(), R, F);
   Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(P, P);
   gram_lower_serial(R, P, out.columns.data(), R, gram.data(), P);
   gram = gram.selfadjointView<Eigen::Lower>();
   gram.diagonal().array() += 1e-12 * std::max(gram.trace(), 1e-300) / static_cast<double>(P);
-  Eigen::MatrixXd LtT(P, F);
-  gemm_transposed_serial(P, R, F, out.columns.data(), R, T.data(), R, 0.0, LtT.data(), P);
-  const Eigen::MatrixXd Q = gram.ldlt().solve(LtT);
+  const Eigen::MatrixXd Q = gram.ldlt().solve(T.transposed_times(out.columns));
   out.residuals.resize(R, F);
   gemm_serial(R, P, F, out.columns.data(), R, Q.data(), P, 0.0, out.residuals.data(), R);
-  out.residuals = T - out.residuals;
+  out.residuals = frames.transpose().cast<double>() - out.residuals;  // coefficient-wise: no temporary
   out.rms = std::sqrt(out.residuals.squaredNorm() / static_cast<double>(N * F));
   return out;
 }

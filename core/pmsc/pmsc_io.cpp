@@ -395,7 +395,7 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
   return m;
 }
 
-container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMatrix& training_frames,
+container::ModelContainer make_container(const TriangleMesh& mesh, FrameMatrix training_frames,
                                          const FrameMatrix* control_frames, const PmscModel& model,
                                          const TrainingReport& report, const std::string& description) {
   container::ModelContainer out;
@@ -404,7 +404,7 @@ container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMa
   store_training_report(report, out);
   out.set_points("mesh.rest_points", mesh.V);
   if (mesh.F.rows() > 0) out.set_faces("mesh.faces", mesh.F);
-  out.set_matrix("sequence.frames", training_frames);
+  out.set_matrix("sequence.frames", std::move(training_frames));
   if (control_frames) out.set_matrix("sequence.control_frames", *control_frames);
   return out;
 }

@@ -68,8 +68,9 @@ Result<PmscModel> load(const container::ModelContainer& in, const std::string& s
 // A complete, servable model container: the output mesh (`mesh.V`: N × 3 positions of the output
 // points; faces optional), the training frames (kept so that retraining can start from them, SPEC
 // "train each night"), the model, and the training report as metadata.
-// `training_frames` is F × N·D output frames; `control_frames` (cross-PMSC only) F × N_c·D.
-container::ModelContainer make_container(const TriangleMesh& mesh, const FrameMatrix& training_frames,
+// `training_frames` is F × N·D output frames, moved into the container (FrameMatrix&& set_matrix: a
+// caller that lets go of its frames holds them once); `control_frames` (cross-PMSC only) F × N_c·D.
+container::ModelContainer make_container(const TriangleMesh& mesh, FrameMatrix training_frames,
                                          const FrameMatrix* control_frames, const PmscModel& model,
                                          const TrainingReport& report, const std::string& description);
 

@@ -145,10 +145,10 @@ int run_train_pmsc(const TrainPmscArgs& a, bool json) {
   const std::string description =
       a.description.empty() ? "PMSC model of " + a.sequence + " (" + std::to_string(frames.rows()) + " frames)"
                             : a.description;
-  auto container = pmsc::make_container(sequence->reference, frames, control ? &control_frames : nullptr, *model,
-                                        report, description);
-  // The container has its own copy of the frames, and the file is written a piece at a time.
-  frames = FrameMatrix();
+  // The frames move into the container (held once: issue #53), and the file is written a piece at
+  // a time.
+  auto container = pmsc::make_container(sequence->reference, std::move(frames),
+                                        control ? &control_frames : nullptr, *model, report, description);
   control_frames = FrameMatrix();
   // Kept so that the daemon can retrain the model from its frames and logged misses.
   pmsc::store_training_options(options, container);
