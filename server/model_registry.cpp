@@ -185,8 +185,13 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
       fresh.push_back(std::move(entry));
     }
   }
+  // A version directory whose model file is not there yet is one being written by a tool that
+  // made the directory first: it is not recorded, so the next poll looks at it again.
+  std::set<uint64_t> not_written_yet;
   for (auto& entry : fresh) {
     const auto dir = repository_ / name / std::to_string(entry.version);
+    std::error_code absent;
+    if (!std::filesystem::exists(dir / kModelFileName, absent)) not_written_yet.insert(entry.version);
     // Issue #54: nothing reached through a link out of the repository is read. (A file that is
     // not there is the loader's to report, as before.)
     if (Status inside = model::check_inside_repository(repository_, dir / kModelFileName);
@@ -211,6 +216,7 @@ Result<ModelEntry> ModelRegistry::load(const std::string& name, uint64_t version
     ModelEntry& model = models_[name];
     model.name = name;
     for (auto& entry : fresh) {
+      if (!entry.model && not_written_yet.count(entry.version)) continue;
       auto& slot = model.versions[entry.version];
       // A refused reload of a version that is serving keeps the serving copy (nothing stored is
       // lost); the refusal is still reported to the caller below.

@@ -119,6 +119,38 @@ TEST(ModelRegistry, ARefusedVersionNeverReplacesAServingOne) {
   EXPECT_EQ(refused.error().code, ErrorCode::kFailedPrecondition);
 }
 
+// A tool that makes a version's directory before writing its model file (the CLI writing straight
+// into a served repository) can be seen by a poll in between: that poll must not write the version
+// off, or it would be served only after a manual load.
+TEST(ModelRegistry, AVersionFoundBeforeItsModelFileIsServedAtTheNextPoll) {
+  testing::TempDir repo;
+  put(repo.path(), "m", "1", point_model(3));
+  ModelRegistry registry(repo.path());
+  ASSERT_EQ(registry.load_all(), 1);
+
+  std::filesystem::create_directories(repo.path() / "m" / "2");
+  EXPECT_EQ(registry.load_new_versions(), 0);
+  EXPECT_FALSE(registry.find("m", 2).ok());
+  EXPECT_EQ((*registry.find("m", 0))->version, 1u);
+
+  ASSERT_TRUE(container::write_file(repo.path() / "m" / "2" / kModelFileName, point_model(4)).ok());
+  EXPECT_EQ(registry.load_new_versions(), 1);
+  auto two = registry.find("m", 2);
+  ASSERT_TRUE(two.ok()) << two.error().message;
+  EXPECT_EQ((*two)->info.point_count, 4);
+
+  // A file that is there but unreadable is refused once and not read again at every poll.
+  std::filesystem::create_directories(repo.path() / "m" / "3");
+  testing::write_text_file(repo.path() / "m" / "3" / kModelFileName, "garbage");
+  EXPECT_EQ(registry.load_new_versions(), 0);
+  auto described = registry.describe("m");
+  ASSERT_TRUE(described.ok());
+  ASSERT_TRUE(described->versions.count(3));
+  EXPECT_FALSE(described->versions.at(3).error.empty());
+  ASSERT_TRUE(container::write_file(repo.path() / "m" / "3" / kModelFileName, point_model(5)).ok());
+  EXPECT_EQ(registry.load_new_versions(), 0);
+}
+
 TEST(ModelRegistry, SnapshotsOutliveUnload) {
   testing::TempDir repo;
   put(repo.path(), "m", "1", point_model(3));
