@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cstddef>
+#include <cstring>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -28,11 +29,13 @@ Error invalid(std::string message) { return make_error(ErrorCode::kInvalidArgume
 // y = C p of every vertex of `model` (n × V).
 Eigen::MatrixXd normalised_positions(const as::AnimationSpaceModel& model, const Eigen::MatrixXd& C) {
   Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(C.rows(), model.vertex_count());
-  for (int v = 0; v < model.vertex_count(); ++v) {
-    const int begin = model.influences.begin(v);
-    add_normalised(C, model.influences.bones.data() + begin,
-                   model.positions.middleCols(begin, model.influences.end(v) - begin), Y.col(v));
-  }
+  parallel_for_chunks(model.vertex_count(), 1024, [&](int64_t first, int64_t last) {
+    for (auto v = static_cast<int>(first); v < static_cast<int>(last); ++v) {
+      const int begin = model.influences.begin(v);
+      add_normalised(C, model.influences.bones.data() + begin,
+                     model.positions.middleCols(begin, model.influences.end(v) - begin), Y.col(v));
+    }
+  });
   return Y;
 }
 
@@ -45,23 +48,53 @@ struct Closest {
 
 // d = y − A's products with e0, e1 and itself, in one pass over the four columns (n values each)
 // instead of forming d and then taking three dot products: the closest-point queries are most of
-// a level fit's time at 10⁵ vertices (issue #53). Two lanes, as SSE2 packets, with three
-// independent accumulators.
+// a level fit's time at 10⁵ vertices (issue #53).
 struct Products {
   double d0 = 0, d1 = 0, dd = 0;
 };
 
-Products products(const double* y, const double* corner, const double* e0, const double* e1, Eigen::Index n) {
-  using Lanes = Eigen::Array2d;
-  Lanes d0 = Lanes::Zero(), d1 = Lanes::Zero(), dd = Lanes::Zero();
+// Four lanes (one ymm, or two xmm on the baseline), two sets of accumulators for the adds'
+// latency. Inlined into each target's entry point below, so that the compiler generates it for
+// that target; neither target has FMA, so both round every product and sum alike and a level is
+// the same on every machine.
+using Quad = double __attribute__((vector_size(32)));
+
+// Loads and sums by reference: a vector passed or returned by value would change the ABI between
+// the targets.
+__attribute__((always_inline)) inline void load(Quad& value, const double* values) {
+  std::memcpy(&value, values, sizeof value);
+}
+
+__attribute__((always_inline)) inline double lanes_sum(const Quad& q) { return (q[0] + q[1]) + (q[2] + q[3]); }
+
+__attribute__((always_inline)) inline Products products_body(const double* y, const double* corner, const double* e0,
+                                                             const double* e1, Eigen::Index n) {
+  Quad d0a{}, d1a{}, dda{}, d0b{}, d1b{}, ddb{};
+  Quad ya, yb, ca, cb, ea, eb, fa, fb;
   Eigen::Index i = 0;
-  for (; i + 2 <= n; i += 2) {
-    const Lanes d = Eigen::Map<const Lanes>(y + i) - Eigen::Map<const Lanes>(corner + i);
-    d0 += Eigen::Map<const Lanes>(e0 + i) * d;
-    d1 += Eigen::Map<const Lanes>(e1 + i) * d;
-    dd += d * d;
+  for (; i + 8 <= n; i += 8) {
+    load(ya, y + i), load(yb, y + i + 4), load(ca, corner + i), load(cb, corner + i + 4);
+    load(ea, e0 + i), load(eb, e0 + i + 4), load(fa, e1 + i), load(fb, e1 + i + 4);
+    const Quad da = ya - ca;
+    const Quad db = yb - cb;
+    d0a += ea * da;
+    d0b += eb * db;
+    d1a += fa * da;
+    d1b += fb * db;
+    dda += da * da;
+    ddb += db * db;
   }
-  Products out{d0.sum(), d1.sum(), dd.sum()};
+  for (; i + 4 <= n; i += 4) {
+    load(ya, y + i), load(ca, corner + i), load(ea, e0 + i), load(fa, e1 + i);
+    const Quad d = ya - ca;
+    d0a += ea * d;
+    d1a += fa * d;
+    dda += d * d;
+  }
+  d0a += d0b;
+  d1a += d1b;
+  dda += ddb;
+  Products out{lanes_sum(d0a), lanes_sum(d1a), lanes_sum(dda)};
   for (; i < n; ++i) {
     const double d = y[i] - corner[i];
     out.d0 += e0[i] * d;
@@ -69,6 +102,29 @@ Products products(const double* y, const double* corner, const double* e0, const
     out.dd += d * d;
   }
   return out;
+}
+
+using ProductsFunction = Products (*)(const double*, const double*, const double*, const double*, Eigen::Index);
+
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) Products products_avx2(const double* y, const double* corner, const double* e0,
+                                                       const double* e1, Eigen::Index n) {
+  return products_body(y, corner, e0, e1, n);
+}
+#endif
+Products products_baseline(const double* y, const double* corner, const double* e0, const double* e1,
+                           Eigen::Index n) {
+  return products_body(y, corner, e0, e1, n);
+}
+
+// The widest the machine has, chosen once.
+Products products(const double* y, const double* corner, const double* e0, const double* e1, Eigen::Index n) {
+#if defined(__x86_64__)
+  static const ProductsFunction chosen = __builtin_cpu_supports("avx2") ? products_avx2 : products_baseline;
+#else
+  static const ProductsFunction chosen = products_baseline;
+#endif
+  return chosen(y, corner, e0, e1, n);
 }
 
 Closest closest_on_triangle(double a, double b, double c, double d0, double d1, double dd) {
@@ -247,10 +303,33 @@ Result<int> remove_influences(const Eigen::MatrixXd& C, InfluenceSimplifier& sim
 
 }  // namespace
 
+Result<NormalisedInput> normalise_input(const as::AnimationSpaceModel& input, const Eigen::MatrixXd& P) {
+  if (P.rows() != 4 * input.bone_count() || P.cols() != P.rows()) {
+    return invalid("P: expected " + std::to_string(4 * input.bone_count()) + " × " +
+                   std::to_string(4 * input.bone_count()) + " (the input's bones), got " + std::to_string(P.rows()) +
+                   " × " + std::to_string(P.cols()));
+  }
+  auto C = as::normalised_animation_space_matrix(P);
+  if (!C) return invalid("P: " + C.error().message);
+  NormalisedInput normalised;
+  normalised.positions = normalised_positions(input, *C);
+  normalised.C = std::move(*C);
+  normalised.P = P;
+  return normalised;
+}
+
 Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::MatrixXd& P,
                            const std::vector<int32_t>& representative, as::AnimationSpaceModel& level,
                            const LevelFitOptions& options, InfluenceSimplifier* simplifier) {
-  const int V = input.vertex_count();
+  auto normalised = normalise_input(input, P);
+  if (!normalised) return normalised.error();
+  return fit_level(*normalised, representative, level, options, simplifier);
+}
+
+Result<LevelFit> fit_level(const NormalisedInput& input, const std::vector<int32_t>& representative,
+                           as::AnimationSpaceModel& level, const LevelFitOptions& options,
+                           InfluenceSimplifier* simplifier) {
+  const auto V = static_cast<int>(input.positions.cols());
   const int L = level.vertex_count();
   if (static_cast<int>(representative.size()) != V) {
     return invalid("representative: expected " + std::to_string(V) + " entries (the input's vertices), got " +
@@ -262,18 +341,17 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
                      std::to_string(r));
     }
   }
-  if (P.rows() != 4 * input.bone_count() || P.cols() != P.rows() || level.bone_count() != input.bone_count()) {
-    return invalid("P: expected " + std::to_string(4 * input.bone_count()) + " × " +
-                   std::to_string(4 * input.bone_count()) + " (the input's bones), got " + std::to_string(P.rows()) +
-                   " × " + std::to_string(P.cols()));
+  if (input.C.rows() != 4 * level.bone_count()) {
+    return invalid("level: expected " + std::to_string(input.C.rows() / 4) + " bones (the input's), got " +
+                   std::to_string(level.bone_count()));
   }
   if (options.rounds < 0 || options.sweeps < 1) {
     return invalid("options: expected rounds ≥ 0 and sweeps ≥ 1, got " + std::to_string(options.rounds) + " and " +
                    std::to_string(options.sweeps));
   }
-  auto C = as::normalised_animation_space_matrix(P);
-  if (!C) return invalid("P: " + C.error().message);
-  const Eigen::MatrixXd Yin = normalised_positions(input, *C);
+  const Eigen::MatrixXd* C = &input.C;
+  const Eigen::MatrixXd& P = input.P;
+  const Eigen::MatrixXd& Yin = input.positions;
   Eigen::MatrixXd Y = normalised_positions(level, *C);
 
   // Faces around each level vertex, and the candidate faces of each representative: its own and
@@ -302,13 +380,15 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
   Eigen::MatrixXd E0(Y.rows(), F), E1(Y.rows(), F);
   Eigen::MatrixXd gram(3, F);
   const auto find_feet = [&] {
-    for (Eigen::Index f = 0; f < F; ++f) {
-      E0.col(f) = Y.col(level.faces(f, 1)) - Y.col(level.faces(f, 0));
-      E1.col(f) = Y.col(level.faces(f, 2)) - Y.col(level.faces(f, 0));
-      gram(0, f) = E0.col(f).squaredNorm();
-      gram(1, f) = E0.col(f).dot(E1.col(f));
-      gram(2, f) = E1.col(f).squaredNorm();
-    }
+    parallel_for_chunks(F, 1024, [&](int64_t first, int64_t last) {
+      for (auto f = static_cast<Eigen::Index>(first); f < static_cast<Eigen::Index>(last); ++f) {
+        E0.col(f) = Y.col(level.faces(f, 1)) - Y.col(level.faces(f, 0));
+        E1.col(f) = Y.col(level.faces(f, 2)) - Y.col(level.faces(f, 0));
+        gram(0, f) = E0.col(f).squaredNorm();
+        gram(1, f) = E0.col(f).dot(E1.col(f));
+        gram(2, f) = E1.col(f).squaredNorm();
+      }
+    });
     // Input vertices are independent here: split them over the cores.
     parallel_for_chunks(V, 256, [&](int64_t first, int64_t last) {
       const Eigen::Index n = Y.rows();
@@ -403,22 +483,66 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
     return *system;
   };
 
-  // Residuals r_o = y_o − Σ λ_c y_c, and which input vertices each level vertex carries.
-  Eigen::MatrixXd R(Yin.rows(), V);
+  // Which input vertices each level vertex carries (their closest points' weights on it), from
+  // the feet found last.
   Carried carried;
-  const auto gather = [&] {
+  const auto carry = [&] {
     carried.assign(static_cast<size_t>(L), {});
     for (int o = 0; o < V; ++o) {
       const Foot& foot = feet[static_cast<size_t>(o)];
-      R.col(o) = Yin.col(o);
       if (foot.face < 0) continue;
       for (int k = 0; k < 3; ++k) {
-        const int32_t c = level.faces(foot.face, k);
-        R.col(o) -= foot.weight[static_cast<size_t>(k)] * Y.col(c);
-        if (foot.weight[static_cast<size_t>(k)] != 0)
-          carried[static_cast<size_t>(c)].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
+        if (foot.weight[static_cast<size_t>(k)] != 0) {
+          carried[static_cast<size_t>(level.faces(foot.face, k))].emplace_back(o, foot.weight[static_cast<size_t>(k)]);
+        }
       }
     }
+  };
+  // Residuals r_o = y_o − Σ λ_c y_c of every input vertex (influence simplification's input).
+  Eigen::MatrixXd R;
+  const auto residuals = [&] {
+    R.resize(Yin.rows(), V);
+    parallel_for_chunks(V, 1024, [&](int64_t first, int64_t last) {
+      for (auto o = static_cast<Eigen::Index>(first); o < static_cast<Eigen::Index>(last); ++o) {
+        const Foot& foot = feet[static_cast<size_t>(o)];
+        R.col(o) = Yin.col(o);
+        if (foot.face < 0) continue;
+        for (int k = 0; k < 3; ++k) R.col(o) -= foot.weight[static_cast<size_t>(k)] * Y.col(level.faces(foot.face, k));
+      }
+    });
+  };
+  // A vertex's pull Σ_o λ_o r_o, with the feet held, is b_v − Σ_c M_vc y_c: b_v = Σ_o λ_ov y_o and
+  // M_vc = Σ_o λ_ov λ_oc over the points v carries (c its neighbours on their faces, v among them).
+  // A sweep then reads a level vertex's few neighbours instead of every residual it carries, and
+  // writes only its own y: the residuals of 10⁵ input vertices were streamed twice per vertex move
+  // (issue #53: most of build-lod's placement at 186k points, and all of it on the coarse levels).
+  Eigen::MatrixXd pulled;  // b_v, n × L
+  std::vector<std::vector<std::pair<int32_t, double>>> coupling;  // M_v·, the diagonal first
+  const auto normal_equations = [&] {
+    pulled.resize(Yin.rows(), L);
+    coupling.assign(static_cast<size_t>(L), {});
+    parallel_for_chunks(L, 256, [&](int64_t first, int64_t last) {
+      for (auto v = static_cast<int32_t>(first); v < static_cast<int32_t>(last); ++v) {
+        auto& row = coupling[static_cast<size_t>(v)];
+        row.emplace_back(v, 0.0);
+        pulled.col(v).setZero();
+        for (const auto& [o, lambda] : carried[static_cast<size_t>(v)]) {
+          pulled.col(v) += lambda * Yin.col(o);
+          const Foot& foot = feet[static_cast<size_t>(o)];
+          for (int k = 0; k < 3; ++k) {
+            const int32_t c = level.faces(foot.face, k);
+            const double product = lambda * foot.weight[static_cast<size_t>(k)];
+            if (product == 0) continue;
+            auto at = std::find_if(row.begin(), row.end(), [c](const auto& entry) { return entry.first == c; });
+            if (at == row.end()) {
+              row.emplace_back(c, product);
+            } else {
+              at->second += product;
+            }
+          }
+        }
+      }
+    });
   };
   // Level vertices that carry no input vertex in common move independently: each reads and
   // writes only its own points' residuals, its own Y column and its own positions. Coloured so
@@ -454,18 +578,15 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
   for (int k = 1; k <= most_bones; ++k) weight_free(k);  // made before the parallel sweeps read them
   const auto move_vertex = [&](int v, Eigen::VectorXd& pull, Eigen::VectorXd& moved, Eigen::VectorXd& g,
                                Eigen::VectorXd& rhs, Eigen::VectorXd& z, Eigen::VectorXd& delta) {
-    const auto& points = carried[static_cast<size_t>(v)];
     const int begin = level.influences.begin(v);
     const int k = level.influences.end(v) - begin;
     // Minimise Σ_o ‖r_o − λ_o C_I Δ‖² over the move Δ (4k) with Σ Δ̲ = 0: with Δ = B z,
     // (Σλ²) Bᵀ P_II B z = Bᵀ C_Iᵀ Σ λ r_o.
-    double lambda2 = 0;
-    pull.setZero();
-    for (const auto& [o, lambda] : points) {
-      lambda2 += lambda * lambda;
-      pull.noalias() += lambda * R.col(o);
-    }
+    const auto& row = coupling[static_cast<size_t>(v)];
+    const double lambda2 = row.front().second;
     if (!(lambda2 > 0)) return;
+    pull = pulled.col(v);
+    for (const auto& [c, m] : row) pull.noalias() -= m * Y.col(c);
     const Eigen::LDLT<Eigen::MatrixXd>& solver = system_of(v);
     if (solver.info() != Eigen::Success) return;
     g.resize(4 * k);
@@ -488,11 +609,11 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
     add_normalised(*C, level.influences.bones.data() + begin,
                    Eigen::Map<const Eigen::Matrix<double, 4, Eigen::Dynamic>>(delta.data(), 4, k), moved);
     Y.col(v) += moved;
-    for (const auto& [o, lambda] : points) R.col(o) -= lambda * moved;
   };
   const auto settle = [&](int rounds) {
     for (int round = 0; round < rounds; ++round) {
-      gather();
+      carry();
+      normal_equations();
       const std::vector<std::vector<int32_t>> classes = colour_classes();
       for (int sweep = 0; sweep < options.sweeps; ++sweep) {
         for (const std::vector<int32_t>& members : classes) {
@@ -515,7 +636,8 @@ Result<LevelFit> fit_level(const as::AnimationSpaceModel& input, const Eigen::Ma
   fit.influences_before = fit.influences = level.influences.influence_count();
   fit.rms_before = fit.rms;
   if (options.influence_exchange >= 0) {
-    gather();
+    carry();
+    residuals();
     std::optional<InfluenceSimplifier> own;
     if (!simplifier) simplifier = &own.emplace(P);
     Result<int> removed = remove_influences(*C, *simplifier, options.influence_exchange, carried, R, level);

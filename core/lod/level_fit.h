@@ -82,4 +82,20 @@ Result<LevelFit> fit_level(const animation_space::AnimationSpaceModel& input, co
                            const std::vector<int32_t>& representative, animation_space::AnimationSpaceModel& level,
                            const LevelFitOptions& options = {}, InfluenceSimplifier* simplifier = nullptr);
 
+// The input surface in normalised animation space: y = C p of every vertex (n × V, n = 4b), made
+// once for every level fitted to it (fit_levels) rather than once per level.
+struct NormalisedInput {
+  Eigen::MatrixXd P;
+  Eigen::MatrixXd C;  // P^½
+  Eigen::MatrixXd positions;
+};
+// Errors: kInvalidArgument for a P that is not 4b × 4b for the input's b bones or not
+// non-negative definite.
+Result<NormalisedInput> normalise_input(const animation_space::AnimationSpaceModel& input, const Eigen::MatrixXd& P);
+
+// fit_level on an input normalised once; the level must have the input's bones.
+Result<LevelFit> fit_level(const NormalisedInput& input, const std::vector<int32_t>& representative,
+                           animation_space::AnimationSpaceModel& level, const LevelFitOptions& options = {},
+                           InfluenceSimplifier* simplifier = nullptr);
+
 }  // namespace animspace::lod

@@ -126,11 +126,13 @@ Result<std::vector<LevelFit>> fit_levels(LodLevels& lods, const Eigen::MatrixXd&
   for (int32_t v = 0; v < input.vertex_count(); ++v) at[static_cast<size_t>(v)] = v;
   double epsilon = 0;
   InfluenceSimplifier simplifier(P);  // its operators serve every level
+  auto normalised = normalise_input(input, P);
+  if (!normalised) return normalised.error();
   for (int l = 1; l < lods.count(); ++l) {
     const LodLevel& finer = lods.levels[static_cast<size_t>(l) - 1];
     for (int32_t& v : at) v = finer.coarser_vertex[static_cast<size_t>(v)];
     LodLevel& level = lods.levels[static_cast<size_t>(l)];
-    Result<LevelFit> fit = fit_level(input, P, at, level.model, options, &simplifier);
+    Result<LevelFit> fit = fit_level(*normalised, at, level.model, options, &simplifier);
     if (!fit.ok()) return fit.error();
     epsilon = std::max(epsilon, fit->bound);
     level.epsilon = epsilon;

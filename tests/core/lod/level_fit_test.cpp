@@ -14,6 +14,7 @@
 
 #include <Eigen/Dense>
 
+#include "core/common/parallel.h"
 #include "core/lod/levels.h"
 #include "core/lod/simplify.h"
 #include "core/lod/surface_distance.h"
@@ -188,6 +189,36 @@ TEST(LevelFit, EveryLevelsEpsilonBoundsTheRmsOverThePosesOfEveryInputVertex) {
     EXPECT_LT(total_squares(error),
               total_squares(rms_over_poses(c.model, unplaced.levels[static_cast<size_t>(l)].model, c.poses)))
         << "level " << l;
+  }
+}
+
+// The closest points, the normal equations and the residuals are split over the cores, and a
+// sweep moves one colour's vertices at a time (no two sharing a point): the levels must not depend
+// on how many threads ran them. A character large enough that every split runs in two chunks.
+TEST(LevelFit, TheLevelsAreTheSameOnOneThreadAndOnTwo) {
+  const testing::LodCase c = testing::arm_lod_case(160, 16, 12);
+  ASSERT_GE(c.model.vertex_count(), 2048);
+  auto pm = build_progressive_mesh(c.model, c.metrics, {});
+  ASSERT_TRUE(pm.ok()) << pm.error().message;
+  const LodLevels cut = make_levels(*pm);
+  ASSERT_GE(cut.count(), 3);
+  LevelFitOptions options;
+  options.influence_exchange = 0.5;
+  LodLevels one = cut, two = cut;
+  set_thread_limit(1);
+  const auto on_one = fit_levels(one, c.metrics.P, options);
+  set_thread_limit(2);
+  const auto on_two = fit_levels(two, c.metrics.P, options);
+  set_thread_limit(0);
+  ASSERT_TRUE(on_one.ok()) << on_one.error().message;
+  ASSERT_TRUE(on_two.ok()) << on_two.error().message;
+  for (int l = 1; l < cut.count(); ++l) {
+    const auto& a = one.levels[static_cast<size_t>(l)];
+    const auto& b = two.levels[static_cast<size_t>(l)];
+    EXPECT_NE(a.model.positions, cut.levels[static_cast<size_t>(l)].model.positions) << "level " << l << " moved";
+    EXPECT_EQ(a.model.influences.bones, b.model.influences.bones) << "level " << l;
+    EXPECT_TRUE(a.model.positions == b.model.positions) << "level " << l;
+    EXPECT_EQ(a.epsilon, b.epsilon) << "level " << l;
   }
 }
 
