@@ -143,18 +143,24 @@ bool is_valid_section_name(std::string_view name) {
          (sections.contains(name) || sections.size() + 1 < kMaxSections);
 }
 
+// A section's header for matrix m, its bytes still to come.
 template <typename Matrix>
-Section matrix_section(SectionType type, const Matrix& m) {
-  using Scalar = typename Matrix::Scalar;
+Section matrix_header(SectionType type, const Matrix& m) {
   static_assert(Matrix::IsRowMajor || Matrix::ColsAtCompileTime == 1, "sections are row-major");
-  assert(sizeof(Scalar) == element_size(type));
+  assert(sizeof(typename Matrix::Scalar) == element_size(type));
   assert(static_cast<uint64_t>(m.rows()) <= std::numeric_limits<uint32_t>::max());
   assert(static_cast<uint64_t>(m.cols()) <= std::numeric_limits<uint32_t>::max());
   Section section;
   section.type = type;
   section.rows = static_cast<uint32_t>(m.rows());
   section.cols = static_cast<uint32_t>(m.cols());
-  section.bytes.resize(static_cast<size_t>(m.size()) * sizeof(Scalar));
+  return section;
+}
+
+template <typename Matrix>
+Section matrix_section(SectionType type, const Matrix& m) {
+  Section section = matrix_header(type, m);
+  section.bytes.resize(static_cast<size_t>(m.size()) * sizeof(typename Matrix::Scalar));
   if (!section.bytes.empty()) std::memcpy(section.bytes.data(), m.data(), section.bytes.size());
   return section;
 }
@@ -567,12 +573,7 @@ void ModelContainer::set_matrix(const std::string& name, const FrameMatrix& m) {
 
 void ModelContainer::set_matrix(const std::string& name, FrameMatrix&& m) {
   assert(can_add_section(sections_, name));
-  assert(static_cast<uint64_t>(m.rows()) <= std::numeric_limits<uint32_t>::max());
-  assert(static_cast<uint64_t>(m.cols()) <= std::numeric_limits<uint32_t>::max());
-  Section section;
-  section.type = SectionType::kFloat32Matrix;
-  section.rows = static_cast<uint32_t>(m.rows());
-  section.cols = static_cast<uint32_t>(m.cols());
+  Section section = matrix_header(SectionType::kFloat32Matrix, m);
   const size_t total = static_cast<size_t>(m.size()) * sizeof(float);
   // Reserved, not resized: a resize would write (and so hold) every page before the copy does.
   section.bytes.reserve(total);
