@@ -147,8 +147,25 @@ void gemm_transposed_serial(long rows, long inner, long columns, const double* a
   if (active_kernel() == Kernel::kPortable) {
     return portable_gemm_transposed(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
   }
+  if (columns < kBlasGemmMinColumns) {
+    for (long j = 0; j < columns; ++j) {
+      cblas_dgemv(CblasColMajor, CblasTrans, blas_int(inner), blas_int(rows), 1.0, a, blas_int(lda), b + j * ldb, 1,
+                  beta, c + j * ldc, 1);
+    }
+    return;
+  }
   cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, blas_int(rows), blas_int(columns), blas_int(inner), 1.0, a,
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
+}
+
+void symmetric_product_lower_serial(long n, const double* a, long lda, const double* x, double* y) {
+  if (n == 0) return;
+  if (active_kernel() == Kernel::kPortable) {
+    const View<double> A(a, n, n, Eigen::OuterStride<>(lda));
+    Eigen::Map<Eigen::VectorXd>(y, n).noalias() = A.selfadjointView<Eigen::Lower>() * Eigen::Map<const Eigen::VectorXd>(x, n);
+    return;
+  }
+  cblas_dsymv(CblasColMajor, CblasLower, blas_int(n), 1.0, a, blas_int(lda), x, 1, 0.0, y, 1);
 }
 
 void gram_lower_serial(long rows, long columns, const float* x, long ldx, float* out, long ldo) {

@@ -75,4 +75,9 @@ void gemm_transposed_serial(long rows, long inner, long columns, const double* a
 void gram_lower_serial(long rows, long columns, const float* x, long ldx, float* out, long ldo);
 void gram_lower_serial(long rows, long columns, const double* x, long ldx, double* out, long ldo);
 
+// y = A·x for a symmetric A (n × n, leading dimension lda) of which only the lower triangle
+// (diagonal included) is read — half the memory of the general product, for a matrix that does
+// not fit in cache (the articulated subspace's M × M inverse, issue #51) — on the calling thread.
+void symmetric_product_lower_serial(long n, const double* a, long lda, const double* x, double* y);
+
 }  // namespace animspace

@@ -106,9 +106,14 @@ class ArticulatedSubspace final : public Subspace {
     Eigen::MatrixXf coordinates(m.basis.cols(), B);
     for (long b = 0; b < B; ++b) coordinates.col(b) = estimates[static_cast<size_t>(b)]->coordinates.cast<float>();
     const long block = std::max(kReconstructionBlockValues / B, 256L);
-    Eigen::MatrixXf scratch(std::min(block, rows), B);
     const Eigen::MatrixXf residual_coordinates = coordinates.bottomRows(r);
-    for (long r0 = 0; r0 < rows; r0 += block) {
+    if (B == 1) {  // one pose (a unary call): the product adds straight onto the mean
+      float* f = destinations.front();
+      Eigen::Map<Eigen::VectorXf>(f, rows) = m.mean;
+      if (r > 0) gemm(rows, r, 1, m.basis.data() + skinning * rows, rows, residual_coordinates.data(), r, 1.0f, f, rows);
+    }
+    Eigen::MatrixXf scratch(B == 1 ? 0 : std::min(block, rows), B);
+    for (long r0 = 0; r0 < rows && B > 1; r0 += block) {
       const long n = std::min(block, rows - r0);
       if (r > 0) {
         gemm(n, r, B, m.basis.data() + skinning * rows + r0, rows, residual_coordinates.data(), r, 0.0f,
@@ -120,17 +125,26 @@ class ArticulatedSubspace final : public Subspace {
         if (r > 0) destination += scratch.col(b).head(n);
       }
     }
+    // Each bone's 3 × 4 transform as a 4 × 4 of columns (the fourth row 0), so that a term is
+    // four lane-wide multiply-adds of h's numbers by the columns rather than three dot products.
+    std::vector<Eigen::Matrix4f> transforms(static_cast<size_t>(m.bone_count));
     for (long b = 0; b < B; ++b) {
       const float* p = coordinates.col(b).data();
+      for (int j = 0; j < m.bone_count; ++j) {
+        Eigen::Matrix4f& T = transforms[static_cast<size_t>(j)];
+        T.topRows<3>() = Eigen::Map<const Eigen::Matrix<float, 3, 4, Eigen::RowMajor>>(
+            p + static_cast<long>(kBoneCoordinates) * j);
+        T.row(3).setZero();
+      }
       float* f = destinations[static_cast<size_t>(b)];
       for (long i = 0; i < m.point_count; ++i) {
+        Eigen::Vector4f sum = Eigen::Vector4f::Zero();
         for (int32_t k = skinning_.offsets[static_cast<size_t>(i)]; k < skinning_.offsets[static_cast<size_t>(i) + 1];
              ++k) {
           const Eigen::Map<const Eigen::Vector4f> h(skinning_.terms.data() + 4L * k);
-          const Eigen::Map<const Eigen::Matrix<float, 3, 4, Eigen::RowMajor>> M_j(
-              p + static_cast<long>(kBoneCoordinates) * skinning_.bones[static_cast<size_t>(k)]);
-          Eigen::Map<Eigen::Vector3f>(f + 3 * i).noalias() += M_j * h;
+          sum.noalias() += transforms[static_cast<size_t>(skinning_.bones[static_cast<size_t>(k)])] * h;
         }
+        Eigen::Map<Eigen::Vector3f>(f + 3 * i) += sum.head<3>();
       }
     }
   }
@@ -167,7 +181,6 @@ class ArticulatedSubspace final : public Subspace {
     const long M = m.basis.cols();
     const long K = static_cast<long>(m.key_points.size());
     const long r = m.residual_components;
-    const auto residual_rows = m.key_basis.rightCols(r);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(M);
     for (long k = 0; k < K; ++k) {
       for (int32_t e = key_offsets_[static_cast<size_t>(k)]; e < key_offsets_[static_cast<size_t>(k) + 1]; ++e) {
@@ -178,8 +191,13 @@ class ArticulatedSubspace final : public Subspace {
         }
       }
     }
-    if (r > 0) rhs.tail(r).noalias() = residual_rows.transpose() * centred;
-    p.noalias() = inverse_gram_ * rhs;
+    // The dense parts through the process's kernel (kernels.h): at M ≈ 425 the M × M product is
+    // most of an estimate, and Eigen's is compiled for SSE2 alone.
+    const long KD = centred.size();
+    const double* residual_block = m.key_basis.data() + (M - r) * KD;
+    if (r > 0) gemm_transposed_serial(r, KD, 1, residual_block, KD, centred.data(), KD, 0.0, rhs.data() + (M - r), M);
+    p.resize(M);
+    symmetric_product_lower_serial(M, inverse_gram_.data(), M, rhs.data(), p.data());
     for (long k = 0; k < K; ++k) {
       for (int32_t e = key_offsets_[static_cast<size_t>(k)]; e < key_offsets_[static_cast<size_t>(k) + 1]; ++e) {
         const double* h = key_terms_.data() + 4L * e;
@@ -191,7 +209,10 @@ class ArticulatedSubspace final : public Subspace {
         }
       }
     }
-    if (r > 0) centred.noalias() -= residual_rows * p.tail(r);
+    if (r > 0) {
+      const Eigen::VectorXd minus_coefficients = -p.tail(r);
+      gemm_serial(KD, r, 1, residual_block, KD, minus_coefficients.data(), r, 1.0, centred.data(), KD);
+    }
     return centred;
   }
 

@@ -413,7 +413,8 @@ void estimate_coordinates_with(const PmscModel& m, const Eigen::Ref<const Eigen:
   std::vector<double> check_errors;
   if (out.checked) {
     Eigen::VectorXd estimate = m.check_mean;
-    estimate.noalias() += m.check_basis * out.coordinates;
+    gemm_serial(C * D, m.check_basis.cols(), 1, m.check_basis.data(), C * D, out.coordinates.data(),
+                m.check_basis.cols(), 1.0, estimate.data(), C * D);
     if (m.aligned) {  // positions (D = 3): a map of 3 × C is only made for them
       Eigen::Map<Eigen::Matrix3Xd> points(estimate.data(), 3, C);
       points = (out.alignment.rotation * points).colwise() + out.alignment.translation;

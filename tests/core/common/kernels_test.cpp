@@ -260,6 +260,33 @@ TEST_F(KernelTest, BothKernelsComputeTheTransposedProductOfTheDefinition) {
   }
 }
 
+// A symmetric A·x from the lower triangle alone: the strict upper triangle holds NaN, which any
+// read of it would carry into y; the lower one is checked against the definition with both halves.
+TEST_F(KernelTest, BothKernelsComputeTheSymmetricProductFromTheLowerTriangleAlone) {
+  for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
+    use_kernel(kernel);
+    std::mt19937 random(13);
+    std::uniform_real_distribution<double> value(-1, 1);
+    for (long n : {1L, 7L, 130L}) {
+      const long lda = n + 3;
+      std::vector<double> a(static_cast<size_t>(lda * n), std::nan("")), x(static_cast<size_t>(n));
+      std::vector<double> full(static_cast<size_t>(n * n));  // both triangles, leading dimension n
+      for (long j = 0; j < n; ++j) {
+        for (long i = j; i < n; ++i) {
+          const double v = value(random);
+          a[static_cast<size_t>(i + j * lda)] = v;
+          full[static_cast<size_t>(i + j * n)] = full[static_cast<size_t>(j + i * n)] = v;
+        }
+      }
+      for (double& v : x) v = value(random);
+      const std::vector<long double> expected = reference(n, n, 1, full, n, x, n, 0.0, x, n);
+      std::vector<double> y(static_cast<size_t>(n), 5.0);
+      symmetric_product_lower_serial(n, a.data(), lda, x.data(), y.data());
+      expect_product(y, y, expected, n, 1, n, 4e-16 * (n + 1), kernel_name(kernel) + " n " + std::to_string(n));
+    }
+  }
+}
+
 TEST_F(KernelTest, TheBlasKernelNamesTheCoreItDispatchedTo) {
   const std::string blas = kernel_name(Kernel::kBlas);
   ASSERT_EQ(blas.rfind("openblas:", 0), 0u) << blas;
