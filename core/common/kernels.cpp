@@ -162,7 +162,8 @@ void symmetric_product_lower_serial(long n, const double* a, long lda, const dou
   if (n == 0) return;
   if (active_kernel() == Kernel::kPortable) {
     const View<double> A(a, n, n, Eigen::OuterStride<>(lda));
-    Eigen::Map<Eigen::VectorXd>(y, n).noalias() = A.selfadjointView<Eigen::Lower>() * Eigen::Map<const Eigen::VectorXd>(x, n);
+    const Eigen::Map<const Eigen::VectorXd> X(x, n);
+    Eigen::Map<Eigen::VectorXd>(y, n).noalias() = A.selfadjointView<Eigen::Lower>() * X;
     return;
   }
   cblas_dsymv(CblasColMajor, CblasLower, blas_int(n), 1.0, a, blas_int(lda), x, 1, 0.0, y, 1);

@@ -4,6 +4,12 @@
 // (pmsc::reconstruct) gives the same points and stays the reference: a client holding the whole
 // basis reconstructs that way (coordinates.h).
 #include <cassert>
+#include <cstdint>
+#include <cstring>
+
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 #include <string>
 #include <vector>
 
@@ -60,6 +66,98 @@ Result<SkinningTerms> read_skinning_terms(const PmscModel& m) {
   return out;
 }
 
+// f_i += Σ_k T_{bone k} h_k over point i's terms, T a bone's transform as four columns of four
+// floats: each of h's four numbers broadcast and multiplied by its column. The even terms are
+// summed apart from the odd ones and the two sums added at the end, so that AVX takes a pair of
+// terms in one register (the next term's h is the next four floats: one load holds both) while
+// the baseline keeps two registers; neither has FMA, so both round every product and sum alike
+// and a pose is the same on every machine.
+#if defined(__x86_64__)
+template <int c>
+__attribute__((always_inline)) inline __m128 term_column(const float* T, __m128 h) {
+  return _mm_mul_ps(_mm_loadu_ps(T + 4 * c), _mm_shuffle_ps(h, h, c * 0x55));
+}
+
+__attribute__((always_inline)) inline __m128 term(const float* T, __m128 h) {
+  return _mm_add_ps(_mm_add_ps(_mm_add_ps(term_column<0>(T, h), term_column<1>(T, h)), term_column<2>(T, h)),
+                    term_column<3>(T, h));
+}
+
+void add_skinning_baseline(const SkinningTerms& skinning, const float* transforms, long point_count, float* f) {
+  const int32_t* offsets = skinning.offsets.data();
+  const int32_t* bones = skinning.bones.data();
+  const float* terms = skinning.terms.data();
+  for (long i = 0; i < point_count; ++i) {
+    __m128 even = _mm_setzero_ps(), odd = _mm_setzero_ps();
+    int32_t k = offsets[i];
+    const int32_t end = offsets[i + 1];
+    for (; k + 1 < end; k += 2) {
+      even = _mm_add_ps(even, term(transforms + 16L * bones[k], _mm_loadu_ps(terms + 4L * k)));
+      odd = _mm_add_ps(odd, term(transforms + 16L * bones[k + 1], _mm_loadu_ps(terms + 4L * k + 4)));
+    }
+    if (k < end) even = _mm_add_ps(even, term(transforms + 16L * bones[k], _mm_loadu_ps(terms + 4L * k)));
+    alignas(16) float total[4];
+    _mm_store_ps(total, _mm_add_ps(even, odd));
+    for (int r = 0; r < 3; ++r) f[3 * i + r] += total[r];
+  }
+}
+
+template <int c>
+__attribute__((target("avx"), always_inline)) inline __m256 pair_column(const float* a, const float* b, __m256 h) {
+  const __m256 column =
+      _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a + 4 * c)), _mm_loadu_ps(b + 4 * c), 1);
+  return _mm256_mul_ps(column, _mm256_permute_ps(h, c * 0x55));
+}
+
+__attribute__((target("avx"))) void add_skinning_avx(const SkinningTerms& skinning, const float* transforms,
+                                                     long point_count, float* f) {
+  const int32_t* offsets = skinning.offsets.data();
+  const int32_t* bones = skinning.bones.data();
+  const float* terms = skinning.terms.data();
+  for (long i = 0; i < point_count; ++i) {
+    __m256 sums = _mm256_setzero_ps();  // even terms low, odd terms high
+    int32_t k = offsets[i];
+    const int32_t end = offsets[i + 1];
+    for (; k + 1 < end; k += 2) {
+      const float* a = transforms + 16L * bones[k];
+      const float* b = transforms + 16L * bones[k + 1];
+      const __m256 h = _mm256_loadu_ps(terms + 4L * k);
+      const __m256 first_two = _mm256_add_ps(pair_column<0>(a, b, h), pair_column<1>(a, b, h));
+      const __m256 pair = _mm256_add_ps(_mm256_add_ps(first_two, pair_column<2>(a, b, h)), pair_column<3>(a, b, h));
+      sums = _mm256_add_ps(sums, pair);
+    }
+    __m128 even = _mm256_castps256_ps128(sums);
+    const __m128 odd = _mm256_extractf128_ps(sums, 1);
+    if (k < end) even = _mm_add_ps(even, term(transforms + 16L * bones[k], _mm_loadu_ps(terms + 4L * k)));
+    alignas(16) float total[4];
+    _mm_store_ps(total, _mm_add_ps(even, odd));
+    for (int r = 0; r < 3; ++r) f[3 * i + r] += total[r];
+  }
+}
+
+using SkinningFunction = void (*)(const SkinningTerms&, const float*, long, float*);
+
+// The widest the machine has (chosen once) under the BLAS kernel; the baseline under the portable
+// one, which promises nothing beyond baseline x86-64 (kernels.h).
+void add_skinning(const SkinningTerms& skinning, const float* transforms, long point_count, float* f) {
+  static const SkinningFunction widest = __builtin_cpu_supports("avx") ? add_skinning_avx : add_skinning_baseline;
+  (active_kernel() == Kernel::kBlas ? widest : add_skinning_baseline)(skinning, transforms, point_count, f);
+}
+#else
+void add_skinning(const SkinningTerms& skinning, const float* transforms, long point_count, float* f) {
+  const int32_t* offsets = skinning.offsets.data();
+  for (long i = 0; i < point_count; ++i) {
+    Eigen::Vector4f even = Eigen::Vector4f::Zero(), odd = Eigen::Vector4f::Zero();
+    for (int32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
+      const Eigen::Map<const Eigen::Matrix4f> T(transforms + 16L * skinning.bones[static_cast<size_t>(k)]);
+      const Eigen::Map<const Eigen::Vector4f> h(skinning.terms.data() + 4L * k);
+      ((k - offsets[i]) % 2 == 0 ? even : odd).noalias() += T * h;
+    }
+    Eigen::Map<Eigen::Vector3f>(f + 3 * i) += (even + odd).head<3>();
+  }
+}
+#endif
+
 // Eq. 2 through the same terms: p = (A_keyᵀ A_key + λI)⁻¹ A_keyᵀ (f_key − key_mean), with
 // A_keyᵀ c and A_key p read off each key's few skinning terms and the residual columns, and the
 // M × M inverse formed once at load — a few hundred thousand multiplications a pose where the
@@ -110,7 +208,9 @@ class ArticulatedSubspace final : public Subspace {
     if (B == 1) {  // one pose (a unary call): the product adds straight onto the mean
       float* f = destinations.front();
       Eigen::Map<Eigen::VectorXf>(f, rows) = m.mean;
-      if (r > 0) gemm(rows, r, 1, m.basis.data() + skinning * rows, rows, residual_coordinates.data(), r, 1.0f, f, rows);
+      if (r > 0) {
+        gemm(rows, r, 1, m.basis.data() + skinning * rows, rows, residual_coordinates.data(), r, 1.0f, f, rows);
+      }
     }
     Eigen::MatrixXf scratch(B == 1 ? 0 : std::min(block, rows), B);
     for (long r0 = 0; r0 < rows && B > 1; r0 += block) {
@@ -125,27 +225,17 @@ class ArticulatedSubspace final : public Subspace {
         if (r > 0) destination += scratch.col(b).head(n);
       }
     }
-    // Each bone's 3 × 4 transform as a 4 × 4 of columns (the fourth row 0), so that a term is
-    // four lane-wide multiply-adds of h's numbers by the columns rather than three dot products.
-    std::vector<Eigen::Matrix4f> transforms(static_cast<size_t>(m.bone_count));
+    // Each bone's 3 × 4 transform as four columns of four floats (the fourth row 0).
+    std::vector<float> transforms(16 * static_cast<size_t>(m.bone_count));
     for (long b = 0; b < B; ++b) {
       const float* p = coordinates.col(b).data();
       for (int j = 0; j < m.bone_count; ++j) {
-        Eigen::Matrix4f& T = transforms[static_cast<size_t>(j)];
+        Eigen::Map<Eigen::Matrix4f> T(transforms.data() + 16L * j);
         T.topRows<3>() = Eigen::Map<const Eigen::Matrix<float, 3, 4, Eigen::RowMajor>>(
             p + static_cast<long>(kBoneCoordinates) * j);
         T.row(3).setZero();
       }
-      float* f = destinations[static_cast<size_t>(b)];
-      for (long i = 0; i < m.point_count; ++i) {
-        Eigen::Vector4f sum = Eigen::Vector4f::Zero();
-        for (int32_t k = skinning_.offsets[static_cast<size_t>(i)]; k < skinning_.offsets[static_cast<size_t>(i) + 1];
-             ++k) {
-          const Eigen::Map<const Eigen::Vector4f> h(skinning_.terms.data() + 4L * k);
-          sum.noalias() += transforms[static_cast<size_t>(skinning_.bones[static_cast<size_t>(k)])] * h;
-        }
-        Eigen::Map<Eigen::Vector3f>(f + 3 * i) += sum.head<3>();
-      }
+      add_skinning(skinning_, transforms.data(), m.point_count, destinations[static_cast<size_t>(b)]);
     }
   }
 

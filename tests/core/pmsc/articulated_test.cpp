@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/common/kernels.h"
 #include "core/common/parallel.h"
 #include "core/container/model_container.h"
 #include "core/demo/bending_arm.h"
@@ -300,21 +301,28 @@ TEST(ArticulatedSubspace, TheSkinningTermsReconstructWhatTheWholeBasisDoes) {
     inputs.push_back(&estimates[f]);
     destinations.push_back(points.col(f).data());
   }
-  runtime.reconstruct(inputs, destinations);  // one batch
   const double u = reconstruction_rounding_bound(model->basis_size());
   const Eigen::MatrixXd A = model->basis.cast<double>();
-  for (long f = 0; f < arm.new_shot.rows(); ++f) {
-    const Eigen::VectorXd p = estimates[f].coordinates.cast<float>().cast<double>();
-    const Eigen::VectorXd exact = model->mean.cast<double>() + A * p;
-    const Eigen::VectorXd bound = u * (model->mean.cast<double>().cwiseAbs() + A.cwiseAbs() * p.cwiseAbs());
-    Eigen::VectorXf alone(model->mean.size());
-    float* destination = alone.data();
-    const PoseEstimate* input = &estimates[f];
-    runtime.reconstruct({&input, 1}, {&destination, 1});
-    EXPECT_TRUE(((points.col(f).cast<double>() - exact).cwiseAbs().array() <= bound.array()).all())
-        << "frame " << f << ": " << ((points.col(f).cast<double>() - exact).cwiseAbs() - bound).maxCoeff() << " over";
-    EXPECT_TRUE(((alone.cast<double>() - exact).cwiseAbs().array() <= bound.array()).all()) << "frame " << f;
+  // Each kernel's path: the portable one takes the baseline skinning loop, BLAS the widest.
+  const Kernel saved = active_kernel();
+  for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
+    use_kernel(kernel);
+    SCOPED_TRACE(kernel_name(kernel));
+    runtime.reconstruct(inputs, destinations);  // one batch
+    for (long f = 0; f < arm.new_shot.rows(); ++f) {
+      const Eigen::VectorXd p = estimates[f].coordinates.cast<float>().cast<double>();
+      const Eigen::VectorXd exact = model->mean.cast<double>() + A * p;
+      const Eigen::VectorXd bound = u * (model->mean.cast<double>().cwiseAbs() + A.cwiseAbs() * p.cwiseAbs());
+      Eigen::VectorXf alone(model->mean.size());
+      float* destination = alone.data();
+      const PoseEstimate* input = &estimates[f];
+      runtime.reconstruct({&input, 1}, {&destination, 1});
+      EXPECT_TRUE(((points.col(f).cast<double>() - exact).cwiseAbs().array() <= bound.array()).all())
+          << "frame " << f << ": " << ((points.col(f).cast<double>() - exact).cwiseAbs() - bound).maxCoeff() << " over";
+      EXPECT_TRUE(((alone.cast<double>() - exact).cwiseAbs().array() <= bound.array()).all()) << "frame " << f;
+    }
   }
+  use_kernel(saved);
 
   // Eq. 2 through the skinning terms (the runtime's estimate) against the dense projection P every
   // client and the reference use: the same p, errors and verdict inputs, within the precision the
