@@ -37,6 +37,7 @@
 #include "harness/daemon_process.h"
 #include "tests/support/pmsc_fixtures.h"
 #include "tests/support/cli_run.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/gltf_posing.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
@@ -56,7 +57,7 @@ class CliClientTest : public ::testing::Test {
   static void SetUpTestSuite() {
     repo_ = new TempDir();
     work_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_->path()).ok());
     daemon_ = new DaemonProcess({"--model-repository", repo_->path().string(), "--miss-log-dir",
                                  work_->path().string(), "--renderer", "none"},
                                 work_->path());
@@ -835,7 +836,7 @@ TEST_F(CliClientTest, RpcFailuresExitWithTheStatusAndTheServersMessage) {
 // adds its residual after: the targets are fitted to the answers, pmsc/articulated_rig.h); and
 // that deviation is what the file shows.
 TEST_F(CliClientTest, ExportRigOfAnArticulatedModelPlaysTheServersAnswers) {
-  ASSERT_TRUE(demo::write_demo_articulated(repo_->path()).ok());
+  ASSERT_TRUE(testing::write_demo_articulated(repo_->path()).ok());
   client_->load_model(std::string(demo::kDemoArticulatedModelName), 1);
   const auto model_file = repo_->path() / std::string(demo::kDemoArticulatedModelName) / "1" / "model.anim";
   const auto glb = work_->path() / "arm-articulated.glb";

@@ -15,6 +15,7 @@
 #include "core/subdivision/subdivide_model.h"
 #include "harness/daemon_process.h"
 #include "tests/support/cli_run.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -31,7 +32,7 @@ CliRun cli(const std::string& arguments, const TempDir& dir) {
 
 TEST(CliSubdivide, RefusesBadLevelsNamingTheFlag) {
   TempDir dir;
-  ASSERT_TRUE(demo::write_demo_repository(dir / "demo").ok());
+  ASSERT_TRUE(testing::write_demo_repository(dir / "demo").ok());
   const std::string arm = (dir / "demo" / "arm-animspace" / "1" / "model.anim").string();
   const std::string out = " -o " + (dir / "out.anim").string();
   for (const char* levels : {"0", "-1", "7"}) {
@@ -56,7 +57,7 @@ TEST(CliSubdivide, RefusesBadLevelsNamingTheFlag) {
 // load` — the command says how, and the daemon's repository poll picks it up.
 TEST(CliSubdivide, AVersionWrittenIntoAServedRepositoryIsServedAtTheNextPoll) {
   TempDir dir;
-  ASSERT_TRUE(demo::write_demo_repository(dir / "demo").ok());
+  ASSERT_TRUE(testing::write_demo_repository(dir / "demo").ok());
   const std::string arm = (dir / "demo" / "arm-animspace" / "1" / "model.anim").string();
   const std::filesystem::path repo = dir / "repo";
   ASSERT_EQ(cli("subdivide " + arm + " --levels 1 -o " + repo.string() + " --model arm-sub", dir).exit_code, 0);
@@ -86,7 +87,7 @@ TEST(CliSubdivide, AVersionWrittenIntoAServedRepositoryIsServedAtTheNextPoll) {
 
 TEST(CliSubdivide, TheDaemonServesASubdividedModelPosedAsTheControlMeshSubdivided) {
   TempDir dir;
-  ASSERT_TRUE(demo::write_demo_repository(dir / "demo").ok());
+  ASSERT_TRUE(testing::write_demo_repository(dir / "demo").ok());
   const std::filesystem::path arm = dir / "demo" / "arm-animspace" / "1" / "model.anim";
   const std::filesystem::path repo = dir / "repo";
   const nlohmann::json report = testing::json_of(

@@ -23,6 +23,7 @@
 #include "core/pmsc/soft_cache.h"
 #include "animspace/v1/poses.grpc.pb.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/metrics_scrape.h"
 #include "tests/support/pmsc_fixtures.h"
@@ -43,7 +44,7 @@ class ClientTest : public ::testing::Test {
   static void SetUpTestSuite() {
     repo_ = new TempDir();
     work_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_->path()).ok());
     daemon_ = new DaemonProcess({"--model-repository", repo_->path().string(), "--miss-log-dir",
                                  work_->path().string(), "--renderer", "none"},
                                 work_->path());
@@ -602,9 +603,9 @@ TEST_F(ClientTest, EveryCallHasADeadline) {
 TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   // The tour relights the demo's cornell: written and loaded here alone, since every test is its
   // own process and the Cornell box's gathers and training dominate a sanitized set-up.
-  ASSERT_TRUE(demo::write_demo_illumination(repo_->path()).ok());
+  ASSERT_TRUE(testing::write_demo_illumination(repo_->path()).ok());
   client_->load_model("cornell", 1);
-  ASSERT_TRUE(demo::write_demo_articulated(repo_->path()).ok());
+  ASSERT_TRUE(testing::write_demo_articulated(repo_->path()).ok());
   client_->load_model(std::string(demo::kDemoArticulatedModelName), 1);
   // The tour's basis cache goes to the test's folder, not the home folder.
   const std::string command = "ANIMSPACE_BASIS_CACHE=" + (work_->path() / "bases").string() + " " +

@@ -26,6 +26,7 @@
 #include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_io.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -45,7 +46,7 @@ class CoordinatesTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     template_repo_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(template_repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(template_repo_->path()).ok());
     testing::write_model(template_repo_->path(), "bend", 1, arm_model(false, 5));
     testing::write_model(template_repo_->path(), "bend-aligned", 1, arm_model(true, 5));
   }

@@ -12,6 +12,7 @@
 #include "core/demo/demo_repository.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -53,7 +54,7 @@ class DaemonTest : public ::testing::Test {
  protected:
   void SetUp() override {
     repo_ = work_.path() / "repo";
-    ASSERT_TRUE(demo::write_demo_repository(repo_).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_).ok());
     write_model(repo_, "tetra", 3, tetrahedron_model());
     // A model whose only version is garbage: listed as refused, never served.
     std::filesystem::create_directories(repo_ / "broken" / "1");

@@ -43,6 +43,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/misslog/miss_log.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
@@ -271,7 +272,7 @@ class FaultTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     demo_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(demo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(demo_->path()).ok());
   }
   static void TearDownTestSuite() {
     delete demo_;

@@ -21,6 +21,7 @@
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/misslog/miss_log.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
@@ -35,7 +36,7 @@ class LoadtestTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     repo_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_->path()).ok());
   }
   static void TearDownTestSuite() {
     delete repo_;

@@ -37,6 +37,7 @@
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/container/sections.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "harness/lod_fixtures.h"
 #include "tests/support/test_support.h"
@@ -158,7 +159,7 @@ class LodServiceTest : public ::testing::Test {
   static void SetUpTestSuite() {
     work_ = new TempDir();
     repo_ = work_->path() / "repo";
-    ASSERT_TRUE(demo::write_demo_repository(repo_).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_).ok());
     // A large flat sheet (one bone, one level): a stream of many blocks.
     sheet_ = new as::AnimationSpaceModel(testing::flat_sheet_case(kSheetSize).model);
     container::ModelContainer sheet;
@@ -934,7 +935,7 @@ TEST_F(LodServiceTest, TextureCoordinatesAtEveryLevelOfAModelBuiltWithItsAtlas) 
   // Written and loaded here, not for the whole suite: ctest runs each test in its own process,
   // and making it (subdivision, atlas, levels) is most of a sanitized suite set-up's time.
   const std::string name(demo::kDemoSmoothModelName);
-  ASSERT_TRUE(demo::write_demo_smooth(repo_).ok());
+  ASSERT_TRUE(testing::write_demo_smooth(repo_).ok());
   client_->load_model(name, 1);
   auto in = container::read_file(repo_ / name / "1" / "model.anim");
   ASSERT_TRUE(in.ok()) << in.error().message;

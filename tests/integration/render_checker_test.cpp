@@ -29,6 +29,7 @@
 #include "harness/daemon_process.h"
 #include "tests/core/render/render_test_geometry.h"
 #include "tests/support/cli_run.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -47,8 +48,8 @@ class RenderCheckerTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     repo_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
-    ASSERT_TRUE(demo::write_demo_smooth(repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_smooth(repo_->path()).ok());
   }
   static void TearDownTestSuite() {
     delete repo_;

@@ -30,6 +30,7 @@
 #include "core/render/png.h"
 #include "harness/daemon_process.h"
 #include "tests/support/cli_run.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 
@@ -46,7 +47,7 @@ class RenderServiceTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     repo_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(repo_->path()).ok());
   }
   static void TearDownTestSuite() {
     delete repo_;
@@ -287,7 +288,7 @@ TEST_F(RenderServiceTest, TheThumbnailCommandSaysTheHeatScaleAndDrawsItsLegend) 
 // chose is printed beside the largest error.
 TEST_F(RenderServiceTest, RelightHeatStatesItsScaleAndDrawsItsLegend) {
   TempDir room;  // the demo's Cornell box alone (the suite's repository holds the arm's models)
-  ASSERT_TRUE(demo::write_demo_illumination(room.path()).ok());
+  ASSERT_TRUE(testing::write_demo_illumination(room.path()).ok());
   auto daemon = std::make_unique<DaemonProcess>(
       std::vector<std::string>{"--model-repository", room.path().string(), "--renderer", "surfaceless"}, work_.path());
   {

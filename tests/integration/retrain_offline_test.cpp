@@ -31,6 +31,7 @@
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/retrain.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
@@ -94,7 +95,7 @@ bool wait_for_default_version(Client& client, uint64_t version) {
 
 TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
   TempDir repo, logs, scratch;
-  ASSERT_TRUE(demo::write_demo_repository(repo.path()).ok());
+  ASSERT_TRUE(testing::write_demo_repository(repo.path()).ok());
   auto original = container::read_file(repo.path() / kModel / "1" / "model.anim");
   ASSERT_TRUE(original.ok());
   auto trained_frames = original->float_matrix(container::sections::kSequenceFrames);
@@ -179,7 +180,7 @@ TEST(RetrainOffline, FoldsEveryReplicasMissesOnceAndReplicasPickTheVersionUp) {
 // misses the killed replica acknowledged are all in its log.
 TEST(RetrainOffline, ThreeReplicasSwapVersionsUnderARoundRobinClientAndSurviveAKill) {
   TempDir repo, logs, scratch;
-  ASSERT_TRUE(demo::write_demo_repository(repo.path()).ok());
+  ASSERT_TRUE(testing::write_demo_repository(repo.path()).ok());
   auto arm = container::read_file(repo.path() / "arm" / "1" / "model.anim");
   ASSERT_TRUE(arm.ok());
   auto frames = arm->float_matrix(container::sections::kSequenceFrames);

@@ -7,6 +7,7 @@
 #include "clients/cpp/client.h"
 #include "core/demo/demo_repository.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/test_support.h"
 #include "tests/support/tls_fixtures.h"
@@ -27,7 +28,7 @@ class SecurityTest : public ::testing::Test {
     auto files = testing::make_tls_files(work_.path() / "tls", &why_not);
     if (!files) GTEST_SKIP() << "no TLS certificates: " << why_not;
     tls_ = *files;
-    ASSERT_TRUE(demo::write_demo_repository(work_.path() / "repo").ok());
+    ASSERT_TRUE(testing::write_demo_repository(work_.path() / "repo").ok());
     testing::write_text_file(work_.path() / "users.tokens", "# render farm\nfarm-token-1\n\nartist-token-2\n");
     testing::write_text_file(work_.path() / "admins.tokens", "admin-token-9\n");
   }
@@ -125,7 +126,7 @@ TEST_F(SecurityTest, ClientCertificatesWhenTheServerRequiresThem) {
 TEST(SecurityStartup, AnEmptyTokenFileStopsTheDaemonWithAMessage) {
   TempDir work;
   testing::write_text_file(work.path() / "empty.tokens", "# nobody yet\n");
-  ASSERT_TRUE(demo::write_demo_repository(work.path() / "repo").ok());
+  ASSERT_TRUE(testing::write_demo_repository(work.path() / "repo").ok());
   try {
     DaemonProcess daemon({"--model-repository", (work.path() / "repo").string(), "--auth-token-file",
                           (work.path() / "empty.tokens").string()},

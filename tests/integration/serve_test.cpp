@@ -32,6 +32,7 @@
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/train.h"
 #include "harness/daemon_process.h"
+#include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
 #include "tests/support/metrics_scrape.h"
 #include "tests/support/test_support.h"
@@ -78,7 +79,7 @@ class ServeTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     template_repo_ = new TempDir();
-    ASSERT_TRUE(demo::write_demo_repository(template_repo_->path()).ok());
+    ASSERT_TRUE(testing::write_demo_repository(template_repo_->path()).ok());
     write_model(template_repo_->path(), "bend", 1, narrow_arm_model());
   }
   static void TearDownTestSuite() {
