@@ -48,6 +48,7 @@
 #include "core/atlas/atlas.h"
 #include "core/atlas/stretch.h"
 #include "core/mesh_io/sequence_io.h"
+#include "harness/build_tree.h"
 
 namespace animspace::bench {
 
@@ -200,7 +201,8 @@ std::optional<atlas::CornerUvs> blender_unwrap(const Dataset& d, const std::stri
       file << "f " << d.model.faces(f, 0) + 1 << ' ' << d.model.faces(f, 1) + 1 << ' ' << d.model.faces(f, 2) + 1 << '\n';
     }
   }
-  std::string command = "blender -b --factory-startup --python '" ANIMSPACE_BLENDER_UNWRAP_SCRIPT "' -- '" +
+  std::string command = "blender -b --factory-startup --python '" +
+                        (harness::source_dir() / "bench" / "blender_unwrap.py").string() + "' -- '" +
                         obj.string() + "' '" + out.string() + "' " + method + " " + std::to_string(kGutter);
   if (charts) {
     const auto adjacency = atlas::face_adjacency(d.model.faces);

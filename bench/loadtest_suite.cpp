@@ -30,6 +30,7 @@
 #include "bench/suites.h"
 #include "clients/cpp/client.h"
 #include "core/pmsc/pmsc_model.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 
 namespace animspace::bench {
@@ -101,7 +102,7 @@ nlohmann::json run_loadtest_suite(const SuiteOptions& options) {
 
   const auto report_path = scratch.path() / "report.json";
   const auto log_path = scratch.path() / "loadtest.txt";
-  const int status = run_program({ANIMSPACE_LOADTEST_PATH, "--server", daemon->address(), "--model", kCraneModelName,
+  const int status = run_program({harness::program_path("animspace-loadtest").string(), "--server", daemon->address(), "--model", kCraneModelName,
                                   "--sequence", (*options.data / "crane").string(), "--select", "1::2",
                                   "--with-points", "--concurrency", kSweep, "--duration-s",
                                   std::to_string(kStepSeconds), "--json", report_path.string()},

@@ -40,6 +40,7 @@
 #include "core/container/sections.h"
 #include "core/render/png.h"
 #include "core/render/renderer.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 
 namespace animspace::bench {
@@ -93,7 +94,7 @@ std::optional<Mesh> write_sequence_model(const std::filesystem::path& data, cons
 std::optional<Mesh> write_cow_model(const std::filesystem::path& data, const std::filesystem::path& scratch,
                                     const std::filesystem::path& repository) {
   const auto dir = data / "cow-rig";
-  const std::string cli = ANIMSPACE_CLI_PATH;
+  const std::string cli = harness::program_path("animspace").string();
   const auto imported = scratch / "cow-imported.anim";
   const std::string import = cli + " import-rig --mesh " + (dir / "cow.obj").string() + " --tgf " +
                              (dir / "cow.tgf").string() + " --dmat " + (dir / "cow.DMAT").string() + " -o " +

@@ -58,6 +58,7 @@
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/pmsc/pmsc_io.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 
 namespace animspace::bench {
@@ -104,7 +105,7 @@ uint64_t available_memory_bytes() {
 // Runs one of the CLI's commands; prints its log's tail and returns nullopt when it fails.
 std::optional<ChildRun> run_cli(const std::vector<std::string>& arguments, const std::filesystem::path& log,
                                 const std::string& what) {
-  std::vector<std::string> argv{ANIMSPACE_CLI_PATH};
+  std::vector<std::string> argv{harness::program_path("animspace").string()};
   argv.insert(argv.end(), arguments.begin(), arguments.end());
   const ChildRun run = run_program(argv, log);
   if (run.exit_status == 0) return run;

@@ -44,6 +44,7 @@
 #include "core/common/parallel.h"
 #include "core/common/timing.h"
 #include "core/subdivision/subdivide_model.h"
+#include "harness/build_tree.h"
 
 namespace animspace::bench {
 namespace {
@@ -125,7 +126,7 @@ std::optional<Dataset> cow_dataset(const std::filesystem::path& data) {
 std::optional<Dataset> arm_dataset() {
   const ScratchDirectory scratch("subdivide");
   const std::string command =
-      std::string(ANIMSPACE_CLI_PATH) + " demo-repository " + (scratch.path() / "repo").string() + " > /dev/null";
+      harness::program_path("animspace").string() + " demo-repository " + (scratch.path() / "repo").string() + " > /dev/null";
   if (std::system(command.c_str()) != 0) {
     std::printf("arm: '%s' failed (skipped)\n", command.c_str());
     return std::nullopt;

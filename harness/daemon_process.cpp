@@ -12,24 +12,18 @@
 #include <stdexcept>
 #include <thread>
 
+#include "harness/build_tree.h"
+
 namespace animspace::harness {
 
 std::filesystem::path daemon_binary() {
   if (const char* env = std::getenv("ANIMSPACED")) return env;
-#ifdef ANIMSPACE_DAEMON_PATH
-  return ANIMSPACE_DAEMON_PATH;
-#else
-  throw std::runtime_error("ANIMSPACED is not set and no daemon path was compiled in");
-#endif
+  return program_path("animspaced");
 }
 
 std::filesystem::path transport_floor_binary() {
   if (const char* env = std::getenv("ANIMSPACE_TRANSPORT_FLOOR")) return env;
-#ifdef ANIMSPACE_TRANSPORT_FLOOR_PATH
-  return ANIMSPACE_TRANSPORT_FLOOR_PATH;
-#else
-  throw std::runtime_error("ANIMSPACE_TRANSPORT_FLOOR is not set and no transport floor path was compiled in");
-#endif
+  return program_path("animspace-transport-floor");
 }
 
 DaemonProcess::DaemonProcess(const std::vector<std::string>& extra_args, const std::filesystem::path& work_dir,

@@ -46,11 +46,12 @@ class DaemonProcess {
   std::filesystem::path log_path_;
 };
 
-// Path of the animspaced binary to run: $ANIMSPACED, else the one the build compiled in.
+// Path of the animspaced binary to run: $ANIMSPACED, else the one beside the running program
+// (harness/build_tree.h).
 std::filesystem::path daemon_binary();
 
 // Path of animspace-transport-floor (server/transport_floor/): $ANIMSPACE_TRANSPORT_FLOOR, else the
-// one the build compiled in.
+// one beside the running program.
 std::filesystem::path transport_floor_binary();
 
 }  // namespace animspace::harness

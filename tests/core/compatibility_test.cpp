@@ -10,6 +10,7 @@
 #include "core/container/model_container.h"
 #include "core/misslog/miss_log.h"
 #include "core/model/servable.h"
+#include "harness/build_tree.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -18,7 +19,7 @@ namespace {
 namespace fs = std::filesystem;
 
 // tests/CMakeLists.txt defines it as an absolute path (see fuzz_regression_test.cpp for why).
-fs::path fixtures() { return fs::path(ANIMSPACE_FIXTURES) / "release-0.1"; }
+fs::path fixtures() { return harness::source_dir() / "tests" / "fixtures" / "release-0.1"; }
 
 struct ContainerCase {
   const char* file;

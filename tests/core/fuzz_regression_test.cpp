@@ -21,6 +21,7 @@
 #include "core/model/model_info.h"
 #include "core/model/servable.h"
 #include "core/pmsc/pmsc_io.h"
+#include "harness/build_tree.h"
 #include "tests/support/test_support.h"
 
 namespace animspace {
@@ -31,7 +32,7 @@ namespace fs = std::filesystem;
 // fuzz/regressions/ of this source tree (the test binary is built from it);
 // tests/CMakeLists.txt defines it as an absolute path: __FILE__ is relative to the build
 // directory when ccache rewrites paths (Makefile: CCACHE_BASEDIR).
-fs::path regressions_dir() { return ANIMSPACE_FUZZ_REGRESSIONS; }
+fs::path regressions_dir() { return harness::source_dir() / "fuzz" / "regressions"; }
 
 std::string read_bytes(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);

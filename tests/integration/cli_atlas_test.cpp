@@ -18,6 +18,7 @@
 #include "core/container/sections.h"
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
+#include "harness/build_tree.h"
 #include "tests/support/cli_run.h"
 #include "tests/support/gltf_posing.h"
 #include "tests/support/test_support.h"
@@ -26,7 +27,7 @@ namespace animspace {
 namespace {
 
 testing::CliRun cli(const std::string& arguments, const testing::TempDir& dir) {
-  return testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " " + arguments, dir / "stderr.txt");
+  return testing::run_command(harness::program_path("animspace").string() + " " + arguments, dir / "stderr.txt");
 }
 
 TEST(CliAtlas, AddsTheAtlasSectionAndExportLodWritesItsUvs) {

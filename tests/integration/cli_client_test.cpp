@@ -34,6 +34,7 @@
 #include "core/container/sections.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/pmsc_fixtures.h"
 #include "tests/support/cli_run.h"
@@ -74,7 +75,7 @@ class CliClientTest : public ::testing::Test {
   // `animspace -s <daemon> <arguments>`, stdout and stderr kept apart (stderr is a file, not a
   // terminal, as in a script).
   static CliRun cli(const std::string& arguments) {
-    return testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon_->address() + " " + arguments,
+    return testing::run_command(harness::program_path("animspace").string() + " -s " + daemon_->address() + " " + arguments,
                                 work_->path() / "stderr.txt");
   }
 

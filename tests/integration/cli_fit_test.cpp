@@ -18,6 +18,7 @@
 #include "core/mesh_io/gltf_skin.h"
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
+#include "harness/build_tree.h"
 #include "tests/support/cli_run.h"
 #include "tests/support/articulated_tube.h"
 #include "tests/support/test_support.h"
@@ -56,7 +57,7 @@ class CliFitTest : public ::testing::Test {
 
   // `animspace <arguments>`, stdout and stderr kept apart (stderr a file, as in a script).
   static CliRun cli(const std::string& arguments) {
-    return testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " " + arguments, work_->path() / "stderr.txt");
+    return testing::run_command(harness::program_path("animspace").string() + " " + arguments, work_->path() / "stderr.txt");
   }
 
   // The exported rig as the library's reader sees it: one joint per bone and the root, the

@@ -13,6 +13,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/lod/lod_io.h"
 #include "core/mesh_io/triangle_mesh_io.h"
+#include "harness/build_tree.h"
 #include "tests/support/cli_run.h"
 #include "tests/support/test_support.h"
 
@@ -20,7 +21,7 @@ namespace animspace {
 namespace {
 
 int run(const std::string& arguments) {
-  const std::string command = std::string(ANIMSPACE_CLI_PATH) + " " + arguments + " > /dev/null 2>&1";
+  const std::string command = harness::program_path("animspace").string() + " " + arguments + " > /dev/null 2>&1";
   return std::system(command.c_str());
 }
 
@@ -108,7 +109,7 @@ TEST(CliLod, BuildsLevelsAndExportsTheCoresLevel) {
   // edge collapses only, within the exchange rule (x = 1 by default), and the influences are the
   // file's.
   const nlohmann::json report = testing::json_of(
-      testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " --json build-lod " + (dir / "arm.anim").string() +
+      testing::run_command(harness::program_path("animspace").string() + " --json build-lod " + (dir / "arm.anim").string() +
                                " --max-levels 5 -o " + (dir / "arm-report.anim").string(),
                            dir / "report.err"));
   ASSERT_EQ(report["levels"].size(), static_cast<size_t>(levels->count()));

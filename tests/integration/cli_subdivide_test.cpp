@@ -13,6 +13,7 @@
 #include "core/container/sections.h"
 #include "core/demo/demo_repository.h"
 #include "core/subdivision/subdivide_model.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/cli_run.h"
 #include "tests/support/demo_fixture.h"
@@ -27,7 +28,7 @@ using testing::CliRun;
 using testing::TempDir;
 
 CliRun cli(const std::string& arguments, const TempDir& dir) {
-  return testing::run_command(std::string(ANIMSPACE_CLI_PATH) + " " + arguments, dir / "stderr.txt");
+  return testing::run_command(harness::program_path("animspace").string() + " " + arguments, dir / "stderr.txt");
 }
 
 TEST(CliSubdivide, RefusesBadLevelsNamingTheFlag) {

@@ -22,6 +22,7 @@
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/soft_cache.h"
 #include "animspace/v1/poses.grpc.pb.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
@@ -609,7 +610,7 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
   client_->load_model(std::string(demo::kDemoArticulatedModelName), 1);
   // The tour's basis cache goes to the test's folder, not the home folder.
   const std::string command = "ANIMSPACE_BASIS_CACHE=" + (work_->path() / "bases").string() + " " +
-                              std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + daemon_->address() + " " +
+                              harness::program_path("animspace-client-tour").string() + " " + daemon_->address() + " " +
                               (work_->path() / "tour.png").string() + " 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
   ASSERT_NE(pipe, nullptr);
@@ -662,7 +663,7 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
 // Issue #21: `--help` was resolved as a host name. Every program answers it.
 TEST_F(ClientTest, TheTourAnswersHelpAndRefusesUnknownOptions) {
   auto run = [](const std::string& arguments, int* status) {
-    FILE* pipe = popen((std::string(ANIMSPACE_CLIENT_TOUR_PATH) + " " + arguments + " 2>&1").c_str(), "r");
+    FILE* pipe = popen((harness::program_path("animspace-client-tour").string() + " " + arguments + " 2>&1").c_str(), "r");
     std::string output;
     char buffer[512];
     while (pipe != nullptr && fgets(buffer, sizeof buffer, pipe) != nullptr) output += buffer;

@@ -20,6 +20,7 @@
 #include "core/mesh_io/pc2.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/misslog/miss_log.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
@@ -60,7 +61,7 @@ class LoadtestTest : public ::testing::Test {
   int loadtest(const std::string& arguments, nlohmann::json* report) {
     const auto json = work_.path() / "report.json";
     std::filesystem::remove(json);
-    const std::string command = std::string(ANIMSPACE_LOADTEST_PATH) + " " + arguments + " --json " + json.string() +
+    const std::string command = harness::program_path("animspace-loadtest").string() + " " + arguments + " --json " + json.string() +
                                 " > " + (work_.path() / "out.txt").string() + " 2>&1";
     const int status = std::system(command.c_str());
     std::ifstream in(json);

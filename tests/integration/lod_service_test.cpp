@@ -36,6 +36,7 @@
 #include "core/lod/selection.h"
 #include "core/mesh_io/triangle_mesh_io.h"
 #include "core/container/sections.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
@@ -136,7 +137,7 @@ void expect_same_mesh(const LodMesh& a, const LodMesh& b) {
 std::string run_cli(const std::string& arguments, int* exit_code, std::string* errors = nullptr) {
   TempDir scratch;
   const auto stderr_path = scratch / "stderr.txt";
-  const std::string command = std::string(ANIMSPACE_CLI_PATH) + " " + arguments + " 2> " + stderr_path.string();
+  const std::string command = harness::program_path("animspace").string() + " " + arguments + " 2> " + stderr_path.string();
   FILE* pipe = popen(command.c_str(), "r");
   std::string out;
   if (pipe == nullptr) {

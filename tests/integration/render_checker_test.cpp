@@ -26,6 +26,7 @@
 #include "core/demo/demo_repository.h"
 #include "core/geometry/bounding_sphere.h"
 #include "core/render/png.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/core/render/render_test_geometry.h"
 #include "tests/support/cli_run.h"
@@ -266,7 +267,7 @@ TEST_F(RenderCheckerTest, RefusalsNameTheFieldAndTheModel) {
 TEST_F(RenderCheckerTest, TheThumbnailCommandDrawsTheCheckerAndRefusesWithoutAnAtlas) {
   auto daemon = start();
   Client client(daemon->address());
-  const std::string cli = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon->address() + " thumbnail ";
+  const std::string cli = harness::program_path("animspace").string() + " -s " + daemon->address() + " thumbnail ";
   const auto png = work_.path() / "checker.png";
   const auto err = work_.path() / "err.txt";
 

@@ -28,6 +28,7 @@
 #include "core/render/camera.h"
 #include "core/render/heat_legend.h"
 #include "core/render/png.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/cli_run.h"
 #include "tests/support/demo_fixture.h"
@@ -255,7 +256,7 @@ TEST_F(RenderServiceTest, TheThumbnailCommandSaysTheHeatScaleAndDrawsItsLegend) 
   }
 
   const auto png = work_.path() / "heat.png";
-  const std::string command = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon->address() + " thumbnail " + model +
+  const std::string command = harness::program_path("animspace").string() + " -s " + daemon->address() + " thumbnail " + model +
                               " -o " + png.string() + " --sequence " + sequence.string() +
                               " --sequence-frame 7 --heat --heat-legend --width 256 --height 256";
   std::string out;
@@ -296,7 +297,7 @@ TEST_F(RenderServiceTest, RelightHeatStatesItsScaleAndDrawsItsLegend) {
     ASSERT_TRUE(testing::wait_until_serving(client)) << daemon->log();
   }
   const auto png = work_.path() / "relight-heat.png";
-  const std::string cli = std::string(ANIMSPACE_CLI_PATH) + " -s " + daemon->address();
+  const std::string cli = harness::program_path("animspace").string() + " -s " + daemon->address();
   const std::string relight = " relight cornell --from 0.2 0.44 0.3 --heat --width 256 --height 256 -o " + png.string();
   const auto err = work_.path() / "relight.err";
   const nlohmann::json report =

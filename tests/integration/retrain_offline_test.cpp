@@ -30,6 +30,7 @@
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/pmsc_model.h"
 #include "core/pmsc/retrain.h"
+#include "harness/build_tree.h"
 #include "harness/daemon_process.h"
 #include "tests/support/demo_fixture.h"
 #include "tests/support/integration_support.h"
@@ -59,7 +60,7 @@ struct Replica {
 nlohmann::json retrain_offline(const std::filesystem::path& repo, const std::filesystem::path& logs,
                                const std::filesystem::path& scratch, const std::string& flags = "") {
   const auto out = scratch / "retrain.json";
-  const std::string command = std::string(ANIMSPACE_CLI_PATH) + " --json retrain-offline --repository " +
+  const std::string command = harness::program_path("animspace").string() + " --json retrain-offline --repository " +
                               repo.string() + " --model " + kModel + " --miss-logs " + logs.string() + flags + " > " +
                               out.string() + " 2>&1";
   const int status = std::system(command.c_str());

@@ -23,6 +23,7 @@
 #include "core/container/sections.h"
 #include "core/demo/demo_repository.h"
 #include "core/pmsc/pmsc_io.h"
+#include "harness/build_tree.h"
 #include "tests/server/support/in_process_server.h"
 #include "tests/support/test_support.h"
 
@@ -80,7 +81,7 @@ class CheckPointsTest : public testing::SmallRepositoryTest {
     fs::create_directories(served_->path() / kChecked / "1");
     ASSERT_TRUE(container::write_file(served_->path() / kChecked / "1" / "model.anim", *stored).ok());
     fs::create_directories(served_->path() / kOld / "1");
-    fs::copy_file(fs::path(ANIMSPACE_FIXTURES) / "release-0.1" / "pmsc.anim", served_->path() / kOld / "1" / "model.anim");
+    fs::copy_file(harness::source_dir() / "tests" / "fixtures" / "release-0.1" / "pmsc.anim", served_->path() / kOld / "1" / "model.anim");
 
     // The pose: f̂ of training frame 3 (sequence.frames holds the model's training frames).
     auto frames = stored->float_matrix(container::sections::kSequenceFrames);
