@@ -26,7 +26,9 @@ def nightly_block():
 
 def run(line, tmp_path, address=None, timeout=300):
     line = line.split("  #", 1)[0].strip()
-    line = line.replace("build/bin/", f"{BUILD}/bin/").replace("/tmp/", f"{tmp_path}/")
+    # The tour's /tmp/ first: the build folder may itself be under /tmp (a clone there, ASan's
+    # absolute ANIMSPACE_BUILD), and its path must not be rewritten.
+    line = line.replace("/tmp/", f"{tmp_path}/").replace("build/bin/", f"{BUILD}/bin/")
     if address:
         line = line.replace("127.0.0.1:50052", address)
     done = subprocess.run(shlex.split(line), cwd=ROOT, capture_output=True, text=True, timeout=timeout)
