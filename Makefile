@@ -44,14 +44,12 @@ bench: build
 	$(BUILD_DIR)/bin/animspace-bench scale --data ../shared/data --scale-levels 1 --json $(BUILD_DIR)/bench-scale.json
 
 # Every test under AddressSanitizer + UndefinedBehaviorSanitizer, leak checks included: each ctest
-# (core, server, loadtest, integration against the ASan-built daemon) and pytest against the
+# (core, server, loadtest, integration against the ASan-built daemon), then pytest against the
 # ASan-built daemon and CLI. Every report goes to a file under build-asan/reports/<suite> (a daemon a
-# test started reports there too) and fails the target; ASan aborts the process that made it. The
-# two suites run at the same time: pytest's longest test (the README tour's crane training, about
-# ten minutes under ASan) is one process, and beside ctest it no longer adds its whole length to the
-# run (docs/CI.md). pytest's output is printed after ctest's, and the target fails naming each suite
-# that failed. The tree builds `all`, which with the bench off is exactly what ctest and pytest run:
-# the test programs and the daemon, CLI, load tester, tour and transport floor the suites start.
+# test started reports there too) and fails the target; ASan aborts the process that made it. Both
+# suites run even when the first fails, and the target then fails naming each one that did. The tree
+# builds `all`, which with the bench off is exactly what ctest and pytest run: the test programs
+# and the daemon, CLI, load tester, tour and transport floor that the integration suite starts.
 ASAN_REPORTS := $(CURDIR)/build-asan/reports
 # $(call asan_env,SUITE): the sanitizers' options, reports under $(ASAN_REPORTS)/SUITE.
 asan_env = ASAN_OPTIONS=abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:detect_leaks=1:log_path=$(ASAN_REPORTS)/$(1)/asan \
@@ -61,17 +59,13 @@ check-asan: deps
 	cmake --preset asan >/dev/null
 	cmake --build --preset asan -j $(JOBS)
 	rm -rf $(ASAN_REPORTS)
-	mkdir -p $(ASAN_REPORTS)
 	status=0; \
-	$(call asan_env,pytest) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=$(CURDIR)/build-asan \
-	  scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/pytest /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python \
-	  > $(ASAN_REPORTS)/pytest.out 2>&1 & pytest=$$!; \
 	$(call asan_env,ctest) scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/ctest \
 	  ctest --preset asan -j $(JOBS) --timeout 900 \
 	  || { status=1; echo "check-asan: FAILED: ctest under ASan"; }; \
-	wait $$pytest || { status=1; pytest_failed=1; }; \
-	echo "check-asan: pytest's output (it ran beside ctest):"; cat $(ASAN_REPORTS)/pytest.out; \
-	[ -z "$${pytest_failed:-}" ] || echo "check-asan: FAILED: pytest against the ASan-built daemon and CLI"; \
+	$(call asan_env,pytest) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=$(CURDIR)/build-asan \
+	  scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/pytest /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python \
+	  || { status=1; echo "check-asan: FAILED: pytest against the ASan-built daemon and CLI"; }; \
 	exit $$status
 asan: check-asan
 
