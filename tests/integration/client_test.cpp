@@ -602,8 +602,8 @@ TEST_F(ClientTest, EveryCallHasADeadline) {
 }
 
 TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
-  // The tour relights the demo's cornell: written and loaded here alone, since every test is its
-  // own process and the Cornell box's gathers and training dominate a sanitized set-up.
+  // The tour relights the demo's cornell and plays arm-articulated: added here alone, since the
+  // other tests' daemon would load them for nothing.
   ASSERT_TRUE(testing::write_demo_illumination(repo_->path()).ok());
   client_->load_model("cornell", 1);
   ASSERT_TRUE(testing::write_demo_articulated(repo_->path()).ok());

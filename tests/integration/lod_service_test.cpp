@@ -933,8 +933,7 @@ TEST_F(LodServiceTest, TextureCoordinatesRefusalsNameTheField) {
 // its UVs: the stored level's, and each corner the atlas's UV of its vertex in its face's chart.
 TEST_F(LodServiceTest, TextureCoordinatesAtEveryLevelOfAModelBuiltWithItsAtlas) {
   // The demo's subdivided arm: an atlas made by `animspace atlas`'s code and levels that keep it.
-  // Written and loaded here, not for the whole suite: ctest runs each test in its own process,
-  // and making it (subdivision, atlas, levels) is most of a sanitized suite set-up's time.
+  // Added and loaded here alone: the suite's other tests do not use it.
   const std::string name(demo::kDemoSmoothModelName);
   ASSERT_TRUE(testing::write_demo_smooth(repo_).ok());
   client_->load_model(name, 1);
