@@ -1,15 +1,24 @@
 #include "core/common/kernels.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cassert>
 #include <cctype>
 #include <cstdint>
+#include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/SVD>
 #include <cblas.h>
 
 // OpenBLAS's pthread build exports this (interface of its blas_server.c) but no header declares it.
 extern "C" int blas_thread_shutdown_(void);
+// LAPACK's divide-and-conquer SVD, which OpenBLAS carries; Debian ships no LAPACKE header with
+// it, so the Fortran interface (arguments by reference, the hidden length of the one character
+// argument last).
+extern "C" void dgesdd_(const char* jobz, const int* m, const int* n, double* a, const int* lda, double* s, double* u,
+                        const int* ldu, double* vt, const int* ldvt, double* work, const int* lwork, int* iwork, int* info,
+                        size_t jobz_length);
 
 #include "core/common/parallel.h"
 
@@ -158,17 +167,6 @@ void gemm_transposed_serial(long rows, long inner, long columns, const double* a
               blas_int(lda), b, blas_int(ldb), beta, c, blas_int(ldc));
 }
 
-void symmetric_product_lower_serial(long n, const double* a, long lda, const double* x, double* y) {
-  if (n == 0) return;
-  if (active_kernel() == Kernel::kPortable) {
-    const View<double> A(a, n, n, Eigen::OuterStride<>(lda));
-    const Eigen::Map<const Eigen::VectorXd> X(x, n);
-    Eigen::Map<Eigen::VectorXd>(y, n).noalias() = A.selfadjointView<Eigen::Lower>() * X;
-    return;
-  }
-  cblas_dsymv(CblasColMajor, CblasLower, blas_int(n), 1.0, a, blas_int(lda), x, 1, 0.0, y, 1);
-}
-
 void gram_lower_serial(long rows, long columns, const float* x, long ldx, float* out, long ldo) {
   if (columns == 0) return;
   if (active_kernel() == Kernel::kPortable) return portable_gram_lower(rows, columns, x, ldx, out, ldo);
@@ -214,6 +212,41 @@ void gemm(long rows, long inner, long columns, const double* a, long lda, const 
           double* c, long ldc) {
   if (rows == 0 || columns == 0) return;
   gemm_rows_split(rows, inner, columns, a, lda, b, ldb, beta, c, ldc);
+}
+
+namespace {
+
+void portable_thin_svd(long rows, long columns, const double* a, long lda, double* s, double* u, long ldu, double* vt,
+                       long ldvt) {
+  const long k = std::min(rows, columns);
+  const Eigen::BDCSVD<Eigen::MatrixXd> svd(View<double>(a, rows, columns, Eigen::OuterStride<>(lda)),
+                                           Eigen::ComputeThinU | Eigen::ComputeThinV);
+  Eigen::Map<Eigen::VectorXd>(s, k) = svd.singularValues();
+  Target<double>(u, rows, k, Eigen::OuterStride<>(ldu)) = svd.matrixU();
+  Target<double>(vt, k, columns, Eigen::OuterStride<>(ldvt)) = svd.matrixV().transpose();
+}
+
+}  // namespace
+
+void thin_svd_serial(long rows, long columns, const double* a, long lda, double* s, double* u, long ldu, double* vt,
+                     long ldvt) {
+  if (rows == 0 || columns == 0) return;
+  if (active_kernel() == Kernel::kPortable) return portable_thin_svd(rows, columns, a, lda, s, u, ldu, vt, ldvt);
+  std::vector<double> copy(static_cast<size_t>(rows * columns));  // dgesdd overwrites its A
+  Target<double>(copy.data(), rows, columns, Eigen::OuterStride<>(rows)) =
+      View<double>(a, rows, columns, Eigen::OuterStride<>(lda));
+  const int m = blas_int(rows), n = blas_int(columns), lda_copy = m, ldu_int = blas_int(ldu), ldvt_int = blas_int(ldvt);
+  std::vector<int> iwork(8 * static_cast<size_t>(std::min(rows, columns)));
+  int info = 0, query = -1;
+  double size = 0;
+  dgesdd_("S", &m, &n, copy.data(), &lda_copy, s, u, &ldu_int, vt, &ldvt_int, &size, &query, iwork.data(), &info, 1);
+  if (info == 0) {
+    std::vector<double> work(static_cast<size_t>(size));
+    const int lwork = static_cast<int>(work.size());
+    dgesdd_("S", &m, &n, copy.data(), &lda_copy, s, u, &ldu_int, vt, &ldvt_int, work.data(), &lwork, iwork.data(),
+            &info, 1);
+  }
+  if (info != 0) portable_thin_svd(rows, columns, a, lda, s, u, ldu, vt, ldvt);
 }
 
 }  // namespace animspace

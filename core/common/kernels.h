@@ -75,9 +75,14 @@ void gemm_transposed_serial(long rows, long inner, long columns, const double* a
 void gram_lower_serial(long rows, long columns, const float* x, long ldx, float* out, long ldo);
 void gram_lower_serial(long rows, long columns, const double* x, long ldx, double* out, long ldo);
 
-// y = A·x for a symmetric A (n × n, leading dimension lda) of which only the lower triangle
-// (diagonal included) is read — half the memory of the general product, for a matrix that does
-// not fit in cache (the articulated subspace's M × M inverse, issue #51) — on the calling thread.
-void symmetric_product_lower_serial(long n, const double* a, long lda, const double* x, double* y);
+// The thin SVD A = U diag(s) Vᵀ of A (rows × columns, column-major, leading dimension lda), k =
+// min(rows, columns): s (k, descending), U (rows × k, leading dimension ldu) and Vᵀ (k × columns,
+// ldvt), on the calling thread. The BLAS kernel runs LAPACK's divide and conquer (dgesdd, in
+// OpenBLAS); the portable one Eigen's (BDCSVD, SSE2 alone): an articulated model's key basis is
+// 1,900 × 425 on crane, decomposed at every key-selection step and calibration fold (issue #51),
+// where Eigen's was a quarter of the training's time. Should LAPACK report no convergence, Eigen's
+// is taken.
+void thin_svd_serial(long rows, long columns, const double* a, long lda, double* s, double* u, long ldu, double* vt,
+                     long ldvt);
 
 }  // namespace animspace

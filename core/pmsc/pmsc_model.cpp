@@ -11,7 +11,6 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
-#include <Eigen/SVD>
 
 #include "core/common/format.h"
 #include "core/common/kernels.h"
@@ -109,11 +108,13 @@ Status prepare_check_rows(PmscModel& m) {
 
 Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, double max_condition,
                                          double* condition_number, double* regularization, Eigen::MatrixXd* range) {
-  // Divide and conquer (Eigen's BDCSVD, one-sided Jacobi below 16 columns): an articulated
-  // basis has hundreds of columns (issue #51), where Jacobi's sweeps over a 1900 × 425 A_key took
-  // seconds at every key-selection step and every calibration fold.
-  Eigen::BDCSVD<Eigen::MatrixXd> svd(key_basis, Eigen::ComputeThinU | Eigen::ComputeThinV);
-  const Eigen::VectorXd& s = svd.singularValues();
+  // Divide and conquer (kernels.h, thin_svd_serial: LAPACK's dgesdd under the BLAS kernel): an
+  // articulated basis has hundreds of columns (issue #51), where Jacobi's sweeps over a 1900 × 425
+  // A_key took seconds at every key-selection step and every calibration fold.
+  const long rows = key_basis.rows(), columns = key_basis.cols(), k = std::min(rows, columns);
+  Eigen::VectorXd s(k);
+  Eigen::MatrixXd U(rows, k), Vt(k, columns);
+  thin_svd_serial(rows, columns, key_basis.data(), rows, s.data(), U.data(), rows, Vt.data(), k);
   const double s_max = s.size() > 0 ? s(0) : 0.0;
   const double s_min = s.size() > 0 ? s(s.size() - 1) : 0.0;
   const double kappa = s_min > 0 ? s_max / s_min : std::numeric_limits<double>::infinity();
@@ -131,9 +132,13 @@ Eigen::MatrixXd least_squares_projection(const Eigen::MatrixXd& key_basis, doubl
   if (range) {
     long rank = 0;
     while (rank < s.size() && s(rank) > 0) ++rank;
-    *range = svd.matrixU().leftCols(rank);
+    *range = U.leftCols(rank);
   }
-  return svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose();
+  // P = V diag(inverse) Uᵀ, formed as its transpose U diag(inverse) Vᵀ through the kernel.
+  U *= inverse.asDiagonal();
+  Eigen::MatrixXd transposed(rows, columns);
+  gemm_serial(rows, k, columns, U.data(), rows, Vt.data(), k, 0.0, transposed.data(), rows);
+  return transposed.transpose();
 }
 
 Status prepare_projection(PmscModel& m) {

@@ -1,10 +1,14 @@
 #include "core/common/kernels.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
+
+#include <Eigen/QR>
 
 #include <gtest/gtest.h>
 
@@ -260,29 +264,40 @@ TEST_F(KernelTest, BothKernelsComputeTheTransposedProductOfTheDefinition) {
   }
 }
 
-// A symmetric A·x from the lower triangle alone: the strict upper triangle holds NaN, which any
-// read of it would carry into y; the lower one is checked against the definition with both halves.
-TEST_F(KernelTest, BothKernelsComputeTheSymmetricProductFromTheLowerTriangleAlone) {
+// The thin SVD of a matrix made with known singular values, A = Q₁ diag(σ) Q₂ᵀ (Q from the QR of
+// random matrices), tall and wide, with padded leading dimensions: s is σ in descending order, U
+// and V have orthonormal columns, U diag(s) Vᵀ is A again, and no padding is written.
+TEST_F(KernelTest, BothKernelsComputeTheThinSvdOfAMatrixWithKnownSingularValues) {
   for (Kernel kernel : {Kernel::kPortable, Kernel::kBlas}) {
     use_kernel(kernel);
     std::mt19937 random(13);
     std::uniform_real_distribution<double> value(-1, 1);
-    for (long n : {1L, 7L, 130L}) {
-      const long lda = n + 3;
-      std::vector<double> a(static_cast<size_t>(lda * n), std::nan("")), x(static_cast<size_t>(n));
-      std::vector<double> full(static_cast<size_t>(n * n));  // both triangles, leading dimension n
-      for (long j = 0; j < n; ++j) {
-        for (long i = j; i < n; ++i) {
-          const double v = value(random);
-          a[static_cast<size_t>(i + j * lda)] = v;
-          full[static_cast<size_t>(i + j * n)] = full[static_cast<size_t>(j + i * n)] = v;
-        }
-      }
-      for (double& v : x) v = value(random);
-      const std::vector<long double> expected = reference(n, n, 1, full, n, x, n, 0.0, x, n);
-      std::vector<double> y(static_cast<size_t>(n), 5.0);
-      symmetric_product_lower_serial(n, a.data(), lda, x.data(), y.data());
-      expect_product(y, y, expected, n, 1, n, 4e-16 * (n + 1), kernel_name(kernel) + " n " + std::to_string(n));
+    for (const auto& [rows, columns] : {std::pair{37L, 11L}, std::pair{11L, 37L}, std::pair{20L, 20L}}) {
+      const long k = std::min(rows, columns);
+      const auto orthonormal = [&](long n) {
+        Eigen::MatrixXd X(n, k);
+        for (long j = 0; j < X.size(); ++j) X.data()[j] = value(random);
+        return Eigen::MatrixXd(Eigen::HouseholderQR<Eigen::MatrixXd>(X).householderQ() * Eigen::MatrixXd::Identity(n, k));
+      };
+      Eigen::VectorXd sigma(k);
+      for (long i = 0; i < k; ++i) sigma(i) = std::pow(10.0, -6.0 * static_cast<double>(i) / static_cast<double>(k));
+      const Eigen::MatrixXd A = orthonormal(rows) * sigma.asDiagonal() * orthonormal(columns).transpose();
+      const long lda = rows + 3, ldu = rows + 2, ldvt = k + 1;
+      const double pad = -7;
+      Eigen::MatrixXd a = Eigen::MatrixXd::Constant(lda, columns, pad), u = Eigen::MatrixXd::Constant(ldu, k, pad),
+                      vt = Eigen::MatrixXd::Constant(ldvt, columns, pad);
+      a.topRows(rows) = A;
+      Eigen::VectorXd s(k);
+      thin_svd_serial(rows, columns, a.data(), lda, s.data(), u.data(), ldu, vt.data(), ldvt);
+      const std::string what = kernel_name(kernel) + " " + std::to_string(rows) + " × " + std::to_string(columns);
+      EXPECT_LE((s - sigma).cwiseAbs().maxCoeff(), 1e-13) << what;
+      const Eigen::MatrixXd U = u.topRows(rows), Vt = vt.topRows(k);
+      EXPECT_LE((U.transpose() * U - Eigen::MatrixXd::Identity(k, k)).cwiseAbs().maxCoeff(), 1e-12) << what;
+      EXPECT_LE((Vt * Vt.transpose() - Eigen::MatrixXd::Identity(k, k)).cwiseAbs().maxCoeff(), 1e-12) << what;
+      EXPECT_LE((U * s.asDiagonal() * Vt - A).cwiseAbs().maxCoeff(), 1e-13) << what;
+      EXPECT_TRUE((a.bottomRows(lda - rows).array() == pad).all()) << what << ": A's padding";
+      EXPECT_TRUE((u.bottomRows(ldu - rows).array() == pad).all()) << what << ": U's padding";
+      EXPECT_TRUE((vt.bottomRows(ldvt - k).array() == pad).all()) << what << ": Vᵀ's padding";
     }
   }
 }
