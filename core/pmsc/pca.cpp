@@ -13,7 +13,6 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Householder>
 #include <Eigen/QR>
-#include <Eigen/SVD>
 
 #include "core/common/kernels.h"
 #include "core/common/parallel.h"
@@ -161,9 +160,12 @@ PcaBasis thin_pca(const TrainingMatrix& X, int max_vectors) {
   // SVD directly; its U is already orthonormal and σ_i accurate to eps·σ_0.
   MatrixXd dense(R, F);
   X.rows_into(0, R, dense);
-  const Eigen::BDCSVD<MatrixXd> svd(dense, Eigen::ComputeThinU);
-  const VectorXd sigma = svd.singularValues().head(candidates);
-  return basis_from_directions(svd.matrixU().leftCols(candidates) * sigma.asDiagonal(), sigma);  // X v_i, as above
+  const Index k = std::min(R, F);
+  VectorXd singular(k);
+  MatrixXd U(R, k), Vt(k, F);
+  thin_svd_serial(R, F, dense.data(), R, singular.data(), U.data(), R, Vt.data(), k);
+  const VectorXd sigma = singular.head(candidates);
+  return basis_from_directions(U.leftCols(candidates) * sigma.asDiagonal(), sigma);  // X v_i, as above
 }
 
 PcaBasis thin_pca(const MatrixXd& X, int max_vectors) { return thin_pca(TrainingMatrix(X), max_vectors); }
