@@ -173,7 +173,7 @@ void add_skinning(const SkinningTerms& skinning, const float* transforms, long p
 //   p_res = S⁻¹ (b_res − Wᵀ b_bone),  p_bone = D⁻¹ b_bone − W p_res,  W = D⁻¹ C,
 // with D⁻¹ one 4B × 4B inverse used for all three rows. On crane (B = 32, r = 36) that is about
 // 80 thousand multiplications and 250 kB read a pose, where the whole M × M inverse (M = 420)
-// took 180 thousand and 0.7 MB — most of an estimate before.
+// took 180 thousand and 0.7 MB (docs/BENCHMARKS.md, issue #51's third round).
 constexpr double kSparseKeyCondition = 1e4;
 
 class ArticulatedSubspace final : public Subspace {
