@@ -332,6 +332,7 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
   options.error_bound = suite.error_bound_diag * diagonal;
   options.error_tolerance = suite.tolerance_diag * diagonal;
   options.max_key_points = 200;
+  if (suite.held_out_key_slack >= 0) options.held_out_key_slack = suite.held_out_key_slack;
   options.remove_rigid_motion = aligned;
   options.subspace_kind = kind;
   options.cross_fitted_calibration = cross_fitted ? 1 : 0;
@@ -514,6 +515,7 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
       {"skinning_seconds", report.skinning_seconds},
       {"basis", model->basis_size()},
       {"key_points", model->key_point_count()},
+      {"held_out_key_slack", options.held_out_key_slack},
       {"train_seconds", report.seconds},
       {"calibration_seconds", report.calibration_seconds},
       {"train_frames", split.train.size()},
@@ -649,6 +651,7 @@ std::vector<nlohmann::json> run_cow_extrapolation(const std::filesystem::path& d
   options.error_bound = suite.error_bound_diag * diagonal;
   options.error_tolerance = suite.tolerance_diag * diagonal;
   options.max_key_points = 200;
+  if (suite.held_out_key_slack >= 0) options.held_out_key_slack = suite.held_out_key_slack;
   options.subspace_kind = kind;
   options.cross_fitted_calibration = cross_fitted ? 1 : 0;
   if (kind == pmsc::SubspaceKind::kArticulated) options.faces = rig->model.faces;
@@ -696,6 +699,7 @@ std::vector<nlohmann::json> run_cow_extrapolation(const std::filesystem::path& d
                           {"train_seconds", report.seconds},
                           {"basis", model->basis_size()},
                           {"key_points", model->key_point_count()},
+                          {"held_out_key_slack", options.held_out_key_slack},
                           {"check_points", model->check_point_count()},
                           {"key_weight", model->key_weight},
                           {"calibration_bad_samples", model->calibration.bad_samples},

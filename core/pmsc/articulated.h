@@ -36,9 +36,8 @@ namespace animspace::pmsc {
 // Coordinates per bone: the 3 × 4 affine matrix M_j, row-major (a00 a01 a02 t0 a10 …).
 inline constexpr int kBoneCoordinates = 12;
 // The key budget of an articulated model: enough keys for kKeyEquationsPerUnknown equations per
-// coordinate, and never more than kMaxKeyFraction of the points (issue #51).
+// coordinate, and never more than kMaxKeyFraction of the points (key_points.h; issue #51).
 inline constexpr double kKeyEquationsPerUnknown = 4.5;
-inline constexpr double kMaxKeyFraction = 0.08;
 // Bones when the caller does not choose: 32 (the skinning benchmark fits horse-gallop's 48 frames
 // with 30 bones within 1.3 of 100 units RMS, docs/BENCHMARKS.md; on crane's first 60%, 32 bones
 // left 0.17% of the diagonal RMS where 24 left 0.22%), and never more than one bone per

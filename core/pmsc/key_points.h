@@ -24,6 +24,11 @@
 
 namespace animspace::pmsc {
 
+// The most keys any model is given, as a fraction of its control points (issues #51, #52): a
+// client poses every key, and a key budget past a few percent of the points is no longer the
+// papers' bargain (2006 §6: 170 keys for 2,986 points, 6%).
+inline constexpr double kMaxKeyFraction = 0.08;
+
 struct KeyPointOptions {
   int channel_count = 3;  // D
   // Basis vectors per block, 10–20 in the papers.
@@ -57,6 +62,14 @@ Result<KeyPointSelection> select_key_points(const TrainingMatrix& T, const Eigen
                                             const KeyPointOptions& options);
 Result<KeyPointSelection> select_key_points(const Eigen::MatrixXd& T, const Eigen::MatrixXd& basis,
                                             const KeyPointOptions& options);
+
+// Each frame's worst point as its key rows alone reconstruct it, max_i ‖x_i − (A P x_key)_i‖ with
+// P the runtime's least-squares projection of A's key rows (pmsc_model.h): X is R × F frames less
+// the basis's mean, A = `basis` (R × M). What the held-out key budget measures (train.h,
+// held_out_key_slack) on frames the keys were not chosen on. Frames are reconstructed a few at a
+// time, so nothing R × F is formed.
+Eigen::VectorXd key_reconstruction_worst_errors(const Eigen::MatrixXd& X, const Eigen::MatrixXd& basis,
+                                                const std::vector<int>& key_points, int channels);
 
 // Rows of the key points: (K·D) × cols, gathered from point-major `rows`.
 Eigen::MatrixXd gather_key_rows(const Eigen::MatrixXd& rows, const std::vector<int>& key_points, int channels);

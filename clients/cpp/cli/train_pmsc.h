@@ -22,6 +22,7 @@ struct TrainPmscArgs {
   double false_hit_rate = pmsc::TrainingOptions{}.false_hit_rate;
   int basis = 0;
   int max_key_points = 200;
+  double held_out_key_slack = pmsc::TrainingOptions{}.held_out_key_slack;
   int block = 12;
   std::vector<int> fiducials;
   int grid = 0;

@@ -135,6 +135,7 @@ TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   o.region_count = 3;
   o.false_hit_rate = 0.1 + 0.2;
   o.calibration_block_frames = 7;
+  o.held_out_key_slack = 0.1 + 0.2;
   o.positions = PointMatrix::Ones(2, 3);  // not persisted
 
   container::ModelContainer c;
@@ -157,6 +158,7 @@ TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   EXPECT_EQ(loaded->region_count, 3);
   EXPECT_EQ(loaded->false_hit_rate, 0.1 + 0.2);
   EXPECT_EQ(loaded->calibration_block_frames, 7);
+  EXPECT_EQ(loaded->held_out_key_slack, 0.1 + 0.2);
   EXPECT_EQ(loaded->positions.rows(), 0);
   EXPECT_EQ(c.metadata_value("pmsc.options.fiducial_points"), "5,0,1234");
 
@@ -168,6 +170,19 @@ TEST(PmscTrainingOptions, EveryFieldRoundTripsBitExactly) {
   EXPECT_TRUE(defaults->fiducial_points.empty());
   EXPECT_FALSE(defaults->remove_rigid_motion);
   EXPECT_EQ(defaults->max_basis_fraction, TrainingOptions{}.max_basis_fraction);
+}
+
+// Issue #52 item 2: a model trained before the held-out key budget stores no slack; its budget
+// was max_key_points alone, and a retrain keeps it so (slack 0), whatever today's default is.
+TEST(PmscTrainingOptions, AModelFromBeforeTheHeldOutKeyBudgetRetrainsWithItsFixedBudget) {
+  ASSERT_GT(TrainingOptions{}.held_out_key_slack, 0);
+  container::ModelContainer c;
+  store_training_options(TrainingOptions{}, c);
+  ASSERT_EQ(c.metadata().erase("pmsc.options.held_out_key_slack"), 1u);
+  auto loaded = load_training_options(round_trip(c), "old");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->held_out_key_slack, 0);
+  EXPECT_EQ(loaded->max_key_points, TrainingOptions{}.max_key_points);
 }
 
 TEST(PmscTrainingOptions, AbsentOptionsAreAFailedPrecondition) {

@@ -14,6 +14,7 @@
 
 #include "core/common/parallel.h"
 #include "core/container/model_container.h"
+#include "core/pmsc/key_points.h"
 #include "core/pmsc/pca.h"
 #include "core/pmsc/pmsc_io.h"
 #include "core/pmsc/relative_point_errors.h"
@@ -445,6 +446,118 @@ TEST(PmscTrain, AHeldOutBasisSlackMustBeANonNegativeNumber) {
   auto model = train(data.frames, o, nullptr);
   ASSERT_FALSE(model.ok());
   EXPECT_NE(model.error().message.find("held_out_basis_slack"), std::string::npos);
+}
+
+// What the held-out key budget measures, worked by hand: frames in the span of a basis, one of
+// them with a bump at a point that is not a key. The keys' rows do not see the bump, so the
+// coordinates are exact and the reconstruction misses the bump alone: its norm is that frame's
+// worst point, and every other frame's is rounding. 70 frames: more than one block of 32.
+TEST(PmscKeyPoints, TheWorstPointOfAKeyReconstructionIsWhatNoKeySees) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal;
+  const int points = 60, M = 4, frames = 70;
+  const Eigen::MatrixXd basis = Eigen::MatrixXd::NullaryExpr(3 * points, M, [&] { return normal(rng); });
+  Eigen::MatrixXd X = basis * Eigen::MatrixXd::NullaryExpr(M, frames, [&] { return normal(rng); });
+  const std::vector<int> keys = {0, 7, 19, 33, 41};
+  const Eigen::Vector3d bump(0.3, -0.4, 1.2);
+  X.col(45).segment<3>(3 * 50) += bump;
+  const Eigen::VectorXd worst = key_reconstruction_worst_errors(X, basis, keys, 3);
+  ASSERT_EQ(worst.size(), frames);
+  for (long f = 0; f < frames; ++f) {
+    if (f == 45) {
+      EXPECT_NEAR(worst(f), bump.norm(), 1e-10);
+    } else {
+      EXPECT_LT(worst(f), 1e-10) << "frame " << f;
+    }
+  }
+  // A bump under a key moves the coordinates instead: the error spreads, and the bumped point
+  // itself is reconstructed with part of it.
+  X.col(3).segment<3>(3 * 19) += bump;
+  EXPECT_GT(key_reconstruction_worst_errors(X, basis, keys, 3)(3), 1e-3);
+}
+
+// Issue #52 item 2, the held-out key budget. Frames exactly in a rank-5 subspace: keys chosen on
+// either half of the frames reproduce the other half to rounding, within the selection's own
+// bound at the first rung, so the rule keeps where the selection stopped.
+TEST(PmscTrain, TheHeldOutKeyRuleKeepsTheStopWhenKeysReproduceFramesTheyNeverSaw) {
+  const auto data = exact_subspace(500, 40, 5, 1.0, 23);
+  TrainingOptions o = options_for(1.0);
+  TrainingReport report;
+  auto model = train(data.frames, o, &report);
+  ASSERT_TRUE(model.ok()) << model.error().message;
+  ASSERT_EQ(report.key_budget_counts.size(), 1u);
+  EXPECT_EQ(report.key_budget_counts[0], model->key_point_count());
+  EXPECT_LE(report.key_budget_errors[0], o.error_bound);
+  o.held_out_key_slack = 0;
+  auto fixed = train(data.frames, o, nullptr);
+  ASSERT_TRUE(fixed.ok()) << fixed.error().message;
+  EXPECT_EQ(fixed->key_points, model->key_points);
+}
+
+// A rank-4 subspace plus noise with M = 10: six of the directions are the training frames' noise,
+// and their coordinates, estimated from the keys' noisy values, carry noise into every point;
+// each key more averages it down. On frames the keys never saw, the worst point falls with the
+// count, so from a budget of 12 the rule climbs its ladder (√2 apart, up to 8% of the 1,000
+// points) and serves more keys; and fresh frames of the same motion, which neither model saw,
+// are reconstructed better than by the 12 keys of slack 0.
+TEST(PmscTrain, TheHeldOutKeyRuleAddsKeysWhileTheyLowerTheWorstPointOnNewFrames) {
+  const NoisySet data = noisy_subspace(1000, 90, 4, 0.01, 1.0, 31);
+  const FrameMatrix training = data.frames.topRows(60), fresh = data.frames.bottomRows(30);
+  TrainingOptions o = options_for(1.0);
+  o.basis_size = 10;
+  o.max_key_points = 12;
+  o.region_count = 0;
+  TrainingReport report;
+  auto ruled = train(training, o, &report);
+  ASSERT_TRUE(ruled.ok()) << ruled.error().message;
+  TrainingOptions fixed_options = o;
+  fixed_options.held_out_key_slack = 0;
+  TrainingReport fixed_report;
+  auto fixed = train(training, fixed_options, &fixed_report);
+  ASSERT_TRUE(fixed.ok()) << fixed.error().message;
+  EXPECT_EQ(fixed->key_point_count(), 12);
+  EXPECT_TRUE(fixed_report.key_budget_counts.empty());
+
+  const std::vector<int>& counts = report.key_budget_counts;
+  const std::vector<double>& errors = report.key_budget_errors;
+  ASSERT_GE(counts.size(), 2u);
+  ASSERT_EQ(errors.size(), counts.size());
+  EXPECT_EQ(counts[0], 12);
+  for (size_t i = 1; i < counts.size(); ++i) {
+    EXPECT_EQ(counts[i], std::min(80, static_cast<int>(std::ceil(std::sqrt(2.0) * counts[i - 1]))));
+  }
+  const double best = *std::min_element(errors.begin(), errors.end());
+  const auto chosen = std::find(counts.begin(), counts.end(), ruled->key_point_count());
+  ASSERT_NE(chosen, counts.end());
+  const size_t at = static_cast<size_t>(chosen - counts.begin());
+  EXPECT_GT(at, 0u);
+  EXPECT_LE(errors[at], (1 + o.held_out_key_slack) * best);
+  for (size_t i = 0; i < at; ++i) EXPECT_GT(errors[i], (1 + o.held_out_key_slack) * best);
+
+  const auto mean_worst_point = [&](const PmscModel& model) {
+    double sum = 0;
+    PoseEstimate estimate;
+    for (long f = 0; f < fresh.rows(); ++f) {
+      const Eigen::VectorXf truth = fresh.row(f).transpose();
+      evaluate(model, gather_key_values(model, truth), estimate);
+      const Eigen::VectorXf residual = truth - estimate.points;
+      sum += static_cast<double>(Eigen::Map<const Eigen::Matrix3Xf>(residual.data(), 3, residual.size() / 3)
+                                     .colwise()
+                                     .norm()
+                                     .maxCoeff());
+    }
+    return sum / static_cast<double>(fresh.rows());
+  };
+  EXPECT_LT(mean_worst_point(*ruled), mean_worst_point(*fixed));
+}
+
+TEST(PmscTrain, AHeldOutKeySlackMustBeANonNegativeNumber) {
+  const auto data = exact_subspace(50, 20, 3, 1.0, 3);
+  TrainingOptions o = options_for(1.0);
+  o.held_out_key_slack = std::nan("");
+  auto model = train(data.frames, o, nullptr);
+  ASSERT_FALSE(model.ok());
+  EXPECT_NE(model.error().message.find("held_out_key_slack"), std::string::npos);
 }
 
 // Issue #38 item 3: the calibration folds run on every core, and the model is the same on one
