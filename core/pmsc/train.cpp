@@ -731,34 +731,48 @@ Result<KeyBudget> held_out_key_budget(const TrainingMatrix& T, const Eigen::Matr
     Eigen::MatrixXd own, others;  // its frames and the other half's, less its basis's mean
     std::vector<int> keys;
   };
+  // The halves are independent: each runs on a core of its own (the products inside it run
+  // inline, parallel.h), and computes what it would alone.
   std::array<Half, 2> half;
-  TrainingBasis residual;
-  for (int h = 0; h < 2; ++h) {
-    Half& mine = half[static_cast<size_t>(h)];
-    if (subset_basis(T, gram, basis, articulated, halves.frames[static_cast<size_t>(h)], residual, mine.basis) < 0) {
-      return KeyBudget();
+  std::array<bool, 2> made{};
+  parallel_for_chunks(2, 1, [&](int64_t first, int64_t last) {
+    TrainingBasis residual;
+    for (int64_t h = first; h < last; ++h) {
+      Half& mine = half[static_cast<size_t>(h)];
+      const std::vector<long>& own = halves.frames[static_cast<size_t>(h)];
+      if (subset_basis(T, gram, basis, articulated, own, residual, mine.basis) < 0) continue;
+      const std::vector<long>& other = halves.frames[static_cast<size_t>(1 - h)];
+      const long stride = (static_cast<long>(other.size()) + kKeyBudgetFrames - 1) / kKeyBudgetFrames;
+      std::vector<long> measured;
+      for (size_t j = 0; j < other.size(); j += static_cast<size_t>(stride)) measured.push_back(other[j]);
+      mine.own = frames_less_mean(T, own, mine.basis.mean);
+      mine.others = frames_less_mean(T, measured, mine.basis.mean);
+      mine.keys = options.seed_points;
+      made[static_cast<size_t>(h)] = true;
     }
-    const std::vector<long>& other = halves.frames[static_cast<size_t>(1 - h)];
-    const long stride = (static_cast<long>(other.size()) + kKeyBudgetFrames - 1) / kKeyBudgetFrames;
-    std::vector<long> measured;
-    for (size_t j = 0; j < other.size(); j += static_cast<size_t>(stride)) measured.push_back(other[j]);
-    mine.own = frames_less_mean(T, halves.frames[static_cast<size_t>(h)], mine.basis.mean);
-    mine.others = frames_less_mean(T, measured, mine.basis.mean);
-    mine.keys = options.seed_points;
-  }
+  });
+  if (!made[0] || !made[1]) return KeyBudget();
   for (size_t rung = 0; rung < out.counts.size(); ++rung) {
-    double sum = 0;
-    long frames = 0;
-    for (Half& mine : half) {
-      options.seed_points = mine.keys;
-      options.max_key_points = out.counts[rung];
-      auto selection = select_key_points(mine.own, mine.basis.basis, options);
-      if (!selection) return selection.error();
-      mine.keys = std::move(selection->key_points);
-      sum += key_reconstruction_worst_errors(mine.others, mine.basis.basis, mine.keys, options.channel_count).sum();
-      frames += mine.others.cols();
-    }
-    out.errors.push_back(sum / static_cast<double>(frames));
+    std::array<Status, 2> status{Status::Ok(), Status::Ok()};
+    std::array<double, 2> sums{};
+    parallel_for_chunks(2, 1, [&](int64_t first, int64_t last) {
+      for (int64_t h = first; h < last; ++h) {
+        Half& mine = half[static_cast<size_t>(h)];
+        KeyPointOptions climb = options;
+        climb.seed_points = mine.keys;
+        climb.max_key_points = out.counts[rung];
+        auto selection = select_key_points(mine.own, mine.basis.basis, climb);
+        if (!selection) {
+          status[static_cast<size_t>(h)] = selection.error();
+          continue;
+        }
+        mine.keys = std::move(selection->key_points);
+        sums[static_cast<size_t>(h)] =
+            key_reconstruction_worst_errors(mine.others, mine.basis.basis, mine.keys, options.channel_count).sum();
+      }
+    });
+    for (const Status& s : status) ANIMSPACE_RETURN_IF_ERROR(s);
+    out.errors.push_back((sums[0] + sums[1]) / static_cast<double>(half[0].others.cols() + half[1].others.cols()));
     if (out.errors[rung] <= bound) break;
     if (rung >= 2 && out.errors[rung - 1] > (1 - slack) * out.errors[rung - 2] &&
         out.errors[rung] > (1 - slack) * out.errors[rung - 1]) {
