@@ -108,14 +108,11 @@ struct IlluminationTrainingOptions {
   // took it from 1.33% to 1.17%; at 100k points and the 18 × 18 grid (M 130), 400 → 600 keys took
   // the estimate from 0.76% to 0.68% of the full calculation (0.98% of the 4,096-ray reference),
   // and the HIT rate from 0.29 to 0.58 (its check points, a fifth of the keys, measure the error
-  // better), for a key gather of 0.6% of the full calculation's rays (docs/BENCHMARKS.md). That
-  // budget is the budget (held_out_key_slack 0): a key here is a gather, whose rays are the
-  // price the light pays, and the held-out key rule (issue #52) weighs only accuracy.
+  // better), for a key gather of 0.6% of the full calculation's rays (docs/BENCHMARKS.md).
   pmsc::TrainingOptions pmsc = [] {
     pmsc::TrainingOptions o;
     o.held_out_basis_slack = 0.05;
     o.max_key_points = 600;
-    o.held_out_key_slack = 0;
     return o;
   }();
 };

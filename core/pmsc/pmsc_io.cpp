@@ -54,7 +54,7 @@ constexpr DoubleOption kDoubleOptions[] = {
     {"false_hit_rate", &TrainingOptions::false_hit_rate, true},
     {"check_point_fraction", &TrainingOptions::check_point_fraction, true},  // issue #35
     {"held_out_basis_slack", &TrainingOptions::held_out_basis_slack, true},  // issue #38
-    {"held_out_key_slack", &TrainingOptions::held_out_key_slack, true},      // issue #52: absent, 0
+    {"held_out_key_slack", &TrainingOptions::held_out_key_slack, true},      // issue #52
 };
 constexpr const char* kFiducialPoints = "fiducial_points";
 constexpr const char* kRemoveRigidMotion = "remove_rigid_motion";
@@ -459,8 +459,6 @@ Result<TrainingOptions> load_training_options(const container::ModelContainer& i
   };
 
   TrainingOptions options;
-  // Models trained before the held-out key budget had max_key_points as their budget.
-  options.held_out_key_slack = 0;
   const auto absent = [&](const char* name, bool optional) {
     known.insert(option_key(name));
     return optional && !metadata.contains(option_key(name));

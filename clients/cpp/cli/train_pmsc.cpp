@@ -51,7 +51,7 @@ CLI::App* add_train_pmsc(CLI::App& app, TrainPmscArgs& a) {
   cmd->add_option("--held-out-key-slack", a.held_out_key_slack,
                   "More keys while they pay on motion they were not chosen on: up to 8% of the points, the fewest "
                   "whose mean worst-point error on held-out halves of the frames is within this fraction of the "
-                  "best (0: --max-key-points is the budget)")
+                  "best, e.g. 0.05 (0: off, --max-key-points is the budget)")
       ->check(tools::kNonNegative)
       ->capture_default_str();
   cmd->add_option("--block", a.block, "Basis vectors per key-selection block (10–20 in the papers)")
