@@ -734,6 +734,38 @@ TEST_F(CliClientTest, TrainingWhoseBasisMissesTheBoundSaysMoreKeysWillNotHelp) {
   EXPECT_GT(report.at("projection_error").get<double>(), 0.0) << run.out;
 }
 
+// Issue #52 item 2: with --held-out-key-slack the report carries the key budget's ladder (from
+// where the selection stopped, counts √2 apart), the model's key count is one of its rungs, and
+// the slack is stored for the model's retrains; a negative slack is refused, naming the option.
+TEST_F(CliClientTest, TrainingWithTheHeldOutKeyRuleReportsItsLadderAndStoresTheSlack) {
+  const auto folder = write_arm_sequence(arm_frames(), work_->path() / "arm-sequence-key-budget");
+  const auto out = work_->path() / "key-budget.anim";
+  const CliRun run = cli("--json train-pmsc " + folder.string() +
+                         " --select ::4 --max-key-points 4 --held-out-key-slack 0.05 --regions 0 -o " + out.string());
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const auto report = nlohmann::json::parse(run.out);
+  const auto& ladder = report.at("key_budget");
+  ASSERT_GE(ladder.size(), 2u) << run.out;
+  EXPECT_EQ(ladder[0].at("key_points").get<int>(), 4) << run.out;
+  bool on_the_ladder = false;
+  for (size_t i = 0; i < ladder.size(); ++i) {
+    const int keys = ladder[i].at("key_points").get<int>();
+    if (i > 0) {
+      EXPECT_EQ(keys, static_cast<int>(std::ceil(std::sqrt(2.0) * ladder[i - 1].at("key_points").get<int>())));
+    }
+    EXPECT_GT(ladder[i].at("held_out_worst_point_percent_diagonal").get<double>(), 0.0) << run.out;
+    on_the_ladder = on_the_ladder || keys == report.at("key_points").get<int>();
+  }
+  EXPECT_TRUE(on_the_ladder) << run.out;
+  auto file = container::read_file(out);
+  ASSERT_TRUE(file.ok());
+  EXPECT_EQ(file->metadata_value("pmsc.options.held_out_key_slack"), "0.05");
+
+  const CliRun refused = cli("train-pmsc " + folder.string() + " --held-out-key-slack -0.1 -o " + out.string());
+  EXPECT_NE(refused.exit_code, 0);
+  EXPECT_NE(refused.err.find("--held-out-key-slack: must be >= 0, got -0.1"), std::string::npos) << refused.err;
+}
+
 TEST_F(CliClientTest, RelightRefusesAHeatScaleWithoutTheHeatMap) {
   const CliRun alone = cli("relight cornell --from 0.2 0.44 0.3 --heat-max 0.5 -o " +
                            (work_->path() / "heat.png").string());
