@@ -649,7 +649,8 @@ FrameHalves alternating_halves(long F, long block) {
 }
 
 // The given frames of T less a subspace's mean (R × frames): what its key selection reconstructs.
-Eigen::MatrixXd frames_less_mean(const TrainingMatrix& T, const std::vector<long>& frames, const Eigen::VectorXd& mean) {
+Eigen::MatrixXd frames_less_mean(const TrainingMatrix& T, const std::vector<long>& frames,
+                                 const Eigen::VectorXd& mean) {
   Eigen::MatrixXd columns(T.rows(), static_cast<long>(frames.size()));
   Eigen::VectorXd shift = -mean;
   if (T.offset().size() > 0) shift += T.offset();
@@ -692,14 +693,14 @@ Result<CrossFittedKeys> cross_fitted_keys(const TrainingMatrix& T, const Eigen::
 
 // Issue #52 item 2: the key count by the accuracy the keys buy on motion they were not chosen
 // on. The training frames' own error says little: each is reproduced by keys its motion drew,
-// and the linear selection stops as soon as every one is within the bound (crane's first 60%:
-// 48 keys at M = 80). So on each half of the frames (alternating_halves) a basis is made and keys
-// are chosen as the served ones are, and the other half's frames — motion that basis and keys
-// never saw — are reconstructed from their key rows alone. Their worst point, averaged over the
-// frames of both halves, is measured at key counts √2 apart, from the served selection's stop up
-// to kMaxKeyFraction of the points (no ladder when one step of √2 does not fit under it); each
-// count continues the previous count's selection (the greedy selection with its keys as seeds),
-// so the ladder costs one selection to its last rung.
+// and the linear selection stops as soon as every one is within the bound (crane's 88 even
+// frames: 48 keys at M = 80; train.h, max_basis_fraction). So on each half of the frames
+// (alternating_halves) a basis is made and keys are chosen as the served ones are, and the other
+// half's frames — motion that basis and keys never saw — are reconstructed from their key rows
+// alone. Their worst point, averaged over the frames of both halves, is measured at key counts √2
+// apart, from the served selection's stop up to kMaxKeyFraction of the points (no ladder when one
+// step of √2 does not fit under it); each count continues the previous count's selection (the
+// greedy selection with its keys as seeds), so the ladder costs one selection to its last rung.
 // The count is the smallest rung within (1 + slack) of the best, or within the selection's bound
 // (TrainingOptions::error_bound: keys the caller would stop at on its own training frames); the
 // ladder stops at such a rung, or after two rungs in a row that each bought less than the slack.
@@ -1234,7 +1235,8 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
     if (!continued) return continued.error();
     selection->key_points = std::move(continued->key_points);
     // (Its first residual is the served selection's last, measured again with the same keys.)
-    for (size_t i = 1; i < continued->max_residual.size(); ++i) selection->max_residual.push_back(continued->max_residual[i]);
+    const std::vector<double>& after = continued->max_residual;
+    selection->max_residual.insert(selection->max_residual.end(), after.begin() + (after.empty() ? 0 : 1), after.end());
   }
   // The keys of each half of the frames, when the calibration is cross-fitted (CrossFittedKeys).
   Result<CrossFittedKeys> crossfit = CrossFittedKeys();
