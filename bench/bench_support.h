@@ -135,9 +135,8 @@ struct SuiteOptions {
   // pmsc: key-selection bound and soft-cache tolerance, fractions of the bounding-box diagonal.
   double error_bound_diag = 0.0025;
   double tolerance_diag = 0.01;
-  // pmsc: TrainingOptions::held_out_key_slack (issue #52 item 2; 0: 200 keys at most, the
-  // training's default); < 0: the training's default.
-  double held_out_key_slack = -1;
+  // pmsc: TrainingOptions::held_out_key_slack (issue #52 item 2; 0: 200 keys at most).
+  double held_out_key_slack = 0;
   std::vector<std::string> datasets{"crane", "horse-gallop", "cow-rig"};
   SkinningSuiteOptions skinning;
   // lod: datasets (the horse is fitted with the skinning options above).

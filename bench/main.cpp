@@ -36,8 +36,7 @@ int main(int argc, char** argv) {
   app.add_option("--tolerance-diag", options.tolerance_diag, "pmsc: soft-cache tolerance (fraction of diagonal)")
       ->capture_default_str();
   app.add_option("--held-out-key-slack", options.held_out_key_slack,
-                 "pmsc: the held-out key budget's slack, e.g. 0.05 (0: the budget is 200 keys; < 0: the training's "
-                 "default, 0)")
+                 "pmsc: the held-out key budget's slack, e.g. 0.05 (0: the budget is 200 keys)")
       ->capture_default_str();
   app.add_option("--datasets", options.datasets, "pmsc: datasets under --data")->capture_default_str();
   app.add_option("--skinning-datasets", options.skinning.datasets, "skinning: datasets under --data")

@@ -332,7 +332,7 @@ nlohmann::json run_one(const std::string& dataset, const mesh_io::LoadedSequence
   options.error_bound = suite.error_bound_diag * diagonal;
   options.error_tolerance = suite.tolerance_diag * diagonal;
   options.max_key_points = 200;
-  if (suite.held_out_key_slack >= 0) options.held_out_key_slack = suite.held_out_key_slack;
+  options.held_out_key_slack = suite.held_out_key_slack;
   options.remove_rigid_motion = aligned;
   options.subspace_kind = kind;
   options.cross_fitted_calibration = cross_fitted ? 1 : 0;
@@ -651,7 +651,7 @@ std::vector<nlohmann::json> run_cow_extrapolation(const std::filesystem::path& d
   options.error_bound = suite.error_bound_diag * diagonal;
   options.error_tolerance = suite.tolerance_diag * diagonal;
   options.max_key_points = 200;
-  if (suite.held_out_key_slack >= 0) options.held_out_key_slack = suite.held_out_key_slack;
+  options.held_out_key_slack = suite.held_out_key_slack;
   options.subspace_kind = kind;
   options.cross_fitted_calibration = cross_fitted ? 1 : 0;
   if (kind == pmsc::SubspaceKind::kArticulated) options.faces = rig->model.faces;

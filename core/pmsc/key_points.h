@@ -14,6 +14,7 @@
 // basis computed from the initial training matrix (2007 §2.2, last paragraph).
 #pragma once
 
+#include <algorithm>
 #include <vector>
 
 #include <Eigen/Core>
@@ -28,6 +29,10 @@ namespace animspace::pmsc {
 // client poses every key, and a key budget past a few percent of the points is no longer the
 // papers' bargain (2006 §6: 170 keys for 2,986 points, 6%).
 inline constexpr double kMaxKeyFraction = 0.08;
+// That ceiling for `points` control points (at least one key).
+inline int max_key_count(long points) {
+  return std::max(1, static_cast<int>(kMaxKeyFraction * static_cast<double>(points)));
+}
 
 struct KeyPointOptions {
   int channel_count = 3;  // D

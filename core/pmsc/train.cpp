@@ -569,8 +569,7 @@ Result<KeyPointOptions> key_point_options(const TrainingOptions& o, const Chosen
     key_options.error_bound = 0;
     for (int point : basis.skinning.coverage_points) key_options.seed_points.push_back(point);
     const int needed = static_cast<int>(std::ceil(kKeyEquationsPerUnknown * M / D));
-    const int ceiling = std::max(1, static_cast<int>(kMaxKeyFraction * static_cast<double>(control_points)));
-    key_options.max_key_points = std::min(std::max(o.max_key_points, needed), ceiling);  // then held_out_key_budget
+    key_options.max_key_points = std::min(std::max(o.max_key_points, needed), max_key_count(control_points));
   }
   if (o.grid_cells > 0) {
     PointMatrix positions = o.positions;
@@ -1221,10 +1220,9 @@ Result<PmscModel> train_joint(const FrameMatrix& control_frames, const FrameMatr
   auto selection = select_key_points(selected_from, basis.subspace.basis, *key_options);
   if (!selection) return selection.error();
   // Then as many more as the held-out rule finds worth their cost (held_out_key_budget).
-  const int key_ceiling = std::max(1, static_cast<int>(kMaxKeyFraction * static_cast<double>(control_points)));
   auto budget = held_out_key_budget(centred, gram, basis, articulated, *key_options, held.block,
-                                    static_cast<int>(selection->key_points.size()), key_ceiling, o.held_out_key_slack,
-                                    o.error_bound);
+                                    static_cast<int>(selection->key_points.size()), max_key_count(control_points),
+                                    o.held_out_key_slack, o.error_bound);
   if (!budget) return budget.error();
   if (budget->count > static_cast<int>(selection->key_points.size())) {
     KeyPointOptions more = *key_options;
