@@ -25,8 +25,20 @@ size_t value_bytes(const v1::BasisChunk& chunk) {
   }
 }
 
+// Values in a SKINNED slot: a bone's number, then its term's four (poses.proto, BasisChunk).
+constexpr uint64_t kSlotValues = 5;
+
+// DENSE (or unset, from servers before the layouts) or SKINNED; another value is refused.
+v1::BasisLayout layout_of(const v1::BasisChunk& chunk) {
+  return chunk.layout() == v1::BASIS_LAYOUT_UNSPECIFIED ? v1::BASIS_LAYOUT_DENSE : chunk.layout();
+}
+
 std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk& chunk) {
   const size_t bytes = value_bytes(chunk);
+  if (layout_of(chunk) != v1::BASIS_LAYOUT_DENSE && layout_of(chunk) != v1::BASIS_LAYOUT_SKINNED) {
+    return "chunk at value " + std::to_string(chunk.offset()) + " has layout " +
+           std::to_string(static_cast<int>(chunk.layout())) + ", not DENSE or SKINNED";
+  }
   if (bytes == 0) {
     return "chunk at value " + std::to_string(chunk.offset()) + " has values_encoding " +
            v1::PointEncoding_Name(chunk.values_encoding()) + ", not FLOAT32 or FLOAT16";
@@ -36,9 +48,24 @@ std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk
            " bytes, not whole " + (bytes == 2 ? "float16" : "float32") + " values";
   }
   if (first) {
-    const uint64_t expected = uint64_t{chunk.point_count()} * chunk.channel_count() * (uint64_t{chunk.basis_size()} + 1);
-    if (chunk.total_values() != expected) {
-      return "total_values " + std::to_string(chunk.total_values()) + " is not N·D·(M+1) = " + std::to_string(expected);
+    const uint64_t N = chunk.point_count(), M = chunk.basis_size();
+    if (layout_of(chunk) == v1::BASIS_LAYOUT_SKINNED) {
+      const uint64_t B = chunk.subspace_bone_count(), K = chunk.influences_per_point();
+      if (chunk.channel_count() != 3 || B == 0 || K == 0 || 12 * B > M) {
+        return "a SKINNED basis of D = " + std::to_string(chunk.channel_count()) + ", B = " + std::to_string(B) +
+               ", K = " + std::to_string(K) + " and M = " + std::to_string(M) + ": expected D = 3, B, K ≥ 1, 12·B ≤ M";
+      }
+      const uint64_t expected = 3 * N * (M - 12 * B + 1) + kSlotValues * N * K;
+      if (chunk.total_values() != expected) {
+        return "total_values " + std::to_string(chunk.total_values()) +
+               " is not N·3·(r+1) + 5·N·K = " + std::to_string(expected);
+      }
+    } else {
+      const uint64_t expected = N * chunk.channel_count() * (M + 1);
+      if (chunk.total_values() != expected) {
+        return "total_values " + std::to_string(chunk.total_values()) + " is not N·D·(M+1) = " +
+               std::to_string(expected);
+      }
     }
     return chunk.offset() == 0 ? std::string() : "the first chunk starts at value " + std::to_string(chunk.offset());
   }
@@ -46,6 +73,8 @@ std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk
       chunk.basis_sha256() != basis.basis_sha256 ||
       chunk.point_count() != basis.point_count || chunk.channel_count() != basis.channel_count ||
       chunk.basis_size() != basis.basis_size || chunk.aligned() != basis.aligned ||
+      layout_of(chunk) != basis.layout || chunk.subspace_bone_count() != basis.subspace_bone_count ||
+      chunk.influences_per_point() != basis.influences_per_point ||
       value_bytes(chunk) != (basis.values_encoding == v1::POINT_ENCODING_FLOAT16 ? 2 : sizeof(float))) {
     return "chunk at value " + std::to_string(chunk.offset()) + " describes another basis than the first chunk";
   }
@@ -59,13 +88,14 @@ std::string check_chunk(const BasisData& basis, bool first, const v1::BasisChunk
 }  // namespace
 
 BasisData Client::get_basis(const std::string& model, uint64_t version, std::chrono::milliseconds deadline,
-                            v1::PointEncoding values_encoding) {
+                            v1::PointEncoding values_encoding, v1::BasisLayout layout) {
   grpc::ClientContext context;
   prepare(&context, deadline.count() > 0 ? deadline : options_.deadline);
   v1::GetBasisRequest request;
   request.mutable_model()->set_name(model);
   request.mutable_model()->set_version(version);
   request.set_values_encoding(values_encoding);
+  request.set_layout(layout);
   auto reader = poses_->GetBasis(&context, request);
   BasisData basis;
   uint64_t total = 0;
@@ -92,6 +122,9 @@ BasisData Client::get_basis(const std::string& model, uint64_t version, std::chr
       basis.channel_count = chunk.channel_count();
       basis.basis_size = chunk.basis_size();
       basis.aligned = chunk.aligned();
+      basis.layout = layout_of(chunk);
+      basis.subspace_bone_count = chunk.subspace_bone_count();
+      basis.influences_per_point = chunk.influences_per_point();
       basis.values_encoding = bytes == 2 ? v1::POINT_ENCODING_FLOAT16 : v1::POINT_ENCODING_FLOAT32;
       basis.values_max_error = chunk.values_max_error();
       values_sha256 = chunk.values_sha256();

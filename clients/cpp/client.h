@@ -86,7 +86,12 @@ struct BasisData {
   uint32_t channel_count = 0;   // D
   uint32_t basis_size = 0;      // M
   bool aligned = false;
-  std::vector<float> values;    // N·D·(M + 1)
+  // DENSE: N·D·(M + 1) values, the mean then the basis; SKINNED (an articulated model's, issue #51
+  // item 4): N·3·(r + 1) + 5·N·K, laid out as poses.proto's BasisChunk says.
+  std::vector<float> values;
+  v1::BasisLayout layout = v1::BASIS_LAYOUT_DENSE;
+  uint32_t subspace_bone_count = 0;   // SKINNED: B
+  uint32_t influences_per_point = 0;  // SKINNED: K
   uint64_t chunk_count = 0;
   uint64_t bytes_received = 0;
   // How the values came (issue #53): FLOAT32, exact; or FLOAT16, widened here, each within
@@ -160,8 +165,11 @@ class Client {
   // `values_encoding` FLOAT16 asks for half the bytes (GetBasisRequest.values_encoding): the
   // values are checked against the SHA-256 of what was sent, and a basis made of them reconstructs
   // within the bound poses.proto states (about 2^-11·(|mean_i| + Σ_j |A_ij p_j|) more than float32).
+  // `layout` (GetBasisRequest.layout): COMPACT gets an articulated model's basis SKINNED, a
+  // fraction of the values (a tenth with tens of bones); BasisData::layout says which came (a server before it sends DENSE).
   BasisData get_basis(const std::string& model, uint64_t version = 0, std::chrono::milliseconds deadline = {},
-                      v1::PointEncoding values_encoding = v1::POINT_ENCODING_FLOAT32);
+                      v1::PointEncoding values_encoding = v1::POINT_ENCODING_FLOAT32,
+                      v1::BasisLayout layout = v1::BASIS_LAYOUT_DENSE);
   // A render waits behind others on the daemon's render thread: `deadline` 0 = the client's default.
   Thumbnail render_thumbnail(const v1::RenderThumbnailRequest& request, std::chrono::milliseconds deadline = {});
 

@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string_view>
+#include <vector>
 
 #include "core/common/atomic_file.h"
 #include "core/common/bytes.h"
@@ -15,9 +16,12 @@ namespace animspace {
 namespace {
 
 // The cache file (docs/FORMATS.md, "basis cache"): magic, N, D, M, aligned (uint32 each),
-// version, checksum (uint64 each), then the float32 values as GetBasis sends them.
+// version, checksum (uint64 each), then the float32 values as GetBasis sends them. A skinned
+// basis: its own magic, and layout, B, K and a reserved word (uint32 each) before the values.
 constexpr std::string_view kMagic = "ASBASIS1";
+constexpr std::string_view kSkinnedMagic = "ASBASIS2";
 constexpr size_t kHeaderBytes = 40;
+constexpr size_t kSkinnedHeaderBytes = 56;
 
 std::string hex16(uint64_t value) {
   char text[17];
@@ -27,10 +31,24 @@ std::string hex16(uint64_t value) {
 
 }  // namespace
 
+size_t Basis::bytes() const {
+  const size_t values = static_cast<size_t>(mean.size() + basis.size()) +
+                        (skinned ? skinned->terms.size() + static_cast<size_t>(skinned->residuals.size()) : 0);
+  return sizeof(float) * values + (skinned ? sizeof(int32_t) * skinned->bones.size() : 0);
+}
+
 Basis make_basis(const std::string& model, BasisData data) {
   const auto rows = static_cast<long>(data.point_count) * data.channel_count;
   const long columns = data.basis_size;
-  if (data.values.size() != static_cast<size_t>(rows * (columns + 1))) {
+  const std::string named = "basis of '" + model + "' version " + std::to_string(data.model_version);
+  std::shared_ptr<const pmsc::SkinnedBasis> skinned;
+  if (data.layout == v1::BASIS_LAYOUT_SKINNED) {
+    auto parsed = pmsc::skinned_basis_from_values(data.values, data.point_count,
+                                                  static_cast<int>(data.subspace_bone_count),
+                                                  static_cast<int>(data.influences_per_point), columns);
+    if (!parsed) throw std::runtime_error(named + ": " + parsed.error().message);
+    skinned = std::make_shared<const pmsc::SkinnedBasis>(std::move(*parsed));
+  } else if (data.values.size() != static_cast<size_t>(rows * (columns + 1))) {
     throw std::runtime_error("basis of '" + model + "' version " + std::to_string(data.model_version) + ": " +
                              std::to_string(data.values.size()) + " values, expected N·D·(M+1) = " +
                              std::to_string(rows * (columns + 1)));
@@ -46,23 +64,25 @@ Basis make_basis(const std::string& model, BasisData data) {
   basis.channel_count = data.channel_count;
   basis.aligned = data.aligned;
   basis.mean = Eigen::Map<const Eigen::VectorXf>(data.values.data(), rows);
-  basis.basis = Eigen::Map<const Eigen::MatrixXf>(data.values.data() + rows, rows, columns);
+  if (skinned) {
+    basis.skinned = skinned;
+  } else {
+    basis.basis = Eigen::Map<const Eigen::MatrixXf>(data.values.data() + rows, rows, columns);
+  }
   if (data.values_encoding == v1::POINT_ENCODING_FLOAT16) {
     basis.basis_sha256 = std::move(data.basis_sha256);
     basis.values_max_error = data.values_max_error;
     return basis;
   }
-  const uint64_t computed = pmsc::basis_checksum(basis.mean, basis.basis);
+  const uint64_t computed = skinned ? pmsc::basis_checksum(*skinned) : pmsc::basis_checksum(basis.mean, basis.basis);
   if (computed != data.basis_checksum) {
-    throw std::runtime_error("basis of '" + model + "' version " + std::to_string(data.model_version) +
-                             ": its values have checksum " + hex16(computed) + ", the server named " +
+    throw std::runtime_error(named + ": its values have checksum " + hex16(computed) + ", the server named " +
                              hex16(data.basis_checksum));
   }
   if (!data.basis_sha256.empty()) {
-    const std::string digest = pmsc::basis_sha256(basis.mean, basis.basis);
+    const std::string digest = skinned ? pmsc::basis_sha256(*skinned) : pmsc::basis_sha256(basis.mean, basis.basis);
     if (digest != data.basis_sha256) {
-      throw std::runtime_error("basis of '" + model + "' version " + std::to_string(data.model_version) +
-                               ": its values have SHA-256 " + hex_digest(digest) + ", the server named " +
+      throw std::runtime_error(named + ": its values have SHA-256 " + hex_digest(digest) + ", the server named " +
                                hex_digest(data.basis_sha256));
     }
     basis.basis_sha256 = std::move(data.basis_sha256);
@@ -79,11 +99,11 @@ void reconstruct(const Basis& basis, const PoseResult& result, Points& out) {
                              hex16(basis.basis_checksum) + ")");
   }
   const size_t alignment_values = basis.aligned ? 12 : 0;
-  if (c.p.size() != static_cast<size_t>(basis.basis.cols()) ||
+  if (c.p.size() != static_cast<size_t>(basis.basis_size()) ||
       c.rotation.size() + c.translation.size() != alignment_values) {
     throw std::runtime_error("coordinates of '" + basis.model + "': " + std::to_string(c.p.size()) + " values and " +
                              std::to_string(c.rotation.size() + c.translation.size()) +
-                             " alignment values, expected " + std::to_string(basis.basis.cols()) + " and " +
+                             " alignment values, expected " + std::to_string(basis.basis_size()) + " and " +
                              std::to_string(alignment_values));
   }
   pmsc::FloatAlignment alignment;
@@ -95,8 +115,12 @@ void reconstruct(const Basis& basis, const PoseResult& result, Points& out) {
   out.point_count = static_cast<uint32_t>(basis.mean.size() / basis.channel_count);
   out.max_error = 0;
   out.values.resize(static_cast<size_t>(basis.mean.size()));
-  pmsc::reconstruct_coordinates(basis.mean, basis.basis, c.p.data(), basis.aligned ? &alignment : nullptr,
-                                out.values.data());
+  if (basis.skinned) {
+    pmsc::reconstruct_coordinates(*basis.skinned, c.p.data(), basis.aligned ? &alignment : nullptr, out.values.data());
+  } else {
+    pmsc::reconstruct_coordinates(basis.mean, basis.basis, c.p.data(), basis.aligned ? &alignment : nullptr,
+                                  out.values.data());
+  }
 }
 
 std::filesystem::path default_basis_cache_directory() {
@@ -122,10 +146,12 @@ std::shared_ptr<const Basis> BasisCache::read_file(Client& client, const std::st
   if (directory_.empty()) return nullptr;
   const auto path = file_of(model, version, checksum);
   auto bytes = read_regular_file(path);  // a FIFO in its place would hang the client (issue #54)
-  if (!bytes || bytes->size() < kHeaderBytes || std::string_view(*bytes).substr(0, kMagic.size()) != kMagic) {
-    return nullptr;
-  }
+  if (!bytes || bytes->size() < kHeaderBytes) return nullptr;
   const std::string_view view(*bytes);
+  const bool skinned = view.substr(0, kSkinnedMagic.size()) == kSkinnedMagic;
+  if (!skinned && view.substr(0, kMagic.size()) != kMagic) return nullptr;
+  const size_t header = skinned ? kSkinnedHeaderBytes : kHeaderBytes;
+  if (bytes->size() < header) return nullptr;
   BasisData data;
   data.point_count = load_le<uint32_t>(view, 8);
   data.channel_count = load_le<uint32_t>(view, 12);
@@ -133,13 +159,21 @@ std::shared_ptr<const Basis> BasisCache::read_file(Client& client, const std::st
   data.aligned = load_le<uint32_t>(view, 20) != 0;
   data.model_version = load_le<uint64_t>(view, 24);
   data.basis_checksum = load_le<uint64_t>(view, 32);
-  const uint64_t values = uint64_t{data.point_count} * data.channel_count * (uint64_t{data.basis_size} + 1);
+  uint64_t values = uint64_t{data.point_count} * data.channel_count * (uint64_t{data.basis_size} + 1);
+  if (skinned) {
+    data.layout = v1::BASIS_LAYOUT_SKINNED;
+    data.subspace_bone_count = load_le<uint32_t>(view, 44);
+    data.influences_per_point = load_le<uint32_t>(view, 48);
+    const uint64_t B = data.subspace_bone_count, K = data.influences_per_point, N = data.point_count;
+    if (load_le<uint32_t>(view, 40) != v1::BASIS_LAYOUT_SKINNED || 12 * B > data.basis_size) return nullptr;
+    values = 3 * N * (data.basis_size - 12 * B + 1) + pmsc::kSlotValues * N * K;
+  }
   if (data.model_version != version || data.basis_checksum != checksum ||
-      bytes->size() != kHeaderBytes + values * sizeof(float)) {
+      bytes->size() != header + values * sizeof(float)) {
     return nullptr;
   }
   data.values.resize(values);
-  std::memcpy(data.values.data(), bytes->data() + kHeaderBytes, values * sizeof(float));
+  std::memcpy(data.values.data(), bytes->data() + header, values * sizeof(float));
   // The server's word on the version: its checksum must be the one asked for (else the answer
   // named a basis the version no longer has, and GetBasis says so), its digest the copy's.
   KeyPoints described;
@@ -162,18 +196,28 @@ std::shared_ptr<const Basis> BasisCache::read_file(Client& client, const std::st
 void BasisCache::write_file(const Basis& basis) const {
   if (directory_.empty()) return;
   const auto rows = static_cast<size_t>(basis.mean.size());
-  const auto values = rows * (static_cast<size_t>(basis.basis.cols()) + 1);
-  std::string bytes(kHeaderBytes + values * sizeof(float), '\0');
-  std::memcpy(bytes.data(), kMagic.data(), kMagic.size());
+  const size_t header = basis.skinned ? kSkinnedHeaderBytes : kHeaderBytes;
+  std::vector<float> skinned_values;
+  if (basis.skinned) skinned_values = pmsc::skinned_values(*basis.skinned);
+  const size_t values = basis.skinned ? skinned_values.size() : rows * (static_cast<size_t>(basis.basis.cols()) + 1);
+  std::string bytes(header + values * sizeof(float), '\0');
+  std::memcpy(bytes.data(), (basis.skinned ? kSkinnedMagic : kMagic).data(), kMagic.size());
   store_le<uint32_t>(bytes, 8, static_cast<uint32_t>(rows / basis.channel_count));
   store_le<uint32_t>(bytes, 12, basis.channel_count);
-  store_le<uint32_t>(bytes, 16, static_cast<uint32_t>(basis.basis.cols()));
+  store_le<uint32_t>(bytes, 16, static_cast<uint32_t>(basis.basis_size()));
   store_le<uint32_t>(bytes, 20, basis.aligned ? 1 : 0);
   store_le<uint64_t>(bytes, 24, basis.model_version);
   store_le<uint64_t>(bytes, 32, basis.basis_checksum);
-  std::memcpy(bytes.data() + kHeaderBytes, basis.mean.data(), rows * sizeof(float));
-  std::memcpy(bytes.data() + kHeaderBytes + rows * sizeof(float), basis.basis.data(),
-              rows * static_cast<size_t>(basis.basis.cols()) * sizeof(float));
+  if (basis.skinned) {
+    store_le<uint32_t>(bytes, 40, v1::BASIS_LAYOUT_SKINNED);
+    store_le<uint32_t>(bytes, 44, static_cast<uint32_t>(basis.skinned->bone_count));
+    store_le<uint32_t>(bytes, 48, static_cast<uint32_t>(basis.skinned->influences));
+    std::memcpy(bytes.data() + header, skinned_values.data(), values * sizeof(float));
+  } else {
+    std::memcpy(bytes.data() + header, basis.mean.data(), rows * sizeof(float));
+    std::memcpy(bytes.data() + header + rows * sizeof(float), basis.basis.data(),
+                rows * static_cast<size_t>(basis.basis.cols()) * sizeof(float));
+  }
   const auto path = file_of(basis.model, basis.model_version, basis.basis_checksum);
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
@@ -194,7 +238,8 @@ std::shared_ptr<const Basis> BasisCache::get(Client& client, const std::string& 
   std::shared_ptr<const Basis> basis = read_file(client, model, version, checksum);
   if (!basis) {
     fetches_ += 1;
-    auto fetched = std::make_shared<const Basis>(make_basis(model, client.get_basis(model, version)));
+    auto fetched = std::make_shared<const Basis>(make_basis(
+        model, client.get_basis(model, version, {}, v1::POINT_ENCODING_FLOAT32, v1::BASIS_LAYOUT_COMPACT)));
     if (fetched->model_version != version || fetched->basis_checksum != checksum) {
       throw std::runtime_error("model '" + model + "' version " + std::to_string(version) + ": the server's basis is " +
                                hex16(fetched->basis_checksum) + " (version " + std::to_string(fetched->model_version) +
@@ -208,23 +253,17 @@ std::shared_ptr<const Basis> BasisCache::get(Client& client, const std::string& 
   return keep(key, std::move(basis));
 }
 
-namespace {
-size_t bytes_of(const Basis& basis) {
-  return sizeof(float) * static_cast<size_t>(basis.mean.size() + basis.basis.size());
-}
-}  // namespace
-
 std::shared_ptr<const Basis> BasisCache::keep(const Key& key, std::shared_ptr<const Basis> basis) {
   if (auto found = bases_.find(key); found != bases_.end()) {  // another caller got it meanwhile
     recency_.splice(recency_.begin(), recency_, found->second.position);
     return found->second.basis;
   }
   recency_.push_front(key);
-  bytes_ += bytes_of(*basis);
+  bytes_ += basis->bytes();
   bases_.emplace(key, Held{basis, recency_.begin()});
   while (recency_.size() > 1 && bytes_ > memory_limit_bytes_) {
     const auto oldest = bases_.find(recency_.back());
-    bytes_ -= bytes_of(*oldest->second.basis);
+    bytes_ -= oldest->second.basis->bytes();
     bases_.erase(oldest);
     recency_.pop_back();
   }

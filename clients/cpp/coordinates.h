@@ -26,7 +26,9 @@
 // the answer did not name.
 //
 // The disk cache is shared with the Python client (docs/FORMATS.md, "basis cache"):
-// <directory>/<model>/<version>-<checksum, 16 hex digits>.basis.
+// <directory>/<model>/<version>-<checksum, 16 hex digits>.basis, dense (ASBASIS1) or skinned
+// (ASBASIS2). The cache asks GetBasis for the COMPACT layout: an articulated model's basis comes
+// and stays skinned.
 #pragma once
 
 #include <atomic>
@@ -43,10 +45,14 @@
 
 #include "clients/cpp/client.h"
 #include "clients/cpp/results.h"
+#include "core/pmsc/skinned_basis.h"
 
 namespace animspace {
 
-// A model version's subspace, ready to reconstruct with.
+// A model version's subspace, ready to reconstruct with: the dense basis, or an articulated
+// model's skinned form of it (GetBasisRequest.layout SKINNED, issue #51 item 4), which is the same
+// basis — the same checksum and SHA-256 — in a fraction of the memory (a tenth with tens of
+// bones), reconstructed within the same bound.
 struct Basis {
   std::string model;
   uint64_t model_version = 0;
@@ -55,16 +61,20 @@ struct Basis {
   uint32_t channel_count = 0;
   bool aligned = false;
   Eigen::VectorXf mean;   // N·D
-  Eigen::MatrixXf basis;  // N·D × M
+  Eigen::MatrixXf basis;  // N·D × M; empty when `skinned` holds it
+  std::shared_ptr<const pmsc::SkinnedBasis> skinned;
   // 0 for the float32 basis; for one fetched as FLOAT16, the largest |value − float32 value|.
   // Each value is within 2^-11 of its own size, so reconstruct() is within about
   // 2^-11·(|mean_i| + Σ_j |A_ij p_j|) more per value (BasisChunk.values_max_error states it exactly).
   float values_max_error = 0;
+
+  long basis_size() const { return skinned ? skinned->basis_size() : basis.cols(); }  // M
+  size_t bytes() const;  // of the values held
 };
 
 // `data` (from Client::get_basis) as a Basis, after checking that its values have the checksum
 // the server named (pmsc::basis_checksum) and, when it named one, the SHA-256
-// (pmsc::basis_sha256). std::runtime_error naming both when they differ. FLOAT16 data, checked
+// (pmsc::basis_sha256) — a skinned basis through the dense values it expands to. std::runtime_error naming both when they differ. FLOAT16 data, checked
 // as it came by get_basis, keeps the names of the float32 basis its answers belong to; a
 // BasisCache holds only float32 bases.
 Basis make_basis(const std::string& model, BasisData data);

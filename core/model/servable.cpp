@@ -1,16 +1,44 @@
 #include "core/model/servable.h"
 
 #include <algorithm>
+#include <span>
 #include <utility>
 
 #include "core/animspace/animspace_io.h"
+#include "core/common/sha256.h"
 #include "core/lod/lod_io.h"
 #include "core/lod/selection.h"
 #include "core/pmsc/coordinates.h"
 #include "core/pmsc/pmsc_io.h"
+#include "core/pmsc/skinned_basis.h"
 #include "core/pmsc/subspace.h"
 
 namespace animspace::model {
+namespace {
+
+std::shared_ptr<const Servable::SkinnedLayout> skinned_layout(const pmsc::SkinnedBasis& basis) {
+  auto layout = std::make_shared<Servable::SkinnedLayout>();
+  layout->bone_count = basis.bone_count;
+  layout->influences = basis.influences;
+  layout->values = pmsc::skinned_values(basis);
+  Sha256 digest;
+  digest.update(std::as_bytes(std::span<const float>(layout->values)));
+  layout->sha256 = digest.digest();
+  // Bone numbers travel as values: binary16 holds every integer up to 2048 exactly.
+  constexpr int kFloat16Integers = 2048;
+  if (basis.bone_count > kFloat16Integers) {
+    layout->float16_refusal = "its " + std::to_string(basis.bone_count) +
+                              " bones cannot be numbered in float16 (integers up to " +
+                              std::to_string(kFloat16Integers) + ")";
+  } else if (auto half = pmsc::float16_values(layout->values)) {
+    layout->float16 = std::move(*half);
+  } else {
+    layout->float16_refusal = half.error().message;
+  }
+  return layout;
+}
+
+}  // namespace
 
 Result<Servable> load_servable(const container::ModelContainer& container, const std::string& source) {
   auto info = describe(container, source);
@@ -26,6 +54,11 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
       servable.float16_basis = std::move(*half);
     } else {
       servable.float16_refusal = half.error().message;
+    }
+    if (auto skinned = pmsc::skinned_basis(*servable.pmsc)) {
+      servable.skinned = skinned_layout(*skinned);
+    } else {
+      servable.skinned_refusal = skinned.error().message;
     }
     auto subspace = pmsc::make_subspace(servable.pmsc);
     if (!subspace) return make_error(subspace.error().code, source + ": " + subspace.error().message);

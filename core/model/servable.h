@@ -40,6 +40,19 @@ struct Servable {
   // beyond ±65504), and the digest is then empty.
   pmsc::Float16Basis float16_basis;
   std::string float16_refusal;
+  // An articulated model's basis in GetBasis's SKINNED layout (pmsc::skinned_basis, issue #51
+  // item 4), built once here; null for other models, and for one whose basis does not expand back
+  // from it (the dense layout alone is then offered).
+  struct SkinnedLayout {
+    int bone_count = 0;         // B
+    int influences = 0;         // K
+    std::vector<float> values;  // pmsc::skinned_values
+    std::string sha256;         // of the float32 values as sent
+    pmsc::Float16Basis float16;
+    std::string float16_refusal;
+  };
+  std::shared_ptr<const SkinnedLayout> skinned;
+  std::string skinned_refusal;  // why `skinned` is null, for a PMSC model
   // The skinning model of an animation-space model, or the posing engine a PMSC model carries
   // for server fail-through (SPEC "Fail-through"), with its LOD levels (Merry 2007 §7.3; level 0
   // is the model itself) and the sphere eq. 7.2 measures depth to (null otherwise).

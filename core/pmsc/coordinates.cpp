@@ -33,15 +33,18 @@ std::string basis_sha256(const Eigen::VectorXf& mean, const Eigen::MatrixXf& bas
   return digest.digest();
 }
 
-Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis) {
+namespace {
+
+// Float16Basis of `parts` as one run of values; `name(i)` says where value i lies, for the error.
+template <typename Name>
+Result<Float16Basis> float16_of(std::initializer_list<std::span<const float>> parts, Name&& name) {
   Float16Basis out;
   Sha256 digest;
   // In blocks, so that a basis of hundreds of megabytes needs no second copy.
   constexpr size_t kBlock = size_t{1} << 20;
   std::vector<char> halves(2 * kBlock);
-  size_t index = 0;  // of the first value of the span being encoded, mean then basis
-  for (const std::span<const float> values : {std::span<const float>(mean.data(), static_cast<size_t>(mean.size())),
-                                             std::span<const float>(basis.data(), static_cast<size_t>(basis.size()))}) {
+  size_t index = 0;  // of the first value of the span being encoded
+  for (const std::span<const float> values : parts) {
     for (size_t at = 0; at < values.size(); at += kBlock) {
       const auto block = values.subspan(at, std::min(kBlock, values.size() - at));
       const auto encoded = std::span<char>(halves.data(), 2 * block.size());
@@ -50,13 +53,9 @@ Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::Mat
         // Name the value by where it lies in the subspace, not the codec's point and channel.
         const auto bad = std::find_if(block.begin(), block.end(),
                                       [](float v) { return !(std::abs(v) <= point_codec::kMaxFloat16); });
-        const size_t i = index + at + static_cast<size_t>(bad - block.begin());
-        const auto rows = static_cast<size_t>(mean.size());
-        const std::string where = i < rows ? "mean value " + std::to_string(i)
-                                           : "basis value " + std::to_string((i - rows) % rows) + " of column " +
-                                                 std::to_string((i - rows) / rows);
         return make_error(ErrorCode::kOutOfRange,
-                          "the subspace cannot be sent as float16: its " + where + " is " +
+                          "the subspace cannot be sent as float16: its " +
+                              name(index + at + static_cast<size_t>(bad - block.begin())) + " is " +
                               std::to_string(bad == block.end() ? 0.0f : *bad) + ", beyond binary16's ±65504");
       }
       out.max_error = std::max(out.max_error, *error);
@@ -66,6 +65,23 @@ Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::Mat
   }
   out.sha256 = digest.digest();
   return out;
+}
+
+}  // namespace
+
+Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis) {
+  const auto rows = static_cast<size_t>(mean.size());
+  return float16_of({std::span<const float>(mean.data(), rows),
+                     std::span<const float>(basis.data(), static_cast<size_t>(basis.size()))},
+                    [rows](size_t i) {
+                      return i < rows ? "mean value " + std::to_string(i)
+                                      : "basis value " + std::to_string((i - rows) % rows) + " of column " +
+                                            std::to_string((i - rows) / rows);
+                    });
+}
+
+Result<Float16Basis> float16_values(std::span<const float> values) {
+  return float16_of({values}, [](size_t i) { return "value " + std::to_string(i); });
 }
 
 FloatAlignment float_alignment(const geometry::RigidTransform& alignment) {

@@ -57,13 +57,10 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
           return Outcome::end(invalid_argument("values_encoding: expected FLOAT32 or FLOAT16, got " +
                                                v1::PointEncoding_Name(request_.values_encoding())));
       }
-      if (half_ && !model_->float16_refusal.empty()) {
-        return Outcome::end({grpc::StatusCode::FAILED_PRECONDITION,
-                             "values_encoding: model '" + model_->name + "' version " + std::to_string(model_->version) +
-                                 ": " + model_->float16_refusal + "; ask for FLOAT32"});
-      }
+      if (grpc::Status s = choose_layout(); !s.ok()) return Outcome::end(std::move(s));
       const pmsc::PmscModel& m = *model_->pmsc;
-      total_ = static_cast<uint64_t>(m.mean.size()) * static_cast<uint64_t>(m.basis_size() + 1);
+      total_ = skinned_ ? skinned_->values.size()
+                        : static_cast<uint64_t>(m.mean.size()) * static_cast<uint64_t>(m.basis_size() + 1);
       chunk_values_ = static_cast<uint64_t>(
           std::max<int64_t>(1, std::min(kMaxChunkBytes, env_.options.max_message_bytes / 4)) /
           static_cast<int64_t>(value_bytes()));
@@ -81,17 +78,28 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
     chunk.set_total_values(total_);
     chunk.set_offset(sent_);
     chunk.set_values_encoding(half_ ? v1::POINT_ENCODING_FLOAT16 : v1::POINT_ENCODING_FLOAT32);
-    chunk.set_values_sha256(half_ ? model_->float16_basis.sha256 : model_->basis_sha256);
-    chunk.set_values_max_error(half_ ? model_->float16_basis.max_error : 0.0f);
+    if (skinned_) {
+      chunk.set_layout(v1::BASIS_LAYOUT_SKINNED);
+      chunk.set_subspace_bone_count(static_cast<uint32_t>(skinned_->bone_count));
+      chunk.set_influences_per_point(static_cast<uint32_t>(skinned_->influences));
+      chunk.set_values_sha256(half_ ? skinned_->float16.sha256 : skinned_->sha256);
+      chunk.set_values_max_error(half_ ? skinned_->float16.max_error : 0.0f);
+    } else {
+      chunk.set_layout(v1::BASIS_LAYOUT_DENSE);
+      chunk.set_values_sha256(half_ ? model_->float16_basis.sha256 : model_->basis_sha256);
+      chunk.set_values_max_error(half_ ? model_->float16_basis.max_error : 0.0f);
+    }
     const uint64_t count = std::min(chunk_values_, total_ - sent_);
     std::string* data = chunk.mutable_data();
     data->resize(count * value_bytes());
-    // The mean, then the basis column by column: one span of values, cut anywhere.
-    const auto mean_values = static_cast<uint64_t>(m.mean.size());
+    // DENSE: the mean, then the basis column by column; SKINNED: its values as built at load. One
+    // span of values either way, cut anywhere.
+    const auto mean_values = skinned_ ? total_ : static_cast<uint64_t>(m.mean.size());
+    const float* first = skinned_ ? skinned_->values.data() : m.mean.data();
     uint64_t written = 0;
     while (written < count) {
       const uint64_t at = sent_ + written;
-      const float* source = at < mean_values ? m.mean.data() + at : m.basis.data() + (at - mean_values);
+      const float* source = at < mean_values ? first + at : m.basis.data() + (at - mean_values);
       const uint64_t run = std::min(count - written, at < mean_values ? mean_values - at : total_ - at);
       if (half_) {
         // In range: float16_refusal is empty (checked at load, the values are immutable).
@@ -110,6 +118,33 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
     return Outcome::write(std::move(bytes));
   }
 
+  // The layout asked for and the model has, and whether its values fit float16 (each layout's own
+  // refusal: a value beyond ±65504, or bone numbers beyond 2048).
+  grpc::Status choose_layout() {
+    const std::string model = "model '" + model_->name + "' version " + std::to_string(model_->version);
+    switch (request_.layout()) {
+      case v1::BASIS_LAYOUT_UNSPECIFIED:
+      case v1::BASIS_LAYOUT_DENSE: break;
+      case v1::BASIS_LAYOUT_SKINNED:
+        if (!model_->skinned) {
+          return {grpc::StatusCode::FAILED_PRECONDITION,
+                  "layout: " + model + " has no SKINNED layout (" + model_->skinned_refusal + "); ask for DENSE"};
+        }
+        skinned_ = model_->skinned;
+        break;
+      case v1::BASIS_LAYOUT_COMPACT: skinned_ = model_->skinned; break;
+      default:
+        return invalid_argument("layout: expected DENSE, SKINNED or COMPACT, got " +
+                                std::to_string(static_cast<int>(request_.layout())));
+    }
+    const std::string& refusal = skinned_ ? skinned_->float16_refusal : model_->float16_refusal;
+    if (half_ && !refusal.empty()) {
+      return {grpc::StatusCode::FAILED_PRECONDITION,
+              "values_encoding: " + model + ": " + refusal + "; ask for FLOAT32"};
+    }
+    return grpc::Status::OK;
+  }
+
   ServiceEnvironment& env_;
   v1::GetBasisRequest request_;  // a copy: builds may run after gRPC has freed its own
   // Read by one build at a time, each ordered after the previous by the reactor's lock.
@@ -119,6 +154,7 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
   uint64_t sent_ = 0;
   bool sent_any_ = false;
   bool half_ = false;  // values_encoding FLOAT16
+  std::shared_ptr<const model::Servable::SkinnedLayout> skinned_;  // null: the DENSE layout
   size_t value_bytes() const { return half_ ? 2 : sizeof(float); }
 };
 

@@ -8,6 +8,7 @@ import collections
 import dataclasses
 import hashlib
 import math
+import re
 import socket
 import struct
 import subprocess
@@ -319,6 +320,92 @@ def test_an_articulated_model_answers_bone_transforms_and_residuals_as_coordinat
         return float(np.linalg.norm(points.astype(np.float64) - frames[1].astype(np.float64), axis=1).max())
 
     assert worst(articulated) < 0.25 * worst(linear.points), (worst(articulated), worst(linear.points))
+
+
+def raw_chunks(channel, model, layout):
+    request = poses_pb2.GetBasisRequest(layout=layout)
+    request.model.name = model
+    return list(poses_pb2_grpc.PoseServiceStub(channel).GetBasis(request, timeout=30))
+
+
+def expand_by_hand(chunks):
+    """The mean and dense A of SKINNED chunks, expanded here entry by entry (poses.proto
+    BasisChunk), float32."""
+    first = chunks[0]
+    n, m, B, K = first.point_count, first.basis_size, first.subspace_bone_count, first.influences_per_point
+    values = np.frombuffer(b"".join(c.data for c in chunks), "<f4")
+    assert values.size == first.total_values == n * 3 * (m - 12 * B + 1) + 5 * n * K
+    A = np.zeros((3 * n, m), np.float32)
+    slots = values[3 * n:3 * n + 5 * n * K].reshape(n, K, 5)
+    for i in range(n):
+        for j, *h in slots[i]:
+            if any(h):
+                assert j == int(j) and 0 <= j < B
+                for a in range(3):
+                    A[3 * i + a, 12 * int(j) + 4 * a:12 * int(j) + 4 * a + 4] = h
+    A[:, 12 * B:] = values[3 * n + 5 * n * K:].reshape(m - 12 * B, 3 * n).T
+    return values[:3 * n], A
+
+
+def test_a_compact_basis_of_an_articulated_model_is_skinned_and_the_same_basis(counted, channel, tmp_path,
+                                                                                 demo_arm_transforms):
+    """Issue #51 item 4: arm-articulated's basis in the SKINNED layout is a fraction of the dense
+    values and expands, entry by entry, to the very float32 values the dense layout sends; answers
+    reconstructed with it are the server's within the stated bound; the cache keeps it as it came."""
+    client, counter = counted
+    described = client.describe_model("arm-articulated").default
+    dense_chunks, mean, A = raw_basis(channel, "arm-articulated")
+    skinned_chunks = raw_chunks(channel, "arm-articulated", poses_pb2.BASIS_LAYOUT_COMPACT)
+    first = skinned_chunks[0]
+    assert first.layout == poses_pb2.BASIS_LAYOUT_SKINNED and dense_chunks[0].layout == poses_pb2.BASIS_LAYOUT_DENSE
+    assert first.subspace_bone_count == described.subspace_bone_count and first.influences_per_point >= 1
+    assert (first.basis_checksum, first.basis_sha256) == (dense_chunks[0].basis_checksum, dense_chunks[0].basis_sha256)
+    print("skinned values", first.total_values, "dense", dense_chunks[0].total_values)
+    assert first.total_values < dense_chunks[0].total_values / 2
+    hand_mean, hand_A = expand_by_hand(skinned_chunks)
+    assert hand_mean.tobytes() == mean.astype("<f4").tobytes()
+    assert hand_A.tobytes(order="F") == A.astype("<f4").tobytes(order="F")
+
+    compact = client.get_basis("arm-articulated", layout="compact")
+    dense = client.get_basis("arm-articulated", layout="dense")
+    assert (compact.layout, dense.layout) == ("skinned", "dense")
+    assert compact.basis_checksum == dense.basis_checksum and compact.nbytes < dense.nbytes / 2
+    assert compact.dense_basis().tobytes(order="F") == dense.basis.tobytes(order="F")
+    assert client.get_basis("arm-articulated", layout="skinned").layout == "skinned"
+
+    keys = client.describe_key_points("arm-articulated")
+    frames = [posed_arm(client, demo_arm_transforms(f / 120)) for f in (14, 57)]
+    values = np.stack([keys.select(f) for f in frames])
+    checks = np.stack([keys.select_check_values(f) for f in frames])
+    exact = client.evaluate_key_points("arm-articulated", values, check_values=checks)
+    answers = client.evaluate_key_points("arm-articulated", values, check_values=checks,
+                                         points_encoding="coordinates")
+    for a, b in zip(exact, answers, strict=True):
+        expect_within_bound(coordinates.reconstruct(compact, b.coordinates), a.points, mean, A, b)
+
+    # reconstruct() fetches the compact layout and caches it as it came (ASBASIS2); a new client
+    # reads it back once the server vouches for its SHA-256, and answers the same.
+    gets = counter.calls[GET_BASIS]
+    with animspace.Client(channel=client.channel, basis_cache=tmp_path / "own") as own:  # counted too
+        first_points = own.reconstruct("arm-articulated", answers[0])
+        assert own.basis_cache.get("arm-articulated", answers[0].model_version,
+                                   answers[0].coordinates.basis_checksum).layout == "skinned"
+    assert counter.calls[GET_BASIS] == gets + 1
+    path = tmp_path / "own" / "arm-articulated" / f"{answers[0].model_version}-{first.basis_checksum:016x}.basis"
+    data = path.read_bytes()
+    assert data[:8] == b"ASBASIS2" and data[56:] == b"".join(c.data for c in skinned_chunks)
+    new_counter = CountingInterceptor()
+    with animspace.Client(channel=grpc.intercept_channel(channel, new_counter), basis_cache=tmp_path / "own") as new:
+        np.testing.assert_array_equal(new.reconstruct("arm-articulated", answers[0]), first_points)
+    assert new_counter.calls[GET_BASIS] == 0 and new_counter.calls[DESCRIBE_KEY_POINTS] == 1
+
+
+def test_a_linear_model_comes_dense_when_compact_and_refuses_skinned(client, channel):
+    assert client.get_basis("arm-pmsc", layout="compact").layout == "dense"
+    assert raw_chunks(channel, "arm-pmsc", poses_pb2.BASIS_LAYOUT_COMPACT)[0].layout == poses_pb2.BASIS_LAYOUT_DENSE
+    with pytest.raises(animspace.FailedPrecondition, match="layout") as refused:
+        client.get_basis("arm-pmsc", layout="skinned")
+    assert refused.value.rpc == "GetBasis"
 
 
 def test_points_the_server_computes_still_come_as_float32(client, arm_transforms):
@@ -648,19 +735,26 @@ def test_a_version_swap_fetches_each_versions_basis_and_a_replaced_version_raise
 # Streams that break BasisChunk's contract (an in-process server)
 
 
+def _split(values, split, changes, **fields):
+    """BasisChunks of model version 3 carrying ``values`` (float32) from each offset in ``split``,
+    with ``fields`` on every chunk, then ``changes`` ({"c<index>": {field: value}}) applied."""
+    raw = np.asarray(values, "<f4").tobytes()
+    bounds = list(split) + [len(raw) // 4]
+    chunks = [poses_pb2.BasisChunk(model_version=3, total_values=bounds[-1], offset=a, data=raw[4 * a:4 * b], **fields)
+              for a, b in zip(bounds, bounds[1:])]
+    for index, chunk_changes in changes.items():
+        for name, value in chunk_changes.items():
+            setattr(chunks[int(index[1:])], name, value)
+    return chunks
+
+
 def _chunks(n=4, d=3, m=2, split=(0, 7, 20), **changes):
     rng = np.random.default_rng(1)
     mean = rng.normal(size=n * d).astype("<f4")
     A = rng.normal(size=(n * d, m)).astype("<f4")
-    raw = mean.tobytes() + A.tobytes(order="F")
     checksum = (zlib.crc32(mean.tobytes()) << 32) | zlib.crc32(A.tobytes(order="F"))
-    bounds = list(split) + [n * d * (m + 1)]
-    chunks = [poses_pb2.BasisChunk(model_version=3, basis_checksum=checksum, point_count=n, channel_count=d,
-                                   basis_size=m, total_values=n * d * (m + 1), offset=a, data=raw[4 * a:4 * b])
-              for a, b in zip(bounds, bounds[1:])]
-    for index, fields in changes.items():
-        for name, value in fields.items():
-            setattr(chunks[int(index[1:])], name, value)
+    chunks = _split(np.concatenate([mean, A.ravel(order="F")]), split, changes, basis_checksum=checksum,
+                    point_count=n, channel_count=d, basis_size=m)
     return chunks, mean, A
 
 
@@ -685,8 +779,12 @@ def test_a_well_formed_stream_assembles(scripted_server, tmp_path):
     ScriptedPoses.script, mean, A = _chunks()
     with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
         basis = client.get_basis("m", 3)
+        # A server from before layouts ignores the request's and leaves the chunks' unset: dense.
+        assert client.get_basis("m", 3, layout="compact").layout == "dense"
+    assert basis.layout == "dense" and basis.bones is None
     np.testing.assert_array_equal(basis.mean, mean)
     np.testing.assert_array_equal(basis.basis, A)
+    assert basis.dense_basis() is basis.basis
     p = np.float32([0.5, -2.0])
     got = coordinates.reconstruct(basis, animspace.SubspaceCoordinates(p=p, basis_checksum=basis.basis_checksum))
     np.testing.assert_allclose(got, (mean.astype(np.float64) + A.astype(np.float64) @ p).reshape(4, 3), rtol=1e-6)
@@ -744,3 +842,192 @@ def test_a_fifo_in_the_basis_cache_is_not_read(tmp_path):
         reader.join(timeout=30)
         pytest.fail("reading the basis cache blocked on a FIFO")
     assert result == [None]
+
+
+# ----------------------------------------------------------------------------------------------
+# The skinned layout (issue #51 item 4), without a daemon
+
+
+def hand_skinned(rng, n=6, bones=3, influences=2, residuals=2):
+    """A small skinned basis built here from poses.proto's definition, entry by entry: its values
+    in GetBasis's SKINNED order (the mean; per point K slots (j, h0..h3), a point with fewer bones
+    padded with (0, 0, 0, 0, 0); the residual columns) and the mean and dense A they stand for."""
+    mean = rng.normal(size=3 * n).astype(np.float32)
+    R = rng.normal(size=(3 * n, residuals)).astype(np.float32)
+    A = np.zeros((3 * n, 12 * bones + residuals), np.float32)
+    slots = []
+    for i in range(n):
+        # Point 0 has bone 0 and then a padding slot naming bone 0 too; odd points have K bones.
+        chosen = [0] if i == 0 else rng.choice(bones, size=1 + i % influences, replace=False)
+        for k in range(influences):
+            if k >= len(chosen):
+                slots += [0, 0, 0, 0, 0]
+                continue
+            j, h = int(chosen[k]), rng.normal(size=4).astype(np.float32)
+            if i == 1:
+                h[0] = 0  # one zero in h is a term like any other: only four zeros are padding
+            slots += [j, *h]
+            for a in range(3):
+                for c in range(4):
+                    A[3 * i + a, 12 * j + 4 * a + c] = h[c]
+    A[:, 12 * bones:] = R
+    values = np.concatenate([mean, np.float32(slots), R.T.ravel()])  # R column by column
+    return values, mean, A
+
+
+SKINNED = dict(point_count=6, channel_count=3, basis_size=12 * 3 + 2, layout=poses_pb2.BASIS_LAYOUT_SKINNED,
+               subspace_bone_count=3, influences_per_point=2)
+BONE_OF_POINT_1_SLOT_0 = 18 + 5 * 2  # after the mean and point 0's two slots
+
+
+def _skinned_chunks(split=(0, 11, 40), aligned=False, tamper=lambda values: None, **changes):
+    values, mean, A = hand_skinned(np.random.default_rng(2))
+    dense = mean.tobytes() + A.tobytes(order="F")
+    checksum = (zlib.crc32(mean.tobytes()) << 32) | zlib.crc32(A.tobytes(order="F"))
+    tamper(values)
+    chunks = _split(values, split, changes, basis_checksum=checksum, basis_sha256=hashlib.sha256(dense).digest(),
+                    aligned=aligned, **SKINNED)
+    return chunks, values, mean, A
+
+
+@pytest.mark.parametrize("aligned", [False, True], ids=["plain", "aligned"])
+def test_a_skinned_stream_is_the_dense_basis_it_expands_to(scripted_server, tmp_path, aligned):
+    ScriptedPoses.script, values, mean, A = _skinned_chunks(aligned=aligned)
+    first = ScriptedPoses.script[0]
+    assert first.total_values == 6 * 3 * (2 + 1) + 5 * 6 * 2 < A.size + mean.size
+    with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
+        basis = client.get_basis("m", 3, layout="compact")
+        with pytest.raises(animspace.ProtocolError, match="asked for the dense layout, the chunks are skinned"):
+            client.get_basis("m", 3)
+        with pytest.raises(ValueError, match="layout: expected 'dense', 'skinned' or 'compact', got 'sparse'"):
+            client.get_basis("m", 3, layout="sparse")
+    assert (basis.layout, basis.bone_count, basis.influences, basis.basis) == ("skinned", 3, 2, None)
+    assert basis.basis_checksum == first.basis_checksum and basis.basis_sha256 == first.basis_sha256
+    assert basis.nbytes == 4 * values.size  # the int32 bones in place of their float32 numbers
+    np.testing.assert_array_equal(basis.mean, mean)
+    np.testing.assert_array_equal(basis.residuals, A[:, 36:])
+    dense = basis.dense_basis()
+    assert dense.dtype == np.float32 and dense.flags.f_contiguous
+    np.testing.assert_array_equal(dense, A)
+    # The expansion's digests are zlib's and hashlib's of the dense values built here.
+    assert coordinates.basis_checksum(mean, A) == first.basis_checksum
+    assert coordinates.basis_sha256(mean, A) == first.basis_sha256
+
+    rng = np.random.default_rng(3)
+    for scale in (1e-4, 1.0, 1e4):
+        p = (rng.normal(size=A.shape[1]) * scale).astype(np.float32)
+        rotation = translation = None
+        if aligned:
+            q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+            rotation, translation = q.astype(np.float32), rng.normal(size=3).astype(np.float32)
+        c = animspace.SubspaceCoordinates(p=p, basis_checksum=basis.basis_checksum, rotation=rotation,
+                                          translation=translation)
+        exact = (mean.astype(np.float64) + A.astype(np.float64) @ p).reshape(-1, 3)
+        if aligned:
+            exact = exact @ rotation.astype(np.float64).T + translation
+        got = coordinates.reconstruct(basis, c)
+        bound = stated_bound(mean.astype(np.float64), A.astype(np.float64), p, rotation, translation)
+        assert got.dtype == np.float32 and got.shape == (6, 3)
+        # The bound is the client's rounding plus the server's: the client alone is within half of
+        # it (unaligned: γ_{M+2}·(|mean_i| + Σ_j |A_ij p_j|); aligned, with room for R's rounding).
+        allowed = bound if aligned else bound / 2
+        assert np.all(np.abs(got - exact) <= allowed), float((np.abs(got - exact) - allowed).max())
+        np.testing.assert_allclose(coordinates.rounding_bound(basis, c), bound, rtol=1e-12)
+
+
+def test_a_skinned_float16_stream_assembles_and_is_not_cached(scripted_server, tmp_path):
+    values, mean, A = hand_skinned(np.random.default_rng(2))
+    half = values.astype("<f2")
+    raw = half.tobytes()
+    checksum = (zlib.crc32(mean.tobytes()) << 32) | zlib.crc32(A.tobytes(order="F"))
+    ScriptedPoses.script = [poses_pb2.BasisChunk(
+        model_version=3, basis_checksum=checksum, total_values=values.size, offset=0, data=raw,
+        values_encoding=common_pb2.POINT_ENCODING_FLOAT16, values_sha256=hashlib.sha256(raw).digest(), **SKINNED)]
+    with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
+        basis = client.get_basis("m", 3, values_encoding="float16", layout="skinned")
+    assert basis.layout == "skinned" and basis.values_encoding == "float16"
+    np.testing.assert_array_equal(basis.bones.ravel(), values[18:78:5])  # bone numbers are exact in binary16
+    np.testing.assert_array_equal(basis.residuals.ravel(order="F"), half[78:].astype(np.float32))
+    assert not any(tmp_path.rglob("*.basis"))
+
+
+def _set(index, value):
+    return lambda values: values.__setitem__(index, value)
+
+
+@pytest.mark.parametrize("script, problem", [
+    (dict(tamper=_set(BONE_OF_POINT_1_SLOT_0, 2.5)), "slot 0 of point 1 names bone 2.5, expected an integer in [0, 3)"),
+    (dict(tamper=_set(BONE_OF_POINT_1_SLOT_0, 3)), "slot 0 of point 1 names bone 3, expected an integer in [0, 3)"),
+    (dict(tamper=_set(BONE_OF_POINT_1_SLOT_0, -1)), "slot 0 of point 1 names bone -1"),
+    (dict(tamper=_set(BONE_OF_POINT_1_SLOT_0, np.nan)), "slot 0 of point 1 names bone nan"),
+    (dict(tamper=lambda v: v.__setitem__(BONE_OF_POINT_1_SLOT_0 + 5, v[BONE_OF_POINT_1_SLOT_0])),
+     "point 1 names bone .* in two slots"),
+    (dict(tamper=_set(BONE_OF_POINT_1_SLOT_0 + 2, 0.25)), "the values' checksum .* is not the basis_checksum"),
+    (dict(c0={"total_values": 113}), "chunk 0: total_values 113, but N·3·(r+1) + 5·N·K = 6·3·3 + 5·6·2 = 114"),
+    (dict(c1={"layout": poses_pb2.BASIS_LAYOUT_DENSE}), "chunk 1: layout 1 differs from chunk 0's 2"),
+    (dict(c2={"subspace_bone_count": 4}), "chunk 2: subspace_bone_count 4 differs from chunk 0's 3"),
+    (dict(c1={"influences_per_point": 3}), "chunk 1: influences_per_point 3 differs from chunk 0's 2"),
+    (dict(c0={"layout": poses_pb2.BASIS_LAYOUT_COMPACT}), "chunk 0: layout 3, not DENSE or SKINNED"),
+    (dict(c0={"subspace_bone_count": 0}), "chunk 0: layout SKINNED with subspace_bone_count 0"),
+    (dict(c0={"channel_count": 1}), "chunk 0: skinned with channel_count 1"),
+    (dict(c0={"basis_sha256": bytes(32)}, c1={"basis_sha256": bytes(32)}, c2={"basis_sha256": bytes(32)}),
+     "the values' SHA-256 .* is not the basis_sha256 0000"),
+], ids=["bone_2.5", "bone_out_of_range", "bone_negative", "bone_nan", "bone_twice", "term", "total",
+        "layout_changes", "bone_count_changes", "influences_change", "layout_compact", "no_bones", "channels",
+        "sha256_wrong"])
+def test_broken_skinned_streams_are_protocol_errors(scripted_server, tmp_path, script, problem):
+    ScriptedPoses.script, *_ = _skinned_chunks(**script)
+    with animspace.Client(scripted_server, basis_cache=tmp_path) as client:
+        with pytest.raises(animspace.ProtocolError, match="GetBasis: .*" + re.escape(problem).replace(r"\.\*", ".*")):
+            client.get_basis("m", 3, layout="skinned")
+    assert not any(tmp_path.rglob("*.basis"))
+
+
+def skinned_basis(scripted_server, tmp_path):
+    """The hand-built skinned basis assembled by a client (whose cache is tmp_path/"fetched")."""
+    ScriptedPoses.script, values, mean, A = _skinned_chunks()
+    with animspace.Client(scripted_server, basis_cache=tmp_path / "fetched") as client:
+        return client.get_basis("m", 3, layout="skinned"), values, mean, A
+
+
+def test_a_skinned_basis_is_cached_as_asbasis2_and_read_back(scripted_server, tmp_path):
+    basis, values, mean, A = skinned_basis(scripted_server, tmp_path)
+    cache = animspace.BasisCache(tmp_path / "bases")
+    cache.put(basis)
+    path = tmp_path / "bases" / "m" / f"3-{basis.basis_checksum:016x}.basis"
+    data = path.read_bytes()
+    # docs/FORMATS.md "Basis cache", parsed here: a 56-byte header, then the values as sent.
+    assert struct.unpack_from("<8sIIIIQQIIII", data) == (b"ASBASIS2", 6, 3, 38, 0, 3, basis.basis_checksum, 2, 3,
+                                                            2, 0)
+    assert data[56:] == values.astype("<f4").tobytes()
+    assert path.read_bytes() == (tmp_path / "fetched" / "m" / path.name).read_bytes()  # get_basis cached it too
+    dense_sha256 = hashlib.sha256(mean.tobytes() + A.tobytes(order="F")).digest()
+    read = animspace.BasisCache(tmp_path / "bases").get("m", 3, basis.basis_checksum,
+                                                        server_sha256=lambda: dense_sha256)
+    assert read.layout == "skinned" and read.basis_sha256 == dense_sha256
+    np.testing.assert_array_equal(read.dense_basis(), A)
+    np.testing.assert_array_equal(read.mean, mean)
+    # A digest the copy does not have: refused, deleted.
+    other = animspace.BasisCache(tmp_path / "bases")
+    assert other.get("m", 3, basis.basis_checksum, server_sha256=lambda: bytes(32)) is None
+    assert other.refused_copies == 1 and not path.exists()
+
+
+@pytest.mark.parametrize("damage", [
+    lambda data: data.__setitem__(slice(56 + 4 * 100, 56 + 4 * 101), struct.pack("<f", 0.5)),  # a residual
+    lambda data: data.__setitem__(slice(56 + 4 * BONE_OF_POINT_1_SLOT_0, 56 + 4 * BONE_OF_POINT_1_SLOT_0 + 4),
+                                  struct.pack("<f", 2.5)),
+    lambda data: data.__delitem__(slice(-4, None)),  # truncated
+    lambda data: data.__setitem__(slice(44, 48), struct.pack("<I", 2)),  # another B
+    lambda data: data.__setitem__(slice(40, 44), struct.pack("<I", 1)),  # another layout
+    lambda data: data.__setitem__(slice(52, 56), struct.pack("<I", 1)),  # reserved
+    lambda data: data.__setitem__(slice(0, 8), b"ASBASIS1"),  # dense's magic
+], ids=["value", "bone", "truncated", "bone_count", "layout", "reserved", "magic"])
+def test_a_corrupt_skinned_cache_file_is_deleted(scripted_server, tmp_path, damage):
+    basis, *_ = skinned_basis(scripted_server, tmp_path)
+    path = next((tmp_path / "fetched" / "m").iterdir())
+    data = bytearray(path.read_bytes())
+    damage(data)
+    path.write_bytes(bytes(data))
+    assert coordinates.read_basis_file(path, "m", 3, basis.basis_checksum) is None
+    assert not path.exists()

@@ -634,37 +634,53 @@ class Client:
     # ------------------------------------------------------------------------------------------
     # Answers as coordinates (issue #36): the basis, its cache, the reconstruction
 
-    def get_basis(self, model: str, version: int = 0, *, values_encoding: str = "float32",
+    def get_basis(self, model: str, version: int = 0, *, values_encoding: str = "float32", layout: str = "dense",
                   deadline_s: Optional[float] = None) -> Basis:
         """The subspace of a PMSC model version — N·D mean and N·D × M basis, float32 — streamed in
         chunks by GetBasis, assembled and checked (order, shape, checksum), and kept in
         :attr:`basis_cache` for :meth:`reconstruct`. Always asks the server (version 0: the
         version served now; ``Basis.model_version`` says which).
 
+        ``layout`` (issue #51 item 4): "dense", A as N·D × M values; "skinned", an articulated
+        model's A as each point's bones and skinning terms plus its residual columns — a fraction
+        of the values (a tenth with tens of bones), the same basis (checked by expanding it
+        through the checksum and SHA-256), a reconstruction that skips A's zeros; "compact",
+        skinned where the model is articulated, else dense (what :meth:`reconstruct` asks for).
+        ``Basis.layout`` says which came: a server from before layouts sends dense whatever is
+        asked.
+
         ``values_encoding="float16"`` (issue #53) halves the bytes sent: the values are checked
         against the SHA-256 of what was sent, widened to float32, and the Basis says how far each
         may be from the float32 basis (``values_max_error``); it is returned, not cached.
         ``animspace.coordinates.reconstruct`` with it is within about
-        ``2⁻¹¹·(|mean_i| + Σ_j |A_ij p_j|)`` more per value (``rounding_bound`` computes it). A basis with a value beyond ±65504 raises FailedPrecondition.
+        ``2⁻¹¹·(|mean_i| + Σ_j |A_ij p_j|)`` more per value (``rounding_bound`` computes it). A
+        basis with a value beyond ±65504 raises FailedPrecondition.
 
         Raises:
             NotFound: an unknown model or version. FailedPrecondition: a model without key points
-                (not PMSC).
-            ProtocolError: chunks out of order, overlapping, short, changing shape, version or
-                checksum mid-stream, values whose checksum is not the one they carry, or another
-                version than the one asked for.
+                (not PMSC); ``layout="skinned"`` for a model that is not articulated.
+            ProtocolError: chunks out of order, overlapping, short, changing shape, layout, version
+                or checksum mid-stream, values whose checksum is not the one they carry, bone
+                numbers that are no bone's, or another version (or a skinned layout when dense was
+                asked for) than the one asked for.
         """
         encodings = {"float32": common_pb2.POINT_ENCODING_FLOAT32, "float16": common_pb2.POINT_ENCODING_FLOAT16}
         if values_encoding not in encodings:
             raise ValueError(f"values_encoding: expected 'float32' or 'float16', got {values_encoding!r}")
+        layouts = {"dense": poses_pb2.BASIS_LAYOUT_DENSE, "skinned": poses_pb2.BASIS_LAYOUT_SKINNED,
+                   "compact": poses_pb2.BASIS_LAYOUT_COMPACT}
+        if layout not in layouts:
+            raise ValueError(f"layout: expected 'dense', 'skinned' or 'compact', got {layout!r}")
         request = poses_pb2.GetBasisRequest(model=_model_ref(model, version),
-                                            values_encoding=encodings[values_encoding])
+                                            values_encoding=encodings[values_encoding], layout=layouts[layout])
         call = self._poses.GetBasis(request, timeout=self._deadline(deadline_s), metadata=self._metadata)
         assembler = _assemble("GetBasis", call, BasisAssembler())
         basis = assembler.basis(model)
         if version != 0 and basis.model_version != version:
             raise ProtocolError("GetBasis", f"asked for version {version}, the chunks are of version "
                                             f"{basis.model_version}")
+        if layout == "dense" and basis.layout != "dense":
+            raise ProtocolError("GetBasis", f"asked for the dense layout, the chunks are {basis.layout}")
         if basis.values_encoding == "float32":
             self._basis_cache.put(basis)
         return basis
@@ -675,7 +691,8 @@ class Client:
 
         The basis is (model, ``result.model_version``, ``result.coordinates.basis_checksum``) from
         :attr:`basis_cache` — memory, then disk — else fetched with GetBasis for that exact version
-        and cached. An answer whose points the server sent gives those points.
+        in its compact layout (skinned for an articulated model) and cached. An answer whose points
+        the server sent gives those points.
 
         The points differ from the server's float32 answer by rounding only: per value i at most
             2·(M + 2)·2⁻²⁴·(|mean_i| + Σ_j |A_ij p_j|)
@@ -700,7 +717,7 @@ class Client:
                                       server_sha256=lambda: self._server_basis_sha256(model, version, checksum,
                                                                                       deadline_s))
         if basis is None:
-            basis = self.get_basis(model, version, deadline_s=deadline_s)
+            basis = self.get_basis(model, version, layout="compact", deadline_s=deadline_s)
             if basis.basis_checksum != checksum:
                 raise BasisMismatch(model, version, checksum, basis.basis_checksum)
         try:

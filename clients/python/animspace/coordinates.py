@@ -12,10 +12,20 @@ This module holds what that needs, without gRPC: the :class:`Basis` and how its 
 (:class:`BasisAssembler`), its checksum (:func:`basis_checksum`), the :class:`BasisCache` on disk
 and in memory, and :func:`reconstruct`. ``Client.get_basis`` and ``Client.reconstruct`` drive it.
 
+An articulated model's A is [L | R] (issue #51 item 4): 12 columns per bone, zero wherever a point
+does not depend on the bone, then r residual columns. Its SKINNED layout (``layout="skinned"``,
+poses.proto BasisChunk) keeps each point's K bones and skinning terms instead of L — a fraction of
+the values, a tenth with tens of bones — and :func:`reconstruct` applies the bone maps to the
+terms, skipping the zeros. It is the same basis: its checksum and SHA-256 are those of the dense
+values it expands to, computed a column at a time, so the dense matrix is never needed
+(:meth:`Basis.dense_basis` makes it).
+
 The cache's files are shared with the C++ client (``clients/cpp``), byte for byte:
 ``<dir>/<model>/<version>-<checksum, 16 lowercase hex digits>.basis`` holding the 8 bytes
 ``ASBASIS1``, a 40-byte little-endian header (uint32 N, D, M, aligned; uint64 version, checksum)
-and then the float32 little-endian values: the N·D mean, then A column by column.
+and then the float32 little-endian values: the N·D mean, then A column by column. A skinned basis
+is ``ASBASIS2``: the same header, then uint32 layout (2), B, K and 0 (56 bytes), then the values
+in the SKINNED order (docs/FORMATS.md, "Basis cache").
 """
 from __future__ import annotations
 
@@ -30,7 +40,7 @@ import tempfile
 import threading
 import zlib
 from dataclasses import dataclass
-from typing import Callable, Optional, Tuple, Union
+from typing import Callable, Iterable, Iterator, Optional, Tuple, Union
 
 import numpy as np
 
@@ -55,6 +65,10 @@ __all__ = [
 CACHE_MAGIC = b"ASBASIS1"
 _HEADER = struct.Struct("<8sIIIIQQ")
 assert _HEADER.size == 40
+# A skinned basis's file: the same fields, then uint32 layout (2), B, K and a reserved 0.
+SKINNED_CACHE_MAGIC = b"ASBASIS2"
+_SKINNED_HEADER = struct.Struct("<8sIIIIQQIIII")
+assert _SKINNED_HEADER.size == 56
 
 # float32's unit roundoff.
 _U = 2.0 ** -24
@@ -77,7 +91,8 @@ class Basis:
         aligned: the model moves its estimate to the world with a per-pose R and t.
         mean: (N·D,) float32, point-major (as ``PointArray``). Read-only.
         basis: (N·D, M) float32, column j the j-th basis vector, stored column by column
-            (Fortran order), as on the wire. Read-only.
+            (Fortran order), as on the wire; None for a skinned basis (:meth:`dense_basis` makes
+            it). Read-only.
         basis_sha256: SHA-256 of the values as GetBasis sends them (32 bytes; b"" from a server
             before it): names the subspace so that it cannot be forged.
         values_encoding: "float32", the basis itself; or "float16" (``get_basis(...,
@@ -85,6 +100,15 @@ class Basis:
             within ``values_max_error`` of the float32 basis the checksum and SHA-256 name, so
             :func:`reconstruct` is within ``values_max_error·(1 + Σ_j |p_j|)`` more per value
             (:func:`rounding_bound` includes it). A float16 basis is never cached.
+        layout: "dense" (``basis`` holds A) or "skinned" (an articulated model, D = 3: A's first
+            12·B columns as each point's bones and terms, then its r residual columns).
+        bone_count, influences: (skinned) B, the subspace's bones, and K, slots per point; 0 for
+            dense.
+        bones: (skinned) (N, K) int32, the bone of each slot, in [0, B).
+        terms: (skinned) (N, K, 4) float32, each slot's skinning term h = w (p̂ − c, 1); a slot
+            whose 4 values are 0 is padding and stands for nothing. Column 12·j + 4·a + c of A
+            holds h[c] at row 3·i + a for each slot (j, h) of point i, and 0 elsewhere.
+        residuals: (skinned) (N·3, r) float32, A's last r = M − 12·B columns, Fortran order.
     """
 
     __repr__ = compact_repr
@@ -97,14 +121,32 @@ class Basis:
     basis_size: int
     aligned: bool
     mean: np.ndarray
-    basis: np.ndarray
+    basis: Optional[np.ndarray]
     basis_sha256: bytes = b""
     values_encoding: str = "float32"
     values_max_error: float = 0.0
+    layout: str = "dense"
+    bone_count: int = 0
+    influences: int = 0
+    bones: Optional[np.ndarray] = None
+    terms: Optional[np.ndarray] = None
+    residuals: Optional[np.ndarray] = None
 
     @property
     def nbytes(self) -> int:
-        return int(self.mean.nbytes + self.basis.nbytes)
+        """The bytes of the arrays it holds."""
+        arrays = (self.mean, self.basis, self.bones, self.terms, self.residuals)
+        return int(sum(a.nbytes for a in arrays if a is not None))
+
+    def dense_basis(self) -> np.ndarray:
+        """A as an (N·D, M) float32 matrix, Fortran order, whatever the layout: ``basis`` itself
+        for a dense basis, otherwise a new one: N·D·M values, the zeros the skinned form leaves out."""
+        if self.basis is not None:
+            return self.basis
+        A = np.empty((self.point_count * self.channel_count, self.basis_size), dtype=np.float32, order="F")
+        for j, column in enumerate(_skinned_columns(self)):
+            A[:, j] = column
+        return A
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,35 +183,125 @@ class SubspaceCoordinates:
 def basis_checksum(mean: np.ndarray, basis: np.ndarray) -> int:
     """(crc32 of the mean's float32 little-endian bytes) << 32 | crc32 of the basis's, column by
     column. ``mean`` is N·D values, ``basis`` N·D × M (any memory order)."""
-    mean_bytes = np.ascontiguousarray(mean, dtype=wire.WIRE_FLOAT).tobytes()
-    basis_bytes = np.asarray(basis, dtype=wire.WIRE_FLOAT).tobytes(order="F")
-    return (zlib.crc32(mean_bytes) << 32) | zlib.crc32(basis_bytes)
+    return _digests(mean, [np.asarray(basis, dtype=wire.WIRE_FLOAT).ravel(order="F")], sha256=False)[0]
 
 
 def basis_sha256(mean: np.ndarray, basis: np.ndarray) -> bytes:
     """SHA-256 of the mean's float32 little-endian bytes followed by the basis's, column by column:
     the values exactly as GetBasis streams them (poses.proto BasisChunk.basis_sha256)."""
-    digest = hashlib.sha256(np.ascontiguousarray(mean, dtype=wire.WIRE_FLOAT).tobytes())
-    digest.update(np.asarray(basis, dtype=wire.WIRE_FLOAT).tobytes(order="F"))
-    return digest.digest()
+    return _digests(mean, [np.asarray(basis, dtype=wire.WIRE_FLOAT).ravel(order="F")])[1]
+
+
+def _digests(mean: np.ndarray, parts: Iterable[np.ndarray], sha256: bool = True) -> Tuple[int, bytes]:
+    """basis_checksum and (unless ``sha256`` is False: b"") basis_sha256 of the mean and A's
+    float32 bytes, A given as contiguous parts in column order (zlib's CRC and hashlib's digest
+    both chain, so a part may be a column or the whole matrix)."""
+    mean = np.ascontiguousarray(mean, dtype=wire.WIRE_FLOAT)
+    digest = hashlib.sha256(mean) if sha256 else None
+    crc = 0
+    for part in parts:
+        part = np.ascontiguousarray(part, dtype=wire.WIRE_FLOAT)
+        crc = zlib.crc32(part, crc)
+        if digest is not None:
+            digest.update(part)
+    return (zlib.crc32(mean) << 32) | crc, digest.digest() if digest is not None else b""
+
+
+def _basis_digests(basis: Basis, sha256: bool = True) -> Tuple[int, bytes]:
+    """:func:`_digests` of the dense values ``basis`` stands for: a skinned one expanded a column
+    at a time (skinned_basis.h's for_each_dense_column), never as a whole matrix."""
+    parts = [basis.basis.ravel(order="F")] if basis.basis is not None else _skinned_columns(basis)
+    return _digests(basis.mean, parts, sha256)
+
+
+def _skinned_columns(basis: Basis) -> Iterator[np.ndarray]:
+    """A skinned basis's dense columns in order, N·3 float32 each. The 12·B columns of the bones
+    share one buffer, valid until the next column: each costs its own entries and one clearing."""
+    assert basis.bones is not None and basis.terms is not None and basis.residuals is not None
+    K = basis.influences
+    bones = basis.bones.ravel()
+    # The slots of each bone (slot s is slot s % K of point s // K), padding left out.
+    live = np.flatnonzero(basis.terms.any(axis=2).ravel())
+    by_bone = live[np.argsort(bones[live], kind="stable")]
+    starts = np.searchsorted(bones[by_bone], np.arange(basis.bone_count + 1))
+    terms = basis.terms.reshape(-1, 4)
+    column = np.zeros(3 * basis.point_count, dtype=np.float32)
+    for j in range(basis.bone_count):
+        slots = by_bone[starts[j]:starts[j + 1]]
+        rows, h = 3 * (slots // K), terms[slots]
+        for a in range(3):
+            for c in range(4):
+                column[rows + a] = h[:, c]
+                yield column
+                column[rows + a] = 0
+    yield from basis.residuals.T  # rows of the C-order transpose: contiguous columns
+
+
+def _value_count(n: int, d: int, m: int, bone_count: int = 0, influences: int = 0) -> int:
+    """Values GetBasis sends: N·D·(M+1) dense; N·3·(r+1) + 5·N·K skinned (bone_count B > 0)."""
+    if bone_count == 0:
+        return n * d * (m + 1)
+    return n * 3 * (m - 12 * bone_count + 1) + 5 * n * influences
+
+
+def _shape_problem(n: int, d: int, m: int, aligned: bool, bone_count: int = 0, influences: int = 0) -> Optional[str]:
+    """What makes N, D, M (and B, K for a skinned basis) no subspace, or None."""
+    if n == 0 or d == 0:
+        return f"point_count {n} × channel_count {d}: an empty subspace"
+    if aligned and d != 3:
+        return f"aligned with channel_count {d} (alignment moves 3-channel points)"
+    if bone_count and (d != 3 or influences == 0 or m < 12 * bone_count):
+        return (f"skinned with channel_count {d}, subspace_bone_count {bone_count}, influences_per_point "
+                f"{influences} and basis_size {m}: expected D = 3, K ≥ 1 and M ≥ 12·B")
+    return None
 
 
 def _basis_from_values(model: str, model_version: int, checksum: int, n: int, d: int, m: int, aligned: bool,
                        values: np.ndarray, sha256: bytes = b"", values_encoding: str = "float32",
-                       values_max_error: float = 0.0) -> Basis:
-    """A Basis over ``values`` (N·D·(M+1) float32: the mean, then A column by column), read-only."""
+                       values_max_error: float = 0.0, bone_count: int = 0, influences: int = 0) -> Basis:
+    """A Basis over ``values`` (:func:`_value_count` float32 in GetBasis's order), read-only: dense
+    when ``bone_count`` is 0, else skinned with B = ``bone_count`` and K = ``influences``.
+
+    Raises:
+        ValueError: (skinned) naming the slot and point of a bone number that is not an integer
+            in [0, B), or of a point that names one bone in two slots (its entries of A would
+            hold two values, and the reconstruction would not be A's).
+    """
     values.setflags(write=False)
     rows = n * d
     mean = values[:rows]
-    basis = values[rows:].reshape((rows, m), order="F")
-    return Basis(model=model, model_version=model_version, basis_checksum=checksum, point_count=n, channel_count=d,
-                 basis_size=m, aligned=aligned, mean=mean, basis=basis, basis_sha256=sha256,
-                 values_encoding=values_encoding, values_max_error=values_max_error)
+    common = dict(model=model, model_version=model_version, basis_checksum=checksum, point_count=n, channel_count=d,
+                  basis_size=m, aligned=aligned, mean=mean, basis_sha256=sha256, values_encoding=values_encoding,
+                  values_max_error=values_max_error)
+    if bone_count == 0:
+        return Basis(basis=values[rows:].reshape((rows, m), order="F"), **common)
+    B, K = bone_count, influences
+    slots = values[rows:rows + 5 * n * K].reshape(n, K, 5)
+    j = slots[..., 0]
+    bad = ~((j >= 0) & (j < B) & (j == np.floor(j)))  # NaN fails every comparison
+    if bad.any():
+        i, k = np.argwhere(bad)[0]
+        raise ValueError(f"slot {k} of point {i} names bone {j[i, k]:.9g}, expected an integer in [0, {B})")
+    bones = j.astype(np.int32)
+    terms = slots[..., 1:]
+    # Padding (h = 0) never collides: each of its slots gets its own negative number.
+    named = np.sort(np.where(terms.any(axis=2), bones, -1 - np.arange(K)), axis=1)
+    twice = named[:, 1:] == named[:, :-1]
+    if twice.any():
+        i, k = np.argwhere(twice)[0]
+        raise ValueError(f"point {i} names bone {named[i, k]} in two slots")
+    bones.setflags(write=False)
+    residuals = values[rows + 5 * n * K:].reshape((rows, m - 12 * B), order="F")
+    return Basis(basis=None, layout="skinned", bone_count=B, influences=K, bones=bones, terms=terms,
+                 residuals=residuals, **common)
 
 
 # Bytes a value of a BasisChunk takes, by its values_encoding (unset: a server before issue #53).
 _VALUE_BYTES = {common_pb2.POINT_ENCODING_UNSPECIFIED: 4, common_pb2.POINT_ENCODING_FLOAT32: 4,
                 common_pb2.POINT_ENCODING_FLOAT16: 2}
+# The layouts a BasisChunk comes in (unset: a server before issue #51's layouts, dense).
+_LAYOUTS = {poses_pb2.BASIS_LAYOUT_UNSPECIFIED: "dense", poses_pb2.BASIS_LAYOUT_DENSE: "dense",
+            poses_pb2.BASIS_LAYOUT_SKINNED: "skinned"}
 
 
 class BasisAssembler:
@@ -177,12 +309,14 @@ class BasisAssembler:
 
     ``take`` each chunk in arrival order, then ``complete()`` and ``basis(model)``. Each returns a
     problem (a sentence naming the chunk and field) or None; the client raises ProtocolError with
-    it. The checksum of the assembled values must equal the one every chunk repeats.
+    it. The checksum of the assembled values — of the dense values a skinned basis expands to —
+    must equal the one every chunk repeats.
     """
 
     def __init__(self) -> None:
         self._first: Optional[poses_pb2.BasisChunk] = None
         self._values: Optional[np.ndarray] = None
+        self._basis: Optional[Basis] = None
         self._filled = 0
         self._chunks = 0
         self._sent = hashlib.sha256()  # over float16 values as they came
@@ -195,20 +329,27 @@ class BasisAssembler:
             return f"{where}: values_encoding {chunk.values_encoding}, not FLOAT32 or FLOAT16"
         if self._first is None:
             n, d, m = chunk.point_count, chunk.channel_count, chunk.basis_size
-            if n == 0 or d == 0:
-                return f"{where}: point_count {n} × channel_count {d}: an empty subspace"
-            if chunk.aligned and d != 3:
-                return f"{where}: aligned with channel_count {d} (alignment moves 3-channel points)"
-            expected = n * d * (m + 1)
+            layout = _LAYOUTS.get(chunk.layout)
+            if layout is None:
+                return f"{where}: layout {chunk.layout}, not DENSE or SKINNED"
+            B, K = (chunk.subspace_bone_count, chunk.influences_per_point) if layout == "skinned" else (0, 0)
+            if layout == "skinned" and B == 0:
+                return f"{where}: layout SKINNED with subspace_bone_count 0"
+            problem = _shape_problem(n, d, m, chunk.aligned, B, K)
+            if problem:
+                return f"{where}: {problem}"
+            expected = _value_count(n, d, m, B, K)
             if chunk.total_values != expected:
-                return (f"{where}: total_values {chunk.total_values}, but N·D·(M+1) = {n}·{d}·{m + 1} = "
-                        f"{expected}")
+                formula = (f"N·3·(r+1) + 5·N·K = {n}·3·{m - 12 * B + 1} + 5·{n}·{K}" if B else
+                           f"N·D·(M+1) = {n}·{d}·{m + 1}")
+                return f"{where}: total_values {chunk.total_values}, but {formula} = {expected}"
             self._first = chunk
             self._values = np.empty(expected, dtype=np.float32)
         else:
             first = self._first
             for name in ("model_version", "basis_checksum", "basis_sha256", "point_count", "channel_count",
-                         "basis_size", "aligned", "total_values", "values_encoding", "values_sha256"):
+                         "basis_size", "aligned", "total_values", "values_encoding", "values_sha256", "layout",
+                         "subspace_bone_count", "influences_per_point"):
                 if getattr(chunk, name) != getattr(first, name):
                     return f"{where}: {name} {getattr(chunk, name)} differs from chunk 0's {getattr(first, name)}"
         assert self._values is not None
@@ -237,38 +378,40 @@ class BasisAssembler:
         return self._first is not None and self._first.values_encoding == common_pb2.POINT_ENCODING_FLOAT16
 
     def complete(self) -> Optional[str]:
-        if self._first is None or self._values is None:
+        first = self._first
+        if first is None or self._values is None:
             return "the stream ended without a chunk"
         if self._filled != self._values.size:
             return f"the stream ended after {self._filled} of {self._values.size} values"
+        skinned = _LAYOUTS[first.layout] == "skinned"
+        try:
+            self._basis = _basis_from_values(
+                "", first.model_version, first.basis_checksum, first.point_count, first.channel_count,
+                first.basis_size, first.aligned, self._values, bytes(first.basis_sha256),
+                "float16" if self._half() else "float32", float(first.values_max_error) if self._half() else 0.0,
+                first.subspace_bone_count if skinned else 0, first.influences_per_point if skinned else 0)
+        except ValueError as error:
+            return f"the skinned values: {error}"
         if self._half():
             # The names are the float32 basis's; float16 values are checked as they came.
             digest = self._sent.digest()
-            if digest != self._first.values_sha256:
+            if digest != first.values_sha256:
                 return (f"the float16 values' SHA-256 {digest.hex()} is not the values_sha256 "
-                        f"{self._first.values_sha256.hex()} the chunks carry")
+                        f"{first.values_sha256.hex()} the chunks carry")
             return None
-        rows = self._first.point_count * self._first.channel_count
-        checksum = basis_checksum(self._values[:rows],
-                                  self._values[rows:].reshape((rows, self._first.basis_size), order="F"))
-        if checksum != self._first.basis_checksum:
+        checksum, digest = _basis_digests(self._basis, sha256=bool(first.basis_sha256))
+        if checksum != first.basis_checksum:
             return (f"the values' checksum {checksum:016x} is not the basis_checksum "
-                    f"{self._first.basis_checksum:016x} the chunks carry")
-        if self._first.basis_sha256:
-            digest = hashlib.sha256(self._values.tobytes()).digest()
-            if digest != self._first.basis_sha256:
-                return (f"the values' SHA-256 {digest.hex()} is not the basis_sha256 "
-                        f"{self._first.basis_sha256.hex()} the chunks carry")
+                    f"{first.basis_checksum:016x} the chunks carry")
+        if first.basis_sha256 and digest != first.basis_sha256:
+            return (f"the values' SHA-256 {digest.hex()} is not the basis_sha256 "
+                    f"{first.basis_sha256.hex()} the chunks carry")
         return None
 
     def basis(self, model: str) -> Basis:
         """The assembled subspace (call after ``complete()`` returned None)."""
-        first = self._first
-        assert first is not None and self._values is not None and self._filled == self._values.size
-        return _basis_from_values(model, first.model_version, first.basis_checksum, first.point_count,
-                                  first.channel_count, first.basis_size, first.aligned, self._values,
-                                  bytes(first.basis_sha256), "float16" if self._half() else "float32",
-                                  float(first.values_max_error) if self._half() else 0.0)
+        assert self._basis is not None
+        return dataclasses.replace(self._basis, model=model)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -287,19 +430,38 @@ def reconstruct(basis: Basis, coordinates: SubspaceCoordinates) -> np.ndarray:
     (both sums are within γ_{M+2} of the exact one, whatever the order of the additions), and for
     an aligned model, whose rotation moves each point's error without growing its length, at most
     2·3·2⁻²⁴·‖x‖ more per coordinate of the point x = mean + A p for the two rotations, and
-    2⁻²⁴·|f̂_c| twice for the rounding of the final sum with t (:func:`rounding_bound`).
+    2⁻²⁴·|f̂_c| twice for the rounding of the final sum with t (:func:`rounding_bound`). A skinned
+    basis sums 1 + 4·K + r terms per value, A's nonzero ones, so the same bound holds.
 
     Raises:
         ValueError: ``coordinates`` that do not belong to ``basis`` (another checksum, M values
             other than its basis_size, an alignment missing or present against ``aligned``).
     """
     check_coordinates(basis, coordinates)
-    values = basis.mean + basis.basis @ coordinates.p  # float32 × float32: one sgemv, float32 sums
+    values = _mean_plus_Ap(basis, coordinates.p)  # float32 throughout
     points = values.reshape(basis.point_count, basis.channel_count)
     if basis.aligned:
         assert coordinates.rotation is not None and coordinates.translation is not None
         points = points @ coordinates.rotation.T + coordinates.translation
     return np.ascontiguousarray(points, dtype=np.float32)
+
+
+def _mean_plus_Ap(basis: Basis, p: np.ndarray, dtype: type = np.float32, absolute: bool = False) -> np.ndarray:
+    """mean + A p over N·D values in ``dtype`` (``absolute``: |mean| + |A| |p|, each product's size),
+    for either layout. Skinned: f̂_i = mean_i + Σ_slots M_j h + Σ_k R_ik p_{12B+k} with M_j bone j's
+    3 × 4 block of p (skinned_basis.h), so only A's nonzero entries are multiplied."""
+    size = np.abs if absolute else (lambda x: x)
+    mean, p = size(basis.mean.astype(dtype, copy=False)), size(p.astype(dtype, copy=False))
+    if basis.basis is not None:
+        return mean + size(basis.basis.astype(dtype, copy=False)) @ p  # float32: one sgemv
+    assert basis.bones is not None and basis.terms is not None and basis.residuals is not None
+    skinning = 12 * basis.bone_count
+    values = mean + size(basis.residuals.astype(dtype, copy=False)) @ p[skinning:]
+    points = values.reshape(-1, 3)
+    maps = p[:skinning].reshape(basis.bone_count, 3, 4)
+    for k in range(basis.influences):  # one slot of every point at a time: N 3×4 maps, not N·K
+        points += np.einsum("nac,nc->na", maps[basis.bones[:, k]], size(basis.terms[:, k].astype(dtype, copy=False)))
+    return values
 
 
 def check_coordinates(basis: Basis, coordinates: SubspaceCoordinates) -> None:
@@ -321,10 +483,8 @@ def rounding_bound(basis: Basis, coordinates: SubspaceCoordinates) -> np.ndarray
     check_coordinates(basis, coordinates)
     m = basis.basis_size
     gamma = (m + 2) * _U / (1 - (m + 2) * _U)
-    mean = basis.mean.astype(np.float64)
-    A = basis.basis.astype(np.float64)
     p = coordinates.p.astype(np.float64)
-    size = np.abs(mean) + np.abs(A) @ np.abs(p)
+    size = _mean_plus_Ap(basis, p, np.float64, absolute=True)
     if basis.values_encoding == "float16":
         # Each value within 2⁻¹¹ of its own size (2⁻²⁵ below 2⁻¹⁴) of the float32 one (poses.proto).
         bound = (2 * gamma + 2.0 ** -11) * (1 + 2.0 ** -10) * size + 2.0 ** -24 * (1 + np.abs(p).sum())
@@ -333,7 +493,7 @@ def rounding_bound(basis: Basis, coordinates: SubspaceCoordinates) -> np.ndarray
     bound = bound.reshape(basis.point_count, basis.channel_count)
     if not basis.aligned:
         return bound
-    x = (mean + A @ p).reshape(-1, 3)
+    x = _mean_plus_Ap(basis, p, np.float64).reshape(-1, 3)
     R = coordinates.rotation.astype(np.float64)
     t = coordinates.translation.astype(np.float64)
     gamma3 = 3 * _U / (1 - 3 * _U)
@@ -428,7 +588,7 @@ class BasisCache:
             if expected is None:
                 return None
             if expected:
-                if basis_sha256(basis.mean, basis.basis) != expected:
+                if _basis_digests(basis)[1] != expected:
                     self.refused_copies += 1
                     try:
                         path.unlink()
@@ -442,7 +602,8 @@ class BasisCache:
 
     def put(self, basis: Basis) -> None:
         """Keeps ``basis`` in memory and writes its file unless one is there already (a file that is
-        there is checked when it is read). A float16 basis is not the one its names name: refused."""
+        there is checked when it is read; dense or skinned, it holds the same basis). A float16
+        basis is not the one its names name: refused."""
         if basis.values_encoding != "float32":
             raise ValueError(f"basis of '{basis.model}' version {basis.model_version}: a {basis.values_encoding} "
                              "copy is not cached (the cache holds the float32 basis its checksum names)")
@@ -475,16 +636,26 @@ def _safe_component(name: str) -> bool:
 
 
 def write_basis_file(path: pathlib.Path, basis: Basis) -> None:
-    """Writes ``basis`` to ``path`` atomically in the shared format (module docstring)."""
+    """Writes ``basis`` to ``path`` atomically in the shared format (module docstring): ``ASBASIS1``
+    dense, ``ASBASIS2`` skinned, its values as GetBasis sent them."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    header = _HEADER.pack(CACHE_MAGIC, basis.point_count, basis.channel_count, basis.basis_size, int(basis.aligned),
-                          basis.model_version, basis.basis_checksum)
+    fields = (basis.point_count, basis.channel_count, basis.basis_size, int(basis.aligned), basis.model_version,
+              basis.basis_checksum)
+    if basis.basis is not None:
+        header = _HEADER.pack(CACHE_MAGIC, *fields)
+        parts = [basis.basis.ravel(order="F")]
+    else:
+        assert basis.bones is not None and basis.terms is not None and basis.residuals is not None
+        header = _SKINNED_HEADER.pack(SKINNED_CACHE_MAGIC, *fields, poses_pb2.BASIS_LAYOUT_SKINNED, basis.bone_count,
+                                      basis.influences, 0)
+        slots = np.concatenate([basis.bones[..., np.newaxis].astype(np.float32), basis.terms], axis=2)
+        parts = [slots, basis.residuals.ravel(order="F")]
     descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(descriptor, "wb") as out:
             out.write(header)
-            out.write(np.ascontiguousarray(basis.mean, dtype=wire.WIRE_FLOAT).tobytes())
-            out.write(np.asarray(basis.basis, dtype=wire.WIRE_FLOAT).tobytes(order="F"))
+            for part in (basis.mean, *parts):
+                out.write(np.ascontiguousarray(part, dtype=wire.WIRE_FLOAT).tobytes())
             out.flush()
             os.fsync(out.fileno())
         os.replace(temporary, path)
@@ -517,15 +688,24 @@ def read_basis_file(path: pathlib.Path, model: str, model_version: int, checksum
 
 
 def _parse_basis_file(data: bytes, model: str, model_version: int, checksum: int) -> Optional[Basis]:
-    if len(data) < _HEADER.size:
+    header, bone_count, influences = _HEADER, 0, 0
+    if data[:8] == SKINNED_CACHE_MAGIC and len(data) >= _SKINNED_HEADER.size:
+        header = _SKINNED_HEADER
+        *_, layout, bone_count, influences, reserved = header.unpack_from(data)
+        if layout != poses_pb2.BASIS_LAYOUT_SKINNED or bone_count == 0 or reserved != 0:
+            return None
+    elif data[:8] != CACHE_MAGIC or len(data) < _HEADER.size:
         return None
-    magic, n, d, m, aligned, version, stored = _HEADER.unpack_from(data)
-    if magic != CACHE_MAGIC or aligned not in (0, 1) or version != model_version or stored != checksum:
+    _, n, d, m, aligned, version, stored = _HEADER.unpack_from(data)
+    if aligned not in (0, 1) or version != model_version or stored != checksum:
         return None
-    if n == 0 or d == 0 or (aligned and d != 3) or len(data) != _HEADER.size + 4 * n * d * (m + 1):
+    if (_shape_problem(n, d, m, bool(aligned), bone_count, influences)
+            or len(data) != header.size + 4 * _value_count(n, d, m, bone_count, influences)):
         return None
-    values = np.frombuffer(data, dtype=wire.WIRE_FLOAT, offset=_HEADER.size).astype(np.float32)
-    rows = n * d
-    if basis_checksum(values[:rows], values[rows:].reshape((rows, m), order="F")) != checksum:
+    values = np.frombuffer(data, dtype=wire.WIRE_FLOAT, offset=header.size).astype(np.float32)
+    try:
+        basis = _basis_from_values(model, version, checksum, n, d, m, bool(aligned), values,
+                                   bone_count=bone_count, influences=influences)
+    except ValueError:  # a bone number that is no bone's
         return None
-    return _basis_from_values(model, version, checksum, n, d, m, bool(aligned), values)
+    return basis if _basis_digests(basis, sha256=False)[0] == checksum else None
