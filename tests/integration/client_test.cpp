@@ -634,6 +634,7 @@ TEST_F(ClientTest, TheReadmesCppTourRunsAgainstTheDemo) {
       << output.substr(articulated, 200);
   EXPECT_LT(articulated_error, 0.5f * linear_error) << output.substr(articulated, 200);
   EXPECT_FALSE(std::filesystem::is_empty(work_->path() / "bases" / "arm-articulated")) << "no basis cached";
+  EXPECT_NE(output.find("arm-articulated's basis: skinned, "), std::string::npos) << output;  // issue #51 item 4
   EXPECT_NE(output.find("skinned "), std::string::npos) << output;
   EXPECT_NE(output.find("LOD level "), std::string::npos) << output;
   EXPECT_NE(output.find("relit by a light at (0.45, 0.44, 0.45): HIT, "), std::string::npos) << output;

@@ -139,7 +139,11 @@ def test_the_new_shots_of_the_tour_hit_where_the_linear_kind_misses(tmp_path):
                 assert done.returncode == 0, (line, done.stderr)
                 if " describe " in line and kind == "articulated":
                     assert "subspace: articulated, " in done.stdout, done.stdout
-                if " play " in line:
+                if " play " in line and " --coordinates" in line:
+                    # Issue #51 item 4: the articulated basis comes skinned, the linear one dense.
+                    layout = "skinned" if kind == "articulated" else "dense"
+                    assert f"1 bases fetched ({layout}, " in done.stdout, done.stdout
+                elif " play " in line:
                     counts = re.search(r"hits (\d+), blends (\d+), misses (\d+)", done.stdout)
                     assert counts and sum(map(int, counts.groups())) == 70, done.stdout  # frames 105–174
                     hits[kind] = int(counts.group(1))

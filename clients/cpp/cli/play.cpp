@@ -65,6 +65,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
   // With coordinates: the client's reconstruction, µs per pose, and each answer's largest
   // distance from the frame it was played from (what a renderer would draw against the truth).
   std::vector<double> reconstruct_us;
+  bool skinned = false;  // the basis came in the SKINNED layout (an articulated model's)
   double max_distance = 0;
   auto stream = client.open_stream(a.model, options);
   const auto start = std::chrono::steady_clock::now();
@@ -93,6 +94,7 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
         bases.reconstruct(client, a.model, *result);
         reconstruct_us.push_back(
             1e6 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        skinned = bases.get(client, a.model, result->model_version, result->coordinates.basis_checksum)->skinned != nullptr;
         const auto frame = frame_values(static_cast<int>(result->sequence));
         for (uint32_t i = 0; i < result->points.point_count; ++i) {
           double squared = 0;
@@ -164,7 +166,9 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
       coordinates = {{"reconstructed", reconstruct_us.size()},
                      {"client_reconstruct_us", reconstruct_p50_us},
                      {"max_point_distance", max_distance},
-                     {"bases_fetched", bases.fetch_count()}};
+                     {"bases_fetched", bases.fetch_count()},
+                     {"basis_layout", skinned ? "skinned" : "dense"},
+                     {"basis_bytes", bases.memory_bytes()}};
     }
     print_json({{"model", a.model},
                 {"coordinates", coordinates},
@@ -189,10 +193,10 @@ int run_play(const PlayArgs& a, Client& client, bool json) {
               static_cast<unsigned long long>(counts[1]), static_cast<unsigned long long>(counts[2]),
               static_cast<unsigned long long>(counts[3]), 100.0 * hit_rate, mean_error, max_error);
   if (a.coordinates) {
-    std::printf("  reconstructed %zu answers from coordinates here: %.1f us per pose (median), %llu bases fetched; "
-                "largest distance from the played frames %.4g\n",
+    std::printf("  reconstructed %zu answers from coordinates here: %.1f us per pose (median), %llu bases fetched "
+                "(%s, %.1f MB held); largest distance from the played frames %.4g\n",
                 reconstruct_us.size(), reconstruct_p50_us, static_cast<unsigned long long>(bases.fetch_count()),
-                max_distance);
+                skinned ? "skinned" : "dense", 1e-6 * static_cast<double>(bases.memory_bytes()), max_distance);
   }
   if (a.complete) {
     std::printf("  completed %llu blends/misses with full values (logged for `animspace retrain %s`)\n",

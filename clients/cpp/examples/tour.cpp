@@ -169,6 +169,13 @@ int main(int argc, char** argv) try {
     }
     return worst;
   };
+  // Its basis is mostly zeros (12 columns a bone, nonzero where the bone moves a point): the cache
+  // fetched it SKINNED — each point's bones and terms, then the residual columns — the same basis
+  // by its digests in a fraction of the bytes, reconstructed without the zeros.
+  const auto articulated_basis = bases.get(client, "arm-articulated", articulated_answer.model_version,
+                                           articulated_answer.coordinates.basis_checksum);
+  std::printf("arm-articulated's basis: %s, %zu bytes held\n", articulated_basis->skinned ? "skinned" : "dense",
+              articulated_basis->bytes());
   std::printf("articulated: %u bones + %u residual components, %zu coordinates: %s, largest error %.3g "
               "(arm-pmsc's estimate: %.3g)\n",
               articulated.subspace_bone_count(), articulated.residual_components(), articulated_sent,
