@@ -22,8 +22,10 @@
 //                                    256² thumbnail of a stored frame drawn by the daemon), and
 //                                    get_lod_bytes / get_lod_chunks / get_lod_ms (GetLod of
 //                                    build-lod's level 0 in animation-space form, median),
-//                                    get_basis_float16_bytes, and a second daemon whose
-//                                    --memory-budget holds 3 copies serving every copy in turn
+//                                    get_basis_float16_bytes, get_basis_compact_bytes,
+//                                    basis_compact_layout and client_reconstruct_compact_us (the
+//                                    COMPACT layout: SKINNED for an articulated model), and a second
+//                                    daemon whose --memory-budget holds 3 copies serving every copy in turn
 //                                    (budget_peak_rss_bytes, budget_reload_ms)
 //   the error across 20 other random poses of build-lod's level nearest a tenth of the vertices
 //   and of meshoptimizer's rest-pose simplification to as many (lod_rms_error_over_diag, …)
@@ -244,6 +246,11 @@ struct Serving {
   // reconstruction, over the rest pose's diagonal.
   uint64_t get_basis_float16_bytes = 0;
   double float16_reconstruct_max_error_over_diag = -1;
+  // The basis asked for COMPACT (issue #51 item 4): an articulated model's comes SKINNED. Its bytes,
+  // the layout that came, and the same answer's reconstruction with it (median).
+  uint64_t get_basis_compact_bytes = 0;
+  std::string basis_compact_layout;
+  double client_reconstruct_compact_us = 0;
   // The copies served again by a daemon with --memory-budget of kBudgetVersions versions' resident
   // bytes: its peak RSS (VmHWM) over the whole round, and the median time of a call that finds
   // its version evicted and loads it again (< 0: not measured, budget_status says why).
@@ -400,6 +407,14 @@ Serving measure_serving(const std::filesystem::path& model_file, uint64_t frames
       largest = std::max(largest, std::abs(static_cast<double>(half_points.values[i]) - points.values[i]));
     }
     serving.float16_reconstruct_max_error_over_diag = largest / rest_diagonal(character.model);
+    BasisData compact = client.get_basis("scale-00", 0, {}, v1::POINT_ENCODING_FLOAT32, v1::BASIS_LAYOUT_COMPACT);
+    serving.get_basis_compact_bytes = compact.bytes_received;
+    serving.basis_compact_layout = compact.layout == v1::BASIS_LAYOUT_SKINNED ? "skinned" : "dense";
+    const Basis compact_basis = make_basis("scale-00", std::move(compact));
+    serving.client_reconstruct_compact_us = 1e6 * median_seconds(repetitions, [&] {
+                                              reconstruct(compact_basis, result, half_points);
+                                              do_not_optimize(half_points.values.data());
+                                            });
   } catch (const std::exception& e) {
     serving.status = std::string("serving failed: ") + e.what();
     return serving;
@@ -580,6 +595,9 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
         row["client_reconstruct_us"] = serving.client_reconstruct_us;
         row["get_basis_float16_bytes"] = serving.get_basis_float16_bytes;
         row["float16_reconstruct_max_error_over_diag"] = serving.float16_reconstruct_max_error_over_diag;
+        row["get_basis_compact_bytes"] = serving.get_basis_compact_bytes;
+        row["basis_compact_layout"] = serving.basis_compact_layout;
+        row["client_reconstruct_compact_us"] = serving.client_reconstruct_compact_us;
         if (serving.budget_reload_ms >= 0) {
           row["memory_budget_bytes"] = serving.memory_budget_bytes;
           row["budget_peak_rss_bytes"] = serving.budget_peak_rss_bytes;
@@ -623,6 +641,11 @@ nlohmann::json run_scale_suite(const SuiteOptions& options) {
       if (row.contains("get_basis_float16_bytes")) {
         std::printf("%-6s GetBasis float16: %.1f MB, the answer within %.2g of the diagonal of float32's\n", "",
                     value("get_basis_float16_bytes") / 1e6, value("float16_reconstruct_max_error_over_diag"));
+      }
+      if (row.contains("get_basis_compact_bytes")) {
+        std::printf("%-6s GetBasis COMPACT: %s, %.1f MB (%.3f of dense), the answer reconstructed in %.1f us\n", "",
+                    row["basis_compact_layout"].get<std::string>().c_str(), value("get_basis_compact_bytes") / 1e6,
+                    value("get_basis_compact_bytes") / value("get_basis_bytes"), value("client_reconstruct_compact_us"));
       }
       if (row.contains("budget_reload_ms")) {
         std::printf("%-6s --memory-budget %.2f GB (%d versions) serving %d copies in turn: peak RSS %.2f GB, a call "

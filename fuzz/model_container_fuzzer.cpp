@@ -20,6 +20,7 @@
 #include "core/lod/levels.h"
 #include "core/model/servable.h"
 #include "core/pmsc/pmsc_model.h"
+#include "core/pmsc/skinned_basis.h"
 #include "fuzz/fuzz_support.h"
 
 namespace animspace::fuzz {
@@ -149,6 +150,14 @@ void load_like_the_registry(std::string_view bytes) {
   const auto servable = model::load_servable(*parsed, std::string(kSource));
   if (!servable) return;
   if (servable->pmsc) use_pmsc(*servable->pmsc, servable->info);
+  if (servable->skinned) {
+    // GetBasis's SKINNED values read back as a client reads them, and name the dense basis.
+    const auto& layout = *servable->skinned;
+    auto skinned = pmsc::skinned_basis_from_values(layout.values, servable->pmsc->point_count, layout.bone_count,
+                                                   layout.influences, servable->pmsc->basis_size());
+    FUZZ_CHECK(skinned.ok());
+    FUZZ_CHECK(pmsc::basis_checksum(*skinned) == servable->basis_checksum);
+  }
   if (servable->animation_space) use_animation_space(*servable->animation_space, *servable->lod_levels, servable->info);
 }
 

@@ -55,14 +55,15 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     } else {
       servable.float16_refusal = half.error().message;
     }
+    auto subspace = pmsc::make_subspace(servable.pmsc);
+    if (!subspace) return make_error(subspace.error().code, source + ": " + subspace.error().message);
+    servable.subspace = std::move(*subspace);
+    // After make_subspace, which refuses an articulated basis of the wrong shape.
     if (auto skinned = pmsc::skinned_basis(*servable.pmsc)) {
       servable.skinned = skinned_layout(*skinned);
     } else {
       servable.skinned_refusal = skinned.error().message;
     }
-    auto subspace = pmsc::make_subspace(servable.pmsc);
-    if (!subspace) return make_error(subspace.error().code, source + ": " + subspace.error().message);
-    servable.subspace = std::move(*subspace);
     const pmsc::PmscModel& m = *servable.pmsc;
     info->check_point_count = m.check_point_count();
     info->false_hit_rate = m.calibration.false_hit_rate;

@@ -18,53 +18,11 @@
 #include "core/common/kernels.h"
 #include "core/pmsc/articulated.h"
 #include "core/pmsc/key_projection.h"
+#include "core/pmsc/skinned_basis.h"
 #include "core/pmsc/subspace.h"
 
 namespace animspace::pmsc {
 namespace {
-
-// Point i's bones are bones[offsets[i] … offsets[i + 1]) (0-based, columns 12·j …), each with
-// its four numbers h = w·(p̂ − c, 1) in terms (4 per influence), and
-//   f̂_i = mean_i + Σ_j M_j h_ij + (residual rows) · p_residual.
-struct SkinningTerms {
-  std::vector<int32_t> offsets;
-  std::vector<int32_t> bones;
-  std::vector<float> terms;
-};
-
-// An articulated basis's first 12·B columns are skinning: at point i and bone j the 3 × 12 block
-// is h_ij in the four columns of each row's transform row and 0 elsewhere. Refuses a basis of
-// another shape: a corrupt or hand-made file would otherwise be reconstructed differently by the
-// server, which reads the terms, and by a client, which reads the whole basis.
-Result<SkinningTerms> read_skinning_terms(const PmscModel& m) {
-  SkinningTerms out;
-  out.offsets.reserve(static_cast<size_t>(m.point_count) + 1);
-  out.offsets.push_back(0);
-  for (long i = 0; i < m.point_count; ++i) {
-    for (int j = 0; j < m.bone_count; ++j) {
-      const auto block = m.basis.block(3 * i, static_cast<long>(kBoneCoordinates) * j, 3, kBoneCoordinates);
-      const Eigen::RowVector4f h = block.block<1, 4>(0, 0);
-      bool skinning_form = true;
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < kBoneCoordinates; ++c) {
-          const float expected = c / 4 == r ? h(c % 4) : 0.0f;
-          skinning_form = skinning_form && block(r, c) == expected;
-        }
-      }
-      if (!skinning_form) {
-        return make_error(ErrorCode::kInvalidArgument,
-                          "pmsc model: an articulated basis's bone columns must have the skinning form "
-                          "(w·(p̂ − c, 1) in each row's four columns of the bone, 0 elsewhere); point " +
-                              std::to_string(i) + ", bone " + std::to_string(j) + " does not");
-      }
-      if ((h.array() == 0.0f).all()) continue;  // exactly: a weight of 1e-6 is still a term
-      out.bones.push_back(j);
-      out.terms.insert(out.terms.end(), h.data(), h.data() + 4);
-    }
-    out.offsets.push_back(static_cast<int32_t>(out.bones.size()));
-  }
-  return out;
-}
 
 // f_i += Σ_k T_{bone k} h_k over point i's terms, T a bone's transform as four columns of four
 // floats: each of h's four numbers broadcast and multiplied by its column. The even terms are

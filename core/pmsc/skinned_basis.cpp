@@ -57,6 +57,42 @@ void for_each_dense_column(const SkinnedBasis& b, Take&& take) {
 
 }  // namespace
 
+Result<SkinningTerms> read_skinning_terms(const PmscModel& m) {
+  if (m.channel_count != 3 || m.bone_count < 0 || m.basis_size() < static_cast<long>(kBoneCoordinates) * m.bone_count) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "pmsc model: an articulated basis has 3 channels and at least 12·B = " +
+                          std::to_string(12L * m.bone_count) + " columns; this one has " +
+                          std::to_string(m.channel_count) + " and " + std::to_string(m.basis_size()));
+  }
+  SkinningTerms out;
+  out.offsets.reserve(static_cast<size_t>(m.point_count) + 1);
+  out.offsets.push_back(0);
+  for (long i = 0; i < m.point_count; ++i) {
+    for (int j = 0; j < m.bone_count; ++j) {
+      const auto block = m.basis.block(3 * i, static_cast<long>(kBoneCoordinates) * j, 3, kBoneCoordinates);
+      const Eigen::RowVector4f h = block.block<1, 4>(0, 0);
+      bool skinning_form = true;
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < kBoneCoordinates; ++c) {
+          const float expected = c / 4 == r ? h(c % 4) : 0.0f;
+          skinning_form = skinning_form && block(r, c) == expected;
+        }
+      }
+      if (!skinning_form) {
+        return make_error(ErrorCode::kInvalidArgument,
+                          "pmsc model: an articulated basis's bone columns must have the skinning form "
+                          "(w·(p̂ − c, 1) in each row's four columns of the bone, 0 elsewhere); point " +
+                              std::to_string(i) + ", bone " + std::to_string(j) + " does not");
+      }
+      if ((h.array() == 0.0f).all()) continue;  // exactly: a weight of 1e-6 is still a term
+      out.bones.push_back(j);
+      out.terms.insert(out.terms.end(), h.data(), h.data() + 4);
+    }
+    out.offsets.push_back(static_cast<int32_t>(out.bones.size()));
+  }
+  return out;
+}
+
 Result<SkinnedBasis> skinned_basis(const PmscModel& m) {
   if (m.subspace_kind != SubspaceKind::kArticulated || m.cross || m.channel_count != 3) {
     return make_error(ErrorCode::kFailedPrecondition,
@@ -67,27 +103,24 @@ Result<SkinnedBasis> skinned_basis(const PmscModel& m) {
   b.point_count = m.point_count;
   b.bone_count = m.bone_count;
   b.mean = m.mean;
-  const long skinning = static_cast<long>(kBoneCoordinates) * m.bone_count;
-  b.residuals = m.basis.rightCols(m.basis_size() - skinning);
-  // Each point's bones: those whose term h_ij (the first of its three rows) is not zero.
-  std::vector<std::vector<int32_t>> bones_of(static_cast<size_t>(b.point_count));
-  for (long i = 0; i < b.point_count; ++i) {
-    for (int j = 0; j < b.bone_count; ++j) {
-      const auto h = m.basis.block<1, 4>(3 * i, static_cast<long>(kBoneCoordinates) * j);
-      if ((h.array() != 0.0f).any()) bones_of[static_cast<size_t>(i)].push_back(j);
-    }
-    b.influences = std::max(b.influences, static_cast<int>(bones_of[static_cast<size_t>(i)].size()));
+  auto read = read_skinning_terms(m);
+  if (!read) return make_error(ErrorCode::kFailedPrecondition, read.error().message);
+  const SkinningTerms& terms = *read;
+  b.residuals = m.basis.rightCols(m.basis_size() - static_cast<long>(kBoneCoordinates) * m.bone_count);
+  for (size_t i = 0; i < static_cast<size_t>(b.point_count); ++i) {
+    b.influences = std::max(b.influences, terms.offsets[i + 1] - terms.offsets[i]);
   }
+  // K slots a point, its own bones first and padding after.
   const auto K = static_cast<size_t>(b.influences);
   b.bones.assign(static_cast<size_t>(b.point_count) * K, 0);
   b.terms.assign(4 * b.bones.size(), 0.0f);
   for (long i = 0; i < b.point_count; ++i) {
-    const auto& bones = bones_of[static_cast<size_t>(i)];
-    for (size_t k = 0; k < bones.size(); ++k) {
-      const size_t s = static_cast<size_t>(i) * K + k;
-      b.bones[s] = bones[k];
-      for (int c = 0; c < 4; ++c) b.terms[4 * s + static_cast<size_t>(c)] = m.basis(3 * i, kBoneCoordinates * bones[k] + c);
-    }
+    const auto first = static_cast<size_t>(terms.offsets[static_cast<size_t>(i)]);
+    const auto count = static_cast<size_t>(terms.offsets[static_cast<size_t>(i) + 1]) - first;
+    const size_t s = static_cast<size_t>(i) * K;
+    std::copy_n(terms.bones.begin() + static_cast<long>(first), count, b.bones.begin() + static_cast<long>(s));
+    std::copy_n(terms.terms.begin() + static_cast<long>(4 * first), 4 * count,
+                b.terms.begin() + static_cast<long>(4 * s));
   }
   // The same values, or no skinned form: compared column by column, bit for bit.
   long column = 0;

@@ -27,6 +27,22 @@
 
 namespace animspace::pmsc {
 
+// An articulated basis's skinning columns read as terms: point i's bones are
+// bones[offsets[i] … offsets[i + 1]) (0-based, columns 12·j …), each with its four numbers
+// h = w·(p̂ − c, 1) in terms (4 per influence), so that
+//   f̂_i = mean_i + Σ_j M_j h_ij + (residual rows) · p_residual.
+// The server's runtime (articulated_subspace.cpp) reconstructs from them; skinned_basis pads them.
+struct SkinningTerms {
+  std::vector<int32_t> offsets;
+  std::vector<int32_t> bones;
+  std::vector<float> terms;
+};
+// Errors: kInvalidArgument naming the point and bone of a basis whose bone columns are not of the
+// skinning form (h_ij in each row's four columns of the bone, 0 elsewhere). A corrupt or hand-made
+// file would otherwise be reconstructed differently by the server, which reads the terms, and by
+// a client, which reads the whole basis.
+Result<SkinningTerms> read_skinning_terms(const PmscModel& model);
+
 // Values in one slot as GetBasis sends it: the bone's number, then h's four.
 inline constexpr int kSlotValues = 5;
 
