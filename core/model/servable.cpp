@@ -16,13 +16,15 @@
 namespace animspace::model {
 namespace {
 
-std::shared_ptr<const Servable::SkinnedLayout> skinned_layout(const pmsc::SkinnedBasis& basis) {
+std::shared_ptr<const Servable::SkinnedLayout> skinned_layout(const pmsc::PmscModel& model,
+                                                              const pmsc::SkinnedBasis& basis) {
   auto layout = std::make_shared<Servable::SkinnedLayout>();
   layout->bone_count = basis.bone_count;
   layout->influences = basis.influences;
-  layout->values = pmsc::skinned_values(basis);
+  layout->slots = pmsc::skinned_slot_values(basis);
+  const auto parts = layout->parts(model);
   Sha256 digest;
-  digest.update(std::as_bytes(std::span<const float>(layout->values)));
+  for (const auto part : parts) digest.update(std::as_bytes(part));
   layout->sha256 = digest.digest();
   // Bone numbers travel as values: binary16 holds every integer up to 2048 exactly.
   constexpr int kFloat16Integers = 2048;
@@ -30,7 +32,7 @@ std::shared_ptr<const Servable::SkinnedLayout> skinned_layout(const pmsc::Skinne
     layout->float16_refusal = "its " + std::to_string(basis.bone_count) +
                               " bones cannot be numbered in float16 (integers up to " +
                               std::to_string(kFloat16Integers) + ")";
-  } else if (auto half = pmsc::float16_values(layout->values)) {
+  } else if (auto half = pmsc::float16_values({parts[0], parts[1], parts[2]})) {
     layout->float16 = std::move(*half);
   } else {
     layout->float16_refusal = half.error().message;
@@ -39,6 +41,14 @@ std::shared_ptr<const Servable::SkinnedLayout> skinned_layout(const pmsc::Skinne
 }
 
 }  // namespace
+
+std::array<std::span<const float>, 3> Servable::SkinnedLayout::parts(const pmsc::PmscModel& model) const {
+  const auto rows = static_cast<size_t>(model.mean.size());
+  const size_t skinning_columns = 12 * static_cast<size_t>(bone_count);
+  return {std::span<const float>(model.mean.data(), rows), std::span<const float>(slots),
+          std::span<const float>(model.basis.data() + skinning_columns * rows,
+                                 rows * (static_cast<size_t>(model.basis.cols()) - skinning_columns))};
+}
 
 Result<Servable> load_servable(const container::ModelContainer& container, const std::string& source) {
   auto info = describe(container, source);
@@ -60,7 +70,7 @@ Result<Servable> load_servable(const container::ModelContainer& container, const
     servable.subspace = std::move(*subspace);
     // After make_subspace, which refuses an articulated basis of the wrong shape.
     if (auto skinned = pmsc::skinned_basis(*servable.pmsc)) {
-      servable.skinned = skinned_layout(*skinned);
+      servable.skinned = skinned_layout(*servable.pmsc, *skinned);
     } else {
       servable.skinned_refusal = skinned.error().message;
     }

@@ -2,7 +2,9 @@
 // checks and the container fuzzer all run on a container, so that what is fuzzed is what loads.
 #pragma once
 
+#include <array>
 #include <memory>
+#include <span>
 #include <vector>
 #include <string>
 
@@ -42,14 +44,17 @@ struct Servable {
   std::string float16_refusal;
   // An articulated model's basis in GetBasis's SKINNED layout (pmsc::skinned_basis, issue #51
   // item 4), built once here; null for other models, and for one whose basis does not expand back
-  // from it (the dense layout alone is then offered).
+  // from it (the dense layout alone is then offered). Only the slots are held: the mean and the
+  // residual columns are sent from the model's own `mean` and last `basis` columns (parts()).
   struct SkinnedLayout {
-    int bone_count = 0;         // B
-    int influences = 0;         // K
-    std::vector<float> values;  // pmsc::skinned_values
-    std::string sha256;         // of the float32 values as sent
+    int bone_count = 0;        // B
+    int influences = 0;        // K
+    std::vector<float> slots;  // pmsc::skinned_slot_values
+    std::string sha256;        // of the float32 values as sent
     pmsc::Float16Basis float16;
     std::string float16_refusal;
+    // The values in GetBasis's order, as three runs: the mean, the slots, the residual columns.
+    std::array<std::span<const float>, 3> parts(const pmsc::PmscModel& model) const;
   };
   std::shared_ptr<const SkinnedLayout> skinned;
   std::string skinned_refusal;  // why `skinned` is null, for a PMSC model

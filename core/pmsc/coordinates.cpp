@@ -80,8 +80,8 @@ Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::Mat
                     });
 }
 
-Result<Float16Basis> float16_values(std::span<const float> values) {
-  return float16_of({values}, [](size_t i) { return "value " + std::to_string(i); });
+Result<Float16Basis> float16_values(std::initializer_list<std::span<const float>> parts) {
+  return float16_of(parts, [](size_t i) { return "value " + std::to_string(i); });
 }
 
 FloatAlignment float_alignment(const geometry::RigidTransform& alignment) {

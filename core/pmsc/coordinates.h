@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <initializer_list>
 #include <span>
 #include <string>
 
@@ -31,8 +32,9 @@ struct Float16Basis {
 };
 // kOutOfRange naming the first value beyond ±65504, which binary16 cannot hold.
 Result<Float16Basis> float16_basis(const Eigen::VectorXf& mean, const Eigen::MatrixXf& basis);
-// The same for any run of values as sent (the skinned layout, skinned_basis.h), naming value i.
-Result<Float16Basis> float16_values(std::span<const float> values);
+// The same for any run of values as sent, given in parts (the skinned layout, skinned_basis.h),
+// naming value i of the run.
+Result<Float16Basis> float16_values(std::initializer_list<std::span<const float>> parts);
 
 // The alignment of one pose as it travels: R and t in float32 (what reconstruct applies).
 struct FloatAlignment {

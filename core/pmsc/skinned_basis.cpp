@@ -140,14 +140,20 @@ Result<SkinnedBasis> skinned_basis(const PmscModel& m) {
   return b;
 }
 
-std::vector<float> skinned_values(const SkinnedBasis& b) {
+std::vector<float> skinned_slot_values(const SkinnedBasis& b) {
   std::vector<float> values;
-  values.reserve(static_cast<size_t>(b.mean.size() + b.residuals.size()) + kSlotValues * b.bones.size());
-  values.insert(values.end(), b.mean.data(), b.mean.data() + b.mean.size());
+  values.reserve(kSlotValues * b.bones.size());
   for (size_t s = 0; s < b.bones.size(); ++s) {
     values.push_back(static_cast<float>(b.bones[s]));
     values.insert(values.end(), b.terms.begin() + static_cast<long>(4 * s), b.terms.begin() + static_cast<long>(4 * s + 4));
   }
+  return values;
+}
+
+std::vector<float> skinned_values(const SkinnedBasis& b) {
+  std::vector<float> values(b.mean.data(), b.mean.data() + b.mean.size());
+  const std::vector<float> slots = skinned_slot_values(b);
+  values.insert(values.end(), slots.begin(), slots.end());
   values.insert(values.end(), b.residuals.data(), b.residuals.data() + b.residuals.size());
   return values;
 }

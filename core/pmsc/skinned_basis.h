@@ -65,6 +65,9 @@ Result<SkinnedBasis> skinned_basis(const PmscModel& model);
 
 // Its values in GetBasis's order: the mean, the N·K slots of kSlotValues, the residual columns.
 std::vector<float> skinned_values(const SkinnedBasis& basis);
+// The slots alone (N·K·kSlotValues values): what a server holds besides the model's own mean and
+// residual columns, which it sends from where they lie.
+std::vector<float> skinned_slot_values(const SkinnedBasis& basis);
 // The inverse, for a client: `values` as skinned_values lays them out for N points, B bones, K
 // slots and M = 12B + r. kInvalidArgument naming the count, or the point and slot of a bone
 // number that is not an integer in [0, B).

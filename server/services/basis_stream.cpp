@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstring>
 #include <memory>
+#include <span>
+#include <vector>
 
 #include "animspace/v1/poses.pb.h"
 #include "core/common/point_codec.h"
@@ -59,8 +61,15 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
       }
       if (grpc::Status s = choose_layout(); !s.ok()) return Outcome::end(std::move(s));
       const pmsc::PmscModel& m = *model_->pmsc;
-      total_ = skinned_ ? skinned_->values.size()
-                        : static_cast<uint64_t>(m.mean.size()) * static_cast<uint64_t>(m.basis_size() + 1);
+      if (skinned_) {
+        const auto parts = skinned_->parts(m);
+        parts_.assign(parts.begin(), parts.end());
+      } else {
+        parts_ = {std::span<const float>(m.mean.data(), static_cast<size_t>(m.mean.size())),
+                  std::span<const float>(m.basis.data(), static_cast<size_t>(m.basis.size()))};
+      }
+      total_ = 0;
+      for (const auto part : parts_) total_ += part.size();
       chunk_values_ = static_cast<uint64_t>(
           std::max<int64_t>(1, std::min(kMaxChunkBytes, env_.options.max_message_bytes / 4)) /
           static_cast<int64_t>(value_bytes()));
@@ -92,15 +101,15 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
     const uint64_t count = std::min(chunk_values_, total_ - sent_);
     std::string* data = chunk.mutable_data();
     data->resize(count * value_bytes());
-    // DENSE: the mean, then the basis column by column; SKINNED: its values as built at load. One
-    // span of values either way, cut anywhere.
-    const auto mean_values = skinned_ ? total_ : static_cast<uint64_t>(m.mean.size());
-    const float* first = skinned_ ? skinned_->values.data() : m.mean.data();
+    // The parts one after the other (DENSE: the mean, then the basis column by column; SKINNED:
+    // the mean, the slots, the residual columns), cut anywhere.
     uint64_t written = 0;
     while (written < count) {
-      const uint64_t at = sent_ + written;
-      const float* source = at < mean_values ? first + at : m.basis.data() + (at - mean_values);
-      const uint64_t run = std::min(count - written, at < mean_values ? mean_values - at : total_ - at);
+      uint64_t at = sent_ + written;
+      size_t part = 0;
+      while (at >= parts_[part].size()) at -= parts_[part++].size();
+      const float* source = parts_[part].data() + at;
+      const uint64_t run = std::min(count - written, parts_[part].size() - at);
       if (half_) {
         // In range: float16_refusal is empty (checked at load, the values are immutable).
         const auto encoded = point_codec::encode_float16(
@@ -155,6 +164,7 @@ class BasisStream final : public StreamReactor<grpc::ServerWriteReactor<grpc::By
   bool sent_any_ = false;
   bool half_ = false;  // values_encoding FLOAT16
   std::shared_ptr<const model::Servable::SkinnedLayout> skinned_;  // null: the DENSE layout
+  std::vector<std::span<const float>> parts_;  // the values sent, in order, within model_
   size_t value_bytes() const { return half_ ? 2 : sizeof(float); }
 };
 
