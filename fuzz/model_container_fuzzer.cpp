@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstring>
 #include <string>
+#include <vector>
 
 #include "core/animspace/animspace_io.h"
 #include "core/animspace/model.h"
@@ -153,7 +154,9 @@ void load_like_the_registry(std::string_view bytes) {
   if (servable->skinned) {
     // GetBasis's SKINNED values read back as a client reads them, and name the dense basis.
     const auto& layout = *servable->skinned;
-    auto skinned = pmsc::skinned_basis_from_values(layout.values, servable->pmsc->point_count, layout.bone_count,
+    std::vector<float> values;
+    for (const auto part : layout.parts(*servable->pmsc)) values.insert(values.end(), part.begin(), part.end());
+    auto skinned = pmsc::skinned_basis_from_values(values, servable->pmsc->point_count, layout.bone_count,
                                                    layout.influences, servable->pmsc->basis_size());
     FUZZ_CHECK(skinned.ok());
     FUZZ_CHECK(pmsc::basis_checksum(*skinned) == servable->basis_checksum);
