@@ -309,6 +309,14 @@ TEST_F(CoordinatesTest, AnArticulatedBasisComesSkinnedAndIsTheSameBasis) {
   EXPECT_EQ(Eigen::Map<const Eigen::VectorXf>(compact.values.data(), rows), m.mean);
   EXPECT_EQ(A, m.basis);
   const Basis basis = make_basis(name, compact);  // checks both digests through its own expansion
+  // In float16 too: each value the float32 one rounded (the bone numbers exactly), checked as sent.
+  const BasisData half = client_->get_basis(name, 0, {}, v1::POINT_ENCODING_FLOAT16, v1::BASIS_LAYOUT_COMPACT);
+  ASSERT_EQ(half.layout, v1::BASIS_LAYOUT_SKINNED);
+  ASSERT_EQ(half.values.size(), compact.values.size());
+  for (size_t i = 0; i < half.values.size(); ++i) {
+    ASSERT_EQ(half.values[i], point_codec::half_to_float(point_codec::float_to_half(compact.values[i]))) << i;
+  }
+  EXPECT_NE(make_basis(name, half).skinned, nullptr);
   ASSERT_NE(basis.skinned, nullptr);
   EXPECT_LT(basis.bytes() * 2, make_basis(name, dense).bytes());
 
