@@ -29,13 +29,9 @@ run: build
 	@bash scripts/print-tour.sh $(LISTEN) $(METRICS)
 	exec $(BUILD_DIR)/bin/animspaced --listen $(LISTEN) --metrics-listen $(METRICS)
 
-# The Python suite on $(JOBS) workers (pytest-xdist, one process per worker, tests dealt as each
-# finishes): most of its tests wait on a daemon or a CLI from one core, so one worker left the other
-# core idle — above all under ASan, where the README tour's crane training alone takes minutes.
-PYTEST_WORKERS = -n $(JOBS)
 test: build
 	ctest --preset $(PRESET) -j $(JOBS) --timeout 300
-	PYTHONPATH=$(BUILD_DIR)/python ANIMSPACE_BUILD=$(BUILD_DIR) /usr/bin/python3 -m pytest -q -p no:cacheprovider $(PYTEST_WORKERS) tests/python
+	PYTHONPATH=$(BUILD_DIR)/python ANIMSPACE_BUILD=$(BUILD_DIR) /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python
 
 bench: build
 	$(BUILD_DIR)/bin/animspace-bench io --data ../shared/data --json $(BUILD_DIR)/bench-io.json
@@ -68,7 +64,7 @@ check-asan: deps
 	  ctest --preset asan -j $(JOBS) --timeout 900 \
 	  || { status=1; echo "check-asan: FAILED: ctest under ASan"; }; \
 	$(call asan_env,pytest) PYTHONPATH=build-asan/python ANIMSPACE_BUILD=$(CURDIR)/build-asan \
-	  scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/pytest /usr/bin/python3 -m pytest -q -p no:cacheprovider $(PYTEST_WORKERS) tests/python \
+	  scripts/with-sanitizer-reports.sh $(ASAN_REPORTS)/pytest /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python \
 	  || { status=1; echo "check-asan: FAILED: pytest against the ASan-built daemon and CLI"; }; \
 	exit $$status
 asan: check-asan

@@ -30,7 +30,7 @@ packages=(
   # fuzz/: libFuzzer targets (clang with its runtime: fuzzer, ASan, UBSan)
   clang libclang-rt-14-dev
   # Python client (always run with /usr/bin/python3)
-  python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-pytest-xdist python3-matplotlib
+  python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-matplotlib
   # ... and its offline install from pyproject.toml into a --system-site-packages venv (tested:
   # the README's lines, pip --no-build-isolation)
   python3-pip python3-setuptools python3-wheel python3-venv
