@@ -33,7 +33,9 @@ std::string hex16(uint64_t value) {
 
 size_t Basis::bytes() const {
   const size_t values = static_cast<size_t>(mean.size() + basis.size()) +
-                        (skinned ? skinned->terms.size() + static_cast<size_t>(skinned->residuals.size()) : 0);
+                        (skinned ? static_cast<size_t>(skinned->mean.size() + skinned->residuals.size()) +
+                                       skinned->terms.size()
+                                 : 0);
   return sizeof(float) * values + (skinned ? sizeof(int32_t) * skinned->bones.size() : 0);
 }
 

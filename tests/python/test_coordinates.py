@@ -284,6 +284,15 @@ def test_relight_answers_as_coordinates_within_the_bound(client, channel, tmp_pa
     expect_within_bound(answer.points, exact.points, mean, A, answer)
 
 
+def exact_and_coordinate_answers(client, model, keys, frames):
+    """`frames` (full poses) answered from their key and check values twice: as float32 points, and
+    as coordinates."""
+    values = np.stack([keys.select(f) for f in frames])
+    checks = np.stack([keys.select_check_values(f) for f in frames])
+    exact = client.evaluate_key_points(model, values, check_values=checks)
+    return exact, client.evaluate_key_points(model, values, check_values=checks, points_encoding="coordinates")
+
+
 def test_an_articulated_model_answers_bone_transforms_and_residuals_as_coordinates(counted, channel, arm_transforms,
                                                                                     demo_arm_transforms):
     # Issue #51: arm-articulated's p is 12 numbers per bone, then its residual coefficients; the
@@ -298,11 +307,7 @@ def test_an_articulated_model_answers_bone_transforms_and_residuals_as_coordinat
     # (the demo flexes to 130° and swings 15°).
     frames = [posed_arm(client, G) for G in (demo_arm_transforms(14 / 120),
                                              arm_transforms(math.radians(150), math.radians(40)))]
-    values = np.stack([keys.select(f) for f in frames])
-    checks = np.stack([keys.select_check_values(f) for f in frames])
-    exact = client.evaluate_key_points("arm-articulated", values, check_values=checks)
-    answers = client.evaluate_key_points("arm-articulated", values, check_values=checks,
-                                         points_encoding="coordinates")
+    exact, answers = exact_and_coordinate_answers(client, "arm-articulated", keys, frames)
     for a, b in zip(exact, answers, strict=True):
         assert b.status == a.status and b.coordinates.p.shape == (A.shape[1],)
         expect_within_bound(client.reconstruct("arm-articulated", b), a.points, mean, A, b)
@@ -375,11 +380,7 @@ def test_a_compact_basis_of_an_articulated_model_is_skinned_and_the_same_basis(c
 
     keys = client.describe_key_points("arm-articulated")
     frames = [posed_arm(client, demo_arm_transforms(f / 120)) for f in (14, 57)]
-    values = np.stack([keys.select(f) for f in frames])
-    checks = np.stack([keys.select_check_values(f) for f in frames])
-    exact = client.evaluate_key_points("arm-articulated", values, check_values=checks)
-    answers = client.evaluate_key_points("arm-articulated", values, check_values=checks,
-                                         points_encoding="coordinates")
+    exact, answers = exact_and_coordinate_answers(client, "arm-articulated", keys, frames)
     for a, b in zip(exact, answers, strict=True):
         expect_within_bound(coordinates.reconstruct(compact, b.coordinates), a.points, mean, A, b)
 
